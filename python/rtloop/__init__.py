@@ -1,0 +1,65 @@
+"""rtloop: recover a scene's light and colours from one photo by rendering in the loop.
+
+A hand-built scene (camera, spheres, planes, one point light) plus a photo go in; a differential-evolution
+search over the scene's free parameters, driven by rtloop's own ray tracer, brings back the light's
+position and intensity and the objects' colours. See README.md for the scene format.
+
+    scene = rtloop.load_scene("examples/yellow-ball/scene_input.json")
+    photo = rtloop.load_image("examples/yellow-ball/objective.png", scene)
+    result = rtloop.fit(scene, photo, seed=1)
+    result.scene          # the fitted scene
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from . import _native
+from ._native import Scene, __version__
+from .acquire import load_image
+from .errors import AcquisitionError, RtloopError, SceneError
+from .fit import FitResult, StageResult, fit
+from .scene import load_scene, save_scene, scene_to_dict
+
+__all__ = [
+    "Scene",
+    "load_scene",
+    "save_scene",
+    "scene_to_dict",
+    "render",
+    "object_ids",
+    "save_image",
+    "load_image",
+    "fit",
+    "FitResult",
+    "StageResult",
+    "RtloopError",
+    "SceneError",
+    "AcquisitionError",
+    "__version__",
+]
+
+
+def render(scene: Any, width: int | None = None, height: int | None = None, spp: int = 1) -> np.ndarray:
+    """Render ``scene`` (a Scene, dict or path) to a float32 (H, W, 3) linear-RGB array.
+
+    ``width``/``height`` default to the scene's image size and keep the field of view; ``spp`` > 1
+    supersamples each pixel (stratified grid when it is a square number) and averages in linear light.
+    Values are radiance times exposure, not clipped.
+    """
+    return _native.render(load_scene(scene), width, height, int(spp))
+
+
+def object_ids(scene: Any, width: int | None = None, height: int | None = None) -> np.ndarray:
+    """Which object each pixel centre shows: int32 (H, W) index into ``objects``, -1 for background."""
+    return _native.object_ids(load_scene(scene), width, height)
+
+
+def save_image(path: Any, image_linear: np.ndarray) -> None:
+    """Write a linear (H, W, 3) image as 8-bit sRGB PNG or BMP (by extension), atomically."""
+    arr = np.ascontiguousarray(image_linear, dtype=np.float32)
+    if arr.ndim != 3 or arr.shape[2] != 3:
+        raise ValueError(f"expected an (H, W, 3) image, got shape {arr.shape}")
+    _native.save_image(str(path), arr)

@@ -1,0 +1,15 @@
+"""rtloop's exceptions.
+
+Every error rtloop raises on bad input derives from :class:`RtloopError`, so a caller (or the
+``rtloop-fit`` CLI) can catch one type and print one line. Messages name the offending field,
+e.g. ``objects[1].normal: zero-length normal``.
+"""
+
+from ._native import RtloopError, SceneError
+
+
+class AcquisitionError(RtloopError):
+    """An objective image could not be read or does not fit the scene (file, format, size)."""
+
+
+__all__ = ["RtloopError", "SceneError", "AcquisitionError"]

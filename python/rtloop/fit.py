@@ -1,0 +1,355 @@
+"""The fit: the paper's two stages, driven from Python, with all the arithmetic in Rust.
+
+Stage 1 ("light") frees the light (``light.*`` paths of the fit section) and minimises the sum of
+absolute RGB differences over the whole image, every other parameter held at the scene's value.
+Stage 2 ("colour") fixes that light and frees everything else (albedos, ...), with R, G and B as three
+objectives (Pareto selection) on pixels sampled inside each object's visible, lit area.
+
+Identifiability. With no ambient light and no specular term the image depends on the light's intensity
+and an object's albedo only through their product. rtloop detects this from the scene and the fit
+section and resolves it in one documented way: stage 2 may raise an albedo above its upper bound if the
+image asks for it (the search range is widened by max intensity / stage-1 intensity), and the light is
+then made just bright enough that every fitted albedo is back within its bounds (products unchanged).
+Otherwise the intensity stays at the stage-1 value. The report names the determined products.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from . import _native
+from .errors import RtloopError
+from .scene import Scene, load_scene, scene_to_dict
+
+__all__ = ["fit", "FitResult", "StageResult", "GenerationInfo", "PROTOCOLS"]
+
+#: Named settings. ``paper``: the paper's numbers. ``rtloop``: the default (see README, speed against error).
+PROTOCOLS: dict[str, dict[str, Any]] = {
+    "paper": {"population": 60, "generations": (200, 200), "f": 0.6, "cr": 0.8, "refine": False},
+    "rtloop": {"population": 40, "generations": (120, 120), "f": 0.6, "cr": 0.8, "refine": True},
+}
+
+#: Pixels sampled per object for stage 2.
+PIXELS_PER_OBJECT = 64
+
+
+@dataclass
+class GenerationInfo:
+    """What a fit's callback receives after every generation of every stage."""
+
+    stage: str
+    generation: int
+    fitness: float
+    objectives: list[float]
+    #: Values of all of the scene's fit parameters (the stage's best individual, the rest held fixed).
+    params: np.ndarray
+    evaluations: int
+
+
+@dataclass
+class StageResult:
+    name: str
+    paths: list[str]
+    param_names: list[str]
+    x: np.ndarray
+    objectives: list[float]
+    evaluations: int
+    generations: int
+    seconds: float
+    loss: str
+    pixels: int
+    #: (generation, fitness, objectives, x) of the best individual of every generation.
+    history: list[tuple[int, float, list[float], np.ndarray]] = field(default_factory=list)
+
+
+@dataclass
+class FitResult:
+    """The outcome of :func:`fit`, in the spirit of scipy's OptimizeResult."""
+
+    scene: Scene
+    #: The fitted values of all fit parameters by scalar name (e.g. ``light.position.x``).
+    x: dict[str, float]
+    stages: list[StageResult]
+    evaluations: int
+    seconds: float
+    protocol: str
+    seed: int
+    #: Per object: light intensity x light colour x albedo, the combination the image determines.
+    products: dict[str, list[float]]
+    identifiability: dict[str, Any]
+    settings: dict[str, Any]
+    success: bool = True
+    message: str = ""
+
+    @property
+    def fitness(self) -> float:
+        return float(sum(self.stages[-1].objectives)) if self.stages else float("nan")
+
+    def report(self) -> dict[str, Any]:
+        """A JSON-able summary (the ``fit_report`` of result.json)."""
+        return {
+            "protocol": self.protocol,
+            "seed": self.seed,
+            "settings": self.settings,
+            "evaluations": self.evaluations,
+            "seconds": round(self.seconds, 4),
+            "stages": [
+                {
+                    "name": s.name,
+                    "parameters": s.param_names,
+                    "loss": s.loss,
+                    "pixels": s.pixels,
+                    "fitness": float(sum(s.objectives)),
+                    "objectives": [float(v) for v in s.objectives],
+                    "evaluations": s.evaluations,
+                    "generations": s.generations,
+                    "seconds": round(s.seconds, 4),
+                }
+                for s in self.stages
+            ],
+            "fitted": self.x,
+            "products": self.products,
+            "identifiability": self.identifiability,
+            "message": self.message,
+        }
+
+
+def _identifiability(scene: Scene, paths: list[str]) -> dict[str, Any]:
+    d = scene_to_dict(scene)
+    albedo_paths = [p for p in paths if p.endswith(".albedo")]
+    light_scale = [p for p in paths if p in ("light.intensity", "light.color", "exposure")]
+    no_ambient = all(v == 0 for v in d["ambient"]) and "ambient" not in paths
+    no_specular = all(o["material"]["specular"] == 0 for o in d["objects"]) and not any(
+        p.endswith(".specular") for p in paths
+    )
+    degenerate = bool(albedo_paths and light_scale and no_ambient and no_specular)
+    info: dict[str, Any] = {"degenerate": degenerate}
+    if degenerate:
+        info["determined"] = [f"{'*'.join(light_scale)}*{p}" for p in albedo_paths]
+        info["note"] = (
+            "no ambient light and no specular highlight: the image fixes only light intensity x albedo "
+            "per object and channel (see 'products'); the intensity is kept at the stage-1 value unless an "
+            "albedo would exceed its bounds, in which case the light is made just bright enough"
+        )
+    elif len(light_scale) > 1:
+        info["degenerate"] = True
+        info["determined"] = ["*".join(light_scale)]
+        info["note"] = f"{' and '.join(light_scale)} scale the image together; only their product is determined"
+    return info
+
+
+def _products(scene: Scene) -> dict[str, list[float]]:
+    d = scene_to_dict(scene)
+    light = np.array(d["light"]["color"]) * d["light"]["intensity"] * d["exposure"]
+    return {o["name"]: [float(v) for v in light * np.array(o["material"]["albedo"])] for o in d["objects"]}
+
+
+def sample_object_pixels(
+    scene: Scene, lit: np.ndarray, per_object: int, rng: np.random.Generator
+) -> np.ndarray:
+    """Pixel indices inside each object's visible area, away from silhouettes, preferring lit pixels."""
+    ids = _native.object_ids(scene)
+    interior = ids.copy()
+    same = np.ones_like(ids, dtype=bool)
+    same[1:, :] &= ids[1:, :] == ids[:-1, :]
+    same[:-1, :] &= ids[:-1, :] == ids[1:, :]
+    same[:, 1:] &= ids[:, 1:] == ids[:, :-1]
+    same[:, :-1] &= ids[:, :-1] == ids[:, 1:]
+    interior[~same] = -2
+    chosen = []
+    for k in range(len(scene.object_names)):
+        cand = np.flatnonzero((interior == k).ravel() & lit.ravel())
+        if cand.size == 0:
+            cand = np.flatnonzero((ids == k).ravel())
+        if cand.size:
+            chosen.append(rng.choice(cand, size=min(per_object, cand.size), replace=False))
+    if not chosen:
+        return np.zeros(0, np.uint32)
+    return np.sort(np.concatenate(chosen)).astype(np.uint32)
+
+
+def _with_bounds(scene: Scene, changes: dict[str, tuple[Any, Any]]) -> Scene:
+    d = scene_to_dict(scene)
+    for path, (lo, hi) in changes.items():
+        d["fit"][path] = {"min": lo, "max": hi}
+    return load_scene(d)
+
+
+def fit(
+    scene: Any,
+    image: np.ndarray,
+    *,
+    protocol: str = "rtloop",
+    seed: int = 0,
+    population: int | None = None,
+    generations: int | tuple[int, int] | None = None,
+    f: float | None = None,
+    cr: float | None = None,
+    threads: int | None = None,
+    clip: bool = True,
+    pixels_per_object: int = PIXELS_PER_OBJECT,
+    callback: Callable[[GenerationInfo], Any] | None = None,
+) -> FitResult:
+    """Fit the scene's free parameters (its ``fit`` section) to ``image``.
+
+    ``image`` is the objective in linear RGB, float (H, W, 3) at the scene's size (see :func:`load_image`).
+    ``protocol``: ``"rtloop"`` (default) or ``"paper"`` (population 60, 200 + 200 generations, F 0.6,
+    CR 0.8); ``population``, ``generations`` (one number for both stages or a pair), ``f`` and ``cr``
+    override it. ``seed`` makes the result reproducible on any number of ``threads``. ``clip`` compares
+    min(render, 1) with the objective, as an 8/16-bit photo saturates. ``callback(GenerationInfo)`` runs
+    after every generation; returning False stops the current stage.
+    """
+    t0 = time.perf_counter()
+    scene = load_scene(scene)
+    if protocol not in PROTOCOLS:
+        raise RtloopError(f"protocol: unknown protocol {protocol!r} (known: {', '.join(PROTOCOLS)})")
+    proto = PROTOCOLS[protocol]
+    pop = int(population if population is not None else proto["population"])
+    gens = generations if generations is not None else proto["generations"]
+    gens = (int(gens), int(gens)) if isinstance(gens, (int, np.integer)) else (int(gens[0]), int(gens[1]))
+    f_ = float(f if f is not None else proto["f"])
+    cr_ = float(cr if cr is not None else proto["cr"])
+    if pop < 4:
+        raise RtloopError(f"population: must be at least 4 (got {pop})")
+    if min(gens) < 0:
+        raise RtloopError(f"generations: must be >= 0 (got {gens})")
+    target = np.ascontiguousarray(image, dtype=np.float32)
+    if target.shape != (scene.height, scene.width, 3):
+        raise RtloopError(
+            f"image: shape {target.shape} does not match the scene's ({scene.height}, {scene.width}, 3); "
+            "load it with rtloop.load_image(path, scene)"
+        )
+    if not np.isfinite(target).all():
+        raise RtloopError("image: contains NaN or infinite values")
+    all_paths = scene.fit_paths
+    if not all_paths:
+        raise RtloopError("fit: the scene's fit section names no free parameters")
+    all_names = scene.param_names()
+    light_paths = [p for p in all_paths if p.startswith("light.")]
+    other_paths = [p for p in all_paths if not p.startswith("light.")]
+    ident = _identifiability(scene, all_paths)
+    settings = {"population": pop, "generations": list(gens), "f": f_, "cr": cr_, "clip": clip,
+                "pixels_per_object": pixels_per_object, "threads": threads}
+    stages: list[StageResult] = []
+    evaluations = 0
+    rng = np.random.default_rng(seed)
+    current = scene
+
+    def run(name: str, stage_scene: Scene, paths: list[str], loss: str, pixels: np.ndarray | None,
+            generations: int, stage_seed: int) -> StageResult:
+        nonlocal evaluations
+        history: list[tuple[int, float, list[float], np.ndarray]] = []
+        base_full = np.array(stage_scene.get_params(all_paths))
+        index = [all_names.index(n) for n in stage_scene.param_names(paths)]
+
+        def on_generation(gen: int, best: np.ndarray, objectives: list[float], evals: int) -> bool:
+            fitness = float(sum(objectives))
+            history.append((gen, fitness, list(objectives), np.array(best)))
+            if callback is not None:
+                full = base_full.copy()
+                full[index] = best
+                info = GenerationInfo(name, gen, fitness, list(objectives), full, evaluations + evals)
+                return callback(info) is not False
+            return True
+
+        t = time.perf_counter()
+        out = _native.optimize(
+            stage_scene, paths, target, pixels=pixels, loss=loss, clip=clip, population=pop,
+            generations=generations, f=f_, cr=cr_, seed=stage_seed, threads=threads, callback=on_generation,
+        )
+        evaluations += out["evaluations"]
+        return StageResult(
+            name=name, paths=paths, param_names=stage_scene.param_names(paths), x=np.asarray(out["x"]),
+            objectives=list(out["objectives"]), evaluations=out["evaluations"], generations=out["generations"],
+            seconds=time.perf_counter() - t, loss=loss, pixels=int(out["active_pixels"]), history=history,
+        )
+
+    def light_stage(name: str, stage_scene: Scene, stage_seed: int) -> Scene:
+        s = run(name, stage_scene, light_paths, "l1", None, gens[0], stage_seed)
+        stages.append(s)
+        return stage_scene.with_params(list(s.x), light_paths)
+
+    def colour_stage(name: str, stage_scene: Scene, stage_seed: int) -> Scene:
+        lit = _native.render(stage_scene).max(axis=2) > 1e-4
+        pixels = sample_object_pixels(stage_scene, lit, pixels_per_object, rng)
+        search_scene = stage_scene
+        widen: dict[str, tuple[Any, Any]] = {}
+        if ident["degenerate"] and "light.intensity" in all_paths:
+            intensity = stage_scene.get_params(["light.intensity"])[0]
+            imax = stage_scene.bounds(["light.intensity"])[0][1]
+            factor = max(1.0, imax / max(intensity, 1e-12))
+            for p in other_paths:
+                if p.endswith(".albedo"):
+                    b = stage_scene.bounds([p])
+                    widen[p] = ([lo for lo, _ in b], [hi * factor for _, hi in b])
+            search_scene = _with_bounds(stage_scene, widen)
+        s = run(name, search_scene, other_paths, "l1_rgb", pixels, gens[1], stage_seed)
+        stages.append(s)
+        fitted = stage_scene.with_params(list(s.x), other_paths)
+        if widen:
+            fitted = _fix_gauge(fitted, list(widen), stage_scene)
+        return fitted
+
+    seeds = np.random.SeedSequence(seed).generate_state(4, dtype=np.uint64)
+    if light_paths:
+        current = light_stage("light", current, int(seeds[0]))
+    if other_paths:
+        current = colour_stage("colour", current, int(seeds[1]))
+    if proto.get("refine") and light_paths and other_paths:
+        # Second pass: the light again, now against the fitted colours, in a narrowed box around it.
+        current = light_stage("light-refine", _narrowed(current, light_paths), int(seeds[2]))
+        current = _restore_bounds(current, scene)
+        current = colour_stage("colour-refine", current, int(seeds[3]))
+    current = _restore_bounds(current, scene)
+    values = current.get_params(all_paths)
+    return FitResult(
+        scene=current,
+        x={n: float(v) for n, v in zip(all_names, values)},
+        stages=stages,
+        evaluations=evaluations,
+        seconds=time.perf_counter() - t0,
+        protocol=protocol,
+        seed=seed,
+        products=_products(current),
+        identifiability=ident,
+        settings=settings,
+    )
+
+
+def _fix_gauge(fitted: Scene, albedo_paths: list[str], bounds_scene: Scene) -> Scene:
+    """Scale the light up (and the albedos down) until every albedo is within its original bounds."""
+    s = 1.0
+    for p in albedo_paths:
+        vals = fitted.get_params([p])
+        for v, (_, hi) in zip(vals, bounds_scene.bounds([p])):
+            if hi > 0:
+                s = max(s, v / hi)
+    if s <= 1.0:
+        return fitted
+    intensity = fitted.get_params(["light.intensity"])[0] * s
+    out = fitted.with_params([intensity], ["light.intensity"])
+    for p in albedo_paths:
+        out = out.with_params([v / s for v in fitted.get_params([p])], [p])
+    return out
+
+
+def _narrowed(scene: Scene, paths: list[str], fraction: float = 0.15) -> Scene:
+    """The scene with the bounds of ``paths`` shrunk to +-fraction of their range around the current values."""
+    changes = {}
+    for p in paths:
+        vals = scene.get_params([p])
+        b = scene.bounds([p])
+        lo = [max(l0, v - fraction * (h0 - l0)) for v, (l0, h0) in zip(vals, b)]
+        hi = [min(h0, v + fraction * (h0 - l0)) for v, (l0, h0) in zip(vals, b)]
+        changes[p] = (lo, hi)
+    return _with_bounds(scene, changes)
+
+
+def _restore_bounds(scene: Scene, original: Scene) -> Scene:
+    d = scene_to_dict(scene)
+    d["fit"] = scene_to_dict(original)["fit"]
+    return load_scene(d)

@@ -1,0 +1,86 @@
+"""Loading and saving scenes. Parsing and validation live in the Rust core (one owner of the format);
+this module only turns files and dicts into the JSON text it reads, with errors that name the file."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+from ._native import Scene
+from .errors import RtloopError, SceneError
+
+__all__ = ["Scene", "load_scene", "save_scene", "scene_to_dict"]
+
+
+def _first_non_finite(value: Any, path: str = "") -> str | None:
+    """The dotted path of the first NaN or infinite float in a nested dict/list, else None."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return path or "scene"
+    if isinstance(value, dict):
+        for k, v in value.items():
+            found = _first_non_finite(v, f"{path}.{k}" if path else str(k))
+            if found:
+                return found
+    elif isinstance(value, (list, tuple)):
+        for i, v in enumerate(value):
+            found = _first_non_finite(v, f"{path}[{i}]")
+            if found:
+                return found
+    return None
+
+
+def load_scene(source: str | os.PathLike[str] | dict[str, Any] | Scene) -> Scene:
+    """Load and validate a scene from a JSON file path, a dict in the scene format, or a Scene (returned as is).
+
+    Raises SceneError naming the field (``objects[0].radius: must be > 0 (got -1)``); for a file, the
+    message starts with the file name.
+    """
+    if isinstance(source, Scene):
+        return source
+    if isinstance(source, dict):
+        bad = _first_non_finite(source)
+        if bad:
+            raise SceneError(f"{bad}: must be a finite number (got NaN or infinity)")
+        try:
+            text = json.dumps(source, allow_nan=False)
+        except (TypeError, ValueError) as e:
+            raise SceneError(f"scene: cannot be written as JSON ({e})") from None
+        return Scene(text)
+    if isinstance(source, (str, os.PathLike)):
+        path = Path(source)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            raise RtloopError(f"{path}: scene file not found") from None
+        except IsADirectoryError:
+            raise RtloopError(f"{path}: is a directory, not a scene file") from None
+        except (OSError, UnicodeDecodeError) as e:
+            raise RtloopError(f"{path}: cannot read scene file ({e})") from None
+        try:
+            return Scene(text)
+        except SceneError as e:
+            raise SceneError(f"{path}: {e}") from None
+    raise TypeError(f"load_scene expects a path, a dict or a Scene, not {type(source).__name__}")
+
+
+def scene_to_dict(scene: Scene) -> dict[str, Any]:
+    """The scene in the public format as a plain dict (defaults written out)."""
+    return json.loads(scene.to_json())
+
+
+def save_scene(scene: Scene | dict[str, Any], path: str | os.PathLike[str]) -> None:
+    """Write a scene (or any JSON-able dict) to ``path`` atomically: a temporary file renamed into place."""
+    data = scene_to_dict(scene) if isinstance(scene, Scene) else scene
+    write_text_atomic(Path(path), json.dumps(data, indent=2, allow_nan=False) + "\n")
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)

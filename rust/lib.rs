@@ -1,0 +1,20 @@
+//! rtloop core: a small physically based ray tracer and a differential-evolution engine for
+//! rendering-in-the-loop scene fitting. This crate knows nothing of Python; the optional
+//! `python` feature adds a thin PyO3 layer (`rust/python/`).
+
+pub mod de;
+pub mod error;
+pub mod fitness;
+pub mod params;
+pub mod render;
+pub mod scene;
+
+#[cfg(feature = "python")]
+mod python;
+
+pub use de::{DeConfig, DeResult, GenerationReport, Objective};
+pub use error::{Error, Result};
+pub use fitness::{Fitness, LossKind};
+pub use params::ParamLayout;
+pub use render::{render, GBuffer, Image};
+pub use scene::Scene;

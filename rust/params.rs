@@ -1,0 +1,197 @@
+//! Free parameters: the `fit` section's dotted paths, mapped onto a flat `f64` vector.
+
+use crate::error::{Error, Result};
+use crate::scene::Scene;
+
+/// What a dotted fit path refers to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Target {
+    LightPosition,
+    LightIntensity,
+    LightColor,
+    Ambient,
+    Exposure,
+    Albedo(usize),
+    Specular(usize),
+    Shininess(usize),
+}
+
+/// The fittable paths, for error messages and documentation.
+pub const FITTABLE: &str = "light.position, light.intensity, light.color, ambient, exposure, \
+objects.NAME.albedo, objects.NAME.specular, objects.NAME.shininess";
+
+impl Target {
+    /// Parse a dotted path such as `objects.ball.albedo`. The error is a bare reason; the caller adds the field.
+    pub fn parse(path: &str, scene: &Scene) -> std::result::Result<Target, String> {
+        let t = match path {
+            "light.position" => Target::LightPosition,
+            "light.intensity" => Target::LightIntensity,
+            "light.color" => Target::LightColor,
+            "ambient" => Target::Ambient,
+            "exposure" => Target::Exposure,
+            _ => {
+                let parts: Vec<&str> = path.split('.').collect();
+                if parts.len() != 3 || parts[0] != "objects" {
+                    return Err(format!(
+                        "unknown parameter path {path:?} (fittable: {FITTABLE})"
+                    ));
+                }
+                let i = scene.object_index(parts[1]).ok_or_else(|| {
+                    let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
+                    format!(
+                        "unknown object {:?} (objects are: {})",
+                        parts[1],
+                        names.join(", ")
+                    )
+                })?;
+                match parts[2] {
+                    "albedo" => Target::Albedo(i),
+                    "specular" => Target::Specular(i),
+                    "shininess" => Target::Shininess(i),
+                    other => {
+                        return Err(format!(
+                            "objects.{}.{other} cannot be fitted (fittable per object: albedo, specular, shininess)",
+                            parts[1]
+                        ))
+                    }
+                }
+            }
+        };
+        Ok(t)
+    }
+
+    /// Number of scalar components.
+    pub fn len(&self) -> usize {
+        match self {
+            Target::LightPosition | Target::LightColor | Target::Ambient | Target::Albedo(_) => 3,
+            Target::LightIntensity
+            | Target::Exposure
+            | Target::Specular(_)
+            | Target::Shininess(_) => 1,
+        }
+    }
+
+    /// Canonical order: the paper's [light x, y, z, power, objects' RGB...].
+    pub fn order_key(&self) -> (usize, usize, usize) {
+        match *self {
+            Target::LightPosition => (0, 0, 0),
+            Target::LightIntensity => (0, 0, 1),
+            Target::LightColor => (0, 0, 2),
+            Target::Ambient => (1, 0, 0),
+            Target::Exposure => (1, 0, 1),
+            Target::Albedo(i) => (2, i, 0),
+            Target::Specular(i) => (2, i, 1),
+            Target::Shininess(i) => (2, i, 2),
+        }
+    }
+
+    /// The smallest physically meaningful value, if any.
+    pub fn lower_limit(&self) -> Option<f64> {
+        match self {
+            Target::LightPosition => None,
+            _ => Some(0.0),
+        }
+    }
+
+    /// True for parameters the image depends on linearly (albedo, intensity, colour, ambient, exposure, specular).
+    pub fn is_linear(&self) -> bool {
+        !matches!(self, Target::LightPosition | Target::Shininess(_))
+    }
+
+    /// Current value in `scene`.
+    pub fn get(&self, scene: &Scene) -> Vec<f64> {
+        match *self {
+            Target::LightPosition => scene.light.position.to_vec(),
+            Target::LightIntensity => vec![scene.light.intensity],
+            Target::LightColor => scene.light.color.to_vec(),
+            Target::Ambient => scene.ambient.to_vec(),
+            Target::Exposure => vec![scene.exposure],
+            Target::Albedo(i) => scene.objects[i].material.albedo.to_vec(),
+            Target::Specular(i) => vec![scene.objects[i].material.specular],
+            Target::Shininess(i) => vec![scene.objects[i].material.shininess],
+        }
+    }
+
+    /// Write `v` (of length `self.len()`) into `scene`.
+    pub fn set(&self, scene: &mut Scene, v: &[f64]) {
+        let v3 = || [v[0], v[1], v[2]];
+        match *self {
+            Target::LightPosition => scene.light.position = v3(),
+            Target::LightIntensity => scene.light.intensity = v[0],
+            Target::LightColor => scene.light.color = v3(),
+            Target::Ambient => scene.ambient = v3(),
+            Target::Exposure => scene.exposure = v[0],
+            Target::Albedo(i) => scene.objects[i].material.albedo = v3(),
+            Target::Specular(i) => scene.objects[i].material.specular = v[0],
+            Target::Shininess(i) => scene.objects[i].material.shininess = v[0],
+        }
+    }
+}
+
+/// A selection of the scene's fit parameters laid out as one vector.
+#[derive(Clone, Debug)]
+pub struct ParamLayout {
+    pub entries: Vec<(String, Target, usize)>,
+    pub bounds: Vec<(f64, f64)>,
+    pub names: Vec<String>,
+}
+
+impl ParamLayout {
+    /// Select `paths` (each must appear in the scene's `fit` section) in canonical order.
+    pub fn new(scene: &Scene, paths: &[String]) -> Result<ParamLayout> {
+        for p in paths {
+            if !scene.fit.iter().any(|f| &f.path == p) {
+                let known: Vec<&str> = scene.fit.iter().map(|f| f.path.as_str()).collect();
+                return Err(Error::Invalid(format!(
+                    "parameter {p:?} is not in the scene's fit section (it has: {})",
+                    known.join(", ")
+                )));
+            }
+        }
+        let mut layout = ParamLayout {
+            entries: Vec::new(),
+            bounds: Vec::new(),
+            names: Vec::new(),
+        };
+        for f in scene.fit.iter().filter(|f| paths.contains(&f.path)) {
+            let offset = layout.bounds.len();
+            layout.entries.push((f.path.clone(), f.target, offset));
+            let suffix: &[&str] = match f.target.len() {
+                1 => &[""],
+                _ if matches!(f.target, Target::LightPosition) => &[".x", ".y", ".z"],
+                _ => &[".r", ".g", ".b"],
+            };
+            for k in 0..f.target.len() {
+                layout.bounds.push((f.min[k], f.max[k]));
+                layout.names.push(format!("{}{}", f.path, suffix[k]));
+            }
+        }
+        Ok(layout)
+    }
+
+    /// All of the scene's fit parameters.
+    pub fn all(scene: &Scene) -> ParamLayout {
+        let paths: Vec<String> = scene.fit.iter().map(|f| f.path.clone()).collect();
+        ParamLayout::new(scene, &paths).expect("the scene's own paths are valid")
+    }
+
+    pub fn dim(&self) -> usize {
+        self.bounds.len()
+    }
+
+    /// Write the parameter vector `x` into `scene`.
+    pub fn apply(&self, scene: &mut Scene, x: &[f64]) {
+        for (_, target, offset) in &self.entries {
+            target.set(scene, &x[*offset..*offset + target.len()]);
+        }
+    }
+
+    /// Read the current values from `scene`.
+    pub fn read(&self, scene: &Scene) -> Vec<f64> {
+        let mut x = Vec::with_capacity(self.dim());
+        for (_, target, _) in &self.entries {
+            x.extend(target.get(scene));
+        }
+        x
+    }
+}

@@ -1,0 +1,374 @@
+//! The PyO3 layer: conversions only. Heavy calls copy their inputs out and release the GIL.
+
+use std::path::PathBuf;
+
+use numpy::{
+    PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
+    PyReadonlyArray3, PyUntypedArrayMethods,
+};
+use pyo3::create_exception;
+use pyo3::exceptions::{PyException, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::de::{self, DeConfig};
+use crate::error::Error;
+use crate::fitness::{Fitness, LossKind};
+use crate::params::ParamLayout;
+use crate::render as core_render;
+use crate::scene::Scene;
+
+create_exception!(
+    _native,
+    RtloopError,
+    PyException,
+    "Base class of rtloop's errors."
+);
+create_exception!(
+    _native,
+    SceneError,
+    RtloopError,
+    "The scene description is invalid; the message names the field."
+);
+
+impl From<Error> for PyErr {
+    fn from(e: Error) -> PyErr {
+        match e {
+            Error::Scene(m) => SceneError::new_err(m),
+            Error::Invalid(m) => RtloopError::new_err(m),
+            Error::Io { .. } => RtloopError::new_err(e.to_string()),
+        }
+    }
+}
+
+/// A validated scene (immutable). Build one with `Scene(json_text)`; `rtloop.load_scene` is the friendly way.
+#[pyclass(frozen, name = "Scene", module = "rtloop._native")]
+pub struct PyScene(pub Scene);
+
+#[pymethods]
+impl PyScene {
+    #[new]
+    fn new(json_text: &str) -> PyResult<Self> {
+        Ok(PyScene(Scene::from_json(json_text)?))
+    }
+
+    #[getter]
+    fn width(&self) -> u32 {
+        self.0.width
+    }
+
+    #[getter]
+    fn height(&self) -> u32 {
+        self.0.height
+    }
+
+    /// Object names in scene order.
+    #[getter]
+    fn object_names(&self) -> Vec<String> {
+        self.0.objects.iter().map(|o| o.name.clone()).collect()
+    }
+
+    /// The fit section's paths in canonical order.
+    #[getter]
+    fn fit_paths(&self) -> Vec<String> {
+        self.0.fit.iter().map(|f| f.path.clone()).collect()
+    }
+
+    /// Scalar parameter names (e.g. `light.position.x`) for `paths` (all fit paths when omitted).
+    #[pyo3(signature = (paths=None))]
+    fn param_names(&self, paths: Option<Vec<String>>) -> PyResult<Vec<String>> {
+        Ok(layout(&self.0, paths)?.names)
+    }
+
+    /// (min, max) per scalar parameter.
+    #[pyo3(signature = (paths=None))]
+    fn bounds(&self, paths: Option<Vec<String>>) -> PyResult<Vec<(f64, f64)>> {
+        Ok(layout(&self.0, paths)?.bounds)
+    }
+
+    /// Current values of the scalar parameters.
+    #[pyo3(signature = (paths=None))]
+    fn get_params(&self, paths: Option<Vec<String>>) -> PyResult<Vec<f64>> {
+        let l = layout(&self.0, paths)?;
+        Ok(l.read(&self.0))
+    }
+
+    /// A copy with the scalar parameters of `paths` set to `values` (no bounds check: bounds are the search's).
+    #[pyo3(signature = (values, paths=None))]
+    fn with_params(&self, values: Vec<f64>, paths: Option<Vec<String>>) -> PyResult<PyScene> {
+        let l = layout(&self.0, paths)?;
+        if values.len() != l.dim() {
+            return Err(PyValueError::new_err(format!(
+                "expected {} values, got {}",
+                l.dim(),
+                values.len()
+            )));
+        }
+        if let Some(v) = values.iter().find(|v| !v.is_finite()) {
+            return Err(PyValueError::new_err(format!(
+                "parameter values must be finite (got {v})"
+            )));
+        }
+        let mut s = self.0.clone();
+        l.apply(&mut s, &values);
+        Ok(PyScene(s))
+    }
+
+    /// The scene as JSON text in the public format, defaults written out.
+    fn to_json(&self) -> String {
+        serde_json::to_string_pretty(&self.0.to_value()).expect("a scene always serialises")
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "<rtloop.Scene {}x{}, {} objects, {} free parameters>",
+            self.0.width,
+            self.0.height,
+            self.0.objects.len(),
+            ParamLayout::all(&self.0).dim()
+        )
+    }
+}
+
+fn layout(scene: &Scene, paths: Option<Vec<String>>) -> PyResult<ParamLayout> {
+    Ok(match paths {
+        Some(p) => ParamLayout::new(scene, &p)?,
+        None => ParamLayout::all(scene),
+    })
+}
+
+fn image_array<'py>(
+    py: Python<'py>,
+    h: u32,
+    w: u32,
+    rgb: Vec<f32>,
+) -> PyResult<Bound<'py, PyArray3<f32>>> {
+    PyArray1::from_vec(py, rgb).reshape([h as usize, w as usize, 3])
+}
+
+/// Render `scene` to a float32 (H, W, 3) linear RGB array.
+#[pyfunction]
+#[pyo3(signature = (scene, width=None, height=None, spp=1))]
+fn render<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyScene>,
+    width: Option<u32>,
+    height: Option<u32>,
+    spp: u32,
+) -> PyResult<Bound<'py, PyArray3<f32>>> {
+    let scene = &scene.get().0;
+    let img = py.detach(|| core_render::render(scene, width, height, spp))?;
+    image_array(py, img.height, img.width, img.rgb)
+}
+
+/// Object index per pixel centre, int32 (H, W), -1 for background.
+#[pyfunction]
+#[pyo3(signature = (scene, width=None, height=None))]
+fn object_ids<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyScene>,
+    width: Option<u32>,
+    height: Option<u32>,
+) -> PyResult<Bound<'py, PyArray2<i32>>> {
+    let scene = &scene.get().0;
+    let (w, h) = (width.unwrap_or(scene.width), height.unwrap_or(scene.height));
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(RtloopError::new_err(format!(
+            "image size must be 1..16384 pixels per side (got {w}x{h})"
+        )));
+    }
+    let ids = py.detach(|| core_render::object_ids(scene, Some(w), Some(h)));
+    PyArray1::from_vec(py, ids).reshape([h as usize, w as usize])
+}
+
+/// Write a linear float (H, W, 3) image as 8-bit sRGB PNG or BMP, atomically.
+#[pyfunction]
+fn save_image(py: Python<'_>, path: PathBuf, image: PyReadonlyArray3<'_, f32>) -> PyResult<()> {
+    let shape = image.shape().to_vec();
+    if shape[2] != 3 {
+        return Err(PyValueError::new_err(format!(
+            "expected an (H, W, 3) image, got shape {shape:?}"
+        )));
+    }
+    let data = image.as_slice()?.to_vec();
+    py.detach(|| core_render::save_srgb8(&path, shape[1] as u32, shape[0] as u32, &data))?;
+    Ok(())
+}
+
+fn target_vec(scene: &Scene, target: &PyReadonlyArray3<'_, f32>) -> PyResult<Vec<f32>> {
+    let shape = target.shape();
+    if shape != [scene.height as usize, scene.width as usize, 3] {
+        return Err(PyValueError::new_err(format!(
+            "objective image has shape {shape:?}; the scene needs ({}, {}, 3)",
+            scene.height, scene.width
+        )));
+    }
+    Ok(target.as_slice()?.to_vec())
+}
+
+fn make_fitness(
+    scene: &Scene,
+    paths: &[String],
+    target: &PyReadonlyArray3<'_, f32>,
+    pixels: Option<PyReadonlyArray1<'_, u32>>,
+    loss: &str,
+    clip: bool,
+) -> PyResult<(Fitness, Vec<(f64, f64)>)> {
+    let layout = ParamLayout::new(scene, paths)?;
+    let bounds = layout.bounds.clone();
+    let target = target_vec(scene, target)?;
+    let pixels: Option<Vec<u32>> = match pixels {
+        Some(p) => Some(p.as_slice()?.to_vec()),
+        None => None,
+    };
+    let fitness = Fitness::new(
+        scene,
+        layout,
+        &target,
+        pixels.as_deref(),
+        LossKind::parse(loss)?,
+        clip,
+    )?;
+    Ok((fitness, bounds))
+}
+
+fn pool(threads: Option<usize>) -> PyResult<rayon::ThreadPool> {
+    let mut b = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = threads {
+        if n == 0 {
+            return Err(PyValueError::new_err("threads must be >= 1"));
+        }
+        b = b.num_threads(n);
+    }
+    b.build()
+        .map_err(|e| RtloopError::new_err(format!("cannot start worker threads: {e}")))
+}
+
+/// Objective values of each row of `population` (N, D): float64 (N, n_objectives).
+#[pyfunction]
+#[pyo3(signature = (scene, paths, target, population, pixels=None, loss="l1", clip=true, threads=None))]
+#[allow(clippy::too_many_arguments)]
+fn evaluate<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyScene>,
+    paths: Vec<String>,
+    target: PyReadonlyArray3<'py, f32>,
+    population: PyReadonlyArray2<'py, f64>,
+    pixels: Option<PyReadonlyArray1<'py, u32>>,
+    loss: &str,
+    clip: bool,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    use de::Objective;
+    use rayon::prelude::*;
+    let scene = &scene.get().0;
+    let (fitness, bounds) = make_fitness(scene, &paths, &target, pixels, loss, clip)?;
+    let pop = population.as_array();
+    if pop.ncols() != bounds.len() {
+        return Err(PyValueError::new_err(format!(
+            "population has {} columns; {} parameters",
+            pop.ncols(),
+            bounds.len()
+        )));
+    }
+    let rows: Vec<Vec<f64>> = pop.rows().into_iter().map(|r| r.to_vec()).collect();
+    let nobj = fitness.n_objectives();
+    let pool = pool(threads)?;
+    let out = py.detach(|| {
+        pool.install(|| {
+            let mut out = vec![0.0; rows.len() * nobj];
+            out.par_chunks_mut(nobj)
+                .zip(rows.par_iter())
+                .for_each(|(o, x)| fitness.evaluate(x, o));
+            out
+        })
+    });
+    PyArray1::from_vec(py, out).reshape([rows.len(), nobj])
+}
+
+/// Run DE/rand/1/bin on the fitness of `paths` against `target`. One call per stage; the GIL is released
+/// except while `callback(generation, best, best_objectives, evaluations)` runs (after the initial
+/// population and after every generation; returning False stops the search).
+#[pyfunction]
+#[pyo3(signature = (scene, paths, target, *, pixels=None, loss="l1", clip=true, population=60,
+                    generations=200, f=0.6, cr=0.8, seed=0, threads=None, callback=None))]
+#[allow(clippy::too_many_arguments)]
+fn optimize<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyScene>,
+    paths: Vec<String>,
+    target: PyReadonlyArray3<'py, f32>,
+    pixels: Option<PyReadonlyArray1<'py, u32>>,
+    loss: &str,
+    clip: bool,
+    population: usize,
+    generations: usize,
+    f: f64,
+    cr: f64,
+    seed: u64,
+    threads: Option<usize>,
+    callback: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let scene = &scene.get().0;
+    let (fitness, bounds) = make_fitness(scene, &paths, &target, pixels, loss, clip)?;
+    let cfg = DeConfig {
+        population,
+        generations,
+        f,
+        cr,
+        seed,
+    };
+    let pool = pool(threads)?;
+    let active = fitness.active_pixels();
+    let mut error: Option<PyErr> = None;
+    let result = py.detach(|| {
+        pool.install(|| {
+            de::minimize(&fitness, &bounds, &cfg, |rep| {
+                let Some(cb) = &callback else { return true };
+                Python::attach(|py| {
+                    let best = PyArray1::from_slice(py, rep.best);
+                    match cb.call1(
+                        py,
+                        (
+                            rep.generation,
+                            best,
+                            rep.best_objectives.to_vec(),
+                            rep.evaluations,
+                        ),
+                    ) {
+                        Ok(v) => !v.bind(py).is(&*pyo3::types::PyBool::new(py, false)),
+                        Err(e) => {
+                            error = Some(e);
+                            false
+                        }
+                    }
+                })
+            })
+        })
+    })?;
+    if let Some(e) = error {
+        return Err(e);
+    }
+    let d = PyDict::new(py);
+    d.set_item("x", PyArray1::from_vec(py, result.best))?;
+    d.set_item("objectives", result.best_objectives)?;
+    d.set_item("evaluations", result.evaluations)?;
+    d.set_item("generations", result.generations)?;
+    d.set_item("stopped", result.stopped)?;
+    d.set_item("active_pixels", active)?;
+    Ok(d)
+}
+
+#[pymodule(gil_used = false)]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyScene>()?;
+    m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add_function(wrap_pyfunction!(object_ids, m)?)?;
+    m.add_function(wrap_pyfunction!(save_image, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluate, m)?)?;
+    m.add_function(wrap_pyfunction!(optimize, m)?)?;
+    m.add("RtloopError", m.py().get_type::<RtloopError>())?;
+    m.add("SceneError", m.py().get_type::<SceneError>())?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,230 @@
+//! Direct lighting from one point light: Lambert plus normalised Blinn–Phong, with a shadow ray.
+//!
+//! L = ρ·ambient + V·I·color·max(0, n·l)/d² · [ρ/π + k_s·(s+8)/(8π)·max(0, n·h)^s], pixel = exposure·L.
+
+use glam::Vec3A;
+
+use super::shape::PShape;
+use super::Surfel;
+use crate::params::Target;
+use crate::scene::Scene;
+
+const INV_PI: f32 = std::f32::consts::FRAC_1_PI;
+
+/// A material in working form.
+#[derive(Clone, Copy, Debug)]
+pub struct PMaterial {
+    pub albedo: Vec3A,
+    pub specular: f32,
+    pub shininess: f32,
+}
+
+/// Everything shading needs that a fit may change: the light, global terms and the materials.
+#[derive(Clone, Debug)]
+pub struct ShadeParams {
+    pub light_position: Vec3A,
+    pub light_intensity: f32,
+    pub light_color: Vec3A,
+    /// I · color, in W/sr per channel (kept in step by `set`).
+    pub light_rgb: Vec3A,
+    pub ambient: Vec3A,
+    pub background: Vec3A,
+    pub exposure: f32,
+    pub materials: Vec<PMaterial>,
+    /// False when every specular is 0: the Blinn–Phong lobe is skipped entirely.
+    pub any_specular: bool,
+}
+
+fn v3(a: [f64; 3]) -> Vec3A {
+    glam::DVec3::from_array(a).as_vec3a()
+}
+
+impl ShadeParams {
+    pub fn new(scene: &Scene) -> ShadeParams {
+        let materials: Vec<PMaterial> = scene
+            .objects
+            .iter()
+            .map(|o| PMaterial {
+                albedo: v3(o.material.albedo),
+                specular: o.material.specular as f32,
+                shininess: o.material.shininess as f32,
+            })
+            .collect();
+        let mut p = ShadeParams {
+            light_position: v3(scene.light.position),
+            light_intensity: scene.light.intensity as f32,
+            light_color: v3(scene.light.color),
+            light_rgb: v3(scene.light.color) * scene.light.intensity as f32,
+            ambient: v3(scene.ambient),
+            background: v3(scene.background),
+            exposure: scene.exposure as f32,
+            any_specular: false,
+            materials,
+        };
+        p.update_flags();
+        p
+    }
+
+    fn update_flags(&mut self) {
+        self.any_specular = self.materials.iter().any(|m| m.specular != 0.0);
+    }
+
+    /// Apply one free parameter directly to the working form.
+    pub fn set(&mut self, target: Target, v: &[f64]) {
+        let v3 = || Vec3A::new(v[0] as f32, v[1] as f32, v[2] as f32);
+        match target {
+            Target::LightPosition => self.light_position = v3(),
+            Target::LightIntensity => self.light_intensity = v[0] as f32,
+            Target::LightColor => self.light_color = v3(),
+            Target::Ambient => self.ambient = v3(),
+            Target::Exposure => self.exposure = v[0] as f32,
+            Target::Albedo(i) => self.materials[i].albedo = v3(),
+            Target::Specular(i) => {
+                self.materials[i].specular = v[0] as f32;
+                self.update_flags();
+            }
+            Target::Shininess(i) => self.materials[i].shininess = v[0] as f32,
+        }
+        self.light_rgb = self.light_color * self.light_intensity;
+    }
+}
+
+/// True if any object other than `skip` blocks the segment from `s` to the light.
+///
+/// A sphere (convex) or a plane can never shadow its own lit side, so the surface the point lies on is
+/// not tested at all: no self-intersection and no offset that could leak light through thin occluders.
+#[inline]
+pub fn occluded(s: &Surfel, to_light: Vec3A, dist: f32, shapes: &[PShape]) -> bool {
+    let tmin = s.eps;
+    let tmax = dist * (1.0 - 4.0 * f32::EPSILON);
+    shapes
+        .iter()
+        .enumerate()
+        .any(|(k, sh)| k as u32 != s.object && sh.hits_segment(s.position, to_light, tmin, tmax))
+}
+
+/// Exposure-scaled radiance towards the eye at surfel `s` (the background for a miss).
+#[inline]
+pub fn shade(s: &Surfel, p: &ShadeParams, shapes: &[PShape], shadows: bool) -> Vec3A {
+    if s.object == u32::MAX {
+        return p.exposure * p.background;
+    }
+    let m = &p.materials[s.object as usize];
+    let mut l = m.albedo * p.ambient;
+    let d = p.light_position - s.position;
+    let d2 = d.length_squared();
+    // A light on the surface itself (d = 0) lies in the tangent plane: no direct light.
+    if d2 > f32::MIN_POSITIVE {
+        let dist = d2.sqrt();
+        let dir = d / dist;
+        let ndotl = s.normal.dot(dir);
+        if ndotl > 0.0 && !(shadows && occluded(s, dir, dist, shapes)) {
+            let mut brdf = m.albedo * INV_PI;
+            if p.any_specular && m.specular > 0.0 {
+                let h = (dir + s.view).normalize_or_zero();
+                let ndoth = s.normal.dot(h).max(0.0);
+                let lobe =
+                    m.specular * (m.shininess + 8.0) * (INV_PI / 8.0) * ndoth.powf(m.shininess);
+                brdf += Vec3A::splat(lobe);
+            }
+            // Clamp so that a light almost touching a surface gives a huge but finite value.
+            let e = (ndotl / d2).min(f32::MAX);
+            l += (p.light_rgb * brdf * e).min(Vec3A::splat(f32::MAX));
+        }
+    }
+    (p.exposure * l).min(Vec3A::splat(f32::MAX))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::Surfel;
+
+    fn params(spec: f32, shin: f32) -> ShadeParams {
+        ShadeParams {
+            light_position: Vec3A::new(0.0, 2.0, 0.0),
+            light_intensity: 10.0,
+            light_color: Vec3A::ONE,
+            light_rgb: Vec3A::splat(10.0),
+            ambient: Vec3A::ZERO,
+            background: Vec3A::new(0.1, 0.2, 0.3),
+            exposure: 1.0,
+            materials: vec![PMaterial {
+                albedo: Vec3A::splat(0.5),
+                specular: spec,
+                shininess: shin,
+            }],
+            any_specular: spec != 0.0,
+        }
+    }
+
+    fn floor_point(x: f32) -> Surfel {
+        Surfel {
+            position: Vec3A::new(x, 0.0, 0.0),
+            normal: Vec3A::Y,
+            view: Vec3A::Y,
+            object: 0,
+            eps: 1e-6,
+        }
+    }
+
+    #[test]
+    fn lambert_inverse_square_and_cosine() {
+        let p = params(0.0, 0.0);
+        let under = shade(&floor_point(0.0), &p, &[], false);
+        assert!((under.x - 10.0 * 0.5 / std::f32::consts::PI / 4.0).abs() < 1e-6);
+        // At x = 2 the light is at 45 degrees and sqrt(8) away.
+        let side = shade(&floor_point(2.0), &p, &[], false);
+        let want = 10.0 * 0.5 / std::f32::consts::PI * (0.5f32.sqrt()) / 8.0;
+        assert!((side.x - want).abs() < 1e-6);
+    }
+
+    #[test]
+    fn light_on_or_below_the_surface_gives_no_direct_light_and_no_nan() {
+        let mut p = params(1.0, 10.0);
+        p.light_position = Vec3A::ZERO;
+        assert_eq!(shade(&floor_point(0.0), &p, &[], false), Vec3A::ZERO);
+        p.light_position = Vec3A::new(0.0, -1.0, 0.0);
+        assert_eq!(shade(&floor_point(0.0), &p, &[], false), Vec3A::ZERO);
+        p.light_position = Vec3A::new(0.0, 1e-30, 0.0);
+        let v = shade(&floor_point(0.0), &p, &[], false);
+        assert!(v.is_finite(), "{v}");
+    }
+
+    #[test]
+    fn normalised_blinn_phong_peak() {
+        // Eye straight above, light straight above: n.h = 1, lobe = ks (s+8)/(8 pi).
+        let p = params(0.5, 20.0);
+        let v = shade(&floor_point(0.0), &p, &[], false);
+        let e = 10.0 / 4.0;
+        let want = e * (0.5 / std::f32::consts::PI + 0.5 * 28.0 / (8.0 * std::f32::consts::PI));
+        assert!((v.x - want).abs() < 1e-5, "{} vs {want}", v.x);
+    }
+
+    #[test]
+    fn miss_returns_exposed_background() {
+        let mut p = params(0.0, 0.0);
+        p.exposure = 2.0;
+        let mut s = floor_point(0.0);
+        s.object = u32::MAX;
+        assert_eq!(shade(&s, &p, &[], false), Vec3A::new(0.2, 0.4, 0.6));
+    }
+
+    #[test]
+    fn sphere_shadows_the_floor_but_not_beside_it() {
+        let p = params(0.0, 0.0);
+        let shapes = [
+            PShape::Plane {
+                point: Vec3A::ZERO,
+                normal: Vec3A::Y,
+            },
+            PShape::Sphere {
+                center: Vec3A::new(0.0, 1.0, 0.0),
+                radius: 0.5,
+            },
+        ];
+        // Light at y = 2 straight above a sphere centred at y = 1 with r = 0.5.
+        assert_eq!(shade(&floor_point(0.0), &p, &shapes, true), Vec3A::ZERO);
+        assert!(shade(&floor_point(3.0), &p, &shapes, true).x > 0.0);
+    }
+}

@@ -1,0 +1,565 @@
+//! The scene: the one owner of parsing and validation of rtloop's JSON scene format.
+//!
+//! Units are metres, right-handed, +y up, linear RGB. Values are kept in `f64` exactly as written;
+//! the renderer converts to its own `f32` working form. Every validation error names its field,
+//! e.g. `objects[1].normal: zero-length normal`.
+
+use serde::Deserialize;
+use serde_json::{json, Map, Value};
+
+use crate::error::{Error, Result};
+use crate::params::Target;
+
+pub type V3 = [f64; 3];
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Camera {
+    pub position: V3,
+    pub look_at: V3,
+    pub up: V3,
+    /// Full vertical field of view in degrees.
+    pub vfov_deg: f64,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct PointLight {
+    pub position: V3,
+    /// Radiant intensity scale in W/sr (times `color`).
+    pub intensity: f64,
+    pub color: V3,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    pub albedo: V3,
+    pub specular: f64,
+    pub shininess: f64,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum Shape {
+    Sphere {
+        center: V3,
+        radius: f64,
+    },
+    /// Infinite, two-sided plane.
+    Plane {
+        point: V3,
+        normal: V3,
+    },
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Object {
+    pub name: String,
+    pub shape: Shape,
+    pub material: Material,
+}
+
+/// One free parameter of the fit section: a dotted path and its bounds (one entry per component).
+#[derive(Clone, Debug, PartialEq)]
+pub struct FitParam {
+    pub path: String,
+    pub target: Target,
+    pub min: Vec<f64>,
+    pub max: Vec<f64>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scene {
+    pub width: u32,
+    pub height: u32,
+    pub camera: Camera,
+    pub light: PointLight,
+    pub ambient: V3,
+    pub background: V3,
+    pub exposure: f64,
+    pub objects: Vec<Object>,
+    /// Free parameters in canonical order (light, globals, then objects in scene order).
+    pub fit: Vec<FitParam>,
+    /// Top-level descriptive keys carried through unchanged (`name`, `description`, `fit_report`, `meta`).
+    pub extra: Map<String, Value>,
+}
+
+// ---------------------------------------------------------------- raw (serde) form
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScene {
+    image: RawImage,
+    camera: RawCamera,
+    light: RawLight,
+    ambient: Option<V3>,
+    background: Option<V3>,
+    exposure: Option<f64>,
+    objects: Vec<RawObject>,
+    fit: Option<Map<String, Value>>,
+    name: Option<Value>,
+    description: Option<Value>,
+    fit_report: Option<Value>,
+    meta: Option<Value>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawImage {
+    width: i64,
+    height: i64,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCamera {
+    position: V3,
+    look_at: V3,
+    up: Option<V3>,
+    vfov_deg: f64,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLight {
+    position: V3,
+    intensity: f64,
+    color: Option<V3>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawObject {
+    name: Option<String>,
+    shape: String,
+    center: Option<V3>,
+    radius: Option<f64>,
+    point: Option<V3>,
+    normal: Option<V3>,
+    material: Option<RawMaterial>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMaterial {
+    albedo: Option<V3>,
+    specular: Option<f64>,
+    shininess: Option<f64>,
+}
+
+// ---------------------------------------------------------------- validation helpers
+
+fn finite(field: &str, v: f64) -> Result<f64> {
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(Error::scene(
+            field,
+            format!("must be a finite number (got {v})"),
+        ))
+    }
+}
+
+fn finite3(field: &str, v: V3) -> Result<V3> {
+    for (k, c) in v.iter().enumerate() {
+        if !c.is_finite() {
+            return Err(Error::scene(
+                field,
+                format!("component {k} must be a finite number (got {c})"),
+            ));
+        }
+    }
+    Ok(v)
+}
+
+fn nonneg3(field: &str, v: V3) -> Result<V3> {
+    let v = finite3(field, v)?;
+    if v.iter().any(|&c| c < 0.0) {
+        return Err(Error::scene(
+            field,
+            format!("must be >= 0 in every component (got {v:?})"),
+        ));
+    }
+    Ok(v)
+}
+
+pub(crate) fn norm(v: V3) -> f64 {
+    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+}
+
+fn cross(a: V3, b: V3) -> V3 {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+impl Scene {
+    /// Parse and validate a scene from JSON text.
+    pub fn from_json(text: &str) -> Result<Scene> {
+        let de = &mut serde_json::Deserializer::from_str(text);
+        let raw: RawScene = serde_path_to_error::deserialize(de).map_err(|e| {
+            let path = e.path().to_string();
+            let inner = e.into_inner();
+            if path.is_empty() || path == "." {
+                Error::Scene(format!("scene: {inner}"))
+            } else {
+                Error::scene(path, inner)
+            }
+        })?;
+        Scene::from_raw(raw)
+    }
+
+    fn from_raw(raw: RawScene) -> Result<Scene> {
+        let width = raw.image.width;
+        let height = raw.image.height;
+        for (field, v) in [("image.width", width), ("image.height", height)] {
+            if !(1..=16384).contains(&v) {
+                return Err(Error::scene(
+                    field,
+                    format!("must be between 1 and 16384 pixels (got {v})"),
+                ));
+            }
+        }
+
+        let c = &raw.camera;
+        let camera = Camera {
+            position: finite3("camera.position", c.position)?,
+            look_at: finite3("camera.look_at", c.look_at)?,
+            up: finite3("camera.up", c.up.unwrap_or([0.0, 1.0, 0.0]))?,
+            vfov_deg: finite("camera.vfov_deg", c.vfov_deg)?,
+        };
+        if !(camera.vfov_deg > 0.0 && camera.vfov_deg < 180.0) {
+            return Err(Error::scene(
+                "camera.vfov_deg",
+                format!("must be in (0, 180) degrees (got {})", camera.vfov_deg),
+            ));
+        }
+        let fwd = [
+            camera.look_at[0] - camera.position[0],
+            camera.look_at[1] - camera.position[1],
+            camera.look_at[2] - camera.position[2],
+        ];
+        let scale = norm(camera.position)
+            .max(norm(camera.look_at))
+            .max(f64::MIN_POSITIVE);
+        if norm(fwd) <= 1e-12 * scale {
+            return Err(Error::scene(
+                "camera.look_at",
+                "coincides with camera.position",
+            ));
+        }
+        let up_len = norm(camera.up);
+        if up_len == 0.0 {
+            return Err(Error::scene("camera.up", "zero-length vector"));
+        }
+        if norm(cross(fwd, camera.up)) <= 1e-9 * norm(fwd) * up_len {
+            return Err(Error::scene(
+                "camera.up",
+                "is parallel to the viewing direction (look_at - position)",
+            ));
+        }
+
+        let l = &raw.light;
+        let light = PointLight {
+            position: finite3("light.position", l.position)?,
+            intensity: finite("light.intensity", l.intensity)?,
+            color: nonneg3("light.color", l.color.unwrap_or([1.0; 3]))?,
+        };
+        if light.intensity < 0.0 {
+            return Err(Error::scene(
+                "light.intensity",
+                format!("must be >= 0 (got {})", light.intensity),
+            ));
+        }
+
+        let ambient = nonneg3("ambient", raw.ambient.unwrap_or([0.0; 3]))?;
+        let background = nonneg3("background", raw.background.unwrap_or([0.0; 3]))?;
+        let exposure = finite("exposure", raw.exposure.unwrap_or(1.0))?;
+        if exposure <= 0.0 {
+            return Err(Error::scene(
+                "exposure",
+                format!("must be > 0 (got {exposure})"),
+            ));
+        }
+
+        if raw.objects.is_empty() {
+            return Err(Error::scene(
+                "objects",
+                "the scene needs at least one object",
+            ));
+        }
+        let mut objects = Vec::with_capacity(raw.objects.len());
+        for (i, o) in raw.objects.into_iter().enumerate() {
+            objects.push(parse_object(i, o, &objects)?);
+        }
+
+        let mut scene = Scene {
+            width: width as u32,
+            height: height as u32,
+            camera,
+            light,
+            ambient,
+            background,
+            exposure,
+            objects,
+            fit: Vec::new(),
+            extra: Map::new(),
+        };
+        for (key, v) in [
+            ("name", raw.name),
+            ("description", raw.description),
+            ("fit_report", raw.fit_report),
+            ("meta", raw.meta),
+        ] {
+            if let Some(v) = v {
+                scene.extra.insert(key.to_string(), v);
+            }
+        }
+        let mut fit = Vec::new();
+        for (path, bounds) in raw.fit.unwrap_or_default() {
+            fit.push(parse_fit_entry(&scene, &path, &bounds)?);
+        }
+        fit.sort_by_key(|p| p.target.order_key());
+        scene.fit = fit;
+        Ok(scene)
+    }
+
+    /// The index of the object called `name`.
+    pub fn object_index(&self, name: &str) -> Option<usize> {
+        self.objects.iter().position(|o| o.name == name)
+    }
+
+    /// The scene as JSON in the public format (defaults written out).
+    pub fn to_value(&self) -> Value {
+        let objects: Vec<Value> = self
+            .objects
+            .iter()
+            .map(|o| {
+                let mut v = match &o.shape {
+                    Shape::Sphere { center, radius } => {
+                        json!({"name": o.name, "shape": "sphere", "center": center, "radius": radius})
+                    }
+                    Shape::Plane { point, normal } => {
+                        json!({"name": o.name, "shape": "plane", "point": point, "normal": normal})
+                    }
+                };
+                v["material"] = json!({
+                    "albedo": o.material.albedo,
+                    "specular": o.material.specular,
+                    "shininess": o.material.shininess,
+                });
+                v
+            })
+            .collect();
+        let mut fit = Map::new();
+        for p in &self.fit {
+            let (min, max) = if p.min.len() == 1 {
+                (json!(p.min[0]), json!(p.max[0]))
+            } else {
+                (json!(p.min), json!(p.max))
+            };
+            fit.insert(p.path.clone(), json!({"min": min, "max": max}));
+        }
+        let mut out = Map::new();
+        for key in ["name", "description"] {
+            if let Some(v) = self.extra.get(key) {
+                out.insert(key.into(), v.clone());
+            }
+        }
+        out.insert(
+            "image".into(),
+            json!({"width": self.width, "height": self.height}),
+        );
+        out.insert(
+            "camera".into(),
+            json!({"position": self.camera.position, "look_at": self.camera.look_at,
+                   "up": self.camera.up, "vfov_deg": self.camera.vfov_deg}),
+        );
+        out.insert(
+            "light".into(),
+            json!({"position": self.light.position, "intensity": self.light.intensity,
+                   "color": self.light.color}),
+        );
+        out.insert("ambient".into(), json!(self.ambient));
+        out.insert("background".into(), json!(self.background));
+        out.insert("exposure".into(), json!(self.exposure));
+        out.insert("objects".into(), Value::Array(objects));
+        out.insert("fit".into(), Value::Object(fit));
+        for key in ["meta", "fit_report"] {
+            if let Some(v) = self.extra.get(key) {
+                out.insert(key.into(), v.clone());
+            }
+        }
+        Value::Object(out)
+    }
+
+    /// True when some object sits between a surface and the light for some light position: with one
+    /// object (a convex sphere or a plane) nothing can shadow anything.
+    pub fn can_occlude(&self) -> bool {
+        self.objects.len() > 1
+    }
+}
+
+fn parse_object(i: usize, o: RawObject, previous: &[Object]) -> Result<Object> {
+    let name = o.name.unwrap_or_else(|| format!("object{i}"));
+    let f = |field: &str| format!("objects[{i}].{field}");
+    if name.is_empty() || name.contains('.') {
+        return Err(Error::scene(
+            f("name"),
+            format!("must be non-empty and contain no '.' (got {name:?})"),
+        ));
+    }
+    if previous.iter().any(|p| p.name == name) {
+        return Err(Error::scene(
+            f("name"),
+            format!("duplicate object name {name:?}"),
+        ));
+    }
+    let need = |v: Option<V3>, field: &str| -> Result<V3> {
+        let v =
+            v.ok_or_else(|| Error::scene(f(field), format!("missing field for a {}", o.shape)))?;
+        finite3(&f(field), v)
+    };
+    let forbid = |present: bool, field: &str| -> Result<()> {
+        if present {
+            Err(Error::scene(
+                f(field),
+                format!("not a field of a {} (a typo for another field?)", o.shape),
+            ))
+        } else {
+            Ok(())
+        }
+    };
+    let shape = match o.shape.as_str() {
+        "sphere" => {
+            forbid(o.point.is_some(), "point")?;
+            forbid(o.normal.is_some(), "normal")?;
+            let center = need(o.center, "center")?;
+            let radius = o
+                .radius
+                .ok_or_else(|| Error::scene(f("radius"), "missing field for a sphere"))?;
+            let radius = finite(&f("radius"), radius)?;
+            if radius <= 0.0 {
+                return Err(Error::scene(
+                    f("radius"),
+                    format!("must be > 0 (got {radius})"),
+                ));
+            }
+            Shape::Sphere { center, radius }
+        }
+        "plane" => {
+            forbid(o.center.is_some(), "center")?;
+            forbid(o.radius.is_some(), "radius")?;
+            let point = need(o.point, "point")?;
+            let normal = need(o.normal, "normal")?;
+            let n = norm(normal);
+            if n == 0.0 || !n.is_finite() {
+                return Err(Error::scene(f("normal"), "zero-length normal"));
+            }
+            Shape::Plane { point, normal }
+        }
+        other => {
+            return Err(Error::scene(
+                f("shape"),
+                format!("unknown shape {other:?} (known shapes: \"sphere\", \"plane\")"),
+            ))
+        }
+    };
+    let m = o.material.unwrap_or(RawMaterial {
+        albedo: None,
+        specular: None,
+        shininess: None,
+    });
+    let material = Material {
+        albedo: nonneg3(&f("material.albedo"), m.albedo.unwrap_or([0.5; 3]))?,
+        specular: finite(&f("material.specular"), m.specular.unwrap_or(0.0))?,
+        shininess: finite(&f("material.shininess"), m.shininess.unwrap_or(0.0))?,
+    };
+    if material.specular < 0.0 {
+        return Err(Error::scene(
+            f("material.specular"),
+            format!("must be >= 0 (got {})", material.specular),
+        ));
+    }
+    if material.shininess < 0.0 {
+        return Err(Error::scene(
+            f("material.shininess"),
+            format!("must be >= 0 (got {})", material.shininess),
+        ));
+    }
+    Ok(Object {
+        name,
+        shape,
+        material,
+    })
+}
+
+fn bound_values(field: &str, v: Option<&Value>, len: usize) -> Result<Vec<f64>> {
+    let v = v.ok_or_else(|| Error::scene(field, "missing"))?;
+    let nums: Vec<Option<f64>> = match v {
+        Value::Number(n) => vec![n.as_f64(); len],
+        Value::Array(a) if a.len() == len => a.iter().map(|x| x.as_f64()).collect(),
+        Value::Array(a) => {
+            return Err(Error::scene(
+                field,
+                format!("expected {len} numbers or one number, got {}", a.len()),
+            ))
+        }
+        _ => {
+            return Err(Error::scene(
+                field,
+                format!("expected a number or a list of {len} numbers, got {v}"),
+            ))
+        }
+    };
+    nums.into_iter()
+        .map(|x| match x {
+            Some(x) if x.is_finite() => Ok(x),
+            _ => Err(Error::scene(
+                field,
+                format!("every bound must be a finite number (got {v})"),
+            )),
+        })
+        .collect()
+}
+
+fn parse_fit_entry(scene: &Scene, path: &str, bounds: &Value) -> Result<FitParam> {
+    let field = format!("fit[{path:?}]");
+    let target = Target::parse(path, scene).map_err(|m| Error::scene(&field, m))?;
+    let obj = bounds.as_object().ok_or_else(|| {
+        Error::scene(
+            &field,
+            format!("expected {{\"min\": ..., \"max\": ...}}, got {bounds}"),
+        )
+    })?;
+    if let Some(k) = obj.keys().find(|k| *k != "min" && *k != "max") {
+        return Err(Error::scene(
+            &field,
+            format!("unknown key {k:?} (expected \"min\" and \"max\")"),
+        ));
+    }
+    let len = target.len();
+    let min = bound_values(&format!("{field}.min"), obj.get("min"), len)?;
+    let max = bound_values(&format!("{field}.max"), obj.get("max"), len)?;
+    for k in 0..len {
+        if min[k] > max[k] {
+            return Err(Error::scene(
+                &field,
+                format!("min > max in component {k} ({} > {})", min[k], max[k]),
+            ));
+        }
+        if let Some(lo) = target.lower_limit() {
+            if min[k] < lo {
+                return Err(Error::scene(
+                    format!("{field}.min"),
+                    format!("must be >= {lo} for {path} (got {})", min[k]),
+                ));
+            }
+        }
+    }
+    Ok(FitParam {
+        path: path.to_string(),
+        target,
+        min,
+        max,
+    })
+}
