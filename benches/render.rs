@@ -28,7 +28,16 @@ fn bench(c: &mut Criterion) {
     let target = render(&scene, None, None, 1).unwrap().rgb;
     let paths = vec!["light.position".to_string(), "light.intensity".to_string()];
     let layout = ParamLayout::new(&scene, &paths).unwrap();
-    let fitness = Fitness::new(&scene, layout.clone(), &target, None, LossKind::L1, true).unwrap();
+    let fitness = Fitness::new(
+        &scene,
+        layout.clone(),
+        &target,
+        None,
+        LossKind::L1,
+        true,
+        None,
+    )
+    .unwrap();
     let mut rng = rtloop::de::Rng::new(1);
     let population: Vec<Vec<f64>> = (0..60)
         .map(|_| {

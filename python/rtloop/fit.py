@@ -1,4 +1,11 @@
-"""The fit: the paper's two stages, driven from Python, with all the arithmetic in Rust.
+"""The fit: the paper's two stages, or rtloop's closed-form method, with all the arithmetic in Rust.
+
+Method ``projected`` (the default protocol ``rtloop`` uses it whenever the scene allows): for a matte
+scene without ambient light, every pixel is linear in the products exposure x intensity x colour x albedo
+of its object. For each candidate light position those products are solved in closed form (least squares
+over the unsaturated pixels, clamped to their bounds) inside the fitness, so DE searches only the light's
+three coordinates against the whole-image L1 loss. This removes stage 1's bias from the wrong starting
+colours and stage 2's separate search.
 
 Stage 1 ("light") frees the light (``light.*`` paths of the fit section) and minimises the sum of
 absolute RGB differences over the whole image, every other parameter held at the scene's value.
@@ -16,8 +23,9 @@ Otherwise the intensity stays at the stage-1 value. The report names the determi
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -25,12 +33,13 @@ from . import _native
 from .errors import RtloopError
 from .scene import Scene, load_scene, scene_to_dict
 
-__all__ = ["fit", "FitResult", "StageResult", "GenerationInfo", "PROTOCOLS"]
+__all__ = ["PROTOCOLS", "FitResult", "GenerationInfo", "StageResult", "fit"]
 
 #: Named settings. ``paper``: the paper's numbers. ``rtloop``: the default (see README, speed against error).
 PROTOCOLS: dict[str, dict[str, Any]] = {
     "paper": {"population": 60, "generations": (200, 200), "f": 0.6, "cr": 0.8, "refine": False},
-    "rtloop": {"population": 40, "generations": (120, 120), "f": 0.6, "cr": 0.8, "refine": True},
+    "rtloop": {"population": 30, "generations": (100, 100), "f": 0.6, "cr": 0.8, "refine": True,
+               "projected": True},
 }
 
 #: Pixels sampled per object for stage 2.
@@ -64,6 +73,8 @@ class StageResult:
     pixels: int
     #: (generation, fitness, objectives, x) of the best individual of every generation.
     history: list[tuple[int, float, list[float], np.ndarray]] = field(default_factory=list)
+    #: For the projected loss: the closed-form products (object x RGB) of the best individual.
+    products: list[list[float]] | None = None
 
 
 @dataclass
@@ -240,18 +251,23 @@ def fit(
     current = scene
 
     def run(name: str, stage_scene: Scene, paths: list[str], loss: str, pixels: np.ndarray | None,
-            generations: int, stage_seed: int) -> StageResult:
+            generations: int, stage_seed: int, product_bounds: np.ndarray | None = None) -> StageResult:
         nonlocal evaluations
         history: list[tuple[int, float, list[float], np.ndarray]] = []
         base_full = np.array(stage_scene.get_params(all_paths))
         index = [all_names.index(n) for n in stage_scene.param_names(paths)]
 
-        def on_generation(gen: int, best: np.ndarray, objectives: list[float], evals: int) -> bool:
+        def on_generation(gen: int, best: np.ndarray, objectives: list[float], evals: int,
+                          products: list[list[float]] | None) -> bool:
             fitness = float(sum(objectives))
             history.append((gen, fitness, list(objectives), np.array(best)))
             if callback is not None:
                 full = base_full.copy()
                 full[index] = best
+                if products is not None:
+                    split = _split_products(stage_scene, products, scene)
+                    full = np.array(split.get_params(all_paths))
+                    full[index] = best
                 info = GenerationInfo(name, gen, fitness, list(objectives), full, evaluations + evals)
                 return callback(info) is not False
             return True
@@ -260,12 +276,14 @@ def fit(
         out = _native.optimize(
             stage_scene, paths, target, pixels=pixels, loss=loss, clip=clip, population=pop,
             generations=generations, f=f_, cr=cr_, seed=stage_seed, threads=threads, callback=on_generation,
+            product_bounds=product_bounds,
         )
         evaluations += out["evaluations"]
         return StageResult(
             name=name, paths=paths, param_names=stage_scene.param_names(paths), x=np.asarray(out["x"]),
             objectives=list(out["objectives"]), evaluations=out["evaluations"], generations=out["generations"],
             seconds=time.perf_counter() - t, loss=loss, pixels=int(out["active_pixels"]), history=history,
+            products=out.get("products"),
         )
 
     def light_stage(name: str, stage_scene: Scene, stage_seed: int) -> Scene:
@@ -295,15 +313,26 @@ def fit(
         return fitted
 
     seeds = np.random.SeedSequence(seed).generate_state(4, dtype=np.uint64)
-    if light_paths:
-        current = light_stage("light", current, int(seeds[0]))
-    if other_paths:
-        current = colour_stage("colour", current, int(seeds[1]))
-    if proto.get("refine") and light_paths and other_paths:
-        # Second pass: the light again, now against the fitted colours, in a narrowed box around it.
-        current = light_stage("light-refine", _narrowed(current, light_paths), int(seeds[2]))
-        current = _restore_bounds(current, scene)
-        current = colour_stage("colour-refine", current, int(seeds[3]))
+    why_not = _projection_blocker(scene, all_paths)
+    method = "projected" if proto.get("projected") and why_not is None else "two-stage"
+    settings["method"] = method
+    if method == "projected":
+        s = run("light+colour", current, ["light.position"], "l1_projected", None, gens[0], int(seeds[0]),
+                product_bounds=_product_bounds(scene))
+        stages.append(s)
+        current = _split_products(current.with_params(list(s.x), ["light.position"]), s.products, scene)
+    else:
+        if proto.get("projected"):
+            settings["projection_unavailable"] = why_not
+        if light_paths:
+            current = light_stage("light", current, int(seeds[0]))
+        if other_paths:
+            current = colour_stage("colour", current, int(seeds[1]))
+        if proto.get("refine") and light_paths and other_paths:
+            # Second pass: the light again, now against the fitted colours, in a narrowed box around it.
+            current = light_stage("light-refine", _narrowed(current, light_paths), int(seeds[2]))
+            current = _restore_bounds(current, scene)
+            current = colour_stage("colour-refine", current, int(seeds[3]))
     current = _restore_bounds(current, scene)
     values = current.get_params(all_paths)
     return FitResult(
@@ -318,6 +347,78 @@ def fit(
         identifiability=ident,
         settings=settings,
     )
+
+
+def _projection_blocker(scene: Scene, paths: list[str]) -> str | None:
+    """None when the closed-form (projected) method applies to this scene and fit section, else why not."""
+    d = scene_to_dict(scene)
+    if "light.position" not in paths:
+        return "light.position is not free"
+    if any(v != 0 for v in d["ambient"]):
+        return "the scene has ambient light"
+    if any(o["material"]["specular"] != 0 for o in d["objects"]):
+        return "an object has a specular term"
+    allowed = {"light.position", "light.intensity"} | {f"objects.{o['name']}.albedo" for o in d["objects"]}
+    extra = [p for p in paths if p not in allowed]
+    if extra:
+        return f"{', '.join(extra)} cannot be solved in closed form"
+    if "light.intensity" in paths:
+        fixed = [o["name"] for o in d["objects"] if f"objects.{o['name']}.albedo" not in paths]
+        if fixed:
+            return f"light.intensity is free but the albedo of {', '.join(fixed)} is fixed"
+    return None
+
+
+def _product_bounds(scene: Scene) -> np.ndarray:
+    """(objects, 3, 2) bounds of exposure x intensity x colour x albedo from the fit section."""
+    d = scene_to_dict(scene)
+    paths = scene.fit_paths
+    scale = np.array(d["light"]["color"], float) * d["exposure"]
+    if "light.intensity" in paths:
+        ilo, ihi = scene.bounds(["light.intensity"])[0]
+    else:
+        ilo = ihi = d["light"]["intensity"]
+    out = np.zeros((len(d["objects"]), 3, 2))
+    for k, o in enumerate(d["objects"]):
+        p = f"objects.{o['name']}.albedo"
+        b = np.array(scene.bounds([p])) if p in paths else np.repeat(np.array(o["material"]["albedo"])[:, None], 2, 1)
+        out[k, :, 0] = ilo * scale * b[:, 0]
+        out[k, :, 1] = ihi * scale * b[:, 1]
+    return out
+
+
+def _split_products(fitted: Scene, products: list[list[float]], original: Scene) -> Scene:
+    """Write closed-form products back as albedos and an intensity.
+
+    Intensity x albedo is all the image determines; rtloop keeps the intensity at the scene's own value
+    (the user's estimate of the lamp) unless an albedo would then exceed its upper bound, in which case the
+    light is made just bright enough (the dimmest light consistent with the photo and the bounds).
+    """
+    d = scene_to_dict(fitted)
+    paths = original.fit_paths
+    scale = np.array(d["light"]["color"], float) * d["exposure"]
+    intensity = d["light"]["intensity"]
+    P = np.asarray(products, float)
+    if "light.intensity" in paths:
+        ilo, ihi = original.bounds(["light.intensity"])[0]
+        intensity = min(max(scene_to_dict(original)["light"]["intensity"], ilo), ihi)
+        need = intensity
+        for k, o in enumerate(d["objects"]):
+            hi = np.array([b[1] for b in original.bounds([f"objects.{o['name']}.albedo"])])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                req = np.where((hi > 0) & (scale > 0), P[k] / (scale * np.maximum(hi, 1e-300)), 0.0)
+            need = max(need, float(np.max(req)))
+        intensity = min(max(need, ilo), ihi)
+        d["light"]["intensity"] = intensity
+    for k, o in enumerate(d["objects"]):
+        p = f"objects.{o['name']}.albedo"
+        if p in paths:
+            lo = np.array([b[0] for b in original.bounds([p])])
+            hi = np.array([b[1] for b in original.bounds([p])])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                rho = np.where(scale > 0, P[k] / (intensity * scale), lo)
+            o["material"]["albedo"] = [float(v) for v in np.clip(np.nan_to_num(rho), lo, hi)]
+    return load_scene(d)
 
 
 def _fix_gauge(fitted: Scene, albedo_paths: list[str], bounds_scene: Scene) -> Scene:

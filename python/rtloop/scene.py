@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 from pathlib import Path
 from typing import Any
 
@@ -48,7 +49,11 @@ def load_scene(source: str | os.PathLike[str] | dict[str, Any] | Scene) -> Scene
             text = json.dumps(source, allow_nan=False)
         except (TypeError, ValueError) as e:
             raise SceneError(f"scene: cannot be written as JSON ({e})") from None
-        return Scene(text)
+        try:
+            return Scene(text)
+        except SceneError as e:
+            # Positions in the JSON text we made from the dict mean nothing to the caller.
+            raise SceneError(re.sub(r" at line \d+ column \d+$", "", str(e))) from None
     if isinstance(source, (str, os.PathLike)):
         path = Path(source)
         try:
@@ -68,7 +73,7 @@ def load_scene(source: str | os.PathLike[str] | dict[str, Any] | Scene) -> Scene
 
 def scene_to_dict(scene: Scene) -> dict[str, Any]:
     """The scene in the public format as a plain dict (defaults written out)."""
-    return json.loads(scene.to_json())
+    return scene.to_dict()
 
 
 def save_scene(scene: Scene | dict[str, Any], path: str | os.PathLike[str]) -> None:

@@ -119,6 +119,11 @@ impl PyScene {
         serde_json::to_string_pretty(&self.0.to_value()).expect("a scene always serialises")
     }
 
+    /// The scene as a plain dict in the public format (defaults written out).
+    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        py.import("json")?.call_method1("loads", (self.to_json(),))
+    }
+
     fn __repr__(&self) -> String {
         format!(
             "<rtloop.Scene {}x{}, {} objects, {} free parameters>",
@@ -213,6 +218,7 @@ fn make_fitness(
     pixels: Option<PyReadonlyArray1<'_, u32>>,
     loss: &str,
     clip: bool,
+    product_bounds: Option<PyReadonlyArray3<'_, f64>>,
 ) -> PyResult<(Fitness, Vec<(f64, f64)>)> {
     let layout = ParamLayout::new(scene, paths)?;
     let bounds = layout.bounds.clone();
@@ -221,13 +227,33 @@ fn make_fitness(
         Some(p) => Some(p.as_slice()?.to_vec()),
         None => None,
     };
+    let product_bounds = match product_bounds {
+        Some(b) => {
+            let a = b.as_array();
+            if a.shape() != [scene.objects.len(), 3, 2] {
+                return Err(PyValueError::new_err(format!(
+                    "product_bounds must have shape ({}, 3, 2), got {:?}",
+                    scene.objects.len(),
+                    a.shape()
+                )));
+            }
+            Some(
+                (0..a.shape()[0])
+                    .map(|k| std::array::from_fn(|c| (a[[k, c, 0]], a[[k, c, 1]])))
+                    .collect(),
+            )
+        }
+        None => None,
+    };
+    let kind = LossKind::parse(loss)?;
     let fitness = Fitness::new(
         scene,
         layout,
         &target,
         pixels.as_deref(),
-        LossKind::parse(loss)?,
+        kind,
         clip,
+        product_bounds,
     )?;
     Ok((fitness, bounds))
 }
@@ -246,7 +272,8 @@ fn pool(threads: Option<usize>) -> PyResult<rayon::ThreadPool> {
 
 /// Objective values of each row of `population` (N, D): float64 (N, n_objectives).
 #[pyfunction]
-#[pyo3(signature = (scene, paths, target, population, pixels=None, loss="l1", clip=true, threads=None))]
+#[pyo3(signature = (scene, paths, target, population, pixels=None, loss="l1", clip=true, threads=None,
+                    product_bounds=None))]
 #[allow(clippy::too_many_arguments)]
 fn evaluate<'py>(
     py: Python<'py>,
@@ -258,11 +285,13 @@ fn evaluate<'py>(
     loss: &str,
     clip: bool,
     threads: Option<usize>,
+    product_bounds: Option<PyReadonlyArray3<'py, f64>>,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     use de::Objective;
     use rayon::prelude::*;
     let scene = &scene.get().0;
-    let (fitness, bounds) = make_fitness(scene, &paths, &target, pixels, loss, clip)?;
+    let (fitness, bounds) =
+        make_fitness(scene, &paths, &target, pixels, loss, clip, product_bounds)?;
     let pop = population.as_array();
     if pop.ncols() != bounds.len() {
         return Err(PyValueError::new_err(format!(
@@ -287,11 +316,12 @@ fn evaluate<'py>(
 }
 
 /// Run DE/rand/1/bin on the fitness of `paths` against `target`. One call per stage; the GIL is released
-/// except while `callback(generation, best, best_objectives, evaluations)` runs (after the initial
+/// except while `callback(generation, best, best_objectives, evaluations, products)` runs (after the initial
 /// population and after every generation; returning False stops the search).
 #[pyfunction]
 #[pyo3(signature = (scene, paths, target, *, pixels=None, loss="l1", clip=true, population=60,
-                    generations=200, f=0.6, cr=0.8, seed=0, threads=None, callback=None))]
+                    generations=200, f=0.6, cr=0.8, seed=0, threads=None, callback=None,
+                    product_bounds=None))]
 #[allow(clippy::too_many_arguments)]
 fn optimize<'py>(
     py: Python<'py>,
@@ -308,9 +338,11 @@ fn optimize<'py>(
     seed: u64,
     threads: Option<usize>,
     callback: Option<Py<PyAny>>,
+    product_bounds: Option<PyReadonlyArray3<'py, f64>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let scene = &scene.get().0;
-    let (fitness, bounds) = make_fitness(scene, &paths, &target, pixels, loss, clip)?;
+    let (fitness, bounds) =
+        make_fitness(scene, &paths, &target, pixels, loss, clip, product_bounds)?;
     let cfg = DeConfig {
         population,
         generations,
@@ -325,16 +357,20 @@ fn optimize<'py>(
         pool.install(|| {
             de::minimize(&fitness, &bounds, &cfg, |rep| {
                 let Some(cb) = &callback else { return true };
+                let products: Option<Vec<Vec<f64>>> = (fitness.kind() == LossKind::L1Projected)
+                    .then(|| {
+                        fitness
+                            .products(rep.best)
+                            .iter()
+                            .map(|p| p.to_vec())
+                            .collect()
+                    });
                 Python::attach(|py| {
                     let best = PyArray1::from_slice(py, rep.best);
+                    let objectives = rep.best_objectives.to_vec();
                     match cb.call1(
                         py,
-                        (
-                            rep.generation,
-                            best,
-                            rep.best_objectives.to_vec(),
-                            rep.evaluations,
-                        ),
+                        (rep.generation, best, objectives, rep.evaluations, products),
                     ) {
                         Ok(v) => !v.bind(py).is(&*pyo3::types::PyBool::new(py, false)),
                         Err(e) => {
@@ -350,6 +386,14 @@ fn optimize<'py>(
         return Err(e);
     }
     let d = PyDict::new(py);
+    if fitness.kind() == LossKind::L1Projected {
+        let products: Vec<Vec<f64>> = fitness
+            .products(&result.best)
+            .iter()
+            .map(|p| p.to_vec())
+            .collect();
+        d.set_item("products", products)?;
+    }
     d.set_item("x", PyArray1::from_vec(py, result.best))?;
     d.set_item("objectives", result.best_objectives)?;
     d.set_item("evaluations", result.evaluations)?;

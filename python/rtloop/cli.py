@@ -1,0 +1,546 @@
+"""``rtloop-fit``: fit a scene to a photo from the command line and keep everything it produced.
+
+    rtloop-fit examples/yellow-ball/scene_input.json examples/yellow-ball/objective.png --out fit-out
+
+The results go into a fresh temporary directory beside the output directory and are moved into place
+only when complete, so an interrupted or failed run leaves nothing half-written and an existing output
+directory untouched. See ``rtloop-fit --help`` for the options and the files written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import os
+import re
+import secrets
+import shutil
+import sys
+import tempfile
+import textwrap
+import threading
+import time
+import warnings
+from pathlib import Path
+from typing import Any, NoReturn, TextIO
+
+import numpy as np
+
+import rtloop
+from rtloop.fit import PROTOCOLS
+
+__all__ = ["main"]
+
+PROG = "rtloop-fit"
+
+DESCRIPTION = """\
+Recover a scene's light and colours from one photo by rendering in the loop.
+
+SCENE is a hand-built scene (JSON: camera, spheres, planes, one point light);
+IMAGE is a photo of it (the objective). The scene's "fit" section chooses the
+free parameters and their search ranges (e.g. "light.position",
+"light.intensity", "objects.ball.albedo"); everything else stays as written.
+The photo is linearised (sRGB by default) and resized to the scene's image
+size, the working resolution. A differential-evolution search then renders
+candidate scenes with rtloop's ray tracer and compares them with the photo.
+
+The paper's method ("--protocol paper") runs two stages:
+  1. light   frees the light and matches the whole image (sum of absolute RGB
+             differences), every other parameter held at the scene's value;
+  2. colour  fixes that light and frees the rest (albedos, ...), matching R, G
+             and B separately on pixels sampled inside each object's visible,
+             lit area.
+The default protocol "rtloop" adds a refine pass (light-refine, colour-refine)
+or, for a matte scene without ambient light, runs one stage, light+colour,
+that searches the light's position and solves the colours in closed form.
+The first number of --generations applies to the light stages (and
+light+colour), the second to the colour stages.
+"""
+
+EPILOG = """\
+files written into DIR:
+  result.json       the fitted scene in the same format as SCENE (load it with
+                    rtloop.load_scene), plus "fit_report": settings, fitness,
+                    evaluations and time per stage, the fitted values, the
+                    determined products and the input paths
+  best_per_generation.csv
+                    one row per generation of every stage: stage, generation,
+                    evaluations, fitness, then every fit parameter's value in
+                    the best individual
+  snapshots/<stage>_gen<NNNN>.bmp
+                    the best individual rendered at the working resolution
+                    every --snapshot-every generations of every stage,
+                    generation 0 included
+  final.png         the fitted scene rendered at --final-scale times the
+                    scene's size, --final-spp samples per pixel
+  objective.png     the photo as the fit saw it (linearised and resized; saved
+                    as sRGB), to compare with final.png and the snapshots
+
+Everything is written into a temporary directory beside DIR and moved into
+place when complete: a failed or interrupted run leaves no partial results. An
+existing, non-empty DIR is replaced only with --force, and only at the end.
+
+example:
+  rtloop-fit examples/yellow-ball/scene_input.json \\
+      examples/yellow-ball/objective.png --out yellow-ball-fit --seed 1
+
+exit status: 0 done, 1 bad input or failed run, 2 bad command line,
+130 interrupted.
+"""
+
+
+def _protocol_help() -> str:
+    parts = []
+    for name, p in PROTOCOLS.items():
+        g = p["generations"]
+        gens = f"{g[0]} + {g[1]}" if isinstance(g, (tuple, list)) else str(g)
+        refine = ", then a refine pass" if p.get("refine") else ""
+        parts.append(f"'{name}' (population {p['population']}, {gens} generations{refine})")
+    return "named settings: " + "; ".join(parts) + " (default: rtloop)"
+
+
+class _UsageError(Exception):
+    """A problem with the command line found by argparse (exit status 2)."""
+
+
+class _Failure(Exception):
+    """A problem with the input or the output directory (exit status 1), reported as one line."""
+
+
+class _Interrupted(Exception):
+    """Raised inside the fit's callback to stop the search after Ctrl-C."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:
+        raise _UsageError(message)
+
+
+# --- argument types ---------------------------------------------------------------------------------------
+
+
+def _int_at_least(minimum: int, what: str):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {value}")
+        return value
+
+    return parse
+
+
+def _generations(text: str) -> int | tuple[int, int]:
+    parts = [p.strip() for p in text.split(",")]
+    try:
+        values = [int(p) for p in parts]
+    except ValueError:
+        values = []
+    if len(values) not in (1, 2) or min(values) < 0:
+        raise argparse.ArgumentTypeError(
+            f"expected N or N1,N2 (whole numbers >= 0: light stages, colour stages), got {text!r}"
+        )
+    return values[0] if len(values) == 1 else (values[0], values[1])
+
+
+def _float_in(lo: float, hi: float, lo_open: bool, what: str):
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        if not (math.isfinite(value) and (value > lo if lo_open else value >= lo) and value <= hi):
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text}")
+        return value
+
+    return parse
+
+
+def _build_parser() -> _Parser:
+    p = _Parser(
+        prog=PROG,
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("scene", metavar="SCENE", help="scene JSON file; its 'fit' section chooses the free parameters")
+    p.add_argument("image", metavar="IMAGE", help="the photo to fit (PNG, JPEG, BMP, TIFF, ...)")
+    p.add_argument("--out", "-o", metavar="DIR", required=True, help="output directory (created)")
+    p.add_argument(
+        "--protocol", choices=sorted(PROTOCOLS), default="rtloop",
+        help=_protocol_help(),
+    )
+    p.add_argument("--population", type=_int_at_least(4, "a whole number >= 4"), metavar="N",
+                   help="individuals per generation (default: the protocol's)")
+    p.add_argument("--generations", type=_generations, metavar="N|N1,N2",
+                   help="generations per stage: one number for every stage, or N1 for the light stages "
+                   "and N2 for the colour stages (default: the protocol's)")
+    p.add_argument("--f", type=_float_in(0.0, 2.0, True, "a number in (0, 2]"), metavar="F",
+                   help="DE differential weight (default: the protocol's)")
+    p.add_argument("--cr", type=_float_in(0.0, 1.0, False, "a number in [0, 1]"), metavar="CR",
+                   help="DE crossover probability (default: the protocol's)")
+    p.add_argument("--seed", type=_int_at_least(0, "a whole number >= 0"), default=0,
+                   help="random seed; the result is the same for any --threads (default 0)")
+    p.add_argument("--threads", type=_int_at_least(1, "a whole number >= 1"), metavar="N",
+                   help="worker threads (default: all cores)")
+    p.add_argument("--response", choices=("srgb", "linear"), default="srgb",
+                   help="how IMAGE's stored values relate to light: 'srgb' (default, cameras and image "
+                   "editors) or 'linear' (raw linear sensor counts)")
+    p.add_argument("--crop", action="store_true",
+                   help="centre-crop IMAGE to the scene's aspect ratio (otherwise they must match)")
+    p.add_argument("--snapshot-every", type=_int_at_least(0, "a whole number >= 0"), default=5, metavar="N",
+                   help="render the best individual every N generations of every stage into snapshots/ "
+                   "(default 5; 0 disables)")
+    p.add_argument("--final-scale", type=_int_at_least(1, "a whole number >= 1"), default=4, metavar="K",
+                   help="final.png is K times the scene's width and height (default 4)")
+    p.add_argument("--final-spp", type=_int_at_least(1, "a whole number >= 1"), default=16, metavar="S",
+                   help="samples per pixel of final.png (default 16)")
+    p.add_argument("--force", action="store_true",
+                   help="replace DIR if it exists and is not empty (only after the new results are complete)")
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
+    return p
+
+
+# --- progress --------------------------------------------------------------------------------------------
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 60:
+        return f"{seconds:.1f}s"
+    minutes, s = divmod(int(seconds), 60)
+    if minutes < 60:
+        return f"{minutes}m{s:02d}s"
+    hours, minutes = divmod(minutes, 60)
+    return f"{hours}h{minutes:02d}m{s:02d}s"
+
+
+class _Progress:
+    """Progress lines on stderr: one per stage start, then every 10 generations (or one updating line
+    on a terminal)."""
+
+    EVERY = 10
+    TTY_INTERVAL = 0.1
+
+    def __init__(self, stream: TextIO, enabled: bool, generations: tuple[int, int]):
+        self.stream = stream
+        self.enabled = enabled
+        self.tty = enabled and bool(getattr(stream, "isatty", lambda: False)())
+        self.generations = generations
+        self.start = time.perf_counter()
+        self.stage: str | None = None
+        self.stages = 0
+        self.open_line = 0  # length of the unfinished \r line, if any
+        self.last_draw = 0.0
+
+    def total(self, stage: str) -> int:
+        return self.generations[0] if stage.startswith("light") else self.generations[1]
+
+    def message(self, text: str) -> None:
+        if not self.enabled:
+            return
+        self.end_line()
+        print(text, file=self.stream, flush=True)
+
+    def end_line(self) -> None:
+        if self.open_line:
+            self.stream.write("\n")
+            self.stream.flush()
+            self.open_line = 0
+
+    def generation(self, info: Any) -> None:
+        if not self.enabled:
+            return
+        total = self.total(info.stage)
+        if info.stage != self.stage:
+            self.stage = info.stage
+            self.stages += 1
+            self.message(f"stage {self.stages} '{info.stage}': {total} generations")
+        now = time.perf_counter()
+        line = (
+            f"  {info.stage}  gen {info.generation}/{total}  best {info.fitness:.6g}  "
+            f"evals {info.evaluations}  {_duration(now - self.start)}"
+        )
+        last = info.generation >= total
+        if self.tty:
+            if last or info.generation == 0 or now - self.last_draw >= self.TTY_INTERVAL:
+                pad = max(0, self.open_line - len(line))
+                self.stream.write("\r" + line + " " * pad)
+                self.stream.flush()
+                self.open_line = len(line)
+                self.last_draw = now
+                if last:
+                    self.end_line()
+        elif info.generation % self.EVERY == 0 or last:
+            print(line, file=self.stream, flush=True)
+
+
+# --- output directory ------------------------------------------------------------------------------------
+
+
+def _check_out(out: Path, force: bool, inputs: list[Path]) -> bool:
+    """Fail early if DIR cannot be (re)placed; True if something is there to replace at the end."""
+    if not os.path.lexists(out):
+        return False
+    if out.is_symlink() or not out.is_dir():
+        raise _Failure(f"{out}: exists and is not a directory")
+    try:
+        empty = not any(out.iterdir())
+    except OSError as e:
+        raise _Failure(f"{out}: cannot read directory ({e.strerror or e})") from None
+    if empty:
+        return True
+    if not force:
+        raise _Failure(f"{out}: output directory exists and is not empty (use --force to replace it)")
+    resolved = out.resolve()
+    for p in [*inputs, Path.cwd()]:
+        rp = p.resolve()
+        if rp == resolved or resolved in rp.parents:
+            what = "the current directory" if p == Path.cwd() else str(p)
+            raise _Failure(f"{out}: refusing to replace it with --force: it contains {what}")
+    return True
+
+
+def _commit(tmp: Path, out: Path, replace: bool) -> None:
+    """Move the finished results into place; an old DIR is renamed aside first and deleted last."""
+    if not replace:
+        try:
+            os.rename(tmp, out)
+        except OSError as e:
+            raise _Failure(f"{out}: cannot move the results into place ({e.strerror or e})") from None
+        return
+    aside = out.with_name(f".{out.name}.rtloop-old-{secrets.token_hex(4)}")
+    try:
+        os.rename(out, aside)
+    except OSError as e:
+        raise _Failure(f"{out}: cannot move the old directory aside ({e.strerror or e})") from None
+    try:
+        os.rename(tmp, out)
+    except OSError as e:
+        os.rename(aside, out)
+        raise _Failure(f"{out}: cannot move the results into place ({e.strerror or e})") from None
+    shutil.rmtree(aside, ignore_errors=True)
+    if os.path.lexists(aside):
+        print(f"{PROG}: warning: could not delete the old results in {aside}", file=sys.stderr)
+
+
+# --- the run ---------------------------------------------------------------------------------------------
+
+
+def _json_safe(value: Any) -> Any:
+    """Plain JSON types; NaN and infinities become null."""
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _json_safe(value.tolist())
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        return v if math.isfinite(v) else None
+    return value
+
+
+_SAFE_NAME = re.compile(r"[^A-Za-z0-9_+-]+")
+
+
+class _Run:
+    def __init__(self, args: argparse.Namespace, progress: _Progress, stop: threading.Event):
+        self.args = args
+        self.progress = progress
+        self.stop = stop
+
+    def check_stop(self) -> None:
+        if self.stop.is_set():
+            raise _Interrupted()
+
+    def __call__(self, tmp: Path) -> Any:
+        """Load, fit and write everything into ``tmp``; returns the FitResult."""
+        args = self.args
+        scene = rtloop.load_scene(args.scene)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            image = rtloop.load_image(args.image, scene, response=args.response, crop=args.crop)
+        for w in caught:
+            print(f"{PROG}: warning: {' '.join(str(w.message).split())}", file=sys.stderr)
+        self.check_stop()
+        names = scene.param_names()
+        if not names:
+            raise _Failure(f"{args.scene}: the scene's fit section names no free parameters")
+
+        rtloop.save_image(tmp / "objective.png", image)
+        snapshots = tmp / "snapshots"
+        snapshots.mkdir()
+        every = args.snapshot_every
+
+        with open(tmp / "best_per_generation.csv", "w", newline="", encoding="utf-8") as fh:
+            writer = csv.writer(fh)
+            writer.writerow(["stage", "generation", "evaluations", "fitness", *names])
+
+            def callback(info: Any) -> None:
+                if self.stop.is_set():
+                    raise _Interrupted()
+                params = np.asarray(info.params, dtype=np.float64)
+                writer.writerow([info.stage, info.generation, info.evaluations, repr(float(info.fitness)),
+                                 *(repr(float(v)) for v in params)])
+                if every and info.generation % every == 0:
+                    shot = rtloop.render(scene.with_params(params.tolist()), spp=1)
+                    stage = _SAFE_NAME.sub("_", info.stage)
+                    rtloop.save_image(snapshots / f"{stage}_gen{info.generation:04d}.bmp", shot)
+                self.progress.generation(info)
+
+            result = rtloop.fit(
+                scene, image, protocol=args.protocol, seed=args.seed, population=args.population,
+                generations=args.generations, f=args.f, cr=args.cr, threads=args.threads, callback=callback,
+            )
+        self.progress.end_line()
+        self.check_stop()
+
+        report = result.report()
+        report["inputs"] = {
+            "scene": os.path.abspath(args.scene),
+            "image": os.path.abspath(args.image),
+            "response": args.response,
+            "crop": bool(args.crop),
+        }
+        data = rtloop.scene_to_dict(result.scene)
+        data["fit_report"] = report
+        (tmp / "result.json").write_text(
+            json.dumps(_json_safe(data), indent=2, allow_nan=False) + "\n", encoding="utf-8"
+        )
+
+        k = args.final_scale
+        self.progress.message(
+            f"rendering final.png ({scene.width * k}x{scene.height * k}, {args.final_spp} spp)"
+        )
+        final = rtloop.render(result.scene, scene.width * k, scene.height * k, args.final_spp)
+        self.check_stop()
+        rtloop.save_image(tmp / "final.png", final)
+        return result
+
+
+def _summary(result: Any, out: Path, wall: float) -> str:
+    lines = [f"fitted parameters ({result.protocol} protocol, seed {result.seed}):"]
+    width = max((len(n) for n in result.x), default=0)
+    for name, value in result.x.items():
+        lines.append(f"  {name:<{width}}  {value:12.6g}")
+    ident = result.identifiability or {}
+    if ident.get("degenerate"):
+        lines.append("")
+        lines.append("determined products (light intensity x light colour x albedo x exposure), r g b:")
+        if result.products:
+            w = max(len(n) for n in result.products)
+            for obj, rgb in result.products.items():
+                lines.append(f"  {obj:<{w}}  " + "  ".join(f"{v:12.6g}" for v in rgb))
+        if ident.get("note"):
+            lines.extend(textwrap.wrap(f"note: {ident['note']}", 78, initial_indent="  ",
+                                       subsequent_indent="  "))
+    lines.append("")
+    lines.append(
+        f"{len(result.stages)} stages, {result.evaluations} evaluations, fit {_duration(result.seconds)}, "
+        f"wall time {_duration(wall)}"
+    )
+    lines.append(f"results in {out}")
+    return "\n".join(lines)
+
+
+def _error(message: str) -> None:
+    print(f"{PROG}: error: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
+
+
+def _run_interruptibly(work: Any, stop: threading.Event) -> Any:
+    """Run ``work()`` in a thread so that Ctrl-C reaches the main thread at once (the fit's callback
+    runs on a worker thread, where Python delivers no signals); on Ctrl-C ask it to stop and wait."""
+    box: dict[str, Any] = {}
+
+    def target() -> None:
+        try:
+            box["value"] = work()
+        except BaseException as e:  # noqa: BLE001 - handed to the main thread
+            box["error"] = e
+
+    thread = threading.Thread(target=target, name="rtloop-fit", daemon=True)
+    thread.start()
+    interrupted = False
+    while thread.is_alive():
+        try:
+            thread.join(0.1)
+        except KeyboardInterrupt:
+            interrupted = True
+            stop.set()
+    if interrupted and "error" in box:
+        raise KeyboardInterrupt()
+    if "error" in box:
+        raise box["error"]
+    return box.get("value")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``rtloop-fit``; returns the exit status."""
+    t0 = time.perf_counter()
+    parser = _build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except _UsageError as e:
+        _error(e)
+        return 2
+    except SystemExit as e:  # --help
+        return int(e.code or 0)
+
+    gens = args.generations if args.generations is not None else PROTOCOLS[args.protocol]["generations"]
+    gens = (gens, gens) if isinstance(gens, int) else (int(gens[0]), int(gens[1]))
+    progress = _Progress(sys.stderr, not args.quiet, gens)
+    stop = threading.Event()
+    out = Path(args.out)
+    tmp: Path | None = None
+    try:
+        replace = _check_out(out, args.force, [Path(args.scene), Path(args.image)])
+        parent = out.absolute().parent
+        try:
+            parent.mkdir(parents=True, exist_ok=True)
+            tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.rtloop-tmp-", dir=parent))
+            umask = os.umask(0o022)
+            os.umask(umask)
+            os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; DIR should look like any mkdir's
+        except OSError as e:
+            raise _Failure(f"{out}: cannot create the output directory ({e.strerror or e})") from None
+        run = _Run(args, progress, stop)
+        progress.message(f"{PROG}: fitting {args.scene} to {args.image} ({args.protocol} protocol)")
+
+        def work() -> Any:
+            result = run(tmp)
+            run.check_stop()
+            _commit(tmp, out, replace)
+            return result
+
+        result = _run_interruptibly(work, stop)
+    except (KeyboardInterrupt, _Interrupted):
+        progress.end_line()
+        print(f"{PROG}: interrupted", file=sys.stderr, flush=True)
+        return 130
+    except (rtloop.RtloopError, _Failure) as e:
+        progress.end_line()
+        _error(e)
+        return 1
+    except OSError as e:
+        progress.end_line()
+        where = f"{e.filename}: " if e.filename else ""
+        _error(f"{where}{e.strerror or e}")
+        return 1
+    finally:
+        if tmp is not None and os.path.lexists(tmp):
+            shutil.rmtree(tmp, ignore_errors=True)
+
+    print(_summary(result, out, time.perf_counter() - t0))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
