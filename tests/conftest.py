@@ -1,0 +1,48 @@
+"""Shared fixtures: tiny scenes built in code, and the path to ../shared (tests skip cleanly without it)."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_SCENES = REPO.parent / "shared" / "scenes"
+
+BALL_ON_FLOOR = {
+    "image": {"width": 64, "height": 48},
+    "camera": {"position": [0, 1.6, -6], "look_at": [0, 0.8, 0], "up": [0, 1, 0], "vfov_deg": 35},
+    "light": {"position": [2.5, 4.5, -1.0], "intensity": 70.0, "color": [1, 1, 1]},
+    "objects": [
+        {"name": "ball", "shape": "sphere", "center": [0, 1, 0], "radius": 1,
+         "material": {"albedo": [0.8, 0.7, 0.1]}},
+        {"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0],
+         "material": {"albedo": [0.6, 0.6, 0.6]}},
+    ],
+    "fit": {
+        "light.position": {"min": [-8, 0.5, -8], "max": [8, 8, 8]},
+        "light.intensity": {"min": 1, "max": 400},
+        "objects.ball.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]},
+        "objects.floor.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]},
+    },
+}
+
+
+@pytest.fixture
+def ball_scene() -> dict:
+    """The paper's scene (sphere on a floor, one light) at 64x48, as a fresh dict."""
+    return copy.deepcopy(BALL_ON_FLOOR)
+
+
+def shared_case(name: str) -> Path:
+    path = SHARED_SCENES / name
+    if not path.is_dir():
+        pytest.skip(f"{path} not found: the reference scenes live in ../shared/scenes beside the repo")
+    return path
+
+
+def shared_case_names() -> list[str]:
+    if not SHARED_SCENES.is_dir():
+        return ["(none: ../shared/scenes absent)"]
+    return sorted(p.name for p in SHARED_SCENES.iterdir() if (p / "scene.json").is_file())
