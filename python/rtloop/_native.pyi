@@ -1,0 +1,66 @@
+"""Type stubs for rtloop's compiled core (rust/python/mod.rs)."""
+
+from os import PathLike
+from typing import Any, Callable
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+class RtloopError(Exception): ...
+class SceneError(RtloopError): ...
+
+class Scene:
+    """A validated, immutable scene. Prefer ``rtloop.load_scene``."""
+
+    def __new__(cls, json_text: str) -> Scene: ...
+    @property
+    def width(self) -> int: ...
+    @property
+    def height(self) -> int: ...
+    @property
+    def object_names(self) -> list[str]: ...
+    @property
+    def fit_paths(self) -> list[str]: ...
+    def param_names(self, paths: list[str] | None = None) -> list[str]: ...
+    def bounds(self, paths: list[str] | None = None) -> list[tuple[float, float]]: ...
+    def get_params(self, paths: list[str] | None = None) -> list[float]: ...
+    def with_params(self, values: list[float], paths: list[str] | None = None) -> Scene: ...
+    def to_json(self) -> str: ...
+    def to_dict(self) -> dict[str, Any]: ...
+
+def render(
+    scene: Scene, width: int | None = None, height: int | None = None, spp: int = 1
+) -> npt.NDArray[np.float32]: ...
+def object_ids(scene: Scene, width: int | None = None, height: int | None = None) -> npt.NDArray[np.int32]: ...
+def save_image(path: str | PathLike[str], image: npt.NDArray[np.float32]) -> None: ...
+def evaluate(
+    scene: Scene,
+    paths: list[str],
+    target: npt.NDArray[np.float32],
+    population: npt.NDArray[np.float64],
+    pixels: npt.NDArray[np.uint32] | None = None,
+    loss: str = "l1",
+    clip: bool = True,
+    threads: int | None = None,
+    product_bounds: npt.NDArray[np.float64] | None = None,
+) -> npt.NDArray[np.float64]: ...
+def optimize(
+    scene: Scene,
+    paths: list[str],
+    target: npt.NDArray[np.float32],
+    *,
+    pixels: npt.NDArray[np.uint32] | None = None,
+    loss: str = "l1",
+    clip: bool = True,
+    population: int = 60,
+    generations: int = 200,
+    f: float = 0.6,
+    cr: float = 0.8,
+    seed: int = 0,
+    threads: int | None = None,
+    callback: Callable[[int, npt.NDArray[np.float64], list[float], int, list[list[float]] | None], Any]
+    | None = None,
+    product_bounds: npt.NDArray[np.float64] | None = None,
+) -> dict[str, Any]: ...
