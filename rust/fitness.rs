@@ -9,6 +9,7 @@ use glam::Vec3A;
 
 use crate::de::Objective;
 use crate::error::{Error, Result};
+use crate::kernel::Kernel;
 use crate::params::{ParamLayout, Target};
 use crate::render::{shade, GBuffer, Geometry, PShape, ShadeParams, Surfel};
 use crate::scene::Scene;
@@ -43,6 +44,7 @@ impl LossKind {
 
 pub struct Fitness {
     pub layout: ParamLayout,
+    kernel: Kernel,
     base: ShadeParams,
     shapes: Vec<PShape>,
     surfels: Vec<Surfel>,
@@ -56,13 +58,16 @@ pub struct Fitness {
     product_bounds: Vec<[(f64, f64); 3]>,
 }
 
-/// Objective values at or above this are treated as saturated: they only say "at least this bright".
-const SATURATED: f32 = 0.999;
+/// Per-thread scratch, reused across evaluations so the hot path never allocates.
+#[derive(Default)]
+struct Scratch {
+    params: Option<ShadeParams>,
+    products: Vec<[f64; 3]>,
+    irradiance: Vec<f32>,
+}
 
 thread_local! {
-    /// Per-thread scratch for `L1Projected` (unit-light shading per active pixel): reused, never reallocated
-    /// once large enough.
-    static SCRATCH: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
 }
 
 impl Fitness {
@@ -173,6 +178,7 @@ impl Fitness {
         Ok(Fitness {
             layout,
             base,
+            kernel: Kernel::new(&surfels, &tgt, &geometry.shapes, scene.can_occlude()),
             shapes: geometry.shapes,
             surfels,
             target: tgt,
@@ -184,70 +190,12 @@ impl Fitness {
         })
     }
 
-    /// For `L1Projected`: the least-squares products (per object and channel) for the light of `x`, and
-    /// the unit-light shading of every active pixel in `g`.
-    fn solve_products(&self, x: &[f64], g: &mut Vec<f32>) -> Vec<[f64; 3]> {
-        let p = self.params(x);
-        let n = self.product_bounds.len();
-        let mut syg = vec![[0.0f64; 3]; n];
-        let mut sgg = vec![[0.0f64; 3]; n];
-        g.clear();
-        for (s, t) in self.surfels.iter().zip(&self.target) {
-            let gi = shade(s, &p, &self.shapes, self.shadows).x;
-            g.push(gi);
-            if s.object == u32::MAX || gi <= 0.0 {
-                continue;
-            }
-            let k = s.object as usize;
-            let gd = gi as f64;
-            for c in 0..3 {
-                if !self.clip || t[c] < SATURATED {
-                    syg[k][c] += t[c] as f64 * gd;
-                    sgg[k][c] += gd * gd;
-                }
-            }
-        }
-        (0..n)
-            .map(|k| {
-                let mut out = [0.0; 3];
-                for c in 0..3 {
-                    let (lo, hi) = self.product_bounds[k][c];
-                    let v = if sgg[k][c] > 0.0 {
-                        syg[k][c] / sgg[k][c]
-                    } else {
-                        lo
-                    };
-                    out[c] = if v.is_finite() { v.clamp(lo, hi) } else { lo };
-                }
-                out
-            })
-            .collect()
-    }
-
     /// The closed-form products (object x channel) for candidate light `x` (`L1Projected` only).
     pub fn products(&self, x: &[f64]) -> Vec<[f64; 3]> {
-        SCRATCH.with(|g| self.solve_products(x, &mut g.borrow_mut()))
-    }
-
-    fn projected_losses(&self, x: &[f64]) -> [f64; 3] {
-        SCRATCH.with(|g| {
-            let mut g = g.borrow_mut();
-            let prods = self.solve_products(x, &mut g);
-            let mut acc = self.constant;
-            for ((s, t), &gi) in self.surfels.iter().zip(&self.target).zip(g.iter()) {
-                let m = if s.object == u32::MAX {
-                    Vec3A::ZERO
-                } else {
-                    let pk = prods[s.object as usize];
-                    Vec3A::new(pk[0] as f32, pk[1] as f32, pk[2] as f32) * gi
-                };
-                let m = if self.clip { m.min(Vec3A::ONE) } else { m };
-                let d = (m - *t).abs();
-                acc[0] += d.x as f64;
-                acc[1] += d.y as f64;
-                acc[2] += d.z as f64;
-            }
-            acc
+        SCRATCH.with(|s| {
+            let mut s = s.borrow_mut();
+            self.fast_losses(x, &mut s);
+            s.products.clone()
         })
     }
 
@@ -257,35 +205,103 @@ impl Fitness {
 
     /// Number of pixels shaded per evaluation.
     pub fn active_pixels(&self) -> usize {
-        self.surfels.len()
+        self.kernel.pixels()
+    }
+
+    /// The shading parameters of candidate `x`, written into `p` (reusing its storage).
+    fn params_into(&self, x: &[f64], p: &mut ShadeParams) {
+        p.clone_from(&self.base);
+        for (_, target, offset) in &self.layout.entries {
+            p.set(*target, &x[*offset..*offset + target.len()]);
+        }
     }
 
     /// The shading parameters of candidate `x`.
     pub fn params(&self, x: &[f64]) -> ShadeParams {
         let mut p = self.base.clone();
-        for (_, target, offset) in &self.layout.entries {
-            p.set(*target, &x[*offset..*offset + target.len()]);
-        }
+        self.params_into(x, &mut p);
         p
     }
 
-    /// Per-channel sums of absolute differences for candidate `x`.
-    pub fn channel_losses(&self, x: &[f64]) -> [f64; 3] {
-        if self.kind == LossKind::L1Projected {
-            return self.projected_losses(x);
-        }
-        let p = self.params(x);
-        let mut acc = [0.0f64; 3];
-        for (s, t) in self.surfels.iter().zip(&self.target) {
-            let m = shade(s, &p, &self.shapes, self.shadows);
-            let m = if self.clip { m.min(Vec3A::ONE) } else { m };
-            let d = (m - *t).abs();
-            acc[0] += d.x as f64;
-            acc[1] += d.y as f64;
-            acc[2] += d.z as f64;
-        }
+    fn fast_losses(&self, x: &[f64], s: &mut Scratch) -> [f64; 3] {
+        let Scratch {
+            params,
+            products,
+            irradiance,
+        } = s;
+        let p = params.get_or_insert_with(|| self.base.clone());
+        self.params_into(x, p);
+        let mut acc = if self.kind == LossKind::L1Projected {
+            products.resize(self.product_bounds.len(), [0.0; 3]);
+            self.kernel
+                .projected(p, self.clip, &self.product_bounds, products, irradiance)
+        } else {
+            self.kernel.l1(p, self.clip)
+        };
         for c in 0..3 {
             acc[c] += self.constant[c];
+        }
+        acc
+    }
+
+    /// Per-channel sums of absolute differences for candidate `x` (the fused kernel).
+    pub fn channel_losses(&self, x: &[f64]) -> [f64; 3] {
+        SCRATCH.with(|s| self.fast_losses(x, &mut s.borrow_mut()))
+    }
+
+    /// The same losses computed the plain way, pixel by pixel through the renderer's `shade` (the
+    /// reference the kernel is tested against).
+    pub fn reference_channel_losses(&self, x: &[f64]) -> [f64; 3] {
+        let p = self.params(x);
+        let mut acc = self.constant;
+        if self.kind == LossKind::L1Projected {
+            // Unit light, white albedo: shade gives g; solve the products, then the loss.
+            let n = self.product_bounds.len();
+            let (mut syg, mut sgg) = (vec![[0.0f64; 3]; n], vec![[0.0f64; 3]; n]);
+            let g: Vec<f32> = self
+                .surfels
+                .iter()
+                .map(|s| shade(s, &p, &self.shapes, self.shadows).x)
+                .collect();
+            for ((s, t), &gi) in self.surfels.iter().zip(&self.target).zip(&g) {
+                if s.object == u32::MAX {
+                    continue;
+                }
+                for c in 0..3 {
+                    if !self.clip || t[c] < crate::kernel::SATURATED {
+                        syg[s.object as usize][c] += (t[c] * gi) as f64;
+                        sgg[s.object as usize][c] += (gi * gi) as f64;
+                    }
+                }
+            }
+            for ((s, t), &gi) in self.surfels.iter().zip(&self.target).zip(&g) {
+                let m = if s.object == u32::MAX {
+                    Vec3A::ZERO
+                } else {
+                    let k = s.object as usize;
+                    Vec3A::from_array(std::array::from_fn(|c| {
+                        let (lo, hi) = self.product_bounds[k][c];
+                        let v = if sgg[k][c] > 0.0 {
+                            syg[k][c] / sgg[k][c]
+                        } else {
+                            lo
+                        };
+                        (v.clamp(lo, hi) as f32) * gi
+                    }))
+                };
+                let d = ((if self.clip { m.min(Vec3A::ONE) } else { m }) - *t).abs();
+                for c in 0..3 {
+                    acc[c] += d[c] as f64;
+                }
+            }
+            return acc;
+        }
+        for (s, t) in self.surfels.iter().zip(&self.target) {
+            let m = shade(s, &p, &self.shapes, self.shadows);
+            let d = ((if self.clip { m.min(Vec3A::ONE) } else { m }) - *t).abs();
+            for c in 0..3 {
+                acc[c] += d[c] as f64;
+            }
         }
         acc
     }

@@ -5,6 +5,7 @@
 pub mod de;
 pub mod error;
 pub mod fitness;
+pub mod kernel;
 pub mod params;
 pub mod render;
 pub mod scene;

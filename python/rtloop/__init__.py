@@ -24,21 +24,21 @@ from .fit import FitResult, StageResult, fit
 from .scene import load_scene, save_scene, scene_to_dict
 
 __all__ = [
+    "AcquisitionError",
+    "FitResult",
+    "RtloopError",
     "Scene",
+    "SceneError",
+    "StageResult",
+    "__version__",
+    "fit",
+    "load_image",
     "load_scene",
+    "object_ids",
+    "render",
+    "save_image",
     "save_scene",
     "scene_to_dict",
-    "render",
-    "object_ids",
-    "save_image",
-    "load_image",
-    "fit",
-    "FitResult",
-    "StageResult",
-    "RtloopError",
-    "SceneError",
-    "AcquisitionError",
-    "__version__",
 ]
 
 

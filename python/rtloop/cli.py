@@ -17,6 +17,7 @@ import os
 import re
 import secrets
 import shutil
+import signal
 import sys
 import tempfile
 import textwrap
@@ -87,7 +88,7 @@ example:
       examples/yellow-ball/objective.png --out yellow-ball-fit --seed 1
 
 exit status: 0 done, 1 bad input or failed run, 2 bad command line,
-130 interrupted.
+130 interrupted (Ctrl-C), 143 terminated (SIGTERM).
 """
 
 
@@ -111,6 +112,10 @@ class _Failure(Exception):
 
 class _Interrupted(Exception):
     """Raised inside the fit's callback to stop the search after Ctrl-C."""
+
+
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, handled like Ctrl-C (clean up, nothing half-written) but reported as such."""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -285,8 +290,13 @@ def _check_out(out: Path, force: bool, inputs: list[Path]) -> bool:
     """Fail early if DIR cannot be (re)placed; True if something is there to replace at the end."""
     if not os.path.lexists(out):
         return False
-    if out.is_symlink() or not out.is_dir():
+    if out.is_symlink():
+        raise _Failure(f"{out}: is a symbolic link; give the directory it points to, or another name")
+    if not out.is_dir():
         raise _Failure(f"{out}: exists and is not a directory")
+    cwd = Path.cwd().resolve()
+    if out.resolve() == cwd or out.resolve() in cwd.parents:
+        raise _Failure(f"{out}: refusing to replace the current directory (or one above it)")
     try:
         empty = not any(out.iterdir())
     except OSError as e:
@@ -296,11 +306,9 @@ def _check_out(out: Path, force: bool, inputs: list[Path]) -> bool:
     if not force:
         raise _Failure(f"{out}: output directory exists and is not empty (use --force to replace it)")
     resolved = out.resolve()
-    for p in [*inputs, Path.cwd()]:
-        rp = p.resolve()
-        if rp == resolved or resolved in rp.parents:
-            what = "the current directory" if p == Path.cwd() else str(p)
-            raise _Failure(f"{out}: refusing to replace it with --force: it contains {what}")
+    for p in inputs:
+        if resolved in p.resolve().parents:
+            raise _Failure(f"{out}: refusing to replace it with --force: it contains {p}")
     return True
 
 
@@ -374,6 +382,10 @@ class _Run:
         names = scene.param_names()
         if not names:
             raise _Failure(f"{args.scene}: the scene's fit section names no free parameters")
+        self.progress.message(
+            f"{PROG}: fitting {len(names)} parameters of {args.scene} to {args.image} "
+            f"({scene.width}x{scene.height}, {args.protocol} protocol)"
+        )
 
         rtloop.save_image(tmp / "objective.png", image)
         snapshots = tmp / "snapshots"
@@ -444,7 +456,7 @@ def _summary(result: Any, out: Path, wall: float) -> str:
                                        subsequent_indent="  "))
     lines.append("")
     lines.append(
-        f"{len(result.stages)} stages, {result.evaluations} evaluations, fit {_duration(result.seconds)}, "
+        f"{len(result.stages)} stage{'s' if len(result.stages) != 1 else ''}, {result.evaluations} evaluations, fit {_duration(result.seconds)}, "
         f"wall time {_duration(wall)}"
     )
     lines.append(f"results in {out}")
@@ -459,32 +471,56 @@ def _run_interruptibly(work: Any, stop: threading.Event) -> Any:
     """Run ``work()`` in a thread so that Ctrl-C reaches the main thread at once (the fit's callback
     runs on a worker thread, where Python delivers no signals); on Ctrl-C ask it to stop and wait."""
     box: dict[str, Any] = {}
+    done = threading.Event()
 
     def target() -> None:
         try:
             box["value"] = work()
         except BaseException as e:  # noqa: BLE001 - handed to the main thread
             box["error"] = e
+        finally:
+            done.set()
 
     thread = threading.Thread(target=target, name="rtloop-fit", daemon=True)
     thread.start()
-    interrupted = False
-    while thread.is_alive():
+    interrupt: KeyboardInterrupt | None = None
+    # Poll an Event rather than Thread.join(timeout): an exception that interrupts join() can leave the
+    # thread looking finished while it still runs.
+    while not done.is_set():
         try:
-            thread.join(0.1)
-        except KeyboardInterrupt:
-            interrupted = True
+            done.wait(0.1)
+        except KeyboardInterrupt as e:
+            interrupt = interrupt or e
             stop.set()
-    if interrupted and "error" in box:
-        raise KeyboardInterrupt()
+    if interrupt is not None and "error" in box:
+        raise interrupt
     if "error" in box:
         raise box["error"]
     return box.get("value")
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``rtloop-fit``; returns the exit status."""
+    """Entry point of ``rtloop-fit``; returns the exit status (0 done, 1 bad input or failed run, 2 bad
+    command line, 130 interrupted, 143 terminated)."""
     t0 = time.perf_counter()
+    previous_term = None
+    if threading.current_thread() is threading.main_thread():
+        previous_term = signal.signal(signal.SIGTERM, _on_sigterm)
+    try:
+        return _main(argv, t0)
+    except KeyboardInterrupt:  # outside the run (which handles its own): nothing to clean up
+        print(f"{PROG}: interrupted", file=sys.stderr, flush=True)
+        return 130
+    finally:
+        if previous_term is not None:
+            signal.signal(signal.SIGTERM, previous_term)
+
+
+def _on_sigterm(signum: int, frame: Any) -> None:
+    raise _Terminated()
+
+
+def _main(argv: list[str] | None, t0: float) -> int:
     parser = _build_parser()
     try:
         args = parser.parse_args(argv)
@@ -498,11 +534,11 @@ def main(argv: list[str] | None = None) -> int:
     gens = (gens, gens) if isinstance(gens, int) else (int(gens[0]), int(gens[1]))
     progress = _Progress(sys.stderr, not args.quiet, gens)
     stop = threading.Event()
-    out = Path(args.out)
+    out = Path(os.path.abspath(args.out))  # normalised: "." and "x/.." have a name and a parent
     tmp: Path | None = None
     try:
         replace = _check_out(out, args.force, [Path(args.scene), Path(args.image)])
-        parent = out.absolute().parent
+        parent = out.parent
         try:
             parent.mkdir(parents=True, exist_ok=True)
             tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.rtloop-tmp-", dir=parent))
@@ -512,15 +548,18 @@ def main(argv: list[str] | None = None) -> int:
         except OSError as e:
             raise _Failure(f"{out}: cannot create the output directory ({e.strerror or e})") from None
         run = _Run(args, progress, stop)
-        progress.message(f"{PROG}: fitting {args.scene} to {args.image} ({args.protocol} protocol)")
 
         def work() -> Any:
             result = run(tmp)
             run.check_stop()
-            _commit(tmp, out, replace)
+            _commit(tmp, out, replace)  # once begun, finished even if Ctrl-C comes meanwhile
             return result
 
         result = _run_interruptibly(work, stop)
+    except _Terminated:
+        progress.end_line()
+        print(f"{PROG}: terminated", file=sys.stderr, flush=True)
+        return 128 + signal.SIGTERM
     except (KeyboardInterrupt, _Interrupted):
         progress.end_line()
         print(f"{PROG}: interrupted", file=sys.stderr, flush=True)

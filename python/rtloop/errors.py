@@ -12,4 +12,4 @@ class AcquisitionError(RtloopError):
     """An objective image could not be read or does not fit the scene (file, format, size)."""
 
 
-__all__ = ["RtloopError", "SceneError", "AcquisitionError"]
+__all__ = ["AcquisitionError", "RtloopError", "SceneError"]

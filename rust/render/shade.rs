@@ -20,7 +20,7 @@ pub struct PMaterial {
 }
 
 /// Everything shading needs that a fit may change: the light, global terms and the materials.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct ShadeParams {
     pub light_position: Vec3A,
     pub light_intensity: f32,
@@ -33,6 +33,31 @@ pub struct ShadeParams {
     pub materials: Vec<PMaterial>,
     /// False when every specular is 0: the Blinn–Phong lobe is skipped entirely.
     pub any_specular: bool,
+}
+
+impl Clone for ShadeParams {
+    fn clone(&self) -> Self {
+        let mut p = ShadeParams {
+            materials: Vec::with_capacity(self.materials.len()),
+            ..*self
+        };
+        p.materials.extend_from_slice(&self.materials);
+        p
+    }
+
+    /// Reuses `self.materials`' allocation: the fitness hot path calls this once per candidate.
+    fn clone_from(&mut self, source: &Self) {
+        self.light_position = source.light_position;
+        self.light_intensity = source.light_intensity;
+        self.light_color = source.light_color;
+        self.light_rgb = source.light_rgb;
+        self.ambient = source.ambient;
+        self.background = source.background;
+        self.exposure = source.exposure;
+        self.any_specular = source.any_specular;
+        self.materials.clear();
+        self.materials.extend_from_slice(&source.materials);
+    }
 }
 
 fn v3(a: [f64; 3]) -> Vec3A {

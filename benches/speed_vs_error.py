@@ -1,0 +1,356 @@
+"""Speed against error: how long rtloop's fits take and how close they get, per protocol and budget.
+
+For every reference scene (a folder holding ``scene_input.json``, ``objective.png`` and the ground truth
+``scene.json``; by default ``../shared/scenes`` next to the repository), every method (a protocol of
+``rtloop.fit``: ``paper`` at the paper's budget, ``rtloop`` the default) and every budget fraction, and
+for a few seeds, this runs::
+
+    scene = rtloop.load_scene(scene_input.json)
+    photo = rtloop.load_image(objective.png, scene)
+    result = rtloop.fit(scene, photo, protocol=method, population=..., generations=..., seed=...)
+
+timing load + fit with ``time.perf_counter``, and scores ``rtloop.scene_to_dict(result.scene)`` against
+``scene.json`` with ``score()`` from ``../shared/tools/score_result.py``: light position error (m), light
+direction error (degrees, seen from the first sphere) and the worst relative error of intensity x albedo
+over the objects.
+
+A budget fraction b scales population x generations of the protocol by b: population and every stage's
+generations are each scaled by sqrt(b) (population at least 5, generations at least 1). The population
+and generations actually used, and the evaluations the fit reports, are in the CSV.
+
+Usage (from the repository root, after ``pip install .[bench]``)::
+
+    python benches/speed_vs_error.py                 # all scenes, paper + rtloop, budgets 0.25 0.5 1, 2 seeds
+    python benches/speed_vs_error.py --quick         # smoke run: 1 seed, smallest budget
+    python benches/speed_vs_error.py --scenes DIR --seeds 3 --budgets 0.5 1 --methods rtloop --out /tmp/b
+
+Writes, atomically, to ``--out`` (default ``benches/results/``): ``speed_vs_error.csv`` (one row per run),
+``speed_vs_error.md`` (the tables printed) and ``speed_vs_error.png`` (error against seconds, log-log:
+light position error and worst product error, one marker per method and budget; needs matplotlib, else
+skipped with a message). ``--quick`` writes ``speed_vs_error_quick.*`` instead. Prints a markdown table
+(medians over seeds per scene, method and budget), a per-method summary (medians over scenes) and the
+machine. Exits 0 with a message when the scenes or the scoring tool are absent.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import importlib
+import importlib.util
+import io
+import math
+import os
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parents[1]
+DEFAULT_SCENES = REPO.parent / "shared" / "scenes"
+SCORE_TOOL = REPO.parent / "shared" / "tools" / "score_result.py"
+DEFAULT_OUT = REPO / "benches" / "results"
+DEFAULT_METHODS = ["paper", "rtloop"]
+DEFAULT_BUDGETS = [0.25, 0.5, 1.0]
+SCENE_FILES = ("scene_input.json", "objective.png", "scene.json")
+#: Errors are drawn on log axes; exact zeros are drawn at this floor.
+LOG_FLOOR = 1e-6
+
+FIELDS = [
+    "scene", "method", "budget", "seed", "population", "generations", "evaluations", "seconds",
+    "fit_seconds", "light_err_m", "light_dir_err_deg", "product_err_max", "fit_method", "error",
+]
+
+
+def load_score(path: Path):
+    """``score(result_dict, truth_dict)`` from the shared scoring tool, imported by path."""
+    spec = importlib.util.spec_from_file_location("rtloop_bench_score_result", path)
+    if spec is None or spec.loader is None:
+        raise ImportError(f"cannot import {path}")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.score
+
+
+def find_scenes(root: Path) -> list[Path]:
+    return sorted(d for d in root.iterdir() if d.is_dir() and all((d / f).is_file() for f in SCENE_FILES))
+
+
+def scaled_budget(proto: dict[str, Any], fraction: float) -> tuple[int, tuple[int, int]]:
+    """Population and per-stage generations with population x generations scaled by ``fraction``."""
+    k = math.sqrt(fraction)
+    population = max(5, round(proto["population"] * k))
+    gens = proto["generations"]
+    gens = (gens, gens) if isinstance(gens, int) else tuple(gens)
+    return population, (max(1, round(gens[0] * k)), max(1, round(gens[1] * k)))
+
+
+def run_one(rtloop, score, scene_dir: Path, truth: dict, method: str, population: int,
+            generations: tuple[int, int], seed: int, threads: int | None) -> dict[str, Any]:
+    t0 = time.perf_counter()
+    scene = rtloop.load_scene(scene_dir / "scene_input.json")
+    photo = rtloop.load_image(scene_dir / "objective.png", scene)
+    result = rtloop.fit(scene, photo, protocol=method, population=population, generations=generations,
+                        seed=seed, threads=threads)
+    seconds = time.perf_counter() - t0
+    s = score(rtloop.scene_to_dict(result.scene), truth)
+    return {
+        "evaluations": int(result.evaluations),
+        "seconds": seconds,
+        "fit_seconds": float(result.seconds),
+        "light_err_m": s["light_err_m"],
+        "light_dir_err_deg": s.get("light_dir_err_deg", float("nan")),
+        "product_err_max": max(s["product_rel_err"].values(), default=float("nan")),
+        "fit_method": result.settings.get("method", ""),
+        "error": "",
+    }
+
+
+def median(values: list[float]) -> float:
+    finite = [v for v in values if not math.isnan(v)]
+    return statistics.median(finite) if finite else float("nan")
+
+
+def group(rows: list[dict[str, Any]], keys: tuple[str, ...]) -> dict[tuple, list[dict[str, Any]]]:
+    out: dict[tuple, list[dict[str, Any]]] = {}
+    for r in rows:
+        out.setdefault(tuple(r[k] for k in keys), []).append(r)
+    return out
+
+
+def fmt(v: float, digits: int = 3) -> str:
+    if isinstance(v, float) and math.isnan(v):
+        return "nan"
+    return f"{v:.{digits}g}"
+
+
+def per_scene_medians(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    out = []
+    for (scene, method, budget), rs in group(rows, ("scene", "method", "budget")).items():
+        out.append({
+            "scene": scene, "method": method, "budget": budget,
+            "population": rs[0]["population"], "generations": rs[0]["generations"],
+            "evaluations": median([float(r["evaluations"]) for r in rs]),
+            "seconds": median([r["seconds"] for r in rs]),
+            "light_err_m": median([r["light_err_m"] for r in rs]),
+            "light_dir_err_deg": median([r["light_dir_err_deg"] for r in rs]),
+            "product_err_max": median([r["product_err_max"] for r in rs]),
+            "runs": len(rs),
+        })
+    return out
+
+
+def tables(rows: list[dict[str, Any]], machine: str) -> str:
+    med = per_scene_medians(rows)
+    buf = io.StringIO()
+    buf.write("| scene | method | budget | pop x gens | evaluations | seconds (median) | "
+              "light error m (median) | light dir deg (median) | product error (median) |\n")
+    buf.write("|---|---|---|---|---|---|---|---|---|\n")
+    for m in med:
+        buf.write(f"| {m['scene']} | {m['method']} | {m['budget']:g} | {m['population']} x {m['generations']} "
+                  f"| {m['evaluations']:.0f} | {fmt(m['seconds'])} | {fmt(m['light_err_m'])} "
+                  f"| {fmt(m['light_dir_err_deg'])} | {fmt(m['product_err_max'])} |\n")
+    buf.write("\nPer method (median over scenes of the per-scene medians):\n\n")
+    buf.write("| method | budget | scenes | seconds | light error m | light dir deg | product error |\n")
+    buf.write("|---|---|---|---|---|---|---|\n")
+    for (method, budget), ms in group(med, ("method", "budget")).items():
+        buf.write(f"| {method} | {budget:g} | {len(ms)} | {fmt(median([m['seconds'] for m in ms]))} "
+                  f"| {fmt(median([m['light_err_m'] for m in ms]))} "
+                  f"| {fmt(median([m['light_dir_err_deg'] for m in ms]))} "
+                  f"| {fmt(median([m['product_err_max'] for m in ms]))} |\n")
+    buf.write(f"\n{machine}\n")
+    return buf.getvalue()
+
+
+def atomic_write(path: Path, write) -> None:
+    """Call ``write(tmp_path)`` and move the result onto ``path`` in one rename."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        write(Path(tmp))
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes the file private; give it ordinary permissions
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
+    def write(tmp: Path) -> None:
+        with open(tmp, "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=FIELDS)
+            w.writeheader()
+            for r in rows:
+                w.writerow({k: (f"{r[k]:.6g}" if isinstance(r[k], float) else r[k]) for k in FIELDS})
+
+    atomic_write(path, write)
+
+
+def write_plot(path: Path, rows: list[dict[str, Any]], title: str) -> bool:
+    try:
+        import matplotlib
+    except ImportError:
+        print("matplotlib is not installed (pip install matplotlib, or .[bench]): no plot", file=sys.stderr)
+        return False
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FixedLocator, FormatStrFormatter, NullFormatter
+
+    med = per_scene_medians(rows)
+    methods = list(dict.fromkeys(m["method"] for m in med))
+    budgets = sorted({m["budget"] for m in med})
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    markers = ["o", "s", "^", "D", "v", "P", "X", "*"]
+    fig, axes = plt.subplots(1, 2, figsize=(12, 5), constrained_layout=True)
+    panels = [("light_err_m", "light position error (m)"), ("product_err_max", "max product relative error")]
+    for ax, (key, label) in zip(axes, panels):
+        for i, method in enumerate(methods):
+            colour = colours[i % len(colours)]
+            line_x, line_y = [], []
+            for j, budget in enumerate(budgets):
+                ms = [m for m in med if m["method"] == method and m["budget"] == budget]
+                if not ms:
+                    continue
+                marker = markers[j % len(markers)]
+                xs = [m["seconds"] for m in ms]
+                ys = [max(m[key], LOG_FLOOR) for m in ms]
+                # Each scene's median over seeds, faint; the median over scenes, bold.
+                ax.scatter(xs, ys, color=colour, marker=marker, alpha=0.3, s=25)
+                x, y = median(xs), median(ys)
+                ax.scatter([x], [y], color=colour, marker=marker, s=90, edgecolors="black",
+                           label=f"{method}, budget {budget:g}")
+                line_x.append(x)
+                line_y.append(y)
+            ax.plot(line_x, line_y, color=colour, alpha=0.6)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        # Readable seconds: 1-2-5 ticks labelled plainly, unlabelled minor ticks.
+        lo, hi = ax.get_xlim()
+        ticks = [m * 10.0**e for e in range(math.floor(math.log10(lo)), math.ceil(math.log10(hi)) + 1)
+                 for m in (1, 2, 5) if lo <= m * 10.0**e <= hi]
+        if len(ticks) >= 2:
+            ax.xaxis.set_major_locator(FixedLocator(ticks))
+            ax.xaxis.set_major_formatter(FormatStrFormatter("%g"))
+            ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_xlabel("seconds (load + fit)")
+        ax.set_ylabel(label)
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(title, fontsize=9)
+
+    def write(tmp: Path) -> None:
+        fig.savefig(tmp, format="png", dpi=120)
+
+    try:
+        atomic_write(path, write)
+    finally:
+        plt.close(fig)
+    return True
+
+
+def machine_line(rtloop) -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as fh:
+            model = next((ln.split(":", 1)[1].strip() for ln in fh if ln.startswith("model name")), "")
+        if model:
+            cpu = f"{cpu} ({model})" if cpu else model
+    except OSError:
+        pass
+    return (f"machine: {cpu}, {os.cpu_count()} logical CPUs, {platform.system()} {platform.release()}; "
+            f"Python {platform.python_version()}; rtloop {rtloop.__version__}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scenes", type=Path, default=DEFAULT_SCENES, help="folder of scene folders")
+    ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="where to write CSV, markdown and PNG")
+    ap.add_argument("--seeds", type=int, default=2, help="seeds per configuration (0, 1, ...)")
+    ap.add_argument("--methods", nargs="+", default=DEFAULT_METHODS, help="protocols of rtloop.fit")
+    ap.add_argument("--budgets", nargs="+", type=float, default=DEFAULT_BUDGETS,
+                    help="fractions of each protocol's population x generations")
+    ap.add_argument("--threads", type=int, default=None, help="threads for rtloop.fit (default: all)")
+    ap.add_argument("--quick", action="store_true", help="smoke run: 1 seed, smallest budget only")
+    args = ap.parse_args(argv)
+
+    if not args.scenes.is_dir():
+        print(f"no scenes at {args.scenes}: nothing to benchmark (pass --scenes DIR)")
+        return 0
+    scenes = find_scenes(args.scenes)
+    if not scenes:
+        print(f"no scene folders with {', '.join(SCENE_FILES)} in {args.scenes}: nothing to benchmark")
+        return 0
+    if not SCORE_TOOL.is_file():
+        print(f"scoring tool {SCORE_TOOL} is absent: nothing to benchmark")
+        return 0
+    if args.seeds < 1 or any(not b > 0 for b in args.budgets):
+        ap.error("--seeds must be >= 1 and every budget > 0")
+
+    import json
+
+    import rtloop
+
+    protocols = importlib.import_module("rtloop.fit").PROTOCOLS
+    unknown = [m for m in args.methods if m not in protocols]
+    if unknown:
+        ap.error(f"unknown method(s) {', '.join(unknown)} (known: {', '.join(protocols)})")
+    score = load_score(SCORE_TOOL)
+    seeds = [0] if args.quick else list(range(args.seeds))
+    budgets = [min(args.budgets)] if args.quick else sorted(set(args.budgets))
+    stem = "speed_vs_error_quick" if args.quick else "speed_vs_error"
+    machine = machine_line(rtloop)
+    total = len(scenes) * len(args.methods) * len(budgets) * len(seeds)
+    print(f"{total} fits: {len(scenes)} scenes x methods {args.methods} x budgets {budgets} x seeds {seeds}",
+          file=sys.stderr)
+
+    rows: list[dict[str, Any]] = []
+    done = 0
+    for scene_dir in scenes:
+        truth = json.loads((scene_dir / "scene.json").read_text())
+        for method in args.methods:
+            for budget in budgets:
+                population, generations = scaled_budget(protocols[method], budget)
+                for seed in seeds:
+                    row: dict[str, Any] = {
+                        "scene": scene_dir.name, "method": method, "budget": budget, "seed": seed,
+                        "population": population, "generations": f"{generations[0]}+{generations[1]}",
+                    }
+                    try:
+                        row.update(run_one(rtloop, score, scene_dir, truth, method, population, generations,
+                                           seed, args.threads))
+                    except (rtloop.RtloopError, OSError, ValueError, KeyError, RuntimeError) as exc:
+                        # One failing fit should not lose the others.
+                        nan = float("nan")
+                        row.update(evaluations=0, seconds=nan, fit_seconds=nan, light_err_m=nan,
+                                   light_dir_err_deg=nan, product_err_max=nan, fit_method="",
+                                   error=f"{type(exc).__name__}: {exc}")
+                    rows.append(row)
+                    done += 1
+                    print(f"[{done}/{total}] {row['scene']} {method} budget {budget:g} seed {seed}: "
+                          f"{fmt(row['seconds'])} s, {row['evaluations']} evals, light {fmt(row['light_err_m'])} m, "
+                          f"product {fmt(row['product_err_max'])}" + (f"  ERROR {row['error']}" if row["error"] else ""),
+                          file=sys.stderr, flush=True)
+
+    out = args.out
+    write_csv(out / f"{stem}.csv", rows)
+    text = tables(rows, machine)
+    atomic_write(out / f"{stem}.md", lambda tmp: tmp.write_text(text))
+    plotted = write_plot(out / f"{stem}.png", rows, f"rtloop speed against error; {machine}")
+    print(text)
+    written = [f"{stem}.csv", f"{stem}.md"] + ([f"{stem}.png"] if plotted else [])
+    print(f"wrote {', '.join(str(out / w) for w in written)}")
+    failed = sum(1 for r in rows if r["error"])
+    if failed:
+        print(f"{failed} of {len(rows)} fits failed (see the 'error' column)", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,418 @@
+//! The fused fitness kernel: shading and loss for one candidate over precomputed pixels.
+//!
+//! `Kernel::new` does all candidate-independent work once per fit: the first hits are stored as a
+//! structure of arrays, grouped by object (so each group shares one material and one list of possible
+//! occluders), together with the objective and, per pixel and occluder, the part of the shadow test that
+//! does not depend on the light (`|p - c|² - r²` for a sphere, the signed distance `n·(p - q)` for a plane).
+//! An evaluation then walks the groups in blocks of `BLOCK` pixels with branch-free loops the compiler
+//! vectorises, never renders an image and never allocates.
+//!
+//! Model only what the scene needs: an object is never tested as its own occluder (a sphere or a plane
+//! cannot shadow its lit side), a scene with one object has no shadow tests at all, the Blinn–Phong lobe
+//! is compiled out when every specular is 0, and background pixels under a fixed background are not here
+//! at all (their loss is a constant).
+
+use glam::Vec3A;
+
+use crate::render::{PShape, ShadeParams, Surfel};
+
+/// Pixels per block: the working set of one block stays in L1.
+pub const BLOCK: usize = 64;
+const INV_PI: f32 = std::f32::consts::FRAC_1_PI;
+/// Objective values at or above this are saturated: they only say "at least this bright".
+pub const SATURATED: f32 = 0.999;
+
+struct SphereOccluder {
+    center: [f32; 3],
+    /// |p - c|² - r² per pixel of the group.
+    c: Vec<f32>,
+}
+
+struct PlaneOccluder {
+    normal: [f32; 3],
+    point: [f32; 3],
+    /// n·(p - q) per pixel of the group: which side of the plane the pixel lies on.
+    side: Vec<f32>,
+}
+
+/// The pixels of one object (or of the background, `object == None`).
+struct Group {
+    object: Option<usize>,
+    p: [Vec<f32>; 3],
+    n: [Vec<f32>; 3],
+    v: [Vec<f32>; 3],
+    t: [Vec<f32>; 3],
+    spheres: Vec<SphereOccluder>,
+    planes: Vec<PlaneOccluder>,
+}
+
+impl Group {
+    fn len(&self) -> usize {
+        self.t[0].len()
+    }
+}
+
+pub struct Kernel {
+    groups: Vec<Group>,
+    pixels: usize,
+}
+
+/// Per-candidate light terms shared by all groups.
+#[derive(Clone, Copy)]
+struct Light {
+    pos: [f32; 3],
+    /// intensity x colour.
+    rgb: [f32; 3],
+}
+
+impl Kernel {
+    /// `surfels` and `targets` are the active pixels; `shapes` the scene's shapes.
+    pub fn new(surfels: &[Surfel], targets: &[Vec3A], shapes: &[PShape], shadows: bool) -> Kernel {
+        let mut order: Vec<usize> = (0..surfels.len()).collect();
+        order.sort_by_key(|&i| surfels[i].object); // stable: keeps row-major order inside a group
+        let mut groups: Vec<Group> = Vec::new();
+        let mut start = 0;
+        while start < order.len() {
+            let obj = surfels[order[start]].object;
+            let mut end = start;
+            while end < order.len() && surfels[order[end]].object == obj {
+                end += 1;
+            }
+            let idx = &order[start..end];
+            let col = |f: &dyn Fn(&Surfel) -> f32| {
+                idx.iter().map(|&i| f(&surfels[i])).collect::<Vec<f32>>()
+            };
+            let tcol = |c: usize| idx.iter().map(|&i| targets[i][c]).collect::<Vec<f32>>();
+            let object = (obj != u32::MAX).then_some(obj as usize);
+            let mut g = Group {
+                object,
+                p: [
+                    col(&|s| s.position.x),
+                    col(&|s| s.position.y),
+                    col(&|s| s.position.z),
+                ],
+                n: [
+                    col(&|s| s.normal.x),
+                    col(&|s| s.normal.y),
+                    col(&|s| s.normal.z),
+                ],
+                v: [col(&|s| s.view.x), col(&|s| s.view.y), col(&|s| s.view.z)],
+                t: [tcol(0), tcol(1), tcol(2)],
+                spheres: Vec::new(),
+                planes: Vec::new(),
+            };
+            if shadows && object.is_some() {
+                for (k, shape) in shapes.iter().enumerate() {
+                    if Some(k) == object {
+                        continue;
+                    }
+                    match *shape {
+                        PShape::Sphere { center, radius } => g.spheres.push(SphereOccluder {
+                            center: center.to_array(),
+                            c: idx
+                                .iter()
+                                .map(|&i| {
+                                    let oc = surfels[i].position - center;
+                                    let l = oc.length();
+                                    (l - radius) * (l + radius)
+                                })
+                                .collect(),
+                        }),
+                        PShape::Plane { point, normal } => g.planes.push(PlaneOccluder {
+                            normal: normal.to_array(),
+                            point: point.to_array(),
+                            side: idx
+                                .iter()
+                                .map(|&i| normal.dot(surfels[i].position - point))
+                                .collect(),
+                        }),
+                    }
+                }
+            }
+            groups.push(g);
+            start = end;
+        }
+        Kernel {
+            groups,
+            pixels: surfels.len(),
+        }
+    }
+
+    pub fn pixels(&self) -> usize {
+        self.pixels
+    }
+
+    /// Per-channel sums of |min(render, 1) - objective| (no clamp without `clip`).
+    pub fn l1(&self, p: &ShadeParams, clip: bool) -> [f64; 3] {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                // SAFETY: the CPU supports the features the function was compiled for.
+                return unsafe { self.l1_avx2(p, clip) };
+            }
+        }
+        self.l1_generic(p, clip)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn l1_avx2(&self, p: &ShadeParams, clip: bool) -> [f64; 3] {
+        self.l1_generic(p, clip)
+    }
+
+    #[inline(always)]
+    fn l1_generic(&self, p: &ShadeParams, clip: bool) -> [f64; 3] {
+        let light = Light {
+            pos: p.light_position.to_array(),
+            rgb: p.light_rgb.to_array(),
+        };
+        let mut acc = [0.0f64; 3];
+        let mut e = [0.0f32; BLOCK];
+        for g in &self.groups {
+            let n = g.len();
+            let Some(obj) = g.object else {
+                // Background whose value a free parameter (exposure) changes.
+                let bg = p.exposure * p.background;
+                for s in 0..n {
+                    for c in 0..3 {
+                        let m = if clip { bg[c].min(1.0) } else { bg[c] };
+                        acc[c] += (m - g.t[c][s]).abs() as f64;
+                    }
+                }
+                continue;
+            };
+            let m = &p.materials[obj];
+            let specular = p.any_specular && m.specular > 0.0;
+            // m_c = exposure * (rho_c * ambient_c + e * I_c * rho_c / pi)  (+ specular lobe)
+            let a: [f32; 3] = std::array::from_fn(|c| p.exposure * m.albedo[c] * p.ambient[c]);
+            let k: [f32; 3] =
+                std::array::from_fn(|c| p.exposure * light.rgb[c] * m.albedo[c] * INV_PI);
+            let ks: [f32; 3] = std::array::from_fn(|c| {
+                p.exposure * light.rgb[c] * m.specular * (m.shininess + 8.0) * (INV_PI / 8.0)
+            });
+            let mut start = 0;
+            while start < n {
+                let len = BLOCK.min(n - start);
+                let r = start..start + len;
+                irradiance(g, r.clone(), &light, &mut e[..len]);
+                shadow(g, r.clone(), &light, &mut e[..len]);
+                if specular {
+                    for c in 0..3 {
+                        let mut sum = 0.0f32;
+                        for (i, s) in r.clone().enumerate() {
+                            let lobe = blinn_phong(g, s, &light, m.shininess);
+                            let v = a[c] + e[i] * (k[c] + ks[c] * lobe);
+                            let v = if clip { v.min(1.0) } else { v };
+                            sum += (v - g.t[c][s]).abs();
+                        }
+                        acc[c] += sum as f64;
+                    }
+                } else {
+                    for c in 0..3 {
+                        let t = &g.t[c][r.clone()];
+                        let mut sum = 0.0f32;
+                        for (ei, ti) in e[..len].iter().zip(t) {
+                            let v = a[c] + ei * k[c];
+                            let v = if clip { v.min(1.0) } else { v };
+                            sum += (v - ti).abs();
+                        }
+                        acc[c] += sum as f64;
+                    }
+                }
+                start += len;
+            }
+        }
+        acc
+    }
+
+    /// Variable projection for a matte scene without ambient light: for the light `p`, the per-object,
+    /// per-channel least-squares products P (clamped to `bounds`) and the resulting per-channel L1 loss.
+    /// `scratch` holds the unit-light irradiance per pixel between the two passes.
+    pub fn projected(
+        &self,
+        p: &ShadeParams,
+        clip: bool,
+        bounds: &[[(f64, f64); 3]],
+        products: &mut [[f64; 3]],
+        scratch: &mut Vec<f32>,
+    ) -> [f64; 3] {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                // SAFETY: the CPU supports the features the function was compiled for.
+                return unsafe { self.projected_avx2(p, clip, bounds, products, scratch) };
+            }
+        }
+        self.projected_generic(p, clip, bounds, products, scratch)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn projected_avx2(
+        &self,
+        p: &ShadeParams,
+        clip: bool,
+        bounds: &[[(f64, f64); 3]],
+        products: &mut [[f64; 3]],
+        scratch: &mut Vec<f32>,
+    ) -> [f64; 3] {
+        self.projected_generic(p, clip, bounds, products, scratch)
+    }
+
+    #[inline(always)]
+    fn projected_generic(
+        &self,
+        p: &ShadeParams,
+        clip: bool,
+        bounds: &[[(f64, f64); 3]],
+        products: &mut [[f64; 3]],
+        scratch: &mut Vec<f32>,
+    ) -> [f64; 3] {
+        let light = Light {
+            pos: p.light_position.to_array(),
+            rgb: [1.0; 3],
+        };
+        scratch.resize(self.pixels, 0.0);
+        for (k, b) in bounds.iter().enumerate() {
+            products[k] = [b[0].0, b[1].0, b[2].0]; // objects with no visible pixels
+        }
+        let sat = if clip { SATURATED } else { f32::INFINITY };
+        let mut acc = [0.0f64; 3];
+        let mut offset = 0;
+        for g in &self.groups {
+            let n = g.len();
+            let e_all = &mut scratch[offset..offset + n];
+            offset += n;
+            let Some(obj) = g.object else {
+                for s in 0..n {
+                    for c in 0..3 {
+                        acc[c] += g.t[c][s].abs() as f64; // black background (ambient-free scene)
+                    }
+                }
+                continue;
+            };
+            // Pass 1: unit-light irradiance / pi, and the normal equations per channel.
+            let (mut syg, mut sgg) = ([0.0f64; 3], [0.0f64; 3]);
+            let mut start = 0;
+            while start < n {
+                let len = BLOCK.min(n - start);
+                let r = start..start + len;
+                let e = &mut e_all[r.clone()];
+                irradiance(g, r.clone(), &light, e);
+                shadow(g, r.clone(), &light, e);
+                for ei in e.iter_mut() {
+                    *ei *= INV_PI;
+                }
+                for c in 0..3 {
+                    let t = &g.t[c][r.clone()];
+                    let (mut a, mut b) = (0.0f32, 0.0f32);
+                    for (ei, ti) in e.iter().zip(t) {
+                        let w = if *ti < sat { *ei } else { 0.0 };
+                        a += w * ti;
+                        b += w * ei;
+                    }
+                    syg[c] += a as f64;
+                    sgg[c] += b as f64;
+                }
+                start += len;
+            }
+            let mut pk = [0.0f32; 3];
+            for c in 0..3 {
+                let (lo, hi) = bounds[obj][c];
+                let v = if sgg[c] > 0.0 { syg[c] / sgg[c] } else { lo };
+                let v = if v.is_finite() { v.clamp(lo, hi) } else { lo };
+                products[obj][c] = v;
+                pk[c] = v as f32;
+            }
+            // Pass 2: the loss at those products.
+            for c in 0..3 {
+                let mut sum = 0.0f32;
+                let mut start = 0;
+                while start < n {
+                    let len = BLOCK.min(n - start);
+                    let mut block = 0.0f32;
+                    for (ei, ti) in e_all[start..start + len]
+                        .iter()
+                        .zip(&g.t[c][start..start + len])
+                    {
+                        let v = pk[c] * ei;
+                        let v = if clip { v.min(1.0) } else { v };
+                        block += (v - ti).abs();
+                    }
+                    sum += block;
+                    start += len;
+                }
+                acc[c] += sum as f64;
+            }
+        }
+        acc
+    }
+}
+
+/// e = max(0, n·l) / d² (unit light), written into `e`; 0 for a light on the surface.
+#[inline(always)]
+fn irradiance(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mut [f32]) {
+    let (px, py, pz) = (&g.p[0][r.clone()], &g.p[1][r.clone()], &g.p[2][r.clone()]);
+    let (nx, ny, nz) = (&g.n[0][r.clone()], &g.n[1][r.clone()], &g.n[2][r]);
+    for i in 0..e.len() {
+        let dx = light.pos[0] - px[i];
+        let dy = light.pos[1] - py[i];
+        let dz = light.pos[2] - pz[i];
+        let d2 = dx * dx + dy * dy + dz * dz;
+        let nl = (nx[i] * dx + ny[i] * dy + nz[i] * dz).max(0.0);
+        let v = (nl / (d2 * d2.sqrt())).min(f32::MAX);
+        e[i] = if d2 > f32::MIN_POSITIVE { v } else { 0.0 };
+    }
+}
+
+/// Zero `e` where the segment from the pixel to the light is blocked by another object.
+#[inline(always)]
+fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mut [f32]) {
+    let (px, py, pz) = (&g.p[0][r.clone()], &g.p[1][r.clone()], &g.p[2][r.clone()]);
+    for s in &g.spheres {
+        let cc = &s.c[r.clone()];
+        for i in 0..e.len() {
+            // Segment x(t) = p + t·d, t in [0, 1], d = L - p; sphere |x - c|² = r².
+            let dx = light.pos[0] - px[i];
+            let dy = light.pos[1] - py[i];
+            let dz = light.pos[2] - pz[i];
+            let a = dx * dx + dy * dy + dz * dz;
+            let ox = px[i] - s.center[0];
+            let oy = py[i] - s.center[1];
+            let oz = pz[i] - s.center[2];
+            let b = ox * dx + oy * dy + oz * dz;
+            let c = cc[i];
+            let disc = b * b - a * c;
+            // Roots (-b ± √disc)/a: the far one is > 0 and the near one < 1.
+            let ab = a + b;
+            let far_positive = b < 0.0 || c < 0.0;
+            let near_below_one = ab > 0.0 || disc > ab * ab;
+            let hit = disc >= 0.0 && far_positive && near_below_one;
+            e[i] = if hit { 0.0 } else { e[i] };
+        }
+    }
+    for pl in &g.planes {
+        let side_l = pl.normal[0] * (light.pos[0] - pl.point[0])
+            + pl.normal[1] * (light.pos[1] - pl.point[1])
+            + pl.normal[2] * (light.pos[2] - pl.point[2]);
+        let side = &pl.side[r.clone()];
+        for i in 0..e.len() {
+            e[i] = if side[i] * side_l < 0.0 { 0.0 } else { e[i] };
+        }
+    }
+}
+
+/// max(0, n·h)^s for the pixel `s` of the group.
+#[inline(always)]
+fn blinn_phong(g: &Group, s: usize, light: &Light, shininess: f32) -> f32 {
+    let p = Vec3A::new(g.p[0][s], g.p[1][s], g.p[2][s]);
+    let n = Vec3A::new(g.n[0][s], g.n[1][s], g.n[2][s]);
+    let v = Vec3A::new(g.v[0][s], g.v[1][s], g.v[2][s]);
+    let l = (Vec3A::from_array(light.pos) - p).normalize_or_zero();
+    let h = (l + v).normalize_or_zero();
+    n.dot(h).max(0.0).powf(shininess)
+}

@@ -1,0 +1,221 @@
+//! The fused fitness kernel (SoA, blocked, shadow terms precomputed) against the plain per-pixel path
+//! through the renderer's `shade`, on random scenes with shadows, several spheres, specular terms,
+//! ambient light and saturated objective pixels.
+
+use rtloop::de::{Objective, Rng};
+use rtloop::{render, Fitness, LossKind, ParamLayout, Scene};
+
+fn random_scene(rng: &mut Rng, spheres: usize, specular: bool, ambient: bool) -> Scene {
+    let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.uniform();
+    let mut objects = Vec::new();
+    for k in 0..spheres {
+        let r = u(0.3, 1.0);
+        let (ks, s) = if specular {
+            (u(0.0, 0.5), u(1.0, 60.0))
+        } else {
+            (0.0, 0.0)
+        };
+        objects.push(format!(
+            r#"{{"name": "s{k}", "shape": "sphere", "center": [{}, {r}, {}], "radius": {r},
+               "material": {{"albedo": [{}, {}, {}], "specular": {ks}, "shininess": {s}}}}}"#,
+            u(-2.0, 2.0),
+            u(-1.5, 1.5),
+            u(0.05, 1.0),
+            u(0.05, 1.0),
+            u(0.05, 1.0)
+        ));
+    }
+    objects.push(format!(
+        r#"{{"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [{}, 1, {}],
+           "material": {{"albedo": [{}, {}, {}]}}}}"#,
+        u(-0.05, 0.05),
+        u(-0.05, 0.05),
+        u(0.1, 0.9),
+        u(0.1, 0.9),
+        u(0.1, 0.9)
+    ));
+    let amb = if ambient { u(0.0, 0.2) } else { 0.0 };
+    let mut fit = vec![
+        r#""light.position": {"min": [-6, 0.5, -6], "max": [6, 8, 6]}"#.to_string(),
+        r#""light.intensity": {"min": 1, "max": 200}"#.to_string(),
+    ];
+    for k in 0..spheres {
+        fit.push(format!(r#""objects.s{k}.albedo": {{"min": 0, "max": 1}}"#));
+    }
+    fit.push(r#""objects.floor.albedo": {"min": 0, "max": 1}"#.to_string());
+    let text = format!(
+        r#"{{"image": {{"width": 96, "height": 72}},
+            "camera": {{"position": [{}, {}, -7], "look_at": [0, 0.7, 0], "vfov_deg": 40}},
+            "light": {{"position": [{}, {}, {}], "intensity": {}}},
+            "ambient": [{amb}, {amb}, {amb}], "exposure": {},
+            "objects": [{}], "fit": {{{}}}}}"#,
+        u(-1.0, 1.0),
+        u(1.0, 3.0),
+        u(-4.0, 4.0),
+        u(1.0, 6.0),
+        u(-4.0, 4.0),
+        u(20.0, 120.0),
+        u(0.7, 1.5),
+        objects.join(","),
+        fit.join(",")
+    );
+    Scene::from_json(&text).unwrap()
+}
+
+fn random_candidate(rng: &mut Rng, layout: &ParamLayout) -> Vec<f64> {
+    layout
+        .bounds
+        .iter()
+        .map(|&(lo, hi)| lo + (hi - lo) * rng.uniform())
+        .collect()
+}
+
+/// Relative difference with a floor: the losses are sums over ~7000 pixels x 3 channels of f32 terms.
+fn close(a: f64, b: f64, rel: f64) -> bool {
+    (a - b).abs() <= rel * a.abs().max(b.abs()).max(1.0)
+}
+
+#[test]
+fn kernel_matches_the_plain_path_on_random_scenes() {
+    let mut rng = Rng::new(42);
+    let mut cases = 0;
+    for trial in 0..24 {
+        let spheres = 1 + trial % 4;
+        let specular = trial % 3 == 1;
+        let ambient = trial % 4 == 2;
+        let scene = random_scene(&mut rng, spheres, specular, ambient);
+        // The objective: the scene itself, saturating at 1, so some pixels are clipped.
+        let target: Vec<f32> = render(&scene, None, None, 1)
+            .unwrap()
+            .rgb
+            .iter()
+            .map(|v| v.min(1.0))
+            .collect();
+        let layout = ParamLayout::all(&scene);
+        for kind in [LossKind::L1, LossKind::L1PerChannel] {
+            let f = Fitness::new(&scene, layout.clone(), &target, None, kind, true, None).unwrap();
+            for _ in 0..6 {
+                let x = random_candidate(&mut rng, &layout);
+                let fast = f.channel_losses(&x);
+                let slow = f.reference_channel_losses(&x);
+                for c in 0..3 {
+                    // Shadow-boundary pixels may flip between the two shadow tests; each flip moves a sum
+                    // of ~thousands of terms by at most one pixel value.
+                    assert!(
+                        close(fast[c], slow[c], 2e-3),
+                        "trial {trial} {kind:?} channel {c}: {fast:?} vs {slow:?}"
+                    );
+                }
+                let mut out = vec![0.0; f.n_objectives()];
+                f.evaluate(&x, &mut out);
+                assert!(out.iter().all(|v| v.is_finite()));
+                cases += 1;
+            }
+        }
+    }
+    assert_eq!(cases, 24 * 2 * 6);
+}
+
+#[test]
+fn kernel_agrees_exactly_where_no_shadow_boundary_exists() {
+    // One sphere alone: no occluders at all, so both paths shade the same pixels with the same formula.
+    let scene = Scene::from_json(
+        r#"{"image": {"width": 64, "height": 48},
+            "camera": {"position": [0, 0, -5], "look_at": [0, 0, 0], "vfov_deg": 40},
+            "light": {"position": [1, 2, -3], "intensity": 30},
+            "objects": [{"name": "b", "shape": "sphere", "center": [0, 0, 0], "radius": 1,
+                         "material": {"albedo": [0.7, 0.5, 0.2], "specular": 0.3, "shininess": 20}}],
+            "fit": {"light.position": {"min": -5, "max": 5}, "light.intensity": {"min": 1, "max": 100}}}"#,
+    )
+    .unwrap();
+    let target = vec![0.3f32; 64 * 48 * 3];
+    let layout = ParamLayout::all(&scene);
+    let f = Fitness::new(
+        &scene,
+        layout.clone(),
+        &target,
+        None,
+        LossKind::L1,
+        true,
+        None,
+    )
+    .unwrap();
+    let mut rng = Rng::new(3);
+    for _ in 0..20 {
+        let x = random_candidate(&mut rng, &layout);
+        let (a, b) = (f.channel_losses(&x), f.reference_channel_losses(&x));
+        for c in 0..3 {
+            assert!(close(a[c], b[c], 1e-5), "{a:?} vs {b:?}");
+        }
+    }
+}
+
+#[test]
+fn projected_kernel_matches_the_plain_solve() {
+    let mut rng = Rng::new(5);
+    for trial in 0..12 {
+        let scene = random_scene(&mut rng, 1 + trial % 3, false, false);
+        let target: Vec<f32> = render(&scene, None, None, 1)
+            .unwrap()
+            .rgb
+            .iter()
+            .map(|v| v.min(1.0))
+            .collect();
+        let layout = ParamLayout::new(&scene, &["light.position".to_string()]).unwrap();
+        let bounds = vec![[(0.0, 200.0); 3]; scene.objects.len()];
+        let f = Fitness::new(
+            &scene,
+            layout.clone(),
+            &target,
+            None,
+            LossKind::L1Projected,
+            true,
+            Some(bounds),
+        )
+        .unwrap();
+        for _ in 0..6 {
+            let x = random_candidate(&mut rng, &layout);
+            let (a, b) = (f.channel_losses(&x), f.reference_channel_losses(&x));
+            for c in 0..3 {
+                assert!(close(a[c], b[c], 2e-3), "trial {trial}: {a:?} vs {b:?}");
+            }
+        }
+        // At the true light the projected loss vanishes (up to float rounding).
+        let truth: Vec<f64> = scene.light.position.to_vec();
+        let at_truth: f64 = f.channel_losses(&truth).iter().sum();
+        assert!(
+            at_truth < 1e-5 * (scene.width * scene.height) as f64,
+            "{at_truth}"
+        );
+    }
+}
+
+#[test]
+fn light_inside_an_occluder_or_on_a_surface_gives_finite_losses() {
+    let mut rng = Rng::new(9);
+    let scene = random_scene(&mut rng, 2, true, false);
+    let target = vec![0.5f32; (scene.width * scene.height * 3) as usize];
+    let layout = ParamLayout::all(&scene);
+    let f = Fitness::new(
+        &scene,
+        layout.clone(),
+        &target,
+        None,
+        LossKind::L1,
+        false,
+        None,
+    )
+    .unwrap();
+    let mut x = layout.read(&scene);
+    let rtloop::scene::Shape::Sphere { center, .. } = scene.objects[0].shape else {
+        unreachable!()
+    };
+    for pos in [center, [0.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 1e-7, 0.0]] {
+        x[..3].copy_from_slice(&pos);
+        let (a, b) = (f.channel_losses(&x), f.reference_channel_losses(&x));
+        assert!(
+            a.iter().chain(&b).all(|v| v.is_finite()),
+            "{pos:?}: {a:?} {b:?}"
+        );
+    }
+}

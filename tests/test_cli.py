@@ -1,0 +1,498 @@
+"""The ``rtloop-fit`` command line: outputs, progress, errors, and the all-or-nothing output directory."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import rtloop
+from rtloop import cli
+
+REPO = Path(__file__).resolve().parents[1]
+EXAMPLE = REPO / "examples" / "yellow-ball"
+
+W, H = 32, 24
+OUTPUTS = ("result.json", "best_per_generation.csv", "final.png", "objective.png", "snapshots")
+
+
+def scene_dict() -> dict:
+    """The yellow-ball example's camera and objects at 32x24, with the example's fit section."""
+    d = json.loads((EXAMPLE / "scene_input.json").read_text(encoding="utf-8"))
+    d["image"] = {"width": W, "height": H}
+    return d
+
+
+@pytest.fixture
+def inputs(tmp_path: Path) -> tuple[Path, Path]:
+    """(scene.json, objective.png) in tmp_path; the objective is rendered by rtloop from a known truth."""
+    d = scene_dict()
+    scene_path = tmp_path / "scene.json"
+    scene_path.write_text(json.dumps(d), encoding="utf-8")
+    truth = json.loads(json.dumps(d))
+    truth["light"].update(position=[2.0, 4.0, -1.5], intensity=40.0)
+    truth["objects"][0]["material"]["albedo"] = [0.8, 0.7, 0.1]
+    truth["objects"][1]["material"]["albedo"] = [0.4, 0.5, 0.6]
+    image_path = tmp_path / "objective.png"
+    rtloop.save_image(image_path, rtloop.render(rtloop.load_scene(truth)))
+    return scene_path, image_path
+
+
+def run(capsys: pytest.CaptureFixture[str], *args: object) -> tuple[int, str, str]:
+    code = cli.main([str(a) for a in args])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def leftovers(parent: Path) -> list[str]:
+    """Temporary or set-aside directories the CLI may have left in ``parent``."""
+    return sorted(p.name for p in parent.iterdir() if ".rtloop-" in p.name)
+
+
+def stages_of(out: Path) -> list[tuple[str, int]]:
+    report = json.loads((out / "result.json").read_text(encoding="utf-8"))["fit_report"]
+    return [(s["name"], s["generations"]) for s in report["stages"]]
+
+
+def error_line(err: str) -> str:
+    lines = err.strip("\n").splitlines()
+    assert len(lines) == 1, f"expected one line on stderr, got {err!r}"
+    assert lines[0].startswith("rtloop-fit: error: "), lines[0]
+    return lines[0]
+
+
+# --- a successful run --------------------------------------------------------------------------------------
+
+
+def test_outputs(inputs, tmp_path, capsys):
+    scene_path, image_path = inputs
+    out = tmp_path / "runs" / "fit"  # the parent does not exist yet
+    code, stdout, stderr = run(capsys, scene_path, image_path, "--out", out, "--population", 12,
+                               "--generations", 6, "--seed", 3, "--quiet")
+    assert code == 0, stderr
+    assert stderr == ""
+    assert sorted(os.listdir(out)) == sorted(OUTPUTS)
+    assert leftovers(out.parent) == []
+
+    # result.json: the fitted scene in the scene format, plus fit_report with the input paths.
+    data = json.loads((out / "result.json").read_text(encoding="utf-8"))
+    report = data["fit_report"]
+    assert report["inputs"]["scene"] == str(scene_path.resolve())
+    assert report["inputs"]["image"] == str(image_path.resolve())
+    assert report["seed"] == 3 and report["settings"]["population"] == 12
+    fitted = rtloop.load_scene(out / "result.json")
+    scene = rtloop.load_scene(scene_path)
+    assert fitted.param_names() == scene.param_names()
+    assert fitted.get_params(scene.fit_paths) == pytest.approx(list(report["fitted"].values()))
+    stages = stages_of(out)
+    assert stages and all(g == 6 for _, g in stages)
+
+    # best_per_generation.csv: one row per generation (0..N) of every stage, in order.
+    with open(out / "best_per_generation.csv", newline="", encoding="utf-8") as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == ["stage", "generation", "evaluations", "fitness", *scene.param_names()]
+    body = rows[1:]
+    assert len(body) == sum(g + 1 for _, g in stages)
+    assert [(r[0], int(r[1])) for r in body] == [(n, g) for n, total in stages for g in range(total + 1)]
+    evaluations = [int(r[2]) for r in body]
+    assert evaluations == sorted(evaluations) and evaluations[-1] == report["evaluations"]
+    assert all(np.isfinite([float(v) for v in r[3:]]).all() for r in body)
+    # The last row holds the final stage's best individual.
+    assert float(body[-1][3]) == pytest.approx(report["stages"][-1]["fitness"])
+
+    # snapshots: generations 0, 5 of every stage (N = 6, every 5), at the working resolution.
+    shots = sorted(os.listdir(out / "snapshots"))
+    assert shots == sorted(f"{n}_gen{g:04d}.bmp" for n, total in stages for g in range(0, total + 1, 5))
+    with Image.open(out / "snapshots" / shots[0]) as im:
+        assert im.size == (W, H)
+
+    # final.png at 4x the scene's size; objective.png at the working resolution.
+    with Image.open(out / "final.png") as im:
+        assert im.size == (4 * W, 4 * H)
+    with Image.open(out / "objective.png") as im:
+        assert im.size == (W, H)
+
+    # The summary on stdout: every fitted value, the output directory.
+    for name in scene.param_names():
+        assert name in stdout
+    assert str(out) in stdout
+    assert "evaluations" in stdout
+    if report["identifiability"]["degenerate"]:
+        assert "determined products" in stdout and "ball" in stdout and "floor" in stdout
+
+
+def test_paper_protocol_generation_pair_and_options(inputs, tmp_path, capsys):
+    scene_path, image_path = inputs
+    out = tmp_path / "paper"
+    code, _, stderr = run(capsys, scene_path, image_path, "-o", out, "--protocol", "paper", "--population", 8,
+                          "--generations", "4,7", "--snapshot-every", 3, "--final-scale", 2, "--final-spp", 1,
+                          "--threads", 2, "--f", 0.5, "--cr", 0.9, "--quiet")
+    assert code == 0, stderr
+    assert stages_of(out) == [("light", 4), ("colour", 7)]
+    with open(out / "best_per_generation.csv", newline="", encoding="utf-8") as fh:
+        assert sum(1 for _ in fh) == 1 + 5 + 8
+    assert sorted(os.listdir(out / "snapshots")) == sorted(
+        [f"light_gen{g:04d}.bmp" for g in (0, 3)] + [f"colour_gen{g:04d}.bmp" for g in (0, 3, 6)]
+    )
+    with Image.open(out / "final.png") as im:
+        assert im.size == (2 * W, 2 * H)
+    settings = json.loads((out / "result.json").read_text(encoding="utf-8"))["fit_report"]["settings"]
+    assert settings["f"] == 0.5 and settings["cr"] == 0.9 and settings["generations"] == [4, 7]
+
+
+def test_snapshots_disabled(inputs, tmp_path, capsys):
+    scene_path, image_path = inputs
+    out = tmp_path / "out"
+    code, _, stderr = run(capsys, scene_path, image_path, "--out", out, "--population", 8, "--generations", 3,
+                          "--snapshot-every", 0, "--final-spp", 1, "--quiet")
+    assert code == 0, stderr
+    assert os.listdir(out / "snapshots") == []
+
+
+def test_progress_on_stderr(inputs, tmp_path, capsys):
+    scene_path, image_path = inputs
+    code, _, stderr = run(capsys, scene_path, image_path, "--out", tmp_path / "out", "--protocol", "paper",
+                          "--population", 8, "--generations", 12, "--final-spp", 1)
+    assert code == 0, stderr
+    assert "stage 1 'light'" in stderr and "stage 2 'colour'" in stderr
+    for stage in ("light", "colour"):
+        gens = [line.split()[2] for line in stderr.splitlines() if line.split()[:2] == [stage, "gen"]]
+        assert gens == ["0/12", "10/12", "12/12"]
+    assert "best" in stderr and "evals" in stderr
+
+
+class FakeTerminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_progress_on_a_terminal_is_one_updating_line(inputs, tmp_path, capsys, monkeypatch):
+    scene_path, image_path = inputs
+    term = FakeTerminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    code = cli.main([str(scene_path), str(image_path), "--out", str(tmp_path / "out"), "--protocol", "paper",
+                     "--population", 8, "--generations", "12", "--final-spp", "1"][:9] + ["--population", "8",
+                     "--generations", "12", "--final-spp", "1"])
+    assert code == 0, term.getvalue()
+    lines = term.getvalue().split("\n")
+    updating = [line for line in lines if "\r" in line]
+    assert len(updating) == 2  # one per stage, each ending at the stage's last generation
+    assert all(line.rstrip().endswith("s") and " gen 12/12 " in line.split("\r")[-1] for line in updating)
+    assert capsys.readouterr().err == ""
+
+
+def test_crop_and_linear_response(inputs, tmp_path, capsys):
+    scene_path, _ = inputs
+    wide = tmp_path / "wide.png"
+    Image.fromarray(np.full((H, 2 * W, 3), 128, np.uint8)).save(wide)
+    code, _, stderr = run(capsys, scene_path, wide, "--out", tmp_path / "nocrop", "--quiet")
+    assert code == 1 and "aspect" in error_line(stderr)
+    out = tmp_path / "crop"
+    code, _, stderr = run(capsys, scene_path, wide, "--out", out, "--crop", "--response", "linear",
+                          "--population", 8, "--generations", 1, "--final-spp", 1, "--quiet")
+    assert code == 0, stderr
+    inputs_ = json.loads((out / "result.json").read_text(encoding="utf-8"))["fit_report"]["inputs"]
+    assert inputs_["crop"] is True and inputs_["response"] == "linear"
+
+
+# --- bad input ---------------------------------------------------------------------------------------------
+
+
+def test_bad_scene_file(inputs, tmp_path, capsys):
+    _, image_path = inputs
+    bad = tmp_path / "bad_scene.json"
+    d = scene_dict()
+    d["objects"][0]["radius"] = -1
+    bad.write_text(json.dumps(d), encoding="utf-8")
+    out = tmp_path / "out"
+    code, stdout, stderr = run(capsys, bad, image_path, "--out", out)
+    assert code == 1
+    line = error_line(stderr)
+    assert str(bad) in line and "radius" in line
+    assert stdout == ""
+    assert not out.exists() and leftovers(tmp_path) == []
+
+    bad.write_text("{ not json", encoding="utf-8")
+    code, _, stderr = run(capsys, bad, image_path, "--out", out)
+    assert code == 1 and str(bad) in error_line(stderr)
+
+
+def test_missing_files(inputs, tmp_path, capsys):
+    scene_path, image_path = inputs
+    missing = tmp_path / "nope.json"
+    code, _, stderr = run(capsys, missing, image_path, "--out", tmp_path / "out")
+    assert code == 1 and str(missing) in error_line(stderr)
+    missing = tmp_path / "nope.png"
+    code, _, stderr = run(capsys, scene_path, missing, "--out", tmp_path / "out")
+    assert code == 1 and str(missing) in error_line(stderr)
+    assert not (tmp_path / "out").exists() and leftovers(tmp_path) == []
+
+
+def test_wrong_image_file(inputs, tmp_path, capsys):
+    scene_path, _ = inputs
+    junk = tmp_path / "junk.png"
+    junk.write_bytes(b"this is not a PNG")
+    code, _, stderr = run(capsys, scene_path, junk, "--out", tmp_path / "out")
+    assert code == 1 and str(junk) in error_line(stderr)
+    assert leftovers(tmp_path) == []
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [
+        [],
+        ["--population", "2"],
+        ["--population", "many"],
+        ["--generations", "x"],
+        ["--generations", "1,2,3"],
+        ["--generations", "-1"],
+        ["--f", "0"],
+        ["--cr", "1.5"],
+        ["--protocol", "fast"],
+        ["--response", "gamma"],
+        ["--snapshot-every", "-1"],
+        ["--final-scale", "0"],
+        ["--bogus"],
+    ],
+)
+def test_bad_command_line(inputs, tmp_path, capsys, extra):
+    scene_path, image_path = inputs
+    args = [scene_path, image_path, "--out", tmp_path / "out", *extra] if extra else []
+    code, stdout, stderr = run(capsys, *args)
+    assert code == 2
+    error_line(stderr)
+    assert stdout == ""
+    assert not (tmp_path / "out").exists()
+
+
+def test_help(capsys):
+    code, stdout, _ = run(capsys, "--help")
+    assert code == 0
+    for word in ("result.json", "best_per_generation.csv", "snapshots/", "final.png", "objective.png",
+                 "examples/yellow-ball/scene_input.json", "examples/yellow-ball/objective.png",
+                 '"fit" section', "light", "colour", "--force"):
+        assert word in stdout, word
+
+
+def test_console_script():
+    exe = shutil.which("rtloop-fit")
+    if exe is None:
+        pytest.skip("rtloop-fit is not on PATH (package not installed)")
+    proc = subprocess.run([exe, "--help"], check=False, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "result.json" in proc.stdout and "final.png" in proc.stdout
+    proc = subprocess.run([exe], check=False, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [proc.stderr.strip()]
+    assert "Traceback" not in proc.stderr
+
+
+# --- the output directory: nothing lost, nothing half-written ------------------------------------------------
+
+
+def old_results(path: Path) -> Path:
+    path.mkdir()
+    (path / "keep.txt").write_text("old results", encoding="utf-8")
+    return path
+
+
+def test_existing_dir_needs_force(inputs, tmp_path, capsys, monkeypatch):
+    scene_path, image_path = inputs
+    out = old_results(tmp_path / "out")
+
+    def no_fit(*args, **kwargs):
+        raise AssertionError("the fit must not start")
+
+    monkeypatch.setattr(rtloop, "fit", no_fit)
+    code, _, stderr = run(capsys, scene_path, image_path, "--out", out)
+    assert code != 0
+    line = error_line(stderr)
+    assert str(out) in line and "--force" in line
+    assert os.listdir(out) == ["keep.txt"]
+    assert (out / "keep.txt").read_text(encoding="utf-8") == "old results"
+    assert leftovers(tmp_path) == []
+
+
+def test_force_replaces(inputs, tmp_path, capsys):
+    scene_path, image_path = inputs
+    out = old_results(tmp_path / "out")
+    code, _, stderr = run(capsys, scene_path, image_path, "--out", out, "--force", "--population", 8,
+                          "--generations", 2, "--final-spp", 1, "--quiet")
+    assert code == 0, stderr
+    assert sorted(os.listdir(out)) == sorted(OUTPUTS)
+    assert leftovers(tmp_path) == []
+
+
+def test_existing_empty_dir_is_used(inputs, tmp_path, capsys):
+    scene_path, image_path = inputs
+    out = tmp_path / "out"
+    out.mkdir()
+    code, _, stderr = run(capsys, scene_path, image_path, "--out", out, "--population", 8, "--generations", 2,
+                          "--final-spp", 1, "--quiet")
+    assert code == 0, stderr
+    assert sorted(os.listdir(out)) == sorted(OUTPUTS)
+
+
+def test_out_is_a_file(inputs, tmp_path, capsys):
+    scene_path, image_path = inputs
+    out = tmp_path / "out"
+    out.write_text("x", encoding="utf-8")
+    code, _, stderr = run(capsys, scene_path, image_path, "--out", out, "--force")
+    assert code == 1 and "not a directory" in error_line(stderr)
+    assert out.read_text(encoding="utf-8") == "x"
+
+
+def test_force_refuses_to_replace_the_inputs(inputs, tmp_path, capsys):
+    scene_path, image_path = inputs
+    code, _, stderr = run(capsys, scene_path, image_path, "--out", tmp_path, "--force")
+    assert code == 1 and "refusing" in error_line(stderr)
+    assert scene_path.exists() and image_path.exists()
+
+
+def test_refuses_to_replace_the_current_directory(inputs, tmp_path, capsys, monkeypatch):
+    scene_path, image_path = inputs
+    out = old_results(tmp_path / "out")
+    monkeypatch.chdir(out)
+    code, _, stderr = run(capsys, scene_path, image_path, "--out", ".", "--force")
+    assert code == 1 and "current directory" in error_line(stderr)
+    assert os.listdir(out) == ["keep.txt"]
+
+
+def failing_fit(monkeypatch, exc: BaseException, seen: list[list[str]], parent: Path) -> None:
+    """Make rtloop.fit raise ``exc`` in the middle of its first stage (after generation 3)."""
+    real_fit = rtloop.fit
+
+    def fit(*args, callback=None, **kwargs):
+        def cb(info):
+            callback(info)
+            if info.generation == 3:
+                seen.append(leftovers(parent))
+                raise exc
+        return real_fit(*args, callback=cb, **kwargs)
+
+    monkeypatch.setattr(rtloop, "fit", fit)
+
+
+@pytest.mark.parametrize("force", [False, True])
+def test_failure_midway_leaves_nothing(inputs, tmp_path, capsys, monkeypatch, force):
+    scene_path, image_path = inputs
+    parent = tmp_path / "results"
+    parent.mkdir()
+    out = parent / "out"
+    if force:
+        old_results(out)
+    seen: list[list[str]] = []
+    failing_fit(monkeypatch, rtloop.RtloopError("boom in the middle"), seen, parent)
+    args = [scene_path, image_path, "--out", out, "--population", 8, "--generations", 10, "--snapshot-every", 1]
+    code, stdout, stderr = run(capsys, *args, *(["--force"] if force else []))
+    assert code == 1
+    assert error_line(stderr.splitlines()[-1]) == "rtloop-fit: error: boom in the middle"
+    assert stdout == ""
+    assert len(seen) == 1 and len(seen[0]) == 1 and "rtloop-tmp" in seen[0][0]  # it was being written
+    assert leftovers(parent) == []
+    if force:
+        assert os.listdir(out) == ["keep.txt"]
+    else:
+        assert os.listdir(parent) == []
+
+
+def test_keyboard_interrupt_cleans_up(inputs, tmp_path, capsys, monkeypatch):
+    scene_path, image_path = inputs
+    out = old_results(tmp_path / "out")
+    seen: list[list[str]] = []
+    failing_fit(monkeypatch, KeyboardInterrupt(), seen, tmp_path)
+    code, stdout, stderr = run(capsys, scene_path, image_path, "--out", out, "--force", "--population", 8,
+                               "--generations", 10)
+    assert code == 130
+    assert stderr.strip().splitlines()[-1] == "rtloop-fit: interrupted"
+    assert "Traceback" not in stderr and stdout == ""
+    assert seen and leftovers(tmp_path) == []
+    assert os.listdir(out) == ["keep.txt"]
+
+
+def test_failure_writing_final_image(inputs, tmp_path, capsys, monkeypatch):
+    scene_path, image_path = inputs
+    out = tmp_path / "out"
+    real_save = rtloop.save_image
+
+    def save_image(path, image):
+        if Path(path).name == "final.png":
+            raise OSError(28, "No space left on device", str(path))
+        real_save(path, image)
+
+    monkeypatch.setattr(rtloop, "save_image", save_image)
+    code, _, stderr = run(capsys, scene_path, image_path, "--out", out, "--population", 8, "--generations", 2,
+                          "--final-spp", 1, "--quiet")
+    assert code == 1 and "No space left on device" in error_line(stderr)
+    assert not out.exists() and leftovers(tmp_path) == []
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+@pytest.mark.parametrize("sig, code, word", [(signal.SIGINT, 130, "interrupted"),
+                                             (signal.SIGTERM, 143, "terminated")])
+def test_signal_during_fit(inputs, tmp_path, sig, code, word):
+    """A real Ctrl-C (or SIGTERM) in the middle of a long fit stops it promptly and cleans up."""
+    scene_path, image_path = inputs
+    out = old_results(tmp_path / "out")
+    # A shell may start background processes with SIGINT ignored; restore Python's handler for the test.
+    launch = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+              "from rtloop.cli import main; sys.exit(main())")
+    cmd = [sys.executable, "-c", launch,
+           str(scene_path), str(image_path), "--out", str(out), "--force", "--generations", "1000000",
+           "--snapshot-every", "0"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:  # wait until the fit is under way
+            tmp = [p for p in tmp_path.iterdir() if "rtloop-tmp" in p.name]
+            csv_file = tmp[0] / "best_per_generation.csv" if tmp else None
+            if csv_file is not None and csv_file.exists() and csv_file.stat().st_size > 2000:
+                break
+            assert proc.poll() is None, proc.communicate()
+            time.sleep(0.05)
+        else:
+            pytest.fail("the fit did not start")
+        t = time.monotonic()
+        proc.send_signal(sig)
+        stdout, stderr = proc.communicate(timeout=60)
+        assert time.monotonic() - t < 30
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == code, stderr
+    assert stderr.strip().splitlines()[-1] == f"rtloop-fit: {word}"
+    assert "Traceback" not in stderr and stdout == ""
+    assert leftovers(tmp_path) == []
+    assert os.listdir(out) == ["keep.txt"]
+
+
+# --- the README's example ----------------------------------------------------------------------------------
+
+
+def test_repo_example(tmp_path, capsys):
+    scene_path = EXAMPLE / "scene_input.json"
+    image_path = EXAMPLE / "objective.png"
+    out = tmp_path / "yellow-ball-fit"
+    code, stdout, stderr = run(capsys, scene_path, image_path, "--out", out, "--seed", 1, "--population", 8,
+                               "--generations", 3, "--snapshot-every", 0, "--final-scale", 1, "--final-spp", 1)
+    assert code == 0, stderr
+    assert "stage 1" in stderr
+    scene = rtloop.load_scene(scene_path)
+    fitted = rtloop.load_scene(out / "result.json")
+    assert (fitted.width, fitted.height) == (scene.width, scene.height)
+    for name in scene.param_names():
+        assert name in stdout
+    with Image.open(out / "final.png") as im:
+        assert im.size == (scene.width, scene.height)
