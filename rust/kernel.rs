@@ -211,13 +211,16 @@ impl Kernel {
                     }
                 } else {
                     for c in 0..3 {
-                        let t = &g.t[c][r.clone()];
-                        let mut sum = 0.0f32;
-                        for (ei, ti) in e[..len].iter().zip(t) {
-                            let v = a[c] + ei * k[c];
-                            let v = if clip { v.min(1.0) } else { v };
-                            sum += (v - ti).abs();
-                        }
+                        let (ac, kc) = (a[c], k[c]);
+                        let sum = if clip {
+                            lane_sum(&e[..len], &g.t[c][r.clone()], |ei, ti| {
+                                ((ac + ei * kc).min(1.0) - ti).abs()
+                            })
+                        } else {
+                            lane_sum(&e[..len], &g.t[c][r.clone()], |ei, ti| {
+                                (ac + ei * kc - ti).abs()
+                            })
+                        };
                         acc[c] += sum as f64;
                     }
                 }
@@ -309,14 +312,8 @@ impl Kernel {
                 }
                 for c in 0..3 {
                     let t = &g.t[c][r.clone()];
-                    let (mut a, mut b) = (0.0f32, 0.0f32);
-                    for (ei, ti) in e.iter().zip(t) {
-                        let w = if *ti < sat { *ei } else { 0.0 };
-                        a += w * ti;
-                        b += w * ei;
-                    }
-                    syg[c] += a as f64;
-                    sgg[c] += b as f64;
+                    syg[c] += lane_sum(e, t, |ei, ti| if ti < sat { ei * ti } else { 0.0 }) as f64;
+                    sgg[c] += lane_sum(e, t, |ei, ti| if ti < sat { ei * ei } else { 0.0 }) as f64;
                 }
                 start += len;
             }
@@ -353,15 +350,47 @@ impl Kernel {
     }
 }
 
+/// Lanes of the explicit partial sums: float addition is not associative, so the compiler will not
+/// vectorise a plain running sum; eight independent accumulators let it (and fix the summation order, so
+/// results stay bit-reproducible).
+const LANES: usize = 8;
+
+/// Sum of f(a[i], b[i]) over the slices, in `LANES` interleaved partial sums.
+#[inline(always)]
+fn lane_sum(a: &[f32], b: &[f32], f: impl Fn(f32, f32) -> f32) -> f32 {
+    let mut acc = [0.0f32; LANES];
+    let (ac, ar) = (a.chunks_exact(LANES), a.chunks_exact(LANES).remainder());
+    let (bc, br) = (b.chunks_exact(LANES), b.chunks_exact(LANES).remainder());
+    for (x, y) in ac.zip(bc) {
+        for j in 0..LANES {
+            acc[j] += f(x[j], y[j]);
+        }
+    }
+    for (j, (x, y)) in ar.iter().zip(br).enumerate() {
+        acc[j] += f(*x, *y);
+    }
+    acc.iter().sum()
+}
+
 /// e = max(0, n·l) / d² (unit light), written into `e`; 0 for a light on the surface.
 #[inline(always)]
 fn irradiance(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mut [f32]) {
-    let (px, py, pz) = (&g.p[0][r.clone()], &g.p[1][r.clone()], &g.p[2][r.clone()]);
-    let (nx, ny, nz) = (&g.n[0][r.clone()], &g.n[1][r.clone()], &g.n[2][r]);
-    for i in 0..e.len() {
-        let dx = light.pos[0] - px[i];
-        let dy = light.pos[1] - py[i];
-        let dz = light.pos[2] - pz[i];
+    let n = e.len();
+    let (px, py, pz) = (
+        &g.p[0][r.start..][..n],
+        &g.p[1][r.start..][..n],
+        &g.p[2][r.start..][..n],
+    );
+    let (nx, ny, nz) = (
+        &g.n[0][r.start..][..n],
+        &g.n[1][r.start..][..n],
+        &g.n[2][r.start..][..n],
+    );
+    let [lx, ly, lz] = light.pos;
+    for i in 0..n {
+        let dx = lx - px[i];
+        let dy = ly - py[i];
+        let dz = lz - pz[i];
         let d2 = dx * dx + dy * dy + dz * dz;
         let nl = (nx[i] * dx + ny[i] * dy + nz[i] * dz).max(0.0);
         let v = (nl / (d2 * d2.sqrt())).min(f32::MAX);
@@ -372,35 +401,39 @@ fn irradiance(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mut [f32]
 /// Zero `e` where the segment from the pixel to the light is blocked by another object.
 #[inline(always)]
 fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mut [f32]) {
-    let (px, py, pz) = (&g.p[0][r.clone()], &g.p[1][r.clone()], &g.p[2][r.clone()]);
+    let n = e.len();
+    let (px, py, pz) = (
+        &g.p[0][r.start..][..n],
+        &g.p[1][r.start..][..n],
+        &g.p[2][r.start..][..n],
+    );
+    let [lx, ly, lz] = light.pos;
     for s in &g.spheres {
-        let cc = &s.c[r.clone()];
-        for i in 0..e.len() {
+        let cc = &s.c[r.start..][..n];
+        let [cx, cy, cz] = s.center;
+        for i in 0..n {
             // Segment x(t) = p + t·d, t in [0, 1], d = L - p; sphere |x - c|² = r².
-            let dx = light.pos[0] - px[i];
-            let dy = light.pos[1] - py[i];
-            let dz = light.pos[2] - pz[i];
+            let dx = lx - px[i];
+            let dy = ly - py[i];
+            let dz = lz - pz[i];
             let a = dx * dx + dy * dy + dz * dz;
-            let ox = px[i] - s.center[0];
-            let oy = py[i] - s.center[1];
-            let oz = pz[i] - s.center[2];
-            let b = ox * dx + oy * dy + oz * dz;
+            let b = (px[i] - cx) * dx + (py[i] - cy) * dy + (pz[i] - cz) * dz;
             let c = cc[i];
             let disc = b * b - a * c;
             // Roots (-b ± √disc)/a: the far one is > 0 and the near one < 1.
             let ab = a + b;
-            let far_positive = b < 0.0 || c < 0.0;
-            let near_below_one = ab > 0.0 || disc > ab * ab;
-            let hit = disc >= 0.0 && far_positive && near_below_one;
+            let far_positive = (b < 0.0) | (c < 0.0);
+            let near_below_one = (ab > 0.0) | (disc > ab * ab);
+            let hit = (disc >= 0.0) & far_positive & near_below_one;
             e[i] = if hit { 0.0 } else { e[i] };
         }
     }
     for pl in &g.planes {
-        let side_l = pl.normal[0] * (light.pos[0] - pl.point[0])
-            + pl.normal[1] * (light.pos[1] - pl.point[1])
-            + pl.normal[2] * (light.pos[2] - pl.point[2]);
-        let side = &pl.side[r.clone()];
-        for i in 0..e.len() {
+        let side_l = pl.normal[0] * (lx - pl.point[0])
+            + pl.normal[1] * (ly - pl.point[1])
+            + pl.normal[2] * (lz - pl.point[2]);
+        let side = &pl.side[r.start..][..n];
+        for i in 0..n {
             e[i] = if side[i] * side_l < 0.0 { 0.0 } else { e[i] };
         }
     }

@@ -182,8 +182,7 @@ def test_progress_on_a_terminal_is_one_updating_line(inputs, tmp_path, capsys, m
     term = FakeTerminal()
     monkeypatch.setattr(sys, "stderr", term)
     code = cli.main([str(scene_path), str(image_path), "--out", str(tmp_path / "out"), "--protocol", "paper",
-                     "--population", 8, "--generations", "12", "--final-spp", "1"][:9] + ["--population", "8",
-                     "--generations", "12", "--final-spp", "1"])
+                     "--population", "8", "--generations", "12", "--final-spp", "1"])
     assert code == 0, term.getvalue()
     lines = term.getvalue().split("\n")
     updating = [line for line in lines if "\r" in line]
