@@ -1,17 +1,34 @@
-//! `cargo bench`: one 128x96 render, and one DE population (60 candidates) of the stage-1 fitness,
-//! on the paper's sphere-on-floor scene (the example shipped in `examples/yellow-ball`).
+//! `cargo bench`: one 128x96 render; one DE population (60 candidates) of the stage-1 fitness and of the
+//! default method's projected fitness, on 1 thread and on all threads; and a whole stage-1 DE run
+//! (the paper's 60 x 200) with and without early exit. Scene: the paper's sphere on a floor
+//! (`examples/yellow-ball/scene.json`); objective: its own render, saturated at 1.
+//!
+//! Throughput is printed in elements/s where an element is one candidate-pixel (CPPS).
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use rayon::prelude::*;
-use rtloop::{de::Objective, render, Fitness, LossKind, ParamLayout, Scene};
+use rtloop::{de, de::Objective, render, DeConfig, Fitness, LossKind, ParamLayout, Scene};
 
 fn scene() -> Scene {
-    let text = std::fs::read_to_string(concat!(
+    let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/examples/yellow-ball/scene.json"
-    ))
-    .expect("examples/yellow-ball/scene.json");
+    );
+    let text = std::fs::read_to_string(path).expect("examples/yellow-ball/scene.json");
     Scene::from_json(&text).expect("valid example scene")
+}
+
+fn population(layout: &ParamLayout, n: usize) -> Vec<Vec<f64>> {
+    let mut rng = de::Rng::new(1);
+    (0..n)
+        .map(|_| {
+            layout
+                .bounds
+                .iter()
+                .map(|&(lo, hi)| lo + (hi - lo) * rng.uniform())
+                .collect()
+        })
+        .collect()
 }
 
 fn bench(c: &mut Criterion) {
@@ -24,48 +41,86 @@ fn bench(c: &mut Criterion) {
     });
     g.finish();
 
-    // Stage-1 fitness: light position + intensity against the whole image.
-    let target = render(&scene, None, None, 1).unwrap().rgb;
-    let paths = vec!["light.position".to_string(), "light.intensity".to_string()];
-    let layout = ParamLayout::new(&scene, &paths).unwrap();
-    let fitness = Fitness::new(
-        &scene,
-        layout.clone(),
-        &target,
-        None,
-        LossKind::L1,
-        true,
-        None,
-    )
-    .unwrap();
-    let mut rng = rtloop::de::Rng::new(1);
-    let population: Vec<Vec<f64>> = (0..60)
-        .map(|_| {
-            layout
-                .bounds
-                .iter()
-                .map(|&(lo, hi)| lo + (hi - lo) * rng.uniform())
-                .collect()
-        })
+    let target: Vec<f32> = render(&scene, None, None, 1)
+        .unwrap()
+        .rgb
+        .iter()
+        .map(|v| v.min(1.0))
         .collect();
-    let mut out = vec![0.0; 60];
+    let stage1 = vec!["light.position".to_string(), "light.intensity".to_string()];
+    let position = vec!["light.position".to_string()];
+    let bounds = vec![[(0.0, 400.0); 3]; scene.objects.len()];
+    let cases = [
+        (
+            "stage1 l1",
+            ParamLayout::new(&scene, &stage1).unwrap(),
+            LossKind::L1,
+            None,
+        ),
+        (
+            "projected",
+            ParamLayout::new(&scene, &position).unwrap(),
+            LossKind::L1Projected,
+            Some(bounds),
+        ),
+    ];
     let mut g = c.benchmark_group("population");
-    g.throughput(Throughput::Elements(60 * pixels)); // candidate-pixels
-    for threads in [1, rayon::current_num_threads()] {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        g.bench_function(format!("60 candidates stage1 threads={threads}"), |b| {
-            b.iter(|| {
-                pool.install(|| {
-                    out.par_iter_mut()
-                        .zip(population.par_iter())
-                        .for_each(|(o, x)| {
+    g.throughput(Throughput::Elements(60 * pixels));
+    for (name, layout, kind, pb) in &cases {
+        let fitness = Fitness::new(
+            &scene,
+            layout.clone(),
+            &target,
+            None,
+            *kind,
+            true,
+            pb.clone(),
+        )
+        .unwrap();
+        let pop = population(layout, 60);
+        let mut out = vec![0.0; 60];
+        for threads in [1, rayon::current_num_threads()] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            g.bench_function(format!("60 candidates {name} threads={threads}"), |b| {
+                b.iter(|| {
+                    pool.install(|| {
+                        out.par_iter_mut().zip(pop.par_iter()).for_each(|(o, x)| {
                             fitness.evaluate(x, std::slice::from_mut(o));
                         })
+                    })
                 })
-            })
+            });
+        }
+    }
+    g.finish();
+
+    let mut g = c.benchmark_group("de");
+    g.sample_size(10);
+    let layout = ParamLayout::new(&scene, &stage1).unwrap();
+    for early in [false, true] {
+        let mut fitness = Fitness::new(
+            &scene,
+            layout.clone(),
+            &target,
+            None,
+            LossKind::L1,
+            true,
+            None,
+        )
+        .unwrap();
+        fitness.early_exit = early;
+        let cfg = DeConfig {
+            population: 60,
+            generations: 200,
+            f: 0.6,
+            cr: 0.8,
+            seed: 1,
+        };
+        g.bench_function(format!("paper stage1 60x200 early_exit={early}"), |b| {
+            b.iter(|| de::minimize(&fitness, &layout.bounds, &cfg, |_| true).unwrap())
         });
     }
     g.finish();

@@ -44,6 +44,8 @@ impl LossKind {
 
 pub struct Fitness {
     pub layout: ParamLayout,
+    /// Let `evaluate_bounded` stop early (on by default; off to measure full evaluations).
+    pub early_exit: bool,
     kernel: Kernel,
     base: ShadeParams,
     shapes: Vec<PShape>,
@@ -177,6 +179,7 @@ impl Fitness {
         }
         Ok(Fitness {
             layout,
+            early_exit: true,
             base,
             kernel: Kernel::new(&surfels, &tgt, &geometry.shapes, scene.can_occlude()),
             shapes: geometry.shapes,
@@ -194,7 +197,7 @@ impl Fitness {
     pub fn products(&self, x: &[f64]) -> Vec<[f64; 3]> {
         SCRATCH.with(|s| {
             let mut s = s.borrow_mut();
-            self.fast_losses(x, &mut s);
+            self.fast_losses(x, &mut s, f64::INFINITY);
             s.products.clone()
         })
     }
@@ -223,7 +226,9 @@ impl Fitness {
         p
     }
 
-    fn fast_losses(&self, x: &[f64], s: &mut Scratch) -> [f64; 3] {
+    /// The fused-kernel losses; exact when their total is `<= bound`, otherwise possibly a partial sum
+    /// that already exceeds it.
+    fn fast_losses(&self, x: &[f64], s: &mut Scratch, bound: f64) -> [f64; 3] {
         let Scratch {
             params,
             products,
@@ -231,12 +236,14 @@ impl Fitness {
         } = s;
         let p = params.get_or_insert_with(|| self.base.clone());
         self.params_into(x, p);
+        let kernel_bound = bound - (self.constant[0] + self.constant[1] + self.constant[2]);
         let mut acc = if self.kind == LossKind::L1Projected {
             products.resize(self.product_bounds.len(), [0.0; 3]);
+            let pb = &self.product_bounds;
             self.kernel
-                .projected(p, self.clip, &self.product_bounds, products, irradiance)
+                .projected(p, self.clip, pb, products, irradiance, kernel_bound)
         } else {
-            self.kernel.l1(p, self.clip)
+            self.kernel.l1(p, self.clip, kernel_bound)
         };
         for c in 0..3 {
             acc[c] += self.constant[c];
@@ -246,7 +253,7 @@ impl Fitness {
 
     /// Per-channel sums of absolute differences for candidate `x` (the fused kernel).
     pub fn channel_losses(&self, x: &[f64]) -> [f64; 3] {
-        SCRATCH.with(|s| self.fast_losses(x, &mut s.borrow_mut()))
+        SCRATCH.with(|s| self.fast_losses(x, &mut s.borrow_mut(), f64::INFINITY))
     }
 
     /// The same losses computed the plain way, pixel by pixel through the renderer's `shade` (the
@@ -316,7 +323,18 @@ impl Objective for Fitness {
     }
 
     fn evaluate(&self, x: &[f64], out: &mut [f64]) {
-        let c = self.channel_losses(x);
+        self.evaluate_bounded(x, out, f64::INFINITY);
+    }
+
+    /// Single-objective losses stop summing once above `bound` (the DE trial's target): the trial loses
+    /// either way, so selection is unchanged and most of a losing trial's pixels are never shaded.
+    fn evaluate_bounded(&self, x: &[f64], out: &mut [f64], bound: f64) {
+        let bound = if self.early_exit {
+            bound
+        } else {
+            f64::INFINITY
+        };
+        let c = SCRATCH.with(|s| self.fast_losses(x, &mut s.borrow_mut(), bound));
         match self.kind {
             LossKind::L1 | LossKind::L1Projected => out[0] = c[0] + c[1] + c[2],
             LossKind::L1PerChannel => out.copy_from_slice(&c),

@@ -142,28 +142,30 @@ impl Kernel {
         self.pixels
     }
 
-    /// Per-channel sums of |min(render, 1) - objective| (no clamp without `clip`).
-    pub fn l1(&self, p: &ShadeParams, clip: bool) -> [f64; 3] {
+    /// Per-channel sums of |min(render, 1) - objective| (no clamp without `clip`). Once the running total
+    /// exceeds `bound` the sum stops early and the partial sums (already above `bound`) are returned: pass
+    /// `f64::INFINITY` for the exact value.
+    pub fn l1(&self, p: &ShadeParams, clip: bool, bound: f64) -> [f64; 3] {
         #[cfg(target_arch = "x86_64")]
         {
             if std::arch::is_x86_feature_detected!("avx2")
                 && std::arch::is_x86_feature_detected!("fma")
             {
                 // SAFETY: the CPU supports the features the function was compiled for.
-                return unsafe { self.l1_avx2(p, clip) };
+                return unsafe { self.l1_avx2(p, clip, bound) };
             }
         }
-        self.l1_generic(p, clip)
+        self.l1_generic(p, clip, bound)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    unsafe fn l1_avx2(&self, p: &ShadeParams, clip: bool) -> [f64; 3] {
-        self.l1_generic(p, clip)
+    unsafe fn l1_avx2(&self, p: &ShadeParams, clip: bool, bound: f64) -> [f64; 3] {
+        self.l1_generic(p, clip, bound)
     }
 
     #[inline(always)]
-    fn l1_generic(&self, p: &ShadeParams, clip: bool) -> [f64; 3] {
+    fn l1_generic(&self, p: &ShadeParams, clip: bool, bound: f64) -> [f64; 3] {
         let light = Light {
             pos: p.light_position.to_array(),
             rgb: p.light_rgb.to_array(),
@@ -225,6 +227,9 @@ impl Kernel {
                     }
                 }
                 start += len;
+                if acc[0] + acc[1] + acc[2] > bound {
+                    return acc;
+                }
             }
         }
         acc
@@ -240,6 +245,7 @@ impl Kernel {
         bounds: &[[(f64, f64); 3]],
         products: &mut [[f64; 3]],
         scratch: &mut Vec<f32>,
+        bound: f64,
     ) -> [f64; 3] {
         #[cfg(target_arch = "x86_64")]
         {
@@ -247,10 +253,10 @@ impl Kernel {
                 && std::arch::is_x86_feature_detected!("fma")
             {
                 // SAFETY: the CPU supports the features the function was compiled for.
-                return unsafe { self.projected_avx2(p, clip, bounds, products, scratch) };
+                return unsafe { self.projected_avx2(p, clip, bounds, products, scratch, bound) };
             }
         }
-        self.projected_generic(p, clip, bounds, products, scratch)
+        self.projected_generic(p, clip, bounds, products, scratch, bound)
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -262,8 +268,9 @@ impl Kernel {
         bounds: &[[(f64, f64); 3]],
         products: &mut [[f64; 3]],
         scratch: &mut Vec<f32>,
+        bound: f64,
     ) -> [f64; 3] {
-        self.projected_generic(p, clip, bounds, products, scratch)
+        self.projected_generic(p, clip, bounds, products, scratch, bound)
     }
 
     #[inline(always)]
@@ -274,6 +281,7 @@ impl Kernel {
         bounds: &[[(f64, f64); 3]],
         products: &mut [[f64; 3]],
         scratch: &mut Vec<f32>,
+        bound: f64,
     ) -> [f64; 3] {
         let light = Light {
             pos: p.light_position.to_array(),
@@ -325,25 +333,24 @@ impl Kernel {
                 products[obj][c] = v;
                 pk[c] = v as f32;
             }
-            // Pass 2: the loss at those products.
-            for c in 0..3 {
-                let mut sum = 0.0f32;
-                let mut start = 0;
-                while start < n {
-                    let len = BLOCK.min(n - start);
-                    let mut block = 0.0f32;
-                    for (ei, ti) in e_all[start..start + len]
-                        .iter()
-                        .zip(&g.t[c][start..start + len])
-                    {
-                        let v = pk[c] * ei;
-                        let v = if clip { v.min(1.0) } else { v };
-                        block += (v - ti).abs();
-                    }
-                    sum += block;
-                    start += len;
+            // Pass 2: the loss at those products (stopping once it exceeds `bound`).
+            let mut start = 0;
+            while start < n {
+                let len = BLOCK.min(n - start);
+                let e = &e_all[start..start + len];
+                for c in 0..3 {
+                    let (pc, t) = (pk[c], &g.t[c][start..start + len]);
+                    let block = if clip {
+                        lane_sum(e, t, |ei, ti| ((pc * ei).min(1.0) - ti).abs())
+                    } else {
+                        lane_sum(e, t, |ei, ti| (pc * ei - ti).abs())
+                    };
+                    acc[c] += block as f64;
                 }
-                acc[c] += sum as f64;
+                start += len;
+                if acc[0] + acc[1] + acc[2] > bound {
+                    return acc;
+                }
             }
         }
         acc

@@ -219,3 +219,77 @@ fn light_inside_an_occluder_or_on_a_surface_gives_finite_losses() {
         );
     }
 }
+
+#[test]
+fn early_exit_changes_cost_not_results() {
+    // DE only asks whether a trial beats its target; stopping the sum early must not change any choice.
+    let mut rng = Rng::new(11);
+    let scene = random_scene(&mut rng, 2, false, false);
+    let target: Vec<f32> = render(&scene, None, None, 1)
+        .unwrap()
+        .rgb
+        .iter()
+        .map(|v| v.min(1.0))
+        .collect();
+    let paths = vec!["light.position".to_string(), "light.intensity".to_string()];
+    let layout = ParamLayout::new(&scene, &paths).unwrap();
+    let cfg = rtloop::DeConfig {
+        population: 16,
+        generations: 25,
+        seed: 4,
+        ..Default::default()
+    };
+    let run = |early: bool| {
+        let mut f = Fitness::new(
+            &scene,
+            layout.clone(),
+            &target,
+            None,
+            LossKind::L1,
+            true,
+            None,
+        )
+        .unwrap();
+        f.early_exit = early;
+        let mut history = Vec::new();
+        let r = rtloop::de::minimize(&f, &layout.bounds, &cfg, |g| {
+            history.push((
+                g.best.to_vec(),
+                g.best_objectives.to_vec(),
+                g.objectives.to_vec(),
+            ));
+            true
+        })
+        .unwrap();
+        (r.best, r.best_objectives, history)
+    };
+    let (exact, early) = (run(false), run(true));
+    assert_eq!(exact.0, early.0);
+    assert_eq!(exact.1, early.1);
+    assert_eq!(
+        exact.2, early.2,
+        "every generation's population objectives are identical"
+    );
+    // And a bounded evaluation above the bound really is cut short but still above it.
+    let f = Fitness::new(
+        &scene,
+        layout.clone(),
+        &target,
+        None,
+        LossKind::L1,
+        true,
+        None,
+    )
+    .unwrap();
+    let x = vec![0.0, 7.5, 0.0, 150.0];
+    let mut full = [0.0];
+    f.evaluate(&x, &mut full);
+    let mut cut = [0.0];
+    f.evaluate_bounded(&x, &mut cut, full[0] * 0.1);
+    assert!(
+        cut[0] > full[0] * 0.1 && cut[0] < full[0],
+        "{} vs {}",
+        cut[0],
+        full[0]
+    );
+}

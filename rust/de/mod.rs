@@ -18,6 +18,15 @@ pub trait Objective: Sync {
     fn n_objectives(&self) -> usize;
     /// Write the objective values of `x` into `out` (length `n_objectives`).
     fn evaluate(&self, x: &[f64], out: &mut [f64]);
+
+    /// Like `evaluate` for a single objective, but the value only has to be exact when it is
+    /// `<= bound`: an implementation may stop summing once it knows the value exceeds `bound` and
+    /// return any value above it. DE uses this for trials, which only need to know whether they beat
+    /// their target.
+    fn evaluate_bounded(&self, x: &[f64], out: &mut [f64], bound: f64) {
+        let _ = bound;
+        self.evaluate(x, out);
+    }
 }
 
 impl<F: Fn(&[f64]) -> f64 + Sync> Objective for F {
@@ -104,15 +113,28 @@ pub fn replaces(a: &[f64], b: &[f64]) -> bool {
     a.iter().zip(b).all(|(x, y)| x <= y) && a.iter().zip(b).any(|(x, y)| x < y)
 }
 
-fn evaluate_all<O: Objective + ?Sized>(obj: &O, xs: &[Vec<f64>], out: &mut [Vec<f64>]) {
-    xs.par_iter().zip(out.par_iter_mut()).for_each(|(x, o)| {
-        obj.evaluate(x, o);
-        for v in o.iter_mut() {
-            if v.is_nan() {
-                *v = f64::INFINITY; // a NaN objective never wins a comparison
+/// Evaluate every `xs[i]` into `out[i]`; with `bounds`, single-objective values only need to be exact up
+/// to `bounds[i][0]` (the trial's target), see `Objective::evaluate_bounded`.
+fn evaluate_all<O: Objective + ?Sized>(
+    obj: &O,
+    xs: &[Vec<f64>],
+    out: &mut [Vec<f64>],
+    bounds: Option<&[Vec<f64>]>,
+) {
+    xs.par_iter()
+        .zip(out.par_iter_mut())
+        .enumerate()
+        .for_each(|(i, (x, o))| {
+            match bounds {
+                Some(b) if o.len() == 1 => obj.evaluate_bounded(x, o, b[i][0]),
+                _ => obj.evaluate(x, o),
             }
-        }
-    });
+            for v in o.iter_mut() {
+                if v.is_nan() {
+                    *v = f64::INFINITY; // a NaN objective never wins a comparison
+                }
+            }
+        });
 }
 
 /// Minimise `obj` within `bounds` (min, max per dimension; min == max fixes a dimension).
@@ -167,7 +189,7 @@ where
         })
         .collect();
     let mut fit = vec![vec![0.0; nobj]; np];
-    evaluate_all(obj, &pop, &mut fit);
+    evaluate_all(obj, &pop, &mut fit, None);
     let mut evaluations = np;
 
     let best_index = |fit: &[Vec<f64>]| {
@@ -205,7 +227,7 @@ where
                 };
             }
         }
-        evaluate_all(obj, &trials, &mut trial_fit);
+        evaluate_all(obj, &trials, &mut trial_fit, Some(&fit));
         evaluations += np;
         for i in 0..np {
             if replaces(&trial_fit[i], &fit[i]) {
