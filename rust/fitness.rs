@@ -9,7 +9,7 @@ use glam::Vec3A;
 
 use crate::de::Objective;
 use crate::error::{Error, Result};
-use crate::kernel::Kernel;
+use crate::kernel::{closed_form, Kernel};
 use crate::params::{ParamLayout, Target};
 use crate::render::{shade, GBuffer, Geometry, PShape, ShadeParams, Surfel};
 use crate::scene::Scene;
@@ -50,6 +50,8 @@ pub struct Fitness {
     base: ShadeParams,
     shapes: Vec<PShape>,
     surfels: Vec<Surfel>,
+    /// Per active pixel: may it inform the closed-form products (not on a silhouette)?
+    solve: Vec<bool>,
     target: Vec<Vec3A>,
     kind: LossKind,
     clip: bool,
@@ -161,7 +163,20 @@ impl Fitness {
             .iter()
             .any(|(_, t, _)| *t == Target::Exposure);
         let background_fixed = !exposure_free || base.background == Vec3A::ZERO;
-        let (mut surfels, mut tgt, mut constant) = (Vec::new(), Vec::new(), [0.0f64; 3]);
+        // Silhouette pixels (a 4-neighbour shows another object) mix two surfaces in a photo; the
+        // closed-form solve leaves them out.
+        let (w, h) = (scene.width as usize, scene.height as usize);
+        let id = |x: usize, y: usize| gbuffer.surfels[y * w + x].object;
+        let interior = |i: usize| {
+            let (x, y) = (i % w, i / w);
+            let o = id(x, y);
+            (x == 0 || id(x - 1, y) == o)
+                && (x + 1 == w || id(x + 1, y) == o)
+                && (y == 0 || id(x, y - 1) == o)
+                && (y + 1 == h || id(x, y + 1) == o)
+        };
+        let (mut surfels, mut tgt, mut solve, mut constant) =
+            (Vec::new(), Vec::new(), Vec::new(), [0.0f64; 3]);
         for &i in pixels {
             let s = gbuffer.surfels[i as usize];
             let t = Vec3A::from_slice(&target[3 * i as usize..3 * i as usize + 3]);
@@ -174,14 +189,32 @@ impl Fitness {
                 }
             } else {
                 surfels.push(s);
+                solve.push(interior(i as usize));
                 tgt.push(t);
+            }
+        }
+        // An object seen only at its silhouette (tiny, or almost hidden) still needs its pixels.
+        for k in 0..scene.objects.len() as u32 {
+            let mine = || surfels.iter().zip(0..).filter(move |(s, _)| s.object == k);
+            if !mine().any(|(_, i)| solve[i]) {
+                let all: Vec<usize> = mine().map(|(_, i)| i).collect();
+                for i in all {
+                    solve[i] = true;
+                }
             }
         }
         Ok(Fitness {
             layout,
             early_exit: true,
             base,
-            kernel: Kernel::new(&surfels, &tgt, &geometry.shapes, scene.can_occlude()),
+            kernel: Kernel::new(
+                &surfels,
+                &tgt,
+                &solve,
+                &geometry.shapes,
+                scene.can_occlude(),
+            ),
+            solve,
             shapes: geometry.shapes,
             surfels,
             target: tgt,
@@ -270,31 +303,59 @@ impl Fitness {
                 .iter()
                 .map(|s| shade(s, &p, &self.shapes, self.shadows).x)
                 .collect();
-            for ((s, t), &gi) in self.surfels.iter().zip(&self.target).zip(&g) {
-                if s.object == u32::MAX {
-                    continue;
-                }
-                for c in 0..3 {
-                    if !self.clip || t[c] < crate::kernel::SATURATED {
-                        syg[s.object as usize][c] += (t[c] * gi) as f64;
-                        sgg[s.object as usize][c] += (gi * gi) as f64;
+            for (((s, t), &gi), &ok) in self
+                .surfels
+                .iter()
+                .zip(&self.target)
+                .zip(&g)
+                .zip(&self.solve)
+            {
+                if s.object != u32::MAX && ok {
+                    let k = s.object as usize;
+                    for c in 0..3 {
+                        if !self.clip || t[c] < crate::kernel::SATURATED {
+                            syg[k][c] += (t[c] * gi) as f64;
+                            sgg[k][c] += (gi * gi) as f64;
+                        }
                     }
                 }
             }
+            let sat = if self.clip {
+                crate::kernel::SATURATED
+            } else {
+                f32::INFINITY
+            };
+            let prods: Vec<[f64; 3]> = (0..n)
+                .map(|k| {
+                    std::array::from_fn(|c| {
+                        if sgg[k][c] > 0.0 {
+                            closed_form(
+                                syg[k][c],
+                                sgg[k][c],
+                                f32::INFINITY,
+                                self.product_bounds[k][c],
+                            )
+                        } else {
+                            let mine = self
+                                .surfels
+                                .iter()
+                                .zip(&self.target)
+                                .zip(&g)
+                                .filter(|((s, _), _)| s.object == k as u32);
+                            let (e, t): (Vec<f32>, Vec<f32>) =
+                                mine.map(|((_, t), &gi)| (gi, t[c])).unzip();
+                            let (a, b, m) = crate::kernel::fallback_sums(&e, &t, sat);
+                            closed_form(a, b, m, self.product_bounds[k][c])
+                        }
+                    })
+                })
+                .collect();
             for ((s, t), &gi) in self.surfels.iter().zip(&self.target).zip(&g) {
                 let m = if s.object == u32::MAX {
                     Vec3A::ZERO
                 } else {
                     let k = s.object as usize;
-                    Vec3A::from_array(std::array::from_fn(|c| {
-                        let (lo, hi) = self.product_bounds[k][c];
-                        let v = if sgg[k][c] > 0.0 {
-                            syg[k][c] / sgg[k][c]
-                        } else {
-                            lo
-                        };
-                        (v.clamp(lo, hi) as f32) * gi
-                    }))
+                    Vec3A::from_array(std::array::from_fn(|c| prods[k][c] as f32 * gi))
                 };
                 let d = ((if self.clip { m.min(Vec3A::ONE) } else { m }) - *t).abs();
                 for c in 0..3 {

@@ -183,6 +183,17 @@ fn projected_kernel_matches_the_plain_solve() {
         // At the true light the projected loss vanishes (up to float rounding).
         let truth: Vec<f64> = scene.light.position.to_vec();
         let at_truth: f64 = f.channel_losses(&truth).iter().sum();
+        eprintln!(
+            "trial {trial}: at truth {at_truth} ref {:?} products {:?} light {:?} objs {:?}",
+            f.reference_channel_losses(&truth),
+            f.products(&truth),
+            scene.light.position,
+            scene
+                .objects
+                .iter()
+                .map(|o| o.shape.clone())
+                .collect::<Vec<_>>()
+        );
         assert!(
             at_truth < 1e-5 * (scene.width * scene.height) as f64,
             "{at_truth}"

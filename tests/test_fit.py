@@ -171,7 +171,8 @@ def test_projected_fitness_equals_l1_at_the_solved_products(ball_scene):
 
 
 def _solve_products(scene, photo, light, pb):
-    """Independent NumPy least squares of the products for a given light (the reference for the Rust solve)."""
+    """Independent NumPy least squares of the products for a given light (the reference for the Rust solve):
+    interior pixels only (a silhouette pixel mixes two surfaces in a photo), unsaturated ones only."""
     d = scene.to_dict()
     d["light"]["position"] = light
     d["light"]["intensity"] = 1.0
@@ -180,12 +181,16 @@ def _solve_products(scene, photo, light, pb):
     d["fit"] = {}
     g = rtloop.render(d)[..., 0]
     ids = rtloop.object_ids(d)
+    pad = np.pad(ids, 1, mode="edge")
+    interior = ((pad[1:-1, :-2] == ids) & (pad[1:-1, 2:] == ids) & (pad[:-2, 1:-1] == ids)
+                & (pad[2:, 1:-1] == ids))
     out = []
     for k in range(len(d["objects"])):
         p = []
         for c in range(3):
-            m = (ids == k) & (g > 0) & (photo[..., c] < 0.999)
-            v = (photo[..., c][m] * g[m]).sum() / max((g[m] ** 2).sum(), 1e-300)
+            m = (ids == k) & interior & (g > 0) & (photo[..., c] < 0.999)
+            assert (g[m] ** 2).sum() > 0, "these scenes always have lit interior pixels"
+            v = (photo[..., c][m] * g[m]).sum() / (g[m] ** 2).sum()
             p.append(float(np.clip(v, pb[k, c, 0], pb[k, c, 1])))
         out.append(p)
     return out

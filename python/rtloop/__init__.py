@@ -21,6 +21,7 @@ from ._native import Scene, __version__
 from .acquire import load_image
 from .errors import AcquisitionError, RtloopError, SceneError
 from .fit import FitResult, StageResult, fit
+from .report import report
 from .scene import load_scene, save_scene, scene_to_dict
 
 __all__ = [
@@ -36,6 +37,7 @@ __all__ = [
     "load_scene",
     "object_ids",
     "render",
+    "report",
     "save_image",
     "save_scene",
     "scene_to_dict",

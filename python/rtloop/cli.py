@@ -31,6 +31,7 @@ import numpy as np
 
 import rtloop
 from rtloop.fit import PROTOCOLS
+from rtloop.report import truth_errors, truth_values
 
 __all__ = ["main"]
 
@@ -78,6 +79,11 @@ files written into DIR:
                     scene's size, --final-spp samples per pixel
   objective.png     the photo as the fit saw it (linearised and resized; saved
                     as sRGB), to compare with final.png and the snapshots
+  report.html, report/*.png
+                    with --report: one self-contained page (images embedded)
+                    showing the objective, the fit and their difference, the
+                    best render through the stages, the parameters and the
+                    fitness against generation, and the fit report
 
 Everything is written into a temporary directory beside DIR and moved into
 place when complete: a failed or interrupted run leaves no partial results. An
@@ -206,6 +212,12 @@ def _build_parser() -> _Parser:
                    help="samples per pixel of final.png (default 16)")
     p.add_argument("--force", action="store_true",
                    help="replace DIR if it exists and is not empty (only after the new results are complete)")
+    p.add_argument("--report", action="store_true",
+                   help="also write DIR/report.html, a self-contained page that shows the search (PNGs in "
+                   "DIR/report/)")
+    p.add_argument("--truth", metavar="SCENE",
+                   help="the true scene (JSON, e.g. a reference scene's scene.json): print the errors of the "
+                   "fitted values and draw the truth in the report")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
     return p
 
@@ -364,6 +376,7 @@ class _Run:
         self.args = args
         self.progress = progress
         self.stop = stop
+        self.truth_errors: dict[str, Any] | None = None
 
     def check_stop(self) -> None:
         if self.stop.is_set():
@@ -382,6 +395,13 @@ class _Run:
         names = scene.param_names()
         if not names:
             raise _Failure(f"{args.scene}: the scene's fit section names no free parameters")
+        truth = None
+        if args.truth is not None:
+            truth = rtloop.load_scene(args.truth)
+            try:
+                truth_values(scene, truth)
+            except rtloop.RtloopError as e:
+                raise _Failure(f"{args.truth}: does not match {args.scene}: {e}") from None
         self.progress.message(
             f"{PROG}: fitting {len(names)} parameters of {args.scene} to {args.image} "
             f"({scene.width}x{scene.height}, {args.protocol} protocol)"
@@ -391,6 +411,7 @@ class _Run:
         snapshots = tmp / "snapshots"
         snapshots.mkdir()
         every = args.snapshot_every
+        rows: list[tuple[str, int, float, np.ndarray]] = []
 
         with open(tmp / "best_per_generation.csv", "w", newline="", encoding="utf-8") as fh:
             writer = csv.writer(fh)
@@ -402,6 +423,7 @@ class _Run:
                 params = np.asarray(info.params, dtype=np.float64)
                 writer.writerow([info.stage, info.generation, info.evaluations, repr(float(info.fitness)),
                                  *(repr(float(v)) for v in params)])
+                rows.append((info.stage, info.generation, float(info.fitness), params))
                 if every and info.generation % every == 0:
                     shot = rtloop.render(scene.with_params(params.tolist()), spp=1)
                     stage = _SAFE_NAME.sub("_", info.stage)
@@ -435,14 +457,33 @@ class _Run:
         final = rtloop.render(result.scene, scene.width * k, scene.height * k, args.final_spp)
         self.check_stop()
         rtloop.save_image(tmp / "final.png", final)
+        if truth is not None:
+            self.truth_errors = truth_errors(result, truth)
+        if args.report:
+            self.progress.message("writing report.html")
+            rtloop.report(result, tmp / "report.html", objective=image, truth=truth, generations=rows,
+                          speed_vs_error_png=_speed_vs_error_png())
+            self.check_stop()
         return result
 
 
-def _summary(result: Any, out: Path, wall: float) -> str:
-    lines = [f"fitted parameters ({result.protocol} protocol, seed {result.seed}):"]
-    width = max((len(n) for n in result.x), default=0)
-    for name, value in result.x.items():
-        lines.append(f"  {name:<{width}}  {value:12.6g}")
+def _speed_vs_error_png() -> Path | None:
+    """The benchmark's plot, benches/results/speed_vs_error.png of rtloop's repository: beside the package
+    when it runs from its source tree, else under the current directory (the repository root); else None."""
+    for repo in (Path(rtloop.__file__).resolve().parents[2], Path.cwd()):
+        png = repo / "benches" / "results" / "speed_vs_error.png"
+        if png.is_file():
+            return png
+    return None
+
+
+def _summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = None,
+             report: Path | None = None) -> str:
+    stages = len(result.stages)
+    lines = [
+        f"{stages} stage{'s' if stages != 1 else ''}, {result.evaluations} evaluations, "
+        + f"fit {_duration(result.seconds)}, wall time {_duration(wall)}"
+    ]
     ident = result.identifiability or {}
     if ident.get("degenerate"):
         lines.append("")
@@ -455,11 +496,24 @@ def _summary(result: Any, out: Path, wall: float) -> str:
             lines.extend(textwrap.wrap(f"note: {ident['note']}", 78, initial_indent="  ",
                                        subsequent_indent="  "))
     lines.append("")
-    lines.append(
-        f"{len(result.stages)} stage{'s' if len(result.stages) != 1 else ''}, {result.evaluations} evaluations, fit {_duration(result.seconds)}, "
-        f"wall time {_duration(wall)}"
-    )
+    lines.append(f"fitted parameters ({result.protocol} protocol, seed {result.seed}):")
+    width = max((len(n) for n in result.x), default=0)
+    if truth is not None:
+        lines.append(f"  {'':<{width}}  {'fitted':>12}  {'truth':>12}  {'error':>12}")
+    for name, value in result.x.items():
+        row = f"  {name:<{width}}  {value:12.6g}"
+        if truth is not None and name in truth["values"]:
+            row += f"  {truth['values'][name]:12.6g}  {truth['errors'][name]:+12.4g}"
+        lines.append(row)
+    if truth is not None:
+        if "light_position_m" in truth:
+            lines.append(f"light position error: {truth['light_position_m']:.4g} m")
+        if truth.get("product_relative"):
+            lines.append("product relative error: " + ", ".join(
+                f"{obj} {100 * rel:.3g}%" for obj, rel in truth["product_relative"].items()))
     lines.append(f"results in {out}")
+    if report is not None:
+        lines.append(f"report: {report}")
     return "\n".join(lines)
 
 
@@ -577,7 +631,8 @@ def _main(argv: list[str] | None, t0: float) -> int:
         if tmp is not None and os.path.lexists(tmp):
             shutil.rmtree(tmp, ignore_errors=True)
 
-    print(_summary(result, out, time.perf_counter() - t0))
+    print(_summary(result, out, time.perf_counter() - t0, truth=run.truth_errors,
+                   report=out / "report.html" if args.report else None))
     return 0
 
 

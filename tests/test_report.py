@@ -1,0 +1,364 @@
+"""The fit report (``rtloop.report``, ``rtloop-fit --report``): a self-contained page that a real browser
+renders with every image, plots whose data are the fit history, and no network references."""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import rtloop
+from rtloop import cli
+from rtloop.report import image_metrics, truth_errors
+
+REPO = Path(__file__).resolve().parents[1]
+EXAMPLE = REPO / "examples" / "yellow-ball"
+SPEED_VS_ERROR = REPO / "benches" / "results" / "speed_vs_error.png"
+W, H = 32, 24
+BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable", "chrome")
+
+
+def scene_dict() -> dict:
+    """The yellow-ball example (its camera, objects and fit section) at 32x24, with its neutral start."""
+    d = json.loads((EXAMPLE / "scene_input.json").read_text(encoding="utf-8"))
+    d["image"] = {"width": W, "height": H}
+    return d
+
+
+def truth_dict() -> dict:
+    d = scene_dict()
+    d["light"].update(position=[2.0, 4.0, -1.5], intensity=40.0)
+    d["objects"][0]["material"]["albedo"] = [0.8, 0.7, 0.1]
+    d["objects"][1]["material"]["albedo"] = [0.4, 0.5, 0.6]
+    return d
+
+
+@pytest.fixture(scope="module")
+def photo() -> np.ndarray:
+    return np.minimum(rtloop.render(truth_dict()), 1.0)
+
+
+@pytest.fixture(scope="module")
+def projected(photo):
+    """A default-protocol fit (one stage, light+colour: colours in closed form) and its callback rows."""
+    rows: list = []
+    result = rtloop.fit(scene_dict(), photo, seed=1, population=8, generations=6, callback=rows.append)
+    assert result.settings["method"] == "projected"
+    return result, rows
+
+
+@pytest.fixture(scope="module")
+def two_stage(photo):
+    """The paper protocol (light, then colour) with tiny budgets."""
+    rows: list = []
+    result = rtloop.fit(scene_dict(), photo, protocol="paper", seed=2, population=6, generations=(4, 5),
+                        callback=rows.append)
+    return result, rows
+
+
+def data_uris(page: str) -> list[bytes]:
+    found = re.findall(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]+)"', page)
+    return [base64.b64decode(m) for m in found]
+
+
+# --- (1) a real browser renders the page and every image ---------------------------------------------------
+
+
+def find_browser() -> str:
+    for name in BROWSERS:
+        path = shutil.which(name)
+        if path:
+            return path
+    if os.environ.get("CI"):
+        pytest.fail(f"no headless browser found ({', '.join(BROWSERS)}); CI must install chromium (.ci/run)")
+    pytest.skip(f"no headless browser found ({', '.join(BROWSERS)}): install Debian's chromium "
+                "(apt-get install chromium) to run this test; it is required when CI is set")
+
+
+def browse(browser: str, page: Path, profile: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    cmd = [browser, "--headless", "--disable-gpu", "--no-sandbox", "--no-first-run", "--hide-scrollbars",
+           f"--user-data-dir={profile}", "--virtual-time-budget=10000", *args, page.resolve().as_uri()]
+    done = subprocess.run(cmd, check=False, capture_output=True, text=True, timeout=180)
+    assert done.returncode == 0, f"{' '.join(cmd)}\n{done.stderr[-3000:]}"
+    return done
+
+
+def test_page_renders_in_a_headless_browser_with_every_image(projected, photo, tmp_path):
+    browser = find_browser()
+    result, rows = projected
+    speed = SPEED_VS_ERROR if SPEED_VS_ERROR.is_file() else None
+    rep = rtloop.report(result, tmp_path / "report.html", objective=photo, truth=truth_dict(),
+                        generations=rows, speed_vs_error_png=speed)
+    page = rep.path.read_text(encoding="utf-8")
+    n_images = page.count("<img ")
+    assert n_images == len(rep.files) >= 3 + 2 + 2  # objective/fitted/difference, strip, plots
+
+    dom = browse(browser, rep.path, tmp_path / "profile-dom", "--dump-dom").stdout
+    body = re.search(r"<body([^>]*)>", dom)
+    assert body, dom[:2000]
+    attrs = dict(re.findall(r'data-([a-z-]+)="([^"]*)"', body.group(1)))
+    assert attrs.get("loaded") == "1", f"the page's load handler did not run: {body.group(0)}"
+    assert attrs.get("errors") == "0", f"script or resource errors while loading: {body.group(0)}"
+    assert attrs.get("images") == str(n_images)
+    assert attrs.get("images-ok") == str(n_images), f"not every image decoded: {body.group(0)}"
+    assert "Fit report" in dom and "Identifiability" in dom
+
+    # A screenshot at desktop and phone widths is not blank: pictures, plot lines, text.
+    for size in ("1280,2400", "390,2400"):
+        shot = tmp_path / f"shot-{size.split(',')[0]}.png"
+        browse(browser, rep.path, tmp_path / f"profile-{size.split(',')[0]}", f"--window-size={size}",
+               f"--screenshot={shot}")
+        with Image.open(shot) as im:
+            arr = np.asarray(im.convert("RGB"), dtype=np.float64)
+        assert arr.shape[1] == int(size.split(",")[0])
+        assert arr.std() > 20, f"screenshot {shot.name} looks blank (std {arr.std():.1f})"
+        colours = np.unique(arr[::4, ::4].reshape(-1, 3), axis=0)
+        assert len(colours) > 200, f"screenshot {shot.name} has only {len(colours)} colours"
+
+
+# --- (2) the plots show the fit history --------------------------------------------------------------------
+
+
+def test_plotted_data_are_the_fit_history_projected(projected, photo, tmp_path):
+    result, rows = projected
+    truth = truth_dict()
+    rep = rtloop.report(result, tmp_path / "r.html", objective=photo, truth=truth, generations=rows)
+    assert rep.source == "generations"
+    (stage,) = result.stages
+    hist = stage.history
+    gens = np.array([h[0] for h in hist], float)
+    assert stage.param_names == ["light.position.x", "light.position.y", "light.position.z"]
+
+    x_all = rep.plots["_generation"]["x"]
+    np.testing.assert_array_equal(x_all, gens)
+    assert rep.plots["_generation"]["rows"] == [(stage.name, int(g)) for g in gens]
+    # The searched coordinates are the history's x, generation by generation.
+    for k, name in enumerate(stage.param_names):
+        x, y = rep.plots["light.position"][name]
+        np.testing.assert_array_equal(x, gens)
+        np.testing.assert_allclose(y, [h[3][k] for h in hist], rtol=0, atol=0)
+    # The fitness curve is the history's fitness.
+    x, y = rep.plots["fitness"][f"fitness:{stage.name}"]
+    np.testing.assert_array_equal(x, gens)
+    np.testing.assert_allclose(y, [h[1] for h in hist], rtol=0, atol=0)
+    # The closed-form colours come from the callback's rows (the history holds only the position).
+    names = result.scene.param_names()
+    for obj in ("ball", "floor"):
+        for c in "rgb":
+            name = f"objects.{obj}.albedo.{c}"
+            _, y = rep.plots[f"objects.{obj}.albedo"][name]
+            np.testing.assert_allclose(y, [r.params[names.index(name)] for r in rows], rtol=0, atol=0)
+    _, y = rep.plots["light.intensity"]["light.intensity"]
+    np.testing.assert_allclose(y, [r.params[names.index("light.intensity")] for r in rows])
+    # The last generation's parameters are the fitted values.
+    for name in names:
+        pid = name.rsplit(".", 1)[0] if name.startswith(("light.position", "objects.")) else name
+        assert rep.plots[pid][name][1][-1] == pytest.approx(result.x[name], rel=1e-9, abs=1e-12)
+    # Truth: dashed lines at the true values; the degenerate scene also plots the products.
+    x, y = rep.plots["light.position"]["truth:light.position.y"]
+    np.testing.assert_allclose(y, [truth["light"]["position"][1]] * 2)
+    assert x[0] == gens[0] and x[-1] == gens[-1]
+    _, y = rep.plots["objects.ball.albedo"]["truth:objects.ball.albedo.g"]
+    np.testing.assert_allclose(y, [0.7, 0.7])
+    assert result.identifiability["degenerate"]
+    _, y = rep.plots["products.ball"]["product:ball.r"]
+    i, a = names.index("light.intensity"), names.index("objects.ball.albedo.r")
+    want = [r.params[i] * r.params[a] for r in rows]
+    np.testing.assert_allclose(y, want, rtol=1e-12)
+    _, y = rep.plots["products.floor"]["truth:product:floor.b"]
+    np.testing.assert_allclose(y, [40.0 * 0.6] * 2)
+    # The strip renders generations 0, k, 2k, ... and the last.
+    assert rep.strip[0][:2] == (stage.name, 0)
+    assert rep.strip[-1][:2] == (stage.name, int(gens[-1]))
+
+
+def test_plotted_data_are_the_fit_history_two_stages(two_stage, tmp_path):
+    result, rows = two_stage
+    assert [s.name for s in result.stages] == ["light", "colour"]
+    light, colour = result.stages
+    rep = rtloop.report(result, tmp_path / "r.html")  # no rows: rebuilt from the history
+    assert rep.source == "history" and rep.notes
+    n1 = len(light.history)
+    x_all = rep.plots["_generation"]["x"]
+    # Generation counts on across stages: the colour stage starts right after the light stage.
+    np.testing.assert_array_equal(x_all, np.arange(n1 + len(colour.history), dtype=float))
+    for stage, sl in ((light, slice(0, n1)), (colour, slice(n1, None))):
+        _, y = rep.plots["fitness"][f"fitness:{stage.name}"]
+        np.testing.assert_allclose(y, [h[1] for h in stage.history], rtol=0, atol=0)
+        for k, name in enumerate(stage.param_names):
+            pid = name.rsplit(".", 1)[0] if name.startswith(("light.position", "objects.")) else name
+            _, y = rep.plots[pid][name]
+            np.testing.assert_allclose(y[sl], [h[3][k] for h in stage.history], rtol=0, atol=0)
+    # During the colour stage the light is held where the light stage left it.
+    _, y = rep.plots["light.position"]["light.position.z"]
+    np.testing.assert_allclose(y[n1:], light.history[-1][3][2])
+
+    # With the callback's rows the plots are those rows exactly; tuples as the CLI records them do the same.
+    names = result.scene.param_names()
+    tuples = [(r.stage, r.generation, r.fitness, np.asarray(r.params)) for r in rows]
+    for given in (rows, tuples):
+        rep = rtloop.report(result, tmp_path / "g.html", generations=given)
+        for j, name in enumerate(names):
+            pid = name.rsplit(".", 1)[0] if name.startswith(("light.position", "objects.")) else name
+            np.testing.assert_allclose(rep.plots[pid][name][1], [r.params[j] for r in rows], rtol=0, atol=0)
+        np.testing.assert_allclose(
+            np.concatenate([rep.plots["fitness"][f"fitness:{s}"][1] for s in ("light", "colour")]),
+            [r.fitness for r in rows],
+        )
+
+
+# --- (3) self-contained: no external URLs, the embedded images are the files -------------------------------
+
+
+def test_page_is_self_contained(projected, photo, tmp_path):
+    result, rows = projected
+    out = tmp_path / "deep" / "report.html"
+    rep = rtloop.report(result, out, objective=photo, truth=truth_dict(), generations=rows,
+                        speed_vs_error_png=SPEED_VS_ERROR if SPEED_VS_ERROR.is_file() else None)
+    assert rep.path == out and out.is_file()
+    page = out.read_text(encoding="utf-8")
+    assert page.startswith("<!doctype html>") and page.rstrip().endswith("</html>")
+    assert 'name="viewport"' in page
+    assert "http://" not in page and "https://" not in page
+    attributes = re.findall(r'\b(src|href|srcset|action|data)\s*=\s*["\']([^"\']*)', page, re.IGNORECASE)
+    assert attributes
+    for attr, value in attributes:
+        assert attr.lower() == "src" and value.startswith("data:image/png;base64,"), (attr, value[:80])
+    assert not re.search(r"<(link|iframe|object|embed)\b", page, re.IGNORECASE)
+    assert not re.search(r"<script[^>]*\bsrc\b", page, re.IGNORECASE)
+    assert not re.search(r"url\(|@import", page, re.IGNORECASE)  # nothing fetched from CSS either
+    # Every embedded image is one of the PNGs written beside the page, byte for byte, in page order.
+    assert all(p.parent == tmp_path / "deep" / "report" for p in rep.files)
+    embedded = data_uris(page)
+    assert embedded == [p.read_bytes() for p in rep.files]
+    assert sorted(os.listdir(tmp_path / "deep")) == ["report", "report.html"]  # no temporary files left
+    assert sorted(os.listdir(tmp_path / "deep" / "report")) == sorted(p.name for p in rep.files)
+    if SPEED_VS_ERROR.is_file():
+        copied = tmp_path / "deep" / "report" / "speed_vs_error.png"
+        assert copied.read_bytes() == SPEED_VS_ERROR.read_bytes()
+    # The numbers are on the page: error metrics, truth errors, products, identifiability.
+    for text in ("L1", "RMSE", "PSNR", "light position error (m)", "product relative error",
+                 result.identifiability["note"].split(":")[0]):
+        assert text in page, text
+    assert "Uncertainty" not in page  # not available yet: the field is shown only when present
+
+    # Written again with a coarser strip: stale strip frames go, nothing else is left behind.
+    result.uncertainty = {"light.position.x": 0.01}
+    try:
+        rep2 = rtloop.report(result, out, generations=rows, strip_every=100)
+    finally:
+        del result.uncertainty
+    assert "Uncertainty" in out.read_text(encoding="utf-8")
+    kept = {p.name for p in rep.files if not p.name.startswith(("strip_", "param_"))}
+    assert sorted(os.listdir(tmp_path / "deep" / "report")) == sorted({p.name for p in rep2.files} | kept)
+    assert len(rep2.strip) == 2  # generation 0 and the last
+
+
+def test_error_numbers_follow_their_formulas():
+    rng = np.random.default_rng(0)
+    objective = rng.uniform(0.1, 0.8, (H, W, 3))
+    render = objective + 0.05
+    render[0, 0] = 3.0  # clipped to 1 as the fit compares
+    m = image_metrics(render, objective)
+    d = np.minimum(render, 1.0) - objective
+    assert m["l1_linear"] == pytest.approx(np.mean(np.abs(d)))
+    assert m["rmse_linear"] == pytest.approx(np.sqrt(np.mean(d**2)))
+    assert m["sum_abs_linear"] == pytest.approx(np.sum(np.abs(d)))
+
+    def srgb(x):
+        x = np.clip(x, 0, 1)
+        return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+
+    mse = np.mean((srgb(np.minimum(render, 1)) - srgb(objective)) ** 2)
+    assert m["psnr_srgb_db"] == pytest.approx(-10 * np.log10(mse))
+
+
+def test_truth_errors(projected):
+    result, _ = projected
+    truth = truth_dict()
+    err = truth_errors(result, truth)
+    fitted = result.scene.to_dict()
+    want = np.linalg.norm(np.subtract(fitted["light"]["position"], truth["light"]["position"]))
+    assert err["light_position_m"] == pytest.approx(want)
+    for k, obj in enumerate(("ball", "floor")):
+        p_true = 40.0 * np.array(truth["objects"][k]["material"]["albedo"])
+        p_fit = fitted["light"]["intensity"] * np.array(fitted["objects"][k]["material"]["albedo"])
+        want = np.linalg.norm(p_fit - p_true) / np.linalg.norm(p_true)
+        assert err["product_relative"][obj] == pytest.approx(want)
+    assert err["values"]["light.intensity"] == 40.0
+    assert err["errors"]["light.position.x"] == pytest.approx(result.x["light.position.x"] - 2.0)
+    other = truth_dict()
+    other["objects"][0]["name"] = "sphere"
+    with pytest.raises(rtloop.RtloopError, match="ball"):
+        truth_errors(result, other)
+
+
+def test_import_rtloop_does_not_import_matplotlib():
+    code = "import sys, rtloop; assert callable(rtloop.report); print('matplotlib' in sys.modules)"
+    done = subprocess.run([sys.executable, "-c", code], check=False, capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "False"
+
+
+# --- (4) the command line -----------------------------------------------------------------------------------
+
+
+def test_cli_report_and_truth(tmp_path, capsys):
+    scene_path = tmp_path / "scene.json"
+    scene_path.write_text(json.dumps(scene_dict()), encoding="utf-8")
+    truth_path = tmp_path / "truth.json"
+    truth_path.write_text(json.dumps(truth_dict()), encoding="utf-8")
+    image_path = tmp_path / "objective.png"
+    rtloop.save_image(image_path, rtloop.render(truth_dict()))
+    out = tmp_path / "fit"
+    code = cli.main([str(scene_path), str(image_path), "--out", str(out), "--population", "8",
+                     "--generations", "5", "--final-scale", "1", "--final-spp", "1", "--report",
+                     "--truth", str(truth_path), "--quiet"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert captured.err == ""
+    page = out / "report.html"
+    assert page.is_file() and (out / "report").is_dir()
+    assert sorted(p.name for p in tmp_path.iterdir() if ".rtloop-" in p.name) == []
+    html_text = page.read_text(encoding="utf-8")
+    assert "http://" not in html_text and "https://" not in html_text
+    files = sorted(os.listdir(out / "report"))
+    assert {"objective.png", "fitted.png", "difference.png", "fitness.png"} <= set(files)
+    assert len(data_uris(html_text)) == len(files)
+    # The rows the CLI recorded are those of best_per_generation.csv: the plots show them.
+    assert "light+colour" in html_text and "truth" in html_text
+
+    # stdout ends with the fitted values (with truth and error), the errors, and the paths.
+    lines = captured.out.rstrip("\n").splitlines()
+    assert lines[-1] == f"report: {page}"
+    assert lines[-2] == f"results in {out}"
+    assert re.fullmatch(r"product relative error: ball [\d.e+-]+%, floor [\d.e+-]+%", lines[-3]), lines[-3]
+    assert re.fullmatch(r"light position error: [\d.e+-]+ m", lines[-4]), lines[-4]
+    fitted = json.loads((out / "result.json").read_text(encoding="utf-8"))["fit_report"]["fitted"]
+    table = lines[-4 - len(fitted):-4]
+    for (name, value), line in zip(fitted.items(), table):
+        parts = line.split()
+        assert parts[0] == name and float(parts[1]) == pytest.approx(value, rel=1e-5, abs=1e-9)
+    assert table[0].split()[0] == "light.position.x" and "truth" in lines[-5 - len(fitted)]
+
+    # A truth that does not match the scene is one clear line, before any fitting.
+    bad = truth_dict()
+    bad["objects"][1]["name"] = "ground"
+    bad_path = tmp_path / "bad.json"
+    bad_path.write_text(json.dumps(bad), encoding="utf-8")
+    code = cli.main([str(scene_path), str(image_path), "--out", str(tmp_path / "x"),
+                     "--truth", str(bad_path)])
+    captured = capsys.readouterr()
+    assert code == 1 and captured.out == ""
+    assert captured.err.startswith(f"rtloop-fit: error: {bad_path}: ") and "floor" in captured.err
+    assert not (tmp_path / "x").exists()
