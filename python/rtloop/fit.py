@@ -334,6 +334,7 @@ def fit(
             current = _restore_bounds(current, scene)
             current = colour_stage("colour-refine", current, int(seeds[3]))
     current = _restore_bounds(current, scene)
+    current = _keep_undetermined(current, scene, all_paths, ident)
     values = current.get_params(all_paths)
     return FitResult(
         scene=current,
@@ -347,6 +348,40 @@ def fit(
         identifiability=ident,
         settings=settings,
     )
+
+
+def lit_pixel_counts(scene: Scene) -> list[int]:
+    """Per object: how many of its visible pixels receive direct light from the scene's light."""
+    d = scene_to_dict(scene)
+    d["light"]["intensity"], d["light"]["color"], d["ambient"], d["exposure"] = 1.0, [1.0, 1.0, 1.0], [0, 0, 0], 1.0
+    for o in d["objects"]:
+        o["material"] = {"albedo": [1.0, 1.0, 1.0]}
+    d["fit"] = {}
+    unit = load_scene(d)
+    lit = _native.render(unit)[..., 0] > 0
+    ids = _native.object_ids(unit)
+    return [int(((ids == k) & lit).sum()) for k in range(len(d["objects"]))]
+
+
+def _keep_undetermined(fitted: Scene, original: Scene, paths: list[str], ident: dict[str, Any]) -> Scene:
+    """An object the fitted light leaves unlit in every visible pixel says nothing about its albedo (a
+    sphere lit only from behind, one hidden by another): report it and keep the scene's own value."""
+    if "ambient" in paths or any(v != 0 for v in scene_to_dict(fitted)["ambient"]):
+        return fitted  # ambient light still shows the albedo
+    counts = lit_pixel_counts(fitted)
+    undetermined = []
+    for name, n in zip(fitted.object_names, counts):
+        p = f"objects.{name}.albedo"
+        if p in paths and n == 0:
+            undetermined.append(p)
+            fitted = fitted.with_params(original.get_params([p]), [p])
+    if undetermined:
+        ident["undetermined"] = undetermined
+        ident["undetermined_note"] = (
+            "no visible pixel of these objects receives direct light from the fitted light, so the photo "
+            "does not determine their albedo; the scene's own values are kept"
+        )
+    return fitted
 
 
 def _projection_blocker(scene: Scene, paths: list[str]) -> str | None:

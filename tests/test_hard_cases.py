@@ -1,0 +1,222 @@
+"""Hard cases: each must neither crash nor return NaN, and must degrade gracefully.
+
+Every objective here is made from a known scene (rendered by rtloop, then damaged the way a camera or a
+file would damage it), so the fit is judged against ground truth it never saw.
+"""
+
+from __future__ import annotations
+
+import copy
+import io
+import json
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import rtloop
+from rtloop import _native
+
+
+def _light_err(result, truth: dict) -> float:
+    return float(np.linalg.norm(np.array(result.scene.to_dict()["light"]["position"]) - truth["light"]["position"]))
+
+
+def _product_err(result, truth: dict, skip: tuple[str, ...] = ()) -> float:
+    fitted = result.scene.to_dict()
+    worst = 0.0
+    for o, f in zip(truth["objects"], fitted["objects"]):
+        if o["name"] in skip:
+            continue
+        want = truth["light"]["intensity"] * np.array(o["material"]["albedo"])
+        got = fitted["light"]["intensity"] * np.array(f["material"]["albedo"])
+        worst = max(worst, float(np.max(np.abs(got - want)) / np.max(want)))
+    return worst
+
+
+def _start(truth: dict) -> dict:
+    start = copy.deepcopy(truth)
+    lo, hi = np.array(truth["fit"]["light.position"]["min"]), np.array(truth["fit"]["light.position"]["max"])
+    start["light"]["position"] = list((lo + hi) / 2)
+    for o in start["objects"]:
+        o["material"]["albedo"] = [0.5, 0.5, 0.5]
+    return start
+
+
+def _photo(truth: dict) -> np.ndarray:
+    return np.minimum(rtloop.render(truth), 1.0)
+
+
+def _through_file(linear: np.ndarray, fmt: str, scene, **save) -> np.ndarray:
+    """Encode as an 8-bit sRGB file (PNG or JPEG) and read back through rtloop's acquisition."""
+    x = np.clip(linear, 0, 1)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+    buf = io.BytesIO()
+    Image.fromarray(np.round(srgb * 255).astype(np.uint8)).save(buf, fmt, **save)
+    return buf.getvalue()
+
+
+def _load_bytes(data: bytes, suffix: str, scene, tmp_path) -> np.ndarray:
+    path = tmp_path / f"photo{suffix}"
+    path.write_bytes(data)
+    return rtloop.load_image(path, scene)
+
+
+def _check(result) -> None:
+    d = result.scene.to_dict()
+    values = [*d["light"]["position"], d["light"]["intensity"]] + [v for o in d["objects"] for v in o["material"]["albedo"]]
+    assert np.all(np.isfinite(values)), d
+    assert np.isfinite(result.fitness)
+
+
+@pytest.mark.parametrize("name, light", [
+    ("light 5 cm above the floor", [0.8, 0.05, -0.6]),
+    ("light behind the sphere (rim light, shadow toward the camera)", [0.3, 2.5, 4.0]),
+    ("light almost straight overhead (tiny shadow)", [0.05, 7.0, 0.05]),
+    ("grazing light on the floor", [7.5, 0.6, 1.0]),
+])
+def test_hard_light_positions_are_recovered(ball_scene, name, light):
+    truth = ball_scene
+    truth["light"]["position"] = light
+    truth["fit"]["light.position"]["min"] = [-8, 0.02, -8]
+    result = rtloop.fit(_start(truth), _photo(truth), seed=1)
+    _check(result)
+    assert _light_err(result, truth) < 0.01, name
+    undetermined = result.identifiability.get("undetermined", [])
+    if "behind" in name:
+        # No visible pixel of the ball is lit: its colour is not in the photo, and rtloop says so.
+        assert undetermined == ["objects.ball.albedo"]
+        assert result.scene.to_dict()["objects"][0]["material"]["albedo"] == [0.5, 0.5, 0.5]
+        assert _product_err(result, truth, skip=("ball",)) < 0.01, name
+    else:
+        assert undetermined == []
+        assert _product_err(result, truth) < 0.01, name
+
+
+def test_light_inside_the_sphere_or_under_the_floor_is_a_losing_candidate_not_a_crash(ball_scene):
+    truth = ball_scene
+    photo = _photo(truth)
+    scene = rtloop.load_scene(truth)
+    paths = ["light.position", "light.intensity"]
+    candidates = np.array([
+        [0.0, 1.0, 0.0, 70.0],    # at the sphere's centre
+        [0.0, 1.99, 0.0, 70.0],   # just inside its top
+        [0.0, -1.0, 0.0, 70.0],   # under the floor
+        [0.0, 0.0, -3.0, 70.0],   # in the floor plane
+        [2.5, 4.5, -1.0, 70.0],   # the truth
+    ])
+    losses = _native.evaluate(scene, paths, photo, candidates)[:, 0]
+    assert np.all(np.isfinite(losses))
+    assert np.argmin(losses) == 4
+    # A search box that contains the sphere's inside and the space under the floor still finds the light.
+    truth["fit"]["light.position"]["min"] = [-8, -3, -8]
+    result = rtloop.fit(_start(truth), photo, seed=2)
+    _check(result)
+    assert _light_err(result, truth) < 0.01
+
+
+def test_very_dim_photo(ball_scene, tmp_path):
+    truth = ball_scene
+    truth["light"]["intensity"] = 1.5  # brightest pixel about 0.03: a handful of 8-bit levels
+    photo = _photo(truth)
+    assert photo.max() < 0.05
+    scene = rtloop.load_scene(_start(truth))
+    loaded = _load_bytes(_through_file(photo, "PNG", scene), ".png", scene, tmp_path)
+    result = rtloop.fit(scene, loaded, seed=3)
+    _check(result)
+    assert _light_err(result, truth) < 0.05
+    assert _product_err(result, truth) < 0.05
+
+
+def test_partly_saturated_photo(ball_scene):
+    truth = ball_scene
+    truth["light"]["intensity"] = 250.0
+    photo = _photo(truth)
+    clipped = (photo >= 1.0).any(axis=2).mean()
+    assert clipped > 0.1, f"only {clipped:.0%} of pixels saturated"
+    result = rtloop.fit(_start(truth), photo, seed=4)
+    _check(result)
+    assert _light_err(result, truth) < 0.01
+    assert _product_err(result, truth) < 0.01
+
+
+def test_strong_noise(ball_scene):
+    """Noise 2.5 times the shared noisy-blue case's, at the paper's 128x96: the light is held to the same
+    5 cm. The colours degrade more: noise clipped at 0 biases the darkest channel (the ball's blue) up,
+    which the least-squares solve does not model yet (a censored loss is future work), so 10 %."""
+    truth = ball_scene
+    truth["image"] = {"width": 128, "height": 96}
+    rng = np.random.default_rng(5)
+    photo = np.clip(_photo(truth) + rng.normal(0, 0.05, (96, 128, 3)), 0, 1).astype(np.float32)
+    result = rtloop.fit(_start(truth), photo, seed=5)
+    _check(result)
+    assert _light_err(result, truth) < 0.05
+    assert _product_err(result, truth) < 0.10
+
+
+def test_jpeg_quality_50(ball_scene, tmp_path):
+    """JPEG at quality 50 subsamples chroma and quantises the dark blue channel hardest: light to 5 cm,
+    colours to 10 % (see test_strong_noise)."""
+    truth = ball_scene
+    truth["image"] = {"width": 128, "height": 96}
+    scene = rtloop.load_scene(_start(truth))
+    loaded = _load_bytes(_through_file(_photo(truth), "JPEG", scene, quality=50), ".jpg", scene, tmp_path)
+    result = rtloop.fit(scene, loaded, seed=6)
+    _check(result)
+    assert _light_err(result, truth) < 0.05
+    assert _product_err(result, truth) < 0.10
+
+
+def test_model_mismatch_interreflection_like_fill_light(ball_scene):
+    """The photo has light the model cannot make (a fill term, as from interreflections): the fit stays
+    finite and near the truth rather than running off to a bound."""
+    truth = ball_scene
+    photo = _photo(truth)
+    ids = rtloop.object_ids(truth)
+    fill = np.where((ids == 0)[..., None], 0.03 * np.array([0.6, 0.6, 0.6]), 0.0)  # floor light on the ball
+    result = rtloop.fit(_start(truth), np.minimum(photo + fill, 1).astype(np.float32), seed=7)
+    _check(result)
+    assert _light_err(result, truth) < 0.25
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1e3])
+def test_millimetre_and_kilometre_scenes(ball_scene, scale):
+    truth = ball_scene
+    s = scale
+    for key in ("position", "look_at"):
+        truth["camera"][key] = [v * s for v in truth["camera"][key]]
+    truth["light"]["position"] = [v * s for v in truth["light"]["position"]]
+    truth["light"]["intensity"] *= s * s  # same irradiance at s times the distance
+    truth["objects"][0]["center"] = [v * s for v in truth["objects"][0]["center"]]
+    truth["objects"][0]["radius"] *= s
+    truth["fit"]["light.position"] = {"min": [-8 * s, 0.5 * s, -8 * s], "max": [8 * s, 8 * s, 8 * s]}
+    truth["fit"]["light.intensity"] = {"min": 1 * s * s, "max": 400 * s * s}
+    photo = _photo(truth)
+    assert 0.2 < (photo.max(axis=2) > 0.02).mean() < 0.9, "the same picture at every scale"
+    result = rtloop.fit(_start(truth), photo, seed=8)
+    _check(result)
+    assert _light_err(result, truth) < 0.01 * s
+    assert _product_err(result, truth) < 0.01
+
+
+def test_one_sphere_hiding_another(ball_scene):
+    truth = ball_scene
+    hidden = {"name": "hidden", "shape": "sphere", "center": [0.2, 0.5, 3.0], "radius": 0.5,
+              "material": {"albedo": [0.2, 0.9, 0.3]}}
+    truth["objects"].insert(1, hidden)
+    truth["fit"]["objects.hidden.albedo"] = {"min": [0, 0, 0], "max": [1, 1, 1]}
+    ids = rtloop.object_ids(truth)
+    assert (ids == 1).sum() == 0, "the second sphere is entirely behind the first"
+    result = rtloop.fit(_start(truth), _photo(truth), seed=9)
+    _check(result)
+    assert _light_err(result, truth) < 0.01
+    # The hidden sphere's colour is not in the image: reported, and left at the scene's value.
+    assert result.identifiability["undetermined"] == ["objects.hidden.albedo"]
+    assert result.scene.to_dict()["objects"][1]["material"]["albedo"] == [0.5, 0.5, 0.5]
+    assert _product_err(result, truth, skip=("hidden",)) < 0.01
+
+
+def test_scene_json_roundtrip_of_a_fit_result_is_valid(ball_scene):
+    result = rtloop.fit(_start(ball_scene), _photo(ball_scene), seed=10, generations=5, population=8)
+    again = rtloop.load_scene(json.loads(result.scene.to_json()))
+    assert again.to_dict() == result.scene.to_dict()
