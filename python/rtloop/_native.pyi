@@ -64,3 +64,22 @@ def optimize(
     | None = None,
     product_bounds: npt.NDArray[np.float64] | None = None,
 ) -> dict[str, Any]: ...
+
+# Test hooks for the optimisers (rust/python/de.rs), used by tests/test_de_scipy.py.
+def minimize_test_function(
+    name: str,
+    dim: int,
+    lo: float,
+    hi: float,
+    *,
+    method: str = "lshade",
+    max_evaluations: int = 10000,
+    seed: int = 0,
+    polish: int = 0,
+    population: int | None = None,
+    x_tol: float | None = None,
+    stall_generations: int = 0,
+    init: str = "lhs",
+    threads: int | None = None,
+) -> dict[str, Any]: ...
+def test_function_value(name: str, x: list[float]) -> float: ...

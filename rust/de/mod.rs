@@ -7,6 +7,7 @@
 //! threads.
 
 pub mod rng;
+pub mod shade;
 
 use rayon::prelude::*;
 

@@ -18,6 +18,9 @@ use crate::params::ParamLayout;
 use crate::render as core_render;
 use crate::scene::Scene;
 
+#[path = "de.rs"]
+mod de_hooks;
+
 create_exception!(
     _native,
     RtloopError,
@@ -406,6 +409,7 @@ fn optimize<'py>(
 #[pymodule(gil_used = false)]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyScene>()?;
+    de_hooks::register(m)?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(object_ids, m)?)?;
     m.add_function(wrap_pyfunction!(save_image, m)?)?;

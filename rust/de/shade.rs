@@ -1,0 +1,1049 @@
+//! L-SHADE (Tanabe & Fukunaga, CEC 2014): success-history based parameter adaptation (SHADE, Tanabe &
+//! Fukunaga 2013) with linear population size reduction, current-to-pbest/1 mutation with an external
+//! archive, binomial crossover and the midpoint-to-bound repair, plus the jSO refinements (Brest, Maučec
+//! & Bošković 2017) as an option, stopping rules on convergence, and a final Nelder–Mead polish.
+//!
+//! The plain DE/rand/1/bin of [`super::minimize`] stays the engine of the paper protocol; this module is
+//! the modern alternative with the same contracts:
+//!
+//! * one objective ([`Objective`] with `n_objectives() == 1`), minimised within `bounds`; a dimension with
+//!   `min == max` stays fixed;
+//! * every trial vector lies within the bounds (a mutant component outside its range is put half way
+//!   between the parent's component and the violated bound, as in L-SHADE);
+//! * a NaN objective value is stored as `+inf`, so it never wins a comparison;
+//! * the callback runs after the initial population and after every generation and stops the search by
+//!   returning `false`;
+//! * determinism: every random draw (initialisation, memory slots, F and CR, pbest and the two difference
+//!   vectors, crossover, archive replacement) is made on the calling thread from one seeded generator; a
+//!   generation's trials are then evaluated in parallel (rayon) by the pure objective, and the selection,
+//!   the memory update and the population reduction run serially again. The result is bit-identical on
+//!   any number of threads.
+//!
+//! One generation of L-SHADE, population `N` (best first in the ranking), memory `M_F`, `M_CR` of size `H`:
+//!
+//! 1. for each target `x_i`: pick a memory slot `r` uniformly; `CR_i ~ N(M_CR[r], 0.1)` clipped to [0, 1]
+//!    (0 when the slot holds the terminal value), `F_i ~ Cauchy(M_F[r], 0.1)` redrawn while `<= 0` and
+//!    truncated to 1; `x_pbest` uniform among the best `max(2, round(p N))`, `x_r1` from the population
+//!    (`r1 != i`), `x_r2` from population ∪ archive (`r2 != i, r1`);
+//!    `v = x_i + F_i (x_pbest − x_i) + F_i (x_r1 − x_r2)`, binomial crossover with `CR_i`, repair;
+//! 2. evaluate the trials in parallel; a trial replaces its target when not worse; a strictly better one
+//!    sends its parent to the archive (a random member is overwritten when the archive is full) and
+//!    records `F_i`, `CR_i` and the improvement;
+//! 3. the next memory slot (cyclically) becomes the improvement-weighted Lehmer mean of the successful
+//!    `F` and `CR` (CR becomes terminal for good if all successful CR were 0);
+//! 4. linear population size reduction: `N = round(N_init + (N_min − N_init) · evaluations / max_evaluations)`,
+//!    the worst individuals are removed and the archive is cut to `round(archive_rate · N)` at random.
+//!
+//! jSO ([`Variant::Jso`]) changes: `N_init = round(25 ln(D) √D)`, `H = 5` with the last slot fixed at 0.9,
+//! memory initialised at `M_F = 0.3`, `M_CR = 0.8`, `p` decreasing linearly from 0.25 to 0.125, archive
+//! rate 1, CR floored at 0.7 / 0.6 in the first quarter / half of the budget, F capped at 0.7 in the first
+//! 60%, the pbest difference weighted by `F_w = 0.7 F, 0.8 F, 1.2 F` (before 20%, 40%, after), and the
+//! memory update averaging the new mean with the old value.
+
+use rayon::prelude::*;
+
+use super::{evaluate_all, pick, report, GenerationReport, Objective, Rng};
+use crate::error::{Error, Result};
+
+/// Which adaptive DE.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Variant {
+    /// L-SHADE as published (Tanabe & Fukunaga 2014).
+    LShade,
+    /// L-SHADE with the jSO refinements (Brest et al. 2017). Use [`ShadeConfig::jso`] for its defaults.
+    Jso,
+}
+
+/// How the initial population is drawn.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Init {
+    /// Latin hypercube: each dimension's range is cut into `N` equal strata and every stratum holds exactly
+    /// one individual (a random point inside it), strata paired at random across dimensions.
+    LatinHypercube,
+    /// Independent uniform draws.
+    Uniform,
+}
+
+/// Why [`minimize`] stopped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StopReason {
+    /// The evaluation budget `max_evaluations` is spent.
+    MaxEvaluations,
+    /// `max_generations` generations were run.
+    MaxGenerations,
+    /// The population's spread in normalised parameter space fell below `x_tol`.
+    Converged,
+    /// The best value did not improve by more than `stall_tol` for `stall_generations` generations.
+    Stalled,
+    /// The callback returned `false`.
+    Callback,
+}
+
+impl StopReason {
+    /// `"max_evaluations"`, `"max_generations"`, `"converged"`, `"stalled"` or `"callback"`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            StopReason::MaxEvaluations => "max_evaluations",
+            StopReason::MaxGenerations => "max_generations",
+            StopReason::Converged => "converged",
+            StopReason::Stalled => "stalled",
+            StopReason::Callback => "callback",
+        }
+    }
+}
+
+impl std::fmt::Display for StopReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Settings of [`minimize`]. `Default` is L-SHADE with the paper's parameters; [`ShadeConfig::jso`] gives
+/// jSO's. `D` below is the number of free dimensions (those with `min < max`, at least 1).
+#[derive(Clone, Debug)]
+pub struct ShadeConfig {
+    pub variant: Variant,
+    /// Evaluation budget of the evolution (the polish has its own). The population reduction is scheduled
+    /// over this budget, and the last generation evaluates only as many trials as are left, so the count
+    /// never exceeds it. Default 12 000 (the paper protocol's 60 × 200 per stage).
+    pub max_evaluations: usize,
+    /// Optional cap on the number of generations (`None`: no cap).
+    pub max_generations: Option<usize>,
+    /// Initial population `N_init`; `None`: `round(18 D)` for L-SHADE, `round(25 ln(max(D, 2)) √D)` for
+    /// jSO, at least `min_population`.
+    pub population_init: Option<usize>,
+    /// Final population `N_min` of the linear reduction (at least 4). Default 4.
+    pub min_population: usize,
+    /// Size `H` of the success-history memory. L-SHADE 6, jSO 5.
+    pub memory_size: usize,
+    /// Initial `M_F`. L-SHADE 0.5, jSO 0.3.
+    pub memory_f: f64,
+    /// Initial `M_CR`. L-SHADE 0.5, jSO 0.8.
+    pub memory_cr: f64,
+    /// Fraction `p` of the population from which `x_pbest` is drawn (at least 2 individuals). L-SHADE
+    /// 0.11; for jSO the starting value 0.25, decreasing linearly to half of it.
+    pub p_best: f64,
+    /// Archive size as a multiple of the population size. L-SHADE 2.6, jSO 1.0.
+    pub archive_rate: f64,
+    pub init: Init,
+    /// Stop when, in every free dimension, `(max − min) / (hi − lo)` over the population is below `x_tol`
+    /// (0 disables). Default 1e-9.
+    pub x_tol: f64,
+    /// Stop after this many consecutive generations without an improvement of the best value by more than
+    /// `stall_tol` (0 disables, the default).
+    pub stall_generations: usize,
+    /// Smallest decrease of the best value that counts as an improvement for `stall_generations`
+    /// (absolute). Default 0: any strict decrease.
+    pub stall_tol: f64,
+    /// Evaluation budget of a final Nelder–Mead polish of the best individual (0, the default: no polish).
+    /// Skipped when the callback stopped the search.
+    pub polish_evaluations: usize,
+    /// The polish stops when every simplex vertex is within this normalised distance (per dimension, as a
+    /// fraction of the range) of the best one. Default 1e-13.
+    pub polish_x_tol: f64,
+    pub seed: u64,
+}
+
+impl Default for ShadeConfig {
+    /// L-SHADE with the parameters of Tanabe & Fukunaga (2014).
+    fn default() -> Self {
+        ShadeConfig {
+            variant: Variant::LShade,
+            max_evaluations: 12_000,
+            max_generations: None,
+            population_init: None,
+            min_population: 4,
+            memory_size: 6,
+            memory_f: 0.5,
+            memory_cr: 0.5,
+            p_best: 0.11,
+            archive_rate: 2.6,
+            init: Init::LatinHypercube,
+            x_tol: 1e-9,
+            stall_generations: 0,
+            stall_tol: 0.0,
+            polish_evaluations: 0,
+            polish_x_tol: 1e-13,
+            seed: 0,
+        }
+    }
+}
+
+impl ShadeConfig {
+    /// L-SHADE's defaults (same as `Default`).
+    pub fn lshade() -> Self {
+        Self::default()
+    }
+
+    /// jSO's defaults (Brest, Maučec & Bošković 2017).
+    pub fn jso() -> Self {
+        ShadeConfig {
+            variant: Variant::Jso,
+            memory_size: 5,
+            memory_f: 0.3,
+            memory_cr: 0.8,
+            p_best: 0.25,
+            archive_rate: 1.0,
+            ..Self::default()
+        }
+    }
+
+    /// The initial population size used for `dim` free dimensions.
+    pub fn initial_population(&self, dim: usize) -> usize {
+        if let Some(n) = self.population_init {
+            return n;
+        }
+        let d = dim.max(1) as f64;
+        let n = match self.variant {
+            Variant::LShade => (18.0 * d).round(),
+            Variant::Jso => (25.0 * d.max(2.0).ln() * d.sqrt()).round(),
+        };
+        (n as usize).max(self.min_population)
+    }
+
+    fn validate(&self, n_init: usize) -> Result<()> {
+        let bad = |m: String| Err(Error::Invalid(m));
+        if self.min_population < 4 {
+            return bad(format!(
+                "min_population must be at least 4 (got {})",
+                self.min_population
+            ));
+        }
+        if n_init < self.min_population {
+            return bad(format!(
+                "population_init ({n_init}) must be at least min_population ({})",
+                self.min_population
+            ));
+        }
+        if self.max_evaluations < n_init {
+            return bad(format!(
+                "max_evaluations ({}) must cover the initial population ({n_init})",
+                self.max_evaluations
+            ));
+        }
+        if self.memory_size == 0 {
+            return bad("memory_size must be at least 1".into());
+        }
+        if !(self.memory_f > 0.0 && self.memory_f <= 1.0) {
+            return bad(format!(
+                "memory_f must be in (0, 1] (got {})",
+                self.memory_f
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.memory_cr) {
+            return bad(format!(
+                "memory_cr must be in [0, 1] (got {})",
+                self.memory_cr
+            ));
+        }
+        if !(self.p_best > 0.0 && self.p_best <= 1.0) {
+            return bad(format!("p_best must be in (0, 1] (got {})", self.p_best));
+        }
+        if !(self.archive_rate >= 0.0 && self.archive_rate.is_finite()) {
+            return bad(format!(
+                "archive_rate must be finite and >= 0 (got {})",
+                self.archive_rate
+            ));
+        }
+        for (name, v) in [
+            ("x_tol", self.x_tol),
+            ("stall_tol", self.stall_tol),
+            ("polish_x_tol", self.polish_x_tol),
+        ] {
+            if v.is_nan() || v < 0.0 {
+                return bad(format!("{name} must be >= 0 (got {v})"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What the final Nelder–Mead polish did.
+#[derive(Clone, Debug)]
+pub struct PolishReport {
+    pub evaluations: usize,
+    /// Best value before and after the polish (`after <= before`: a worse point is never taken).
+    pub f_before: f64,
+    pub f_after: f64,
+    /// `f_before − f_after` (0 when the polish found nothing better; `inf` when `f_before` was `inf`).
+    pub improvement: f64,
+    /// The simplex shrank below `polish_x_tol` before the budget was spent.
+    pub converged: bool,
+}
+
+#[derive(Clone, Debug)]
+pub struct ShadeResult {
+    pub best: Vec<f64>,
+    /// The best value, as a one-element vector like [`super::DeResult::best_objectives`].
+    pub best_objectives: Vec<f64>,
+    /// All evaluations, the polish's included.
+    pub evaluations: usize,
+    /// Generations run after the initial population.
+    pub generations: usize,
+    pub stop: StopReason,
+    /// Final population size.
+    pub population: usize,
+    /// Final success-history memory (`None`: the terminal CR value).
+    pub memory_f: Vec<f64>,
+    pub memory_cr: Vec<Option<f64>>,
+    /// Present when a polish ran.
+    pub polish: Option<PolishReport>,
+}
+
+impl ShadeResult {
+    /// The callback asked to stop.
+    pub fn stopped(&self) -> bool {
+        self.stop == StopReason::Callback
+    }
+}
+
+/// A normal draw (Box–Muller, two uniforms, no caching so every draw costs the same).
+fn normal(rng: &mut Rng, mean: f64, sd: f64) -> f64 {
+    let u1 = 1.0 - rng.uniform(); // (0, 1]
+    let u2 = rng.uniform();
+    mean + sd * (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+}
+
+/// A Cauchy draw.
+fn cauchy(rng: &mut Rng, loc: f64, scale: f64) -> f64 {
+    loc + scale * (std::f64::consts::PI * (rng.uniform() - 0.5)).tan()
+}
+
+fn check_problem<O: Objective + ?Sized>(obj: &O, bounds: &[(f64, f64)]) -> Result<()> {
+    if obj.n_objectives() != 1 {
+        return Err(Error::Invalid(format!(
+            "L-SHADE and Nelder-Mead minimise one objective (got {})",
+            obj.n_objectives()
+        )));
+    }
+    for (k, &(lo, hi)) in bounds.iter().enumerate() {
+        if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+            return Err(Error::Invalid(format!(
+                "bounds[{k}] must be finite with min <= max (got {lo}, {hi})"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Initial population of `n` individuals within `bounds` (fixed dimensions at their value).
+fn initial_population(rng: &mut Rng, bounds: &[(f64, f64)], n: usize, init: Init) -> Vec<Vec<f64>> {
+    let mut pop = vec![vec![0.0; bounds.len()]; n];
+    for (j, &(lo, hi)) in bounds.iter().enumerate() {
+        if lo == hi {
+            pop.iter_mut().for_each(|x| x[j] = lo);
+            continue;
+        }
+        match init {
+            Init::Uniform => {
+                for x in pop.iter_mut() {
+                    x[j] = (lo + (hi - lo) * rng.uniform()).clamp(lo, hi);
+                }
+            }
+            Init::LatinHypercube => {
+                // A random permutation of the strata (Fisher-Yates).
+                let mut strata: Vec<usize> = (0..n).collect();
+                for i in (1..n).rev() {
+                    strata.swap(i, rng.below(i + 1));
+                }
+                for (x, &s) in pop.iter_mut().zip(&strata) {
+                    let t = (s as f64 + rng.uniform()) / n as f64;
+                    x[j] = (lo + (hi - lo) * t).clamp(lo, hi);
+                }
+            }
+        }
+    }
+    pop
+}
+
+/// Largest per-dimension spread of `pop`, as a fraction of each free dimension's range (0 if none is free).
+pub fn normalized_spread(pop: &[Vec<f64>], bounds: &[(f64, f64)]) -> f64 {
+    normalized_spreads(pop, bounds)
+        .into_iter()
+        .fold(0.0, f64::max)
+}
+
+/// Per-dimension spread `(max − min) / (hi − lo)` of `pop` (0 for fixed dimensions).
+pub fn normalized_spreads(pop: &[Vec<f64>], bounds: &[(f64, f64)]) -> Vec<f64> {
+    bounds
+        .iter()
+        .enumerate()
+        .map(|(j, &(lo, hi))| {
+            if lo == hi || pop.is_empty() {
+                return 0.0;
+            }
+            let (a, b) = pop
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+                    (a.min(x[j]), b.max(x[j]))
+                });
+            (b - a) / (hi - lo)
+        })
+        .collect()
+}
+
+/// Indices of `fit` from best to worst (ties by index, so the order is deterministic).
+fn ranking(fit: &[Vec<f64>]) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..fit.len()).collect();
+    order.sort_by(|&a, &b| fit[a][0].total_cmp(&fit[b][0]).then(a.cmp(&b)));
+    order
+}
+
+fn best_index(fit: &[Vec<f64>]) -> usize {
+    (0..fit.len())
+        .min_by(|&a, &b| fit[a][0].total_cmp(&fit[b][0]))
+        .expect("population is never empty")
+}
+
+/// Improvement-weighted Lehmer mean `Σ w s² / Σ w s` of `s` (weights proportional to `delta`).
+fn weighted_lehmer_mean(s: &[f64], delta: &[f64]) -> f64 {
+    // Improvements are > 0; an infinite one (a trial beating an infinite/NaN parent) takes all the weight.
+    let w: Vec<f64> = if delta.iter().any(|d| !d.is_finite()) {
+        delta
+            .iter()
+            .map(|d| if d.is_finite() { 0.0 } else { 1.0 })
+            .collect()
+    } else {
+        delta.to_vec()
+    };
+    let num: f64 = w.iter().zip(s).map(|(w, s)| w * s * s).sum();
+    let den: f64 = w.iter().zip(s).map(|(w, s)| w * s).sum();
+    if den > 0.0 && den.is_finite() && num.is_finite() {
+        num / den
+    } else {
+        // Degenerate weights: the unweighted Lehmer mean.
+        let num: f64 = s.iter().map(|s| s * s).sum();
+        let den: f64 = s.iter().sum();
+        num / den
+    }
+}
+
+/// Minimise the single objective `obj` within `bounds` with L-SHADE (or jSO, see [`ShadeConfig`]).
+///
+/// `callback` runs after the initial population and after every generation with the current (shrinking)
+/// population; returning `false` stops the search (and skips the polish). The search also stops on the
+/// budget, the generation cap, convergence or stall; [`ShadeResult::stop`] says which (checked in the
+/// order callback, converged, stalled, evaluations, generations).
+pub fn minimize<O, C>(
+    obj: &O,
+    bounds: &[(f64, f64)],
+    cfg: &ShadeConfig,
+    mut callback: C,
+) -> Result<ShadeResult>
+where
+    O: Objective + ?Sized,
+    C: FnMut(&GenerationReport) -> bool,
+{
+    check_problem(obj, bounds)?;
+    let dim = bounds.len();
+    let free = bounds.iter().filter(|(lo, hi)| lo < hi).count();
+    let n_init = cfg.initial_population(free);
+    cfg.validate(n_init)?;
+    let jso = cfg.variant == Variant::Jso;
+    let max_evals = cfg.max_evaluations;
+    let h = cfg.memory_size;
+
+    let mut rng = Rng::new(cfg.seed);
+    let mut pop = initial_population(&mut rng, bounds, n_init, cfg.init);
+    let mut fit = vec![vec![0.0; 1]; n_init];
+    evaluate_all(obj, &pop, &mut fit, None);
+    let mut evaluations = n_init;
+
+    let mut memory_f = vec![cfg.memory_f; h];
+    let mut memory_cr: Vec<Option<f64>> = vec![Some(cfg.memory_cr); h];
+    // jSO keeps the last slot at 0.9 and cycles the updates over the others.
+    let update_slots = if jso && h > 1 {
+        memory_f[h - 1] = 0.9;
+        memory_cr[h - 1] = Some(0.9);
+        h - 1
+    } else {
+        h
+    };
+    let mut slot = 0usize;
+    let mut archive: Vec<Vec<f64>> = Vec::new();
+    let mut archive_cap = (cfg.archive_rate * n_init as f64).round() as usize;
+
+    let mut generations = 0usize;
+    let mut b = best_index(&fit);
+    let mut reference_best = fit[b][0];
+    let mut since_improvement = 0usize;
+
+    let stop_check = |cb_ok: bool,
+                      pop: &[Vec<f64>],
+                      since_improvement: usize,
+                      evaluations: usize,
+                      generations: usize|
+     -> Option<StopReason> {
+        if !cb_ok {
+            Some(StopReason::Callback)
+        } else if cfg.x_tol > 0.0 && normalized_spread(pop, bounds) < cfg.x_tol {
+            Some(StopReason::Converged)
+        } else if cfg.stall_generations > 0 && since_improvement >= cfg.stall_generations {
+            Some(StopReason::Stalled)
+        } else if evaluations >= max_evals {
+            Some(StopReason::MaxEvaluations)
+        } else if cfg.max_generations.is_some_and(|g| generations >= g) {
+            Some(StopReason::MaxGenerations)
+        } else {
+            None
+        }
+    };
+
+    let ok = callback(&report(0, b, &pop, &fit, evaluations));
+    let mut stop = stop_check(ok, &pop, 0, evaluations, 0);
+
+    // Per-generation scratch.
+    let mut trials: Vec<Vec<f64>> = Vec::new();
+    let mut trial_fit: Vec<Vec<f64>> = Vec::new();
+    let mut f_used: Vec<f64> = Vec::new();
+    let mut cr_used: Vec<f64> = Vec::new();
+
+    while stop.is_none() {
+        let n = pop.len();
+        let k = n.min(max_evals - evaluations);
+        let progress = evaluations as f64 / max_evals as f64;
+        let p = if jso {
+            cfg.p_best * (1.0 - 0.5 * progress)
+        } else {
+            cfg.p_best
+        };
+        let n_top = ((p * n as f64).round() as usize).clamp(2, n);
+        let order = ranking(&fit);
+
+        // All random draws of the generation, serially.
+        trials.resize_with(k, || vec![0.0; dim]);
+        trial_fit.resize_with(k, || vec![0.0; 1]);
+        f_used.clear();
+        cr_used.clear();
+        for (i, trial) in trials.iter_mut().enumerate() {
+            let r = rng.below(h);
+            let mut cr = match memory_cr[r] {
+                None => 0.0,
+                Some(m) => normal(&mut rng, m, 0.1).clamp(0.0, 1.0),
+            };
+            let mut f = loop {
+                let v = cauchy(&mut rng, memory_f[r], 0.1);
+                if v > 0.0 {
+                    break v.min(1.0);
+                }
+            };
+            let mut fw = f;
+            if jso {
+                if progress < 0.25 {
+                    cr = cr.max(0.7);
+                } else if progress < 0.5 {
+                    cr = cr.max(0.6);
+                }
+                if progress < 0.6 {
+                    f = f.min(0.7);
+                }
+                fw = f * if progress < 0.2 {
+                    0.7
+                } else if progress < 0.4 {
+                    0.8
+                } else {
+                    1.2
+                };
+            }
+            f_used.push(f);
+            cr_used.push(cr);
+            let pbest = order[rng.below(n_top)];
+            let r1 = pick(&mut rng, n, &[i]);
+            let r2 = pick(&mut rng, n + archive.len(), &[i, r1]);
+            let (x, xp, x1) = (&pop[i], &pop[pbest], &pop[r1]);
+            let x2 = if r2 < n { &pop[r2] } else { &archive[r2 - n] };
+            let jrand = rng.below(dim.max(1));
+            for j in 0..dim {
+                let (lo, hi) = bounds[j];
+                trial[j] = if lo == hi {
+                    lo
+                } else if j == jrand || rng.uniform() < cr {
+                    let v = x[j] + fw * (xp[j] - x[j]) + f * (x1[j] - x2[j]);
+                    // Out of bounds: half way between the parent and the violated bound.
+                    let v = if v < lo {
+                        0.5 * (lo + x[j])
+                    } else if v > hi {
+                        0.5 * (hi + x[j])
+                    } else {
+                        v
+                    };
+                    v.clamp(lo, hi)
+                } else {
+                    x[j]
+                };
+            }
+        }
+
+        // A trial only has to be exact when it beats its target (failures are discarded, and the
+        // success history uses the improvements of successes only), so the objective may exit early.
+        evaluate_all(obj, &trials, &mut trial_fit, Some(&fit[..k]));
+        evaluations += k;
+
+        // Selection, archive and the success history, serially.
+        let mut s_f = Vec::new();
+        let mut s_cr = Vec::new();
+        let mut s_delta = Vec::new();
+        for i in 0..k {
+            let (tf, pf) = (trial_fit[i][0], fit[i][0]);
+            if tf <= pf {
+                std::mem::swap(&mut pop[i], &mut trials[i]);
+                std::mem::swap(&mut fit[i], &mut trial_fit[i]);
+                if tf < pf {
+                    // trials[i] now holds the replaced parent.
+                    if archive_cap > 0 {
+                        if archive.len() < archive_cap {
+                            archive.push(trials[i].clone());
+                        } else {
+                            let r = rng.below(archive.len());
+                            archive[r].clone_from(&trials[i]);
+                        }
+                    }
+                    s_f.push(f_used[i]);
+                    s_cr.push(cr_used[i]);
+                    s_delta.push(pf - tf);
+                }
+            }
+        }
+        if !s_f.is_empty() {
+            let mean_f = weighted_lehmer_mean(&s_f, &s_delta);
+            let max_cr = s_cr.iter().copied().fold(0.0, f64::max);
+            let new_cr = match memory_cr[slot] {
+                Some(old) if max_cr > 0.0 => {
+                    let m = weighted_lehmer_mean(&s_cr, &s_delta);
+                    Some(if jso { 0.5 * (m + old) } else { m })
+                }
+                _ => None,
+            };
+            memory_f[slot] = if jso {
+                0.5 * (mean_f + memory_f[slot])
+            } else {
+                mean_f
+            };
+            memory_cr[slot] = new_cr;
+            slot = (slot + 1) % update_slots;
+        }
+        generations += 1;
+
+        // Linear population size reduction.
+        let planned = n_init as f64
+            + (cfg.min_population as f64 - n_init as f64) * evaluations as f64 / max_evals as f64;
+        let n_new = (planned.round() as usize).clamp(cfg.min_population, n);
+        if n_new < n {
+            let order = ranking(&fit);
+            let mut keep = vec![false; n];
+            for &i in &order[..n_new] {
+                keep[i] = true;
+            }
+            let mut it = keep.iter();
+            pop.retain(|_| *it.next().unwrap());
+            let mut it = keep.iter();
+            fit.retain(|_| *it.next().unwrap());
+            archive_cap = (cfg.archive_rate * n_new as f64).round() as usize;
+            while archive.len() > archive_cap {
+                let r = rng.below(archive.len());
+                archive.swap_remove(r);
+            }
+        }
+
+        b = best_index(&fit);
+        if fit[b][0] < reference_best - cfg.stall_tol {
+            reference_best = fit[b][0];
+            since_improvement = 0;
+        } else {
+            since_improvement += 1;
+        }
+        let ok = callback(&report(generations, b, &pop, &fit, evaluations));
+        stop = stop_check(ok, &pop, since_improvement, evaluations, generations);
+    }
+    let stop = stop.expect("the loop ends with a reason");
+
+    let mut best = pop[b].clone();
+    let mut best_f = fit[b][0];
+    let mut polish = None;
+    if cfg.polish_evaluations > 0 && stop != StopReason::Callback {
+        let step: Vec<f64> = normalized_spreads(&pop, bounds)
+            .into_iter()
+            .map(|s| s.clamp(1e-8, 0.1))
+            .collect();
+        let nm = nelder_mead(
+            obj,
+            bounds,
+            &best,
+            best_f,
+            &step,
+            cfg.polish_evaluations,
+            cfg.polish_x_tol,
+        )?;
+        evaluations += nm.evaluations;
+        let f_before = best_f;
+        if nm.f < best_f {
+            best = nm.x;
+            best_f = nm.f;
+        }
+        polish = Some(PolishReport {
+            evaluations: nm.evaluations,
+            f_before,
+            f_after: best_f,
+            improvement: if best_f < f_before {
+                f_before - best_f
+            } else {
+                0.0
+            },
+            converged: nm.converged,
+        });
+    }
+
+    Ok(ShadeResult {
+        best,
+        best_objectives: vec![best_f],
+        evaluations,
+        generations,
+        stop,
+        population: pop.len(),
+        memory_f,
+        memory_cr,
+        polish,
+    })
+}
+
+/// Result of [`nelder_mead`].
+#[derive(Clone, Debug)]
+pub struct NelderMeadResult {
+    /// The best point seen (`x0` itself, bit for bit, when nothing beat `f0`).
+    pub x: Vec<f64>,
+    pub f: f64,
+    pub evaluations: usize,
+    /// The simplex shrank below `x_tol` before the budget was spent.
+    pub converged: bool,
+}
+
+struct Vertex {
+    /// Normalised coordinates of the free dimensions, in [0, 1].
+    t: Vec<f64>,
+    x: Vec<f64>,
+    f: f64,
+}
+
+/// Bounded Nelder–Mead from `x0` (whose value `f0` is known), with the adaptive coefficients of Gao & Han
+/// (2012): reflection 1, expansion 1 + 2/n, contraction 0.75 − 1/(2n), shrink 1 − 1/n for n free
+/// dimensions.
+///
+/// The search runs in normalised coordinates `t = (x − lo) / (hi − lo)` of the free dimensions; every
+/// point is clamped to the box before it is evaluated (fixed dimensions keep `x0`'s value). The initial
+/// simplex is `x0` plus `step[j]` (a fraction of the range) along each free dimension `j` (minus, where
+/// plus would leave the box). It stops after `max_evaluations` evaluations or when every vertex lies
+/// within `x_tol` (normalised, per dimension) of the best. The initial simplex and shrink steps are
+/// evaluated in parallel; the result does not depend on the number of threads.
+pub fn nelder_mead<O: Objective + ?Sized>(
+    obj: &O,
+    bounds: &[(f64, f64)],
+    x0: &[f64],
+    f0: f64,
+    step: &[f64],
+    max_evaluations: usize,
+    x_tol: f64,
+) -> Result<NelderMeadResult> {
+    check_problem(obj, bounds)?;
+    if x0.len() != bounds.len() || step.len() != bounds.len() {
+        return Err(Error::Invalid(format!(
+            "x0 and step need {} values (got {} and {})",
+            bounds.len(),
+            x0.len(),
+            step.len()
+        )));
+    }
+    let free: Vec<usize> = (0..bounds.len())
+        .filter(|&j| bounds[j].0 < bounds[j].1)
+        .collect();
+    let n = free.len();
+    let f0 = if f0.is_nan() { f64::INFINITY } else { f0 };
+    let to_x = |t: &[f64]| -> Vec<f64> {
+        let mut x = x0.to_vec();
+        for (k, &j) in free.iter().enumerate() {
+            let (lo, hi) = bounds[j];
+            x[j] = (lo + (hi - lo) * t[k]).clamp(lo, hi);
+        }
+        x
+    };
+    let eval = |x: &[f64]| {
+        let mut o = [0.0];
+        obj.evaluate(x, &mut o);
+        if o[0].is_nan() {
+            f64::INFINITY
+        } else {
+            o[0]
+        }
+    };
+    let make = |t: Vec<f64>| {
+        let t: Vec<f64> = t.into_iter().map(|v| v.clamp(0.0, 1.0)).collect();
+        let x = to_x(&t);
+        Vertex { t, x, f: 0.0 }
+    };
+    let evaluate_batch = |vs: &mut [Vertex]| {
+        vs.par_iter_mut().for_each(|v| v.f = eval(&v.x));
+    };
+
+    let t0: Vec<f64> = free
+        .iter()
+        .map(|&j| {
+            let (lo, hi) = bounds[j];
+            ((x0[j] - lo) / (hi - lo)).clamp(0.0, 1.0)
+        })
+        .collect();
+    let mut simplex = vec![Vertex {
+        t: t0.clone(),
+        x: x0.to_vec(),
+        f: f0,
+    }];
+    let mut evaluations = 0usize;
+    if n == 0 || max_evaluations == 0 {
+        return Ok(NelderMeadResult {
+            x: x0.to_vec(),
+            f: f0,
+            evaluations,
+            converged: n == 0,
+        });
+    }
+    let mut initial: Vec<Vertex> = free
+        .iter()
+        .enumerate()
+        .take(max_evaluations)
+        .map(|(k, &j)| {
+            let s = if step[j].is_finite() && step[j] > 0.0 {
+                step[j].min(0.5)
+            } else {
+                0.05
+            };
+            let mut t = t0.clone();
+            t[k] = if t0[k] + s <= 1.0 {
+                t0[k] + s
+            } else {
+                t0[k] - s
+            };
+            make(t)
+        })
+        .collect();
+    evaluate_batch(&mut initial);
+    evaluations += initial.len();
+    simplex.extend(initial);
+    let mut converged = false;
+
+    if simplex.len() == n + 1 {
+        let nf = n as f64;
+        let (alpha, beta, gamma, delta) = (1.0, 1.0 + 2.0 / nf, 0.75 - 0.5 / nf, 1.0 - 1.0 / nf);
+        // Points along the line from the centroid `c` through the worst vertex: c + coef (c - worst).
+        let along = |c: &[f64], w: &[f64], coef: f64| -> Vec<f64> {
+            c.iter().zip(w).map(|(c, w)| c + coef * (c - w)).collect()
+        };
+        loop {
+            simplex.sort_by(|a, b| a.f.total_cmp(&b.f));
+            let spread = simplex[1..]
+                .iter()
+                .flat_map(|v| v.t.iter().zip(&simplex[0].t).map(|(a, b)| (a - b).abs()))
+                .fold(0.0, f64::max);
+            if spread <= x_tol {
+                converged = true;
+                break;
+            }
+            if evaluations >= max_evaluations {
+                break;
+            }
+            let mut c = vec![0.0; n];
+            for v in &simplex[..n] {
+                for (c, t) in c.iter_mut().zip(&v.t) {
+                    *c += t / nf;
+                }
+            }
+            let worst_t = simplex[n].t.clone();
+            let (f_best, f_second, f_worst) = (simplex[0].f, simplex[n - 1].f, simplex[n].f);
+            let mut r = make(along(&c, &worst_t, alpha));
+            r.f = eval(&r.x);
+            evaluations += 1;
+            let mut shrink = false;
+            if r.f < f_best {
+                if evaluations < max_evaluations {
+                    let mut e = make(along(&c, &worst_t, alpha * beta));
+                    e.f = eval(&e.x);
+                    evaluations += 1;
+                    simplex[n] = if e.f < r.f { e } else { r };
+                } else {
+                    simplex[n] = r;
+                }
+            } else if r.f < f_second {
+                simplex[n] = r;
+            } else if evaluations >= max_evaluations {
+                if r.f < f_worst {
+                    simplex[n] = r;
+                }
+            } else if r.f < f_worst {
+                // Outside contraction.
+                let mut oc = make(along(&c, &worst_t, alpha * gamma));
+                oc.f = eval(&oc.x);
+                evaluations += 1;
+                if oc.f <= r.f {
+                    simplex[n] = oc;
+                } else {
+                    simplex[n] = r;
+                    shrink = true;
+                }
+            } else {
+                // Inside contraction.
+                let mut ic = make(along(&c, &worst_t, -gamma));
+                ic.f = eval(&ic.x);
+                evaluations += 1;
+                if ic.f < f_worst {
+                    simplex[n] = ic;
+                } else {
+                    shrink = true;
+                }
+            }
+            if shrink && evaluations < max_evaluations {
+                let best_t = simplex[0].t.clone();
+                let take = n.min(max_evaluations - evaluations);
+                let mut shrunk: Vec<Vertex> = simplex[1..=take]
+                    .iter()
+                    .map(|v| {
+                        make(
+                            best_t
+                                .iter()
+                                .zip(&v.t)
+                                .map(|(b, t)| b + delta * (t - b))
+                                .collect(),
+                        )
+                    })
+                    .collect();
+                evaluate_batch(&mut shrunk);
+                evaluations += take;
+                for (k, v) in shrunk.into_iter().enumerate() {
+                    simplex[1 + k] = v;
+                }
+            }
+        }
+    }
+    let best = simplex
+        .into_iter()
+        .min_by(|a, b| a.f.total_cmp(&b.f))
+        .expect("simplex is never empty");
+    Ok(NelderMeadResult {
+        x: best.x,
+        f: best.f,
+        evaluations,
+        converged,
+    })
+}
+
+/// Standard test functions for validating the optimisers (all with minimum 0).
+pub mod test_functions {
+    use std::f64::consts::PI;
+
+    /// Σ x².  Minimum 0 at the origin.
+    pub fn sphere(x: &[f64]) -> f64 {
+        x.iter().map(|v| v * v).sum()
+    }
+
+    /// Σ 100 (x_{i+1} − x_i²)² + (1 − x_i)².  Minimum 0 at (1, …, 1).
+    pub fn rosenbrock(x: &[f64]) -> f64 {
+        x.windows(2)
+            .map(|w| 100.0 * (w[1] - w[0] * w[0]).powi(2) + (1.0 - w[0]).powi(2))
+            .sum()
+    }
+
+    /// 10 n + Σ x² − 10 cos(2π x).  Minimum 0 at the origin.
+    pub fn rastrigin(x: &[f64]) -> f64 {
+        10.0 * x.len() as f64
+            + x.iter()
+                .map(|v| v * v - 10.0 * (2.0 * PI * v).cos())
+                .sum::<f64>()
+    }
+
+    /// −20 exp(−0.2 √(Σx²/n)) − exp(Σ cos(2π x)/n) + 20 + e.  Minimum 0 at the origin.
+    pub fn ackley(x: &[f64]) -> f64 {
+        let n = x.len().max(1) as f64;
+        let s2 = x.iter().map(|v| v * v).sum::<f64>() / n;
+        let sc = x.iter().map(|v| (2.0 * PI * v).cos()).sum::<f64>() / n;
+        -20.0 * (-0.2 * s2.sqrt()).exp() - sc.exp() + 20.0 + std::f64::consts::E
+    }
+
+    /// 1 + Σ x²/4000 − Π cos(x_i / √i).  Minimum 0 at the origin.
+    pub fn griewank(x: &[f64]) -> f64 {
+        let s = x.iter().map(|v| v * v).sum::<f64>() / 4000.0;
+        let p: f64 = x
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (v / ((i + 1) as f64).sqrt()).cos())
+            .product();
+        1.0 + s - p
+    }
+
+    /// The function called `name` (`sphere`, `rosenbrock`, `rastrigin`, `ackley`, `griewank`).
+    pub fn by_name(name: &str) -> Option<fn(&[f64]) -> f64> {
+        Some(match name {
+            "sphere" => sphere,
+            "rosenbrock" => rosenbrock,
+            "rastrigin" => rastrigin,
+            "ackley" => ackley,
+            "griewank" => griewank,
+            _ => return None,
+        })
+    }
+
+    /// Where each function has its minimum (value 0) in `dim` dimensions.
+    pub fn minimizer(name: &str, dim: usize) -> Option<Vec<f64>> {
+        by_name(name)?;
+        Some(vec![if name == "rosenbrock" { 1.0 } else { 0.0 }; dim])
+    }
+
+    pub const NAMES: [&str; 5] = ["sphere", "rosenbrock", "rastrigin", "ackley", "griewank"];
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lehmer_mean_weights_and_degenerate_cases() {
+        // Equal weights: Σs²/Σs.
+        assert!((weighted_lehmer_mean(&[0.2, 0.4], &[1.0, 1.0]) - 0.2 / 0.6).abs() < 1e-15);
+        // All weight on one value.
+        assert_eq!(weighted_lehmer_mean(&[0.2, 0.4], &[0.0, 3.0]), 0.4);
+        // An infinite improvement takes all the weight instead of giving NaN.
+        let m = weighted_lehmer_mean(&[0.2, 0.4], &[f64::INFINITY, 1.0]);
+        assert!((m - 0.2).abs() < 1e-15, "{m}");
+    }
+
+    #[test]
+    fn latin_hypercube_has_one_point_per_stratum() {
+        let mut rng = Rng::new(3);
+        let bounds = [(-1.0, 3.0), (2.0, 2.0), (0.0, 1e-3)];
+        let n = 17;
+        let pop = initial_population(&mut rng, &bounds, n, Init::LatinHypercube);
+        for (j, &(lo, hi)) in bounds.iter().enumerate() {
+            if lo == hi {
+                assert!(pop.iter().all(|x| x[j] == lo));
+                continue;
+            }
+            let mut seen = vec![0; n];
+            for x in &pop {
+                assert!(lo <= x[j] && x[j] <= hi);
+                let s = (((x[j] - lo) / (hi - lo)) * n as f64).floor() as usize;
+                seen[s.min(n - 1)] += 1;
+            }
+            assert!(seen.iter().all(|&c| c == 1), "dimension {j}: {seen:?}");
+        }
+    }
+
+    #[test]
+    fn samplers_have_the_right_location() {
+        let mut rng = Rng::new(11);
+        let m = 20_000;
+        let mean = (0..m).map(|_| normal(&mut rng, 0.5, 0.1)).sum::<f64>() / m as f64;
+        assert!((mean - 0.5).abs() < 0.005, "{mean}");
+        let mut c: Vec<f64> = (0..m).map(|_| cauchy(&mut rng, 0.5, 0.1)).collect();
+        c.sort_by(f64::total_cmp);
+        let median = c[m / 2];
+        let q1 = c[m / 4];
+        assert!((median - 0.5).abs() < 0.01, "{median}");
+        // The Cauchy quartiles are loc ± scale.
+        assert!((q1 - 0.4).abs() < 0.01, "{q1}");
+    }
+}
