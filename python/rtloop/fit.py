@@ -38,8 +38,11 @@ __all__ = ["PROTOCOLS", "FitResult", "GenerationInfo", "StageResult", "fit"]
 #: Named settings. ``paper``: the paper's numbers. ``rtloop``: the default (see README, speed against error).
 PROTOCOLS: dict[str, dict[str, Any]] = {
     "paper": {"population": 60, "generations": (200, 200), "f": 0.6, "cr": 0.8, "refine": False},
-    "rtloop": {"population": 30, "generations": (100, 100), "f": 0.6, "cr": 0.8, "refine": True,
-               "projected": True},
+    # Default: the closed-form method searched by L-SHADE, 30 x 50 = 1500 evaluations and a 100-evaluation
+    # Nelder-Mead polish (benches/speed_vs_error.py); scenes it does not apply to fall back to DE in two
+    # stages plus a refine pass, 30 x 100 per stage.
+    "rtloop": {"population": 30, "generations": (49, 100), "f": 0.6, "cr": 0.8, "refine": True,
+               "projected": True, "optimizer": "lshade", "polish": 100},
 }
 
 #: Pixels sampled per object for stage 2.
@@ -204,6 +207,8 @@ def fit(
     clip: bool = True,
     pixels_per_object: int = PIXELS_PER_OBJECT,
     callback: Callable[[GenerationInfo], Any] | None = None,
+    optimizer: str | None = None,
+    polish: int | None = None,
 ) -> FitResult:
     """Fit the scene's free parameters (its ``fit`` section) to ``image``.
 
@@ -251,7 +256,8 @@ def fit(
     current = scene
 
     def run(name: str, stage_scene: Scene, paths: list[str], loss: str, pixels: np.ndarray | None,
-            generations: int, stage_seed: int, product_bounds: np.ndarray | None = None) -> StageResult:
+            generations: int, stage_seed: int, product_bounds: np.ndarray | None = None,
+            method: str = "de", polish: int = 0) -> StageResult:
         nonlocal evaluations
         history: list[tuple[int, float, list[float], np.ndarray]] = []
         base_full = np.array(stage_scene.get_params(all_paths))
@@ -276,12 +282,19 @@ def fit(
         out = _native.optimize(
             stage_scene, paths, target, pixels=pixels, loss=loss, clip=clip, population=pop,
             generations=generations, f=f_, cr=cr_, seed=stage_seed, threads=threads, callback=on_generation,
-            product_bounds=product_bounds,
+            product_bounds=product_bounds, method=method, polish=polish,
         )
+        generations_run = out["generations"]
+        if "polish" in out and not out["stopped"]:
+            # The Nelder-Mead polish after the last generation is logged as one more generation, so the
+            # history (and the CSV, the report) ends at the fitted values.
+            generations_run += 1
+            on_generation(generations_run, np.asarray(out["x"]), list(out["objectives"]), out["evaluations"],
+                          out.get("products"))
         evaluations += out["evaluations"]
         return StageResult(
             name=name, paths=paths, param_names=stage_scene.param_names(paths), x=np.asarray(out["x"]),
-            objectives=list(out["objectives"]), evaluations=out["evaluations"], generations=out["generations"],
+            objectives=list(out["objectives"]), evaluations=out["evaluations"], generations=generations_run,
             seconds=time.perf_counter() - t, loss=loss, pixels=int(out["active_pixels"]), history=history,
             products=out.get("products"),
         )
@@ -316,9 +329,12 @@ def fit(
     why_not = _projection_blocker(scene, all_paths)
     method = "projected" if proto.get("projected") and why_not is None else "two-stage"
     settings["method"] = method
+    optimizer = optimizer if optimizer is not None else proto.get("optimizer", "de")
+    polish = int(polish if polish is not None else proto.get("polish", 0))
+    settings["optimizer"], settings["polish"] = optimizer, polish
     if method == "projected":
         s = run("light+colour", current, ["light.position"], "l1_projected", None, gens[0], int(seeds[0]),
-                product_bounds=_product_bounds(scene))
+                product_bounds=_product_bounds(scene), method=optimizer, polish=polish)
         stages.append(s)
         current = _split_products(current.with_params(list(s.x), ["light.position"]), s.products, scene)
     else:

@@ -324,7 +324,7 @@ fn evaluate<'py>(
 #[pyfunction]
 #[pyo3(signature = (scene, paths, target, *, pixels=None, loss="l1", clip=true, population=60,
                     generations=200, f=0.6, cr=0.8, seed=0, threads=None, callback=None,
-                    product_bounds=None))]
+                    product_bounds=None, method="de", max_evaluations=None, polish=0))]
 #[allow(clippy::too_many_arguments)]
 fn optimize<'py>(
     py: Python<'py>,
@@ -342,6 +342,9 @@ fn optimize<'py>(
     threads: Option<usize>,
     callback: Option<Py<PyAny>>,
     product_bounds: Option<PyReadonlyArray3<'py, f64>>,
+    method: &str,
+    max_evaluations: Option<usize>,
+    polish: usize,
 ) -> PyResult<Bound<'py, PyDict>> {
     let scene = &scene.get().0;
     let (fitness, bounds) =
@@ -358,23 +361,14 @@ fn optimize<'py>(
     let mut error: Option<PyErr> = None;
     let result = py.detach(|| {
         pool.install(|| {
-            de::minimize(&fitness, &bounds, &cfg, |rep| {
+            let callback = |rep: &de::GenerationReport| {
                 let Some(cb) = &callback else { return true };
                 let products: Option<Vec<Vec<f64>>> = (fitness.kind() == LossKind::L1Projected)
-                    .then(|| {
-                        fitness
-                            .products(rep.best)
-                            .iter()
-                            .map(|p| p.to_vec())
-                            .collect()
-                    });
+                    .then(|| fitness.products(rep.best).iter().map(|p| p.to_vec()).collect());
                 Python::attach(|py| {
                     let best = PyArray1::from_slice(py, rep.best);
                     let objectives = rep.best_objectives.to_vec();
-                    match cb.call1(
-                        py,
-                        (rep.generation, best, objectives, rep.evaluations, products),
-                    ) {
+                    match cb.call1(py, (rep.generation, best, objectives, rep.evaluations, products)) {
                         Ok(v) => !v.bind(py).is(&*pyo3::types::PyBool::new(py, false)),
                         Err(e) => {
                             error = Some(e);
@@ -382,9 +376,37 @@ fn optimize<'py>(
                         }
                     }
                 })
-            })
+            };
+            match method {
+                "de" => de::minimize(&fitness, &bounds, &cfg, callback).map(|r| {
+                    let why = if r.stopped { "callback" } else { "max_generations" };
+                    (r, why, None)
+                }),
+                "lshade" => {
+                    let scfg = de::shade::ShadeConfig {
+                        max_evaluations: max_evaluations.unwrap_or(population * (generations + 1)),
+                        population_init: Some(population),
+                        polish_evaluations: polish,
+                        seed,
+                        ..de::shade::ShadeConfig::lshade()
+                    };
+                    de::shade::minimize(&fitness, &bounds, &scfg, callback).map(|r| {
+                        let polish = r.polish.as_ref().map(|p| (p.evaluations, p.f_before, p.f_after));
+                        let res = de::DeResult {
+                            best: r.best,
+                            best_objectives: r.best_objectives,
+                            evaluations: r.evaluations,
+                            generations: r.generations,
+                            stopped: matches!(r.stop, de::shade::StopReason::Callback),
+                        };
+                        (res, r.stop.as_str(), polish)
+                    })
+                }
+                other => Err(Error::Invalid(format!("unknown method {other:?} (known: \"de\", \"lshade\")"))),
+            }
         })
     })?;
+    let (result, stop_reason, polish_report) = result;
     if let Some(e) = error {
         return Err(e);
     }
@@ -402,6 +424,10 @@ fn optimize<'py>(
     d.set_item("evaluations", result.evaluations)?;
     d.set_item("generations", result.generations)?;
     d.set_item("stopped", result.stopped)?;
+    d.set_item("stop_reason", stop_reason)?;
+    if let Some((evals, before, after)) = polish_report {
+        d.set_item("polish", (evals, before, after))?;
+    }
     d.set_item("active_pixels", active)?;
     Ok(d)
 }
