@@ -24,6 +24,7 @@ pub const SATURATED: f32 = 0.999;
 
 struct SphereOccluder {
     center: [f32; 3],
+    radius: f32,
     /// |p - c|² - r² per pixel of the group.
     c: Vec<f32>,
 }
@@ -47,6 +48,8 @@ struct Group {
     ts: [Vec<f32>; 3],
     spheres: Vec<SphereOccluder>,
     planes: Vec<PlaneOccluder>,
+    /// Bounding sphere (centre, radius) of each run of `BLOCK` pixels, for culling shadow tests.
+    blocks: Vec<([f32; 3], f32)>,
 }
 
 impl Group {
@@ -121,6 +124,18 @@ impl Kernel {
                 }),
                 spheres: Vec::new(),
                 planes: Vec::new(),
+                blocks: idx
+                    .chunks(BLOCK)
+                    .map(|chunk| {
+                        let pts: Vec<Vec3A> = chunk.iter().map(|&i| surfels[i].position).collect();
+                        let centre = pts.iter().fold(Vec3A::ZERO, |a, &p| a + p) / pts.len() as f32;
+                        let radius = pts
+                            .iter()
+                            .map(|&p| (p - centre).length())
+                            .fold(0.0f32, f32::max);
+                        (centre.to_array(), radius)
+                    })
+                    .collect(),
             };
             if shadows && object.is_some() {
                 for (k, shape) in shapes.iter().enumerate() {
@@ -130,6 +145,7 @@ impl Kernel {
                     match *shape {
                         PShape::Sphere { center, radius } => g.spheres.push(SphereOccluder {
                             center: center.to_array(),
+                            radius,
                             c: idx
                                 .iter()
                                 .map(|&i| {
@@ -341,8 +357,9 @@ impl Kernel {
                 }
                 for c in 0..3 {
                     let t = &g.ts[c][r.clone()];
-                    syg[c] += lane_sum(e, t, |ei, ti| if ti < sat { ei * ti } else { 0.0 }) as f64;
-                    sgg[c] += lane_sum(e, t, |ei, ti| if ti < sat { ei * ei } else { 0.0 }) as f64;
+                    let (a, b) = normal_equations(e, t, sat);
+                    syg[c] += a as f64;
+                    sgg[c] += b as f64;
                 }
                 start += len;
             }
@@ -435,6 +452,31 @@ fn lane_sum(a: &[f32], b: &[f32], f: impl Fn(f32, f32) -> f32) -> f32 {
         acc[j] += f(*x, *y);
     }
     acc.iter().sum()
+}
+
+/// (Σ e·t, Σ e²) over the pixels with t < `sat`, in `LANES` partial sums each.
+#[inline(always)]
+fn normal_equations(e: &[f32], t: &[f32], sat: f32) -> (f32, f32) {
+    let (mut a, mut b) = ([0.0f32; LANES], [0.0f32; LANES]);
+    let n = e.len().min(t.len());
+    let full = n - n % LANES;
+    for (x, y) in e[..full]
+        .chunks_exact(LANES)
+        .zip(t[..full].chunks_exact(LANES))
+    {
+        for j in 0..LANES {
+            // Select, not multiply by a 0/1 weight: excluded pixels carry t = +inf.
+            let keep = y[j] < sat;
+            a[j] += if keep { x[j] * y[j] } else { 0.0 };
+            b[j] += if keep { x[j] * x[j] } else { 0.0 };
+        }
+    }
+    for j in full..n {
+        let keep = t[j] < sat;
+        a[j - full] += if keep { e[j] * t[j] } else { 0.0 };
+        b[j - full] += if keep { e[j] * e[j] } else { 0.0 };
+    }
+    (a.iter().sum(), b.iter().sum())
 }
 
 /// e = max(0, n·l) / d² (unit light), written into `e`; 0 for a light on the surface.
@@ -539,7 +581,22 @@ fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mut [f32]) {
         &g.p[2][r.start..][..n],
     );
     let [lx, ly, lz] = light.pos;
+    let (centre, reach) = g.blocks[r.start / BLOCK];
+    let (b, l) = (Vec3A::from_array(centre), Vec3A::from_array(light.pos));
     for s in &g.spheres {
+        // Every segment from a pixel of this block to the light stays within `reach` of the segment from
+        // the block's centre to the light: if the sphere is farther than that, no pixel is shadowed by it.
+        let c = Vec3A::from_array(s.center);
+        let v = l - b;
+        let t = if v.length_squared() > 0.0 {
+            ((c - b).dot(v) / v.length_squared()).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let gap = (c - (b + t * v)).length();
+        if gap > (s.radius + reach) * (1.0 + 1e-4) + 1e-6 * (c.abs().max_element() + s.radius) {
+            continue;
+        }
         let cc = &s.c[r.start..][..n];
         let [cx, cy, cz] = s.center;
         for i in 0..n {
