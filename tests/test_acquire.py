@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 import pytest
 from PIL import Image, ImageOps
+
 from rtloop.acquire import load_image
 from rtloop.errors import AcquisitionError
 

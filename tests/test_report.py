@@ -249,7 +249,10 @@ def test_page_is_self_contained(projected, photo, tmp_path):
     for text in ("L1", "RMSE", "PSNR", "light position error (m)", "product relative error",
                  result.identifiability["note"].split(":")[0]):
         assert text in page, text
-    assert "Uncertainty" not in page  # not available yet: the field is shown only when present
+    # The fit's per-parameter uncertainty is shown, one row per parameter.
+    assert "Uncertainty" in page
+    for name in result.uncertainty["sigma"]:
+        assert name in page
 
     # Written again with a coarser strip: stale strip frames go, nothing else is left behind.
     result.uncertainty = {"light.position.x": 0.01}

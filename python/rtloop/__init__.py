@@ -23,6 +23,7 @@ from .errors import AcquisitionError, RtloopError, SceneError
 from .fit import FitResult, StageResult, fit
 from .report import report
 from .scene import load_scene, save_scene, scene_to_dict
+from .uncertainty import estimate_uncertainty
 
 __all__ = [
     "AcquisitionError",
@@ -32,6 +33,7 @@ __all__ = [
     "SceneError",
     "StageResult",
     "__version__",
+    "estimate_uncertainty",
     "fit",
     "load_image",
     "load_scene",

@@ -1,7 +1,8 @@
 """Type stubs for rtloop's compiled core (rust/python/mod.rs)."""
 
+from collections.abc import Callable
 from os import PathLike
-from typing import Any, Callable
+from typing import Any, Self
 
 import numpy as np
 import numpy.typing as npt
@@ -14,7 +15,7 @@ class SceneError(RtloopError): ...
 class Scene:
     """A validated, immutable scene. Prefer ``rtloop.load_scene``."""
 
-    def __new__(cls, json_text: str) -> Scene: ...
+    def __new__(cls, json_text: str) -> Self: ...
     @property
     def width(self) -> int: ...
     @property

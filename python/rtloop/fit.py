@@ -98,6 +98,8 @@ class FitResult:
     settings: dict[str, Any]
     success: bool = True
     message: str = ""
+    #: Per-parameter 1-sigma uncertainty (see rtloop.uncertainty), or None when not estimated.
+    uncertainty: dict[str, Any] | None = None
 
     @property
     def fitness(self) -> float:
@@ -128,6 +130,7 @@ class FitResult:
             "fitted": self.x,
             "products": self.products,
             "identifiability": self.identifiability,
+            "uncertainty": self.uncertainty,
             "message": self.message,
         }
 
@@ -146,8 +149,9 @@ def _identifiability(scene: Scene, paths: list[str]) -> dict[str, Any]:
         info["determined"] = [f"{'*'.join(light_scale)}*{p}" for p in albedo_paths]
         info["note"] = (
             "no ambient light and no specular highlight: the image fixes only light intensity x albedo "
-            "per object and channel (see 'products'); the intensity is kept at the stage-1 value unless an "
-            "albedo would exceed its bounds, in which case the light is made just bright enough"
+            "per object and channel (see 'products'); the intensity is kept at the scene's value (the paper "
+            "protocol: stage 1's value) unless an albedo would exceed its bounds, in which case the light is "
+            "made just bright enough"
         )
     elif len(light_scale) > 1:
         info["degenerate"] = True
@@ -209,6 +213,7 @@ def fit(
     callback: Callable[[GenerationInfo], Any] | None = None,
     optimizer: str | None = None,
     polish: int | None = None,
+    uncertainty: bool = True,
 ) -> FitResult:
     """Fit the scene's free parameters (its ``fit`` section) to ``image``.
 
@@ -217,7 +222,10 @@ def fit(
     CR 0.8); ``population``, ``generations`` (one number for both stages or a pair), ``f`` and ``cr``
     override it. ``seed`` makes the result reproducible on any number of ``threads``. ``clip`` compares
     min(render, 1) with the objective, as an 8/16-bit photo saturates. ``callback(GenerationInfo)`` runs
-    after every generation; returning False stops the current stage.
+    after every generation; returning False stops the current stage. ``uncertainty`` adds per-parameter
+    1-sigma estimates (Gauss-Newton at the optimum, scaled by the residual) to the result. ``optimizer``
+    ("de" or "lshade") and ``polish`` (Nelder-Mead evaluations) override the protocol's search for the
+    closed-form method.
     """
     t0 = time.perf_counter()
     scene = load_scene(scene)
@@ -352,7 +360,7 @@ def fit(
     current = _restore_bounds(current, scene)
     current = _keep_undetermined(current, scene, all_paths, ident)
     values = current.get_params(all_paths)
-    return FitResult(
+    result = FitResult(
         scene=current,
         x={n: float(v) for n, v in zip(all_names, values)},
         stages=stages,
@@ -364,6 +372,12 @@ def fit(
         identifiability=ident,
         settings=settings,
     )
+    if uncertainty:
+        from .uncertainty import estimate_uncertainty
+
+        result.uncertainty = estimate_uncertainty(result, target, clip=clip)
+    result.seconds = time.perf_counter() - t0
+    return result
 
 
 def lit_pixel_counts(scene: Scene) -> list[int]:

@@ -730,10 +730,12 @@ def report(
             page.add(_table(["object", "fitted"], body, numeric_from=2))
     uncertainty = getattr(result, "uncertainty", None) or rep.get("uncertainty")
     if uncertainty:
-        page.add("<h3>Uncertainty</h3>")
-        items = uncertainty.items() if isinstance(uncertainty, dict) else enumerate(uncertainty)
-        page.add(_table(["parameter", "uncertainty"], [[str(k), _fmt(v) if not isinstance(v, str) else v]
-                                                      for k, v in items]))
+        page.add("<h3>Uncertainty (1 sigma, Gauss-Newton at the optimum, from the residual)</h3>")
+        sigma = uncertainty.get("sigma", uncertainty) if isinstance(uncertainty, dict) else {}
+        page.add(_table(["parameter", "sigma"], [[str(k), "not determined" if v is None else _fmt(v)]
+                                                  for k, v in sigma.items()]))
+        for w in (uncertainty.get("warnings", []) if isinstance(uncertainty, dict) else []):
+            page.add(f"<p class='note'>{html.escape(str(w))}</p>")
 
     # 6. speed against error -------------------------------------------------------------------------------
     if speed_vs_error_png is not None and Path(speed_vs_error_png).is_file():
