@@ -249,18 +249,11 @@ impl Kernel {
                         acc[c] += sum as f64;
                     }
                 } else {
+                    let t = [&g.t[0][r.clone()], &g.t[1][r.clone()], &g.t[2][r.clone()]];
+                    let top = if clip { 1.0 } else { f32::INFINITY };
+                    let sums = rgb_l1(&e[..len], t, a, k, top);
                     for c in 0..3 {
-                        let (ac, kc) = (a[c], k[c]);
-                        let sum = if clip {
-                            lane_sum(&e[..len], &g.t[c][r.clone()], |ei, ti| {
-                                ((ac + ei * kc).min(1.0) - ti).abs()
-                            })
-                        } else {
-                            lane_sum(&e[..len], &g.t[c][r.clone()], |ei, ti| {
-                                (ac + ei * kc - ti).abs()
-                            })
-                        };
-                        acc[c] += sum as f64;
+                        acc[c] += sums[c] as f64;
                     }
                 }
                 start += len;
@@ -380,14 +373,12 @@ impl Kernel {
             while start < n {
                 let len = BLOCK.min(n - start);
                 let e = &e_all[start..start + len];
+                let r = start..start + len;
+                let t = [&g.t[0][r.clone()], &g.t[1][r.clone()], &g.t[2][r]];
+                let top = if clip { 1.0 } else { f32::INFINITY };
+                let sums = rgb_l1(e, t, [0.0; 3], pk, top);
                 for c in 0..3 {
-                    let (pc, t) = (pk[c], &g.t[c][start..start + len]);
-                    let block = if clip {
-                        lane_sum(e, t, |ei, ti| ((pc * ei).min(1.0) - ti).abs())
-                    } else {
-                        lane_sum(e, t, |ei, ti| (pc * ei - ti).abs())
-                    };
-                    acc[c] += block as f64;
+                    acc[c] += sums[c] as f64;
                 }
                 start += len;
                 if acc[0] + acc[1] + acc[2] > bound {
@@ -437,21 +428,36 @@ pub fn fallback_sums(e: &[f32], t: &[f32], sat: f32) -> (f64, f64, f32) {
 /// results stay bit-reproducible).
 const LANES: usize = 8;
 
-/// Sum of f(a[i], b[i]) over the slices, in `LANES` interleaved partial sums.
+/// Σ |min(a_c + e·k_c, top) - t_c| for the three channels in one pass over `e`, in `LANES` partial sums.
 #[inline(always)]
-fn lane_sum(a: &[f32], b: &[f32], f: impl Fn(f32, f32) -> f32) -> f32 {
-    let mut acc = [0.0f32; LANES];
-    let (ac, ar) = (a.chunks_exact(LANES), a.chunks_exact(LANES).remainder());
-    let (bc, br) = (b.chunks_exact(LANES), b.chunks_exact(LANES).remainder());
-    for (x, y) in ac.zip(bc) {
+fn rgb_l1(e: &[f32], t: [&[f32]; 3], a: [f32; 3], k: [f32; 3], top: f32) -> [f32; 3] {
+    let n = e.len();
+    let (t0, t1, t2) = (&t[0][..n], &t[1][..n], &t[2][..n]);
+    let (mut s0, mut s1, mut s2) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+    let full = n - n % LANES;
+    let mut i = 0;
+    while i < full {
+        let (ec, c0, c1, c2) = (
+            &e[i..i + LANES],
+            &t0[i..i + LANES],
+            &t1[i..i + LANES],
+            &t2[i..i + LANES],
+        );
         for j in 0..LANES {
-            acc[j] += f(x[j], y[j]);
+            let ej = ec[j];
+            s0[j] += ((a[0] + ej * k[0]).min(top) - c0[j]).abs();
+            s1[j] += ((a[1] + ej * k[1]).min(top) - c1[j]).abs();
+            s2[j] += ((a[2] + ej * k[2]).min(top) - c2[j]).abs();
         }
+        i += LANES;
     }
-    for (j, (x, y)) in ar.iter().zip(br).enumerate() {
-        acc[j] += f(*x, *y);
+    for j in 0..n - full {
+        let ej = e[full + j];
+        s0[j] += ((a[0] + ej * k[0]).min(top) - t0[full + j]).abs();
+        s1[j] += ((a[1] + ej * k[1]).min(top) - t1[full + j]).abs();
+        s2[j] += ((a[2] + ej * k[2]).min(top) - t2[full + j]).abs();
     }
-    acc.iter().sum()
+    [s0.iter().sum(), s1.iter().sum(), s2.iter().sum()]
 }
 
 /// (Σ e·t, Σ e²) over the pixels with t < `sat`, in `LANES` partial sums each.
