@@ -498,3 +498,19 @@ def test_repo_example(tmp_path, capsys):
         assert name in stdout
     with Image.open(out / "final.png") as im:
         assert im.size == (scene.width, scene.height)
+
+
+def test_mask_option(capsys, inputs, tmp_path):
+    scene_path, image_path = inputs
+    mask = np.ones((H, W, 3), np.float32)
+    mask[:, : W // 4] = 0.0
+    rtloop.save_image(tmp_path / "mask.png", mask)
+    out = tmp_path / "masked"
+    code, _, err = run(capsys, scene_path, image_path, "--out", out, "--mask", tmp_path / "mask.png",
+                       "--population", 8, "--generations", 3, "--quiet", "--snapshot-every", 0)
+    assert code == 0, err
+    report = json.loads((out / "result.json").read_text(encoding="utf-8"))["fit_report"]
+    assert report["inputs"]["mask"] == str((tmp_path / "mask.png").resolve())
+    assert report["settings"]["masked_pixels"] == H * (W // 4)
+    code, _, err = run(capsys, scene_path, image_path, "--out", tmp_path / "x", "--mask", tmp_path / "nope.png")
+    assert code == 1 and "nope.png" in error_line(err)

@@ -255,3 +255,38 @@ def test_reference_scenes_light_within_5cm(case):
     s = _score(result.scene.to_dict(), truth)
     assert s["light_err_m"] < 0.05, s
     assert max(s["product_rel_err"].values()) < 0.05, s
+
+
+def test_mask_leaves_out_what_the_scene_does_not_model(ball_scene, tmp_path):
+    """A bright patch the scene cannot make (a reflection, another object) biases an unmasked fit; masked
+    out, the fit is as good as on the clean photo."""
+    truth = ball_scene
+    photo = _photo(truth)
+    damaged = photo.copy()
+    damaged[30:44, 2:20] = 0.9  # a bright rectangle on the floor, left of the ball
+    mask_img = np.ones((48, 64, 3), np.float32)
+    mask_img[28:46, 0:22] = 0.0
+    rtloop.save_image(tmp_path / "mask.png", mask_img)
+    mask = rtloop.load_mask(tmp_path / "mask.png", rtloop.load_scene(truth))
+    assert mask.shape == (48, 64) and mask.dtype == bool
+    assert not mask[30:44, 2:20].any() and mask[:20].all()
+
+    def light_err(r):
+        return np.linalg.norm(np.array(r.scene.to_dict()["light"]["position"]) - truth["light"]["position"])
+
+    unmasked = rtloop.fit(_wrong_start(truth), damaged, seed=4)
+    masked = rtloop.fit(_wrong_start(truth), damaged, seed=4, mask=mask)
+    assert light_err(masked) < 0.01
+    assert light_err(unmasked) > 3 * light_err(masked)
+    assert masked.settings["masked_pixels"] == int((~mask).sum())
+    for name in ("ball", "floor"):
+        want = _products(truth)[name]
+        got = np.array(masked.products[name])
+        assert np.max(np.abs(got - want)) / np.max(want) < 0.01
+    with pytest.raises(rtloop.RtloopError, match="mask"):
+        rtloop.fit(truth, photo, mask=np.zeros((48, 64), bool))
+    with pytest.raises(rtloop.RtloopError, match="mask"):
+        rtloop.fit(truth, photo, mask=np.ones((10, 10), bool))
+    rtloop.save_image(tmp_path / "black.png", np.zeros((48, 64, 3), np.float32))
+    with pytest.raises(rtloop.AcquisitionError, match="black.png"):
+        rtloop.load_mask(tmp_path / "black.png", rtloop.load_scene(truth))

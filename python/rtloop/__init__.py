@@ -18,7 +18,7 @@ import numpy as np
 
 from . import _native
 from ._native import Scene, __version__
-from .acquire import load_image
+from .acquire import load_image, load_mask
 from .errors import AcquisitionError, RtloopError, SceneError
 from .fit import FitResult, StageResult, fit
 from .report import report
@@ -36,6 +36,7 @@ __all__ = [
     "estimate_uncertainty",
     "fit",
     "load_image",
+    "load_mask",
     "load_scene",
     "object_ids",
     "render",

@@ -48,7 +48,7 @@ from PIL import Image
 
 from .errors import AcquisitionError
 
-__all__ = ["RESPONSES", "load_image"]
+__all__ = ["RESPONSES", "load_image", "load_mask"]
 
 #: The accepted values of ``load_image(..., response=...)``.
 RESPONSES = ("srgb", "linear")
@@ -337,3 +337,19 @@ def _linearise(image: np.ndarray, response: str) -> np.ndarray:
     if not np.isfinite(result).all():
         raise _Fail("image contains values too large for 32-bit floats")
     return result
+
+
+def load_mask(path: str | os.PathLike[str], scene: SceneLike, *, crop: bool = False) -> np.ndarray:
+    """Load a mask image for :func:`rtloop.fit`: white where the scene models the photo, black where it
+    does not (another object, a reflection, a shadow the scene has no caster for).
+
+    Any format :func:`load_image` reads, at the photo's or the scene's size (same aspect-ratio rules and
+    ``crop``). Returns bool (H, W) at the scene's size, True = use the pixel. A working pixel is kept only
+    when the mask is white over all of it (coverage >= 99 % after area averaging), so pixels that straddle
+    the mask's edge are left out too.
+    """
+    values = load_image(path, scene, response="linear", crop=crop)
+    keep = values.mean(axis=2) >= 0.99
+    if not keep.any():
+        raise AcquisitionError(f"{os.fspath(path)}: the mask is black everywhere: no pixel would be fitted")
+    return keep

@@ -203,6 +203,9 @@ def _build_parser() -> _Parser:
                    "editors) or 'linear' (raw linear sensor counts)")
     p.add_argument("--crop", action="store_true",
                    help="centre-crop IMAGE to the scene's aspect ratio (otherwise they must match)")
+    p.add_argument("--mask", type=Path, metavar="PNG",
+                   help="an image of IMAGE's size (or the scene's): white where the scene models the photo, "
+                   "black where it does not (another object, a reflection); black pixels are left out of the fit")
     p.add_argument("--snapshot-every", type=_int_at_least(0, "a whole number >= 0"), default=5, metavar="N",
                    help="render the best individual every N generations of every stage into snapshots/ "
                    "(default 5; 0 disables)")
@@ -389,6 +392,7 @@ class _Run:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             image = rtloop.load_image(args.image, scene, response=args.response, crop=args.crop)
+            mask = None if args.mask is None else rtloop.load_mask(args.mask, scene, crop=args.crop)
         for w in caught:
             print(f"{PROG}: warning: {' '.join(str(w.message).split())}", file=sys.stderr)
         self.check_stop()
@@ -433,6 +437,7 @@ class _Run:
             result = rtloop.fit(
                 scene, image, protocol=args.protocol, seed=args.seed, population=args.population,
                 generations=args.generations, f=args.f, cr=args.cr, threads=args.threads, callback=callback,
+                mask=mask,
             )
         self.progress.end_line()
         self.check_stop()
@@ -443,6 +448,7 @@ class _Run:
             "image": os.path.abspath(args.image),
             "response": args.response,
             "crop": bool(args.crop),
+            "mask": None if args.mask is None else os.path.abspath(args.mask),
         }
         data = rtloop.scene_to_dict(result.scene)
         data["fit_report"] = report

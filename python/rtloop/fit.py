@@ -214,6 +214,7 @@ def fit(
     optimizer: str | None = None,
     polish: int | None = None,
     uncertainty: bool = True,
+    mask: np.ndarray | None = None,
 ) -> FitResult:
     """Fit the scene's free parameters (its ``fit`` section) to ``image``.
 
@@ -225,7 +226,8 @@ def fit(
     after every generation; returning False stops the current stage. ``uncertainty`` adds per-parameter
     1-sigma estimates (Gauss-Newton at the optimum, scaled by the residual) to the result. ``optimizer``
     ("de" or "lshade") and ``polish`` (Nelder-Mead evaluations) override the protocol's search for the
-    closed-form method.
+    closed-form method. ``mask`` (bool (H, W), True = use) leaves out pixels the scene does not model
+    (another object, a reflection, the photographer's shadow): they count in no loss and no solve.
     """
     t0 = time.perf_counter()
     scene = load_scene(scene)
@@ -249,6 +251,14 @@ def fit(
         )
     if not np.isfinite(target).all():
         raise RtloopError("image: contains NaN or infinite values")
+    use: np.ndarray | None = None
+    if mask is not None:
+        m = np.asarray(mask)
+        if m.shape != (scene.height, scene.width):
+            raise RtloopError(f"mask: shape {m.shape} does not match the scene's ({scene.height}, {scene.width})")
+        if not m.any():
+            raise RtloopError("mask: selects no pixel")
+        use = np.flatnonzero(m.astype(bool).ravel()).astype(np.uint32)
     all_paths = scene.fit_paths
     if not all_paths:
         raise RtloopError("fit: the scene's fit section names no free parameters")
@@ -257,6 +267,7 @@ def fit(
     other_paths = [p for p in all_paths if not p.startswith("light.")]
     ident = _identifiability(scene, all_paths)
     settings = {"population": pop, "generations": list(gens), "f": f_, "cr": cr_, "clip": clip,
+                "masked_pixels": None if use is None else int(scene.width * scene.height - use.size),
                 "pixels_per_object": pixels_per_object, "threads": threads}
     stages: list[StageResult] = []
     evaluations = 0
@@ -308,12 +319,14 @@ def fit(
         )
 
     def light_stage(name: str, stage_scene: Scene, stage_seed: int) -> Scene:
-        s = run(name, stage_scene, light_paths, "l1", None, gens[0], stage_seed)
+        s = run(name, stage_scene, light_paths, "l1", use, gens[0], stage_seed)
         stages.append(s)
         return stage_scene.with_params(list(s.x), light_paths)
 
     def colour_stage(name: str, stage_scene: Scene, stage_seed: int) -> Scene:
         lit = _native.render(stage_scene).max(axis=2) > 1e-4
+        if mask is not None:
+            lit &= np.asarray(mask, bool)
         pixels = sample_object_pixels(stage_scene, lit, pixels_per_object, rng)
         search_scene = stage_scene
         widen: dict[str, tuple[Any, Any]] = {}
@@ -341,7 +354,7 @@ def fit(
     polish = int(polish if polish is not None else proto.get("polish", 0))
     settings["optimizer"], settings["polish"] = optimizer, polish
     if method == "projected":
-        s = run("light+colour", current, ["light.position"], "l1_projected", None, gens[0], int(seeds[0]),
+        s = run("light+colour", current, ["light.position"], "l1_projected", use, gens[0], int(seeds[0]),
                 product_bounds=_product_bounds(scene), method=optimizer, polish=polish)
         stages.append(s)
         current = _split_products(current.with_params(list(s.x), ["light.position"]), s.products, scene)
@@ -375,7 +388,7 @@ def fit(
     if uncertainty:
         from .uncertainty import estimate_uncertainty
 
-        result.uncertainty = estimate_uncertainty(result, target, clip=clip)
+        result.uncertainty = estimate_uncertainty(result, target, clip=clip, mask=mask)
     result.seconds = time.perf_counter() - t0
     return result
 

@@ -69,6 +69,7 @@ def estimate_uncertainty(
     clip: bool = True,
     step: float | dict[str, float] | None = None,
     params: str = "auto",
+    mask: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """Per-parameter standard deviations and correlations of a fit (Gauss-Newton at the optimum).
 
@@ -118,6 +119,8 @@ def estimate_uncertainty(
     silhouette = _edges(ids)
     shadow_edge = _edges(np.where(ids >= 0, lit.astype(np.int32), -1)) & ~silhouette
     use = ~(saturated | silhouette | shadow_edge)
+    if mask is not None:  # pixels the fit left out (bool (H, W), True = used)
+        use &= np.asarray(mask, bool)
     raw0 = raw(theta0)
     clipped0 = raw0 >= 1.0
 
