@@ -364,11 +364,20 @@ fn optimize<'py>(
             let callback = |rep: &de::GenerationReport| {
                 let Some(cb) = &callback else { return true };
                 let products: Option<Vec<Vec<f64>>> = (fitness.kind() == LossKind::L1Projected)
-                    .then(|| fitness.products(rep.best).iter().map(|p| p.to_vec()).collect());
+                    .then(|| {
+                        fitness
+                            .products(rep.best)
+                            .iter()
+                            .map(|p| p.to_vec())
+                            .collect()
+                    });
                 Python::attach(|py| {
                     let best = PyArray1::from_slice(py, rep.best);
                     let objectives = rep.best_objectives.to_vec();
-                    match cb.call1(py, (rep.generation, best, objectives, rep.evaluations, products)) {
+                    match cb.call1(
+                        py,
+                        (rep.generation, best, objectives, rep.evaluations, products),
+                    ) {
                         Ok(v) => !v.bind(py).is(&*pyo3::types::PyBool::new(py, false)),
                         Err(e) => {
                             error = Some(e);
@@ -379,7 +388,11 @@ fn optimize<'py>(
             };
             match method {
                 "de" => de::minimize(&fitness, &bounds, &cfg, callback).map(|r| {
-                    let why = if r.stopped { "callback" } else { "max_generations" };
+                    let why = if r.stopped {
+                        "callback"
+                    } else {
+                        "max_generations"
+                    };
                     (r, why, None)
                 }),
                 "lshade" => {
@@ -391,7 +404,10 @@ fn optimize<'py>(
                         ..de::shade::ShadeConfig::lshade()
                     };
                     de::shade::minimize(&fitness, &bounds, &scfg, callback).map(|r| {
-                        let polish = r.polish.as_ref().map(|p| (p.evaluations, p.f_before, p.f_after));
+                        let polish = r
+                            .polish
+                            .as_ref()
+                            .map(|p| (p.evaluations, p.f_before, p.f_after));
                         let res = de::DeResult {
                             best: r.best,
                             best_objectives: r.best_objectives,
@@ -402,7 +418,9 @@ fn optimize<'py>(
                         (res, r.stop.as_str(), polish)
                     })
                 }
-                other => Err(Error::Invalid(format!("unknown method {other:?} (known: \"de\", \"lshade\")"))),
+                other => Err(Error::Invalid(format!(
+                    "unknown method {other:?} (known: \"de\", \"lshade\")"
+                ))),
             }
         })
     })?;
