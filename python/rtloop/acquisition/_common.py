@@ -1,0 +1,190 @@
+"""Small helpers shared by the acquisition modules: encoding for display and detection, files, errors."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from ..errors import AcquisitionError
+
+__all__ = [
+    "AcquisitionError",
+    "atomic_write_bytes",
+    "check_image",
+    "encode_srgb",
+    "read_json",
+    "to_detection_grey",
+    "to_display_bgr8",
+    "write_json",
+    "write_png16_srgb",
+]
+
+
+def check_image(image: Any, what: str = "image") -> np.ndarray:
+    """A float32 (H, W, 3) copy-free view of a linear RGB image, or a clear AcquisitionError."""
+    arr = np.asarray(image)
+    if arr.ndim == 2:
+        arr = np.repeat(arr[:, :, None], 3, axis=2)
+    if arr.ndim != 3 or arr.shape[2] != 3 or arr.shape[0] < 8 or arr.shape[1] < 8:
+        raise AcquisitionError(
+            f"{what}: expected a linear RGB image of shape (H, W, 3) at least 8x8, got shape {arr.shape}"
+        )
+    if arr.dtype != np.float32:
+        if arr.dtype == np.uint8:
+            raise AcquisitionError(
+                f"{what}: got 8-bit values; pass a linear float image (rtloop.load_image or "
+                "rtloop.acquisition.load_photo make one)"
+            )
+        arr = arr.astype(np.float32)
+    if not np.isfinite(arr).all():
+        raise AcquisitionError(f"{what}: contains NaN or infinite values")
+    return arr
+
+
+def encode_srgb(linear: np.ndarray) -> np.ndarray:
+    """Linear values -> sRGB-encoded values in [0, 1] (clipped), float32."""
+    x = np.clip(np.asarray(linear, dtype=np.float32), 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055).astype(np.float32)
+
+
+def to_display_bgr8(linear: np.ndarray) -> np.ndarray:
+    """A linear RGB image as 8-bit sRGB BGR (OpenCV's order), for drawing and detection."""
+    enc = encode_srgb(linear)
+    return np.ascontiguousarray((enc[:, :, ::-1] * 255.0 + 0.5).astype(np.uint8))
+
+
+def to_detection_grey(linear: np.ndarray, stretch: bool = True) -> np.ndarray:
+    """8-bit grey image for the marker and corner detectors.
+
+    The detectors expect display-referred contrast, so the linear luminance is sRGB-encoded; with
+    ``stretch`` a dim photo is first scaled so its 99.5th percentile maps to white (detection only
+    cares about contrast, and an underexposed photo would otherwise give too little of it).
+    """
+    lum = 0.2126 * linear[:, :, 0] + 0.7152 * linear[:, :, 1] + 0.0722 * linear[:, :, 2]
+    if stretch:
+        top = float(np.percentile(lum, 99.5))
+        if top > 1e-6:
+            lum = lum / top
+    return (encode_srgb(lum) * 255.0 + 0.5).astype(np.uint8)
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
+    """Write a file through a temporary file in the same directory and rename it into place."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual permissions
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def jsonable(value: Any) -> Any:
+    """``value`` with numpy types made plain and NaN/infinity made None (JSON has neither)."""
+    return _jsonable(value)
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, (np.floating, float)):
+        v = float(value)
+        if not math.isfinite(v):
+            return None
+        return v
+    if isinstance(value, np.bool_):
+        return bool(value)
+    return value
+
+
+def write_json(path: str | os.PathLike[str], data: Any) -> None:
+    """Write ``data`` as indented JSON (numpy values converted), atomically."""
+    text = json.dumps(_jsonable(data), indent=2) + "\n"
+    atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def read_json(path: str | os.PathLike[str], what: str) -> Any:
+    """Parse a JSON file or raise AcquisitionError naming it and saying what it should be."""
+    name = os.fspath(path)
+    try:
+        with open(name, encoding="utf-8") as fh:
+            return json.load(fh)
+    except FileNotFoundError:
+        raise AcquisitionError(f"{name}: no such file (expected {what})") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise AcquisitionError(f"{name}: cannot read {what}: {exc}") from None
+    except json.JSONDecodeError as exc:
+        raise AcquisitionError(
+            f"{name}: not valid JSON ({exc.msg} at line {exc.lineno}); expected {what}"
+        ) from None
+
+
+def encode_png(image_bgr_or_grey: np.ndarray) -> bytes:
+    ok, buf = cv2.imencode(".png", image_bgr_or_grey)
+    if not ok:
+        raise AcquisitionError("could not encode PNG")
+    return buf.tobytes()
+
+
+def write_png16_srgb(path: str | os.PathLike[str], linear: np.ndarray) -> None:
+    """Write a linear RGB image as a 16-bit sRGB-encoded PNG (what rtloop.load_image reads by default).
+
+    Values above 1 are clipped (they were saturated in the photo anyway).
+    """
+    enc = encode_srgb(linear)
+    data = (enc[:, :, ::-1] * 65535.0 + 0.5).astype(np.uint16)
+    atomic_write_bytes(path, encode_png(np.ascontiguousarray(data)))
+
+
+def write_png8(path: str | os.PathLike[str], image_bgr: np.ndarray) -> None:
+    atomic_write_bytes(path, encode_png(np.ascontiguousarray(image_bgr)))
+
+
+_UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
+
+
+def undistort_points(
+    points: np.ndarray,
+    camera_matrix: np.ndarray,
+    dist_coeffs: np.ndarray,
+    new_matrix: np.ndarray | None = None,
+) -> np.ndarray:
+    """Ideal (undistorted) coordinates of observed pixels (N, 2): normalised, or pixels of ``new_matrix``.
+
+    Iterates to convergence (OpenCV's default of 5 iterations is not enough for strong distortion);
+    works with OpenCV 4 (``undistortPointsIter``) and 5 (``undistortPoints`` with criteria).
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 1, 2)
+    k = np.asarray(camera_matrix, dtype=np.float64)
+    d = np.asarray(dist_coeffs, dtype=np.float64)
+    if hasattr(cv2, "undistortPointsIter"):
+        out = cv2.undistortPointsIter(pts, k, d, None, new_matrix, _UNDISTORT_CRITERIA)
+    else:
+        out = cv2.undistortPoints(pts, k, d, R=None, P=new_matrix, criteria=_UNDISTORT_CRITERIA)
+    return out.reshape(-1, 2)

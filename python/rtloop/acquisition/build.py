@@ -1,0 +1,413 @@
+"""From a photo of a ball on a floor with a ChArUco board to a scene ready for ``rtloop-fit``.
+
+:func:`build_scene` runs the whole chain:
+
+1. colour: a white balance from a grey card, or a colour correction from a ColorChecker, measured
+   in the photo and applied in linear light (to the photo and to a separate objective photo);
+2. the camera model: with a calibration, undistort the photos and re-centre the principal point
+   (the scene's camera is an ideal pinhole); with only a field of view, take the photo as a pinhole;
+   with neither, estimate the focal length from the board (less accurate);
+3. the board: camera pose and floor plane (the board's face is the floor, y = 0, +y up, metres);
+4. the ball: its outline, searched for as a ball of the given radius resting on the floor, and its
+   centre fitted to the outline;
+5. the scene: camera, floor plane, sphere, a first guess of the light, and a ``fit`` section
+   (light position and intensity, both albedos) with bounds scaled to the scene;
+6. an overlay: the board's axes and corners, the ball's fitted outline and edge points, and the
+   outline of the ball as rtloop renders the new scene (``rtloop.object_ids``), over the photo.
+
+The fit cannot move the sphere (``objects.*.center`` is not a fittable parameter in rtloop's scene
+format), so the sphere stays where the photo puts it; the overlay is the check that it lines up.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+
+import rtloop
+
+from ._common import AcquisitionError, check_image, jsonable, to_display_bgr8
+from .ball import BallSilhouette, SpherePlacement, locate_ball, silhouette_polyline
+from .boards import BoardSpec, parse_board
+from .calibration import CameraIntrinsics, PinholeRemap
+from .camera import focal_from_vfov
+from .colour import ColourCorrection, colorchecker_correction, grey_card_balance
+from .pose import FloorPose, estimate_floor_pose
+
+__all__ = ["AcquiredScene", "build_scene", "draw_overlay", "fit_section"]
+
+#: Longest side of the overlay image (pixels); larger photos are drawn scaled down.
+OVERLAY_MAX_SIDE = 1600
+
+
+@dataclass
+class AcquiredScene:
+    """Everything :func:`build_scene` found.
+
+    Attributes:
+        scene: the scene dict (README format) with a ``fit`` section and ``meta.acquisition``.
+        objective: the photo to fit, linear RGB float32 at full size: colour-corrected, undistorted.
+        photo: the board photo after the same steps (what the geometry was measured on).
+        pose, silhouette, sphere, colour: the pieces, for inspection.
+        overlay: 8-bit BGR image for checking the alignment.
+        warnings: things the user should know (estimated focal length, poor fits).
+    """
+
+    scene: dict[str, Any]
+    objective: np.ndarray
+    photo: np.ndarray
+    pose: FloorPose
+    silhouette: BallSilhouette
+    sphere: SpherePlacement
+    colour: ColourCorrection
+    overlay: np.ndarray
+    warnings: list[str] = field(default_factory=list)
+
+
+def fit_section(
+    camera_position: np.ndarray,
+    ball_centre: np.ndarray,
+    ball_radius: float,
+    intensity: float,
+    light_range: float = 2.0,
+    ball: str = "ball",
+    floor: str = "floor",
+) -> dict[str, Any]:
+    """The ``fit`` bounds: the light within ``light_range`` x the scene's scale s (the camera's
+    distance to the ball, at least 4 ball radii) of the ball horizontally and between 0.1 s and
+    ``light_range`` x s above the floor; the intensity within a factor 100 of the first guess;
+    albedos in [0, 1]."""
+    s = max(float(np.linalg.norm(np.asarray(camera_position) - ball_centre)), 4 * ball_radius)
+    reach = light_range * s
+    bx, bz = float(ball_centre[0]), float(ball_centre[2])
+    return {
+        "light.position": {"min": [bx - reach, 0.1 * s, bz - reach], "max": [bx + reach, reach, bz + reach]},
+        "light.intensity": {"min": intensity / 100.0, "max": intensity * 100.0},
+        f"objects.{ball}.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]},
+        f"objects.{floor}.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]},
+    }
+
+
+def build_scene(
+    photo: np.ndarray,
+    board: BoardSpec | str | dict,
+    ball_radius: float,
+    *,
+    intrinsics: CameraIntrinsics | None = None,
+    vfov_deg: float | None = None,
+    objective: np.ndarray | None = None,
+    colour: str | tuple | ColourCorrection | None = None,
+    ball_hint: tuple[float, float, float] | None = None,
+    ball_mask: np.ndarray | None = None,
+    resting: bool = True,
+    width: int = 160,
+    light_range: float = 2.0,
+    names: tuple[str, str] = ("ball", "floor"),
+    where: str = "photo",
+    objective_where: str = "objective",
+) -> AcquiredScene:
+    """Build the scene from one photo (board + ball on the floor), optionally fitting another.
+
+    Args:
+        photo: linear RGB float (H, W, 3) showing the ChArUco board lying on the floor and the ball.
+        board: the board (see ``boards.parse_board``).
+        ball_radius: metres.
+        intrinsics: a calibration of this camera (undistorts and re-centres); or ``vfov_deg``, the
+            full vertical field of view of an already distortion-free photo; neither: estimated.
+        objective: the photo to fit, from the same camera position and settings (e.g. the same view
+            with the board removed); default: ``photo``.
+        colour: ``None``, ``"colorchecker"``, a grey-card rectangle ``(x, y, w, h)`` / ``"x,y,w,h"``
+            (pixels of ``photo`` as given), or a ready :class:`ColourCorrection`.
+        ball_hint, ball_mask: help for finding the ball (pixels of ``photo`` as given).
+        resting: the ball rests on the floor (recommended); False frees its height.
+        width: the scene's working width in pixels (height follows the photo's aspect ratio).
+        light_range: size of the light's search box in units of the scene's scale.
+        names: the names of the sphere and the plane in the scene.
+
+    Raises:
+        AcquisitionError: any step failed; the message says which and what to do.
+    """
+    photo = check_image(photo, where)
+    h, w = photo.shape[:2]
+    if objective is None:
+        objective = photo
+    else:
+        objective = check_image(objective, objective_where)
+        if objective.shape != photo.shape:
+            raise AcquisitionError(
+                f"{objective_where}: is {objective.shape[1]}x{objective.shape[0]} but the board photo "
+                f"{where} is "
+                f"{w}x{h}; both must come from the same camera, position and resolution"
+            )
+    if not (isinstance(width, int) and 8 <= width <= 4096):
+        raise AcquisitionError(f"scene width must be a whole number from 8 to 4096 pixels (got {width})")
+    if not (math.isfinite(light_range) and 0.25 <= light_range <= 100):
+        raise AcquisitionError(f"light range must be between 0.25 and 100 (got {light_range}); 2 is typical")
+    spec = parse_board(board)
+    notes: list[str] = []
+
+    # 1. Colour, measured on the photo as given, applied in linear light.
+    if colour is None:
+        correction = ColourCorrection.identity()
+    elif isinstance(colour, ColourCorrection):
+        correction = colour
+    elif isinstance(colour, str) and colour.lower() in ("colorchecker", "colourchecker", "mcc"):
+        correction = colorchecker_correction(photo, where=where)
+    else:
+        correction = grey_card_balance(photo, colour, where=where)
+    same = objective is photo
+    if correction.source != "none":
+        photo = correction.apply(photo)
+        objective = photo if same else correction.apply(objective)
+
+    # 2. The camera model.
+    remap = None
+    if intrinsics is not None:
+        remap = PinholeRemap(intrinsics, w, h, where)
+        photo = remap.image(photo).astype(np.float32)
+        objective = photo if same else remap.image(objective).astype(np.float32)
+        focal, focal_source = remap.focal_px, "calibration"
+    elif vfov_deg is not None:
+        if not (math.isfinite(vfov_deg) and 1.0 <= vfov_deg <= 170.0):
+            raise AcquisitionError(
+                f"vertical field of view must be between 1 and 170 degrees (got {vfov_deg})"
+            )
+        focal, focal_source = focal_from_vfov(vfov_deg, h), "given"
+    else:
+        focal, focal_source = None, "board"
+
+    # 3. The board: camera and floor.
+    pose = estimate_floor_pose(photo, spec, focal_px=focal, focal_source=focal_source, where=where)
+    camera = pose.camera
+    if focal_source == "board":
+        notes.append(
+            "the focal length was estimated from the board alone (vertical field of view "
+            f"{camera.vfov_deg:.1f} deg); "
+            "a calibration (rtloop-acquire calibrate) or --vfov is more accurate"
+        )
+    if pose.reprojection_rms_px > 1.0:
+        notes.append(
+            f"the board's corners are reprojected with {pose.reprojection_rms_px:.2f} px RMS error (more "
+            "than 1 px): "
+            "is the lens distortion calibrated, and does the board lie flat?"
+        )
+
+    # 4. The ball.
+    hint = ball_hint
+    if hint is not None and remap is not None:
+        p = remap.points(np.array([[hint[0], hint[1]]]))[0]
+        hint = (float(p[0]), float(p[1]), float(hint[2]) * remap.focal_px / float(remap.source_matrix[1, 1]))
+    mask = None if ball_mask is None else np.asarray(ball_mask)
+    if mask is not None:
+        if mask.shape[:2] != (h, w):
+            raise AcquisitionError(
+                f"ball mask: is {mask.shape[1]}x{mask.shape[0]} but the photo is {w}x{h}; draw it on the "
+                "photo itself"
+            )
+        if remap is not None:
+            mask = remap.mask(mask if mask.ndim == 2 else mask.max(axis=2))
+    board_outline = _board_outline_px(pose)
+    bw, bh = spec.size_m
+    try:
+        silhouette, sphere = locate_ball(
+            photo,
+            camera,
+            ball_radius,
+            hint=hint,
+            mask=mask,
+            resting=resting,
+            exclude=board_outline,
+            keep_off=(-bw / 2, bw / 2, -bh / 2, bh / 2),
+            where=where,
+        )
+    except AcquisitionError as exc:
+        raise AcquisitionError(f"{exc} (the ball is looked for beside the board, not on it)") from None
+    if silhouette.rms_px > 1.0:
+        notes.append(
+            f"the ball's outline fits its edge points with {silhouette.rms_px:.2f} px RMS (more than 1 px); "
+            "check the overlay"
+        )
+    if silhouette.coverage < 0.5:
+        notes.append(
+            f"only {silhouette.coverage:.0%} of the ball's outline shows a clear edge; check the overlay"
+        )
+    if not resting and abs(sphere.height_above_floor - ball_radius) > 0.1 * ball_radius:
+        notes.append(
+            f"the ball's centre is {sphere.height_above_floor:.3f} m above the floor but its radius is "
+            f"{ball_radius:g} m: "
+            "it does not rest on the floor, or the radius or the board is off"
+        )
+
+    # 5. The scene.
+    ball_name, floor_name = names
+    if ball_name == floor_name:
+        raise AcquisitionError("the ball and the floor need different names")
+    height = max(1, round(width * h / w))
+    centre = sphere.centre
+    s = max(float(np.linalg.norm(camera.position - centre)), 4 * ball_radius)
+    light_pos = np.array([centre[0], min(s, light_range * s), centre[2]])
+    lum = objective @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+    bright = max(float(np.percentile(lum, 99.0)), 0.05)
+    d = float(np.linalg.norm(light_pos - centre)) - ball_radius
+    intensity = (
+        math.pi * d * d * bright
+    )  # white Lambertian surface facing the lamp at d: the brightest pixels
+    scene: dict[str, Any] = {
+        "image": {"width": width, "height": int(height)},
+        "camera": camera.to_scene_camera(),
+        "light": {
+            "position": [float(v) for v in light_pos],
+            "intensity": intensity,
+            "color": [1.0, 1.0, 1.0],
+        },
+        "ambient": [0.0, 0.0, 0.0],
+        "background": [0.0, 0.0, 0.0],
+        "exposure": 1.0,
+        "objects": [
+            {
+                "name": ball_name,
+                "shape": "sphere",
+                "center": [float(v) for v in centre],
+                "radius": float(ball_radius),
+                "material": {"albedo": [0.5, 0.5, 0.5]},
+            },
+            {
+                "name": floor_name,
+                "shape": "plane",
+                **pose.floor_plane,
+                "material": {"albedo": [0.5, 0.5, 0.5]},
+            },
+        ],
+        "fit": fit_section(
+            camera.position, centre, ball_radius, intensity, light_range, ball_name, floor_name
+        ),
+    }
+    report = {
+        "photo_size": [w, h],
+        "camera_model": focal_source,
+        "colour": {k: v for k, v in correction.report().items() if k != "patch_corners_px"},
+        "pose": pose.report(),
+        "ball": {**silhouette.report(), **sphere.report()},
+        "notes": [
+            (
+                "world: metres, +y up, the board's face is the floor (y = 0), origin at the board's centre, "
+                "x along the board's columns, z along its rows"
+            ),
+            (
+                "light.position and light.intensity are first guesses; the photo fixes only intensity x "
+                "albedo "
+                "(see rtloop-fit's identifiability note): put in the lamp's real intensity if you know it"
+            ),
+            "the sphere's centre is measured here and not refined by the fit (centres are not fittable)",
+        ],
+        "warnings": notes,
+    }
+    if intrinsics is not None:
+        report["calibration"] = {"rms_px": intrinsics.rms_px, "image_size": list(intrinsics.image_size)}
+    scene["meta"] = {"acquisition": jsonable(report)}
+    rtloop.load_scene(scene)  # validates: a failure here is a bug, not bad input
+    overlay = draw_overlay(photo, scene, pose, silhouette)
+    return AcquiredScene(scene, objective, photo, pose, silhouette, sphere, correction, overlay, notes)
+
+
+def _board_outline_px(pose: FloorPose) -> np.ndarray:
+    bw, bh = pose.board.size_m
+    corners = np.array([[0, 0, 0], [bw, 0, 0], [bw, bh, 0], [0, bh, 0]], dtype=float)
+    return pose.camera.project(pose.board_to_world(corners))
+
+
+def draw_overlay(
+    photo: np.ndarray,
+    scene: dict[str, Any],
+    pose: FloorPose,
+    silhouette: BallSilhouette,
+) -> np.ndarray:
+    """The photo with the board's corners, outline and world axes, the ball's edge points and fitted
+    outline, and the ball's outline as rendered from ``scene`` (rtloop.object_ids)."""
+    h, w = photo.shape[:2]
+    scale = min(1.0, OVERLAY_MAX_SIDE / max(w, h))
+    ow, oh = max(1, round(w * scale)), max(1, round(h * scale))
+    img = cv2.resize(photo, (ow, oh), interpolation=cv2.INTER_AREA) if scale < 1 else photo
+    lum = img @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+    top = float(np.percentile(lum, 99.0))
+    if 0 < top < 0.5:
+        img = img * (0.8 / top)  # brighten a dark photo, for seeing only
+    out = to_display_bgr8(img)
+    sx, sy = ow / w, oh / h
+    lw = max(1, round(max(ow, oh) / 800))
+
+    def px(points: np.ndarray) -> np.ndarray:
+        p = np.asarray(points, dtype=float).reshape(-1, 2)
+        q = np.column_stack([(p[:, 0] + 0.5) * sx - 0.5, (p[:, 1] + 0.5) * sy - 0.5])
+        return np.round(q * 16).astype(np.int32)  # 4 fractional bits for cv2's shift=4
+
+    # Rendered silhouette of the scene's ball (what rtloop will render); drawn last, below.
+    ids = rtloop.object_ids(scene, ow, oh)
+    ball_index = next(i for i, o in enumerate(scene["objects"]) if o["shape"] == "sphere")
+    ball_region = (ids == ball_index).astype(np.uint8)
+    contours, _ = cv2.findContours(ball_region, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+
+    # Board: outline, corners found, world axes at the origin (x red, y = up green, z blue).
+    cam = pose.camera
+    outline = _board_outline_px(pose)
+    cv2.polylines(out, [px(outline)], True, (0, 255, 255), lw, cv2.LINE_AA, shift=4)
+    for p in px(pose.detection.image_points):
+        cv2.circle(out, tuple(int(v) for v in p), 3 * 16 * lw // 2, (0, 200, 0), lw, cv2.LINE_AA, shift=4)
+    length = 0.5 * min(pose.board.size_m)
+    axes = cam.project(np.array([[0, 0, 0], [length, 0, 0], [0, length, 0], [0, 0, length]], dtype=float))
+    if np.isfinite(axes).all():
+        o = tuple(int(v) for v in px(axes[0])[0])
+        for end, colour, label in (
+            (axes[1], (0, 0, 255), "x"),
+            (axes[2], (0, 255, 0), "y (up)"),
+            (axes[3], (255, 0, 0), "z"),
+        ):
+            e = tuple(int(v) for v in px(end)[0])
+            cv2.arrowedLine(out, o, e, colour, 2 * lw, cv2.LINE_AA, shift=4, tipLength=0.15)
+            cv2.putText(
+                out,
+                label,
+                (e[0] // 16 + 4, e[1] // 16 - 4),
+                cv2.FONT_HERSHEY_SIMPLEX,
+                0.5 * lw,
+                colour,
+                lw,
+                cv2.LINE_AA,
+            )
+
+    # Ball: the edge points used and the fitted outline.
+    for p in px(silhouette.edge_points):
+        cv2.circle(out, tuple(int(v) for v in p), 16 * lw, (0, 0, 255), -1, cv2.LINE_AA, shift=4)
+    cv2.polylines(
+        out, [px(silhouette_polyline(silhouette, 360))], True, (255, 255, 0), lw, cv2.LINE_AA, shift=4
+    )
+
+    # The rendered outline last, dashed, so the fitted outline under it stays visible.
+    for contour in contours:
+        pts = contour.reshape(-1, 2)
+        dash = max(4, 6 * lw)
+        for start in range(0, len(pts), 2 * dash):
+            seg = pts[start : start + dash + 1]
+            if len(seg) > 1:
+                cv2.polylines(out, [seg.reshape(-1, 1, 2)], False, (255, 0, 255), lw + 1, cv2.LINE_AA)
+
+    legend = [
+        ("board corners found", (0, 200, 0)),
+        ("board outline (from the pose)", (0, 255, 255)),
+        ("ball edge points", (0, 0, 255)),
+        ("ball outline fitted", (255, 255, 0)),
+        ("ball as rtloop renders the scene (dashed)", (255, 0, 255)),
+    ]
+    font, size = cv2.FONT_HERSHEY_SIMPLEX, 0.5 * lw
+    box_w = max(cv2.getTextSize(text, font, size, lw)[0][0] for text, _ in legend) + 12 * lw
+    box = out[: 18 * lw * len(legend) + 8 * lw, :box_w]
+    box[:] = (box * 0.35).astype(np.uint8)  # darken behind the legend
+    y = 18 * lw
+    for text, colour in legend:
+        cv2.putText(out, text, (6 * lw, y), font, size, colour, lw, cv2.LINE_AA)
+        y += 18 * lw
+    return out

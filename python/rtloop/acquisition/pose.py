@@ -1,0 +1,173 @@
+"""The floor plane and the camera pose from one ChArUco board lying on the floor.
+
+World frame (the scene's): metres, right-handed, +y up, the board's printed face in the plane y=0
+with the origin at the board's centre, +x along the board's columns (to the right as printed) and
++z along its rows (down the printed page). In board coordinates (OpenCV's: x right, y down the
+page, z into the paper) a point ``p`` is at ``WORLD_FROM_BOARD @ (p - board_centre)`` in the world;
+the paper's normal towards the viewer (-z) becomes +y.
+
+:func:`estimate_floor_pose` finds the board's corners, solves the perspective-n-point problem
+(``cv2.solvePnP`` with the planar IPPE solver, then Levenberg-Marquardt refinement) and returns the
+camera as the scene format writes it. The photo must already be a centred pinhole image, as
+:func:`rtloop.acquisition.calibration.undistort_to_pinhole` makes one; without a calibration the
+focal length is estimated from the board itself (less accurate: a calibration is better).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+
+from ._common import AcquisitionError, check_image, to_detection_grey
+from .boards import BoardDetection, BoardSpec, detect_board, parse_board
+from .camera import PinholeCamera, centred_camera_matrix
+
+__all__ = ["WORLD_FROM_BOARD", "FloorPose", "estimate_floor_pose", "estimate_focal_from_board"]
+
+#: Rotation from board coordinates (x right, y down the page, z into the paper) to world (+y up).
+WORLD_FROM_BOARD = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+
+@dataclass
+class FloorPose:
+    """The camera and the floor found from a board on the floor.
+
+    Attributes:
+        camera: the scene's camera (world frame above) for the photo's full size.
+        board: the board description used.
+        detection: the corners found (pixel and board coordinates).
+        rvec, tvec: OpenCV's board -> camera pose.
+        reprojection_rms_px: RMS distance between the corners found and the board reprojected.
+        focal_source: where the focal length came from ("calibration", "given", "board").
+    """
+
+    camera: PinholeCamera
+    board: BoardSpec
+    detection: BoardDetection
+    rvec: np.ndarray
+    tvec: np.ndarray
+    reprojection_rms_px: float
+    focal_source: str
+
+    @property
+    def floor_plane(self) -> dict[str, Any]:
+        """The floor as the scene format's plane (the board's face is y = 0)."""
+        return {"point": [0.0, 0.0, 0.0], "normal": [0.0, 1.0, 0.0]}
+
+    def board_to_world(self, points: np.ndarray) -> np.ndarray:
+        p = np.asarray(points, dtype=float).reshape(-1, 3)
+        return (p - self.board.centre) @ WORLD_FROM_BOARD.T
+
+    def report(self) -> dict[str, Any]:
+        cam = self.camera
+        return {
+            "board": self.board.to_dict(),
+            "corners": len(self.detection),
+            "reprojection_rms_px": self.reprojection_rms_px,
+            "focal_px": cam.focal_px,
+            "focal_source": self.focal_source,
+            "camera_distance_m": float(np.linalg.norm(cam.position)),
+            "camera_height_m": float(cam.position[1]),
+        }
+
+
+def estimate_focal_from_board(detection: BoardDetection, width: int, height: int) -> float:
+    """Focal length (pixels) of a centred, distortion-free camera from one view of a flat board.
+
+    A single view of a plane fixes the focal length once the principal point is known (Zhang), if
+    the board is seen at an angle; seen head-on it does not, and this fails.
+    """
+    k0 = centred_camera_matrix(float(max(width, height)), width, height)
+    flags = (
+        cv2.CALIB_USE_INTRINSIC_GUESS
+        | cv2.CALIB_FIX_PRINCIPAL_POINT
+        | cv2.CALIB_FIX_ASPECT_RATIO
+        | cv2.CALIB_ZERO_TANGENT_DIST
+        | cv2.CALIB_FIX_K1
+        | cv2.CALIB_FIX_K2
+        | cv2.CALIB_FIX_K3
+        | cv2.CALIB_FIX_K4
+        | cv2.CALIB_FIX_K5
+        | cv2.CALIB_FIX_K6
+    )
+    try:
+        _, k, _, _, _ = cv2.calibrateCamera(
+            [detection.object_points], [detection.image_points], (width, height), k0, np.zeros(5), flags=flags
+        )
+        f = float(k[0, 0])
+    except cv2.error:
+        f = float("nan")
+    vfov = math.degrees(2 * math.atan(height / 2 / f)) if f > 0 else float("nan")
+    if not (math.isfinite(f) and 3.0 <= vfov <= 150.0):
+        raise AcquisitionError(
+            "could not estimate the focal length from the board (it is probably seen nearly head-on); "
+            "calibrate the camera ('rtloop-acquire calibrate') or give the field of view (--vfov)"
+        )
+    return f
+
+
+def estimate_floor_pose(
+    image: np.ndarray,
+    board: BoardSpec | str | dict,
+    *,
+    focal_px: float | None = None,
+    focal_source: str | None = None,
+    where: str = "photo",
+) -> FloorPose:
+    """Camera pose and floor plane from a ChArUco board lying on the floor.
+
+    Args:
+        image: linear RGB float image (H, W, 3) of a *centred pinhole camera*: undistorted and
+            re-centred (see ``undistort_to_pinhole``), or from a camera whose distortion is negligible.
+        board: the board (a :class:`BoardSpec`, an inline spec or a JSON file, see ``boards``).
+        focal_px: the focal length in pixels at this image's size; None estimates it from the board.
+        focal_source: how the focal length was obtained, for the report.
+        where: the name used in error messages (the file name).
+
+    Raises:
+        AcquisitionError: no board, too few corners, corners on a line, no focal length.
+    """
+    image = check_image(image, where)
+    spec = parse_board(board)
+    if spec.kind != "charuco":
+        raise AcquisitionError(
+            f"{where}: the floor pose needs a ChArUco board (a chessboard's corners can't be "
+            "named when part of it is hidden, and its orientation is ambiguous)"
+        )
+    h, w = image.shape[:2]
+    detection = detect_board(to_detection_grey(image), spec, where=where)
+    if focal_px is None:
+        focal_px = estimate_focal_from_board(detection, w, h)
+        focal_source = "board"
+    elif not (math.isfinite(focal_px) and focal_px > 0):
+        raise AcquisitionError(f"{where}: focal length must be > 0 pixels (got {focal_px})")
+    k = centred_camera_matrix(float(focal_px), w, h)
+    obj = detection.object_points.astype(np.float64)
+    img = detection.image_points.astype(np.float64)
+    dist = np.zeros(5)
+    ok, rvec, tvec = cv2.solvePnP(obj, img, k, dist, flags=cv2.SOLVEPNP_IPPE)
+    if not ok:
+        ok, rvec, tvec = cv2.solvePnP(obj, img, k, dist, flags=cv2.SOLVEPNP_ITERATIVE)
+    if not ok:
+        raise AcquisitionError(f"{where}: could not solve the board's pose from {len(obj)} corners")
+    rvec, tvec = cv2.solvePnPRefineLM(obj, img, k, dist, rvec, tvec)
+    projected, _ = cv2.projectPoints(obj, rvec, tvec, k, dist)
+    rms = float(np.sqrt(np.mean(np.sum((projected.reshape(-1, 2) - img) ** 2, axis=1))))
+    camera = PinholeCamera.from_opencv(rvec, tvec, float(focal_px), w, h, WORLD_FROM_BOARD, spec.centre)
+    if camera.position[1] <= 0:
+        raise AcquisitionError(
+            f"{where}: the board appears to be seen from below the floor; is --board right?"
+        )
+    return FloorPose(
+        camera,
+        spec,
+        detection,
+        np.asarray(rvec).reshape(3),
+        np.asarray(tvec).reshape(3),
+        rms,
+        focal_source or "given",
+    )

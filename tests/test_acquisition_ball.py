@@ -1,0 +1,199 @@
+"""The ball's outline and its centre in 3-D (rtloop.acquisition.ball), on photos rendered by rtloop.
+
+Each photo is rtloop.render of a scene (README format) with a known camera; the camera handed to the
+ball finder is that scene camera, so the only error measured is the ball's.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import rtloop
+from rtloop.acquisition import (
+    AcquisitionError,
+    PinholeCamera,
+    find_ball,
+    locate_ball,
+    place_sphere,
+)
+
+W, H = 640, 480
+
+# camera position, look_at, vfov, ball centre (x, z), radius, light position, ambient, ball albedo, floor
+CASES = {
+    "yellow-front-light": (
+        [0.3, 0.7, -1.2],
+        [0, 0.05, 0],
+        50,
+        (0.15, 0.1),
+        0.1,
+        [0.8, 1.5, -0.3],
+        0.0,
+        [0.8, 0.6, 0.1],
+        0.5,
+    ),
+    "back-light-dark-shadow": (
+        [0.3, 0.7, -1.2],
+        [0, 0.05, 0],
+        50,
+        (0.15, 0.1),
+        0.1,
+        [-0.6, 1.2, 0.8],
+        0.03,
+        [0.8, 0.6, 0.1],
+        0.5,
+    ),
+    "paper-scene": (
+        [0, 1.6, -6],
+        [0, 0.8, 0],
+        35,
+        (0.0, 0.0),
+        1.0,
+        [2.5, 4.5, -1],
+        0.0,
+        [0.8, 0.7, 0.1],
+        0.6,
+    ),
+    "wide-angle-near-edge": (
+        [0.5, 0.45, -1.0],
+        [0, 0.1, 0],
+        70,
+        (-0.45, 0.05),
+        0.08,
+        [0.3, 1.2, -0.5],
+        0.02,
+        [0.2, 0.3, 0.8],
+        0.5,
+    ),
+    "grey-ball-grey-floor": (
+        [-0.8, 1.1, -1.4],
+        [0.1, 0, 0.1],
+        45,
+        (0.2, 0.3),
+        0.12,
+        [0.5, 1.6, -1.0],
+        0.05,
+        [0.6, 0.6, 0.6],
+        0.35,
+    ),
+}
+
+
+def scene_for(case) -> dict:
+    pos, look, vfov, (bx, bz), r, light, amb, albedo, floor = case
+    ball = np.array([bx, r, bz])
+    return {
+        "image": {"width": W, "height": H},
+        "camera": {"position": pos, "look_at": look, "up": [0, 1, 0], "vfov_deg": vfov},
+        "light": {"position": light, "intensity": 2.5 * float(np.sum((np.array(light) - ball) ** 2))},
+        "ambient": [amb] * 3,
+        "objects": [
+            {
+                "name": "ball",
+                "shape": "sphere",
+                "center": ball.tolist(),
+                "radius": r,
+                "material": {"albedo": albedo},
+            },
+            {
+                "name": "floor",
+                "shape": "plane",
+                "point": [0, 0, 0],
+                "normal": [0, 1, 0],
+                "material": {"albedo": [floor] * 3},
+            },
+        ],
+    }
+
+
+@pytest.fixture(scope="module")
+def photos() -> dict[str, tuple[dict, np.ndarray]]:
+    out = {}
+    for name, case in CASES.items():
+        scene = scene_for(case)
+        out[name] = (scene, rtloop.render(scene, spp=9))
+    return out
+
+
+def truth(scene: dict) -> tuple[PinholeCamera, np.ndarray, float]:
+    cam = PinholeCamera.from_scene_camera(scene["camera"], W, H)
+    ball = scene["objects"][0]
+    return cam, np.array(ball["center"]), ball["radius"]
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_resting_ball_centre_within_1_percent_of_camera_distance(photos, name: str) -> None:
+    scene, image = photos[name]
+    cam, centre, r = truth(scene)
+    silhouette, sphere = locate_ball(image, cam, r)
+    distance = float(np.linalg.norm(centre - cam.position))
+    assert np.linalg.norm(sphere.centre - centre) <= 0.01 * distance
+    assert sphere.centre[1] == pytest.approx(r)  # resting on the floor
+    assert silhouette.rms_px < 1.0
+    assert silhouette.coverage > 0.3
+    # The outline's apparent radius matches the true angular radius.
+    assert silhouette.alpha == pytest.approx(np.arcsin(r / distance), rel=0.01)
+
+
+def test_free_centre_also_recovers_the_height(photos) -> None:
+    scene, image = photos["grey-ball-grey-floor"]
+    cam, centre, r = truth(scene)
+    _, sphere = locate_ball(image, cam, r, resting=False)
+    distance = float(np.linalg.norm(centre - cam.position))
+    assert np.linalg.norm(sphere.centre - centre) <= 0.02 * distance
+    assert sphere.height_above_floor == pytest.approx(r, rel=0.1)
+
+
+@pytest.mark.parametrize("name", ["yellow-front-light", "back-light-dark-shadow", "paper-scene"])
+def test_find_ball_then_place_sphere(photos, name: str) -> None:
+    """The outline finder that knows nothing of the floor (exact sphere-outline model), then placement
+    from its outline. (locate_ball, which searches for a resting ball, is the robust one.)"""
+    scene, image = photos[name]
+    cam, centre, r = truth(scene)
+    silhouette = find_ball(image, focal_px=cam.focal_px)
+    expected = cam.project(centre[None, :])[0]
+    assert np.linalg.norm(silhouette.centre_px - expected) < 0.5
+    sphere = place_sphere(silhouette, cam, r)
+    assert np.linalg.norm(sphere.centre - centre) <= 0.01 * np.linalg.norm(centre - cam.position)
+
+
+def test_hint_and_mask(photos) -> None:
+    scene, image = photos["back-light-dark-shadow"]
+    cam, centre, r = truth(scene)
+    distance = float(np.linalg.norm(centre - cam.position))
+    uv = cam.project(centre[None, :])[0]
+    sil, sphere = locate_ball(image, cam, r, hint=(uv[0] + 8, uv[1] - 5, 30))
+    assert sil.source == "hint"
+    assert np.linalg.norm(sphere.centre - centre) <= 0.01 * distance
+    mask = rtloop.object_ids(scene) == 0
+    sil, sphere = locate_ball(image, cam, r, mask=mask)
+    assert sil.source == "mask"
+    assert np.linalg.norm(sphere.centre - centre) <= 0.01 * distance
+
+
+# --- failures -----------------------------------------------------------------------------------------
+
+
+def test_no_ball_is_a_clear_error(photos) -> None:
+    scene, _ = photos["paper-scene"]
+    empty = dict(scene, objects=scene["objects"][1:])
+    floor_only = rtloop.render(empty, spp=4)
+    cam, _, r = truth(scene)
+    with pytest.raises(AcquisitionError, match=r"no ball.*--ball X,Y,R"):
+        locate_ball(floor_only, cam, r)
+    with pytest.raises(AcquisitionError, match=r"no ball.*--ball X,Y,R"):
+        find_ball(np.full((H, W, 3), 0.2, np.float32))
+
+
+def test_photo_of_the_wrong_size_is_a_clear_error(photos) -> None:
+    scene, image = photos["paper-scene"]
+    cam, _, r = truth(scene)
+    with pytest.raises(AcquisitionError, match=r"photo is 320x240 but the camera .* 640x480"):
+        locate_ball(image[::2, ::2].copy(), cam, r)
+    with pytest.raises(AcquisitionError, match="mask is 320x240 but the photo is 640x480"):
+        locate_ball(image, cam, r, mask=np.ones((240, 320), bool))
+    with pytest.raises(AcquisitionError, match="hint"):
+        locate_ball(image, cam, r, hint=(900, 100, 20))
+    with pytest.raises(AcquisitionError, match="radius must be > 0"):
+        locate_ball(image, cam, -1.0)

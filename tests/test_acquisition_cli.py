@@ -1,0 +1,393 @@
+"""The command lines ``rtloop-acquire`` and ``rtloop-scene`` (through their main(argv) functions).
+
+The end-to-end photo is an rtloop render of a ball on a floor with a ChArUco board laid on the floor
+(rtloop.acquisition.synthetic.paste_board_on_floor), under a coloured light with a grey card in view;
+the objective photo is the same view without the board. The scene written must give back the camera
+and the ball it was made with, and be accepted by rtloop-fit.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from PIL import Image
+
+import rtloop
+from rtloop import cli as fit_cli
+from rtloop.acquisition import (
+    PinholeCamera,
+    board_image,
+    detect_board,
+    parse_board,
+)
+from rtloop.acquisition._common import to_detection_grey, write_png16_srgb
+from rtloop.acquisition.cli import acquire_main, scene_main
+from rtloop.acquisition.synthetic import board_view, paste_board_on_floor
+
+W, H = 800, 600
+BOARD = "6x4,70mm,52mm,DICT_5X5_100"
+CAST = np.array([1.2, 1.0, 0.7], np.float32)
+CARD = (600, 470, 50, 40)  # x, y, w, h of the grey card in the photo
+TRUE_SCENE = {
+    "image": {"width": W, "height": H},
+    "camera": {"position": [0.25, 0.6, -0.8], "look_at": [0.08, 0.0, 0.05], "up": [0, 1, 0], "vfov_deg": 50},
+    "light": {"position": [-0.5, 1.4, -0.6], "intensity": 4.0},
+    "ambient": [0.03, 0.03, 0.03],
+    "objects": [
+        {
+            "name": "ball",
+            "shape": "sphere",
+            "center": [0.36, 0.08, 0.12],
+            "radius": 0.08,
+            "material": {"albedo": [0.8, 0.6, 0.1]},
+        },
+        {
+            "name": "floor",
+            "shape": "plane",
+            "point": [0, 0, 0],
+            "normal": [0, 1, 0],
+            "material": {"albedo": [0.45, 0.45, 0.45]},
+        },
+    ],
+}
+
+
+@pytest.fixture(scope="module")
+def photos(tmp_path_factory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("photos")
+    render = rtloop.render(TRUE_SCENE, spp=9)
+    ids = rtloop.object_ids(TRUE_SCENE)
+    cam = PinholeCamera.from_scene_camera(TRUE_SCENE["camera"], W, H)
+    with_board = paste_board_on_floor(render, ids == 1, 0.45, parse_board(BOARD), cam)
+    x, y, w, h = CARD
+    for img in (with_board,):
+        img[y : y + h, x : x + w] *= 0.6 / 0.45  # a lighter, neutral card on the floor
+    write_png16_srgb(d / "photo.png", with_board * CAST)
+    write_png16_srgb(d / "objective.png", render * CAST)
+    write_png16_srgb(d / "small.png", cv2.resize(render, (400, 300), interpolation=cv2.INTER_AREA))
+    write_png16_srgb(d / "blank.png", np.full((H, W, 3), 0.3, np.float32))
+    return {p.stem: p for p in d.iterdir()}
+
+
+def run(main, capsys, *args) -> tuple[int, str, str]:
+    code = main([str(a) for a in args])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+# --- help ---------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("main", "args", "words"),
+    [
+        (acquire_main, ["--help"], ["board", "capture", "calibrate", "undistort", "A session"]),
+        (acquire_main, ["board", "--help"], ["--dpi", "Print at 100%", "square_m"]),
+        (
+            acquire_main,
+            ["capture", "--help"],
+            ["--frames", "--exposure", "locked", "unsupported", "--backend"],
+        ),
+        (acquire_main, ["calibrate", "--help"], ["10 to 20", "chess:", "RMS"]),
+        (acquire_main, ["undistort", "--help"], ["principal point", "--camera"]),
+        (
+            scene_main,
+            ["--help"],
+            [
+                "--ball-radius",
+                "--camera",
+                "--vfov",
+                "--grey-card",
+                "--colorchecker",
+                "--objective",
+                "overlay.png",
+                "rtloop-fit",
+            ],
+        ),
+    ],
+)
+def test_help_teaches(capsys, main, args, words) -> None:
+    code, out, _ = run(main, capsys, *args)
+    assert code == 0
+    for word in words:
+        assert word in out
+
+
+def test_usage_errors_exit_2(capsys) -> None:
+    code, _, err = run(scene_main, capsys, "photo.png", "--out", "x")
+    assert code == 2 and "--ball-radius" in err
+    code, _, err = run(acquire_main, capsys, "capture", "--frames", "0", "--out", "x.png")
+    assert code == 2 and ">= 1" in err
+    code, _, _ = run(acquire_main, capsys)
+    assert code == 2
+
+
+# --- board, calibrate, undistort ----------------------------------------------------------------------
+
+
+def test_board_command_writes_a_detectable_board(tmp_path, capsys) -> None:
+    out = tmp_path / "board.png"
+    code, stdout, _ = run(
+        acquire_main, capsys, "board", "--board", "5x4,30mm,22mm,DICT_4X4_50", "--dpi", "150", "--out", out
+    )
+    assert code == 0 and "print at 100%" in stdout
+    spec = parse_board(tmp_path / "board.json")
+    assert spec == parse_board("5x4,30mm,22mm,DICT_4X4_50")
+    grey = cv2.imread(str(out), cv2.IMREAD_GRAYSCALE)
+    square, margin = round(0.03 / 0.0254 * 150), round(0.01 / 0.0254 * 150)  # pixels at 150 dpi
+    assert grey.shape == (4 * square + 2 * margin, 5 * square + 2 * margin)
+    with Image.open(out) as img:
+        assert tuple(round(v) for v in img.info["dpi"]) == (150, 150)
+    det = detect_board(grey, spec)
+    assert len(det) == 4 * 3  # every inner corner
+
+
+def test_calibrate_and_undistort_commands(tmp_path, capsys) -> None:
+    spec = parse_board("9x6,50mm,37mm")
+    f = 620.0
+    vfov = float(np.degrees(2 * np.arctan(240 / f)))
+    names = []
+    rng = np.random.default_rng(7)
+    for i in range(5):
+        az = 2 * np.pi * i / 5
+        el = np.radians(rng.uniform(40, 60))
+        d = rng.uniform(0.55, 0.65)
+        pos = [d * np.cos(el) * np.sin(az), d * np.sin(el), d * np.cos(el) * np.cos(az)]
+        cam = PinholeCamera.from_scene_camera(
+            {"position": pos, "look_at": [0, 0, 0], "vfov_deg": vfov}, 640, 480
+        )
+        name = tmp_path / f"view{i}.png"
+        write_png16_srgb(name, board_view(spec, cam, supersample=2))
+        names.append(name)
+    blank = tmp_path / "blank.png"
+    write_png16_srgb(blank, np.full((480, 640, 3), 0.3, np.float32))
+    camera = tmp_path / "camera.json"
+    code, stdout, err = run(
+        acquire_main,
+        capsys,
+        "calibrate",
+        *names,
+        blank,
+        "--board",
+        "9x6,50mm,37mm",
+        "--zero-tangent",
+        "--out",
+        camera,
+    )
+    assert code == 0, err
+    assert "5 of 6 photos used" in stdout and "skipped" in err and "blank.png" in err
+    data = json.loads(camera.read_text())
+    assert data["camera_matrix"][0][0] == pytest.approx(f, rel=0.01)
+    assert data["camera_matrix"][1][1] == pytest.approx(f, rel=0.01)
+    out = tmp_path / "u.png"
+    code, stdout, _ = run(acquire_main, capsys, "undistort", names[0], "--camera", camera, "--out", out)
+    assert code == 0 and "vertical field of view" in stdout
+    assert cv2.imread(str(out), cv2.IMREAD_UNCHANGED).dtype == np.uint16
+
+
+# --- rtloop-scene -------------------------------------------------------------------------------------
+
+
+def test_scene_command_end_to_end(tmp_path, capsys, photos) -> None:
+    out = tmp_path / "scene"
+    x, y, w, h = CARD
+    code, stdout, err = run(
+        scene_main,
+        capsys,
+        photos["photo"],
+        "--board",
+        BOARD,
+        "--ball-radius",
+        "80mm",
+        "--vfov",
+        "50",
+        "--objective",
+        photos["objective"],
+        "--grey-card",
+        f"{x + 5},{y + 5},{w - 10},{h - 10}",
+        "--width",
+        "64",
+        "--out",
+        out,
+    )
+    assert code == 0, err
+    assert "rtloop-fit" in stdout
+    assert sorted(p.name for p in out.iterdir()) == [
+        "objective.png",
+        "overlay.png",
+        "photo.png",
+        "scene.json",
+    ]
+    scene = json.loads((out / "scene.json").read_text())
+    rtloop.load_scene(scene)  # valid scene format
+
+    truth_cam = np.array(TRUE_SCENE["camera"]["position"])
+    truth_ball = np.array(TRUE_SCENE["objects"][0]["center"])
+    distance = float(np.linalg.norm(truth_cam - truth_ball))
+    assert np.linalg.norm(np.array(scene["camera"]["position"]) - truth_cam) <= 0.01 * np.linalg.norm(
+        truth_cam
+    )
+    assert scene["camera"]["vfov_deg"] == pytest.approx(50.0)
+    ball = scene["objects"][0]
+    assert ball["shape"] == "sphere" and ball["radius"] == pytest.approx(0.08)
+    assert np.linalg.norm(np.array(ball["center"]) - truth_ball) <= 0.01 * distance
+    assert scene["objects"][1] == {
+        "name": "floor",
+        "shape": "plane",
+        "point": [0.0, 0.0, 0.0],
+        "normal": [0.0, 1.0, 0.0],
+        "material": {"albedo": [0.5, 0.5, 0.5]},
+    }
+    assert scene["image"] == {"width": 64, "height": 48}
+    fit = scene["fit"]
+    assert set(fit) == {"light.position", "light.intensity", "objects.ball.albedo", "objects.floor.albedo"}
+    lo, hi = np.array(fit["light.position"]["min"]), np.array(fit["light.position"]["max"])
+    assert np.all(lo <= TRUE_SCENE["light"]["position"]) and np.all(TRUE_SCENE["light"]["position"] <= hi)
+    assert scene["meta"]["acquisition"]["colour"]["source"] == "grey card"
+
+    # The objective is white-balanced: the floor comes out neutral.
+    objective = rtloop.load_image(out / "objective.png", (W, H))
+    floor = objective[500:560, 100:300].reshape(-1, 3).mean(axis=0)
+    assert np.ptp(floor) / floor.mean() < 0.02
+
+    overlay = cv2.imread(str(out / "overlay.png"))
+    assert overlay.shape == (H, W, 3)
+    # The rendered ball outline (magenta) is drawn where the ball is.
+    uv = PinholeCamera.from_scene_camera(TRUE_SCENE["camera"], W, H).project(truth_ball[None, :])[0]
+    around = overlay[int(uv[1]) - 60 : int(uv[1]) + 60, int(uv[0]) - 60 : int(uv[0]) + 60].reshape(-1, 3)
+    assert np.any((around[:, 0] > 200) & (around[:, 2] > 200) & (around[:, 1] < 80))
+
+    # rtloop-fit accepts the scene and the objective as they are (a very short fit).
+    code = fit_cli.main(
+        [
+            str(out / "scene.json"),
+            str(out / "objective.png"),
+            "--out",
+            str(tmp_path / "fit"),
+            "--generations",
+            "2",
+            "--population",
+            "8",
+            "--snapshot-every",
+            "0",
+        ]
+    )
+    capsys.readouterr()
+    assert code == 0 and (tmp_path / "fit" / "result.json").is_file()
+
+    # An existing output directory is kept unless --force.
+    code, _, err = run(
+        scene_main,
+        capsys,
+        photos["photo"],
+        "--board",
+        BOARD,
+        "--ball-radius",
+        "0.08",
+        "--vfov",
+        "50",
+        "--out",
+        out,
+    )
+    assert code == 1 and "--force" in err
+
+
+def test_scene_command_with_a_calibration(tmp_path, capsys, photos) -> None:
+    """A calibration file (here an ideal one) is used instead of --vfov."""
+    f = (H / 2) / np.tan(np.radians(25))
+    camera = tmp_path / "camera.json"
+    camera.write_text(
+        json.dumps(
+            {
+                "image_size": [W, H],
+                "dist_coeffs": [0, 0, 0, 0, 0],
+                "camera_matrix": [[f, 0, (W - 1) / 2], [0, f, (H - 1) / 2], [0, 0, 1]],
+            }
+        )
+    )
+    code, _, err = run(
+        scene_main,
+        capsys,
+        photos["photo"],
+        "--board",
+        BOARD,
+        "--ball-radius",
+        "0.08",
+        "--camera",
+        camera,
+        "--out",
+        tmp_path / "s",
+    )
+    assert code == 0, err
+    scene = json.loads((tmp_path / "s" / "scene.json").read_text())
+    assert scene["camera"]["vfov_deg"] == pytest.approx(50.0, abs=0.01)
+    truth_ball = np.array(TRUE_SCENE["objects"][0]["center"])
+    assert np.linalg.norm(np.array(scene["objects"][0]["center"]) - truth_ball) < 0.01
+
+
+@pytest.mark.parametrize(
+    ("which", "extra", "message"),
+    [
+        ("blank", [], "no ChArUco board found"),
+        ("photo", ["--objective", "SMALL"], "is 400x300 but the board photo"),
+        ("photo", ["--grey-card", "790,590,50,50"], "reaches outside"),
+        ("photo", ["--camera", "MISSING"], "no such file"),
+    ],
+)
+def test_scene_command_errors(tmp_path, capsys, photos, which, extra, message) -> None:
+    extra = [
+        str(photos["small"]) if e == "SMALL" else str(tmp_path / "nope.json") if e == "MISSING" else e
+        for e in extra
+    ]
+    code, _, err = run(
+        scene_main,
+        capsys,
+        photos[which],
+        "--board",
+        BOARD,
+        "--ball-radius",
+        "0.08",
+        *(["--vfov", "50"] if "--camera" not in extra else []),
+        *extra,
+        "--out",
+        tmp_path / "o",
+    )
+    assert code == 1
+    assert message in err and err.startswith("rtloop-scene: error:")
+    assert not (tmp_path / "o").exists()
+
+
+def test_scene_command_without_a_ball(tmp_path, capsys) -> None:
+    """A board but no ball: the error names the fixes (--ball, --ball-mask)."""
+    spec = parse_board(BOARD)
+    cam = PinholeCamera.from_scene_camera(TRUE_SCENE["camera"], 640, 480)
+    path = tmp_path / "board-only.png"
+    write_png16_srgb(path, board_view(spec, cam, background=0.4))
+    code, _, err = run(
+        scene_main,
+        capsys,
+        path,
+        "--board",
+        BOARD,
+        "--ball-radius",
+        "0.08",
+        "--vfov",
+        "50",
+        "--out",
+        tmp_path / "o",
+    )
+    assert code == 1 and "--ball X,Y,R" in err and "--ball-mask" in err
+
+
+def test_board_image_and_detection_agree() -> None:
+    spec = parse_board(BOARD)
+    img = board_image(spec, 60, 30)
+    det = detect_board(
+        to_detection_grey(np.repeat(img[:, :, None] / 255.0, 3, axis=2).astype(np.float32)), spec
+    )
+    expected = det.object_points[:, :2] / spec.square_m * 60 + 30 - 0.5
+    assert np.abs(det.image_points - expected).max() < 0.2
