@@ -9,7 +9,7 @@ use glam::Vec3A;
 
 use crate::de::Objective;
 use crate::error::{Error, Result};
-use crate::kernel::{closed_form, Kernel};
+use crate::kernel::{closed_form, Kernel, Norm};
 use crate::params::{ParamLayout, Target};
 use crate::render::{shade, GBuffer, Geometry, PShape, ShadeParams, Surfel};
 use crate::scene::Scene;
@@ -56,8 +56,10 @@ pub struct Fitness {
     kind: LossKind,
     clip: bool,
     shadows: bool,
-    /// Per-channel loss of the pixels left out because no free parameter changes them.
+    /// Per-channel loss of the pixels left out because no free parameter changes them...
     constant: [f64; 3],
+    /// ...from their fixed differences (model - objective), kept to recompute it for another norm.
+    fixed: Vec<Vec3A>,
     /// For `L1Projected`: (min, max) of each object's product per channel.
     product_bounds: Vec<[(f64, f64); 3]>,
 }
@@ -175,18 +177,15 @@ impl Fitness {
                 && (y == 0 || id(x, y - 1) == o)
                 && (y + 1 == h || id(x, y + 1) == o)
         };
-        let (mut surfels, mut tgt, mut solve, mut constant) =
-            (Vec::new(), Vec::new(), Vec::new(), [0.0f64; 3]);
+        let (mut surfels, mut tgt, mut solve, mut fixed) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         for &i in pixels {
             let s = gbuffer.surfels[i as usize];
             let t = Vec3A::from_slice(&target[3 * i as usize..3 * i as usize + 3]);
             if s.object == u32::MAX && background_fixed {
                 let m = shade(&s, &base, &[], false);
                 let m = if clip { m.min(Vec3A::ONE) } else { m };
-                let d = (m - t).abs();
-                for c in 0..3 {
-                    constant[c] += d[c] as f64;
-                }
+                fixed.push(m - t);
             } else {
                 surfels.push(s);
                 solve.push(interior(i as usize));
@@ -221,7 +220,8 @@ impl Fitness {
             kind,
             clip,
             shadows: scene.can_occlude(),
-            constant,
+            constant: penalty_sums(&fixed, Norm::L1),
+            fixed,
             product_bounds,
         })
     }
@@ -233,6 +233,16 @@ impl Fitness {
             self.fast_losses(x, &mut s, f64::INFINITY);
             s.products.clone()
         })
+    }
+
+    /// Penalise pixel differences with `norm` (L1 by default) in every loss of this fitness.
+    pub fn set_norm(&mut self, norm: Norm) {
+        self.kernel.norm = norm;
+        self.constant = penalty_sums(&self.fixed, norm);
+    }
+
+    pub fn norm(&self) -> Norm {
+        self.kernel.norm
     }
 
     pub fn kind(&self) -> LossKind {
@@ -357,22 +367,33 @@ impl Fitness {
                     let k = s.object as usize;
                     Vec3A::from_array(std::array::from_fn(|c| prods[k][c] as f32 * gi))
                 };
-                let d = ((if self.clip { m.min(Vec3A::ONE) } else { m }) - *t).abs();
+                let d = (if self.clip { m.min(Vec3A::ONE) } else { m }) - *t;
                 for c in 0..3 {
-                    acc[c] += d[c] as f64;
+                    acc[c] += self.norm().penalty(d[c]) as f64;
                 }
             }
             return acc;
         }
         for (s, t) in self.surfels.iter().zip(&self.target) {
             let m = shade(s, &p, &self.shapes, self.shadows);
-            let d = ((if self.clip { m.min(Vec3A::ONE) } else { m }) - *t).abs();
+            let d = (if self.clip { m.min(Vec3A::ONE) } else { m }) - *t;
             for c in 0..3 {
-                acc[c] += d[c] as f64;
+                acc[c] += self.norm().penalty(d[c]) as f64;
             }
         }
         acc
     }
+}
+
+/// Per-channel sums of `norm`'s penalty over fixed differences.
+fn penalty_sums(diffs: &[Vec3A], norm: Norm) -> [f64; 3] {
+    let mut acc = [0.0f64; 3];
+    for d in diffs {
+        for c in 0..3 {
+            acc[c] += norm.penalty(d[c]) as f64;
+        }
+    }
+    acc
 }
 
 impl Objective for Fitness {

@@ -16,6 +16,49 @@ use glam::Vec3A;
 
 use crate::render::{PShape, ShadeParams, Surfel};
 
+/// How a pixel's difference d = model - objective is penalised. `L1` is the paper's; `L2` is the maximum
+/// likelihood under Gaussian noise; `Huber(h)` is quadratic within `h` and linear beyond (d²/(2h), then
+/// |d| - h/2), robust to a few pixels the scene does not model.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Norm {
+    L1,
+    L2,
+    Huber(f32),
+}
+
+impl Norm {
+    /// "l1", "l2", "huber" (h = 0.02) or "huber:H".
+    pub fn parse(s: &str) -> Result<Norm, String> {
+        match s {
+            "l1" => Ok(Norm::L1),
+            "l2" => Ok(Norm::L2),
+            "huber" => Ok(Norm::Huber(0.02)),
+            _ => match s.strip_prefix("huber:").map(str::parse::<f32>) {
+                Some(Ok(h)) if h > 0.0 && h.is_finite() => Ok(Norm::Huber(h)),
+                _ => Err(format!(
+                    "unknown norm {s:?} (known: \"l1\", \"l2\", \"huber\", \"huber:H\" with H > 0)"
+                )),
+            },
+        }
+    }
+
+    #[inline(always)]
+    pub fn penalty(self, d: f32) -> f32 {
+        match self {
+            Norm::L1 => d.abs(),
+            Norm::L2 => d * d,
+            Norm::Huber(h) => {
+                let a = d.abs();
+                if a <= h {
+                    0.5 * d * d / h
+                } else {
+                    a - 0.5 * h
+                }
+            }
+        }
+    }
+}
+
 /// Pixels per block: the working set of one block stays in L1.
 pub const BLOCK: usize = 64;
 const INV_PI: f32 = std::f32::consts::FRAC_1_PI;
@@ -59,6 +102,8 @@ impl Group {
 }
 
 pub struct Kernel {
+    /// The per-pixel penalty of every loss this kernel computes.
+    pub norm: Norm,
     groups: Vec<Group>,
     pixels: usize,
 }
@@ -170,6 +215,7 @@ impl Kernel {
             start = end;
         }
         Kernel {
+            norm: Norm::L1,
             groups,
             pixels: surfels.len(),
         }
@@ -217,7 +263,7 @@ impl Kernel {
                 for s in 0..n {
                     for c in 0..3 {
                         let m = if clip { bg[c].min(1.0) } else { bg[c] };
-                        acc[c] += (m - g.t[c][s]).abs() as f64;
+                        acc[c] += self.norm.penalty(m - g.t[c][s]) as f64;
                     }
                 }
                 continue;
@@ -244,14 +290,14 @@ impl Kernel {
                             let lobe = blinn_phong(g, s, &light, m.shininess);
                             let v = a[c] + e[i] * (k[c] + ks[c] * lobe);
                             let v = if clip { v.min(1.0) } else { v };
-                            sum += (v - g.t[c][s]).abs();
+                            sum += self.norm.penalty(v - g.t[c][s]);
                         }
                         acc[c] += sum as f64;
                     }
                 } else {
                     let t = [&g.t[0][r.clone()], &g.t[1][r.clone()], &g.t[2][r.clone()]];
                     let top = if clip { 1.0 } else { f32::INFINITY };
-                    let sums = rgb_l1(&e[..len], t, a, k, top);
+                    let sums = rgb_loss(self.norm, &e[..len], t, a, k, top);
                     for c in 0..3 {
                         acc[c] += sums[c] as f64;
                     }
@@ -331,7 +377,8 @@ impl Kernel {
             let Some(obj) = g.object else {
                 for s in 0..n {
                     for c in 0..3 {
-                        acc[c] += g.t[c][s].abs() as f64; // black background (ambient-free scene)
+                        // black background (ambient-free scene)
+                        acc[c] += self.norm.penalty(g.t[c][s]) as f64;
                     }
                 }
                 continue;
@@ -376,7 +423,7 @@ impl Kernel {
                 let r = start..start + len;
                 let t = [&g.t[0][r.clone()], &g.t[1][r.clone()], &g.t[2][r]];
                 let top = if clip { 1.0 } else { f32::INFINITY };
-                let sums = rgb_l1(e, t, [0.0; 3], pk, top);
+                let sums = rgb_loss(self.norm, e, t, [0.0; 3], pk, top);
                 for c in 0..3 {
                     acc[c] += sums[c] as f64;
                 }
@@ -428,9 +475,33 @@ pub fn fallback_sums(e: &[f32], t: &[f32], sat: f32) -> (f64, f64, f32) {
 /// results stay bit-reproducible).
 const LANES: usize = 8;
 
-/// Σ |min(a_c + e·k_c, top) - t_c| for the three channels in one pass over `e`, in `LANES` partial sums.
+/// Σ penalty(min(a_c + e·k_c, top) - t_c) for the three channels, one loop per norm so each vectorises.
 #[inline(always)]
-fn rgb_l1(e: &[f32], t: [&[f32]; 3], a: [f32; 3], k: [f32; 3], top: f32) -> [f32; 3] {
+fn rgb_loss(norm: Norm, e: &[f32], t: [&[f32]; 3], a: [f32; 3], k: [f32; 3], top: f32) -> [f32; 3] {
+    match norm {
+        Norm::L1 => rgb_sum(e, t, a, k, top, |d| d.abs()),
+        Norm::L2 => rgb_sum(e, t, a, k, top, |d| d * d),
+        Norm::Huber(h) => rgb_sum(e, t, a, k, top, move |d| {
+            let ad = d.abs();
+            if ad <= h {
+                0.5 * d * d / h
+            } else {
+                ad - 0.5 * h
+            }
+        }),
+    }
+}
+
+/// Σ f(min(a_c + e·k_c, top) - t_c) for the three channels in one pass over `e`, in `LANES` partial sums.
+#[inline(always)]
+fn rgb_sum(
+    e: &[f32],
+    t: [&[f32]; 3],
+    a: [f32; 3],
+    k: [f32; 3],
+    top: f32,
+    f: impl Fn(f32) -> f32,
+) -> [f32; 3] {
     let n = e.len();
     let (t0, t1, t2) = (&t[0][..n], &t[1][..n], &t[2][..n]);
     let (mut s0, mut s1, mut s2) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
@@ -445,17 +516,17 @@ fn rgb_l1(e: &[f32], t: [&[f32]; 3], a: [f32; 3], k: [f32; 3], top: f32) -> [f32
         );
         for j in 0..LANES {
             let ej = ec[j];
-            s0[j] += ((a[0] + ej * k[0]).min(top) - c0[j]).abs();
-            s1[j] += ((a[1] + ej * k[1]).min(top) - c1[j]).abs();
-            s2[j] += ((a[2] + ej * k[2]).min(top) - c2[j]).abs();
+            s0[j] += f((a[0] + ej * k[0]).min(top) - c0[j]);
+            s1[j] += f((a[1] + ej * k[1]).min(top) - c1[j]);
+            s2[j] += f((a[2] + ej * k[2]).min(top) - c2[j]);
         }
         i += LANES;
     }
     for j in 0..n - full {
         let ej = e[full + j];
-        s0[j] += ((a[0] + ej * k[0]).min(top) - t0[full + j]).abs();
-        s1[j] += ((a[1] + ej * k[1]).min(top) - t1[full + j]).abs();
-        s2[j] += ((a[2] + ej * k[2]).min(top) - t2[full + j]).abs();
+        s0[j] += f((a[0] + ej * k[0]).min(top) - t0[full + j]);
+        s1[j] += f((a[1] + ej * k[1]).min(top) - t1[full + j]);
+        s2[j] += f((a[2] + ej * k[2]).min(top) - t2[full + j]);
     }
     [s0.iter().sum(), s1.iter().sum(), s2.iter().sum()]
 }

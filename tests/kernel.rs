@@ -304,3 +304,60 @@ fn early_exit_changes_cost_not_results() {
         full[0]
     );
 }
+
+#[test]
+fn every_norm_matches_the_plain_path_and_its_definition() {
+    use rtloop::Norm;
+    let mut rng = Rng::new(21);
+    for trial in 0..6 {
+        let scene = random_scene(&mut rng, 1 + trial % 3, trial % 2 == 1, false);
+        let clean = render(&scene, None, None, 1).unwrap().rgb;
+        // A noisy objective, so differences span both sides of the Huber threshold.
+        let target: Vec<f32> = clean
+            .iter()
+            .map(|v| (v + 0.05 * (rng.uniform() as f32 - 0.5)).clamp(0.0, 1.0))
+            .collect();
+        let layout = ParamLayout::all(&scene);
+        for norm in [Norm::L1, Norm::L2, Norm::Huber(0.01)] {
+            let mut f = Fitness::new(
+                &scene,
+                layout.clone(),
+                &target,
+                None,
+                LossKind::L1,
+                true,
+                None,
+            )
+            .unwrap();
+            f.set_norm(norm);
+            let x = random_candidate(&mut rng, &layout);
+            let (fast, slow) = (f.channel_losses(&x), f.reference_channel_losses(&x));
+            // And from the definition: render the candidate, penalise every pixel.
+            let mut s = scene.clone();
+            layout.apply(&mut s, &x);
+            let img = render(&s, None, None, 1).unwrap().rgb;
+            let mut direct = [0.0f64; 3];
+            for (i, (m, t)) in img.iter().zip(&target).enumerate() {
+                direct[i % 3] += norm.penalty(m.min(1.0) - t) as f64;
+            }
+            for c in 0..3 {
+                assert!(
+                    close(fast[c], slow[c], 2e-3),
+                    "{norm:?} trial {trial}: {fast:?} vs {slow:?}"
+                );
+                assert!(
+                    close(fast[c], direct[c], 2e-3),
+                    "{norm:?} trial {trial}: {fast:?} vs {direct:?}"
+                );
+            }
+        }
+    }
+    assert_eq!(Norm::parse("huber:0.05"), Ok(Norm::Huber(0.05)));
+    assert!(Norm::parse("huber:-1").is_err() && Norm::parse("l3").is_err());
+    // Huber is continuous at its threshold and linear beyond it.
+    let h = Norm::Huber(0.1);
+    assert!(
+        (h.penalty(0.1) - 0.05).abs() < 1e-7
+            && (h.penalty(1.1) - h.penalty(1.0) - 0.1).abs() < 1e-6
+    );
+}

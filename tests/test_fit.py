@@ -125,8 +125,9 @@ def test_ambient_light_makes_intensity_and_albedo_separable(ball_scene):
     assert result_ident["degenerate"] is False
 
 
-def test_fitness_is_the_l1_distance_of_the_rendered_image(ball_scene):
-    """The fused fitness equals rendering the candidate and summing |min(render, 1) - objective|."""
+@pytest.mark.parametrize("norm", ["l1", "l2", "huber:0.01"])
+def test_fitness_is_the_distance_of_the_rendered_image(ball_scene, norm):
+    """The fused fitness equals rendering the candidate and summing penalty(min(render, 1) - objective)."""
     rng = np.random.default_rng(0)
     truth = ball_scene
     photo = np.clip(rtloop.render(truth) + rng.normal(0, 0.02, (48, 64, 3)).astype(np.float32), 0, 1)
@@ -134,11 +135,33 @@ def test_fitness_is_the_l1_distance_of_the_rendered_image(ball_scene):
     paths = scene.fit_paths
     bounds = np.array(scene.bounds(paths))
     pop = bounds[:, 0] + (bounds[:, 1] - bounds[:, 0]) * rng.random((8, len(bounds)))
-    got = _native.evaluate(scene, paths, photo, pop)[:, 0]
+    got = _native.evaluate(scene, paths, photo, pop, norm=norm)[:, 0]
+
+    def penalty(d):
+        if norm == "l1":
+            return np.abs(d)
+        if norm == "l2":
+            return d * d
+        h = 0.01
+        return np.where(np.abs(d) <= h, 0.5 * d * d / h, np.abs(d) - 0.5 * h)
+
     for x, g in zip(pop, got):
         img = rtloop.render(scene.with_params(list(x)))
-        want = np.abs(np.minimum(img, 1.0) - photo).astype(np.float64).sum()
+        want = penalty((np.minimum(img, 1.0) - photo).astype(np.float64)).sum()
         assert g == pytest.approx(want, rel=1e-5)
+
+
+@pytest.mark.parametrize("norm", ["l2", "huber"])
+def test_other_norms_fit_too(ball_scene, norm):
+    truth = ball_scene
+    rng = np.random.default_rng(11)
+    photo = np.clip(_photo(truth) + rng.normal(0, 0.01, (48, 64, 3)), 0, 1).astype(np.float32)
+    result = rtloop.fit(_wrong_start(truth), photo, seed=1, norm=norm)
+    assert result.settings["norm"] == norm
+    err = np.linalg.norm(np.array(result.scene.to_dict()["light"]["position"]) - truth["light"]["position"])
+    assert err < 0.05
+    with pytest.raises(rtloop.RtloopError, match="norm"):
+        rtloop.fit(truth, photo, norm="l3")
 
 
 def test_projected_fitness_equals_l1_at_the_solved_products(ball_scene):

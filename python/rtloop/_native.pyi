@@ -46,6 +46,7 @@ def evaluate(
     clip: bool = True,
     threads: int | None = None,
     product_bounds: npt.NDArray[np.float64] | None = None,
+    norm: str = "l1",
 ) -> npt.NDArray[np.float64]: ...
 def optimize(
     scene: Scene,
@@ -64,6 +65,10 @@ def optimize(
     callback: Callable[[int, npt.NDArray[np.float64], list[float], int, list[list[float]] | None], Any]
     | None = None,
     product_bounds: npt.NDArray[np.float64] | None = None,
+    method: str = "de",
+    max_evaluations: int | None = None,
+    polish: int = 0,
+    norm: str = "l1",
 ) -> dict[str, Any]: ...
 
 # Test hooks for the optimisers (rust/python/de.rs), used by tests/test_de_scipy.py.

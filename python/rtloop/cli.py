@@ -203,6 +203,9 @@ def _build_parser() -> _Parser:
                    "editors) or 'linear' (raw linear sensor counts)")
     p.add_argument("--crop", action="store_true",
                    help="centre-crop IMAGE to the scene's aspect ratio (otherwise they must match)")
+    p.add_argument("--norm", default="l1", metavar="NORM",
+                   help="per-pixel penalty of the loss: l1 (the paper's, default), l2 (Gaussian noise), "
+                   "huber or huber:H (quadratic within H, linear beyond; robust to unmodelled pixels)")
     p.add_argument("--mask", type=Path, metavar="PNG",
                    help="an image of IMAGE's size (or the scene's): white where the scene models the photo, "
                    "black where it does not (another object, a reflection); black pixels are left out of the fit")
@@ -437,7 +440,7 @@ class _Run:
             result = rtloop.fit(
                 scene, image, protocol=args.protocol, seed=args.seed, population=args.population,
                 generations=args.generations, f=args.f, cr=args.cr, threads=args.threads, callback=callback,
-                mask=mask,
+                mask=mask, norm=args.norm,
             )
         self.progress.end_line()
         self.check_stop()

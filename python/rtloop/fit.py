@@ -215,6 +215,7 @@ def fit(
     polish: int | None = None,
     uncertainty: bool = True,
     mask: np.ndarray | None = None,
+    norm: str = "l1",
 ) -> FitResult:
     """Fit the scene's free parameters (its ``fit`` section) to ``image``.
 
@@ -228,6 +229,8 @@ def fit(
     ("de" or "lshade") and ``polish`` (Nelder-Mead evaluations) override the protocol's search for the
     closed-form method. ``mask`` (bool (H, W), True = use) leaves out pixels the scene does not model
     (another object, a reflection, the photographer's shadow): they count in no loss and no solve.
+    ``norm`` penalises each pixel's difference: "l1" (the paper's, default), "l2" (maximum likelihood for
+    Gaussian noise), "huber" or "huber:H" (quadratic within H, default 0.02, linear beyond).
     """
     t0 = time.perf_counter()
     scene = load_scene(scene)
@@ -268,6 +271,7 @@ def fit(
     ident = _identifiability(scene, all_paths)
     settings = {"population": pop, "generations": list(gens), "f": f_, "cr": cr_, "clip": clip,
                 "masked_pixels": None if use is None else int(scene.width * scene.height - use.size),
+                "norm": norm,
                 "pixels_per_object": pixels_per_object, "threads": threads}
     stages: list[StageResult] = []
     evaluations = 0
@@ -301,7 +305,7 @@ def fit(
         out = _native.optimize(
             stage_scene, paths, target, pixels=pixels, loss=loss, clip=clip, population=pop,
             generations=generations, f=f_, cr=cr_, seed=stage_seed, threads=threads, callback=on_generation,
-            product_bounds=product_bounds, method=method, polish=polish,
+            product_bounds=product_bounds, method=method, polish=polish, norm=norm,
         )
         generations_run = out["generations"]
         if "polish" in out and not out["stopped"]:

@@ -14,6 +14,7 @@ use pyo3::types::PyDict;
 use crate::de::{self, DeConfig};
 use crate::error::Error;
 use crate::fitness::{Fitness, LossKind};
+use crate::kernel::Norm;
 use crate::params::ParamLayout;
 use crate::render as core_render;
 use crate::scene::Scene;
@@ -222,6 +223,7 @@ fn make_fitness(
     loss: &str,
     clip: bool,
     product_bounds: Option<PyReadonlyArray3<'_, f64>>,
+    norm: &str,
 ) -> PyResult<(Fitness, Vec<(f64, f64)>)> {
     let layout = ParamLayout::new(scene, paths)?;
     let bounds = layout.bounds.clone();
@@ -249,7 +251,7 @@ fn make_fitness(
         None => None,
     };
     let kind = LossKind::parse(loss)?;
-    let fitness = Fitness::new(
+    let mut fitness = Fitness::new(
         scene,
         layout,
         &target,
@@ -258,6 +260,7 @@ fn make_fitness(
         clip,
         product_bounds,
     )?;
+    fitness.set_norm(Norm::parse(norm).map_err(RtloopError::new_err)?);
     Ok((fitness, bounds))
 }
 
@@ -276,7 +279,7 @@ fn pool(threads: Option<usize>) -> PyResult<rayon::ThreadPool> {
 /// Objective values of each row of `population` (N, D): float64 (N, n_objectives).
 #[pyfunction]
 #[pyo3(signature = (scene, paths, target, population, pixels=None, loss="l1", clip=true, threads=None,
-                    product_bounds=None))]
+                    product_bounds=None, norm="l1"))]
 #[allow(clippy::too_many_arguments)]
 fn evaluate<'py>(
     py: Python<'py>,
@@ -289,12 +292,21 @@ fn evaluate<'py>(
     clip: bool,
     threads: Option<usize>,
     product_bounds: Option<PyReadonlyArray3<'py, f64>>,
+    norm: &str,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     use de::Objective;
     use rayon::prelude::*;
     let scene = &scene.get().0;
-    let (fitness, bounds) =
-        make_fitness(scene, &paths, &target, pixels, loss, clip, product_bounds)?;
+    let (fitness, bounds) = make_fitness(
+        scene,
+        &paths,
+        &target,
+        pixels,
+        loss,
+        clip,
+        product_bounds,
+        norm,
+    )?;
     let pop = population.as_array();
     if pop.ncols() != bounds.len() {
         return Err(PyValueError::new_err(format!(
@@ -324,7 +336,7 @@ fn evaluate<'py>(
 #[pyfunction]
 #[pyo3(signature = (scene, paths, target, *, pixels=None, loss="l1", clip=true, population=60,
                     generations=200, f=0.6, cr=0.8, seed=0, threads=None, callback=None,
-                    product_bounds=None, method="de", max_evaluations=None, polish=0))]
+                    product_bounds=None, method="de", max_evaluations=None, polish=0, norm="l1"))]
 #[allow(clippy::too_many_arguments)]
 fn optimize<'py>(
     py: Python<'py>,
@@ -345,10 +357,19 @@ fn optimize<'py>(
     method: &str,
     max_evaluations: Option<usize>,
     polish: usize,
+    norm: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
     let scene = &scene.get().0;
-    let (fitness, bounds) =
-        make_fitness(scene, &paths, &target, pixels, loss, clip, product_bounds)?;
+    let (fitness, bounds) = make_fitness(
+        scene,
+        &paths,
+        &target,
+        pixels,
+        loss,
+        clip,
+        product_bounds,
+        norm,
+    )?;
     let cfg = DeConfig {
         population,
         generations,

@@ -189,11 +189,7 @@ pub fn render(scene: &Scene, width: Option<u32>, height: Option<u32>, spp: u32) 
     let geometry = Geometry::new(scene);
     let params = ShadeParams::new(scene);
     let shadows = scene.can_occlude();
-    let offsets = if spp == 1 {
-        vec![(0.5, 0.5)]
-    } else {
-        sample_offsets(spp)
-    };
+    let offsets = sample_offsets(spp); // spp = 1: the pixel centre
     let inv = 1.0 / offsets.len() as f32;
     let mut rgb = vec![0.0f32; (width * height * 3) as usize];
     rgb.par_chunks_mut(3 * width as usize)
