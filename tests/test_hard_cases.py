@@ -81,16 +81,17 @@ def test_hard_light_positions_are_recovered(ball_scene, name, light):
     truth["fit"]["light.position"]["min"] = [-8, 0.02, -8]
     result = rtloop.fit(_start(truth), _photo(truth), seed=1)
     _check(result)
-    assert _light_err(result, truth) < 0.01, name
+    # Noise-free and rendered by rtloop: held to the 1 mm / 0.2 % targets even here.
+    assert _light_err(result, truth) < 0.001, name
     undetermined = result.identifiability.get("undetermined", [])
     if "behind" in name:
         # No visible pixel of the ball is lit: its colour is not in the photo, and rtloop says so.
         assert undetermined == ["objects.ball.albedo"]
         assert result.scene.to_dict()["objects"][0]["material"]["albedo"] == [0.5, 0.5, 0.5]
-        assert _product_err(result, truth, skip=("ball",)) < 0.01, name
+        assert _product_err(result, truth, skip=("ball",)) < 0.002, name
     else:
         assert undetermined == []
-        assert _product_err(result, truth) < 0.01, name
+        assert _product_err(result, truth) < 0.002, name
 
 
 def test_light_inside_the_sphere_or_under_the_floor_is_a_losing_candidate_not_a_crash(ball_scene):
@@ -112,7 +113,7 @@ def test_light_inside_the_sphere_or_under_the_floor_is_a_losing_candidate_not_a_
     truth["fit"]["light.position"]["min"] = [-8, -3, -8]
     result = rtloop.fit(_start(truth), photo, seed=2)
     _check(result)
-    assert _light_err(result, truth) < 0.01
+    assert _light_err(result, truth) < 0.001
 
 
 def test_very_dim_photo(ball_scene, tmp_path):
@@ -136,8 +137,8 @@ def test_partly_saturated_photo(ball_scene):
     assert clipped > 0.1, f"only {clipped:.0%} of pixels saturated"
     result = rtloop.fit(_start(truth), photo, seed=4)
     _check(result)
-    assert _light_err(result, truth) < 0.01
-    assert _product_err(result, truth) < 0.01
+    assert _light_err(result, truth) < 0.001
+    assert _product_err(result, truth) < 0.002
 
 
 def test_strong_noise(ball_scene):
@@ -195,8 +196,8 @@ def test_millimetre_and_kilometre_scenes(ball_scene, scale):
     assert 0.2 < (photo.max(axis=2) > 0.02).mean() < 0.9, "the same picture at every scale"
     result = rtloop.fit(_start(truth), photo, seed=8)
     _check(result)
-    assert _light_err(result, truth) < 0.01 * s
-    assert _product_err(result, truth) < 0.01
+    assert _light_err(result, truth) < 0.001 * s
+    assert _product_err(result, truth) < 0.002
 
 
 def test_one_sphere_hiding_another(ball_scene):
@@ -209,11 +210,11 @@ def test_one_sphere_hiding_another(ball_scene):
     assert (ids == 1).sum() == 0, "the second sphere is entirely behind the first"
     result = rtloop.fit(_start(truth), _photo(truth), seed=9)
     _check(result)
-    assert _light_err(result, truth) < 0.01
+    assert _light_err(result, truth) < 0.001
     # The hidden sphere's colour is not in the image: reported, and left at the scene's value.
     assert result.identifiability["undetermined"] == ["objects.hidden.albedo"]
     assert result.scene.to_dict()["objects"][1]["material"]["albedo"] == [0.5, 0.5, 0.5]
-    assert _product_err(result, truth, skip=("hidden",)) < 0.01
+    assert _product_err(result, truth, skip=("hidden",)) < 0.002
 
 
 def test_scene_json_roundtrip_of_a_fit_result_is_valid(ball_scene):
