@@ -142,10 +142,10 @@ impl Fitness {
             if let Some((path, _, _)) = layout
                 .entries
                 .iter()
-                .find(|(_, t, _)| *t != Target::LightPosition)
+                .find(|(_, t, _)| !matches!(t, Target::LightPosition | Target::LightDirection))
             {
                 return Err(Error::Invalid(format!(
-                    "the projected loss searches light.position only; {path} is solved in closed form"
+                    "the projected loss searches the light's position or direction only; {path} is solved in closed form"
                 )));
             }
             // Unit light and white albedo: shading then yields g per pixel.

@@ -112,6 +112,8 @@ pub struct Kernel {
 #[derive(Clone, Copy)]
 struct Light {
     pos: [f32; 3],
+    /// A directional light's unit direction towards the light (then `pos` is unused).
+    dir: Option<[f32; 3]>,
     /// intensity x colour.
     rgb: [f32; 3],
 }
@@ -251,6 +253,7 @@ impl Kernel {
     fn l1_generic<const AVX2: bool>(&self, p: &ShadeParams, clip: bool, bound: f64) -> [f64; 3] {
         let light = Light {
             pos: p.light_position.to_array(),
+            dir: p.light_direction.map(|d| d.to_array()),
             rgb: p.light_rgb.to_array(),
         };
         let mut acc = [0.0f64; 3];
@@ -361,6 +364,7 @@ impl Kernel {
     ) -> [f64; 3] {
         let light = Light {
             pos: p.light_position.to_array(),
+            dir: p.light_direction.map(|d| d.to_array()),
             rgb: [1.0; 3],
         };
         scratch.resize(self.pixels, 0.0);
@@ -564,6 +568,19 @@ fn irradiance<const AVX2: bool>(
     light: &Light,
     e: &mut [f32],
 ) {
+    if let Some(d) = light.dir {
+        // Directional light: no fall-off, e = max(0, n·l).
+        let n = e.len();
+        let (nx, ny, nz) = (
+            &g.n[0][r.start..][..n],
+            &g.n[1][r.start..][..n],
+            &g.n[2][r.start..][..n],
+        );
+        for i in 0..n {
+            e[i] = (nx[i] * d[0] + ny[i] * d[1] + nz[i] * d[2]).max(0.0);
+        }
+        return;
+    }
     #[cfg(target_arch = "x86_64")]
     if AVX2 {
         // SAFETY: `AVX2` is only true on the path dispatched after checking the CPU's features.
@@ -651,6 +668,10 @@ fn irradiance_exact(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mut
 /// Zero `e` where the segment from the pixel to the light is blocked by another object.
 #[inline(always)]
 fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mut [f32]) {
+    if let Some(d) = light.dir {
+        shadow_directional(g, r, d, e);
+        return;
+    }
     let n = e.len();
     let (px, py, pz) = (
         &g.p[0][r.start..][..n],
@@ -704,13 +725,46 @@ fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mut [f32]) {
     }
 }
 
+/// `shadow` for a directional light: rays p + t·d, t in (0, inf), d the unit direction to the light.
+#[inline(always)]
+fn shadow_directional(g: &Group, r: std::ops::Range<usize>, d: [f32; 3], e: &mut [f32]) {
+    let n = e.len();
+    let (px, py, pz) = (
+        &g.p[0][r.start..][..n],
+        &g.p[1][r.start..][..n],
+        &g.p[2][r.start..][..n],
+    );
+    for s in &g.spheres {
+        let cc = &s.c[r.start..][..n];
+        let [cx, cy, cz] = s.center;
+        for i in 0..n {
+            // |p - c + t d|² = r² with |d| = 1: t² + 2bt + c = 0; blocked when the far root is positive.
+            let b = (px[i] - cx) * d[0] + (py[i] - cy) * d[1] + (pz[i] - cz) * d[2];
+            let c = cc[i];
+            let hit = (b * b - c >= 0.0) & ((b < 0.0) | (c < 0.0));
+            e[i] = if hit { 0.0 } else { e[i] };
+        }
+    }
+    for pl in &g.planes {
+        // The ray heads towards the plane's other side when n·d and the pixel's side differ in sign.
+        let side_l = pl.normal[0] * d[0] + pl.normal[1] * d[1] + pl.normal[2] * d[2];
+        let side = &pl.side[r.start..][..n];
+        for i in 0..n {
+            e[i] = if side[i] * side_l < 0.0 { 0.0 } else { e[i] };
+        }
+    }
+}
+
 /// max(0, n·h)^s for the pixel `s` of the group.
 #[inline(always)]
 fn blinn_phong(g: &Group, s: usize, light: &Light, shininess: f32) -> f32 {
     let p = Vec3A::new(g.p[0][s], g.p[1][s], g.p[2][s]);
     let n = Vec3A::new(g.n[0][s], g.n[1][s], g.n[2][s]);
     let v = Vec3A::new(g.v[0][s], g.v[1][s], g.v[2][s]);
-    let l = (Vec3A::from_array(light.pos) - p).normalize_or_zero();
+    let l = match light.dir {
+        Some(d) => Vec3A::from_array(d),
+        None => (Vec3A::from_array(light.pos) - p).normalize_or_zero(),
+    };
     let h = (l + v).normalize_or_zero();
     n.dot(h).max(0.0).powf(shininess)
 }

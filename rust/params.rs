@@ -7,6 +7,8 @@ use crate::scene::Scene;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Target {
     LightPosition,
+    /// A directional light's direction (3 components, normalised on use).
+    LightDirection,
     LightIntensity,
     LightColor,
     Ambient,
@@ -17,14 +19,23 @@ pub enum Target {
 }
 
 /// The fittable paths, for error messages and documentation.
-pub const FITTABLE: &str = "light.position, light.intensity, light.color, ambient, exposure, \
+pub const FITTABLE: &str = "light.position (point light), light.direction (directional light), \
+light.intensity, light.color, ambient, exposure, \
 objects.NAME.albedo, objects.NAME.specular, objects.NAME.shininess";
 
 impl Target {
     /// Parse a dotted path such as `objects.ball.albedo`. The error is a bare reason; the caller adds the field.
     pub fn parse(path: &str, scene: &Scene) -> std::result::Result<Target, String> {
+        let directional = scene.light.direction.is_some();
         let t = match path {
+            "light.position" if directional => {
+                return Err("the light is directional: fit light.direction, not light.position".into())
+            }
+            "light.direction" if !directional => {
+                return Err("the light is a point light: fit light.position (or make it \"type\": \"directional\")".into())
+            }
             "light.position" => Target::LightPosition,
+            "light.direction" => Target::LightDirection,
             "light.intensity" => Target::LightIntensity,
             "light.color" => Target::LightColor,
             "ambient" => Target::Ambient,
@@ -63,7 +74,11 @@ impl Target {
     /// Number of scalar components.
     pub fn len(&self) -> usize {
         match self {
-            Target::LightPosition | Target::LightColor | Target::Ambient | Target::Albedo(_) => 3,
+            Target::LightPosition
+            | Target::LightDirection
+            | Target::LightColor
+            | Target::Ambient
+            | Target::Albedo(_) => 3,
             Target::LightIntensity
             | Target::Exposure
             | Target::Specular(_)
@@ -74,7 +89,7 @@ impl Target {
     /// Canonical order: the paper's [light x, y, z, power, objects' RGB...].
     pub fn order_key(&self) -> (usize, usize, usize) {
         match *self {
-            Target::LightPosition => (0, 0, 0),
+            Target::LightPosition | Target::LightDirection => (0, 0, 0),
             Target::LightIntensity => (0, 0, 1),
             Target::LightColor => (0, 0, 2),
             Target::Ambient => (1, 0, 0),
@@ -88,20 +103,24 @@ impl Target {
     /// The smallest physically meaningful value, if any.
     pub fn lower_limit(&self) -> Option<f64> {
         match self {
-            Target::LightPosition => None,
+            Target::LightPosition | Target::LightDirection => None,
             _ => Some(0.0),
         }
     }
 
     /// True for parameters the image depends on linearly (albedo, intensity, colour, ambient, exposure, specular).
     pub fn is_linear(&self) -> bool {
-        !matches!(self, Target::LightPosition | Target::Shininess(_))
+        !matches!(
+            self,
+            Target::LightPosition | Target::LightDirection | Target::Shininess(_)
+        )
     }
 
     /// Current value in `scene`.
     pub fn get(&self, scene: &Scene) -> Vec<f64> {
         match *self {
             Target::LightPosition => scene.light.position.to_vec(),
+            Target::LightDirection => scene.light.direction.unwrap_or([0.0, 1.0, 0.0]).to_vec(),
             Target::LightIntensity => vec![scene.light.intensity],
             Target::LightColor => scene.light.color.to_vec(),
             Target::Ambient => scene.ambient.to_vec(),
@@ -117,6 +136,14 @@ impl Target {
         let v3 = || [v[0], v[1], v[2]];
         match *self {
             Target::LightPosition => scene.light.position = v3(),
+            Target::LightDirection => {
+                let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                scene.light.direction = Some(if n > 0.0 && n.is_finite() {
+                    [v[0] / n, v[1] / n, v[2] / n]
+                } else {
+                    [0.0, 1.0, 0.0]
+                });
+            }
             Target::LightIntensity => scene.light.intensity = v[0],
             Target::LightColor => scene.light.color = v3(),
             Target::Ambient => scene.ambient = v3(),
@@ -158,7 +185,9 @@ impl ParamLayout {
             layout.entries.push((f.path.clone(), f.target, offset));
             let suffix: &[&str] = match f.target.len() {
                 1 => &[""],
-                _ if matches!(f.target, Target::LightPosition) => &[".x", ".y", ".z"],
+                _ if matches!(f.target, Target::LightPosition | Target::LightDirection) => {
+                    &[".x", ".y", ".z"]
+                }
                 _ => &[".r", ".g", ".b"],
             };
             for k in 0..f.target.len() {

@@ -21,12 +21,18 @@ pub struct Camera {
     pub vfov_deg: f64,
 }
 
+/// The scene's one light: a point light at `position`, or a directional light (a sun, a lamp far away)
+/// shining from `direction`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PointLight {
+    /// Point light: its position. Unused (zero) for a directional light.
     pub position: V3,
-    /// Radiant intensity scale in W/sr (times `color`).
+    /// Point light: radiant intensity in W/sr; directional: irradiance at normal incidence in W/m²
+    /// (times `color` in both cases).
     pub intensity: f64,
     pub color: V3,
+    /// Directional light: the unit direction from the scene towards the light (normalised when set).
+    pub direction: Option<V3>,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -119,7 +125,10 @@ struct RawCamera {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawLight {
-    position: V3,
+    #[serde(rename = "type")]
+    kind: Option<String>,
+    position: Option<V3>,
+    direction: Option<V3>,
     intensity: f64,
     color: Option<V3>,
 }
@@ -259,10 +268,45 @@ impl Scene {
         }
 
         let l = &raw.light;
+        let (position, direction) = match l.kind.as_deref().unwrap_or("point") {
+            "point" => {
+                if l.direction.is_some() {
+                    return Err(Error::scene("light.direction", "a point light has a position, not a direction (or set \"type\": \"directional\")"));
+                }
+                let p = l.position.ok_or_else(|| {
+                    Error::scene("light.position", "missing field for a point light")
+                })?;
+                (finite3("light.position", p)?, None)
+            }
+            "directional" => {
+                if l.position.is_some() {
+                    return Err(Error::scene(
+                        "light.position",
+                        "a directional light has a direction, not a position",
+                    ));
+                }
+                let d = l.direction.ok_or_else(|| {
+                    Error::scene("light.direction", "missing field for a directional light")
+                })?;
+                let d = finite3("light.direction", d)?;
+                let n = norm(d);
+                if n == 0.0 || !n.is_finite() {
+                    return Err(Error::scene("light.direction", "zero-length direction"));
+                }
+                ([0.0; 3], Some([d[0] / n, d[1] / n, d[2] / n])) // stored as a unit vector
+            }
+            other => {
+                return Err(Error::scene(
+                    "light.type",
+                    format!("unknown light type {other:?} (known: \"point\", \"directional\")"),
+                ))
+            }
+        };
         let light = PointLight {
-            position: finite3("light.position", l.position)?,
+            position,
             intensity: finite("light.intensity", l.intensity)?,
             color: nonneg3("light.color", l.color.unwrap_or([1.0; 3]))?,
+            direction,
         };
         if light.intensity < 0.0 {
             return Err(Error::scene(
@@ -374,11 +418,15 @@ impl Scene {
             json!({"position": self.camera.position, "look_at": self.camera.look_at,
                    "up": self.camera.up, "vfov_deg": self.camera.vfov_deg}),
         );
-        out.insert(
-            "light".into(),
-            json!({"position": self.light.position, "intensity": self.light.intensity,
-                   "color": self.light.color}),
-        );
+        let light = match self.light.direction {
+            None => json!({"position": self.light.position, "intensity": self.light.intensity,
+                           "color": self.light.color}),
+            Some(d) => {
+                json!({"type": "directional", "direction": d, "intensity": self.light.intensity,
+                              "color": self.light.color})
+            }
+        };
+        out.insert("light".into(), light);
         out.insert("ambient".into(), json!(self.ambient));
         out.insert("background".into(), json!(self.background));
         out.insert("exposure".into(), json!(self.exposure));

@@ -361,3 +361,67 @@ fn every_norm_matches_the_plain_path_and_its_definition() {
             && (h.penalty(1.1) - h.penalty(1.0) - 0.1).abs() < 1e-6
     );
 }
+
+/// A random scene lit by a directional light (a sun): the same geometry generator, the light swapped.
+fn random_sun_scene(rng: &mut Rng, spheres: usize, specular: bool) -> Scene {
+    let point = random_scene(rng, spheres, specular, false);
+    let mut v = point.to_value();
+    let dir = [
+        rng.uniform() * 2.0 - 1.0,
+        0.3 + rng.uniform(),
+        rng.uniform() * 2.0 - 1.0,
+    ];
+    v["light"] = serde_json::json!({"type": "directional", "direction": dir, "intensity": 3.0});
+    let fit = v["fit"].as_object_mut().unwrap();
+    fit.remove("light.position");
+    fit.insert(
+        "light.direction".into(),
+        serde_json::json!({"min": [-1, 0.05, -1], "max": [1, 1, 1]}),
+    );
+    Scene::from_json(&v.to_string()).unwrap()
+}
+
+#[test]
+fn directional_light_kernel_matches_the_plain_path() {
+    let mut rng = Rng::new(33);
+    for trial in 0..8 {
+        let scene = random_sun_scene(&mut rng, 1 + trial % 4, trial % 2 == 1);
+        let target: Vec<f32> = render(&scene, None, None, 1)
+            .unwrap()
+            .rgb
+            .iter()
+            .map(|v| v.min(1.0))
+            .collect();
+        let layout = ParamLayout::all(&scene);
+        assert_eq!(layout.names[0], "light.direction.x");
+        let f = Fitness::new(
+            &scene,
+            layout.clone(),
+            &target,
+            None,
+            LossKind::L1,
+            true,
+            None,
+        )
+        .unwrap();
+        for _ in 0..5 {
+            let x = random_candidate(&mut rng, &layout);
+            let (fast, slow) = (f.channel_losses(&x), f.reference_channel_losses(&x));
+            for c in 0..3 {
+                assert!(
+                    close(fast[c], slow[c], 2e-3),
+                    "trial {trial}: {fast:?} vs {slow:?}"
+                );
+            }
+        }
+        // At the true parameters the loss vanishes; the direction's length does not matter.
+        let mut x = layout.read(&scene);
+        let exact: f64 = f.channel_losses(&x).iter().sum();
+        x[..3].iter_mut().for_each(|v| *v *= 2.5);
+        let scaled: f64 = f.channel_losses(&x).iter().sum();
+        assert!(
+            exact < 1e-5 * target.len() as f64 && (scaled - exact).abs() < 1e-3,
+            "{exact} {scaled}"
+        );
+    }
+}

@@ -221,3 +221,32 @@ def test_scene_json_roundtrip_of_a_fit_result_is_valid(ball_scene):
     result = rtloop.fit(_start(ball_scene), _photo(ball_scene), seed=10, generations=5, population=8)
     again = rtloop.load_scene(json.loads(result.scene.to_json()))
     assert again.to_dict() == result.scene.to_dict()
+
+
+def test_directional_light_sun(ball_scene):
+    """A far light (a sun) as a directional light: only its direction is searched, and recovered."""
+    truth = ball_scene
+    sun = np.array([0.6, 1.0, -0.4])
+    truth["light"] = {"type": "directional", "direction": list(sun), "intensity": 2.5}
+    truth["fit"].pop("light.position")
+    truth["fit"]["light.direction"] = {"min": [-1, 0.05, -1], "max": [1, 1, 1]}
+    truth["fit"]["light.intensity"] = {"min": 0.1, "max": 20}
+    start = copy.deepcopy(truth)
+    start["light"]["direction"] = [0.0, 1.0, 0.0]
+    for o in start["objects"]:
+        o["material"]["albedo"] = [0.5, 0.5, 0.5]
+    result = rtloop.fit(start, _photo(truth), seed=12)
+    fitted_dir = np.array(result.scene.to_dict()["light"]["direction"])
+    angle = np.degrees(np.arccos(np.clip(fitted_dir @ sun / np.linalg.norm(sun), -1, 1)))
+    assert angle < 0.05, f"direction off by {angle:.4f} degrees"
+    assert np.linalg.norm(fitted_dir) == pytest.approx(1.0)
+    assert result.settings["method"] == "projected"
+    assert _product_err(result, truth) < 0.002
+    assert result.scene.to_dict()["light"]["type"] == "directional"
+    # A directional light has no position to fit, and a point light no direction.
+    with pytest.raises(rtloop.SceneError, match="light.direction"):
+        rtloop.load_scene({**truth, "fit": {"light.position": {"min": -1, "max": 1}}})
+    with pytest.raises(rtloop.SceneError, match="light.direction"):
+        rtloop.load_scene({**truth, "light": {"type": "directional", "direction": [0, 0, 0], "intensity": 1}})
+    with pytest.raises(rtloop.SceneError, match="light.type"):
+        rtloop.load_scene({**truth, "light": {"type": "spot", "position": [0, 1, 0], "intensity": 1}})

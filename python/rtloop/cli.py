@@ -278,16 +278,21 @@ class _Progress:
         if not self.enabled:
             return
         total = self.total(info.stage)
+        # The closed-form stage searches with L-SHADE: its budget is population x (N + 1) evaluations over
+        # more, shrinking generations (plus a polish, logged as one more), so no generation count is known.
+        counted = info.stage != "light+colour"
         if info.stage != self.stage:
             self.stage = info.stage
             self.stages += 1
-            self.message(f"stage {self.stages} '{info.stage}': {total} generations")
+            what = f"{total} generations" if counted else "L-SHADE, then a Nelder-Mead polish"
+            self.message(f"stage {self.stages} '{info.stage}': {what}")
         now = time.perf_counter()
+        of = f"/{total}" if counted else ""
         line = (
-            f"  {info.stage}  gen {info.generation}/{total}  best {info.fitness:.6g}  "
+            f"  {info.stage}  gen {info.generation}{of}  best {info.fitness:.6g}  "
             f"evals {info.evaluations}  {_duration(now - self.start)}"
         )
-        last = info.generation >= total
+        last = counted and info.generation >= total
         if self.tty:
             if last or info.generation == 0 or now - self.last_draw >= self.TTY_INTERVAL:
                 pad = max(0, self.open_line - len(line))

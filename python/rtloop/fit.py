@@ -358,10 +358,11 @@ def fit(
     polish = int(polish if polish is not None else proto.get("polish", 0))
     settings["optimizer"], settings["polish"] = optimizer, polish
     if method == "projected":
-        s = run("light+colour", current, ["light.position"], "l1_projected", use, gens[0], int(seeds[0]),
+        where = ["light.direction"] if "light.direction" in all_paths else ["light.position"]
+        s = run("light+colour", current, where, "l1_projected", use, gens[0], int(seeds[0]),
                 product_bounds=_product_bounds(scene), method=optimizer, polish=polish)
         stages.append(s)
-        current = _split_products(current.with_params(list(s.x), ["light.position"]), s.products, scene)
+        current = _split_products(current.with_params(list(s.x), where), s.products, scene)
     else:
         if proto.get("projected"):
             settings["projection_unavailable"] = why_not
@@ -434,13 +435,14 @@ def _keep_undetermined(fitted: Scene, original: Scene, paths: list[str], ident: 
 def _projection_blocker(scene: Scene, paths: list[str]) -> str | None:
     """None when the closed-form (projected) method applies to this scene and fit section, else why not."""
     d = scene_to_dict(scene)
-    if "light.position" not in paths:
-        return "light.position is not free"
+    if "light.position" not in paths and "light.direction" not in paths:
+        return "neither light.position nor light.direction is free"
     if any(v != 0 for v in d["ambient"]):
         return "the scene has ambient light"
     if any(o["material"]["specular"] != 0 for o in d["objects"]):
         return "an object has a specular term"
-    allowed = {"light.position", "light.intensity"} | {f"objects.{o['name']}.albedo" for o in d["objects"]}
+    allowed = {"light.position", "light.direction", "light.intensity"}
+    allowed |= {f"objects.{o['name']}.albedo" for o in d["objects"]}
     extra = [p for p in paths if p not in allowed]
     if extra:
         return f"{', '.join(extra)} cannot be solved in closed form"

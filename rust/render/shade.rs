@@ -23,6 +23,8 @@ pub struct PMaterial {
 #[derive(Debug)]
 pub struct ShadeParams {
     pub light_position: Vec3A,
+    /// `Some(unit vector towards the light)` for a directional light: no fall-off, shadow rays to infinity.
+    pub light_direction: Option<Vec3A>,
     pub light_intensity: f32,
     pub light_color: Vec3A,
     /// I · color, in W/sr per channel (kept in step by `set`).
@@ -48,6 +50,7 @@ impl Clone for ShadeParams {
     /// Reuses `self.materials`' allocation: the fitness hot path calls this once per candidate.
     fn clone_from(&mut self, source: &Self) {
         self.light_position = source.light_position;
+        self.light_direction = source.light_direction;
         self.light_intensity = source.light_intensity;
         self.light_color = source.light_color;
         self.light_rgb = source.light_rgb;
@@ -58,6 +61,11 @@ impl Clone for ShadeParams {
         self.materials.clear();
         self.materials.extend_from_slice(&source.materials);
     }
+}
+
+/// The unit vector along `d`; straight up for a zero (or non-finite) candidate direction.
+pub fn unit_or_up(d: Vec3A) -> Vec3A {
+    d.try_normalize().unwrap_or(Vec3A::Y)
 }
 
 fn v3(a: [f64; 3]) -> Vec3A {
@@ -77,6 +85,7 @@ impl ShadeParams {
             .collect();
         let mut p = ShadeParams {
             light_position: v3(scene.light.position),
+            light_direction: scene.light.direction.map(|d| unit_or_up(v3(d))),
             light_intensity: scene.light.intensity as f32,
             light_color: v3(scene.light.color),
             light_rgb: v3(scene.light.color) * scene.light.intensity as f32,
@@ -99,6 +108,7 @@ impl ShadeParams {
         let v3 = || Vec3A::new(v[0] as f32, v[1] as f32, v[2] as f32);
         match target {
             Target::LightPosition => self.light_position = v3(),
+            Target::LightDirection => self.light_direction = Some(unit_or_up(v3())),
             Target::LightIntensity => self.light_intensity = v[0] as f32,
             Target::LightColor => self.light_color = v3(),
             Target::Ambient => self.ambient = v3(),
@@ -136,26 +146,32 @@ pub fn shade(s: &Surfel, p: &ShadeParams, shapes: &[PShape], shadows: bool) -> V
     }
     let m = &p.materials[s.object as usize];
     let mut l = m.albedo * p.ambient;
-    let d = p.light_position - s.position;
-    let d2 = d.length_squared();
-    // A light on the surface itself (d = 0) lies in the tangent plane: no direct light.
-    if d2 > f32::MIN_POSITIVE {
-        let dist = d2.sqrt();
-        let dir = d / dist;
-        let ndotl = s.normal.dot(dir);
-        if ndotl > 0.0 && !(shadows && occluded(s, dir, dist, shapes)) {
-            let mut brdf = m.albedo * INV_PI;
-            if p.any_specular && m.specular > 0.0 {
-                let h = (dir + s.view).normalize_or_zero();
-                let ndoth = s.normal.dot(h).max(0.0);
-                let lobe =
-                    m.specular * (m.shininess + 8.0) * (INV_PI / 8.0) * ndoth.powf(m.shininess);
-                brdf += Vec3A::splat(lobe);
+    // Unit direction to the light, its distance and the inverse-square factor.
+    let (dir, dist, falloff) = match p.light_direction {
+        Some(dir) => (dir, f32::INFINITY, 1.0),
+        None => {
+            let d = p.light_position - s.position;
+            let d2 = d.length_squared();
+            // A light on the surface itself (d = 0) lies in the tangent plane: no direct light.
+            if d2 <= f32::MIN_POSITIVE {
+                return (p.exposure * l).min(Vec3A::splat(f32::MAX));
             }
-            // Clamp so that a light almost touching a surface gives a huge but finite value.
-            let e = (ndotl / d2).min(f32::MAX);
-            l += (p.light_rgb * brdf * e).min(Vec3A::splat(f32::MAX));
+            let dist = d2.sqrt();
+            (d / dist, dist, 1.0 / d2)
         }
+    };
+    let ndotl = s.normal.dot(dir);
+    if ndotl > 0.0 && !(shadows && occluded(s, dir, dist, shapes)) {
+        let mut brdf = m.albedo * INV_PI;
+        if p.any_specular && m.specular > 0.0 {
+            let h = (dir + s.view).normalize_or_zero();
+            let ndoth = s.normal.dot(h).max(0.0);
+            let lobe = m.specular * (m.shininess + 8.0) * (INV_PI / 8.0) * ndoth.powf(m.shininess);
+            brdf += Vec3A::splat(lobe);
+        }
+        // Clamp so that a light almost touching a surface gives a huge but finite value.
+        let e = (ndotl * falloff).min(f32::MAX);
+        l += (p.light_rgb * brdf * e).min(Vec3A::splat(f32::MAX));
     }
     (p.exposure * l).min(Vec3A::splat(f32::MAX))
 }
@@ -168,6 +184,7 @@ mod tests {
     fn params(spec: f32, shin: f32) -> ShadeParams {
         ShadeParams {
             light_position: Vec3A::new(0.0, 2.0, 0.0),
+            light_direction: None,
             light_intensity: 10.0,
             light_color: Vec3A::ONE,
             light_rgb: Vec3A::splat(10.0),
