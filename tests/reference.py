@@ -244,13 +244,20 @@ def render_full(scene, width=None, height=None, offsets=None) -> Render:
             sh[m] = float(mat["shininess"])
 
         light = s["light"]
-        lp = _v3(light["position"])
         intensity = float(light["intensity"])
         color = _v3(light["color"])
-
-        to_light = lp - x
-        dist = np.linalg.norm(to_light, axis=1)
-        lvec = to_light / dist[:, None]
+        if light.get("type") == "directional":
+            # A light at infinity in direction d: no fall-off, shadow rays reach far beyond the scene.
+            dvec = _v3(light["direction"]) / np.linalg.norm(light["direction"])
+            lvec = np.broadcast_to(dvec, x.shape).copy()
+            dist = np.ones(len(x))
+            far = 1e6 * (1.0 + np.max(np.abs(x)))
+            lp = x + far * lvec
+        else:
+            lp = _v3(light["position"])
+            to_light = lp - x
+            dist = np.linalg.norm(to_light, axis=1)
+            lvec = to_light / dist[:, None]
         v = -dh
         hv = lvec + v
         hv = hv / np.maximum(np.linalg.norm(hv, axis=1, keepdims=True), 1e-300)

@@ -270,6 +270,17 @@ def test_random_scene_matches_reference(seed):
     compare_with_reference(random_scene(seed))
 
 
+@pytest.mark.parametrize("seed", list(range(4)))
+def test_random_scene_under_a_directional_light_matches_reference(seed):
+    scene = random_scene(100 + seed)
+    rng = np.random.default_rng(seed)
+    scene["light"] = {"type": "directional", "direction": [float(rng.uniform(-1, 1)), float(rng.uniform(0.3, 1)),
+                                                            float(rng.uniform(-1, 1))],
+                      "intensity": float(rng.uniform(1, 4)), "color": scene["light"].get("color", [1, 1, 1])}
+    scene["fit"] = {}
+    compare_with_reference(scene)
+
+
 def test_scene_object_size_and_file_loading(tmp_path):
     s = random_scene(3)
     sc = rtloop.load_scene(s)
