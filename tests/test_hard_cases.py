@@ -243,6 +243,7 @@ def test_directional_light_sun(ball_scene):
     assert result.settings["method"] == "projected"
     assert _product_err(result, truth) < 0.002
     assert result.scene.to_dict()["light"]["type"] == "directional"
+    assert result.uncertainty["sigma"] == {} and "directional" in result.uncertainty["warnings"][0]
     # A directional light has no position to fit, and a point light no direction.
     with pytest.raises(rtloop.SceneError, match="light.direction"):
         rtloop.load_scene({**truth, "fit": {"light.position": {"min": -1, "max": 1}}})

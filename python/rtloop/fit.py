@@ -393,7 +393,10 @@ def fit(
     if uncertainty:
         from .uncertainty import estimate_uncertainty
 
-        result.uncertainty = estimate_uncertainty(result, target, clip=clip, mask=mask)
+        try:
+            result.uncertainty = estimate_uncertainty(result, target, clip=clip, mask=mask)
+        except RtloopError as e:
+            result.uncertainty = {"method": "gauss-newton", "sigma": {}, "warnings": [str(e)]}
     result.seconds = time.perf_counter() - t0
     return result
 

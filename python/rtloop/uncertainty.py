@@ -87,6 +87,10 @@ def estimate_uncertainty(
     Jacobian over the determined parameters), ``parametrization`` and ``warnings``.
     """
     scene: Scene = result.scene if hasattr(result, "scene") else load_scene(result)
+    if scene_to_dict(scene)["light"].get("type") == "directional":
+        # The direction is a unit vector searched through three components: the parametrisation below
+        # assumes a point light. Say so rather than report a misleading sigma.
+        raise RtloopError("uncertainty: not available for directional lights yet")
     ident = getattr(result, "identifiability", None)
     target = np.asarray(image, dtype=np.float64)
     if target.shape != (scene.height, scene.width, 3):
