@@ -598,7 +598,10 @@ def _main(argv: list[str] | None, t0: float) -> int:
     except SystemExit as e:  # --help
         return int(e.code or 0)
 
-    gens = args.generations if args.generations is not None else PROTOCOLS[args.protocol]["generations"]
+    proto = PROTOCOLS[args.protocol]
+    # Generations shown per stage: the closed-form stage has an evaluation budget instead (see _Progress),
+    # and the two-stage fallback of a protocol may use its own generations.
+    gens = args.generations if args.generations is not None else proto.get("fallback_generations", proto["generations"])
     gens = (gens, gens) if isinstance(gens, int) else (int(gens[0]), int(gens[1]))
     progress = _Progress(sys.stderr, not args.quiet, gens)
     stop = threading.Event()

@@ -2,10 +2,10 @@
 
 Method ``projected`` (the default protocol ``rtloop`` uses it whenever the scene allows): for a matte
 scene without ambient light, every pixel is linear in the products exposure x intensity x colour x albedo
-of its object. For each candidate light position those products are solved in closed form (least squares
-over the unsaturated pixels, clamped to their bounds) inside the fitness, so DE searches only the light's
-three coordinates against the whole-image L1 loss. This removes stage 1's bias from the wrong starting
-colours and stage 2's separate search.
+of its object. For each candidate light position (or direction) those products are solved in closed form
+(least squares over the unsaturated pixels away from silhouettes, clamped to their bounds) inside the
+fitness, so L-SHADE searches only the light's three coordinates against the whole-image loss. This
+removes stage 1's bias from the wrong starting colours and stage 2's separate search.
 
 Stage 1 ("light") frees the light (``light.*`` paths of the fit section) and minimises the sum of
 absolute RGB differences over the whole image, every other parameter held at the scene's value.
@@ -17,7 +17,9 @@ and an object's albedo only through their product. rtloop detects this from the 
 section and resolves it in one documented way: stage 2 may raise an albedo above its upper bound if the
 image asks for it (the search range is widened by max intensity / stage-1 intensity), and the light is
 then made just bright enough that every fitted albedo is back within its bounds (products unchanged).
-Otherwise the intensity stays at the stage-1 value. The report names the determined products.
+Otherwise the intensity stays at the stage-1 value. The closed-form method splits its products the same
+way around the scene's own intensity. The report names the determined products, and objects that no
+visible pixel shows lit (their albedo is not in the photo: it keeps the scene's value).
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ PROTOCOLS: dict[str, dict[str, Any]] = {
     # Nelder-Mead polish (benches/speed_vs_error.py); scenes it does not apply to fall back to DE in two
     # stages plus a refine pass, 30 x 100 per stage.
     "rtloop": {"population": 30, "generations": (49, 100), "f": 0.6, "cr": 0.8, "refine": True,
-               "projected": True, "optimizer": "lshade", "polish": 100},
+               "projected": True, "optimizer": "lshade", "polish": 100, "fallback_generations": (100, 100)},
 }
 
 #: Pixels sampled per object for stage 2.
@@ -354,6 +356,9 @@ def fit(
     why_not = _projection_blocker(scene, all_paths)
     method = "projected" if proto.get("projected") and why_not is None else "two-stage"
     settings["method"] = method
+    if method == "two-stage" and generations is None and "fallback_generations" in proto:
+        gens = proto["fallback_generations"]
+        settings["generations"] = list(gens)
     optimizer = optimizer if optimizer is not None else proto.get("optimizer", "de")
     polish = int(polish if polish is not None else proto.get("polish", 0))
     settings["optimizer"], settings["polish"] = optimizer, polish
