@@ -62,6 +62,17 @@ fn random_scene(rng: &mut Rng, spheres: usize, specular: bool, ambient: bool) ->
     Scene::from_json(&text).unwrap()
 }
 
+/// A fitness of all of `layout` over the whole image, no closed-form products.
+fn fitness(
+    scene: &Scene,
+    layout: &ParamLayout,
+    target: &[f32],
+    kind: LossKind,
+    clip: bool,
+) -> Fitness {
+    Fitness::new(scene, layout.clone(), target, None, kind, clip, None).unwrap()
+}
+
 fn random_candidate(rng: &mut Rng, layout: &ParamLayout) -> Vec<f64> {
     layout
         .bounds
@@ -93,7 +104,7 @@ fn kernel_matches_the_plain_path_on_random_scenes() {
             .collect();
         let layout = ParamLayout::all(&scene);
         for kind in [LossKind::L1, LossKind::L1PerChannel] {
-            let f = Fitness::new(&scene, layout.clone(), &target, None, kind, true, None).unwrap();
+            let f = fitness(&scene, &layout, &target, kind, true);
             for _ in 0..6 {
                 let x = random_candidate(&mut rng, &layout);
                 let fast = f.channel_losses(&x);
@@ -130,16 +141,7 @@ fn kernel_agrees_exactly_where_no_shadow_boundary_exists() {
     .unwrap();
     let target = vec![0.3f32; 64 * 48 * 3];
     let layout = ParamLayout::all(&scene);
-    let f = Fitness::new(
-        &scene,
-        layout.clone(),
-        &target,
-        None,
-        LossKind::L1,
-        true,
-        None,
-    )
-    .unwrap();
+    let f = fitness(&scene, &layout, &target, LossKind::L1, true);
     let mut rng = Rng::new(3);
     for _ in 0..20 {
         let x = random_candidate(&mut rng, &layout);
@@ -207,16 +209,7 @@ fn light_inside_an_occluder_or_on_a_surface_gives_finite_losses() {
     let scene = random_scene(&mut rng, 2, true, false);
     let target = vec![0.5f32; (scene.width * scene.height * 3) as usize];
     let layout = ParamLayout::all(&scene);
-    let f = Fitness::new(
-        &scene,
-        layout.clone(),
-        &target,
-        None,
-        LossKind::L1,
-        false,
-        None,
-    )
-    .unwrap();
+    let f = fitness(&scene, &layout, &target, LossKind::L1, false);
     let mut x = layout.read(&scene);
     let rtloop::scene::Shape::Sphere { center, .. } = scene.objects[0].shape else {
         unreachable!()
@@ -251,16 +244,7 @@ fn early_exit_changes_cost_not_results() {
         ..Default::default()
     };
     let run = |early: bool| {
-        let mut f = Fitness::new(
-            &scene,
-            layout.clone(),
-            &target,
-            None,
-            LossKind::L1,
-            true,
-            None,
-        )
-        .unwrap();
+        let mut f = fitness(&scene, &layout, &target, LossKind::L1, true);
         f.early_exit = early;
         let mut history = Vec::new();
         let r = rtloop::de::minimize(&f, &layout.bounds, &cfg, |g| {
@@ -282,16 +266,7 @@ fn early_exit_changes_cost_not_results() {
         "every generation's population objectives are identical"
     );
     // And a bounded evaluation above the bound really is cut short but still above it.
-    let f = Fitness::new(
-        &scene,
-        layout.clone(),
-        &target,
-        None,
-        LossKind::L1,
-        true,
-        None,
-    )
-    .unwrap();
+    let f = fitness(&scene, &layout, &target, LossKind::L1, true);
     let x = vec![0.0, 7.5, 0.0, 150.0];
     let mut full = [0.0];
     f.evaluate(&x, &mut full);
@@ -319,16 +294,7 @@ fn every_norm_matches_the_plain_path_and_its_definition() {
             .collect();
         let layout = ParamLayout::all(&scene);
         for norm in [Norm::L1, Norm::L2, Norm::Huber(0.01)] {
-            let mut f = Fitness::new(
-                &scene,
-                layout.clone(),
-                &target,
-                None,
-                LossKind::L1,
-                true,
-                None,
-            )
-            .unwrap();
+            let mut f = fitness(&scene, &layout, &target, LossKind::L1, true);
             f.set_norm(norm);
             let x = random_candidate(&mut rng, &layout);
             let (fast, slow) = (f.channel_losses(&x), f.reference_channel_losses(&x));
@@ -394,16 +360,7 @@ fn directional_light_kernel_matches_the_plain_path() {
             .collect();
         let layout = ParamLayout::all(&scene);
         assert_eq!(layout.names[0], "light.direction.x");
-        let f = Fitness::new(
-            &scene,
-            layout.clone(),
-            &target,
-            None,
-            LossKind::L1,
-            true,
-            None,
-        )
-        .unwrap();
+        let f = fitness(&scene, &layout, &target, LossKind::L1, true);
         for _ in 0..5 {
             let x = random_candidate(&mut rng, &layout);
             let (fast, slow) = (f.channel_losses(&x), f.reference_channel_losses(&x));
