@@ -69,6 +69,7 @@ def optimize(
     max_evaluations: int | None = None,
     polish: int = 0,
     norm: str = "l1",
+    with_products: bool = True,
 ) -> dict[str, Any]: ...
 
 # Test hooks for the optimisers (rust/python/de.rs), used by tests/test_de_scipy.py.

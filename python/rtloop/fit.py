@@ -308,6 +308,7 @@ def fit(
             stage_scene, paths, target, pixels=pixels, loss=loss, clip=clip, population=pop,
             generations=generations, f=f_, cr=cr_, seed=stage_seed, threads=threads, callback=on_generation,
             product_bounds=product_bounds, method=method, polish=polish, norm=norm,
+            with_products=callback is not None,
         )
         generations_run = out["generations"]
         if "polish" in out and not out["stopped"]:

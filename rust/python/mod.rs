@@ -330,13 +330,16 @@ fn evaluate<'py>(
     PyArray1::from_vec(py, out).reshape([rows.len(), nobj])
 }
 
-/// Run DE/rand/1/bin on the fitness of `paths` against `target`. One call per stage; the GIL is released
-/// except while `callback(generation, best, best_objectives, evaluations, products)` runs (after the initial
-/// population and after every generation; returning False stops the search).
+/// Search the fitness of `paths` against `target` with DE/rand/1/bin (`method="de"`) or L-SHADE
+/// (`"lshade"`, optionally followed by a Nelder-Mead `polish`). One call per stage; the GIL is released
+/// except while `callback(generation, best, best_objectives, evaluations, products)` runs, after the
+/// initial population and after every generation (returning False stops the search). `products` are the
+/// closed-form products of the best for the projected loss when `with_products`, else None.
 #[pyfunction]
 #[pyo3(signature = (scene, paths, target, *, pixels=None, loss="l1", clip=true, population=60,
                     generations=200, f=0.6, cr=0.8, seed=0, threads=None, callback=None,
-                    product_bounds=None, method="de", max_evaluations=None, polish=0, norm="l1"))]
+                    product_bounds=None, method="de", max_evaluations=None, polish=0, norm="l1",
+                    with_products=true))]
 #[allow(clippy::too_many_arguments)]
 fn optimize<'py>(
     py: Python<'py>,
@@ -358,6 +361,7 @@ fn optimize<'py>(
     max_evaluations: Option<usize>,
     polish: usize,
     norm: &str,
+    with_products: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let scene = &scene.get().0;
     let (fitness, bounds) = make_fitness(
@@ -384,8 +388,9 @@ fn optimize<'py>(
         pool.install(|| {
             let callback = |rep: &de::GenerationReport| {
                 let Some(cb) = &callback else { return true };
-                let products: Option<Vec<Vec<f64>>> = (fitness.kind() == LossKind::L1Projected)
-                    .then(|| {
+                // The closed-form products of the best (one more evaluation) only when the caller wants them.
+                let products: Option<Vec<Vec<f64>>> =
+                    (with_products && fitness.kind() == LossKind::L1Projected).then(|| {
                         fitness
                             .products(rep.best)
                             .iter()
