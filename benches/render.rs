@@ -7,7 +7,9 @@
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use rayon::prelude::*;
-use rtloop::{de, de::Objective, render, DeConfig, Fitness, LossKind, ParamLayout, Scene};
+use rtloop::{
+    de, de::Objective, render, DeConfig, Fitness, LossKind, ParamLayout, Projection, Scene,
+};
 
 fn scene() -> Scene {
     let path = concat!(
@@ -61,7 +63,7 @@ fn bench(c: &mut Criterion) {
             "projected",
             ParamLayout::new(&scene, &position).unwrap(),
             LossKind::L1Projected,
-            Some(bounds),
+            Some(Projection::matte(bounds)),
         ),
     ];
     let mut g = c.benchmark_group("population");

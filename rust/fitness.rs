@@ -9,7 +9,7 @@ use glam::Vec3A;
 
 use crate::de::Objective;
 use crate::error::{Error, Result};
-use crate::kernel::{closed_form, Kernel, Norm};
+use crate::kernel::{solve_object, Kernel, Norm, Projection, SolveSums, Solved};
 use crate::params::{ParamLayout, Target};
 use crate::render::{shade, GBuffer, Geometry, PShape, ShadeParams, Surfel};
 use crate::scene::Scene;
@@ -22,10 +22,12 @@ pub enum LossKind {
     /// Three objectives: the sums of absolute differences of R, G and B separately (the paper's stage 2).
     L1PerChannel,
     /// One objective, the whole-image L1 loss after the linear unknowns have been solved in closed form:
-    /// for a matte scene without ambient light every pixel is `P[object][channel] * g(pixel)`, with `g`
-    /// the unit-light irradiance / pi and `P` = exposure x intensity x colour x albedo. For each candidate
-    /// light, `P` is the least-squares fit over the unsaturated pixels, clamped to its bounds (variable
-    /// projection), so the search runs over the light's position only.
+    /// for a scene without ambient light every pixel is `P[object][channel] * a(pixel)` (plus
+    /// `Q[object] * w[channel] * b(pixel)` for an object with a specular term), with `a` the unit-light
+    /// irradiance / pi, `b` the unit-light specular lobe, `P` = exposure x intensity x colour x albedo and
+    /// `Q` = intensity x specular. For each candidate light (and shininess), `P` and `Q` are the
+    /// least-squares fit over the unsaturated pixels, clamped to their bounds (variable projection), so
+    /// the search runs over the light's position (and any free shininess) only.
     L1Projected,
 }
 
@@ -60,15 +62,15 @@ pub struct Fitness {
     constant: [f64; 3],
     /// ...from their fixed differences (model - objective), kept to recompute it for another norm.
     fixed: Vec<Vec3A>,
-    /// For `L1Projected`: (min, max) of each object's product per channel.
-    product_bounds: Vec<[(f64, f64); 3]>,
+    /// For `L1Projected`: the bounds of the closed-form unknowns.
+    projection: Option<Projection>,
 }
 
 /// Per-thread scratch, reused across evaluations so the hot path never allocates.
 #[derive(Default)]
 struct Scratch {
     params: Option<ShadeParams>,
-    products: Vec<[f64; 3]>,
+    solved: Solved,
     irradiance: Vec<f32>,
 }
 
@@ -87,7 +89,7 @@ impl Fitness {
         pixels: Option<&[u32]>,
         kind: LossKind,
         clip: bool,
-        product_bounds: Option<Vec<[(f64, f64); 3]>>,
+        projection: Option<Projection>,
     ) -> Result<Fitness> {
         let n = (scene.width * scene.height) as usize;
         if target.len() != 3 * n {
@@ -123,42 +125,61 @@ impl Fitness {
             }
         };
         let mut base = ShadeParams::new(scene);
-        let product_bounds = if kind == LossKind::L1Projected {
-            let pb = product_bounds.ok_or_else(|| {
+        let projection = if kind == LossKind::L1Projected {
+            let mut proj = projection.ok_or_else(|| {
                 Error::Invalid("the projected loss needs product bounds for every object".into())
             })?;
-            if pb.len() != scene.objects.len() {
+            let n = scene.objects.len();
+            if proj.diffuse.len() != n || proj.specular.len() != n {
                 return Err(Error::Invalid(format!(
-                    "product bounds given for {} objects; the scene has {}",
-                    pb.len(),
-                    scene.objects.len()
+                    "product bounds given for {} objects ({} specular); the scene has {n}",
+                    proj.diffuse.len(),
+                    proj.specular.len(),
                 )));
             }
-            if base.ambient != Vec3A::ZERO || base.any_specular {
+            if base.ambient != Vec3A::ZERO {
                 return Err(Error::Invalid(
-                    "the projected loss models matte scenes without ambient light (ambient 0, specular 0)".into(),
+                    "the projected loss models scenes without ambient light (ambient 0)".into(),
                 ));
             }
-            if let Some((path, _, _)) = layout
-                .entries
+            if let Some(o) = scene
+                .objects
                 .iter()
-                .find(|(_, t, _)| !matches!(t, Target::LightPosition | Target::LightDirection))
+                .zip(&proj.specular)
+                .find(|(o, b)| o.material.specular != 0.0 && b.1 <= 0.0)
             {
                 return Err(Error::Invalid(format!(
-                    "the projected loss searches the light's position or direction only; {path} is solved in closed form"
+                    "objects.{}.specular is not 0 but its specular product bounds are (0, 0): the projected \
+                     loss would model the object as matte",
+                    o.0.name
                 )));
             }
-            // Unit light and white albedo: shading then yields g per pixel.
+            if let Some((path, _, _)) = layout.entries.iter().find(|(_, t, _)| {
+                !matches!(
+                    t,
+                    Target::LightPosition | Target::LightDirection | Target::Shininess(_)
+                )
+            }) {
+                return Err(Error::Invalid(format!(
+                    "the projected loss searches the light's position or direction and shininess only; {path} \
+                     is solved in closed form"
+                )));
+            }
+            // The specular product Q = intensity x specular enters channel c as Q x exposure x colour_c.
+            proj.weight = std::array::from_fn(|c| (scene.exposure * scene.light.color[c]) as f32);
+            // Unit light, white albedo, no lobe: shading then yields the diffuse factor per pixel.
             base.light_intensity = 1.0;
             base.light_color = Vec3A::ONE;
             base.light_rgb = Vec3A::ONE;
             base.exposure = 1.0;
             for m in &mut base.materials {
                 m.albedo = Vec3A::ONE;
+                m.specular = 0.0;
             }
-            pb
+            base.any_specular = false;
+            Some(proj)
         } else {
-            Vec::new()
+            None
         };
         let exposure_free = layout
             .entries
@@ -222,16 +243,22 @@ impl Fitness {
             shadows: scene.can_occlude(),
             constant: penalty_sums(&fixed, Norm::L1),
             fixed,
-            product_bounds,
+            projection,
         })
     }
 
     /// The closed-form products (object x channel) for candidate light `x` (`L1Projected` only).
     pub fn products(&self, x: &[f64]) -> Vec<[f64; 3]> {
+        self.solved(x).products
+    }
+
+    /// The closed-form solution for candidate `x`: diffuse products and specular products per object
+    /// (`L1Projected` only; empty otherwise).
+    pub fn solved(&self, x: &[f64]) -> Solved {
         SCRATCH.with(|s| {
             let mut s = s.borrow_mut();
             self.fast_losses(x, &mut s, f64::INFINITY);
-            s.products.clone()
+            s.solved.clone()
         })
     }
 
@@ -274,19 +301,18 @@ impl Fitness {
     fn fast_losses(&self, x: &[f64], s: &mut Scratch, bound: f64) -> [f64; 3] {
         let Scratch {
             params,
-            products,
+            solved,
             irradiance,
         } = s;
         let p = params.get_or_insert_with(|| self.base.clone());
         self.params_into(x, p);
         let kernel_bound = bound - (self.constant[0] + self.constant[1] + self.constant[2]);
-        let mut acc = if self.kind == LossKind::L1Projected {
-            products.resize(self.product_bounds.len(), [0.0; 3]);
-            let pb = &self.product_bounds;
-            self.kernel
-                .projected(p, self.clip, pb, products, irradiance, kernel_bound)
-        } else {
-            self.kernel.l1(p, self.clip, kernel_bound)
+        let mut acc = match &self.projection {
+            Some(proj) => {
+                self.kernel
+                    .projected(p, self.clip, proj, solved, irradiance, kernel_bound)
+            }
+            None => self.kernel.l1(p, self.clip, kernel_bound),
         };
         for c in 0..3 {
             acc[c] += self.constant[c];
@@ -304,68 +330,81 @@ impl Fitness {
     pub fn reference_channel_losses(&self, x: &[f64]) -> [f64; 3] {
         let p = self.params(x);
         let mut acc = self.constant;
-        if self.kind == LossKind::L1Projected {
-            // Unit light, white albedo: shade gives g; solve the products, then the loss.
-            let n = self.product_bounds.len();
-            let (mut syg, mut sgg) = (vec![[0.0f64; 3]; n], vec![[0.0f64; 3]; n]);
-            let g: Vec<f32> = self
+        if let Some(proj) = &self.projection {
+            // Unit light, white albedo, no lobe: shade gives the diffuse factor a. Albedo 0 and specular 1
+            // give the specular factor b. Sum the normal equations pixel by pixel, solve, then the loss.
+            let n = proj.diffuse.len();
+            let mut sums = vec![SolveSums::default(); n];
+            let a: Vec<f32> = self
                 .surfels
                 .iter()
                 .map(|s| shade(s, &p, &self.shapes, self.shadows).x)
                 .collect();
-            for (((s, t), &gi), &ok) in self
+            let b: Vec<f32> = self
                 .surfels
                 .iter()
-                .zip(&self.target)
-                .zip(&g)
-                .zip(&self.solve)
-            {
-                if s.object != u32::MAX && ok {
+                .map(|s| {
                     let k = s.object as usize;
-                    for c in 0..3 {
-                        if !self.clip || t[c] < crate::kernel::SATURATED {
-                            syg[k][c] += (t[c] * gi) as f64;
-                            sgg[k][c] += (gi * gi) as f64;
-                        }
+                    if s.object == u32::MAX || proj.specular[k].1 <= 0.0 {
+                        return 0.0;
                     }
-                }
-            }
+                    let mut q = p.clone();
+                    q.materials[k].albedo = Vec3A::ZERO;
+                    q.materials[k].specular = 1.0;
+                    q.any_specular = true;
+                    shade(s, &q, &self.shapes, self.shadows).x
+                })
+                .collect();
             let sat = if self.clip {
                 crate::kernel::SATURATED
             } else {
                 f32::INFINITY
             };
-            let prods: Vec<[f64; 3]> = (0..n)
-                .map(|k| {
-                    std::array::from_fn(|c| {
-                        if sgg[k][c] > 0.0 {
-                            closed_form(
-                                syg[k][c],
-                                sgg[k][c],
-                                f32::INFINITY,
-                                self.product_bounds[k][c],
-                            )
-                        } else {
-                            let mine = self
-                                .surfels
-                                .iter()
-                                .zip(&self.target)
-                                .zip(&g)
-                                .filter(|((s, _), _)| s.object == k as u32);
-                            let (e, t): (Vec<f32>, Vec<f32>) =
-                                mine.map(|((_, t), &gi)| (gi, t[c])).unzip();
-                            let (a, b, m) = crate::kernel::fallback_sums(&e, &t, sat);
-                            closed_form(a, b, m, self.product_bounds[k][c])
+            for (i, (s, t)) in self.surfels.iter().zip(&self.target).enumerate() {
+                if s.object != u32::MAX && self.solve[i] {
+                    let (m, ai, bi) = (&mut sums[s.object as usize], a[i] as f64, b[i] as f64);
+                    for c in 0..3 {
+                        if t[c] < sat {
+                            let y = t[c] as f64;
+                            m.saa[c] += ai * ai;
+                            m.sab[c] += ai * bi;
+                            m.sbb[c] += bi * bi;
+                            m.sya[c] += y * ai;
+                            m.syb[c] += y * bi;
                         }
-                    })
+                    }
+                }
+            }
+            let solved: Vec<([f64; 3], f64)> = (0..n)
+                .map(|k| {
+                    let fallback = |c: usize| {
+                        let (e, t): (Vec<f32>, Vec<f32>) = self
+                            .surfels
+                            .iter()
+                            .zip(&self.target)
+                            .zip(&a)
+                            .filter(|((s, _), _)| s.object == k as u32)
+                            .map(|((_, t), &ai)| (ai, t[c]))
+                            .unzip();
+                        crate::kernel::fallback_sums(&e, &t, sat)
+                    };
+                    solve_object(
+                        &sums[k],
+                        proj.weight,
+                        &proj.diffuse[k],
+                        proj.specular[k],
+                        fallback,
+                    )
                 })
                 .collect();
-            for ((s, t), &gi) in self.surfels.iter().zip(&self.target).zip(&g) {
+            for (i, (s, t)) in self.surfels.iter().zip(&self.target).enumerate() {
                 let m = if s.object == u32::MAX {
                     Vec3A::ZERO
                 } else {
-                    let k = s.object as usize;
-                    Vec3A::from_array(std::array::from_fn(|c| prods[k][c] as f32 * gi))
+                    let (pk, q) = solved[s.object as usize];
+                    Vec3A::from_array(std::array::from_fn(|c| {
+                        (pk[c] * a[i] as f64 + q * proj.weight[c] as f64 * b[i] as f64) as f32
+                    }))
                 };
                 let d = (if self.clip { m.min(Vec3A::ONE) } else { m }) - *t;
                 for c in 0..3 {

@@ -314,15 +314,16 @@ impl Kernel {
         acc
     }
 
-    /// Variable projection for a matte scene without ambient light: for the light `p`, the per-object,
-    /// per-channel least-squares products P (clamped to `bounds`) and the resulting per-channel L1 loss.
-    /// `scratch` holds the unit-light irradiance per pixel between the two passes.
+    /// Variable projection for a scene without ambient light: for the light `p`, the per-object,
+    /// per-channel least-squares products P (clamped to their bounds), for objects with a specular term also
+    /// the scalar specular product Q (see [`Projection`]), and the resulting per-channel loss.
+    /// `scratch` holds the unit-light diffuse and specular factors per pixel between the two passes.
     pub fn projected(
         &self,
         p: &ShadeParams,
         clip: bool,
-        bounds: &[[(f64, f64); 3]],
-        products: &mut [[f64; 3]],
+        proj: &Projection,
+        out: &mut Solved,
         scratch: &mut Vec<f32>,
         bound: f64,
     ) -> [f64; 3] {
@@ -332,10 +333,10 @@ impl Kernel {
                 && std::arch::is_x86_feature_detected!("fma")
             {
                 // SAFETY: the CPU supports the features the function was compiled for.
-                return unsafe { self.projected_avx2(p, clip, bounds, products, scratch, bound) };
+                return unsafe { self.projected_avx2(p, clip, proj, out, scratch, bound) };
             }
         }
-        self.projected_generic::<false>(p, clip, bounds, products, scratch, bound)
+        self.projected_generic::<false>(p, clip, proj, out, scratch, bound)
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -344,12 +345,12 @@ impl Kernel {
         &self,
         p: &ShadeParams,
         clip: bool,
-        bounds: &[[(f64, f64); 3]],
-        products: &mut [[f64; 3]],
+        proj: &Projection,
+        out: &mut Solved,
         scratch: &mut Vec<f32>,
         bound: f64,
     ) -> [f64; 3] {
-        self.projected_generic::<true>(p, clip, bounds, products, scratch, bound)
+        self.projected_generic::<true>(p, clip, proj, out, scratch, bound)
     }
 
     #[inline(always)]
@@ -357,8 +358,8 @@ impl Kernel {
         &self,
         p: &ShadeParams,
         clip: bool,
-        bounds: &[[(f64, f64); 3]],
-        products: &mut [[f64; 3]],
+        proj: &Projection,
+        out: &mut Solved,
         scratch: &mut Vec<f32>,
         bound: f64,
     ) -> [f64; 3] {
@@ -367,16 +368,22 @@ impl Kernel {
             dir: p.light_direction.map(|d| d.to_array()),
             rgb: [1.0; 3],
         };
-        scratch.resize(self.pixels, 0.0);
-        for (k, b) in bounds.iter().enumerate() {
-            products[k] = [b[0].0, b[1].0, b[2].0]; // objects with no visible pixels
-        }
+        // First half: diffuse factor a per pixel; second half: specular factor b (specular objects only).
+        scratch.resize(2 * self.pixels, 0.0);
+        let (a_all, b_all) = scratch.split_at_mut(self.pixels);
+        out.products.clear();
+        out.products
+            .extend(proj.diffuse.iter().map(|b| [b[0].0, b[1].0, b[2].0])); // objects with no visible pixels
+        out.specular.clear();
+        out.specular.extend(proj.specular.iter().map(|b| b.0));
         let sat = if clip { SATURATED } else { f32::INFINITY };
+        let top = if clip { 1.0 } else { f32::INFINITY };
         let mut acc = [0.0f64; 3];
         let mut offset = 0;
         for g in &self.groups {
             let n = g.len();
-            let e_all = &mut scratch[offset..offset + n];
+            let e_all = &mut a_all[offset..offset + n];
+            let s_all = &mut b_all[offset..offset + n];
             offset += n;
             let Some(obj) = g.object else {
                 for s in 0..n {
@@ -387,8 +394,10 @@ impl Kernel {
                 }
                 continue;
             };
-            // Pass 1: unit-light irradiance / pi, and the normal equations per channel.
-            let (mut syg, mut sgg) = ([0.0f64; 3], [0.0f64; 3]);
+            let specular = proj.specular[obj].1 > 0.0;
+            let shininess = p.materials[obj].shininess;
+            // Pass 1: unit-light irradiance / pi (and the specular factor), and the normal equations.
+            let mut sums = SolveSums::default();
             let mut start = 0;
             while start < n {
                 let len = BLOCK.min(n - start);
@@ -399,35 +408,64 @@ impl Kernel {
                 for ei in e.iter_mut() {
                     *ei *= INV_PI;
                 }
-                for c in 0..3 {
-                    let t = &g.ts[c][r.clone()];
-                    let (a, b) = normal_equations(e, t, sat);
-                    syg[c] += a as f64;
-                    sgg[c] += b as f64;
+                if specular {
+                    let b = &mut s_all[r.clone()];
+                    let norm = (shininess + 8.0) / 8.0;
+                    for (i, s) in r.clone().enumerate() {
+                        // (s+8)/(8 pi) max(0, n.h)^s cos / d² = e · (s+8)/8 · max(0, n.h)^s
+                        b[i] = if e[i] > 0.0 {
+                            (e[i] * norm * blinn_phong(g, s, &light, shininess)).min(f32::MAX)
+                        } else {
+                            0.0
+                        };
+                    }
+                    for c in 0..3 {
+                        sums.add_specular(c, e, b, &g.ts[c][r.clone()], sat);
+                    }
+                } else {
+                    for c in 0..3 {
+                        let (a, b) = normal_equations(e, &g.ts[c][r.clone()], sat);
+                        sums.sya[c] += a as f64;
+                        sums.saa[c] += b as f64;
+                    }
                 }
                 start += len;
             }
-            let mut pk = [0.0f32; 3];
-            for c in 0..3 {
-                // Rare: no lit, unsaturated interior pixel (e.g. a rim-lit sphere): solve with every pixel.
-                let v = if sgg[c] > 0.0 {
-                    closed_form(syg[c], sgg[c], f32::INFINITY, bounds[obj][c])
+            let (pk, q) = solve_object(
+                &sums,
+                proj.weight,
+                &proj.diffuse[obj],
+                if specular {
+                    proj.specular[obj]
                 } else {
-                    let (a, b, sat_min) = fallback_sums(&e_all[..n], &g.t[c], sat);
-                    closed_form(a, b, sat_min, bounds[obj][c])
-                };
-                products[obj][c] = v;
-                pk[c] = v as f32;
-            }
+                    (0.0, 0.0)
+                },
+                |c| fallback_sums(&e_all[..n], &g.t[c], sat),
+            );
+            out.products[obj] = pk;
+            out.specular[obj] = q;
+            let pk: [f32; 3] = std::array::from_fn(|c| pk[c] as f32);
             // Pass 2: the loss at those products (stopping once it exceeds `bound`).
             let mut start = 0;
             while start < n {
                 let len = BLOCK.min(n - start);
-                let e = &e_all[start..start + len];
                 let r = start..start + len;
-                let t = [&g.t[0][r.clone()], &g.t[1][r.clone()], &g.t[2][r]];
-                let top = if clip { 1.0 } else { f32::INFINITY };
-                let sums = rgb_loss(self.norm, e, t, [0.0; 3], pk, top);
+                let e = &e_all[r.clone()];
+                let t = [&g.t[0][r.clone()], &g.t[1][r.clone()], &g.t[2][r.clone()]];
+                let sums = if specular && q > 0.0 {
+                    let qw: [f32; 3] = std::array::from_fn(|c| (q * proj.weight[c] as f64) as f32);
+                    let b = &s_all[r];
+                    let mut sums = [0.0f32; 3];
+                    for c in 0..3 {
+                        for i in 0..len {
+                            let v = (pk[c] * e[i] + qw[c] * b[i]).min(top);
+                            sums[c] += self.norm.penalty(v - t[c][i]);
+                        }
+                    }
+                    sums
+                } else {
+                    rgb_loss(self.norm, e, t, [0.0; 3], pk, top)
+                };
                 for c in 0..3 {
                     acc[c] += sums[c] as f64;
                 }
@@ -439,6 +477,134 @@ impl Kernel {
         }
         acc
     }
+}
+
+/// What the closed-form solve may choose, per object: the bounds of its diffuse products
+/// P_c = exposure x intensity x colour_c x albedo_c and of its specular product Q = intensity x specular,
+/// which enters channel c as Q x `weight[c]` (`weight` = exposure x light colour). An object whose
+/// specular bounds are (0, 0) is matte: no specular factor is computed for it at all.
+#[derive(Clone, Debug)]
+pub struct Projection {
+    pub diffuse: Vec<[(f64, f64); 3]>,
+    pub specular: Vec<(f64, f64)>,
+    pub weight: [f32; 3],
+}
+
+impl Projection {
+    /// Matte objects only.
+    pub fn matte(diffuse: Vec<[(f64, f64); 3]>) -> Projection {
+        let n = diffuse.len();
+        Projection {
+            diffuse,
+            specular: vec![(0.0, 0.0); n],
+            weight: [1.0; 3],
+        }
+    }
+}
+
+/// The closed-form solution for one candidate: per object its diffuse products and specular product.
+#[derive(Clone, Debug, Default)]
+pub struct Solved {
+    pub products: Vec<[f64; 3]>,
+    pub specular: Vec<f64>,
+}
+
+/// Per-channel sums over an object's informing pixels (t < saturation): diffuse factor a, specular
+/// factor b, objective y.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SolveSums {
+    pub saa: [f64; 3],
+    pub sab: [f64; 3],
+    pub sbb: [f64; 3],
+    pub sya: [f64; 3],
+    pub syb: [f64; 3],
+}
+
+impl SolveSums {
+    #[inline(always)]
+    fn add_specular(&mut self, c: usize, a: &[f32], b: &[f32], t: &[f32], sat: f32) {
+        let (mut aa, mut ab, mut bb, mut ya, mut yb) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        for i in 0..a.len() {
+            if t[i] < sat {
+                let (ai, bi, yi) = (a[i] as f64, b[i] as f64, t[i] as f64);
+                aa += ai * ai;
+                ab += ai * bi;
+                bb += bi * bi;
+                ya += yi * ai;
+                yb += yi * bi;
+            }
+        }
+        self.saa[c] += aa;
+        self.sab[c] += ab;
+        self.sbb[c] += bb;
+        self.sya[c] += ya;
+        self.syb[c] += yb;
+    }
+}
+
+/// One object's products from its sums: the least-squares (P_r, P_g, P_b, Q) of
+/// y_c = P_c·a + Q·w_c·b over the informing pixels, then clamped to the bounds in two rounds: Q to its
+/// bounds and every P_c given Q; if a P_c was clamped, Q again given the P's, and the unclamped P_c given
+/// the new Q. A matte object (`qb == (0, 0)`) reduces to P_c = Σya / Σaa. A channel with no informing
+/// pixel (Σaa = 0: rim-lit, or every pixel saturated) is solved over all of the object's pixels by
+/// `fallback(c)` (see [`fallback_sums`]), without the specular term.
+pub fn solve_object(
+    s: &SolveSums,
+    w: [f32; 3],
+    pb: &[(f64, f64); 3],
+    qb: (f64, f64),
+    fallback: impl Fn(usize) -> (f64, f64, f32),
+) -> ([f64; 3], f64) {
+    let clampq = |q: f64| {
+        if q.is_finite() {
+            q.clamp(qb.0, qb.1)
+        } else {
+            qb.0
+        }
+    };
+    let w: [f64; 3] = std::array::from_fn(|c| w[c] as f64);
+    let informed = s.saa.iter().all(|&v| v > 0.0);
+    let mut q = qb.0;
+    if qb.1 > 0.0 && informed {
+        // Schur complement of the diagonal P block: Q·Σ_c w_c²(Σbb - Σab²/Σaa) = Σ_c w_c(Σyb - Σab Σya/Σaa).
+        let (mut num, mut den) = (0.0, 0.0);
+        for c in 0..3 {
+            num += w[c] * (s.syb[c] - s.sab[c] * s.sya[c] / s.saa[c]);
+            den += w[c] * w[c] * (s.sbb[c] - s.sab[c] * s.sab[c] / s.saa[c]);
+        }
+        if den > 0.0 {
+            q = clampq(num / den);
+        }
+    }
+    let p_given = |c: usize, q: f64| (s.sya[c] - q * w[c] * s.sab[c]) / s.saa[c];
+    let mut p = [0.0f64; 3];
+    let mut clamped = [false; 3];
+    for c in 0..3 {
+        p[c] = if s.saa[c] > 0.0 {
+            let v = closed_form(p_given(c, q), 1.0, f32::INFINITY, pb[c]);
+            clamped[c] = v != p_given(c, q);
+            v
+        } else {
+            let (a, b, sat_min) = fallback(c);
+            closed_form(a, b, sat_min, pb[c])
+        };
+    }
+    if qb.1 > 0.0 && informed && clamped.iter().any(|&k| k) {
+        let (mut num, mut den) = (0.0, 0.0);
+        for c in 0..3 {
+            num += w[c] * (s.syb[c] - s.sab[c] * p[c]);
+            den += w[c] * w[c] * s.sbb[c];
+        }
+        if den > 0.0 {
+            q = clampq(num / den);
+            for c in 0..3 {
+                if !clamped[c] {
+                    p[c] = closed_form(p_given(c, q), 1.0, f32::INFINITY, pb[c]);
+                }
+            }
+        }
+    }
+    (p, q)
 }
 
 /// The least-squares product `syg / sgg` clamped to `bounds`; without any unsaturated pixel

@@ -16,7 +16,7 @@ mod python;
 pub use de::{DeConfig, DeResult, GenerationReport, Objective};
 pub use error::{Error, Result};
 pub use fitness::{Fitness, LossKind};
-pub use kernel::Norm;
+pub use kernel::{Norm, Projection};
 pub use params::ParamLayout;
 pub use render::{render, GBuffer, Image};
 pub use scene::Scene;

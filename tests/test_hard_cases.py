@@ -254,8 +254,8 @@ def test_directional_light_sun(ball_scene):
 
 
 def test_glossy_ball_with_free_specular_and_shininess(ball_scene):
-    """A highlight the model knows about informs the fit instead of biasing it; with the lobe free the
-    closed form does not apply and the two-stage search runs."""
+    """A highlight the model knows about informs the fit instead of biasing it: intensity x specular joins
+    the closed-form solve, the shininess is searched with the light, and the fit is as exact as a matte one."""
     truth = ball_scene
     truth["objects"][0]["material"].update(specular=0.3, shininess=30.0)
     truth["fit"]["objects.ball.specular"] = {"min": 0, "max": 1}
@@ -264,10 +264,33 @@ def test_glossy_ball_with_free_specular_and_shininess(ball_scene):
     start["objects"][0]["material"].update(specular=0.1, shininess=10.0)
     result = rtloop.fit(start, _photo(truth), seed=1)
     _check(result)
+    assert result.settings["method"] == "projected"
+    assert _light_err(result, truth) < 0.001
+    assert _product_err(result, truth) < 0.002
+    fitted = result.scene.to_dict()
+    ks = fitted["light"]["intensity"] * fitted["objects"][0]["material"]["specular"]
+    assert ks == pytest.approx(truth["light"]["intensity"] * 0.3, rel=0.002)
+    assert fitted["objects"][0]["material"]["shininess"] == pytest.approx(30.0, rel=0.01)
+    assert "light.intensity*objects.ball.specular" in result.identifiability["determined"]
+
+
+def test_highlight_of_known_strength(ball_scene):
+    """A fixed, known specular under a fixed intensity: the closed form holds the lobe at its value and
+    fits only the albedos; with the intensity free, the highlight measures it and the two-stage search
+    (which models that) runs instead, saying why."""
+    truth = ball_scene
+    truth["objects"][0]["material"].update(specular=0.4, shininess=20.0)
+    photo = _photo(truth)
+    fixed = copy.deepcopy(truth)
+    del fixed["fit"]["light.intensity"]
+    result = rtloop.fit(_start(fixed), photo, seed=2)
+    _check(result)
+    assert result.settings["method"] == "projected"
+    assert _light_err(result, truth) < 0.001
+    assert _product_err(result, truth) < 0.002
+    assert result.scene.to_dict()["objects"][0]["material"]["specular"] == 0.4
+    result = rtloop.fit(_start(truth), photo, seed=2, generations=30)
+    _check(result)
     assert result.settings["method"] == "two-stage"
-    assert _light_err(result, truth) < 0.01
-    fitted = result.scene.to_dict()["objects"][0]["material"]
-    assert 0 < fitted["specular"] <= 1 and 1 <= fitted["shininess"] <= 100
-    # The diffuse products stay within the paper protocol's rough colour accuracy; the lobe's own strength
-    # is recovered only roughly by the two-stage search (a closed-form specular term is still to come).
-    assert _product_err(result, truth) < 0.10
+    assert "specular of ball is fixed" in result.settings["projection_unavailable"]
+    assert not result.identifiability["degenerate"]

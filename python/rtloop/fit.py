@@ -141,19 +141,22 @@ def _identifiability(scene: Scene, paths: list[str]) -> dict[str, Any]:
     d = scene_to_dict(scene)
     albedo_paths = [p for p in paths if p.endswith(".albedo")]
     light_scale = [p for p in paths if p in ("light.intensity", "light.color", "exposure")]
+    specular_paths = [p for p in paths if p.endswith(".specular")]
     no_ambient = all(v == 0 for v in d["ambient"]) and "ambient" not in paths
-    no_specular = all(o["material"]["specular"] == 0 for o in d["objects"]) and not any(
-        p.endswith(".specular") for p in paths
+    # A highlight of known strength (a fixed, non-zero specular) measures the light's intensity; a free
+    # specular scales with the intensity like an albedo does.
+    known_specular = any(
+        o["material"]["specular"] != 0 and f"objects.{o['name']}.specular" not in paths for o in d["objects"]
     )
-    degenerate = bool(albedo_paths and light_scale and no_ambient and no_specular)
+    degenerate = bool((albedo_paths or specular_paths) and light_scale and no_ambient and not known_specular)
     info: dict[str, Any] = {"degenerate": degenerate}
     if degenerate:
-        info["determined"] = [f"{'*'.join(light_scale)}*{p}" for p in albedo_paths]
+        info["determined"] = [f"{'*'.join(light_scale)}*{p}" for p in albedo_paths + specular_paths]
         info["note"] = (
-            "no ambient light and no specular highlight: the image fixes only light intensity x albedo "
-            "per object and channel (see 'products'); the intensity is kept at the scene's value (the paper "
-            "protocol: stage 1's value) unless an albedo would exceed its bounds, in which case the light is "
-            "made just bright enough"
+            "no ambient light and no highlight of known strength: the image fixes only light intensity x "
+            "albedo per object and channel (see 'products'), and intensity x specular; the intensity is "
+            "kept at the scene's value (the paper protocol: stage 1's value) unless an albedo or a specular "
+            "would exceed its bounds, in which case the light is made just bright enough"
         )
     elif len(light_scale) > 1:
         info["degenerate"] = True
@@ -365,6 +368,7 @@ def fit(
     settings["optimizer"], settings["polish"] = optimizer, polish
     if method == "projected":
         where = ["light.direction"] if "light.direction" in all_paths else ["light.position"]
+        where += [p for p in all_paths if p.endswith(".shininess")]  # searched with the light
         s = run("light+colour", current, where, "l1_projected", use, gens[0], int(seeds[0]),
                 product_bounds=_product_bounds(scene), method=optimizer, polish=polish)
         stages.append(s)
@@ -448,13 +452,18 @@ def _projection_blocker(scene: Scene, paths: list[str]) -> str | None:
         return "neither light.position nor light.direction is free"
     if any(v != 0 for v in d["ambient"]):
         return "the scene has ambient light"
-    if any(o["material"]["specular"] != 0 for o in d["objects"]):
-        return "an object has a specular term"
     allowed = {"light.position", "light.direction", "light.intensity"}
-    allowed |= {f"objects.{o['name']}.albedo" for o in d["objects"]}
+    for o in d["objects"]:
+        allowed |= {f"objects.{o['name']}.{m}" for m in ("albedo", "specular", "shininess")}
     extra = [p for p in paths if p not in allowed]
     if extra:
         return f"{', '.join(extra)} cannot be solved in closed form"
+    if "light.intensity" in paths:
+        known = [o["name"] for o in d["objects"]
+                 if o["material"]["specular"] != 0 and f"objects.{o['name']}.specular" not in paths]
+        if known:
+            return (f"light.intensity is free and the specular of {', '.join(known)} is fixed (the highlight "
+                    "then measures the intensity, which the closed form does not model)")
     if "light.intensity" in paths:
         fixed = [o["name"] for o in d["objects"] if f"objects.{o['name']}.albedo" not in paths]
         if fixed:
@@ -463,7 +472,9 @@ def _projection_blocker(scene: Scene, paths: list[str]) -> str | None:
 
 
 def _product_bounds(scene: Scene) -> np.ndarray:
-    """(objects, 3, 2) bounds of exposure x intensity x colour x albedo from the fit section."""
+    """(objects, 4, 2) bounds of the closed-form unknowns from the fit section: rows 0-2 exposure x
+    intensity x colour x albedo per channel, row 3 intensity x specular ((0, 0) for a matte object, which
+    then costs no specular work)."""
     d = scene_to_dict(scene)
     paths = scene.fit_paths
     scale = np.array(d["light"]["color"], float) * d["exposure"]
@@ -471,36 +482,49 @@ def _product_bounds(scene: Scene) -> np.ndarray:
         ilo, ihi = scene.bounds(["light.intensity"])[0]
     else:
         ilo = ihi = d["light"]["intensity"]
-    out = np.zeros((len(d["objects"]), 3, 2))
+    out = np.zeros((len(d["objects"]), 4, 2))
     for k, o in enumerate(d["objects"]):
         p = f"objects.{o['name']}.albedo"
         b = np.array(scene.bounds([p])) if p in paths else np.repeat(np.array(o["material"]["albedo"])[:, None], 2, 1)
-        out[k, :, 0] = ilo * scale * b[:, 0]
-        out[k, :, 1] = ihi * scale * b[:, 1]
+        out[k, :3, 0] = ilo * scale * b[:, 0]
+        out[k, :3, 1] = ihi * scale * b[:, 1]
+        sp = f"objects.{o['name']}.specular"
+        klo, khi = scene.bounds([sp])[0] if sp in paths else (o["material"]["specular"],) * 2
+        out[k, 3] = (ilo * klo, ihi * khi)
     return out
 
 
 def _split_products(fitted: Scene, products: list[list[float]], original: Scene) -> Scene:
-    """Write closed-form products back as albedos and an intensity.
+    """Write closed-form products back as albedos, speculars and an intensity.
 
-    Intensity x albedo is all the image determines; rtloop keeps the intensity at the scene's own value
-    (the user's estimate of the lamp) unless an albedo would then exceed its upper bound, in which case the
-    light is made just bright enough (the dimmest light consistent with the photo and the bounds).
+    ``products``: per object [P_r, P_g, P_b] or [P_r, P_g, P_b, Q], P = exposure x intensity x colour x
+    albedo, Q = intensity x specular. Intensity x albedo (and x specular) is all the image determines;
+    rtloop keeps the intensity at the scene's own value (the user's estimate of the lamp) unless an albedo
+    or a specular would then exceed its upper bound, in which case the light is made just bright enough
+    (the dimmest light consistent with the photo and the bounds).
     """
     d = scene_to_dict(fitted)
     paths = original.fit_paths
     scale = np.array(d["light"]["color"], float) * d["exposure"]
     intensity = d["light"]["intensity"]
-    P = np.asarray(products, float)
+    rows = np.asarray(products, float)
+    P = rows[:, :3]
+    Q = rows[:, 3] if rows.shape[1] > 3 else np.zeros(len(rows))
     if "light.intensity" in paths:
         ilo, ihi = original.bounds(["light.intensity"])[0]
         intensity = min(max(scene_to_dict(original)["light"]["intensity"], ilo), ihi)
         need = intensity
         for k, o in enumerate(d["objects"]):
-            hi = np.array([b[1] for b in original.bounds([f"objects.{o['name']}.albedo"])])
-            with np.errstate(divide="ignore", invalid="ignore"):
-                req = np.where((hi > 0) & (scale > 0), P[k] / (scale * np.maximum(hi, 1e-300)), 0.0)
-            need = max(need, float(np.max(req)))
+            p = f"objects.{o['name']}.albedo"
+            if p in paths:
+                hi = np.array([b[1] for b in original.bounds([p])])
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    req = np.where((hi > 0) & (scale > 0), P[k] / (scale * np.maximum(hi, 1e-300)), 0.0)
+                need = max(need, float(np.max(req)))
+            sp = f"objects.{o['name']}.specular"
+            if sp in paths and Q[k] > 0:
+                khi = original.bounds([sp])[0][1]
+                need = max(need, float(Q[k] / khi) if khi > 0 else need)
         intensity = min(max(need, ilo), ihi)
         d["light"]["intensity"] = intensity
     for k, o in enumerate(d["objects"]):
@@ -511,6 +535,11 @@ def _split_products(fitted: Scene, products: list[list[float]], original: Scene)
             with np.errstate(divide="ignore", invalid="ignore"):
                 rho = np.where(scale > 0, P[k] / (intensity * scale), lo)
             o["material"]["albedo"] = [float(v) for v in np.clip(np.nan_to_num(rho), lo, hi)]
+        sp = f"objects.{o['name']}.specular"
+        if sp in paths:
+            klo, khi = original.bounds([sp])[0]
+            ks = Q[k] / intensity if intensity > 0 else klo
+            o["material"]["specular"] = float(np.clip(np.nan_to_num(ks), klo, khi))
     return load_scene(d)
 
 

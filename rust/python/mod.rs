@@ -14,7 +14,7 @@ use pyo3::types::PyDict;
 use crate::de::{self, DeConfig};
 use crate::error::Error;
 use crate::fitness::{Fitness, LossKind};
-use crate::kernel::Norm;
+use crate::kernel::{Norm, Projection};
 use crate::params::ParamLayout;
 use crate::render as core_render;
 use crate::scene::Scene;
@@ -232,21 +232,30 @@ fn make_fitness(
         Some(p) => Some(p.as_slice()?.to_vec()),
         None => None,
     };
-    let product_bounds = match product_bounds {
+    let projection = match product_bounds {
         Some(b) => {
             let a = b.as_array();
-            if a.shape() != [scene.objects.len(), 3, 2] {
+            let n = scene.objects.len();
+            if a.ndim() != 3
+                || a.shape()[0] != n
+                || !(3..=4).contains(&a.shape()[1])
+                || a.shape()[2] != 2
+            {
                 return Err(PyValueError::new_err(format!(
-                    "product_bounds must have shape ({}, 3, 2), got {:?}",
-                    scene.objects.len(),
+                    "product_bounds must have shape ({n}, 3, 2) or ({n}, 4, 2) (row 4: intensity x \
+                     specular), got {:?}",
                     a.shape()
                 )));
             }
-            Some(
-                (0..a.shape()[0])
+            let mut proj = Projection::matte(
+                (0..n)
                     .map(|k| std::array::from_fn(|c| (a[[k, c, 0]], a[[k, c, 1]])))
                     .collect(),
-            )
+            );
+            if a.shape()[1] == 4 {
+                proj.specular = (0..n).map(|k| (a[[k, 3, 0]], a[[k, 3, 1]])).collect();
+            }
+            Some(proj)
         }
         None => None,
     };
@@ -258,10 +267,21 @@ fn make_fitness(
         pixels.as_deref(),
         kind,
         clip,
-        product_bounds,
+        projection,
     )?;
     fitness.set_norm(Norm::parse(norm).map_err(RtloopError::new_err)?);
     Ok((fitness, bounds))
+}
+
+/// The closed-form solution for `x`, one row per object: [P_r, P_g, P_b, Q] (Q = intensity x specular,
+/// 0 for a matte object).
+fn solved_rows(fitness: &Fitness, x: &[f64]) -> Vec<Vec<f64>> {
+    let s = fitness.solved(x);
+    s.products
+        .iter()
+        .zip(&s.specular)
+        .map(|(p, &q)| vec![p[0], p[1], p[2], q])
+        .collect()
 }
 
 fn pool(threads: Option<usize>) -> PyResult<rayon::ThreadPool> {
@@ -334,7 +354,9 @@ fn evaluate<'py>(
 /// (`"lshade"`, optionally followed by a Nelder-Mead `polish`). One call per stage; the GIL is released
 /// except while `callback(generation, best, best_objectives, evaluations, products)` runs, after the
 /// initial population and after every generation (returning False stops the search). `products` are the
-/// closed-form products of the best for the projected loss when `with_products`, else None.
+/// closed-form products of the best for the projected loss when `with_products` (one row per object:
+/// [P_r, P_g, P_b, Q], Q = intensity x specular), else None. `product_bounds` is (objects, 3, 2), or
+/// (objects, 4, 2) with row 4 bounding Q for objects with a specular term.
 #[pyfunction]
 #[pyo3(signature = (scene, paths, target, *, pixels=None, loss="l1", clip=true, population=60,
                     generations=200, f=0.6, cr=0.8, seed=0, threads=None, callback=None,
@@ -389,14 +411,9 @@ fn optimize<'py>(
             let callback = |rep: &de::GenerationReport| {
                 let Some(cb) = &callback else { return true };
                 // The closed-form products of the best (one more evaluation) only when the caller wants them.
-                let products: Option<Vec<Vec<f64>>> =
-                    (with_products && fitness.kind() == LossKind::L1Projected).then(|| {
-                        fitness
-                            .products(rep.best)
-                            .iter()
-                            .map(|p| p.to_vec())
-                            .collect()
-                    });
+                let products: Option<Vec<Vec<f64>>> = (with_products
+                    && fitness.kind() == LossKind::L1Projected)
+                    .then(|| solved_rows(&fitness, rep.best));
                 Python::attach(|py| {
                     let best = PyArray1::from_slice(py, rep.best);
                     let objectives = rep.best_objectives.to_vec();
@@ -456,11 +473,7 @@ fn optimize<'py>(
     }
     let d = PyDict::new(py);
     if fitness.kind() == LossKind::L1Projected {
-        let products: Vec<Vec<f64>> = fitness
-            .products(&result.best)
-            .iter()
-            .map(|p| p.to_vec())
-            .collect();
+        let products = solved_rows(&fitness, &result.best);
         d.set_item("products", products)?;
     }
     d.set_item("x", PyArray1::from_vec(py, result.best))?;
