@@ -262,6 +262,28 @@ impl Fitness {
         })
     }
 
+    /// For `L1Projected`: the products that minimise this fitness's own loss at candidate `x` (see
+    /// [`Kernel::refine`]) and the per-channel loss there; the least-squares products of `solved` are
+    /// what the search uses, these are what a fit reports. `None` for other losses.
+    pub fn refined(&self, x: &[f64]) -> Option<(Solved, [f64; 3])> {
+        let proj = self.projection.as_ref()?;
+        let p = self.params(x);
+        let (mut solved, mut scratch) = (Solved::default(), Vec::new());
+        self.kernel.projected(
+            &p,
+            self.clip,
+            proj,
+            &mut solved,
+            &mut scratch,
+            f64::INFINITY,
+        );
+        let mut loss = self.kernel.refine(self.clip, proj, &mut solved, &scratch);
+        for c in 0..3 {
+            loss[c] += self.constant[c];
+        }
+        Some((solved, loss))
+    }
+
     /// Penalise pixel differences with `norm` (L1 by default) in every loss of this fitness.
     pub fn set_norm(&mut self, norm: Norm) {
         self.kernel.norm = norm;

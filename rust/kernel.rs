@@ -57,6 +57,24 @@ impl Norm {
             }
         }
     }
+
+    /// The derivative of `penalty` (a subgradient for L1: 0 at 0).
+    #[inline(always)]
+    pub fn slope(self, d: f64) -> f64 {
+        match self {
+            Norm::L1 => {
+                if d > 0.0 {
+                    1.0
+                } else if d < 0.0 {
+                    -1.0
+                } else {
+                    0.0
+                }
+            }
+            Norm::L2 => 2.0 * d,
+            Norm::Huber(h) => (d / h as f64).clamp(-1.0, 1.0),
+        }
+    }
 }
 
 /// Pixels per block: the working set of one block stays in L1.
@@ -477,6 +495,210 @@ impl Kernel {
         }
         acc
     }
+
+    /// The products that minimise this kernel's own loss (norm and clip) rather than least squares, for
+    /// one light: called once at the end of a search, after `projected` has filled `out` and `scratch`
+    /// for that light. Least squares treats a pixel saturated in the objective as missing, which biases
+    /// a bright channel down under noise (the pixels that noise pushed up to 1 are dropped, those it pushed
+    /// down are kept). Here a saturated pixel counts one-sidedly, as the loss does: it pulls the product up
+    /// while the model is below 1, and says nothing once the model reaches 1. The loss is then minimised
+    /// per object by block coordinate descent, each P_c given Q and then Q given the P's, each by
+    /// bisection on the loss's derivative, e.g. Σ a·slope(P a + Q w b - y) (non-decreasing: every term is
+    /// convex once an unsaturated pixel's clip at 1 is dropped). Returns the per-channel loss at the
+    /// refined products.
+    pub fn refine(
+        &self,
+        clip: bool,
+        proj: &Projection,
+        out: &mut Solved,
+        scratch: &[f32],
+    ) -> [f64; 3] {
+        let (a_all, b_all) = scratch.split_at(self.pixels);
+        let sat = if clip { SATURATED } else { f32::INFINITY };
+        let top = if clip { 1.0f64 } else { f64::INFINITY };
+        let mut acc = [0.0f64; 3];
+        let mut offset = 0;
+        for g in &self.groups {
+            let n = g.len();
+            let (a, b) = (&a_all[offset..offset + n], &b_all[offset..offset + n]);
+            offset += n;
+            let Some(obj) = g.object else {
+                for c in 0..3 {
+                    acc[c] += g.t[c]
+                        .iter()
+                        .map(|&t| self.norm.penalty(t) as f64)
+                        .sum::<f64>();
+                }
+                continue;
+            };
+            let specular = proj.specular[obj].1 > 0.0;
+            let t = [&g.ts[0], &g.ts[1], &g.ts[2]];
+            // d/dm of one pixel's loss at model value m (silhouette pixels, ts = inf, excluded).
+            let slope = |m: f64, c: usize, i: usize| -> f64 {
+                let y = t[c][i];
+                if !y.is_finite() {
+                    0.0
+                } else if y < sat {
+                    self.norm.slope(m - y as f64)
+                } else {
+                    self.norm.slope((m - top).min(0.0))
+                }
+            };
+            let model = |pc: f64, q: f64, c: usize, i: usize| {
+                pc * a[i] as f64
+                    + if specular {
+                        q * proj.weight[c] as f64 * b[i] as f64
+                    } else {
+                        0.0
+                    }
+            };
+            let informed: [bool; 3] =
+                std::array::from_fn(|c| (0..n).any(|i| t[c][i].is_finite() && a[i] > 0.0));
+            // Block coordinate descent: each P_c given Q, then Q given the P's (a few rounds; one for a
+            // matte object, whose channels are independent).
+            for _round in 0..if specular { 4 } else { 1 } {
+                for c in 0..3 {
+                    if informed[c] {
+                        let q = out.specular[obj];
+                        out.products[obj][c] = if self.norm == Norm::L1 {
+                            // Terms |min(a P + s, top) - y|: coefficient a, offset s (the lobe).
+                            let terms =
+                                (0..n)
+                                    .filter(|&i| a[i] > 0.0 && t[c][i].is_finite())
+                                    .map(|i| {
+                                        (
+                                            a[i] as f64,
+                                            model(0.0, q, c, i),
+                                            t[c][i] as f64,
+                                            t[c][i] >= sat,
+                                        )
+                                    });
+                            l1_line_min(terms, proj.diffuse[obj][c], top)
+                        } else {
+                            bisect(proj.diffuse[obj][c], |pc| {
+                                (0..n)
+                                    .filter(|&i| a[i] > 0.0)
+                                    .map(|i| a[i] as f64 * slope(model(pc, q, c, i), c, i))
+                                    .sum()
+                            })
+                        };
+                    }
+                }
+                if specular && informed.iter().all(|&k| k) {
+                    let pk = out.products[obj];
+                    out.specular[obj] = if self.norm == Norm::L1 {
+                        let terms = (0..3).flat_map(|c| {
+                            (0..n)
+                                .filter(move |&i| b[i] > 0.0 && t[c][i].is_finite())
+                                .map(move |i| {
+                                    let k = proj.weight[c] as f64 * b[i] as f64;
+                                    (k, pk[c] * a[i] as f64, t[c][i] as f64, t[c][i] >= sat)
+                                })
+                        });
+                        l1_line_min(terms, proj.specular[obj], top)
+                    } else {
+                        bisect(proj.specular[obj], |q| {
+                            (0..3)
+                                .map(|c| {
+                                    (0..n)
+                                        .filter(|&i| b[i] > 0.0)
+                                        .map(|i| {
+                                            proj.weight[c] as f64
+                                                * b[i] as f64
+                                                * slope(model(pk[c], q, c, i), c, i)
+                                        })
+                                        .sum::<f64>()
+                                })
+                                .sum()
+                        })
+                    };
+                }
+            }
+            for c in 0..3 {
+                let (pc, q) = (out.products[obj][c], out.specular[obj]);
+                acc[c] += (0..n)
+                    .map(|i| {
+                        let m = model(pc, q, c, i).min(top) as f32;
+                        self.norm.penalty(m - g.t[c][i]) as f64
+                    })
+                    .sum::<f64>();
+            }
+        }
+        acc
+    }
+}
+
+/// The exact minimiser over [lo, hi] of Σ_j ℓ_j(x) for terms (k > 0, o, y, saturated): ℓ = |min(k x + o,
+/// top) - y| for an unsaturated pixel, max(0, top - k x - o) for a saturated one (it only says "at least
+/// top"). Each ℓ is piecewise linear in x, so the minimum lies at a breakpoint ((y - o)/k or
+/// (top - o)/k) or an end: one sweep over the sorted breakpoints, tracking the slope, finds it. Unlike a
+/// convex stand-in, this keeps the clip exact, so the estimate stays median-unbiased where noise pushes a
+/// pixel across the clip (an unsaturated pixel of a model already at `top` costs a constant).
+pub fn l1_line_min(
+    terms: impl Iterator<Item = (f64, f64, f64, bool)>,
+    (lo, hi): (f64, f64),
+    top: f64,
+) -> f64 {
+    // Breakpoints with the slope change there; the slope left of every breakpoint is -Σk.
+    let mut events: Vec<(f64, f64)> = Vec::new();
+    let mut slope = 0.0;
+    for (k, o, y, saturated) in terms {
+        slope -= k;
+        if saturated {
+            events.push(((top - o) / k, k));
+        } else {
+            events.push(((y - o) / k, 2.0 * k));
+            events.push(((top - o) / k, -k));
+        }
+    }
+    events.retain(|e| !e.0.is_nan());
+    events.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let (mut x, mut f) = (lo, 0.0);
+    let (mut best_x, mut best_f) = (lo, 0.0);
+    for &(at, ds) in &events {
+        if at > x {
+            let to = at.min(hi);
+            f += slope * (to - x);
+            x = to;
+            if f < best_f {
+                (best_x, best_f) = (x, f);
+            }
+            if x >= hi {
+                break;
+            }
+        }
+        slope += ds;
+    }
+    if x < hi {
+        f += slope * (hi - x);
+        if f < best_f {
+            best_x = hi;
+        }
+    }
+    best_x
+}
+
+/// The zero of a non-decreasing `derivative` on [lo, hi] by bisection (an end when it does not change
+/// sign there): the minimiser of a convex function of one variable.
+fn bisect((mut lo, mut hi): (f64, f64), derivative: impl Fn(f64) -> f64) -> f64 {
+    if !(derivative(lo) < 0.0) {
+        return lo;
+    }
+    if !(derivative(hi) > 0.0) {
+        return hi;
+    }
+    for _ in 0..64 {
+        if hi - lo <= 1e-9 * hi.abs().max(lo.abs()).max(f64::MIN_POSITIVE) {
+            break;
+        }
+        let mid = 0.5 * (lo + hi);
+        if derivative(mid) < 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
 }
 
 /// What the closed-form solve may choose, per object: the bounds of its diffuse products

@@ -142,9 +142,10 @@ def test_partly_saturated_photo(ball_scene):
 
 
 def test_strong_noise(ball_scene):
-    """Noise 2.5 times the shared noisy-blue case's, at the paper's 128x96: the light is held to the same
-    5 cm. The colours degrade more: noise clipped at 0 biases the darkest channel (the ball's blue) up,
-    which the least-squares solve does not model yet (a censored loss is future work), so 10 %."""
+    """Noise 2.5 times the shared noisy-blue case's, on the saturated photo, at the paper's 128x96: the
+    light to 5 cm, the colours to 4 %. Least squares alone got the ball's red 5-8 % low here (saturated
+    pixels that noise pulls below 1 fitted as unsaturated, unsaturated ones pushed to 1 dropped); the
+    reported products minimise the L1 loss with the clip kept exact (see Kernel::refine)."""
     truth = ball_scene
     truth["image"] = {"width": 128, "height": 96}
     rng = np.random.default_rng(5)
@@ -152,12 +153,12 @@ def test_strong_noise(ball_scene):
     result = rtloop.fit(_start(truth), photo, seed=5)
     _check(result)
     assert _light_err(result, truth) < 0.05
-    assert _product_err(result, truth) < 0.10
+    assert _product_err(result, truth) < 0.04
 
 
 def test_jpeg_quality_50(ball_scene, tmp_path):
     """JPEG at quality 50 subsamples chroma and quantises the dark blue channel hardest: light to 5 cm,
-    colours to 10 % (see test_strong_noise)."""
+    colours to 3 % (see test_strong_noise; least squares alone was 7-8 % off)."""
     truth = ball_scene
     truth["image"] = {"width": 128, "height": 96}
     scene = rtloop.load_scene(_start(truth))
@@ -165,7 +166,7 @@ def test_jpeg_quality_50(ball_scene, tmp_path):
     result = rtloop.fit(scene, loaded, seed=6)
     _check(result)
     assert _light_err(result, truth) < 0.05
-    assert _product_err(result, truth) < 0.10
+    assert _product_err(result, truth) < 0.03
 
 
 def test_model_mismatch_interreflection_like_fill_light(ball_scene):
@@ -243,7 +244,11 @@ def test_directional_light_sun(ball_scene):
     assert result.settings["method"] == "projected"
     assert _product_err(result, truth) < 0.002
     assert result.scene.to_dict()["light"]["type"] == "directional"
-    assert result.uncertainty["sigma"] == {} and "directional" in result.uncertainty["warnings"][0]
+    u = result.uncertainty  # noise-free photo: sigma is float32 rounding, with the warning that says so
+    assert not any("not available" in w for w in u["warnings"])
+    assert set(u["sigma"]) == {"light.direction.u", "light.direction.v"} | {
+        f"products.{o}.{c}" for o in ("ball", "floor") for c in "rgb"}
+    assert all(s is not None and 0 <= s < 1e-6 for s in u["sigma"].values())
     # A directional light has no position to fit, and a point light no direction.
     with pytest.raises(rtloop.SceneError, match="light.direction"):
         rtloop.load_scene({**truth, "fit": {"light.position": {"min": -1, "max": 1}}})

@@ -4,20 +4,35 @@
     u = estimate_uncertainty(result, photo)
     u["sigma"]["light.position.x"]      # one standard deviation, metres
     u["sigma"]["products.ball.r"]       # exposure x intensity x colour x albedo of the ball, red
+    u["sigma"]["light.direction.u"]     # a directional light: radians (see "Directional light")
 
 Residuals are r(θ) = min(render(θ), 1) - image over every used pixel and channel. Near the optimum
 r(θ) ≈ r(θ̂) + J (θ - θ̂), and if the image is the model plus independent noise of one variance σ², the
 least-squares estimate has covariance σ² (JᵀJ)⁻¹; σ² is estimated from the residuals as
 s² = |r|² / (N - P) (P the rank of J). J is taken by central finite differences of rtloop's own renderer,
-with steps of 1e-3 of each parameter's bound range: the renderer works in float32, and smaller steps let
-its rounding through (the intensity-albedo degeneracy then no longer looks singular).
+with steps of 1e-3 of each parameter's scale (its bound range; 1 rad for a direction angle): the renderer
+works in float32, and smaller steps let its rounding through (the intensity-albedo degeneracy then no
+longer looks singular). The image is linear in an albedo (a product), so an albedo's column is its exact
+derivative instead, exposure x (ambient + light x the unit-light render) on the object's pixels: no
+render, and none of the float32 rounding of a difference (finite differences agree with it to a few 1e-6
+in sigma, about their own rounding; ``EXACT_ALBEDO = False`` renders them).
 
 Which parameters. A matte scene without ambient light fixes only exposure x intensity x colour x albedo
 per object and channel (``result.identifiability["degenerate"]``), so when every object's albedo is free
 those *products* are the parameters (varied by scaling albedos under a light of unit intensity and
-colour, exposure 1), with the light position and any other free parameter; their names are
+colour, exposure 1), with the light position or direction and any other free parameter; their names are
 ``products.NAME.r|g|b``. Otherwise the scene's own fit parameters are used (``params="scene"`` forces
 this, ``params="products"`` insists on products).
+
+Directional light. Its direction is a unit vector d (searched as three components, normalised); sigma is
+given for two angles about the fitted d, in radians: d turned by the angle |(a, b)| towards a u + b v,
+where u = up x d normalised is horizontal (up: the camera's; where d lies along it, another horizontal
+axis) and v = d x u points towards up. Their names are ``light.direction.u`` and ``light.direction.v``,
+their values 0; they have no bounds. ``light_direction`` in the result gives the frame (``direction``,
+``u``, ``v``, world coordinates) and two cone figures in degrees: ``angle_deg``, the square root of the
+larger eigenvalue of the angles' 2 x 2 covariance (one sigma along the worse axis), and ``rms_angle_deg``
+= sqrt(sigma_u² + sigma_v²), the rms angle between the fitted and the true direction (None where an angle
+is not determined).
 
 Which pixels. Pixels saturated in the objective (any channel >= 0.999) say only "at least 1"; pixels on a
 silhouette (a 4-neighbour shows another object) and on a shadow edge (a 4-neighbour differs in whether the
@@ -25,21 +40,27 @@ light reaches it) change discontinuously with the parameters, which one sample p
 as a derivative. All three are left out, and with ``clip`` so is a pixel whose render crosses 1 within a
 finite-difference step (the clip's kink); everything else, background included, is used.
 
-Not determined. The Jacobian's columns are scaled to unit norm and decomposed (SVD). A parameter that no
-used pixel responds to (the albedo of an object no pixel shows, or one the light never reaches) or that
-enters a numerically zero singular direction (intensity against albedo when the scene's own parameters
-are used in a degenerate scene) gets ``None`` as sigma and a warning; the covariance of the rest is
-computed without them.
+Not determined. The Jacobian's columns are scaled to unit norm and decomposed (singular values and
+vectors: from the eigen-decomposition of the scaled JᵀJ when every singular value is above GRAM_RCOND of
+the largest, else by QR and SVD of J itself). A parameter that no used pixel responds to (the albedo of
+an object no pixel shows, or one the light never reaches) or that enters a numerically zero singular
+direction (intensity against albedo when the scene's own parameters are used in a degenerate scene) gets
+``None`` as sigma and a warning; the covariance of the rest is computed without them.
 
 What it is not. The fit minimises the L1 loss, not least squares: for Gaussian noise the L1 estimate is
 about sqrt(pi/2) ≈ 1.25 times as spread as the least-squares one the formula describes, and the optimiser
 adds its own (small) scatter. sigma describes the noise in the photo under the model; it does not cover a
 wrong model (a misplaced camera, a wrong shape, an unmodelled light) or a fit short of its optimum: both
 show as a ``residual_rms`` above the photo's noise, and s², hence sigma, grows with them.
+
+Cost: one render at the optimum, one for the object index and the unit-light factor, and two per
+parameter other than the albedos (the light's position or direction), on a handful of used-pixel arrays.
 """
 
 from __future__ import annotations
 
+import json
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -50,7 +71,7 @@ from .scene import Scene, load_scene, scene_to_dict
 
 __all__ = ["estimate_uncertainty"]
 
-#: Default finite-difference step: this fraction of each parameter's scale (its bound range).
+#: Default finite-difference step: this fraction of each parameter's scale (its bound range; 1 rad for an angle).
 STEP_FRACTION = 1e-3
 #: Objective pixels with any channel at or above this are saturated and left out.
 SATURATED = 0.999
@@ -58,8 +79,40 @@ SATURATED = 0.999
 RCOND = 1e-4
 #: A parameter whose component in a null singular vector exceeds this is reported as not determined.
 NULL_COMPONENT = 1e-3
+#: The decomposition comes from the Gram matrix while every singular value is above this fraction of the
+#: largest (its error is then below 1e-9 relative), else from QR and SVD of the Jacobian itself.
+GRAM_RCOND = 1e-3
+#: The scale of a direction angle (radians): the default step is STEP_FRACTION of it.
+ANGLE_SCALE = 1.0
+#: Albedo columns from the exact derivative rather than finite differences (False: render them, as a check).
+EXACT_ALBEDO = True
+#: Rows per block of the tall-skinny QR (see _svd_scaled).
+_QR_BLOCK = 512
 
 _LIGHT_SCALE = ("light.intensity", "light.color", "exposure")
+_ANGLES = ("light.direction.u", "light.direction.v")
+
+
+@dataclass
+class _Space:
+    """The parameters sigma is reported for, and how they map onto a scene that renders them."""
+
+    work: Scene  # the scene whose fit parameters are varied (the products scene, or the fitted one)
+    paths: list[str]  # work's fit paths, in the order of its parameter vector
+    names: list[str]  # one per parameter
+    theta0: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    scale: np.ndarray
+    albedo: dict[int, tuple[int, int]]  # parameter index -> (object index, channel) of an albedo
+    direction: tuple[int, np.ndarray, np.ndarray, np.ndarray] | None  # index of angle u, d, u, v
+
+    def native(self, theta: np.ndarray) -> list[float]:
+        """``work``'s parameter vector for ``theta`` (the two angles become a unit direction)."""
+        if self.direction is None:
+            return [float(v) for v in theta]
+        k, d, u, v = self.direction
+        return [float(x) for x in (*theta[:k], *_rotate(d, u, v, theta[k], theta[k + 1]), *theta[k + 2 :])]
 
 
 def estimate_uncertainty(
@@ -76,21 +129,18 @@ def estimate_uncertainty(
     ``result``: a :class:`rtloop.FitResult` (or a Scene at the optimum with its ``fit`` section).
     ``image``: the objective the fit saw, linear float (H, W, 3) at the scene's size. ``clip`` compares
     min(render, 1) with it, as the fit does. ``step``: finite-difference step as a fraction of each
-    parameter's bound range (default 1e-3), or ``{name: absolute step}`` for some parameters.
-    ``params``: ``"auto"`` (products where the scene determines only products, else the scene's fit
-    parameters), ``"products"`` or ``"scene"``.
+    parameter's scale (its bound range, 1 rad for a direction angle; default 1e-3), or
+    ``{name: absolute step}`` for some parameters. ``params``: ``"auto"`` (products where the scene
+    determines only products, else the scene's fit parameters), ``"products"`` or ``"scene"``.
 
     Returns a JSON-able dict: ``method`` ("gauss-newton"), ``names``, ``values`` (the parameters at the
-    optimum), ``sigma`` ({name: float or None}), ``correlation`` (rows and columns in ``names`` order,
-    None where a parameter is not determined), ``residual_rms``, ``pixels`` (used), ``excluded``
-    (saturated / silhouette / shadow-edge pixel counts), ``dof``, ``condition`` (of the column-scaled
-    Jacobian over the determined parameters), ``parametrization`` and ``warnings``.
+    optimum; 0 for the direction angles), ``sigma`` ({name: float or None}), ``correlation`` (rows and
+    columns in ``names`` order, None where a parameter is not determined), ``residual_rms``, ``pixels``
+    (used), ``excluded`` (saturated / silhouette / shadow-edge / clip-kink pixel counts), ``dof``,
+    ``condition`` (of the column-scaled Jacobian over the determined parameters), ``parametrization``,
+    ``step`` and ``warnings``; for a directional light also ``light_direction`` (see the module docstring).
     """
     scene: Scene = result.scene if hasattr(result, "scene") else load_scene(result)
-    if scene_to_dict(scene)["light"].get("type") == "directional":
-        # The direction is a unit vector searched through three components: the parametrisation below
-        # assumes a point light. Say so rather than report a misleading sigma.
-        raise RtloopError("uncertainty: not available for directional lights yet")
     ident = getattr(result, "identifiability", None)
     target = np.asarray(image, dtype=np.float64)
     if target.shape != (scene.height, scene.width, 3):
@@ -104,48 +154,62 @@ def estimate_uncertainty(
     if not scene.fit_paths:
         raise RtloopError("fit: the scene's fit section names no free parameters")
 
-    why_not = _products_blocker(scene)
+    d = scene_to_dict(scene)
+    why_not = _products_blocker(scene, d)
     if params == "products" and why_not:
         raise RtloopError(f"params: products do not describe this scene ({why_not})")
     degenerate = bool(ident["degenerate"]) if ident is not None else why_not is None
     use_products = params == "products" or (params == "auto" and why_not is None and degenerate)
-    work, paths, names, lo, hi, scale = _products_space(scene) if use_products else _scene_space(scene)
-    theta0 = np.array(work.get_params(paths), dtype=np.float64)
+    space, wd = _products_space(scene, d) if use_products else _scene_space(scene, d)
+    work, paths, names, theta0 = space.work, space.paths, space.names, space.theta0
     warnings: list[str] = []
 
     def raw(theta: np.ndarray) -> np.ndarray:
-        return _native.render(work.with_params([float(v) for v in theta], paths))
+        return _native.render(work.with_params(space.native(theta), paths))
 
     # Pixels the model can represent as a smooth function of the parameters.
-    ids = _native.object_ids(work)
-    lit = _lit_mask(work)
-    saturated = (target >= SATURATED).any(axis=2)
+    ids, unit = _ids_and_unit_light(wd, work)
+    lit = unit > 0
+    sat = target.reshape(-1, 3) >= SATURATED
+    saturated = (sat[:, 0] | sat[:, 1] | sat[:, 2]).reshape(ids.shape)
     silhouette = _edges(ids)
     shadow_edge = _edges(np.where(ids >= 0, lit.astype(np.int32), -1)) & ~silhouette
     use = ~(saturated | silhouette | shadow_edge)
     if mask is not None:  # pixels the fit left out (bool (H, W), True = used)
         use &= np.asarray(mask, bool)
-    raw0 = raw(theta0)
+    idx = np.flatnonzero(use)  # everything below works on the used pixels only
+    n = idx.size
+    raw0_img = raw(theta0)
+    raw0 = np.take(raw0_img.reshape(-1, 3), idx, axis=0)
     clipped0 = raw0 >= 1.0
 
     # Jacobian by central differences (one-sided where a step would cross a bound). With ``clip``, a pixel
-    # whose render crosses 1 inside a step sits on the clip's kink and is left out ("clip_kink").
-    steps = _steps(names, scale, step)
+    # whose render crosses 1 inside a step sits on the clip's kink and is left out ("clip_kink"). The
+    # image is linear in an albedo: its column is the exact derivative (the unit-light render, scaled),
+    # with no render, and a pixel is on the kink where that line crosses 1 inside the step.
+    steps = _steps(names, space.scale, step)
     P = len(names)
-    kink = np.zeros(use.shape, dtype=bool)
-    J = np.zeros((int(use.sum()) * 3, P))
+    kink = np.zeros(n, dtype=bool)
+    Jt = np.zeros((P, 3 * n))  # the Jacobian's transpose: one contiguous row per parameter
 
     def clipped(img: np.ndarray) -> np.ndarray:
-        nonlocal kink
+        """The used pixels of ``img`` (float32, flat), min(img, 1) with ``clip``, noting kink pixels."""
+        g = np.take(img.reshape(-1, 3), idx, axis=0)
         if clip:
-            kink |= ((img >= 1.0) != clipped0).any(axis=2)
-            img = np.minimum(img, 1.0)
-        return img[use].astype(np.float64).ravel()
+            cross = (g >= 1.0) != clipped0
+            if cross.any():
+                kink[cross.any(axis=1)] = True
+            g = np.minimum(g, np.float32(1.0))
+        return g.ravel()
 
-    f0 = clipped(raw0)
+    f0 = clipped(raw0_img)
+    ids_u = np.take(ids.ravel(), idx)
+    unit_u = np.take(unit.ravel(), idx).astype(np.float64)
+    light_rgb = np.array(wd["light"]["color"], float) * wd["light"]["intensity"]
+    pixels_of: dict[int, np.ndarray] = {}
     for k in range(P):
         h = steps[k]
-        up_ok, down_ok = theta0[k] + h <= hi[k], theta0[k] - h >= lo[k]
+        up_ok, down_ok = theta0[k] + h <= space.hi[k], theta0[k] - h >= space.lo[k]
         tp, tm = theta0.copy(), theta0.copy()
         if up_ok and down_ok or not (up_ok or down_ok):
             tp[k] += h
@@ -157,31 +221,51 @@ def estimate_uncertainty(
         else:
             tm[k] -= h
             denom = h
-        fp = clipped(raw(tp)) if tp[k] != theta0[k] else f0
-        fm = clipped(raw(tm)) if tm[k] != theta0[k] else f0
-        J[:, k] = (fp - fm) / denom
-        if theta0[k] <= lo[k] or theta0[k] >= hi[k]:
+        if EXACT_ALBEDO and k in space.albedo:
+            o, c = space.albedo[k]
+            if o not in pixels_of:
+                pixels_of[o] = np.flatnonzero(ids_u == o)
+            on = pixels_of[o]
+            slope = wd["exposure"] * (wd["ambient"][c] + light_rgb[c] * unit_u[on])
+            moved = [t - theta0[k] for t in (tp[k], tm[k]) if t != theta0[k]]
+            if clip:
+                base = raw0[on, c].astype(np.float64)
+                was = clipped0[on, c]
+                for dt in moved:
+                    kink[on[(base + dt * slope >= 1.0) != was]] = True
+                slope = np.where(was, 0.0, slope)  # clipped at the optimum and on both sides: flat
+            if moved:
+                Jt[k, 3 * on + c] = slope
+        else:
+            fp = clipped(raw(tp)) if tp[k] != theta0[k] else f0
+            fm = clipped(raw(tm)) if tm[k] != theta0[k] else f0
+            np.subtract(fp, fm, out=Jt[k], dtype=np.float64)  # float32 values, exact difference in float64
+            Jt[k] /= denom
+        if theta0[k] <= space.lo[k] or theta0[k] >= space.hi[k]:
             warnings.append(
                 f"{names[k]}: at its bound ({theta0[k]:.6g}); the Gauss-Newton sigma assumes an interior optimum"
             )
-    kink &= use
-    rows = np.repeat(~kink[use], 3)
-    J = J[rows]
-    r0 = (f0 - target[use].astype(np.float64).ravel())[rows]
-    use &= ~kink
+    r0 = np.subtract(f0, np.take(target.reshape(-1, 3), idx, axis=0).ravel(), dtype=np.float64)
+    n_kink = int(kink.sum())
+    if n_kink:  # zero rows: the same JᵀJ, QR and |r|² as without them
+        rows = np.repeat(kink, 3)
+        Jt[:, rows] = 0.0
+        r0[rows] = 0.0
     excluded = {
         "saturated": int(saturated.sum()),
         "silhouette": int((silhouette & ~saturated).sum()),
         "shadow_edge": int((shadow_edge & ~saturated).sum()),
-        "clip_kink": int(kink.sum()),
+        "clip_kink": n_kink,
     }
-    n_pix = int(use.sum())
-    n_res = r0.size
+    n_pix = n - n_kink
+    n_res = 3 * n_pix
+    rr = float(np.einsum("i,i->", r0, r0))  # not r0 @ r0: a threaded BLAS dot waits on the render's threads
 
     determined = np.ones(P, dtype=bool)
-    col = np.linalg.norm(J, axis=0)
-    finite = np.isfinite(J).all(axis=0)
-    effect = np.where(finite, col * scale, 0.0)
+    gram = Jt @ Jt.T
+    col = np.sqrt(np.diag(gram))
+    finite = np.isfinite(col)  # a column with a NaN or an infinity has one on the diagonal
+    effect = np.where(finite, col * space.scale, 0.0)
     big = effect.max() if P else 0.0
     zero = ~finite | (col == 0) | (effect <= 1e-9 * big)
     if zero.any():
@@ -196,51 +280,52 @@ def estimate_uncertainty(
     # numerically zero singular direction is not determined; the others get the pseudo-inverse's
     # covariance, which leaves the undetermined combination free (their sigma is marginal over it, not
     # conditional on holding the undetermined parameters at their fitted values).
-    idx = np.flatnonzero(determined)
-    sigma: dict[str, float | None] = {n: None for n in names}
+    idx_p = np.flatnonzero(determined)
+    sigma: dict[str, float | None] = {name: None for name in names}
     corr: list[list[float | None]] = [[None] * P for _ in range(P)]
     condition = None
     rank = 0
     s2 = float("nan")
-    if idx.size:
-        # SVD of R from Js = QR: the same singular values and vectors as Js's, at P x P cost.
-        _, s, vt = np.linalg.svd(np.linalg.qr(J[:, idx] / col[idx], mode="r"))
+    cov = None
+    if idx_p.size:
+        s, vt = _svd_scaled(Jt, idx_p, gram[np.ix_(idx_p, idx_p)], col[idx_p])
         null = s < RCOND * s[0]
         rank = int((~null).sum())
         condition = float(s[0] / s[~null].min())
         if null.any():
             involved = (np.abs(vt[null]) > NULL_COMPONENT).any(axis=0)
-            group = [names[i] for i in idx[involved]]
+            group = [names[i] for i in idx_p[involved]]
             warnings.append(
                 f"{', '.join(group)}: not determined: the image fixes only a combination of them "
                 f"(singular value {s[null].min() / s[0]:.1e} of the largest)"
             )
-            determined[idx[involved]] = False
+            determined[idx_p[involved]] = False
         if n_res - rank <= 0:
             warnings.append(f"only {n_res} residuals for {rank} parameters: no uncertainty can be estimated")
             determined[:] = False
         else:
-            s2 = float(r0 @ r0) / (n_res - rank)
+            s2 = rr / (n_res - rank)
             # (JsᵀJs)⁺ = V S⁻² Vᵀ over the non-zero singular values: no explicit normal-equation inverse.
             v = vt[~null]
             cov_scaled = (v.T / s[~null] ** 2) @ v
-            cov = s2 * cov_scaled / np.outer(col[idx], col[idx])
+            cov = s2 * cov_scaled / np.outer(col[idx_p], col[idx_p])
             sd = np.sqrt(np.diag(cov))
             # Correlations from the scaled covariance: independent of s2 (defined for a perfect fit too).
-            d = np.sqrt(np.diag(cov_scaled))
-            keep = np.flatnonzero(determined[idx])
+            dg = np.sqrt(np.diag(cov_scaled))
+            r = np.clip(cov_scaled / np.outer(dg, dg), -1.0, 1.0).tolist()
+            keep = np.flatnonzero(determined[idx_p]).tolist()
             for a in keep:
-                sigma[names[idx[a]]] = float(sd[a])
+                sigma[names[idx_p[a]]] = float(sd[a])
                 for b in keep:
-                    corr[idx[a]][idx[b]] = float(np.clip(cov_scaled[a, b] / (d[a] * d[b]), -1.0, 1.0))
+                    corr[idx_p[a]][idx_p[b]] = r[a][b]
     dof = n_res - rank
-    rms = float(np.sqrt(r0 @ r0 / n_res)) if n_res else float("nan")
+    rms = float(np.sqrt(rr / n_res)) if n_res else float("nan")
     if rms < 1e-6:
         warnings.append(
             f"residual rms {rms:.1e}: the image is reproduced to float32 rounding (a noise-free render?), so "
             "sigma reflects rounding only; the optimiser's own scatter (refit with other seeds) is larger"
         )
-    return {
+    out = {
         "method": "gauss-newton",
         "parametrization": "products" if use_products else "scene",
         "names": names,
@@ -255,11 +340,47 @@ def estimate_uncertainty(
         "step": [float(h) for h in steps],
         "warnings": warnings,
     }
+    if space.direction is not None:
+        k, dvec, u, v = space.direction
+        block: dict[str, Any] = {"direction": dvec.tolist(), "u": u.tolist(), "v": v.tolist(),
+                                 "angle_deg": None, "rms_angle_deg": None}
+        if cov is not None and determined[k] and determined[k + 1]:
+            at = [int(np.flatnonzero(idx_p == k)[0]), int(np.flatnonzero(idx_p == k + 1)[0])]
+            c2 = cov[np.ix_(at, at)]
+            block["angle_deg"] = float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(c2)[-1], 0.0))))
+            block["rms_angle_deg"] = float(np.degrees(np.sqrt(max(np.trace(c2), 0.0))))
+        out["light_direction"] = block
+    return out
 
 
-def _products_blocker(scene: Scene) -> str | None:
+def _svd_scaled(
+    jt: np.ndarray, idx: np.ndarray, gram: np.ndarray, col: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Singular values (descending) and right singular vectors (rows) of Js = J / col, J = ``jt[idx]``ᵀ
+    (``gram`` = JᵀJ, ``col`` its columns' norms).
+
+    From the eigen-decomposition of JsᵀJs (``gram`` scaled) when every singular value is above GRAM_RCOND
+    of the largest: its eigenvalues are then accurate to about 1e-16 / GRAM_RCOND² relative, at P x P
+    cost. Otherwise, where squaring would lose the small singular values to rounding, from the SVD of R in
+    Js = QR (the same singular values and vectors as Js's), R by a tall-skinny QR: the QR of each block
+    of rows, then of their stacked R factors (cache-sized LAPACK calls; one QR of all of Js is several
+    times slower, and much slower still when a threaded BLAS competes with the renderer's threads).
+    """
+    w, vec = np.linalg.eigh(gram / np.outer(col, col))
+    if w[-1] > 0 and w[0] > GRAM_RCOND**2 * w[-1]:
+        return np.sqrt(w[::-1]), vec[:, ::-1].T
+    js = jt[idx].T / col
+    m, p = js.shape
+    blocks = -(-m // _QR_BLOCK)
+    padded = np.zeros((blocks * _QR_BLOCK, p))  # zero rows leave R unchanged
+    padded[:m] = js
+    r = np.linalg.qr(padded.reshape(blocks, _QR_BLOCK, p), mode="r").reshape(-1, p)
+    _, s, vt = np.linalg.svd(np.linalg.qr(r, mode="r"))
+    return s, vt
+
+
+def _products_blocker(scene: Scene, d: dict[str, Any]) -> str | None:
     """None when the image determines exactly the products of this scene and fit section, else why not."""
-    d = scene_to_dict(scene)
     paths = scene.fit_paths
     fixed = [o["name"] for o in d["objects"] if f"objects.{o['name']}.albedo" not in paths]
     if fixed:
@@ -273,19 +394,16 @@ def _products_blocker(scene: Scene) -> str | None:
     return None
 
 
-def _scene_space(scene: Scene) -> tuple[Scene, list[str], list[str], np.ndarray, np.ndarray, np.ndarray]:
+def _scene_space(scene: Scene, d: dict[str, Any]) -> tuple[_Space, dict[str, Any]]:
+    """The scene's own fit parameters (a direction as two angles)."""
     paths = list(scene.fit_paths)
-    names = scene.param_names(paths)
     b = np.array(scene.bounds(paths), dtype=np.float64).reshape(-1, 2)
-    values = np.array(scene.get_params(paths), dtype=np.float64)
-    rng = b[:, 1] - b[:, 0]
-    scale = np.where(rng > 0, rng, np.maximum(np.abs(values), 1.0))
-    return scene, paths, names, b[:, 0], b[:, 1], scale
+    return _space(scene, paths, d, b[:, 0], b[:, 1], {}), d
 
 
-def _products_space(scene: Scene) -> tuple[Scene, list[str], list[str], np.ndarray, np.ndarray, np.ndarray]:
-    """A scene whose albedos are the products under a unit light, and its parameters."""
-    d = scene_to_dict(scene)
+def _products_space(scene: Scene, d: dict[str, Any]) -> tuple[_Space, dict[str, Any]]:
+    """A scene whose albedos are the products under a unit light, and its parameters; ``d`` (the scene as
+    a dict) is changed into that scene's dict, and returned."""
     paths = scene.fit_paths
     light = np.array(d["light"]["color"], float) * d["light"]["intensity"] * d["exposure"]
     color_scale = np.array(d["light"]["color"], float) * d["exposure"]
@@ -303,12 +421,10 @@ def _products_space(scene: Scene) -> tuple[Scene, list[str], list[str], np.ndarr
         color_scale = color_scale / d["exposure"] * np.array([[elo], [ehi]])
     fit_old = d["fit"]
     fit_new: dict[str, Any] = {}
-    lo: list[float] = []
-    hi: list[float] = []
-    names: list[str] = []
-    new_paths: list[str] = []
-    if "light.position" in paths:
-        fit_new["light.position"] = fit_old["light.position"]
+    bounds: dict[str, tuple[float, float]] = {}  # the products' own bounds, by albedo component name
+    for p in ("light.position", "light.direction"):
+        if p in paths:
+            fit_new[p] = fit_old[p]
     for o in d["objects"]:
         p = f"objects.{o['name']}.albedo"
         ab = np.array(scene.bounds([p]))
@@ -318,40 +434,72 @@ def _products_space(scene: Scene) -> tuple[Scene, list[str], list[str], np.ndarr
         o["material"]["albedo"] = [float(v) for v in prod]
         top = float(max(np.max(phi), np.max(prod), 1.0))
         fit_new[p] = {"min": [0.0, 0.0, 0.0], "max": [top] * 3}
-        lo.extend(float(v) for v in plo)
-        hi.extend(float(v) for v in phi)
-        names.extend(f"products.{o['name']}.{c}" for c in "rgb")
-    rest = [p for p in paths if p not in _LIGHT_SCALE and not p.endswith(".albedo") and p != "light.position"]
-    for p in rest:
-        fit_new[p] = fit_old[p]
+        for c, lo_c, hi_c in zip("rgb", plo, phi):
+            bounds[f"{p}.{c}"] = (float(lo_c), float(hi_c))
+    for p in paths:
+        if p not in _LIGHT_SCALE and p not in fit_new:
+            fit_new[p] = fit_old[p]
     d["light"]["intensity"], d["light"]["color"], d["exposure"] = 1.0, [1.0, 1.0, 1.0], 1.0
     d["fit"] = fit_new
-    work = load_scene(d)
-    if "light.position" in paths:
-        new_paths.append("light.position")
-    new_paths.extend(f"objects.{o['name']}.albedo" for o in d["objects"])
-    new_paths.extend(rest)
-    all_names: list[str] = []
-    all_lo: list[float] = []
-    all_hi: list[float] = []
-    if "light.position" in paths:
-        all_names += work.param_names(["light.position"])
-        b = work.bounds(["light.position"])
-        all_lo += [v[0] for v in b]
-        all_hi += [v[1] for v in b]
-    all_names += names
-    all_lo += lo
-    all_hi += hi
-    if rest:
-        all_names += work.param_names(rest)
-        b = work.bounds(rest)
-        all_lo += [v[0] for v in b]
-        all_hi += [v[1] for v in b]
-    lo_a, hi_a = np.array(all_lo), np.array(all_hi)
-    values = np.array(work.get_params(new_paths), dtype=np.float64)
-    rng = hi_a - lo_a
+    work = Scene(json.dumps(d, allow_nan=False))  # made from a valid scene: load_scene's checks not needed
+    new_paths = list(work.fit_paths)
+    native_names = work.param_names(new_paths)
+    b = np.array(work.bounds(new_paths), dtype=np.float64).reshape(-1, 2)
+    for i, name in enumerate(native_names):
+        if name in bounds:
+            b[i] = bounds[name]
+    prefix = {f"objects.{o['name']}.albedo.": f"products.{o['name']}." for o in d["objects"]}
+    rename = {name: prefix[name[:-1]] + name[-1] for name in bounds}
+    return _space(work, new_paths, d, b[:, 0], b[:, 1], rename), d
+
+
+def _space(
+    work: Scene, paths: list[str], d: dict[str, Any], lo: np.ndarray, hi: np.ndarray, rename: dict[str, str]
+) -> _Space:
+    """The parameters of ``work``'s ``paths``: scales from the bounds, albedos marked as linear, and a
+    direction replaced by two angles about the fitted one (no bounds, scale ANGLE_SCALE)."""
+    native = work.param_names(paths)
+    values = np.array(work.get_params(paths), dtype=np.float64)
+    rng = hi - lo
     scale = np.where(rng > 0, rng, np.maximum(np.abs(values), 1.0))
-    return work, new_paths, all_names, lo_a, hi_a, scale
+    objects = {o["name"]: i for i, o in enumerate(d["objects"])}
+    albedo = {}
+    for i, name in enumerate(native):
+        parts = name.split(".")
+        if len(parts) == 4 and parts[0] == "objects" and parts[2] == "albedo":
+            albedo[i] = (objects[parts[1]], "rgb".index(parts[3]))
+    names = [rename.get(name, name) for name in native]
+    direction = None
+    if "light.direction.x" in native:
+        k = native.index("light.direction.x")
+        dvec, u, v = _tangent_basis(np.array(values[k : k + 3]), np.array(d["camera"]["up"], float))
+        names[k : k + 3] = list(_ANGLES)
+        values = np.concatenate([values[:k], [0.0, 0.0], values[k + 3 :]])
+        lo = np.concatenate([lo[:k], [-np.inf, -np.inf], lo[k + 3 :]])
+        hi = np.concatenate([hi[:k], [np.inf, np.inf], hi[k + 3 :]])
+        scale = np.concatenate([scale[:k], [ANGLE_SCALE, ANGLE_SCALE], scale[k + 3 :]])
+        albedo = {(i - 1 if i > k else i): oc for i, oc in albedo.items()}
+        direction = (k, dvec, u, v)
+    return _Space(work, paths, names, values, lo, hi, scale, albedo, direction)
+
+
+def _tangent_basis(d: np.ndarray, up: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unit ``d`` and two unit axes perpendicular to it: u = up x d (horizontal), v = d x u (towards up)."""
+    d = d / np.linalg.norm(d)
+    u = np.cross(up, d)
+    if np.linalg.norm(u) < 1e-6 * np.linalg.norm(up):  # d along up: any horizontal axis will do
+        u = np.cross(np.eye(3)[int(np.argmin(np.abs(d)))], d)
+    u /= np.linalg.norm(u)
+    return d, u, np.cross(d, u)
+
+
+def _rotate(d: np.ndarray, u: np.ndarray, v: np.ndarray, a: float, b: float) -> np.ndarray:
+    """``d`` turned by the angle |(a, b)| (radians) towards a u + b v: the exponential map at d."""
+    w = a * u + b * v
+    angle = float(np.hypot(a, b))
+    if angle == 0.0:
+        return d
+    return np.cos(angle) * d + np.sin(angle) * (w / angle)
 
 
 def _steps(names: list[str], scale: np.ndarray, step: float | dict[str, float] | None) -> np.ndarray:
@@ -370,15 +518,30 @@ def _steps(names: list[str], scale: np.ndarray, step: float | dict[str, float] |
     return out
 
 
-def _lit_mask(scene: Scene) -> np.ndarray:
-    """Whether the light reaches the surface each pixel shows (unit light, unit albedos, no ambient)."""
-    d = scene_to_dict(scene)
-    d["light"]["intensity"], d["light"]["color"], d["ambient"], d["exposure"] = 1.0, [1.0, 1.0, 1.0], [0, 0, 0], 1.0
-    d["background"] = [0.0, 0.0, 0.0]
-    for o in d["objects"]:
-        o["material"] = {"albedo": [1.0, 1.0, 1.0]}
-    d["fit"] = {}
-    return _native.render(load_scene(d))[..., 0] > 0
+def _ids_and_unit_light(d: dict[str, Any], work: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """Object index per pixel (-1 for background) and, from the same render, the scene ``d`` under a
+    light of unit intensity, unit albedos, no ambient or specular and exposure 1 (red channel): > 0 where
+    the light reaches the surface a pixel shows, and the geometric factor an albedo multiplies.
+
+    One render does both: the light is red only, and a green ambient light of 1 shows object k, whose
+    albedo is (1, k + 1, 0), as green k + 1 exactly (the background is black). Should that ever not hold,
+    the index comes from ``object_ids``.
+    """
+    unit = {
+        **d,
+        "light": {**d["light"], "intensity": 1.0, "color": [1.0, 0.0, 0.0]},
+        "ambient": [0.0, 1.0, 0.0],
+        "exposure": 1.0,
+        "background": [0.0, 0.0, 0.0],
+        "objects": [{**o, "material": {"albedo": [1.0, k + 1.0, 0.0]}} for k, o in enumerate(d["objects"])],
+        "fit": {},
+    }
+    img = _native.render(Scene(json.dumps(unit, allow_nan=False)))
+    green = img[..., 1]
+    ids = green.astype(np.int32) - 1
+    if not np.array_equal(ids + 1, green) or ids.max(initial=-1) >= len(d["objects"]):
+        ids = _native.object_ids(work)
+    return ids, img[..., 0]
 
 
 def _edges(labels: np.ndarray) -> np.ndarray:

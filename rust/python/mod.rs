@@ -14,7 +14,7 @@ use pyo3::types::PyDict;
 use crate::de::{self, DeConfig};
 use crate::error::Error;
 use crate::fitness::{Fitness, LossKind};
-use crate::kernel::{Norm, Projection};
+use crate::kernel::{Norm, Projection, Solved};
 use crate::params::ParamLayout;
 use crate::render as core_render;
 use crate::scene::Scene;
@@ -276,7 +276,10 @@ fn make_fitness(
 /// The closed-form solution for `x`, one row per object: [P_r, P_g, P_b, Q] (Q = intensity x specular,
 /// 0 for a matte object).
 fn solved_rows(fitness: &Fitness, x: &[f64]) -> Vec<Vec<f64>> {
-    let s = fitness.solved(x);
+    rows(&fitness.solved(x))
+}
+
+fn rows(s: &Solved) -> Vec<Vec<f64>> {
     s.products
         .iter()
         .zip(&s.specular)
@@ -473,11 +476,18 @@ fn optimize<'py>(
     }
     let d = PyDict::new(py);
     if fitness.kind() == LossKind::L1Projected {
-        let products = solved_rows(&fitness, &result.best);
-        d.set_item("products", products)?;
+        // The search ranks lights by least-squares products; the result carries the products that
+        // minimise the loss itself (saturated pixels one-sided), and that loss.
+        let (solved, loss) = fitness
+            .refined(&result.best)
+            .expect("a projected fitness refines");
+        d.set_item("products", rows(&solved))?;
+        d.set_item("search_objectives", result.best_objectives.clone())?;
+        d.set_item("objectives", vec![loss.iter().sum::<f64>()])?;
+    } else {
+        d.set_item("objectives", result.best_objectives)?;
     }
     d.set_item("x", PyArray1::from_vec(py, result.best))?;
-    d.set_item("objectives", result.best_objectives)?;
     d.set_item("evaluations", result.evaluations)?;
     d.set_item("generations", result.generations)?;
     d.set_item("stopped", result.stopped)?;
