@@ -1,5 +1,6 @@
 //! `cargo bench`: one 128x96 render; one DE population (60 candidates) of the stage-1 fitness and of the
-//! default method's projected fitness, on 1 thread and on all threads; and a whole stage-1 DE run
+//! default method's projected fitness, on 1 thread and on all threads, with the loss in linear space and
+//! (`srgb`) in sRGB space; and a whole stage-1 DE run
 //! (the paper's 60 x 200) with and without early exit. Scene: the paper's sphere on a floor
 //! (`examples/yellow-ball/scene.json`); objective: its own render, saturated at 1.
 //!
@@ -8,7 +9,7 @@
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use rayon::prelude::*;
 use rtloop::{
-    de, de::Objective, render, DeConfig, Fitness, LossKind, ParamLayout, Projection, Scene,
+    de, de::Objective, render, DeConfig, Fitness, LossKind, ParamLayout, Projection, Scene, Space,
 };
 
 fn scene() -> Scene {
@@ -58,18 +59,34 @@ fn bench(c: &mut Criterion) {
             ParamLayout::new(&scene, &stage1).unwrap(),
             LossKind::L1,
             None,
+            Space::Linear,
         ),
         (
             "projected",
             ParamLayout::new(&scene, &position).unwrap(),
             LossKind::L1Projected,
+            Some(Projection::matte(bounds.clone())),
+            Space::Linear,
+        ),
+        (
+            "stage1 l1 srgb",
+            ParamLayout::new(&scene, &stage1).unwrap(),
+            LossKind::L1,
+            None,
+            Space::Srgb,
+        ),
+        (
+            "projected srgb",
+            ParamLayout::new(&scene, &position).unwrap(),
+            LossKind::L1Projected,
             Some(Projection::matte(bounds)),
+            Space::Srgb,
         ),
     ];
     let mut g = c.benchmark_group("population");
     g.throughput(Throughput::Elements(60 * pixels));
-    for (name, layout, kind, pb) in &cases {
-        let fitness = Fitness::new(
+    for (name, layout, kind, pb, space) in &cases {
+        let mut fitness = Fitness::new(
             &scene,
             layout.clone(),
             &target,
@@ -79,6 +96,7 @@ fn bench(c: &mut Criterion) {
             pb.clone(),
         )
         .unwrap();
+        fitness.set_space(*space);
         let pop = population(layout, 60);
         let mut out = vec![0.0; 60];
         for threads in [1, rayon::current_num_threads()] {

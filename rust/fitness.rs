@@ -13,6 +13,7 @@ use crate::kernel::{solve_object, Kernel, Norm, Projection, SolveSums, Solved};
 use crate::params::{ParamLayout, Target};
 use crate::render::{shade, GBuffer, Geometry, PShape, ShadeParams, Surfel};
 use crate::scene::Scene;
+use crate::space::{srgb_encode_exact, Space, SrgbLut};
 
 /// How a candidate's image is compared with the objective.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -60,8 +61,8 @@ pub struct Fitness {
     shadows: bool,
     /// Per-channel loss of the pixels left out because no free parameter changes them...
     constant: [f64; 3],
-    /// ...from their fixed differences (model - objective), kept to recompute it for another norm.
-    fixed: Vec<Vec3A>,
+    /// ...from their fixed (clipped model, objective), kept to recompute it for another norm or space.
+    fixed: Vec<(Vec3A, Vec3A)>,
     /// For `L1Projected`: the bounds of the closed-form unknowns.
     projection: Option<Projection>,
 }
@@ -206,7 +207,7 @@ impl Fitness {
             if s.object == u32::MAX && background_fixed {
                 let m = shade(&s, &base, &[], false);
                 let m = if clip { m.min(Vec3A::ONE) } else { m };
-                fixed.push(m - t);
+                fixed.push((m, t));
             } else {
                 surfels.push(s);
                 solve.push(interior(i as usize));
@@ -241,7 +242,7 @@ impl Fitness {
             kind,
             clip,
             shadows: scene.can_occlude(),
-            constant: penalty_sums(&fixed, Norm::L1),
+            constant: penalty_sums(&fixed, Norm::L1, Space::Linear),
             fixed,
             projection,
         })
@@ -287,11 +288,25 @@ impl Fitness {
     /// Penalise pixel differences with `norm` (L1 by default) in every loss of this fitness.
     pub fn set_norm(&mut self, norm: Norm) {
         self.kernel.norm = norm;
-        self.constant = penalty_sums(&self.fixed, norm);
+        self.constant = penalty_sums(&self.fixed, norm, self.space());
     }
 
     pub fn norm(&self) -> Norm {
         self.kernel.norm
+    }
+
+    /// Compare values in `space` (linear by default) in every loss of this fitness: in sRGB the
+    /// objective is encoded here, once, and the (clipped) model per pixel and evaluation. The
+    /// closed-form products of `L1Projected` stay least squares in linear space (that is what makes
+    /// them closed form); only the loss that ranks candidates, and the products that [`Fitness::refined`]
+    /// reports, are in `space`.
+    pub fn set_space(&mut self, space: Space) {
+        self.kernel.set_space(space);
+        self.constant = penalty_sums(&self.fixed, self.norm(), space);
+    }
+
+    pub fn space(&self) -> Space {
+        self.kernel.space()
     }
 
     pub fn kind(&self) -> LossKind {
@@ -347,11 +362,31 @@ impl Fitness {
         SCRATCH.with(|s| self.fast_losses(x, &mut s.borrow_mut(), f64::INFINITY))
     }
 
-    /// The same losses computed the plain way, pixel by pixel through the renderer's `shade` (the
-    /// reference the kernel is tested against).
+    /// penalty(enc(m) - enc(t)) per channel for a clipped model `m` and objective `t`, with the exact
+    /// encoding of this fitness's space (the plain path's; the kernel interpolates a table).
+    fn exact_penalty(&self, m: Vec3A, t: Vec3A) -> [f64; 3] {
+        std::array::from_fn(|c| {
+            let d = match self.space() {
+                Space::Linear => m[c] - t[c],
+                Space::Srgb => {
+                    (srgb_encode_exact(m[c] as f64) - srgb_encode_exact(t[c] as f64)) as f32
+                }
+            };
+            self.norm().penalty(d) as f64
+        })
+    }
+
+    /// The same losses computed the plain way, pixel by pixel through the renderer's `shade` and with the
+    /// exact sRGB encoding (the reference the kernel is tested against).
     pub fn reference_channel_losses(&self, x: &[f64]) -> [f64; 3] {
         let p = self.params(x);
-        let mut acc = self.constant;
+        let mut acc = [0.0f64; 3];
+        for &(m, t) in &self.fixed {
+            let l = self.exact_penalty(m, t);
+            for c in 0..3 {
+                acc[c] += l[c];
+            }
+        }
         if let Some(proj) = &self.projection {
             // Unit light, white albedo, no lobe: shade gives the diffuse factor a. Albedo 0 and specular 1
             // give the specular factor b. Sum the normal equations pixel by pixel, solve, then the loss.
@@ -428,28 +463,36 @@ impl Fitness {
                         (pk[c] * a[i] as f64 + q * proj.weight[c] as f64 * b[i] as f64) as f32
                     }))
                 };
-                let d = (if self.clip { m.min(Vec3A::ONE) } else { m }) - *t;
+                let l = self.exact_penalty(if self.clip { m.min(Vec3A::ONE) } else { m }, *t);
                 for c in 0..3 {
-                    acc[c] += self.norm().penalty(d[c]) as f64;
+                    acc[c] += l[c];
                 }
             }
             return acc;
         }
         for (s, t) in self.surfels.iter().zip(&self.target) {
             let m = shade(s, &p, &self.shapes, self.shadows);
-            let d = (if self.clip { m.min(Vec3A::ONE) } else { m }) - *t;
+            let l = self.exact_penalty(if self.clip { m.min(Vec3A::ONE) } else { m }, *t);
             for c in 0..3 {
-                acc[c] += self.norm().penalty(d[c]) as f64;
+                acc[c] += l[c];
             }
         }
         acc
     }
 }
 
-/// Per-channel sums of `norm`'s penalty over fixed differences.
-fn penalty_sums(diffs: &[Vec3A], norm: Norm) -> [f64; 3] {
+/// Per-channel sums of `norm`'s penalty over fixed (model, objective) pairs, compared in `space` with
+/// the kernel's encoding.
+fn penalty_sums(fixed: &[(Vec3A, Vec3A)], norm: Norm, space: Space) -> [f64; 3] {
     let mut acc = [0.0f64; 3];
-    for d in diffs {
+    for &(m, t) in fixed {
+        let d = match space {
+            Space::Linear => m - t,
+            Space::Srgb => {
+                let lut = SrgbLut::get();
+                Vec3A::from_array(std::array::from_fn(|c| lut.encode(m[c]) - lut.encode(t[c])))
+            }
+        };
         for c in 0..3 {
             acc[c] += norm.penalty(d[c]) as f64;
         }

@@ -9,12 +9,14 @@
 //!
 //! Model only what the scene needs: an object is never tested as its own occluder (a sphere or a plane
 //! cannot shadow its lit side), a scene with one object has no shadow tests at all, the Blinn–Phong lobe
-//! is compiled out when every specular is 0, and background pixels under a fixed background are not here
-//! at all (their loss is a constant).
+//! is compiled out when every specular is 0, background pixels under a fixed background are not here
+//! at all (their loss is a constant), and the linear loss space compiles the encoding away (the sRGB
+//! space's loops are separate monomorphisations: see [`crate::space::Encoding`]).
 
 use glam::Vec3A;
 
 use crate::render::{PShape, ShadeParams, Surfel};
+use crate::space::{Encoding, Identity, Space, SrgbLut};
 
 /// How a pixel's difference d = model - objective is penalised. `L1` is the paper's; `L2` is the maximum
 /// likelihood under Gaussian noise; `Huber(h)` is quadratic within `h` and linear beyond (d²/(2h), then
@@ -104,6 +106,8 @@ struct Group {
     n: [Vec<f32>; 3],
     v: [Vec<f32>; 3],
     t: [Vec<f32>; 3],
+    /// The objective in the loss space (its sRGB encoding); empty in the linear space, which uses `t`.
+    te: [Vec<f32>; 3],
     /// The objective as the closed-form solve uses it: +inf where a pixel must not inform the products
     /// (a silhouette pixel, which the photo averages over two surfaces), so the saturation test drops it.
     ts: [Vec<f32>; 3],
@@ -122,6 +126,8 @@ impl Group {
 pub struct Kernel {
     /// The per-pixel penalty of every loss this kernel computes.
     pub norm: Norm,
+    /// Where the penalty compares values (see [`Kernel::set_space`]).
+    space: Space,
     groups: Vec<Group>,
     pixels: usize,
 }
@@ -176,6 +182,7 @@ impl Kernel {
                 ],
                 v: [col(&|s| s.view.x), col(&|s| s.view.y), col(&|s| s.view.z)],
                 t: [tcol(0), tcol(1), tcol(2)],
+                te: Default::default(),
                 ts: std::array::from_fn(|c| {
                     idx.iter()
                         .map(|&i| {
@@ -236,6 +243,7 @@ impl Kernel {
         }
         Kernel {
             norm: Norm::L1,
+            space: Space::Linear,
             groups,
             pixels: surfels.len(),
         }
@@ -245,7 +253,27 @@ impl Kernel {
         self.pixels
     }
 
-    /// Per-channel sums of |min(render, 1) - objective| (no clamp without `clip`). Once the running total
+    /// Compare values in `space` in every loss of this kernel: for sRGB the objective is encoded here,
+    /// once, and every model value per evaluation (see [`crate::space`]).
+    pub fn set_space(&mut self, space: Space) {
+        self.space = space;
+        let lut = SrgbLut::get();
+        for g in &mut self.groups {
+            g.te = match space {
+                Space::Linear => Default::default(),
+                Space::Srgb => {
+                    std::array::from_fn(|c| g.t[c].iter().map(|&t| lut.encode(t)).collect())
+                }
+            };
+        }
+    }
+
+    pub fn space(&self) -> Space {
+        self.space
+    }
+
+    /// Per-channel sums of penalty(enc(min(render, 1)) - enc(objective)) (no clamp without `clip`; enc the
+    /// identity in the linear space, the sRGB encoding in [`Space::Srgb`]). Once the running total
     /// exceeds `bound` the sum stops early and the partial sums (already above `bound`) are returned: pass
     /// `f64::INFINITY` for the exact value.
     pub fn l1(&self, p: &ShadeParams, clip: bool, bound: f64) -> [f64; 3] {
@@ -258,17 +286,29 @@ impl Kernel {
                 return unsafe { self.l1_avx2(p, clip, bound) };
             }
         }
-        self.l1_generic::<false>(p, clip, bound)
+        match self.space {
+            Space::Linear => self.l1_generic::<false, _>(p, clip, bound, Identity),
+            Space::Srgb => self.l1_generic::<false, _>(p, clip, bound, SrgbLut::get()),
+        }
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     unsafe fn l1_avx2(&self, p: &ShadeParams, clip: bool, bound: f64) -> [f64; 3] {
-        self.l1_generic::<true>(p, clip, bound)
+        match self.space {
+            Space::Linear => self.l1_generic::<true, _>(p, clip, bound, Identity),
+            Space::Srgb => self.l1_generic::<true, _>(p, clip, bound, SrgbLut::get()),
+        }
     }
 
     #[inline(always)]
-    fn l1_generic<const AVX2: bool>(&self, p: &ShadeParams, clip: bool, bound: f64) -> [f64; 3] {
+    fn l1_generic<const AVX2: bool, E: Encoding>(
+        &self,
+        p: &ShadeParams,
+        clip: bool,
+        bound: f64,
+        enc: E,
+    ) -> [f64; 3] {
         let light = Light {
             pos: p.light_position.to_array(),
             dir: p.light_direction.map(|d| d.to_array()),
@@ -278,13 +318,15 @@ impl Kernel {
         let mut e = [0.0f32; BLOCK];
         for g in &self.groups {
             let n = g.len();
+            // The objective in the loss space.
+            let gt = if E::ENCODES { &g.te } else { &g.t };
             let Some(obj) = g.object else {
                 // Background whose value a free parameter (exposure) changes.
                 let bg = p.exposure * p.background;
                 for s in 0..n {
                     for c in 0..3 {
                         let m = if clip { bg[c].min(1.0) } else { bg[c] };
-                        acc[c] += self.norm.penalty(m - g.t[c][s]) as f64;
+                        acc[c] += self.norm.penalty(enc.any(m) - gt[c][s]) as f64;
                     }
                 }
                 continue;
@@ -311,14 +353,14 @@ impl Kernel {
                             let lobe = blinn_phong(g, s, &light, m.shininess);
                             let v = a[c] + e[i] * (k[c] + ks[c] * lobe);
                             let v = if clip { v.min(1.0) } else { v };
-                            sum += self.norm.penalty(v - g.t[c][s]);
+                            sum += self.norm.penalty(enc.any(v) - gt[c][s]);
                         }
                         acc[c] += sum as f64;
                     }
                 } else {
-                    let t = [&g.t[0][r.clone()], &g.t[1][r.clone()], &g.t[2][r.clone()]];
+                    let t = [&gt[0][r.clone()], &gt[1][r.clone()], &gt[2][r.clone()]];
                     let top = if clip { 1.0 } else { f32::INFINITY };
-                    let sums = rgb_loss(self.norm, &e[..len], t, a, k, top);
+                    let sums = rgb_loss_in(self.norm, &e[..len], t, a, k, top, enc);
                     for c in 0..3 {
                         acc[c] += sums[c] as f64;
                     }
@@ -354,7 +396,20 @@ impl Kernel {
                 return unsafe { self.projected_avx2(p, clip, proj, out, scratch, bound) };
             }
         }
-        self.projected_generic::<false>(p, clip, proj, out, scratch, bound)
+        match self.space {
+            Space::Linear => {
+                self.projected_generic::<false, _>(p, clip, proj, out, scratch, bound, Identity)
+            }
+            Space::Srgb => self.projected_generic::<false, _>(
+                p,
+                clip,
+                proj,
+                out,
+                scratch,
+                bound,
+                SrgbLut::get(),
+            ),
+        }
     }
 
     #[cfg(target_arch = "x86_64")]
@@ -368,11 +423,25 @@ impl Kernel {
         scratch: &mut Vec<f32>,
         bound: f64,
     ) -> [f64; 3] {
-        self.projected_generic::<true>(p, clip, proj, out, scratch, bound)
+        match self.space {
+            Space::Linear => {
+                self.projected_generic::<true, _>(p, clip, proj, out, scratch, bound, Identity)
+            }
+            Space::Srgb => self.projected_generic::<true, _>(
+                p,
+                clip,
+                proj,
+                out,
+                scratch,
+                bound,
+                SrgbLut::get(),
+            ),
+        }
     }
 
     #[inline(always)]
-    fn projected_generic<const AVX2: bool>(
+    #[allow(clippy::too_many_arguments)]
+    fn projected_generic<const AVX2: bool, E: Encoding>(
         &self,
         p: &ShadeParams,
         clip: bool,
@@ -380,6 +449,7 @@ impl Kernel {
         out: &mut Solved,
         scratch: &mut Vec<f32>,
         bound: f64,
+        enc: E,
     ) -> [f64; 3] {
         let light = Light {
             pos: p.light_position.to_array(),
@@ -403,11 +473,13 @@ impl Kernel {
             let e_all = &mut a_all[offset..offset + n];
             let s_all = &mut b_all[offset..offset + n];
             offset += n;
+            // The objective in the loss space (the solve below uses the linear `ts`).
+            let gt = if E::ENCODES { &g.te } else { &g.t };
             let Some(obj) = g.object else {
                 for s in 0..n {
                     for c in 0..3 {
-                        // black background (ambient-free scene)
-                        acc[c] += self.norm.penalty(g.t[c][s]) as f64;
+                        // black background (ambient-free scene): enc(0) = 0
+                        acc[c] += self.norm.penalty(gt[c][s]) as f64;
                     }
                 }
                 continue;
@@ -469,7 +541,7 @@ impl Kernel {
                 let len = BLOCK.min(n - start);
                 let r = start..start + len;
                 let e = &e_all[r.clone()];
-                let t = [&g.t[0][r.clone()], &g.t[1][r.clone()], &g.t[2][r.clone()]];
+                let t = [&gt[0][r.clone()], &gt[1][r.clone()], &gt[2][r.clone()]];
                 let sums = if specular && q > 0.0 {
                     let qw: [f32; 3] = std::array::from_fn(|c| (q * proj.weight[c] as f64) as f32);
                     let b = &s_all[r];
@@ -477,12 +549,12 @@ impl Kernel {
                     for c in 0..3 {
                         for i in 0..len {
                             let v = (pk[c] * e[i] + qw[c] * b[i]).min(top);
-                            sums[c] += self.norm.penalty(v - t[c][i]);
+                            sums[c] += self.norm.penalty(enc.any(v) - t[c][i]);
                         }
                     }
                     sums
                 } else {
-                    rgb_loss(self.norm, e, t, [0.0; 3], pk, top)
+                    rgb_loss_in(self.norm, e, t, [0.0; 3], pk, top, enc)
                 };
                 for c in 0..3 {
                     acc[c] += sums[c] as f64;
@@ -496,16 +568,19 @@ impl Kernel {
         acc
     }
 
-    /// The products that minimise this kernel's own loss (norm and clip) rather than least squares, for
-    /// one light: called once at the end of a search, after `projected` has filled `out` and `scratch`
+    /// The products that minimise this kernel's own loss (norm, clip and space) rather than least squares,
+    /// for one light: called once at the end of a search, after `projected` has filled `out` and `scratch`
     /// for that light. Least squares treats a pixel saturated in the objective as missing, which biases
     /// a bright channel down under noise (the pixels that noise pushed up to 1 are dropped, those it pushed
     /// down are kept). Here a saturated pixel counts one-sidedly, as the loss does: it pulls the product up
     /// while the model is below 1, and says nothing once the model reaches 1. The loss is then minimised
-    /// per object by block coordinate descent, each P_c given Q and then Q given the P's, each by
-    /// bisection on the loss's derivative, e.g. Σ a·slope(P a + Q w b - y) (non-decreasing: every term is
-    /// convex once an unsaturated pixel's clip at 1 is dropped). Returns the per-channel loss at the
-    /// refined products.
+    /// per object by block coordinate descent, each P_c given Q and then Q given the P's. In the linear
+    /// space each step is exact for L1 ([`l1_line_min`]) and otherwise bisection on the loss's
+    /// derivative, e.g. Σ a·slope(P a + Q w b - y) (non-decreasing: every term is convex once an
+    /// unsaturated pixel's clip at 1 is dropped). In the sRGB space no term is linear or convex in the
+    /// unknown any more, but each is still unimodal in it with the same breakpoint (the encoding is
+    /// monotone), so each step is the branch and bound of [`encoded_line_min`], for every norm. Returns
+    /// the per-channel loss at the refined products.
     pub fn refine(
         &self,
         clip: bool,
@@ -516,15 +591,22 @@ impl Kernel {
         let (a_all, b_all) = scratch.split_at(self.pixels);
         let sat = if clip { SATURATED } else { f32::INFINITY };
         let top = if clip { 1.0f64 } else { f64::INFINITY };
+        let srgb = self.space == Space::Srgb;
+        // A model value in the loss space.
+        let enc = |m: f32| match self.space {
+            Space::Linear => m,
+            Space::Srgb => SrgbLut::get().encode(m),
+        };
         let mut acc = [0.0f64; 3];
         let mut offset = 0;
         for g in &self.groups {
             let n = g.len();
             let (a, b) = (&a_all[offset..offset + n], &b_all[offset..offset + n]);
             offset += n;
+            let gt = if srgb { &g.te } else { &g.t };
             let Some(obj) = g.object else {
                 for c in 0..3 {
-                    acc[c] += g.t[c]
+                    acc[c] += gt[c]
                         .iter()
                         .map(|&t| self.norm.penalty(t) as f64)
                         .sum::<f64>();
@@ -560,7 +642,26 @@ impl Kernel {
                 for c in 0..3 {
                     if informed[c] {
                         let q = out.specular[obj];
-                        out.products[obj][c] = if self.norm == Norm::L1 {
+                        out.products[obj][c] = if srgb {
+                            // Terms enc(min(a P + s, top)) against the encoded objective.
+                            let terms: Vec<EncodedTerm> = (0..n)
+                                .filter(|&i| a[i] > 0.0 && t[c][i].is_finite())
+                                .map(|i| EncodedTerm {
+                                    k: a[i] as f64,
+                                    o: model(0.0, q, c, i),
+                                    y: t[c][i] as f64,
+                                    ye: g.te[c][i],
+                                    saturated: t[c][i] >= sat,
+                                })
+                                .collect();
+                            encoded_line_min(
+                                &terms,
+                                self.norm,
+                                top,
+                                proj.diffuse[obj][c],
+                                out.products[obj][c],
+                            )
+                        } else if self.norm == Norm::L1 {
                             // Terms |min(a P + s, top) - y|: coefficient a, offset s (the lobe).
                             let terms =
                                 (0..n)
@@ -586,7 +687,28 @@ impl Kernel {
                 }
                 if specular && informed.iter().all(|&k| k) {
                     let pk = out.products[obj];
-                    out.specular[obj] = if self.norm == Norm::L1 {
+                    out.specular[obj] = if srgb {
+                        let terms: Vec<EncodedTerm> = (0..3)
+                            .flat_map(|c| {
+                                (0..n)
+                                    .filter(move |&i| b[i] > 0.0 && t[c][i].is_finite())
+                                    .map(move |i| EncodedTerm {
+                                        k: proj.weight[c] as f64 * b[i] as f64,
+                                        o: pk[c] * a[i] as f64,
+                                        y: t[c][i] as f64,
+                                        ye: g.te[c][i],
+                                        saturated: t[c][i] >= sat,
+                                    })
+                            })
+                            .collect();
+                        encoded_line_min(
+                            &terms,
+                            self.norm,
+                            top,
+                            proj.specular[obj],
+                            out.specular[obj],
+                        )
+                    } else if self.norm == Norm::L1 {
                         let terms = (0..3).flat_map(|c| {
                             (0..n)
                                 .filter(move |&i| b[i] > 0.0 && t[c][i].is_finite())
@@ -619,12 +741,220 @@ impl Kernel {
                 acc[c] += (0..n)
                     .map(|i| {
                         let m = model(pc, q, c, i).min(top) as f32;
-                        self.norm.penalty(m - g.t[c][i]) as f64
+                        self.norm.penalty(enc(m) - gt[c][i]) as f64
                     })
                     .sum::<f64>();
             }
         }
         acc
+    }
+}
+
+/// One pixel's term in a line search of [`Kernel::refine`] in the sRGB space: the model k x + o (k > 0)
+/// clipped at `top` and encoded, g(x) = enc(min(k x + o, top)), against the encoded objective `ye`
+/// (`y` linear); a saturated pixel (objective at the clip) only penalises a model below `top`.
+#[derive(Clone, Copy, Debug)]
+pub struct EncodedTerm {
+    pub k: f64,
+    pub o: f64,
+    pub y: f64,
+    pub ye: f32,
+    pub saturated: bool,
+}
+
+impl EncodedTerm {
+    /// Where the term's loss is least: (y - o)/k, or (top - o)/k for a saturated pixel.
+    fn at(&self, top: f64) -> f64 {
+        (if self.saturated { top } else { self.y } - self.o) / self.k
+    }
+
+    /// g(x) and its right derivative.
+    #[inline]
+    fn g(&self, x: f64, top: f64, lut: &SrgbLut) -> (f64, f64) {
+        let m = self.k * x + self.o;
+        if m >= top {
+            (lut.encode(top as f32) as f64, 0.0)
+        } else {
+            let (v, d) = lut.encode_slope(m as f32);
+            (v as f64, d as f64 * self.k)
+        }
+    }
+
+    /// The loss at g(x) = `g`: penalty(g - ye), or penalty(min(g - enc(top), 0)) when saturated.
+    #[inline]
+    fn loss(&self, g: f64, g_top: f64, norm: Norm) -> f64 {
+        let d = if self.saturated {
+            (g - g_top).min(0.0)
+        } else {
+            g - self.ye as f64
+        };
+        norm.penalty(d as f32) as f64
+    }
+}
+
+/// Evaluations at most of one [`encoded_line_min`] (each one or two passes over the terms).
+const MAX_SPLITS: usize = 400;
+
+/// The minimiser over [lo, hi] of F(x) = Σ_j ℓ_j(x) for the sRGB-space terms of [`EncodedTerm`], with
+/// `norm`'s penalty: the exact step of [`Kernel::refine`] in the sRGB space.
+///
+/// Each g_j is concave and non-decreasing (the encoding is, so is its table, and so is a clip), so each
+/// ℓ_j is unimodal, least at its breakpoint `at` (where the model meets the objective), but a sum of them
+/// is not, and unlike in linear space need not be least at a breakpoint: a term rising in the encoding's
+/// flat part beside one falling in its steep part makes an interior minimum (see the tests). So this is a
+/// branch and bound on x with a convex minorant per interval [u, v]: a term with its breakpoint at or
+/// left of u rises there, and ℓ ≥ penalty(chord of g - ye) (g is concave, the penalty increasing on the
+/// positive side), which is convex; one with its breakpoint at or right of v falls there, and is convex
+/// itself (an increasing convex penalty of the convex ye - g); any other term is at least 0. Their sum Λ
+/// is convex and at least the larger of its tangents at u and v, whose least value on [u, v] is the
+/// interval's bound. The bound's gap shrinks with the square of the interval's width, so only intervals
+/// near the minimum survive: the interval with the lowest bound is split at its midpoint until no
+/// bound is below the best value found by more than 1e-9 of it (the best is then the global minimum to
+/// that tolerance), intervals narrower than 1e-7 of their position (the model is f32) are not split,
+/// and at most `MAX_SPLITS` midpoints are evaluated. `start` (clamped to the bounds) is evaluated first:
+/// the result is never worse than it.
+pub fn encoded_line_min(
+    terms: &[EncodedTerm],
+    norm: Norm,
+    top: f64,
+    (lo, hi): (f64, f64),
+    start: f64,
+) -> f64 {
+    if !(lo < hi) {
+        return lo;
+    }
+    let lut = SrgbLut::get();
+    let g_top = lut.encode(top as f32) as f64;
+    let at: Vec<f64> = terms.iter().map(|t| t.at(top)).collect();
+    let value = |x: f64| -> f64 {
+        terms
+            .iter()
+            .map(|t| t.loss(t.g(x, top, lut).0, g_top, norm))
+            .sum()
+    };
+    // The least value on [u, v] of the larger tangent of the convex minorant Λ at u and v.
+    let bound = |u: f64, v: f64| -> f64 {
+        let (mut fu, mut du, mut fv, mut dv) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        for (t, &b) in terms.iter().zip(&at) {
+            if b > u && b < v {
+                continue;
+            }
+            let ((gu, su), (gv, sv)) = (t.g(u, top, lut), t.g(v, top, lut));
+            if b <= u {
+                if t.saturated {
+                    continue; // 0 from its breakpoint on
+                }
+                // Rising: penalty(chord - ye), with the chord's slope.
+                let s = (gv - gu) / (v - u);
+                let (du_, dv_) = (gu - t.ye as f64, gv - t.ye as f64);
+                fu += norm.penalty(du_ as f32) as f64;
+                fv += norm.penalty(dv_ as f32) as f64;
+                du += rising_slope(norm, du_) * s;
+                dv += rising_slope(norm, dv_) * s;
+            } else {
+                // Falling: convex; its right derivative at either end is a valid tangent slope.
+                let target = if t.saturated { g_top } else { t.ye as f64 };
+                fu += t.loss(gu, g_top, norm);
+                fv += t.loss(gv, g_top, norm);
+                du -= norm.slope(target - gu) * su;
+                dv -= norm.slope(target - gv) * sv;
+            }
+        }
+        let tangents = |x: f64| (fu + du * (x - u)).max(fv + dv * (x - v));
+        let mut least = tangents(u).min(tangents(v));
+        if du < dv {
+            let x = (fv - fu - dv * v + du * u) / (du - dv);
+            if x > u && x < v {
+                least = least.min(tangents(x));
+            }
+        }
+        least
+    };
+    let start = if start.is_finite() {
+        start.clamp(lo, hi)
+    } else {
+        lo
+    };
+    let mut xs = vec![lo];
+    if start > lo && start < hi {
+        xs.push(start);
+    }
+    xs.push(hi);
+    let mut best = (start, value(start));
+    for &x in &xs {
+        if x != start {
+            let f = value(x);
+            if f < best.1 {
+                best = (x, f);
+            }
+        }
+    }
+    let mut heap: std::collections::BinaryHeap<Interval> = xs
+        .windows(2)
+        .map(|w| Interval {
+            bound: bound(w[0], w[1]),
+            u: w[0],
+            v: w[1],
+        })
+        .collect();
+    let mut splits = 0;
+    while let Some(Interval { bound: b, u, v }) = heap.pop() {
+        if b >= best.1 - 1e-9 * best.1.abs() || splits >= MAX_SPLITS {
+            break;
+        }
+        let mid = 0.5 * (u + v);
+        if v - u <= 1e-7 * u.abs().max(v.abs()) || !(mid > u && mid < v) {
+            continue;
+        }
+        splits += 1;
+        let f = value(mid);
+        if f < best.1 {
+            best = (mid, f);
+        }
+        for (u, v) in [(u, mid), (mid, v)] {
+            heap.push(Interval {
+                bound: bound(u, v),
+                u,
+                v,
+            });
+        }
+    }
+    best.0
+}
+
+/// The slope of penalty(d) for a rising term (d ≥ 0, increasing): L1's is 1 at d = 0 too.
+#[inline]
+fn rising_slope(norm: Norm, d: f64) -> f64 {
+    match norm {
+        Norm::L1 => 1.0,
+        _ => norm.slope(d.max(0.0)),
+    }
+}
+
+/// An interval of [`encoded_line_min`] with its lower bound; the heap pops the lowest bound first.
+struct Interval {
+    bound: f64,
+    u: f64,
+    v: f64,
+}
+
+impl PartialEq for Interval {
+    fn eq(&self, other: &Self) -> bool {
+        self.bound.total_cmp(&other.bound).is_eq()
+    }
+}
+
+impl Eq for Interval {}
+
+impl PartialOrd for Interval {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for Interval {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        other.bound.total_cmp(&self.bound)
     }
 }
 
@@ -919,6 +1249,77 @@ fn rgb_sum(
         s0[j] += f((a[0] + ej * k[0]).min(top) - t0[full + j]);
         s1[j] += f((a[1] + ej * k[1]).min(top) - t1[full + j]);
         s2[j] += f((a[2] + ej * k[2]).min(top) - t2[full + j]);
+    }
+    [s0.iter().sum(), s1.iter().sum(), s2.iter().sum()]
+}
+
+/// `rgb_loss` in the loss space of `enc`: Σ penalty(enc(min(a_c + e·k_c, top)) - t_c) with `t` already
+/// encoded. The linear space ([`Identity`]) is `rgb_loss` itself.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn rgb_loss_in<E: Encoding>(
+    norm: Norm,
+    e: &[f32],
+    t: [&[f32]; 3],
+    a: [f32; 3],
+    k: [f32; 3],
+    top: f32,
+    enc: E,
+) -> [f32; 3] {
+    if !E::ENCODES {
+        return rgb_loss(norm, e, t, a, k, top);
+    }
+    match norm {
+        Norm::L1 => rgb_sum_encoded(e, t, a, k, top, enc, |d| d.abs()),
+        Norm::L2 => rgb_sum_encoded(e, t, a, k, top, enc, |d| d * d),
+        Norm::Huber(h) => rgb_sum_encoded(e, t, a, k, top, enc, move |d| {
+            let ad = d.abs();
+            if ad <= h {
+                0.5 * d * d / h
+            } else {
+                ad - 0.5 * h
+            }
+        }),
+    }
+}
+
+/// `rgb_sum` with the model encoded by `enc` (the table lookups are scalar; the rest vectorises). Without
+/// a clip (`top` > 1) every value goes through [`Encoding::any`], which branches above 1.
+#[inline(always)]
+fn rgb_sum_encoded<E: Encoding>(
+    e: &[f32],
+    t: [&[f32]; 3],
+    a: [f32; 3],
+    k: [f32; 3],
+    top: f32,
+    enc: E,
+    f: impl Fn(f32) -> f32,
+) -> [f32; 3] {
+    let n = e.len();
+    let (t0, t1, t2) = (&t[0][..n], &t[1][..n], &t[2][..n]);
+    let (mut s0, mut s1, mut s2) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+    let full = if top <= 1.0 { n - n % LANES } else { 0 };
+    let mut i = 0;
+    while i < full {
+        let (ec, c0, c1, c2) = (
+            &e[i..i + LANES],
+            &t0[i..i + LANES],
+            &t1[i..i + LANES],
+            &t2[i..i + LANES],
+        );
+        for j in 0..LANES {
+            let ej = ec[j];
+            s0[j] += f(enc.unit((a[0] + ej * k[0]).min(top)) - c0[j]);
+            s1[j] += f(enc.unit((a[1] + ej * k[1]).min(top)) - c1[j]);
+            s2[j] += f(enc.unit((a[2] + ej * k[2]).min(top)) - c2[j]);
+        }
+        i += LANES;
+    }
+    for (j, s) in (full..n).enumerate() {
+        let (es, l) = (e[s], j % LANES);
+        s0[l] += f(enc.any((a[0] + es * k[0]).min(top)) - t0[s]);
+        s1[l] += f(enc.any((a[1] + es * k[1]).min(top)) - t1[s]);
+        s2[l] += f(enc.any((a[2] + es * k[2]).min(top)) - t2[s]);
     }
     [s0.iter().sum(), s1.iter().sum(), s2.iter().sum()]
 }

@@ -9,6 +9,7 @@ pub mod kernel;
 pub mod params;
 pub mod render;
 pub mod scene;
+pub mod space;
 
 #[cfg(feature = "python")]
 mod python;
@@ -20,3 +21,4 @@ pub use kernel::{Norm, Projection};
 pub use params::ParamLayout;
 pub use render::{render, GBuffer, Image};
 pub use scene::Scene;
+pub use space::Space;

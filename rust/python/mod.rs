@@ -18,6 +18,7 @@ use crate::kernel::{Norm, Projection, Solved};
 use crate::params::ParamLayout;
 use crate::render as core_render;
 use crate::scene::Scene;
+use crate::space::Space;
 
 #[path = "de.rs"]
 mod de_hooks;
@@ -224,7 +225,9 @@ fn make_fitness(
     clip: bool,
     product_bounds: Option<PyReadonlyArray3<'_, f64>>,
     norm: &str,
+    space: &str,
 ) -> PyResult<(Fitness, Vec<(f64, f64)>)> {
+    let space = Space::parse(space).map_err(RtloopError::new_err)?;
     let layout = ParamLayout::new(scene, paths)?;
     let bounds = layout.bounds.clone();
     let target = target_vec(scene, target)?;
@@ -270,6 +273,7 @@ fn make_fitness(
         projection,
     )?;
     fitness.set_norm(Norm::parse(norm).map_err(RtloopError::new_err)?);
+    fitness.set_space(space);
     Ok((fitness, bounds))
 }
 
@@ -299,10 +303,12 @@ fn pool(threads: Option<usize>) -> PyResult<rayon::ThreadPool> {
         .map_err(|e| RtloopError::new_err(format!("cannot start worker threads: {e}")))
 }
 
-/// Objective values of each row of `population` (N, D): float64 (N, n_objectives).
+/// Objective values of each row of `population` (N, D): float64 (N, n_objectives). `norm` is the
+/// per-pixel penalty ("l1", "l2", "huber", "huber:H"), `space` where it compares values ("linear" or
+/// "srgb": the sRGB encodings of the clipped model and of the objective).
 #[pyfunction]
 #[pyo3(signature = (scene, paths, target, population, pixels=None, loss="l1", clip=true, threads=None,
-                    product_bounds=None, norm="l1"))]
+                    product_bounds=None, norm="l1", space="linear"))]
 #[allow(clippy::too_many_arguments)]
 fn evaluate<'py>(
     py: Python<'py>,
@@ -316,6 +322,7 @@ fn evaluate<'py>(
     threads: Option<usize>,
     product_bounds: Option<PyReadonlyArray3<'py, f64>>,
     norm: &str,
+    space: &str,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     use de::Objective;
     use rayon::prelude::*;
@@ -329,6 +336,7 @@ fn evaluate<'py>(
         clip,
         product_bounds,
         norm,
+        space,
     )?;
     let pop = population.as_array();
     if pop.ncols() != bounds.len() {
@@ -359,12 +367,14 @@ fn evaluate<'py>(
 /// initial population and after every generation (returning False stops the search). `products` are the
 /// closed-form products of the best for the projected loss when `with_products` (one row per object:
 /// [P_r, P_g, P_b, Q], Q = intensity x specular), else None. `product_bounds` is (objects, 3, 2), or
-/// (objects, 4, 2) with row 4 bounding Q for objects with a specular term.
+/// (objects, 4, 2) with row 4 bounding Q for objects with a specular term. `norm` and `space` as for
+/// `evaluate`; in "srgb" the closed-form products stay least squares in linear space, and the reported
+/// `products` minimise the sRGB-space loss.
 #[pyfunction]
 #[pyo3(signature = (scene, paths, target, *, pixels=None, loss="l1", clip=true, population=60,
                     generations=200, f=0.6, cr=0.8, seed=0, threads=None, callback=None,
                     product_bounds=None, method="de", max_evaluations=None, polish=0, norm="l1",
-                    with_products=true))]
+                    with_products=true, space="linear"))]
 #[allow(clippy::too_many_arguments)]
 fn optimize<'py>(
     py: Python<'py>,
@@ -387,6 +397,7 @@ fn optimize<'py>(
     polish: usize,
     norm: &str,
     with_products: bool,
+    space: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
     let scene = &scene.get().0;
     let (fitness, bounds) = make_fitness(
@@ -398,6 +409,7 @@ fn optimize<'py>(
         clip,
         product_bounds,
         norm,
+        space,
     )?;
     let cfg = DeConfig {
         population,
