@@ -154,6 +154,18 @@ def test_paper_protocol_generation_pair_and_options(inputs, tmp_path, capsys):
     assert settings["f"] == 0.5 and settings["cr"] == 0.9 and settings["generations"] == [4, 7]
 
 
+def test_loss_space_option(inputs, tmp_path, capsys):
+    scene_path, image_path = inputs
+    out = tmp_path / "srgb"
+    code, _, stderr = run(capsys, scene_path, image_path, "-o", out, "--loss-space", "srgb", "--population", 8,
+                          "--generations", 3, "--snapshot-every", 0, "--final-scale", 1, "--final-spp", 1, "--quiet")
+    assert code == 0, stderr
+    settings = json.loads((out / "result.json").read_text(encoding="utf-8"))["fit_report"]["settings"]
+    assert settings["space"] == "srgb" and settings["norm"] == "l1"
+    code, stdout, _ = run(capsys, "--help")
+    assert "--loss-space {linear,srgb}" in stdout
+
+
 def test_snapshots_disabled(inputs, tmp_path, capsys):
     scene_path, image_path = inputs
     out = tmp_path / "out"
@@ -263,6 +275,7 @@ def test_wrong_image_file(inputs, tmp_path, capsys):
         ["--cr", "1.5"],
         ["--protocol", "fast"],
         ["--response", "gamma"],
+        ["--loss-space", "gamma"],
         ["--snapshot-every", "-1"],
         ["--final-scale", "0"],
         ["--bogus"],

@@ -166,6 +166,85 @@ def test_other_norms_fit_too(ball_scene, norm):
         rtloop.fit(truth, photo, norm="l3")
 
 
+def _srgb(x: np.ndarray) -> np.ndarray:
+    """The sRGB encoding of IEC 61966-2-1, in float64 (also above 1)."""
+    x = np.asarray(x, np.float64)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.abs(x) ** (1 / 2.4) - 0.055)
+
+
+@pytest.mark.parametrize("clip", [True, False])
+@pytest.mark.parametrize("norm", ["l1", "l2", "huber:0.01"])
+def test_srgb_fitness_is_the_distance_of_the_encoded_images(ball_scene, norm, clip):
+    """With space="srgb" the fitness is Σ penalty(enc(min(render, 1)) - enc(objective)), plain and projected
+    (the kernel encodes through a table good to 2e-5, so the sums agree to about that per pixel)."""
+    rng = np.random.default_rng(1)
+    truth = ball_scene
+    photo = np.clip(rtloop.render(truth) + rng.normal(0, 0.02, (48, 64, 3)), 0, 1).astype(np.float32)
+    scene = rtloop.load_scene(truth)
+    paths = scene.fit_paths
+    bounds = np.array(scene.bounds(paths))
+    pop = bounds[:, 0] + (bounds[:, 1] - bounds[:, 0]) * rng.random((6, len(bounds)))
+    got = _native.evaluate(scene, paths, photo, pop, norm=norm, space="srgb", clip=clip)[:, 0]
+    linear = _native.evaluate(scene, paths, photo, pop, norm=norm, clip=clip)[:, 0]
+
+    def penalty(d):
+        if norm == "l1":
+            return np.abs(d)
+        if norm == "l2":
+            return d * d
+        h = 0.01
+        return np.where(np.abs(d) <= h, 0.5 * d * d / h, np.abs(d) - 0.5 * h)
+
+    for x, g, lin in zip(pop, got, linear):
+        img = rtloop.render(scene.with_params(list(x)))
+        model = np.minimum(img, 1.0) if clip else img
+        want = penalty(_srgb(model) - _srgb(photo)).sum()
+        assert g == pytest.approx(want, rel=1e-4, abs=1e-4 * photo.size)
+        assert g != pytest.approx(lin, rel=1e-2)
+    # The projected loss: the same encoded distance at its (linear least-squares) products.
+    from rtloop.fit import _product_bounds
+    start = rtloop.load_scene(_wrong_start(truth))
+    pb = _product_bounds(start)
+    for light in ([1.0, 5.0, -2.0], [2.5, 4.5, -1.0]):
+        proj = _native.evaluate(start, ["light.position"], photo, np.array([light]), loss="l1_projected",
+                                product_bounds=pb, norm=norm, space="srgb", clip=clip)[0, 0]
+        d = start.to_dict()
+        d["light"]["position"], d["light"]["intensity"], d["fit"] = light, 1.0, {}
+        for o, p in zip(d["objects"], _solve_products(start, photo, light, pb, clip=clip)):
+            o["material"]["albedo"] = list(p)
+        img = rtloop.render(d)
+        model = np.minimum(img, 1.0) if clip else img
+        assert proj == pytest.approx(penalty(_srgb(model) - _srgb(photo)).sum(), rel=1e-4, abs=1e-4 * photo.size)
+
+
+def test_srgb_space_recovers_a_self_rendered_scene(ball_scene):
+    """Noise-free and rendered by rtloop: the sRGB-space loss is held to the same 1 mm and 0.2 % targets."""
+    truth = ball_scene
+    result = rtloop.fit(_wrong_start(truth), _photo(truth), seed=3, space="srgb")
+    assert result.settings["space"] == "srgb" and result.settings["method"] == "projected"
+    fitted = result.scene.to_dict()
+    err = np.linalg.norm(np.array(fitted["light"]["position"]) - truth["light"]["position"])
+    assert err < 0.001, f"light position error {err:.5f} m"
+    want, got = _products(truth), _products(fitted)
+    for name in want:
+        rel = np.max(np.abs(got[name] - want[name])) / np.max(want[name])
+        assert rel < 0.002, f"{name}: product error {rel:.5f}"
+    # The paper's two stages take the space too.
+    paper = rtloop.fit(_wrong_start(truth), _photo(truth), protocol="paper", seed=1, generations=(60, 60),
+                       space="srgb")
+    assert [s.loss for s in paper.stages] == ["l1", "l1_rgb"] and paper.settings["space"] == "srgb"
+    err = np.linalg.norm(np.array(paper.scene.to_dict()["light"]["position"]) - truth["light"]["position"])
+    assert err < 0.05
+    assert result.report()["settings"]["space"] == "srgb"
+    with pytest.raises(rtloop.RtloopError, match="space: unknown loss space 'sRGB'"):
+        rtloop.fit(truth, _photo(truth), space="sRGB")
+    scene = rtloop.load_scene(truth)
+    with pytest.raises(rtloop.RtloopError, match="space"):
+        _native.evaluate(scene, ["light.position"], _photo(truth), np.zeros((1, 3)), space="gamma")
+    with pytest.raises(rtloop.RtloopError, match="space"):
+        _native.optimize(scene, ["light.position"], _photo(truth), space="gamma", generations=1)
+
+
 def test_projected_fitness_equals_l1_at_the_solved_products(ball_scene):
     """Variable projection: the closed-form loss is the plain L1 loss of the scene with the solved products."""
     truth = ball_scene
@@ -195,9 +274,10 @@ def test_projected_fitness_equals_l1_at_the_solved_products(ball_scene):
     assert at_truth < 1e-3
 
 
-def _solve_products(scene, photo, light, pb):
+def _solve_products(scene, photo, light, pb, clip=True):
     """Independent NumPy least squares of the products for a given light (the reference for the Rust solve):
-    interior pixels only (a silhouette pixel mixes two surfaces in a photo), unsaturated ones only."""
+    interior pixels only (a silhouette pixel mixes two surfaces in a photo), unsaturated ones only (all
+    without ``clip``)."""
     d = scene.to_dict()
     d["light"]["position"] = light
     d["light"]["intensity"] = 1.0
@@ -213,7 +293,7 @@ def _solve_products(scene, photo, light, pb):
     for k in range(len(d["objects"])):
         p = []
         for c in range(3):
-            m = (ids == k) & interior & (g > 0) & (photo[..., c] < 0.999)
+            m = (ids == k) & interior & (g > 0) & ((photo[..., c] < 0.999) | (not clip))
             assert (g[m] ** 2).sum() > 0, "these scenes always have lit interior pixels"
             v = (photo[..., c][m] * g[m]).sum() / (g[m] ** 2).sum()
             p.append(float(np.clip(v, pb[k, c, 0], pb[k, c, 1])))

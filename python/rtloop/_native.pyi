@@ -47,6 +47,7 @@ def evaluate(
     threads: int | None = None,
     product_bounds: npt.NDArray[np.float64] | None = None,
     norm: str = "l1",
+    space: str = "linear",
 ) -> npt.NDArray[np.float64]: ...
 def optimize(
     scene: Scene,
@@ -70,6 +71,7 @@ def optimize(
     polish: int = 0,
     norm: str = "l1",
     with_products: bool = True,
+    space: str = "linear",
 ) -> dict[str, Any]: ...
 
 # Test hooks for the optimisers (rust/python/de.rs), used by tests/test_de_scipy.py.

@@ -206,6 +206,10 @@ def _build_parser() -> _Parser:
     p.add_argument("--norm", default="l1", metavar="NORM",
                    help="per-pixel penalty of the loss: l1 (the paper's, default), l2 (Gaussian noise), "
                    "huber or huber:H (quadratic within H, linear beyond; robust to unmodelled pixels)")
+    p.add_argument("--loss-space", choices=("linear", "srgb"), default="linear",
+                   help="where --norm compares render and IMAGE: 'linear' (default, radiance) or 'srgb' (both "
+                   "sRGB-encoded, as an 8-bit file stores them: an error in the shadows counts as the file and "
+                   "the eye resolve it; for dark or JPEG-compressed photos)")
     p.add_argument("--mask", type=Path, metavar="PNG",
                    help="an image of IMAGE's size (or the scene's): white where the scene models the photo, "
                    "black where it does not (another object, a reflection); black pixels are left out of the fit")
@@ -445,7 +449,7 @@ class _Run:
             result = rtloop.fit(
                 scene, image, protocol=args.protocol, seed=args.seed, population=args.population,
                 generations=args.generations, f=args.f, cr=args.cr, threads=args.threads, callback=callback,
-                mask=mask, norm=args.norm,
+                mask=mask, norm=args.norm, space=args.loss_space,
             )
         self.progress.end_line()
         self.check_stop()

@@ -35,7 +35,10 @@ from . import _native
 from .errors import RtloopError
 from .scene import Scene, load_scene, scene_to_dict
 
-__all__ = ["PROTOCOLS", "FitResult", "GenerationInfo", "StageResult", "fit"]
+__all__ = ["LOSS_SPACES", "PROTOCOLS", "FitResult", "GenerationInfo", "StageResult", "fit"]
+
+#: Where a loss compares pixel values: ``linear`` radiance (default) or ``srgb`` code values.
+LOSS_SPACES = ("linear", "srgb")
 
 #: Named settings. ``paper``: the paper's numbers. ``rtloop``: the default (see README, speed against error).
 PROTOCOLS: dict[str, dict[str, Any]] = {
@@ -221,6 +224,7 @@ def fit(
     uncertainty: bool = True,
     mask: np.ndarray | None = None,
     norm: str = "l1",
+    space: str = "linear",
 ) -> FitResult:
     """Fit the scene's free parameters (its ``fit`` section) to ``image``.
 
@@ -235,12 +239,17 @@ def fit(
     closed-form method. ``mask`` (bool (H, W), True = use) leaves out pixels the scene does not model
     (another object, a reflection, the photographer's shadow): they count in no loss and no solve.
     ``norm`` penalises each pixel's difference: "l1" (the paper's, default), "l2" (maximum likelihood for
-    Gaussian noise), "huber" or "huber:H" (quadratic within H, default 0.02, linear beyond).
+    Gaussian noise), "huber" or "huber:H" (quadratic within H, default 0.02, linear beyond). ``space`` is
+    where it is taken: "linear" (default, radiance) or "srgb" (the sRGB encodings of the clipped render
+    and of the image, as an 8-bit file stores them: a shadow's error counts as the file resolves it); the
+    closed-form products stay least squares in linear space, the reported ones minimise the sRGB loss.
     """
     t0 = time.perf_counter()
     scene = load_scene(scene)
     if protocol not in PROTOCOLS:
         raise RtloopError(f"protocol: unknown protocol {protocol!r} (known: {', '.join(PROTOCOLS)})")
+    if space not in LOSS_SPACES:
+        raise RtloopError(f"space: unknown loss space {space!r} (known: {', '.join(LOSS_SPACES)})")
     proto = PROTOCOLS[protocol]
     pop = int(population if population is not None else proto["population"])
     gens = generations if generations is not None else proto["generations"]
@@ -276,7 +285,7 @@ def fit(
     ident = _identifiability(scene, all_paths)
     settings = {"population": pop, "generations": list(gens), "f": f_, "cr": cr_, "clip": clip,
                 "masked_pixels": None if use is None else int(scene.width * scene.height - use.size),
-                "norm": norm,
+                "norm": norm, "space": space,
                 "pixels_per_object": pixels_per_object, "threads": threads}
     stages: list[StageResult] = []
     evaluations = 0
@@ -310,7 +319,7 @@ def fit(
         out = _native.optimize(
             stage_scene, paths, target, pixels=pixels, loss=loss, clip=clip, population=pop,
             generations=generations, f=f_, cr=cr_, seed=stage_seed, threads=threads, callback=on_generation,
-            product_bounds=product_bounds, method=method, polish=polish, norm=norm,
+            product_bounds=product_bounds, method=method, polish=polish, norm=norm, space=space,
             with_products=callback is not None,
         )
         generations_run = out["generations"]
