@@ -792,8 +792,8 @@ impl EncodedTerm {
     }
 }
 
-/// Evaluations at most of one [`encoded_line_min`] (each one or two passes over the terms).
-const MAX_SPLITS: usize = 400;
+/// Midpoints evaluated at most by one [`encoded_line_min`] (each one pass over the terms; typically 20-50).
+const MAX_SPLITS: usize = 200;
 
 /// The minimiser over [lo, hi] of F(x) = Σ_j ℓ_j(x) for the sRGB-space terms of [`EncodedTerm`], with
 /// `norm`'s penalty: the exact step of [`Kernel::refine`] in the sRGB space.
@@ -809,10 +809,11 @@ const MAX_SPLITS: usize = 400;
 /// is convex and at least the larger of its tangents at u and v, whose least value on [u, v] is the
 /// interval's bound. The bound's gap shrinks with the square of the interval's width, so only intervals
 /// near the minimum survive: the interval with the lowest bound is split at its midpoint until no
-/// bound is below the best value found by more than 1e-9 of it (the best is then the global minimum to
-/// that tolerance), intervals narrower than 1e-7 of their position (the model is f32) are not split,
-/// and at most `MAX_SPLITS` midpoints are evaluated. `start` (clamped to the bounds) is evaluated first:
-/// the result is never worse than it.
+/// bound is below the best value found by more than 1e-8 of it (the best is then the global minimum to
+/// that tolerance; the terms are f32), intervals narrower than 1e-7 of their position (the model is f32)
+/// are not split, and at most `MAX_SPLITS` midpoints are evaluated. `start` (clamped to the bounds) is
+/// evaluated first: the result is never worse than it. Each evaluated point keeps every term's g and g'
+/// while an interval ends there, so a split encodes each term once.
 pub fn encoded_line_min(
     terms: &[EncodedTerm],
     norm: Norm,
@@ -826,20 +827,25 @@ pub fn encoded_line_min(
     let lut = SrgbLut::get();
     let g_top = lut.encode(top as f32) as f64;
     let at: Vec<f64> = terms.iter().map(|t| t.at(top)).collect();
-    let value = |x: f64| -> f64 {
-        terms
+    // A point: x, F(x), and per term g(x) and its right derivative.
+    let eval = |x: f64| -> Point {
+        let g: Vec<[f64; 2]> = terms.iter().map(|t| t.g(x, top, lut).into()).collect();
+        let f = terms
             .iter()
-            .map(|t| t.loss(t.g(x, top, lut).0, g_top, norm))
-            .sum()
+            .zip(&g)
+            .map(|(t, gi)| t.loss(gi[0], g_top, norm))
+            .sum();
+        Point { x, f, g }
     };
     // The least value on [u, v] of the larger tangent of the convex minorant Λ at u and v.
-    let bound = |u: f64, v: f64| -> f64 {
+    let bound = |pu: &Point, pv: &Point| -> f64 {
+        let (u, v) = (pu.x, pv.x);
         let (mut fu, mut du, mut fv, mut dv) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-        for (t, &b) in terms.iter().zip(&at) {
+        for (j, (t, &b)) in terms.iter().zip(&at).enumerate() {
             if b > u && b < v {
                 continue;
             }
-            let ((gu, su), (gv, sv)) = (t.g(u, top, lut), t.g(v, top, lut));
+            let ([gu, su], [gv, sv]) = (pu.g[j], pv.g[j]);
             if b <= u {
                 if t.saturated {
                     continue; // 0 from its breakpoint on
@@ -875,51 +881,85 @@ pub fn encoded_line_min(
     } else {
         lo
     };
-    let mut xs = vec![lo];
-    if start > lo && start < hi {
-        xs.push(start);
+    // Points by index, each freed once no interval in the heap ends there. An interval whose bound
+    // cannot beat the best value is never pushed.
+    let tol = |best: f64| 1e-8 * best.abs();
+    let mut points: Vec<Option<Point>> = Vec::new();
+    let mut refs: Vec<u32> = Vec::new();
+    let mut best = (start, f64::INFINITY);
+    let mut xs = vec![lo, start, hi];
+    xs.dedup();
+    // `start` first, so that it wins ties.
+    for x in std::iter::once(start).chain(xs.iter().copied().filter(|&x| x != start)) {
+        let p = eval(x);
+        if p.f < best.1 {
+            best = (p.x, p.f);
+        }
+        points.push(Some(p));
+        refs.push(0);
     }
-    xs.push(hi);
-    let mut best = (start, value(start));
-    for &x in &xs {
-        if x != start {
-            let f = value(x);
-            if f < best.1 {
-                best = (x, f);
+    let mut ids: Vec<usize> = (0..points.len()).collect();
+    let x_of = |points: &[Option<Point>], k: usize| points[k].as_ref().expect("a live point").x;
+    ids.sort_by(|&i, &j| x_of(&points, i).total_cmp(&x_of(&points, j)));
+    let mut heap = std::collections::BinaryHeap::new();
+    let push = |a: usize,
+                c: usize,
+                points: &[Option<Point>],
+                refs: &mut [u32],
+                heap: &mut std::collections::BinaryHeap<Interval>,
+                best: f64| {
+        let (pa, pc) = (points[a].as_ref(), points[c].as_ref());
+        let b = bound(pa.expect("a live point"), pc.expect("a live point"));
+        if b < best - tol(best) {
+            heap.push(Interval {
+                bound: b,
+                u: a,
+                v: c,
+            });
+            refs[a] += 1;
+            refs[c] += 1;
+        }
+    };
+    for w in ids.windows(2) {
+        push(w[0], w[1], &points, &mut refs, &mut heap, best.1);
+    }
+    let mut splits = 0;
+    while let Some(Interval { bound: b, u, v }) = heap.pop() {
+        if b >= best.1 - tol(best.1) || splits >= MAX_SPLITS {
+            break;
+        }
+        let (xu, xv) = (x_of(&points, u), x_of(&points, v));
+        let mid = 0.5 * (xu + xv);
+        if xv - xu > 1e-7 * xu.abs().max(xv.abs()) && mid > xu && mid < xv {
+            splits += 1;
+            let p = eval(mid);
+            if p.f < best.1 {
+                best = (p.x, p.f);
+            }
+            points.push(Some(p));
+            refs.push(0);
+            let m = points.len() - 1;
+            push(u, m, &points, &mut refs, &mut heap, best.1);
+            push(m, v, &points, &mut refs, &mut heap, best.1);
+            if refs[m] == 0 {
+                points[m] = None;
+            }
+        }
+        for k in [u, v] {
+            refs[k] -= 1;
+            if refs[k] == 0 {
+                points[k] = None;
             }
         }
     }
-    let mut heap: std::collections::BinaryHeap<Interval> = xs
-        .windows(2)
-        .map(|w| Interval {
-            bound: bound(w[0], w[1]),
-            u: w[0],
-            v: w[1],
-        })
-        .collect();
-    let mut splits = 0;
-    while let Some(Interval { bound: b, u, v }) = heap.pop() {
-        if b >= best.1 - 1e-9 * best.1.abs() || splits >= MAX_SPLITS {
-            break;
-        }
-        let mid = 0.5 * (u + v);
-        if v - u <= 1e-7 * u.abs().max(v.abs()) || !(mid > u && mid < v) {
-            continue;
-        }
-        splits += 1;
-        let f = value(mid);
-        if f < best.1 {
-            best = (mid, f);
-        }
-        for (u, v) in [(u, mid), (mid, v)] {
-            heap.push(Interval {
-                bound: bound(u, v),
-                u,
-                v,
-            });
-        }
-    }
     best.0
+}
+
+/// A point of [`encoded_line_min`]: x, F(x), and per term g(x) and its right derivative.
+struct Point {
+    x: f64,
+    f: f64,
+    g: Vec<[f64; 2]>,
 }
 
 /// The slope of penalty(d) for a rising term (d ≥ 0, increasing): L1's is 1 at d = 0 too.
@@ -931,11 +971,12 @@ fn rising_slope(norm: Norm, d: f64) -> f64 {
     }
 }
 
-/// An interval of [`encoded_line_min`] with its lower bound; the heap pops the lowest bound first.
+/// An interval of [`encoded_line_min`] between two points (by index) with its lower bound; the heap pops
+/// the lowest bound first.
 struct Interval {
     bound: f64,
-    u: f64,
-    v: f64,
+    u: usize,
+    v: usize,
 }
 
 impl PartialEq for Interval {

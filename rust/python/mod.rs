@@ -444,7 +444,7 @@ fn optimize<'py>(
                     }
                 })
             };
-            match method {
+            let found = match method {
                 "de" => de::minimize(&fitness, &bounds, &cfg, callback).map(|r| {
                     let why = if r.stopped {
                         "callback"
@@ -479,20 +479,20 @@ fn optimize<'py>(
                 other => Err(Error::Invalid(format!(
                     "unknown method {other:?} (known: \"de\", \"lshade\")"
                 ))),
-            }
+            }?;
+            // The search ranks lights by least-squares products; the result carries the products that
+            // minimise the loss itself (saturated pixels one-sided), and that loss (still without the GIL:
+            // in the sRGB space this is a few line searches per object).
+            let refined = fitness.refined(&found.0.best);
+            Ok::<_, Error>((found, refined))
         })
     })?;
-    let (result, stop_reason, polish_report) = result;
+    let ((result, stop_reason, polish_report), refined) = result;
     if let Some(e) = error {
         return Err(e);
     }
     let d = PyDict::new(py);
-    if fitness.kind() == LossKind::L1Projected {
-        // The search ranks lights by least-squares products; the result carries the products that
-        // minimise the loss itself (saturated pixels one-sided), and that loss.
-        let (solved, loss) = fitness
-            .refined(&result.best)
-            .expect("a projected fitness refines");
+    if let Some((solved, loss)) = refined {
         d.set_item("products", rows(&solved))?;
         d.set_item("search_objectives", result.best_objectives.clone())?;
         d.set_item("objectives", vec![loss.iter().sum::<f64>()])?;
