@@ -146,8 +146,27 @@ impl Kernel {
         shapes: &[PShape],
         shadows: bool,
     ) -> Kernel {
-        let mut order: Vec<usize> = (0..surfels.len()).collect();
-        order.sort_by_key(|&i| surfels[i].object); // stable: keeps row-major order inside a group
+        // Pixels grouped by object (background last), row-major inside a group: a counting sort.
+        let slot = |o: u32| {
+            if o == u32::MAX {
+                shapes.len()
+            } else {
+                o as usize
+            }
+        };
+        let mut count = vec![0usize; shapes.len() + 2];
+        for s in surfels {
+            count[slot(s.object) + 1] += 1;
+        }
+        for k in 1..count.len() {
+            count[k] += count[k - 1];
+        }
+        let mut order = vec![0usize; surfels.len()];
+        for (i, s) in surfels.iter().enumerate() {
+            let k = slot(s.object);
+            order[count[k]] = i;
+            count[k] += 1;
+        }
         let mut groups: Vec<Group> = Vec::new();
         let mut start = 0;
         while start < order.len() {
@@ -192,11 +211,12 @@ impl Kernel {
                 blocks: idx
                     .chunks(BLOCK)
                     .map(|chunk| {
-                        let pts: Vec<Vec3A> = chunk.iter().map(|&i| surfels[i].position).collect();
-                        let centre = pts.iter().fold(Vec3A::ZERO, |a, &p| a + p) / pts.len() as f32;
-                        let radius = pts
+                        let pos = |&i: &usize| surfels[i].position;
+                        let centre = chunk.iter().map(pos).fold(Vec3A::ZERO, |a, p| a + p)
+                            / chunk.len() as f32;
+                        let radius = chunk
                             .iter()
-                            .map(|&p| (p - centre).length())
+                            .map(|i| (pos(i) - centre).length())
                             .fold(0.0f32, f32::max);
                         (centre.to_array(), radius)
                     })
@@ -518,10 +538,15 @@ impl Kernel {
         let top = if clip { 1.0f64 } else { f64::INFINITY };
         let mut acc = [0.0f64; 3];
         let mut offset = 0;
+        out.lit.clear();
+        out.lit.resize(proj.diffuse.len(), 0);
         for g in &self.groups {
             let n = g.len();
             let (a, b) = (&a_all[offset..offset + n], &b_all[offset..offset + n]);
             offset += n;
+            if let Some(obj) = g.object {
+                out.lit[obj] = a.iter().filter(|&&v| v > 0.0).count();
+            }
             let Some(obj) = g.object else {
                 for c in 0..3 {
                     acc[c] += g.t[c]
@@ -640,6 +665,15 @@ pub fn l1_line_min(
     top: f64,
 ) -> f64 {
     // Breakpoints with the slope change there; the slope left of every breakpoint is -Σk.
+    // Sorted by an order-preserving integer key of the position (cheaper than comparing floats).
+    let key = |x: f64| {
+        let b = x.to_bits();
+        if b >> 63 == 1 {
+            !b
+        } else {
+            b | (1 << 63)
+        }
+    };
     let mut events: Vec<(f64, f64)> = Vec::new();
     let mut slope = 0.0;
     for (k, o, y, saturated) in terms {
@@ -652,7 +686,7 @@ pub fn l1_line_min(
         }
     }
     events.retain(|e| !e.0.is_nan());
-    events.sort_by(|a, b| a.0.total_cmp(&b.0));
+    events.sort_unstable_by_key(|e| key(e.0));
     let (mut x, mut f) = (lo, 0.0);
     let (mut best_x, mut best_f) = (lo, 0.0);
     for &(at, ds) in &events {
@@ -729,6 +763,8 @@ impl Projection {
 pub struct Solved {
     pub products: Vec<[f64; 3]>,
     pub specular: Vec<f64>,
+    /// Per object: its pixels that receive direct light (filled by `Kernel::refine` only).
+    pub lit: Vec<usize>,
 }
 
 /// Per-channel sums over an object's informing pixels (t < saturation): diffuse factor a, specular

@@ -78,8 +78,11 @@ class StageResult:
     pixels: int
     #: (generation, fitness, objectives, x) of the best individual of every generation.
     history: list[tuple[int, float, list[float], np.ndarray]] = field(default_factory=list)
-    #: For the projected loss: the closed-form products (object x RGB) of the best individual.
+    #: For the projected loss: the closed-form products of the best individual, per object
+    #: [P_r, P_g, P_b, Q] (Q = intensity x specular, 0 for a matte object).
     products: list[list[float]] | None = None
+    #: For the projected loss: per object, its (unmasked) pixels that the fitted light reaches.
+    lit_pixels: list[int] | None = None
 
 
 @dataclass
@@ -325,7 +328,7 @@ def fit(
             name=name, paths=paths, param_names=stage_scene.param_names(paths), x=np.asarray(out["x"]),
             objectives=list(out["objectives"]), evaluations=out["evaluations"], generations=generations_run,
             seconds=time.perf_counter() - t, loss=loss, pixels=int(out["active_pixels"]), history=history,
-            products=out.get("products"),
+            products=out.get("products"), lit_pixels=out.get("lit_pixels"),
         )
 
     def light_stage(name: str, stage_scene: Scene, stage_seed: int) -> Scene:
@@ -373,6 +376,7 @@ def fit(
                 product_bounds=_product_bounds(scene), method=optimizer, polish=polish)
         stages.append(s)
         current = _split_products(current.with_params(list(s.x), where), s.products, scene)
+        current = _keep_undetermined(current, scene, all_paths, ident, s.lit_pixels)
     else:
         if proto.get("projected"):
             settings["projection_unavailable"] = why_not
@@ -385,8 +389,8 @@ def fit(
             current = light_stage("light-refine", _narrowed(current, light_paths), int(seeds[2]))
             current = _restore_bounds(current, scene)
             current = colour_stage("colour-refine", current, int(seeds[3]))
-    current = _restore_bounds(current, scene)
-    current = _keep_undetermined(current, scene, all_paths, ident)
+        current = _restore_bounds(current, scene)
+        current = _keep_undetermined(current, scene, all_paths, ident)
     values = current.get_params(all_paths)
     result = FitResult(
         scene=current,
@@ -424,12 +428,15 @@ def lit_pixel_counts(scene: Scene) -> list[int]:
     return [int(((ids == k) & lit).sum()) for k in range(len(d["objects"]))]
 
 
-def _keep_undetermined(fitted: Scene, original: Scene, paths: list[str], ident: dict[str, Any]) -> Scene:
+def _keep_undetermined(fitted: Scene, original: Scene, paths: list[str], ident: dict[str, Any],
+                       counts: list[int] | None = None) -> Scene:
     """An object the fitted light leaves unlit in every visible pixel says nothing about its albedo (a
-    sphere lit only from behind, one hidden by another): report it and keep the scene's own value."""
+    sphere lit only from behind, one hidden by another): report it and keep the scene's own value.
+    ``counts``: lit pixels per object when the search already knows them (else rendered here)."""
     if "ambient" in paths or any(v != 0 for v in scene_to_dict(fitted)["ambient"]):
         return fitted  # ambient light still shows the albedo
-    counts = lit_pixel_counts(fitted)
+    if counts is None:
+        counts = lit_pixel_counts(fitted)
     undetermined = []
     for name, n in zip(fitted.object_names, counts):
         p = f"objects.{name}.albedo"
