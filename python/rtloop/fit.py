@@ -1,11 +1,13 @@
 """The fit: the paper's two stages, or rtloop's closed-form method, with all the arithmetic in Rust.
 
-Method ``projected`` (the default protocol ``rtloop`` uses it whenever the scene allows): for a matte
-scene without ambient light, every pixel is linear in the products exposure x intensity x colour x albedo
-of its object. For each candidate light position (or direction) those products are solved in closed form
-(least squares over the unsaturated pixels away from silhouettes, clamped to their bounds) inside the
-fitness, so L-SHADE searches only the light's three coordinates against the whole-image loss. This
-removes stage 1's bias from the wrong starting colours and stage 2's separate search.
+Method ``projected`` (the default protocol ``rtloop`` uses it whenever the scene allows): for a scene
+without ambient light, every pixel is linear in the products exposure x intensity x colour x albedo of its
+object, and for a glossy object in intensity x specular. For each candidate light position (or direction)
+and shininess those products are solved in closed form (least squares over the unsaturated pixels away
+from silhouettes, clamped to their bounds) inside the fitness, so L-SHADE searches only the light's three
+coordinates (and any free shininess) against the whole-image loss. This removes stage 1's bias from the
+wrong starting colours and stage 2's separate search. The products reported are re-solved at the fitted
+light to minimise the loss itself, saturated pixels one-sided (see the README, "Photos saturate").
 
 Stage 1 ("light") frees the light (``light.*`` paths of the fit section) and minimises the sum of
 absolute RGB differences over the whole image, every other parameter held at the scene's value.
