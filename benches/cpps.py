@@ -180,8 +180,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     repeats = 3 if args.quick else 7
     threads_all = os.cpu_count() or 1
-    lines = [f"machine: {platform.machine()} {platform.processor() or ''}, {threads_all} logical CPUs, "
-             f"Python {platform.python_version()}, numpy {np.__version__}, rtloop {rtloop.__version__}", ""]
+    lines = [(f"machine: {platform.machine()} {platform.processor() or ''}, {threads_all} logical CPUs, "
+             f"Python {platform.python_version()}, numpy {np.__version__}, rtloop {rtloop.__version__}"), ""]
 
     def say(s=""):
         print(s, flush=True)

@@ -54,7 +54,7 @@ DEFAULT_SCENES = REPO.parent / "shared" / "scenes"
 SCORE_TOOL = REPO.parent / "shared" / "tools" / "score_result.py"
 DEFAULT_OUT = REPO / "benches" / "results"
 DEFAULT_METHODS = ["paper", "rtloop"]
-DEFAULT_BUDGETS = [0.25, 0.5, 1.0]
+DEFAULT_BUDGETS = [0.05, 0.1, 0.25, 0.5, 1.0]
 SCENE_FILES = ("scene_input.json", "objective.png", "scene.json")
 #: Errors are drawn on log axes; exact zeros are drawn at this floor.
 LOG_FLOOR = 1e-6
@@ -79,22 +79,25 @@ def find_scenes(root: Path) -> list[Path]:
     return sorted(d for d in root.iterdir() if d.is_dir() and all((d / f).is_file() for f in SCENE_FILES))
 
 
-def scaled_budget(proto: dict[str, Any], fraction: float) -> tuple[int, tuple[int, int]]:
-    """Population and per-stage generations with population x generations scaled by ``fraction``."""
+def scaled_budget(proto: dict[str, Any], fraction: float) -> tuple[int, tuple[int, int], int | None]:
+    """Population, per-stage generations and polish evaluations with population x generations (and the
+    polish) scaled by ``fraction``; polish None where the protocol has none."""
     k = math.sqrt(fraction)
     population = max(5, round(proto["population"] * k))
     gens = proto["generations"]
     gens = (gens, gens) if isinstance(gens, int) else tuple(gens)
-    return population, (max(1, round(gens[0] * k)), max(1, round(gens[1] * k)))
+    polish = max(10, round(proto["polish"] * fraction)) if proto.get("polish") else None
+    return population, (max(1, round(gens[0] * k)), max(1, round(gens[1] * k))), polish
 
 
 def run_one(rtloop, score, scene_dir: Path, truth: dict, method: str, population: int,
-            generations: tuple[int, int], seed: int, threads: int | None) -> dict[str, Any]:
+            generations: tuple[int, int], seed: int, threads: int | None, polish: int | None = None,
+            uncertainty: bool = False) -> dict[str, Any]:
     t0 = time.perf_counter()
     scene = rtloop.load_scene(scene_dir / "scene_input.json")
     photo = rtloop.load_image(scene_dir / "objective.png", scene)
     result = rtloop.fit(scene, photo, protocol=method, population=population, generations=generations,
-                        seed=seed, threads=threads)
+                        seed=seed, threads=threads, polish=polish, uncertainty=uncertainty)
     seconds = time.perf_counter() - t0
     s = score(rtloop.scene_to_dict(result.scene), truth)
     return {
@@ -161,8 +164,56 @@ def tables(rows: list[dict[str, Any]], machine: str) -> str:
                   f"| {fmt(median([m['light_err_m'] for m in ms]))} "
                   f"| {fmt(median([m['light_dir_err_deg'] for m in ms]))} "
                   f"| {fmt(median([m['product_err_max'] for m in ms]))} |\n")
+    buf.write(reach_table(med))
     buf.write(f"\n{machine}\n")
     return buf.getvalue()
+
+
+def reach_table(med: list[dict[str, Any]], reference: str = "paper", method: str = "rtloop") -> str:
+    """Per scene: the reference protocol at its full budget, and the cheapest budget of ``method`` whose
+    median light error and product error are both at most the reference's, with the speed-up."""
+    ref = {m["scene"]: m for m in med if m["method"] == reference and m["budget"] == 1.0}
+    if not ref:
+        return ""
+    buf = io.StringIO()
+    buf.write(f"\nTime for {method} to reach {reference}'s error (full budget), per scene:\n\n")
+    buf.write(f"| scene | {reference} seconds | {reference} light m | {reference} product | {method} budget "
+              f"| evaluations | seconds | light m | product | speed-up |\n")
+    buf.write("|---|---|---|---|---|---|---|---|---|---|\n")
+    for scene, r in ref.items():
+        ok = sorted((m for m in med if m["scene"] == scene and m["method"] == method
+                     and m["light_err_m"] <= r["light_err_m"] and m["product_err_max"] <= r["product_err_max"]),
+                    key=lambda m: m["seconds"])
+        head = f"| {scene} | {fmt(r['seconds'])} | {fmt(r['light_err_m'])} | {fmt(r['product_err_max'])} "
+        if not ok:
+            buf.write(head + "| not reached | | | | | |\n")
+            continue
+        m = ok[0]
+        buf.write(head + f"| {m['budget']:g} | {m['evaluations']:.0f} | {fmt(m['seconds'])} "
+                  f"| {fmt(m['light_err_m'])} | {fmt(m['product_err_max'])} | {r['seconds'] / m['seconds']:.1f}x |\n")
+    return buf.getvalue()
+
+
+def success_runs(rtloop, score, scene_dir: Path, truth: dict, seeds: int, max_evals: int, threshold: float,
+                 threads: int | None) -> tuple[str, list[dict[str, Any]]]:
+    """The default method on one scene within ``max_evals`` candidate evaluations, over ``seeds`` seeds:
+    how often the light lands within ``threshold`` metres."""
+    proto = importlib.import_module("rtloop.fit").PROTOCOLS["rtloop"]
+    pop, polish = proto["population"], proto["polish"]
+    gens = (max_evals - polish) // pop - 1  # L-SHADE spends population x (generations + 1), then the polish
+    rows = []
+    for seed in range(seeds):
+        r = run_one(rtloop, score, scene_dir, truth, "rtloop", pop, (gens, proto["generations"][1]), seed,
+                    threads, polish)
+        rows.append({"seed": seed, **r})
+    hits = sum(1 for r in rows if r["light_err_m"] < threshold)
+    worst = max(r["evaluations"] for r in rows)
+    errs = sorted(r["light_err_m"] for r in rows)
+    text = (f"\nSuccess rate, {scene_dir.name}, default method at most {max_evals} evaluations "
+            f"(population {pop} x {gens + 1} generations + {polish} polish; at most {worst} used): light within "
+            f"{threshold * 100:g} cm in {hits} of {seeds} seeds; light error median {fmt(median(errs))} m, "
+            f"worst {fmt(errs[-1])} m; median {fmt(median([r['seconds'] for r in rows]))} s per fit.\n")
+    return text, rows
 
 
 def atomic_write(path: Path, write) -> None:
@@ -277,6 +328,13 @@ def main(argv: list[str] | None = None) -> int:
                     help="fractions of each protocol's population x generations")
     ap.add_argument("--threads", type=int, default=None, help="threads for rtloop.fit (default: all)")
     ap.add_argument("--quick", action="store_true", help="smoke run: 1 seed, smallest budget only")
+    ap.add_argument("--uncertainty", action="store_true",
+                    help="time the fits with their uncertainty estimate (off: the search alone, as the paper's)")
+    ap.add_argument("--success-scene", default="yellow-ball",
+                    help="scene for the success-rate run ('' to skip): light within --success-threshold")
+    ap.add_argument("--success-seeds", type=int, default=20, help="seeds for the success-rate run")
+    ap.add_argument("--success-evals", type=int, default=1200, help="evaluation budget of the success-rate run")
+    ap.add_argument("--success-threshold", type=float, default=0.01, help="light error counted a success (m)")
     args = ap.parse_args(argv)
 
     if not args.scenes.is_dir():
@@ -315,7 +373,7 @@ def main(argv: list[str] | None = None) -> int:
         truth = json.loads((scene_dir / "scene.json").read_text())
         for method in args.methods:
             for budget in budgets:
-                population, generations = scaled_budget(protocols[method], budget)
+                population, generations, polish = scaled_budget(protocols[method], budget)
                 for seed in seeds:
                     row: dict[str, Any] = {
                         "scene": scene_dir.name, "method": method, "budget": budget, "seed": seed,
@@ -323,7 +381,7 @@ def main(argv: list[str] | None = None) -> int:
                     }
                     try:
                         row.update(run_one(rtloop, score, scene_dir, truth, method, population, generations,
-                                           seed, args.threads))
+                                           seed, args.threads, polish, args.uncertainty))
                     except (rtloop.RtloopError, OSError, ValueError, KeyError, RuntimeError) as exc:
                         # One failing fit should not lose the others.
                         nan = float("nan")
@@ -340,6 +398,13 @@ def main(argv: list[str] | None = None) -> int:
     out = args.out
     write_csv(out / f"{stem}.csv", rows)
     text = tables(rows, machine)
+    success_dir = args.scenes / args.success_scene
+    if args.success_scene and not args.quick and (success_dir / "scene.json").is_file():
+        print(f"success-rate run: {args.success_scene}, {args.success_seeds} seeds", file=sys.stderr)
+        truth = json.loads((success_dir / "scene.json").read_text())
+        line, _ = success_runs(rtloop, score, success_dir, truth, args.success_seeds, args.success_evals,
+                               args.success_threshold, args.threads)
+        text = text.replace(f"\n{machine}\n", line + f"\n{machine}\n")
     atomic_write(out / f"{stem}.md", lambda tmp: tmp.write_text(text))
     plotted = write_plot(out / f"{stem}.png", rows, f"rtloop speed against error; {machine}")
     print(text)

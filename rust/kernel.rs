@@ -152,8 +152,27 @@ impl Kernel {
         shapes: &[PShape],
         shadows: bool,
     ) -> Kernel {
-        let mut order: Vec<usize> = (0..surfels.len()).collect();
-        order.sort_by_key(|&i| surfels[i].object); // stable: keeps row-major order inside a group
+        // Pixels grouped by object (background last), row-major inside a group: a counting sort.
+        let slot = |o: u32| {
+            if o == u32::MAX {
+                shapes.len()
+            } else {
+                o as usize
+            }
+        };
+        let mut count = vec![0usize; shapes.len() + 2];
+        for s in surfels {
+            count[slot(s.object) + 1] += 1;
+        }
+        for k in 1..count.len() {
+            count[k] += count[k - 1];
+        }
+        let mut order = vec![0usize; surfels.len()];
+        for (i, s) in surfels.iter().enumerate() {
+            let k = slot(s.object);
+            order[count[k]] = i;
+            count[k] += 1;
+        }
         let mut groups: Vec<Group> = Vec::new();
         let mut start = 0;
         while start < order.len() {
@@ -199,11 +218,12 @@ impl Kernel {
                 blocks: idx
                     .chunks(BLOCK)
                     .map(|chunk| {
-                        let pts: Vec<Vec3A> = chunk.iter().map(|&i| surfels[i].position).collect();
-                        let centre = pts.iter().fold(Vec3A::ZERO, |a, &p| a + p) / pts.len() as f32;
-                        let radius = pts
+                        let pos = |&i: &usize| surfels[i].position;
+                        let centre = chunk.iter().map(pos).fold(Vec3A::ZERO, |a, p| a + p)
+                            / chunk.len() as f32;
+                        let radius = chunk
                             .iter()
-                            .map(|&p| (p - centre).length())
+                            .map(|i| (pos(i) - centre).length())
                             .fold(0.0f32, f32::max);
                         (centre.to_array(), radius)
                     })
@@ -599,11 +619,16 @@ impl Kernel {
         };
         let mut acc = [0.0f64; 3];
         let mut offset = 0;
+        out.lit.clear();
+        out.lit.resize(proj.diffuse.len(), 0);
         for g in &self.groups {
             let n = g.len();
             let (a, b) = (&a_all[offset..offset + n], &b_all[offset..offset + n]);
             offset += n;
             let gt = if srgb { &g.te } else { &g.t };
+            if let Some(obj) = g.object {
+                out.lit[obj] = a.iter().filter(|&&v| v > 0.0).count();
+            }
             let Some(obj) = g.object else {
                 for c in 0..3 {
                     acc[c] += gt[c]
@@ -1023,7 +1048,7 @@ pub fn l1_line_min(
         }
     }
     events.retain(|e| !e.0.is_nan());
-    events.sort_by(|a, b| a.0.total_cmp(&b.0));
+    radix_sort_by_position(&mut events);
     let (mut x, mut f) = (lo, 0.0);
     let (mut best_x, mut best_f) = (lo, 0.0);
     for &(at, ds) in &events {
@@ -1047,6 +1072,41 @@ pub fn l1_line_min(
         }
     }
     best_x
+}
+
+/// Sort (position, slope change) events by position: an LSD radix sort on an order-preserving 32-bit key
+/// of the position rounded to f32 (three 11-bit passes; a comparison sort of the ~10⁴ events per object and
+/// channel cost more than the rest of a small fit's finish). Rounding to f32 (a relative 6e-8) only
+/// merges breakpoints closer than the renderer's own precision.
+fn radix_sort_by_position(events: &mut Vec<(f64, f64)>) {
+    let key = |x: f64| {
+        let b = (x as f32).to_bits();
+        if b >> 31 == 1 {
+            !b
+        } else {
+            b | (1 << 31)
+        }
+    };
+    let mut from: Vec<(u32, (f64, f64))> = events.iter().map(|&e| (key(e.0), e)).collect();
+    let mut to = from.clone();
+    for shift in [0u32, 11, 22] {
+        let mut count = [0usize; 2049];
+        for e in &from {
+            count[((e.0 >> shift) & 2047) as usize + 1] += 1;
+        }
+        for k in 1..count.len() {
+            count[k] += count[k - 1];
+        }
+        for e in &from {
+            let d = ((e.0 >> shift) & 2047) as usize;
+            to[count[d]] = *e;
+            count[d] += 1;
+        }
+        std::mem::swap(&mut from, &mut to);
+    }
+    for (dst, src) in events.iter_mut().zip(&from) {
+        *dst = src.1;
+    }
 }
 
 /// The zero of a non-decreasing `derivative` on [lo, hi] by bisection (an end when it does not change
@@ -1100,6 +1160,8 @@ impl Projection {
 pub struct Solved {
     pub products: Vec<[f64; 3]>,
     pub specular: Vec<f64>,
+    /// Per object: its pixels that receive direct light (filled by `Kernel::refine` only).
+    pub lit: Vec<usize>,
 }
 
 /// Per-channel sums over an object's informing pixels (t < saturation): diffuse factor a, specular

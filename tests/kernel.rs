@@ -656,6 +656,60 @@ fn refined_products_are_exact_on_a_clean_glossy_image() {
     );
 }
 
+#[test]
+fn l1_line_min_finds_the_global_minimum_of_the_clipped_loss() {
+    use rtloop::kernel::l1_line_min;
+    let mut rng = Rng::new(41);
+    for trial in 0..200 {
+        let n = 1 + trial % 60;
+        let terms: Vec<(f64, f64, f64, bool)> = (0..n)
+            .map(|_| {
+                let k = 0.01 + rng.uniform();
+                let o = if rng.uniform() < 0.3 {
+                    0.3 * rng.uniform()
+                } else {
+                    0.0
+                };
+                let saturated = rng.uniform() < 0.25;
+                let y = if saturated { 1.0 } else { rng.uniform() };
+                (k, o, y, saturated)
+            })
+            .collect();
+        let top = 1.0;
+        let loss = |x: f64| -> f64 {
+            terms
+                .iter()
+                .map(|&(k, o, y, sat)| {
+                    let m = (k * x + o).min(top);
+                    if sat {
+                        top - m
+                    } else {
+                        (m - y).abs()
+                    }
+                })
+                .sum()
+        };
+        let (lo, hi) = (0.0, 3.0 + 10.0 * rng.uniform());
+        let x = l1_line_min(terms.iter().copied(), (lo, hi), top);
+        assert!((lo..=hi).contains(&x));
+        // The exact loss is piecewise linear: its minimum over [lo, hi] is at a breakpoint or an end.
+        let mut candidates = vec![lo, hi];
+        for &(k, o, y, _) in &terms {
+            candidates.extend([(y - o) / k, (top - o) / k]);
+        }
+        let best = candidates
+            .into_iter()
+            .filter(|c| (lo..=hi).contains(c))
+            .map(loss)
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            loss(x) <= best + 1e-6 * (1.0 + best),
+            "trial {trial}: {} at {x} vs {best}",
+            loss(x)
+        );
+    }
+}
+
 /// The loss-space tests' allowance for the kernel's table encoding against the plain path's exact one:
 /// at most 2e-5 per encoded value, so 4e-5 per difference, times the penalty's slope (1 for L1 and
 /// Huber, 2|d| for L2), per term.

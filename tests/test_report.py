@@ -255,11 +255,11 @@ def test_page_is_self_contained(projected, photo, tmp_path):
         assert name in page
 
     # Written again with a coarser strip: stale strip frames go, nothing else is left behind.
-    result.uncertainty = {"light.position.x": 0.01}
+    saved, result.uncertainty = result.uncertainty, {"light.position.x": 0.01}
     try:
         rep2 = rtloop.report(result, out, generations=rows, strip_every=100)
     finally:
-        del result.uncertainty
+        result.uncertainty = saved  # the fixture is shared: ``del`` would leave the class default, None
     assert "Uncertainty" in out.read_text(encoding="utf-8")
     kept = {p.name for p in rep.files if not p.name.startswith(("strip_", "param_"))}
     assert sorted(os.listdir(tmp_path / "deep" / "report")) == sorted({p.name for p in rep2.files} | kept)
@@ -303,6 +303,46 @@ def test_truth_errors(projected):
     other["objects"][0]["name"] = "sphere"
     with pytest.raises(rtloop.RtloopError, match="ball"):
         truth_errors(result, other)
+
+
+def test_directional_light_uncertainty_is_one_line_in_degrees(projected, tmp_path):
+    """A directional light's uncertainty: the two angles' sigmas (radians, marked so) and, on one row of
+    the uncertainty table, the cone in degrees from result.uncertainty["light_direction"]."""
+    truth = truth_dict()
+    sun = np.array([0.6, 1.0, -0.4])
+    truth["light"] = {"type": "directional", "direction": list(sun / np.linalg.norm(sun)), "intensity": 2.5}
+    truth["fit"].pop("light.position")
+    truth["fit"]["light.direction"] = {"min": [-1, 0.05, -1], "max": [1, 1, 1]}
+    truth["fit"]["light.intensity"] = {"min": 0.1, "max": 20}
+    start = json.loads(json.dumps(truth))
+    start["light"]["direction"] = [0.0, 1.0, 0.0]
+    clean = rtloop.render(truth)
+    photo = np.minimum(clean + 0.01 * np.random.default_rng(0).normal(size=clean.shape), 1.0)
+    result = rtloop.fit(start, photo.astype(np.float32), seed=1, population=8, generations=10)
+    cone = result.uncertainty["light_direction"]
+    assert cone["angle_deg"] > 0 and cone["rms_angle_deg"] >= cone["angle_deg"]
+    rep = rtloop.report(result, tmp_path / "r.html", objective=photo)
+    page = rep.path.read_text(encoding="utf-8")
+    rows = re.findall(r"<tr>(.*?)</tr>", page)
+    line = [r for r in rows if "light direction" in r]
+    assert len(line) == 1, line
+    cells = re.findall(r"<td[^>]*>(.*?)</td>", line[0])
+    assert cells == ["light direction (angle, degrees)",
+                     f"{cone['angle_deg']:.3g}° along the worse axis, {cone['rms_angle_deg']:.3g}° rms"]
+    first = re.findall(r"<tr><td[^>]*>(.*?)</td>", page)  # the first cell of every table row
+    assert [n for n in first if n.startswith(("light.direction.u", "light.direction.v"))] == [
+        "light.direction.u (rad)", "light.direction.v (rad)"]
+    assert first.index("light direction (angle, degrees)") == first.index("light.direction.v (rad)") + 1
+    # An angle the image does not determine: the row says so.
+    result.uncertainty = {**result.uncertainty, "light_direction": {**cone, "angle_deg": None,
+                                                                     "rms_angle_deg": None}}
+    page = rtloop.report(result, tmp_path / "r.html").path.read_text(encoding="utf-8")
+    assert "<td>light direction (angle, degrees)</td><td>not determined</td>" in page
+    # A point light has no such row.
+    point, _ = projected
+    assert point.uncertainty["sigma"]
+    page = rtloop.report(point, tmp_path / "p.html").path.read_text(encoding="utf-8")
+    assert "Uncertainty" in page and "light direction" not in page and "(rad)" not in page
 
 
 def test_import_rtloop_does_not_import_matplotlib():

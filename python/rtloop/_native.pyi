@@ -72,7 +72,13 @@ def optimize(
     norm: str = "l1",
     with_products: bool = True,
     space: str = "linear",
-) -> dict[str, Any]: ...
+) -> dict[str, Any]:
+    """Keys: x, objectives, evaluations, generations, stopped, stop_reason, active_pixels, polish (when
+    run); for the projected loss also products (per object [P_r, P_g, P_b, Q]: the products minimising
+    the loss at x), lit_pixels (per object) and search_objectives (the loss at the least-squares
+    products the search ranked candidates by). product_bounds: (objects, 3, 2), or (objects, 4, 2) whose
+    row 4 bounds Q = intensity x specular. space: "linear" or "srgb" (the loss compares the sRGB
+    encodings of the clipped render and of target; the least-squares products stay linear)."""
 
 # Test hooks for the optimisers (rust/python/de.rs), used by tests/test_de_scipy.py.
 def minimize_test_function(

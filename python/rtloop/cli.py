@@ -54,9 +54,11 @@ The paper's method ("--protocol paper") runs two stages:
   2. colour  fixes that light and frees the rest (albedos, ...), matching R, G
              and B separately on pixels sampled inside each object's visible,
              lit area.
-The default protocol "rtloop" adds a refine pass (light-refine, colour-refine)
-or, for a matte scene without ambient light, runs one stage, light+colour,
-that searches the light's position and solves the colours in closed form.
+The default protocol "rtloop", for a scene without ambient light, runs one
+stage, light+colour, that searches the light's position (and any free
+shininess) and solves the colours (and intensity x specular of glossy objects)
+in closed form; other scenes get the two stages plus a refine pass
+(light-refine, colour-refine).
 The first number of --generations applies to the light stages (and
 light+colour), the second to the colour stages.
 """

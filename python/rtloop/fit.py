@@ -1,11 +1,13 @@
 """The fit: the paper's two stages, or rtloop's closed-form method, with all the arithmetic in Rust.
 
-Method ``projected`` (the default protocol ``rtloop`` uses it whenever the scene allows): for a matte
-scene without ambient light, every pixel is linear in the products exposure x intensity x colour x albedo
-of its object. For each candidate light position (or direction) those products are solved in closed form
-(least squares over the unsaturated pixels away from silhouettes, clamped to their bounds) inside the
-fitness, so L-SHADE searches only the light's three coordinates against the whole-image loss. This
-removes stage 1's bias from the wrong starting colours and stage 2's separate search.
+Method ``projected`` (the default protocol ``rtloop`` uses it whenever the scene allows): for a scene
+without ambient light, every pixel is linear in the products exposure x intensity x colour x albedo of its
+object, and for a glossy object in intensity x specular. For each candidate light position (or direction)
+and shininess those products are solved in closed form (least squares over the unsaturated pixels away
+from silhouettes, clamped to their bounds) inside the fitness, so L-SHADE searches only the light's three
+coordinates (and any free shininess) against the whole-image loss. This removes stage 1's bias from the
+wrong starting colours and stage 2's separate search. The products reported are re-solved at the fitted
+light to minimise the loss itself, saturated pixels one-sided (see the README, "Photos saturate").
 
 Stage 1 ("light") frees the light (``light.*`` paths of the fit section) and minimises the sum of
 absolute RGB differences over the whole image, every other parameter held at the scene's value.
@@ -81,8 +83,11 @@ class StageResult:
     pixels: int
     #: (generation, fitness, objectives, x) of the best individual of every generation.
     history: list[tuple[int, float, list[float], np.ndarray]] = field(default_factory=list)
-    #: For the projected loss: the closed-form products (object x RGB) of the best individual.
+    #: For the projected loss: the closed-form products of the best individual, per object
+    #: [P_r, P_g, P_b, Q] (Q = intensity x specular, 0 for a matte object).
     products: list[list[float]] | None = None
+    #: For the projected loss: per object, its (unmasked) pixels that the fitted light reaches.
+    lit_pixels: list[int] | None = None
 
 
 @dataclass
@@ -334,7 +339,7 @@ def fit(
             name=name, paths=paths, param_names=stage_scene.param_names(paths), x=np.asarray(out["x"]),
             objectives=list(out["objectives"]), evaluations=out["evaluations"], generations=generations_run,
             seconds=time.perf_counter() - t, loss=loss, pixels=int(out["active_pixels"]), history=history,
-            products=out.get("products"),
+            products=out.get("products"), lit_pixels=out.get("lit_pixels"),
         )
 
     def light_stage(name: str, stage_scene: Scene, stage_seed: int) -> Scene:
@@ -382,6 +387,7 @@ def fit(
                 product_bounds=_product_bounds(scene), method=optimizer, polish=polish)
         stages.append(s)
         current = _split_products(current.with_params(list(s.x), where), s.products, scene)
+        current = _keep_undetermined(current, scene, all_paths, ident, s.lit_pixels)
     else:
         if proto.get("projected"):
             settings["projection_unavailable"] = why_not
@@ -394,8 +400,8 @@ def fit(
             current = light_stage("light-refine", _narrowed(current, light_paths), int(seeds[2]))
             current = _restore_bounds(current, scene)
             current = colour_stage("colour-refine", current, int(seeds[3]))
-    current = _restore_bounds(current, scene)
-    current = _keep_undetermined(current, scene, all_paths, ident)
+        current = _restore_bounds(current, scene)
+        current = _keep_undetermined(current, scene, all_paths, ident)
     values = current.get_params(all_paths)
     result = FitResult(
         scene=current,
@@ -433,12 +439,15 @@ def lit_pixel_counts(scene: Scene) -> list[int]:
     return [int(((ids == k) & lit).sum()) for k in range(len(d["objects"]))]
 
 
-def _keep_undetermined(fitted: Scene, original: Scene, paths: list[str], ident: dict[str, Any]) -> Scene:
+def _keep_undetermined(fitted: Scene, original: Scene, paths: list[str], ident: dict[str, Any],
+                       counts: list[int] | None = None) -> Scene:
     """An object the fitted light leaves unlit in every visible pixel says nothing about its albedo (a
-    sphere lit only from behind, one hidden by another): report it and keep the scene's own value."""
+    sphere lit only from behind, one hidden by another): report it and keep the scene's own value.
+    ``counts``: lit pixels per object when the search already knows them (else rendered here)."""
     if "ambient" in paths or any(v != 0 for v in scene_to_dict(fitted)["ambient"]):
         return fitted  # ambient light still shows the albedo
-    counts = lit_pixel_counts(fitted)
+    if counts is None:
+        counts = lit_pixel_counts(fitted)
     undetermined = []
     for name, n in zip(fitted.object_names, counts):
         p = f"objects.{name}.albedo"

@@ -424,6 +424,10 @@ _SAFE = re.compile(r"[^A-Za-z0-9_.+-]+")
 _OURS = re.compile(r"^(strip_\d+_.*|param_.*)\.png$")
 
 
+#: The two angles of a directional light in rtloop.uncertainty's sigma (radians).
+_ANGLE_NAMES = ("light.direction.u", "light.direction.v")
+
+
 def _fmt(v: Any, digits: int = 6) -> str:
     if v is None:
         return "–"
@@ -732,8 +736,17 @@ def report(
     if uncertainty:
         page.add("<h3>Uncertainty (1 sigma, Gauss-Newton at the optimum, from the residual)</h3>")
         sigma = uncertainty.get("sigma", uncertainty) if isinstance(uncertainty, dict) else {}
-        page.add(_table(["parameter", "sigma"], [[str(k), "not determined" if v is None else _fmt(v)]
-                                                  for k, v in sigma.items()]))
+        body = [[f"{k} (rad)" if str(k) in _ANGLE_NAMES else str(k), "not determined" if v is None else _fmt(v)]
+                for k, v in sigma.items()]
+        cone = uncertainty.get("light_direction") if isinstance(uncertainty, dict) else None
+        if isinstance(cone, dict):  # a directional light: its two angles (radians) as one cone, in degrees
+            line = ["light direction (angle, degrees)", "not determined"]
+            if cone.get("angle_deg") is not None and cone.get("rms_angle_deg") is not None:
+                line[1] = (f"{_fmt(cone['angle_deg'], 3)}° along the worse axis, "
+                           f"{_fmt(cone['rms_angle_deg'], 3)}° rms")
+            after = [i for i, row in enumerate(body) if row[0].startswith("light.direction.")]
+            body.insert(after[-1] + 1 if after else len(body), line)
+        page.add(_table(["parameter", "sigma"], body))
         for w in (uncertainty.get("warnings", []) if isinstance(uncertainty, dict) else []):
             page.add(f"<p class='note'>{html.escape(str(w))}</p>")
 

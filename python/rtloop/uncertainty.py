@@ -4,6 +4,8 @@
     u = estimate_uncertainty(result, photo)
     u["sigma"]["light.position.x"]      # one standard deviation, metres
     u["sigma"]["products.ball.r"]       # exposure x intensity x colour x albedo of the ball, red
+    u["sigma"]["products.ball.specular"]  # intensity x specular of a glossy ball
+    u["sigma"]["objects.ball.shininess"]  # its Blinn-Phong exponent, when free
     u["sigma"]["light.direction.u"]     # a directional light: radians (see "Directional light")
 
 Residuals are r(θ) = min(render(θ), 1) - image over every used pixel and channel. Near the optimum
@@ -14,15 +16,23 @@ with steps of 1e-3 of each parameter's scale (its bound range; 1 rad for a direc
 works in float32, and smaller steps let its rounding through (the intensity-albedo degeneracy then no
 longer looks singular). The image is linear in an albedo (a product), so an albedo's column is its exact
 derivative instead, exposure x (ambient + light x the unit-light render) on the object's pixels: no
-render, and none of the float32 rounding of a difference (finite differences agree with it to a few 1e-6
-in sigma, about their own rounding; ``EXACT_ALBEDO = False`` renders them).
+render, and none of the float32 rounding of a difference. It is linear in a specular (the specular
+product) too: its column is the lobe alone, one render of the scene with every albedo 0 and the glossy
+objects' specular 1 for all of them. Finite differences agree with both to a few 1e-5 of the column and
+a few 1e-6 in sigma, about their own rounding (``EXACT_ALBEDO = False`` renders them). The shininess, the
+light's position and its direction have no such form: finite differences.
 
-Which parameters. A matte scene without ambient light fixes only exposure x intensity x colour x albedo
-per object and channel (``result.identifiability["degenerate"]``), so when every object's albedo is free
-those *products* are the parameters (varied by scaling albedos under a light of unit intensity and
-colour, exposure 1), with the light position or direction and any other free parameter; their names are
-``products.NAME.r|g|b``. Otherwise the scene's own fit parameters are used (``params="scene"`` forces
-this, ``params="products"`` insists on products).
+Which parameters. A scene without ambient light fixes only exposure x intensity x colour x albedo per
+object and channel (``result.identifiability["degenerate"]``) and, for a glossy object whose specular is
+free, Q = intensity x specular (the highlight's strength): the render is P_c a + exposure x colour_c x
+Q b, a the unit-light diffuse factor and b the unit-light lobe, as in the fit's closed-form solve. So
+when every object's albedo is free, those *products* are the parameters, ``products.NAME.r|g|b`` and
+``products.NAME.specular``, with the light position or direction and any other free parameter (a free
+shininess keeps its name, ``objects.NAME.shininess``). They are varied in a scene whose light has
+intensity 1, exposure 1 and the fitted exposure x colour as its colour, with albedo P_c / (exposure x
+colour_c) and specular Q. Otherwise, and where a highlight of known strength (a fixed non-zero specular)
+measures the light or a free light colour is seen in a fitted highlight, the scene's own fit parameters
+are used (``params="scene"`` forces this, ``params="products"`` insists on products).
 
 Directional light. Its direction is a unit vector d (searched as three components, normalised); sigma is
 given for two angles about the fitted d, in radians: d turned by the angle |(a, b)| towards a u + b v,
@@ -34,11 +44,17 @@ larger eigenvalue of the angles' 2 x 2 covariance (one sigma along the worse axi
 = sqrt(sigma_u² + sigma_v²), the rms angle between the fitted and the true direction (None where an angle
 is not determined).
 
-Which pixels. Pixels saturated in the objective (any channel >= 0.999) say only "at least 1"; pixels on a
+Which pixels. A channel saturated in the objective (>= 0.999) says only "at least 1": it is left out,
+but the pixel's other channels are used, as the fit's closed-form solve uses them (a highlight that
+saturates red still shows in green and blue, and those channels measure the specular product and the
+shininess: leaving out whole pixels overstated their sigma 2.4 and 1.6 times against the actual spread
+of the glossy ball in tests/test_uncertainty.py). Pixels on a
 silhouette (a 4-neighbour shows another object) and on a shadow edge (a 4-neighbour differs in whether the
 light reaches it) change discontinuously with the parameters, which one sample per pixel cannot represent
-as a derivative. All three are left out, and with ``clip`` so is a pixel whose render crosses 1 within a
-finite-difference step (the clip's kink); everything else, background included, is used.
+as a derivative. Both are left out, as is a pixel saturated in every channel, and with ``clip`` a pixel
+whose render crosses 1 within a finite-difference step in a channel that is not saturated (the clip's
+kink); everything else, background included, is used. ``excluded`` counts these pixels, and in
+``saturated_channels`` the saturated channels left out of pixels otherwise used.
 
 Not determined. The Jacobian's columns are scaled to unit norm and decomposed (singular values and
 vectors: from the eigen-decomposition of the scaled JᵀJ when every singular value is above GRAM_RCOND of
@@ -53,8 +69,9 @@ adds its own (small) scatter. sigma describes the noise in the photo under the m
 wrong model (a misplaced camera, a wrong shape, an unmodelled light) or a fit short of its optimum: both
 show as a ``residual_rms`` above the photo's noise, and s², hence sigma, grows with them.
 
-Cost: one render at the optimum, one for the object index and the unit-light factor, and two per
-parameter other than the albedos (the light's position or direction), on a handful of used-pixel arrays.
+Cost: one render at the optimum, one for the object index and the unit-light factor, one for the lobes
+when a specular is free, and two per parameter other than the albedos and speculars (the light's
+position or direction, a shininess), on a handful of used-pixel arrays.
 """
 
 from __future__ import annotations
@@ -73,7 +90,7 @@ __all__ = ["estimate_uncertainty"]
 
 #: Default finite-difference step: this fraction of each parameter's scale (its bound range; 1 rad for an angle).
 STEP_FRACTION = 1e-3
-#: Objective pixels with any channel at or above this are saturated and left out.
+#: Objective channels at or above this are saturated and left out (the pixel's other channels are used).
 SATURATED = 0.999
 #: Singular values below this fraction of the largest (unit-norm columns) count as zero.
 RCOND = 1e-4
@@ -84,7 +101,8 @@ NULL_COMPONENT = 1e-3
 GRAM_RCOND = 1e-3
 #: The scale of a direction angle (radians): the default step is STEP_FRACTION of it.
 ANGLE_SCALE = 1.0
-#: Albedo columns from the exact derivative rather than finite differences (False: render them, as a check).
+#: Albedo and specular columns from the exact derivative rather than finite differences (False: render
+#: them, as a check).
 EXACT_ALBEDO = True
 #: Rows per block of the tall-skinny QR (see _svd_scaled).
 _QR_BLOCK = 512
@@ -105,10 +123,13 @@ class _Space:
     hi: np.ndarray
     scale: np.ndarray
     albedo: dict[int, tuple[int, int]]  # parameter index -> (object index, channel) of an albedo
+    specular: dict[int, int]  # parameter index -> object index of a specular (the image is linear in it)
+    factor: np.ndarray  # work's value / the parameter's (1 but for a product under a coloured work light)
     direction: tuple[int, np.ndarray, np.ndarray, np.ndarray] | None  # index of angle u, d, u, v
 
     def native(self, theta: np.ndarray) -> list[float]:
         """``work``'s parameter vector for ``theta`` (the two angles become a unit direction)."""
+        theta = theta * self.factor
         if self.direction is None:
             return [float(v) for v in theta]
         k, d, u, v = self.direction
@@ -136,7 +157,8 @@ def estimate_uncertainty(
     Returns a JSON-able dict: ``method`` ("gauss-newton"), ``names``, ``values`` (the parameters at the
     optimum; 0 for the direction angles), ``sigma`` ({name: float or None}), ``correlation`` (rows and
     columns in ``names`` order, None where a parameter is not determined), ``residual_rms``, ``pixels``
-    (used), ``excluded`` (saturated / silhouette / shadow-edge / clip-kink pixel counts), ``dof``,
+    (used), ``excluded`` (saturated / silhouette / shadow-edge / clip-kink pixel counts, and saturated
+    channels left out of pixels otherwise used), ``dof``,
     ``condition`` (of the column-scaled Jacobian over the determined parameters), ``parametrization``,
     ``step`` and ``warnings``; for a directional light also ``light_direction`` (see the module docstring).
     """
@@ -170,8 +192,8 @@ def estimate_uncertainty(
     # Pixels the model can represent as a smooth function of the parameters.
     ids, unit = _ids_and_unit_light(wd, work)
     lit = unit > 0
-    sat = target.reshape(-1, 3) >= SATURATED
-    saturated = (sat[:, 0] | sat[:, 1] | sat[:, 2]).reshape(ids.shape)
+    sat = target.reshape(-1, 3) >= SATURATED  # per channel: the others of the pixel still count
+    saturated = sat.all(axis=1).reshape(ids.shape)
     silhouette = _edges(ids)
     shadow_edge = _edges(np.where(ids >= 0, lit.astype(np.int32), -1)) & ~silhouette
     use = ~(saturated | silhouette | shadow_edge)
@@ -179,14 +201,17 @@ def estimate_uncertainty(
         use &= np.asarray(mask, bool)
     idx = np.flatnonzero(use)  # everything below works on the used pixels only
     n = idx.size
+    sat_u = np.take(sat, idx, axis=0)  # saturated channels of used pixels: left out one by one
+    free_u = ~sat_u
     raw0_img = raw(theta0)
     raw0 = np.take(raw0_img.reshape(-1, 3), idx, axis=0)
     clipped0 = raw0 >= 1.0
 
     # Jacobian by central differences (one-sided where a step would cross a bound). With ``clip``, a pixel
-    # whose render crosses 1 inside a step sits on the clip's kink and is left out ("clip_kink"). The
-    # image is linear in an albedo: its column is the exact derivative (the unit-light render, scaled),
-    # with no render, and a pixel is on the kink where that line crosses 1 inside the step.
+    # whose render crosses 1 inside a step in a channel that is not saturated sits on the clip's kink and
+    # is left out ("clip_kink"). The image is linear in an albedo and in a specular: their columns are
+    # the exact derivatives (the unit-light render, scaled; the lobe alone), with no render per
+    # parameter, and a pixel is on the kink where that line crosses 1 inside the step.
     steps = _steps(names, space.scale, step)
     P = len(names)
     kink = np.zeros(n, dtype=bool)
@@ -198,7 +223,7 @@ def estimate_uncertainty(
         if clip:
             cross = (g >= 1.0) != clipped0
             if cross.any():
-                kink[cross.any(axis=1)] = True
+                kink[(cross & free_u).any(axis=1)] = True
             g = np.minimum(g, np.float32(1.0))
         return g.ravel()
 
@@ -206,7 +231,10 @@ def estimate_uncertainty(
     ids_u = np.take(ids.ravel(), idx)
     unit_u = np.take(unit.ravel(), idx).astype(np.float64)
     light_rgb = np.array(wd["light"]["color"], float) * wd["light"]["intensity"]
-    pixels_of: dict[int, np.ndarray] = {}
+    lobe_u = None
+    if EXACT_ALBEDO and space.specular:
+        lobe_u = np.take(_lobes(wd, set(space.specular.values())).reshape(-1, 3), idx, axis=0).astype(np.float64)
+    pixels_of: dict[int, tuple[np.ndarray, ...]] = {}
     for k in range(P):
         h = steps[k]
         up_ok, down_ok = theta0[k] + h <= space.hi[k], theta0[k] - h >= space.lo[k]
@@ -221,21 +249,30 @@ def estimate_uncertainty(
         else:
             tm[k] -= h
             denom = h
-        if EXACT_ALBEDO and k in space.albedo:
-            o, c = space.albedo[k]
-            if o not in pixels_of:
-                pixels_of[o] = np.flatnonzero(ids_u == o)
-            on = pixels_of[o]
-            slope = wd["exposure"] * (wd["ambient"][c] + light_rgb[c] * unit_u[on])
+        if EXACT_ALBEDO and (k in space.albedo or k in space.specular):
+            if k in space.albedo:
+                o, c = space.albedo[k]
+                chans = slice(c, c + 1)
+            else:
+                o, chans = space.specular[k], slice(0, 3)
+            if o not in pixels_of:  # the object's used pixels, their render and clip state at the optimum
+                on = np.flatnonzero(ids_u == o)
+                pixels_of[o] = (on, raw0[on].astype(np.float64), clipped0[on], free_u[on])
+            on, base, was, free = pixels_of[o]
+            base, was, free = base[:, chans], was[:, chans], free[:, chans]  # views
+            if k in space.albedo:  # d render / d albedo: exposure x (ambient + light x unit-light factor)
+                slope = (wd["exposure"] * (wd["ambient"][c] + light_rgb[c] * unit_u[on]))[:, None]
+            else:  # d render / d specular: the lobe alone (albedo 0, specular 1)
+                slope = lobe_u[on]
+            slope = slope * space.factor[k]  # per unit of the parameter
             moved = [t - theta0[k] for t in (tp[k], tm[k]) if t != theta0[k]]
             if clip:
-                base = raw0[on, c].astype(np.float64)
-                was = clipped0[on, c]
                 for dt in moved:
-                    kink[on[(base + dt * slope >= 1.0) != was]] = True
+                    hit = ((base + dt * slope >= 1.0) != was) & free
+                    kink[on[hit[:, 0] if hit.shape[1] == 1 else hit.any(axis=1)]] = True
                 slope = np.where(was, 0.0, slope)  # clipped at the optimum and on both sides: flat
             if moved:
-                Jt[k, 3 * on + c] = slope
+                Jt[k].reshape(-1, 3)[on, chans] = slope
         else:
             fp = clipped(raw(tp)) if tp[k] != theta0[k] else f0
             fm = clipped(raw(tm)) if tm[k] != theta0[k] else f0
@@ -247,18 +284,20 @@ def estimate_uncertainty(
             )
     r0 = np.subtract(f0, np.take(target.reshape(-1, 3), idx, axis=0).ravel(), dtype=np.float64)
     n_kink = int(kink.sum())
-    if n_kink:  # zero rows: the same JᵀJ, QR and |r|² as without them
-        rows = np.repeat(kink, 3)
+    drop = sat_u | kink[:, None]  # residuals left out
+    if drop.any():  # zero rows: the same JᵀJ, QR and |r|² as without them
+        rows = drop.ravel()
         Jt[:, rows] = 0.0
         r0[rows] = 0.0
     excluded = {
         "saturated": int(saturated.sum()),
+        "saturated_channels": int(sat_u[~kink].sum()),
         "silhouette": int((silhouette & ~saturated).sum()),
         "shadow_edge": int((shadow_edge & ~saturated).sum()),
         "clip_kink": n_kink,
     }
     n_pix = n - n_kink
-    n_res = 3 * n_pix
+    n_res = 3 * n_pix - excluded["saturated_channels"]
     rr = float(np.einsum("i,i->", r0, r0))  # not r0 @ r0: a threaded BLAS dot waits on the render's threads
 
     determined = np.ones(P, dtype=bool)
@@ -389,8 +428,12 @@ def _products_blocker(scene: Scene, d: dict[str, Any]) -> str | None:
         return "no light scale (intensity, colour, exposure) is free"
     if any(v != 0 for v in d["ambient"]) or "ambient" in paths:
         return "the scene has ambient light"
-    if any(o["material"]["specular"] != 0 for o in d["objects"]) or any(p.endswith(".specular") for p in paths):
-        return "an object has a specular term"
+    known = [o["name"] for o in d["objects"]
+             if o["material"]["specular"] != 0 and f"objects.{o['name']}.specular" not in paths]
+    if known:
+        return f"the specular of {', '.join(known)} is fixed (a highlight of known strength measures the light)"
+    if "light.color" in paths and any(p.endswith(".specular") for p in paths):
+        return "the light colour is free and a specular term is fitted (a highlight shows the light's colour)"
     return None
 
 
@@ -402,11 +445,21 @@ def _scene_space(scene: Scene, d: dict[str, Any]) -> tuple[_Space, dict[str, Any
 
 
 def _products_space(scene: Scene, d: dict[str, Any]) -> tuple[_Space, dict[str, Any]]:
-    """A scene whose albedos are the products under a unit light, and its parameters; ``d`` (the scene as
-    a dict) is changed into that scene's dict, and returned."""
+    """A scene that renders the products, and its parameters; ``d`` (the scene as a dict) is changed into
+    that scene's dict, and returned.
+
+    The work scene's light has intensity 1 and colour w = exposure x colour (the fitted values; 1 in a
+    channel where w is 0 and no specular is fitted), exposure 1: an albedo P_c / w_c there renders the
+    diffuse product P_c (the parameter's ``factor`` is 1 / w_c), and a specular Q renders the lobe
+    Q x w_c x lobe, as exposure x intensity x colour_c x specular x lobe does in the fitted scene.
+    """
     paths = scene.fit_paths
     light = np.array(d["light"]["color"], float) * d["light"]["intensity"] * d["exposure"]
-    color_scale = np.array(d["light"]["color"], float) * d["exposure"]
+    glossy = [o for o in d["objects"] if f"objects.{o['name']}.specular" in paths]
+    w = np.array(d["light"]["color"], float) * d["exposure"]
+    w_work = np.where((w > 0) | bool(glossy), w, 1.0)  # a dark channel stays dark only under a lobe
+    inv_w = np.divide(1.0, w_work, out=np.ones(3), where=w_work > 0)
+    color_scale = w
     if "light.intensity" in paths:
         ilo, ihi = scene.bounds(["light.intensity"])[0]
     else:
@@ -416,12 +469,15 @@ def _products_space(scene: Scene, d: dict[str, Any]) -> tuple[_Space, dict[str, 
         color_scale = d["exposure"] * np.array([cb[:, 0], cb[:, 1]])  # (2, 3): min and max
     else:
         color_scale = np.array([color_scale, color_scale])
+    e_range = np.ones(2)  # the exposure's bounds / its fitted value
     if "exposure" in paths:
-        elo, ehi = scene.bounds(["exposure"])[0]
-        color_scale = color_scale / d["exposure"] * np.array([[elo], [ehi]])
+        e_range = np.array(scene.bounds(["exposure"])[0]) / d["exposure"]
+        color_scale = color_scale * e_range[:, None]
     fit_old = d["fit"]
     fit_new: dict[str, Any] = {}
-    bounds: dict[str, tuple[float, float]] = {}  # the products' own bounds, by albedo component name
+    bounds: dict[str, tuple[float, float]] = {}  # the products' own bounds, by work's parameter name
+    factor: dict[str, float] = {}  # work's value / the product's, by work's parameter name
+    rename: dict[str, str] = {}  # work's parameter name -> the product's
     for p in ("light.position", "light.direction"):
         if p in paths:
             fit_new[p] = fit_old[p]
@@ -431,15 +487,26 @@ def _products_space(scene: Scene, d: dict[str, Any]) -> tuple[_Space, dict[str, 
         prod = light * np.array(o["material"]["albedo"], float)
         plo = ilo * color_scale[0] * ab[:, 0]
         phi = ihi * color_scale[1] * ab[:, 1]
-        o["material"]["albedo"] = [float(v) for v in prod]
-        top = float(max(np.max(phi), np.max(prod), 1.0))
+        o["material"]["albedo"] = [float(v) for v in prod * inv_w]
+        top = float(max(np.max(phi), np.max(prod), 1.0) * np.max(inv_w))
         fit_new[p] = {"min": [0.0, 0.0, 0.0], "max": [top] * 3}
-        for c, lo_c, hi_c in zip("rgb", plo, phi):
+        for c, lo_c, hi_c, f_c in zip("rgb", plo, phi, inv_w):
             bounds[f"{p}.{c}"] = (float(lo_c), float(hi_c))
+            factor[f"{p}.{c}"] = float(f_c)
+            rename[f"{p}.{c}"] = f"products.{o['name']}.{c}"
+    for o in glossy:
+        # Q = intensity x specular (at the fitted exposure, which the work light's colour carries).
+        p = f"objects.{o['name']}.specular"
+        klo, khi = scene.bounds([p])[0]
+        q = d["light"]["intensity"] * o["material"]["specular"]
+        o["material"]["specular"] = float(q)
+        bounds[p] = (float(ilo * klo * e_range[0]), float(ihi * khi * e_range[1]))
+        fit_new[p] = {"min": 0.0, "max": float(max(bounds[p][1], q, 1.0))}
+        rename[p] = f"products.{o['name']}.specular"
     for p in paths:
         if p not in _LIGHT_SCALE and p not in fit_new:
             fit_new[p] = fit_old[p]
-    d["light"]["intensity"], d["light"]["color"], d["exposure"] = 1.0, [1.0, 1.0, 1.0], 1.0
+    d["light"]["intensity"], d["light"]["color"], d["exposure"] = 1.0, [float(v) for v in w_work], 1.0
     d["fit"] = fit_new
     work = Scene(json.dumps(d, allow_nan=False))  # made from a valid scene: load_scene's checks not needed
     new_paths = list(work.fit_paths)
@@ -448,26 +515,35 @@ def _products_space(scene: Scene, d: dict[str, Any]) -> tuple[_Space, dict[str, 
     for i, name in enumerate(native_names):
         if name in bounds:
             b[i] = bounds[name]
-    prefix = {f"objects.{o['name']}.albedo.": f"products.{o['name']}." for o in d["objects"]}
-    rename = {name: prefix[name[:-1]] + name[-1] for name in bounds}
-    return _space(work, new_paths, d, b[:, 0], b[:, 1], rename), d
+    return _space(work, new_paths, d, b[:, 0], b[:, 1], rename, factor), d
 
 
 def _space(
-    work: Scene, paths: list[str], d: dict[str, Any], lo: np.ndarray, hi: np.ndarray, rename: dict[str, str]
+    work: Scene,
+    paths: list[str],
+    d: dict[str, Any],
+    lo: np.ndarray,
+    hi: np.ndarray,
+    rename: dict[str, str],
+    factor: dict[str, float] | None = None,
 ) -> _Space:
-    """The parameters of ``work``'s ``paths``: scales from the bounds, albedos marked as linear, and a
-    direction replaced by two angles about the fitted one (no bounds, scale ANGLE_SCALE)."""
+    """The parameters of ``work``'s ``paths``: scales from the bounds, albedos and speculars marked as
+    linear, and a direction replaced by two angles about the fitted one (no bounds, scale ANGLE_SCALE).
+    ``rename`` and ``factor`` (work's value / the parameter's, default 1) are by work's parameter name;
+    ``lo``, ``hi`` are the parameters' own bounds."""
     native = work.param_names(paths)
-    values = np.array(work.get_params(paths), dtype=np.float64)
+    fac = np.array([(factor or {}).get(name, 1.0) for name in native])
+    values = np.array(work.get_params(paths), dtype=np.float64) / fac
     rng = hi - lo
     scale = np.where(rng > 0, rng, np.maximum(np.abs(values), 1.0))
-    objects = {o["name"]: i for i, o in enumerate(d["objects"])}
-    albedo = {}
+    objects = {f"objects.{o['name']}.": i for i, o in enumerate(d["objects"])}
+    albedo, specular = {}, {}
     for i, name in enumerate(native):
-        parts = name.split(".")
-        if len(parts) == 4 and parts[0] == "objects" and parts[2] == "albedo":
-            albedo[i] = (objects[parts[1]], "rgb".index(parts[3]))
+        head, _, tail = name.rpartition(".albedo.")
+        if head + "." in objects and tail in ("r", "g", "b"):
+            albedo[i] = (objects[head + "."], "rgb".index(tail))
+        elif name.endswith(".specular") and name[: -len("specular")] in objects:
+            specular[i] = objects[name[: -len("specular")]]
     names = [rename.get(name, name) for name in native]
     direction = None
     if "light.direction.x" in native:
@@ -478,9 +554,11 @@ def _space(
         lo = np.concatenate([lo[:k], [-np.inf, -np.inf], lo[k + 3 :]])
         hi = np.concatenate([hi[:k], [np.inf, np.inf], hi[k + 3 :]])
         scale = np.concatenate([scale[:k], [ANGLE_SCALE, ANGLE_SCALE], scale[k + 3 :]])
+        fac = np.concatenate([fac[:k], [1.0, 1.0], fac[k + 3 :]])
         albedo = {(i - 1 if i > k else i): oc for i, oc in albedo.items()}
+        specular = {(i - 1 if i > k else i): o for i, o in specular.items()}
         direction = (k, dvec, u, v)
-    return _Space(work, paths, names, values, lo, hi, scale, albedo, direction)
+    return _Space(work, paths, names, values, lo, hi, scale, albedo, specular, fac, direction)
 
 
 def _tangent_basis(d: np.ndarray, up: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -542,6 +620,22 @@ def _ids_and_unit_light(d: dict[str, Any], work: Scene) -> tuple[np.ndarray, np.
     if not np.array_equal(ids + 1, green) or ids.max(initial=-1) >= len(d["objects"]):
         ids = _native.object_ids(work)
     return ids, img[..., 0]
+
+
+def _lobes(d: dict[str, Any], objects: set[int]) -> np.ndarray:
+    """The scene ``d`` with only the specular lobes of ``objects`` (specular 1, their shininess; every
+    albedo, the ambient light and the background 0): exactly the derivative of the render with respect
+    to those objects' specular, on their pixels."""
+    lobes = {
+        **d,
+        "ambient": [0.0, 0.0, 0.0],
+        "background": [0.0, 0.0, 0.0],
+        "objects": [{**o, "material": {"albedo": [0.0, 0.0, 0.0], "specular": 1.0 if k in objects else 0.0,
+                                       "shininess": o["material"]["shininess"]}}
+                    for k, o in enumerate(d["objects"])],
+        "fit": {},
+    }
+    return _native.render(Scene(json.dumps(lobes, allow_nan=False)))
 
 
 def _edges(labels: np.ndarray) -> np.ndarray:

@@ -291,16 +291,32 @@ fn rows(s: &Solved) -> Vec<Vec<f64>> {
         .collect()
 }
 
-fn pool(threads: Option<usize>) -> PyResult<rayon::ThreadPool> {
+/// A worker pool of `threads` threads (all cores when `None`), started once per size and kept: starting
+/// threads costs more than a small fit's search. Results never depend on the pool (see `de`).
+pub(crate) fn pool(threads: Option<usize>) -> PyResult<std::sync::Arc<rayon::ThreadPool>> {
+    use std::collections::HashMap;
+    use std::sync::{Arc, Mutex, OnceLock};
+    static POOLS: OnceLock<Mutex<HashMap<Option<usize>, Arc<rayon::ThreadPool>>>> = OnceLock::new();
+    if threads == Some(0) {
+        return Err(PyValueError::new_err("threads must be >= 1"));
+    }
+    let mut pools = POOLS
+        .get_or_init(|| Mutex::new(HashMap::new()))
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    if let Some(p) = pools.get(&threads) {
+        return Ok(p.clone());
+    }
     let mut b = rayon::ThreadPoolBuilder::new();
     if let Some(n) = threads {
-        if n == 0 {
-            return Err(PyValueError::new_err("threads must be >= 1"));
-        }
         b = b.num_threads(n);
     }
-    b.build()
-        .map_err(|e| RtloopError::new_err(format!("cannot start worker threads: {e}")))
+    let p = Arc::new(
+        b.build()
+            .map_err(|e| RtloopError::new_err(format!("cannot start worker threads: {e}")))?,
+    );
+    pools.insert(threads, p.clone());
+    Ok(p)
 }
 
 /// Objective values of each row of `population` (N, D): float64 (N, n_objectives). `norm` is the
@@ -494,6 +510,7 @@ fn optimize<'py>(
     let d = PyDict::new(py);
     if let Some((solved, loss)) = refined {
         d.set_item("products", rows(&solved))?;
+        d.set_item("lit_pixels", solved.lit)?;
         d.set_item("search_objectives", result.best_objectives.clone())?;
         d.set_item("objectives", vec![loss.iter().sum::<f64>()])?;
     } else {
