@@ -303,7 +303,12 @@ impl Kernel {
                 && std::arch::is_x86_feature_detected!("fma")
             {
                 // SAFETY: the CPU supports the features the function was compiled for.
-                return unsafe { self.l1_avx2(p, clip, bound) };
+                return unsafe {
+                    match self.space {
+                        Space::Linear => self.l1_avx2(p, clip, bound, Identity),
+                        Space::Srgb => self.l1_avx2(p, clip, bound, SrgbLut::get()),
+                    }
+                };
             }
         }
         match self.space {
@@ -312,13 +317,17 @@ impl Kernel {
         }
     }
 
+    /// One function per encoding, so the linear space's is exactly the code it was without the option.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    unsafe fn l1_avx2(&self, p: &ShadeParams, clip: bool, bound: f64) -> [f64; 3] {
-        match self.space {
-            Space::Linear => self.l1_generic::<true, _>(p, clip, bound, Identity),
-            Space::Srgb => self.l1_generic::<true, _>(p, clip, bound, SrgbLut::get()),
-        }
+    unsafe fn l1_avx2<E: Encoding>(
+        &self,
+        p: &ShadeParams,
+        clip: bool,
+        bound: f64,
+        enc: E,
+    ) -> [f64; 3] {
+        self.l1_generic::<true, E>(p, clip, bound, enc)
     }
 
     #[inline(always)]
@@ -413,7 +422,16 @@ impl Kernel {
                 && std::arch::is_x86_feature_detected!("fma")
             {
                 // SAFETY: the CPU supports the features the function was compiled for.
-                return unsafe { self.projected_avx2(p, clip, proj, out, scratch, bound) };
+                return unsafe {
+                    match self.space {
+                        Space::Linear => {
+                            self.projected_avx2(p, clip, proj, out, scratch, bound, Identity)
+                        }
+                        Space::Srgb => {
+                            self.projected_avx2(p, clip, proj, out, scratch, bound, SrgbLut::get())
+                        }
+                    }
+                };
             }
         }
         match self.space {
@@ -432,9 +450,11 @@ impl Kernel {
         }
     }
 
+    /// One function per encoding, as `l1_avx2`.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    unsafe fn projected_avx2(
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn projected_avx2<E: Encoding>(
         &self,
         p: &ShadeParams,
         clip: bool,
@@ -442,21 +462,9 @@ impl Kernel {
         out: &mut Solved,
         scratch: &mut Vec<f32>,
         bound: f64,
+        enc: E,
     ) -> [f64; 3] {
-        match self.space {
-            Space::Linear => {
-                self.projected_generic::<true, _>(p, clip, proj, out, scratch, bound, Identity)
-            }
-            Space::Srgb => self.projected_generic::<true, _>(
-                p,
-                clip,
-                proj,
-                out,
-                scratch,
-                bound,
-                SrgbLut::get(),
-            ),
-        }
+        self.projected_generic::<true, E>(p, clip, proj, out, scratch, bound, enc)
     }
 
     #[inline(always)]
