@@ -20,7 +20,7 @@ and generations actually used, and the evaluations the fit reports, are in the C
 
 Usage (from the repository root, after ``pip install .[bench]``)::
 
-    python benches/speed_vs_error.py                 # all scenes, paper + rtloop, budgets 0.25 0.5 1, 2 seeds
+    python benches/speed_vs_error.py                 # all scenes, paper + rtloop, budgets 0.05 to 1, 2 seeds
     python benches/speed_vs_error.py --quick         # smoke run: 1 seed, smallest budget
     python benches/speed_vs_error.py --scenes DIR --seeds 3 --budgets 0.5 1 --methods rtloop --out /tmp/b
 
@@ -54,7 +54,7 @@ DEFAULT_SCENES = REPO.parent / "shared" / "scenes"
 SCORE_TOOL = REPO.parent / "shared" / "tools" / "score_result.py"
 DEFAULT_OUT = REPO / "benches" / "results"
 DEFAULT_METHODS = ["paper", "rtloop"]
-DEFAULT_BUDGETS = [0.05, 0.1, 0.25, 0.5, 1.0]
+DEFAULT_BUDGETS = [0.05, 0.1, 0.15, 0.2, 0.25, 0.35, 0.5, 1.0]
 SCENE_FILES = ("scene_input.json", "objective.png", "scene.json")
 #: Errors are drawn on log axes; exact zeros are drawn at this floor.
 LOG_FLOOR = 1e-6
