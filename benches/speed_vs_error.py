@@ -54,6 +54,9 @@ DEFAULT_SCENES = REPO.parent / "shared" / "scenes"
 SCORE_TOOL = REPO.parent / "shared" / "tools" / "score_result.py"
 DEFAULT_OUT = REPO / "benches" / "results"
 DEFAULT_METHODS = ["paper", "rtloop"]
+#: A method name ending in this runs the protocol without its Nelder-Mead polish, giving the polish's
+#: evaluations to the search instead (e.g. ``rtloop-nopolish``).
+NO_POLISH = "-nopolish"
 DEFAULT_BUDGETS = [0.05, 0.1, 0.15, 0.2, 0.25, 0.35, 0.5, 1.0]
 SCENE_FILES = ("scene_input.json", "objective.png", "scene.json")
 #: Errors are drawn on log axes; exact zeros are drawn at this floor.
@@ -96,8 +99,9 @@ def run_one(rtloop, score, scene_dir: Path, truth: dict, method: str, population
     t0 = time.perf_counter()
     scene = rtloop.load_scene(scene_dir / "scene_input.json")
     photo = rtloop.load_image(scene_dir / "objective.png", scene)
-    result = rtloop.fit(scene, photo, protocol=method, population=population, generations=generations,
-                        seed=seed, threads=threads, polish=polish, uncertainty=uncertainty)
+    result = rtloop.fit(scene, photo, protocol=method.removesuffix(NO_POLISH), population=population,
+                        generations=generations, seed=seed, threads=threads, polish=polish,
+                        uncertainty=uncertainty)
     seconds = time.perf_counter() - t0
     s = score(rtloop.scene_to_dict(result.scene), truth)
     return {
@@ -323,7 +327,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenes", type=Path, default=DEFAULT_SCENES, help="folder of scene folders")
     ap.add_argument("--out", type=Path, default=DEFAULT_OUT, help="where to write CSV, markdown and PNG")
     ap.add_argument("--seeds", type=int, default=2, help="seeds per configuration (0, 1, ...)")
-    ap.add_argument("--methods", nargs="+", default=DEFAULT_METHODS, help="protocols of rtloop.fit")
+    ap.add_argument("--methods", nargs="+", default=DEFAULT_METHODS,
+                    help=f"protocols of rtloop.fit; PROTOCOL{NO_POLISH} runs it without its polish, at equal cost")
     ap.add_argument("--budgets", nargs="+", type=float, default=DEFAULT_BUDGETS,
                     help="fractions of each protocol's population x generations")
     ap.add_argument("--threads", type=int, default=None, help="threads for rtloop.fit (default: all)")
@@ -355,7 +360,7 @@ def main(argv: list[str] | None = None) -> int:
     import rtloop
 
     protocols = importlib.import_module("rtloop.fit").PROTOCOLS
-    unknown = [m for m in args.methods if m not in protocols]
+    unknown = [m for m in args.methods if m.removesuffix(NO_POLISH) not in protocols]
     if unknown:
         ap.error(f"unknown method(s) {', '.join(unknown)} (known: {', '.join(protocols)})")
     score = load_score(SCORE_TOOL)
@@ -373,7 +378,12 @@ def main(argv: list[str] | None = None) -> int:
         truth = json.loads((scene_dir / "scene.json").read_text())
         for method in args.methods:
             for budget in budgets:
-                population, generations, polish = scaled_budget(protocols[method], budget)
+                population, generations, polish = scaled_budget(protocols[method.removesuffix(NO_POLISH)],
+                                                                budget)
+                if method.endswith(NO_POLISH) and polish:
+                    # The polish's evaluations go to the search instead: what the polish buys at equal cost.
+                    generations = (generations[0] + round(polish / population), generations[1])
+                    polish = 0
                 for seed in seeds:
                     row: dict[str, Any] = {
                         "scene": scene_dir.name, "method": method, "budget": budget, "seed": seed,
