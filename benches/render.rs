@@ -117,6 +117,60 @@ fn bench(c: &mut Criterion) {
     }
     g.finish();
 
+    // What one fit pays once, whatever its budget: building the projected fitness (primary rays, the
+    // per-object pixel groups) and the loss-minimising products at the end; and one candidate alone, as the
+    // polish evaluates them.
+    let mut g = c.benchmark_group("fixed");
+    let layout = ParamLayout::new(&scene, &position).unwrap();
+    let matte = Projection::matte(vec![[(0.0, 400.0); 3]; scene.objects.len()]);
+    let projected = || {
+        Fitness::new(
+            &scene,
+            layout.clone(),
+            &target,
+            None,
+            LossKind::L1Projected,
+            true,
+            Some(matte.clone()),
+        )
+        .unwrap()
+    };
+    g.bench_function("projected fitness new", |b| b.iter(projected));
+    let fitness = projected();
+    let truth = scene.light.position.to_vec();
+    g.bench_function("refined products", |b| b.iter(|| fitness.refined(&truth)));
+    for threads in [1, rayon::current_num_threads()] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        g.bench_function(format!("one candidate projected threads={threads}"), |b| {
+            b.iter(|| {
+                pool.install(|| {
+                    let mut o = [0.0];
+                    fitness.evaluate(&truth, &mut o);
+                    o
+                })
+            })
+        });
+        // Ten in a row inside the pool, as the polish runs them.
+        g.bench_function(
+            format!("10 candidates alone projected threads={threads}"),
+            |b| {
+                b.iter(|| {
+                    pool.install(|| {
+                        let mut o = [0.0];
+                        for _ in 0..10 {
+                            fitness.evaluate_alone(&truth, &mut o);
+                        }
+                        o
+                    })
+                })
+            },
+        );
+    }
+    g.finish();
+
     let mut g = c.benchmark_group("de");
     g.sample_size(10);
     let layout = ParamLayout::new(&scene, &stage1).unwrap();

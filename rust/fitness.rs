@@ -79,6 +79,15 @@ thread_local! {
     static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
 }
 
+/// `f` with this thread's scratch, or with a fresh one where the thread's is in use: a thread that waits
+/// inside a parallel evaluation may run another job of the pool (another fit's evaluation) meanwhile.
+fn with_scratch<R>(f: impl FnOnce(&mut Scratch) -> R) -> R {
+    SCRATCH.with(|s| match s.try_borrow_mut() {
+        Ok(mut s) => f(&mut s),
+        Err(_) => f(&mut Scratch::default()),
+    })
+}
+
 impl Fitness {
     /// `target` is the objective in linear RGB at the scene's size (row-major, 3 floats per pixel).
     /// `pixels` restricts the loss to those pixel indices (all pixels when `None`). With `clip`, rendered
@@ -256,9 +265,8 @@ impl Fitness {
     /// The closed-form solution for candidate `x`: diffuse products and specular products per object
     /// (`L1Projected` only; empty otherwise).
     pub fn solved(&self, x: &[f64]) -> Solved {
-        SCRATCH.with(|s| {
-            let mut s = s.borrow_mut();
-            self.fast_losses(x, &mut s, f64::INFINITY);
+        with_scratch(|s| {
+            self.fast_losses(x, s, f64::INFINITY, false);
             s.solved.clone()
         })
     }
@@ -277,6 +285,7 @@ impl Fitness {
             &mut solved,
             &mut scratch,
             f64::INFINITY,
+            false,
         );
         let mut loss = self.kernel.refine(self.clip, proj, &mut solved, &scratch);
         for c in 0..3 {
@@ -335,7 +344,8 @@ impl Fitness {
 
     /// The fused-kernel losses; exact when their total is `<= bound`, otherwise possibly a partial sum
     /// that already exceeds it.
-    fn fast_losses(&self, x: &[f64], s: &mut Scratch, bound: f64) -> [f64; 3] {
+    /// `parallel`: spread the pixels over the current rayon pool (the projected loss only; same value).
+    fn fast_losses(&self, x: &[f64], s: &mut Scratch, bound: f64, parallel: bool) -> [f64; 3] {
         let Scratch {
             params,
             solved,
@@ -345,10 +355,15 @@ impl Fitness {
         self.params_into(x, p);
         let kernel_bound = bound - (self.constant[0] + self.constant[1] + self.constant[2]);
         let mut acc = match &self.projection {
-            Some(proj) => {
-                self.kernel
-                    .projected(p, self.clip, proj, solved, irradiance, kernel_bound)
-            }
+            Some(proj) => self.kernel.projected(
+                p,
+                self.clip,
+                proj,
+                solved,
+                irradiance,
+                kernel_bound,
+                parallel,
+            ),
             None => self.kernel.l1(p, self.clip, kernel_bound),
         };
         for c in 0..3 {
@@ -359,7 +374,7 @@ impl Fitness {
 
     /// Per-channel sums of absolute differences for candidate `x` (the fused kernel).
     pub fn channel_losses(&self, x: &[f64]) -> [f64; 3] {
-        SCRATCH.with(|s| self.fast_losses(x, &mut s.borrow_mut(), f64::INFINITY))
+        with_scratch(|s| self.fast_losses(x, s, f64::INFINITY, false))
     }
 
     /// penalty(enc(m) - enc(t)) per channel for a clipped model `m` and objective `t`, with the exact
@@ -500,6 +515,15 @@ fn penalty_sums(fixed: &[(Vec3A, Vec3A)], norm: Norm, space: Space) -> [f64; 3] 
     acc
 }
 
+impl Fitness {
+    fn write(&self, c: [f64; 3], out: &mut [f64]) {
+        match self.kind {
+            LossKind::L1 | LossKind::L1Projected => out[0] = c[0] + c[1] + c[2],
+            LossKind::L1PerChannel => out.copy_from_slice(&c),
+        }
+    }
+}
+
 impl Objective for Fitness {
     fn n_objectives(&self) -> usize {
         match self.kind {
@@ -520,10 +544,13 @@ impl Objective for Fitness {
         } else {
             f64::INFINITY
         };
-        let c = SCRATCH.with(|s| self.fast_losses(x, &mut s.borrow_mut(), bound));
-        match self.kind {
-            LossKind::L1 | LossKind::L1Projected => out[0] = c[0] + c[1] + c[2],
-            LossKind::L1PerChannel => out.copy_from_slice(&c),
-        }
+        let c = with_scratch(|s| self.fast_losses(x, s, bound, false));
+        self.write(c, out);
+    }
+
+    /// The projected loss spreads one candidate's pixels over the pool (the same value as `evaluate`).
+    fn evaluate_alone(&self, x: &[f64], out: &mut [f64]) {
+        let c = with_scratch(|s| self.fast_losses(x, s, f64::INFINITY, true));
+        self.write(c, out);
     }
 }

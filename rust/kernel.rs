@@ -14,6 +14,7 @@
 //! space's loops are separate monomorphisations: see [`crate::space::Encoding`]).
 
 use glam::Vec3A;
+use rayon::prelude::*;
 
 use crate::render::{PShape, ShadeParams, Surfel};
 use crate::space::{Encoding, Identity, Space, SrgbLut};
@@ -407,6 +408,12 @@ impl Kernel {
     /// per-channel least-squares products P (clamped to their bounds), for objects with a specular term also
     /// the scalar specular product Q (see [`Projection`]), and the resulting per-channel loss.
     /// `scratch` holds the unit-light diffuse and specular factors per pixel between the two passes.
+    ///
+    /// With `parallel` the pixels of each object are split over the current rayon pool in runs of `CHUNK`
+    /// (for one candidate alone, as a local polish evaluates them; the early exit at `bound` is then
+    /// skipped). Either way every sum is taken run by run and the runs are added in order, so the result
+    /// is the same bit for bit, serial or parallel, on any number of threads.
+    #[allow(clippy::too_many_arguments)]
     pub fn projected(
         &self,
         p: &ShadeParams,
@@ -415,6 +422,7 @@ impl Kernel {
         out: &mut Solved,
         scratch: &mut Vec<f32>,
         bound: f64,
+        parallel: bool,
     ) -> [f64; 3] {
         #[cfg(target_arch = "x86_64")]
         {
@@ -424,20 +432,26 @@ impl Kernel {
                 // SAFETY: the CPU supports the features the function was compiled for.
                 return unsafe {
                     match self.space {
-                        Space::Linear => {
-                            self.projected_avx2(p, clip, proj, out, scratch, bound, Identity)
-                        }
-                        Space::Srgb => {
-                            self.projected_avx2(p, clip, proj, out, scratch, bound, SrgbLut::get())
-                        }
+                        Space::Linear => self
+                            .projected_avx2(p, clip, proj, out, scratch, bound, parallel, Identity),
+                        Space::Srgb => self.projected_avx2(
+                            p,
+                            clip,
+                            proj,
+                            out,
+                            scratch,
+                            bound,
+                            parallel,
+                            SrgbLut::get(),
+                        ),
                     }
                 };
             }
         }
         match self.space {
-            Space::Linear => {
-                self.projected_generic::<false, _>(p, clip, proj, out, scratch, bound, Identity)
-            }
+            Space::Linear => self.projected_generic::<false, _>(
+                p, clip, proj, out, scratch, bound, parallel, Identity,
+            ),
             Space::Srgb => self.projected_generic::<false, _>(
                 p,
                 clip,
@@ -445,6 +459,7 @@ impl Kernel {
                 out,
                 scratch,
                 bound,
+                parallel,
                 SrgbLut::get(),
             ),
         }
@@ -454,7 +469,7 @@ impl Kernel {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     #[allow(clippy::too_many_arguments)]
-    unsafe fn projected_avx2<E: Encoding>(
+    unsafe fn projected_avx2<E: Encoding + Send + Sync>(
         &self,
         p: &ShadeParams,
         clip: bool,
@@ -462,14 +477,15 @@ impl Kernel {
         out: &mut Solved,
         scratch: &mut Vec<f32>,
         bound: f64,
+        parallel: bool,
         enc: E,
     ) -> [f64; 3] {
-        self.projected_generic::<true, E>(p, clip, proj, out, scratch, bound, enc)
+        self.projected_generic::<true, E>(p, clip, proj, out, scratch, bound, parallel, enc)
     }
 
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    fn projected_generic<const AVX2: bool, E: Encoding>(
+    fn projected_generic<const AVX2: bool, E: Encoding + Send + Sync>(
         &self,
         p: &ShadeParams,
         clip: bool,
@@ -477,6 +493,7 @@ impl Kernel {
         out: &mut Solved,
         scratch: &mut Vec<f32>,
         bound: f64,
+        parallel: bool,
         enc: E,
     ) -> [f64; 3] {
         let light = Light {
@@ -501,59 +518,51 @@ impl Kernel {
             let e_all = &mut a_all[offset..offset + n];
             let s_all = &mut b_all[offset..offset + n];
             offset += n;
-            // The objective in the loss space (the solve below uses the linear `ts`).
-            let gt = if E::ENCODES { &g.te } else { &g.t };
             let Some(obj) = g.object else {
+                // Black background (ambient-free scene): enc(0) = 0.
+                let gt = if E::ENCODES { &g.te } else { &g.t };
                 for s in 0..n {
                     for c in 0..3 {
-                        // black background (ambient-free scene): enc(0) = 0
                         acc[c] += self.norm.penalty(gt[c][s]) as f64;
                     }
                 }
                 continue;
             };
-            let specular = proj.specular[obj].1 > 0.0;
-            let shininess = p.materials[obj].shininess;
+            let run = Run {
+                g,
+                light: &light,
+                specular: proj.specular[obj].1 > 0.0,
+                shininess: p.materials[obj].shininess,
+                sat,
+                top,
+                norm: self.norm,
+            };
             // Pass 1: unit-light irradiance / pi (and the specular factor), and the normal equations.
             let mut sums = SolveSums::default();
-            let mut start = 0;
-            while start < n {
-                let len = BLOCK.min(n - start);
-                let r = start..start + len;
-                let e = &mut e_all[r.clone()];
-                irradiance::<AVX2>(g, r.clone(), &light, e);
-                shadow(g, r.clone(), &light, e);
-                for ei in e.iter_mut() {
-                    *ei *= INV_PI;
+            if parallel {
+                let parts: Vec<SolveSums> = e_all
+                    .par_chunks_mut(CHUNK)
+                    .zip(s_all.par_chunks_mut(CHUNK))
+                    .enumerate()
+                    .map(|(k, (e, b))| run.factors_dispatch::<AVX2>(k * CHUNK, e, b))
+                    .collect();
+                for part in &parts {
+                    sums.add(part);
                 }
-                if specular {
-                    let b = &mut s_all[r.clone()];
-                    let norm = (shininess + 8.0) / 8.0;
-                    for (i, s) in r.clone().enumerate() {
-                        // (s+8)/(8 pi) max(0, n.h)^s cos / d² = e · (s+8)/8 · max(0, n.h)^s
-                        b[i] = if e[i] > 0.0 {
-                            (e[i] * norm * blinn_phong(g, s, &light, shininess)).min(f32::MAX)
-                        } else {
-                            0.0
-                        };
-                    }
-                    for c in 0..3 {
-                        sums.add_specular(c, e, b, &g.ts[c][r.clone()], sat);
-                    }
-                } else {
-                    for c in 0..3 {
-                        let (a, b) = normal_equations(e, &g.ts[c][r.clone()], sat);
-                        sums.sya[c] += a as f64;
-                        sums.saa[c] += b as f64;
-                    }
+            } else {
+                for (k, (e, b)) in e_all
+                    .chunks_mut(CHUNK)
+                    .zip(s_all.chunks_mut(CHUNK))
+                    .enumerate()
+                {
+                    sums.add(&run.factors::<AVX2>(k * CHUNK, e, b));
                 }
-                start += len;
             }
             let (pk, q) = solve_object(
                 &sums,
                 proj.weight,
                 &proj.diffuse[obj],
-                if specular {
+                if run.specular {
                     proj.specular[obj]
                 } else {
                     (0.0, 0.0)
@@ -563,33 +572,34 @@ impl Kernel {
             out.products[obj] = pk;
             out.specular[obj] = q;
             let pk: [f32; 3] = std::array::from_fn(|c| pk[c] as f32);
-            // Pass 2: the loss at those products (stopping once it exceeds `bound`).
-            let mut start = 0;
-            while start < n {
-                let len = BLOCK.min(n - start);
-                let r = start..start + len;
-                let e = &e_all[r.clone()];
-                let t = [&gt[0][r.clone()], &gt[1][r.clone()], &gt[2][r.clone()]];
-                let sums = if specular && q > 0.0 {
-                    let qw: [f32; 3] = std::array::from_fn(|c| (q * proj.weight[c] as f64) as f32);
-                    let b = &s_all[r];
-                    let mut sums = [0.0f32; 3];
+            let qw: [f32; 3] = std::array::from_fn(|c| (q * proj.weight[c] as f64) as f32);
+            let q_on = run.specular && q > 0.0;
+            // Pass 2: the loss at those products (serially, stopping once it exceeds `bound`).
+            let (e_all, s_all) = (&*e_all, &*s_all);
+            if parallel {
+                let parts: Vec<[f64; 3]> = e_all
+                    .par_chunks(CHUNK)
+                    .zip(s_all.par_chunks(CHUNK))
+                    .enumerate()
+                    .map(|(k, (e, b))| {
+                        run.loss_dispatch::<AVX2, E>(k * CHUNK, e, b, pk, qw, q_on, enc, None)
+                    })
+                    .collect();
+                for part in &parts {
                     for c in 0..3 {
-                        for i in 0..len {
-                            let v = (pk[c] * e[i] + qw[c] * b[i]).min(top);
-                            sums[c] += self.norm.penalty(enc.any(v) - t[c][i]);
-                        }
+                        acc[c] += part[c];
                     }
-                    sums
-                } else {
-                    rgb_loss_in(self.norm, e, t, [0.0; 3], pk, top, enc)
-                };
-                for c in 0..3 {
-                    acc[c] += sums[c] as f64;
                 }
-                start += len;
-                if acc[0] + acc[1] + acc[2] > bound {
-                    return acc;
+            } else {
+                for (k, (e, b)) in e_all.chunks(CHUNK).zip(s_all.chunks(CHUNK)).enumerate() {
+                    let part =
+                        run.loss::<AVX2, E>(k * CHUNK, e, b, pk, qw, q_on, enc, Some((acc, bound)));
+                    for c in 0..3 {
+                        acc[c] += part[c];
+                    }
+                    if acc[0] + acc[1] + acc[2] > bound {
+                        return acc;
+                    }
                 }
             }
         }
@@ -620,24 +630,18 @@ impl Kernel {
         let sat = if clip { SATURATED } else { f32::INFINITY };
         let top = if clip { 1.0f64 } else { f64::INFINITY };
         let srgb = self.space == Space::Srgb;
-        // A model value in the loss space.
-        let enc = |m: f32| match self.space {
-            Space::Linear => m,
-            Space::Srgb => SrgbLut::get().encode(m),
-        };
-        let mut acc = [0.0f64; 3];
-        let mut offset = 0;
         out.lit.clear();
         out.lit.resize(proj.diffuse.len(), 0);
+        // The objects' groups with their diffuse and specular factors.
+        let mut objects: Vec<RefineObject> = Vec::new();
+        let mut acc = [0.0f64; 3];
+        let mut offset = 0;
         for g in &self.groups {
             let n = g.len();
             let (a, b) = (&a_all[offset..offset + n], &b_all[offset..offset + n]);
             offset += n;
-            let gt = if srgb { &g.te } else { &g.t };
-            if let Some(obj) = g.object {
-                out.lit[obj] = a.iter().filter(|&&v| v > 0.0).count();
-            }
             let Some(obj) = g.object else {
+                let gt = if srgb { &g.te } else { &g.t };
                 for c in 0..3 {
                     acc[c] += gt[c]
                         .iter()
@@ -646,140 +650,222 @@ impl Kernel {
                 }
                 continue;
             };
-            let specular = proj.specular[obj].1 > 0.0;
-            let t = [&g.ts[0], &g.ts[1], &g.ts[2]];
-            // d/dm of one pixel's loss at model value m (silhouette pixels, ts = inf, excluded).
-            let slope = |m: f64, c: usize, i: usize| -> f64 {
-                let y = t[c][i];
-                if !y.is_finite() {
-                    0.0
-                } else if y < sat {
-                    self.norm.slope(m - y as f64)
-                } else {
-                    self.norm.slope((m - top).min(0.0))
-                }
-            };
-            let model = |pc: f64, q: f64, c: usize, i: usize| {
-                pc * a[i] as f64
-                    + if specular {
-                        q * proj.weight[c] as f64 * b[i] as f64
-                    } else {
-                        0.0
-                    }
-            };
-            let informed: [bool; 3] =
-                std::array::from_fn(|c| (0..n).any(|i| t[c][i].is_finite() && a[i] > 0.0));
-            // Block coordinate descent: each P_c given Q, then Q given the P's (a few rounds; one for a
-            // matte object, whose channels are independent).
-            for _round in 0..if specular { 4 } else { 1 } {
-                for c in 0..3 {
-                    if informed[c] {
-                        let q = out.specular[obj];
-                        out.products[obj][c] = if srgb {
-                            // Terms enc(min(a P + s, top)) against the encoded objective.
-                            let terms: Vec<EncodedTerm> = (0..n)
-                                .filter(|&i| a[i] > 0.0 && t[c][i].is_finite())
-                                .map(|i| EncodedTerm {
-                                    k: a[i] as f64,
-                                    o: model(0.0, q, c, i),
-                                    y: t[c][i] as f64,
-                                    ye: g.te[c][i],
-                                    saturated: t[c][i] >= sat,
-                                })
-                                .collect();
-                            encoded_line_min(
-                                &terms,
-                                self.norm,
-                                top,
-                                proj.diffuse[obj][c],
-                                out.products[obj][c],
-                            )
-                        } else if self.norm == Norm::L1 {
-                            // Terms |min(a P + s, top) - y|: coefficient a, offset s (the lobe).
-                            let terms =
-                                (0..n)
-                                    .filter(|&i| a[i] > 0.0 && t[c][i].is_finite())
-                                    .map(|i| {
-                                        (
-                                            a[i] as f64,
-                                            model(0.0, q, c, i),
-                                            t[c][i] as f64,
-                                            t[c][i] >= sat,
-                                        )
-                                    });
-                            l1_line_min(terms, proj.diffuse[obj][c], top)
-                        } else {
-                            bisect(proj.diffuse[obj][c], |pc| {
-                                (0..n)
-                                    .filter(|&i| a[i] > 0.0)
-                                    .map(|i| a[i] as f64 * slope(model(pc, q, c, i), c, i))
-                                    .sum()
-                            })
-                        };
-                    }
-                }
-                if specular && informed.iter().all(|&k| k) {
-                    let pk = out.products[obj];
-                    out.specular[obj] = if srgb {
-                        let terms: Vec<EncodedTerm> = (0..3)
-                            .flat_map(|c| {
-                                (0..n)
-                                    .filter(move |&i| b[i] > 0.0 && t[c][i].is_finite())
-                                    .map(move |i| EncodedTerm {
-                                        k: proj.weight[c] as f64 * b[i] as f64,
-                                        o: pk[c] * a[i] as f64,
-                                        y: t[c][i] as f64,
-                                        ye: g.te[c][i],
-                                        saturated: t[c][i] >= sat,
-                                    })
-                            })
-                            .collect();
-                        encoded_line_min(
-                            &terms,
-                            self.norm,
-                            top,
-                            proj.specular[obj],
-                            out.specular[obj],
-                        )
-                    } else if self.norm == Norm::L1 {
-                        let terms = (0..3).flat_map(|c| {
-                            (0..n)
-                                .filter(move |&i| b[i] > 0.0 && t[c][i].is_finite())
-                                .map(move |i| {
-                                    let k = proj.weight[c] as f64 * b[i] as f64;
-                                    (k, pk[c] * a[i] as f64, t[c][i] as f64, t[c][i] >= sat)
-                                })
-                        });
-                        l1_line_min(terms, proj.specular[obj], top)
-                    } else {
-                        bisect(proj.specular[obj], |q| {
-                            (0..3)
-                                .map(|c| {
-                                    (0..n)
-                                        .filter(|&i| b[i] > 0.0)
-                                        .map(|i| {
-                                            proj.weight[c] as f64
-                                                * b[i] as f64
-                                                * slope(model(pk[c], q, c, i), c, i)
-                                        })
-                                        .sum::<f64>()
-                                })
-                                .sum()
-                        })
-                    };
-                }
+            out.lit[obj] = a.iter().filter(|&&v| v > 0.0).count();
+            objects.push(RefineObject {
+                g,
+                obj,
+                a,
+                b,
+                specular: proj.specular[obj].1 > 0.0,
+                informed: std::array::from_fn(|c| {
+                    (0..n).any(|i| g.ts[c][i].is_finite() && a[i] > 0.0)
+                }),
+            });
+        }
+        // Block coordinate descent per object: each P_c given Q, then Q given the P's (four rounds for a
+        // glossy object; one for a matte one, whose channels are independent). Every line search depends
+        // only on its own object's values, so those of a round run in parallel over (object, channel)
+        // and the result is the same on any number of threads.
+        let rounds = if objects.iter().any(|o| o.specular) {
+            4
+        } else {
+            1
+        };
+        for round in 0..rounds {
+            let tasks: Vec<(usize, usize)> = objects
+                .iter()
+                .enumerate()
+                .filter(|(_, o)| round == 0 || o.specular)
+                .flat_map(|(k, o)| (0..3).filter(|&c| o.informed[c]).map(move |c| (k, c)))
+                .collect();
+            let solved: Vec<f64> = tasks
+                .par_iter()
+                .map(|&(k, c)| {
+                    let o = &objects[k];
+                    let q = out.specular[o.obj];
+                    self.refine_diffuse(o, c, q, out.products[o.obj][c], proj, sat, top)
+                })
+                .collect();
+            for (&(k, c), v) in tasks.iter().zip(solved) {
+                out.products[objects[k].obj][c] = v;
             }
-            for c in 0..3 {
-                let (pc, q) = (out.products[obj][c], out.specular[obj]);
-                acc[c] += (0..n)
-                    .map(|i| {
-                        let m = model(pc, q, c, i).min(top) as f32;
-                        self.norm.penalty(enc(m) - gt[c][i]) as f64
-                    })
-                    .sum::<f64>();
+            let glossy: Vec<usize> = (0..objects.len())
+                .filter(|&k| objects[k].specular && objects[k].informed.iter().all(|&i| i))
+                .collect();
+            let solved: Vec<f64> = glossy
+                .par_iter()
+                .map(|&k| {
+                    let o = &objects[k];
+                    let (pk, q) = (out.products[o.obj], out.specular[o.obj]);
+                    self.refine_specular(o, pk, q, proj, sat, top)
+                })
+                .collect();
+            for (&k, v) in glossy.iter().zip(solved) {
+                out.specular[objects[k].obj] = v;
             }
         }
-        acc
+        // The loss at the refined products, per object and channel, added in the groups' order.
+        let losses: Vec<f64> = (0..objects.len() * 3)
+            .into_par_iter()
+            .map(|kc| {
+                let (o, c) = (&objects[kc / 3], kc % 3);
+                let (pc, q) = (out.products[o.obj][c], out.specular[o.obj]);
+                let gt = if srgb { &o.g.te[c] } else { &o.g.t[c] };
+                (0..o.a.len())
+                    .map(|i| {
+                        let m = o.model(pc, q, proj.weight[c], i).min(top) as f32;
+                        let m = if srgb { SrgbLut::get().encode(m) } else { m };
+                        self.norm.penalty(m - gt[i]) as f64
+                    })
+                    .sum::<f64>()
+            })
+            .collect();
+        // Background first, as the groups are ordered (objects, then the background).
+        let mut total = [0.0f64; 3];
+        for (kc, l) in losses.iter().enumerate() {
+            total[kc % 3] += l;
+        }
+        for c in 0..3 {
+            total[c] += acc[c];
+        }
+        total
+    }
+
+    /// [`Kernel::refine`]'s line search for P_c of one object given its specular product `q`, starting
+    /// from `start` (the sRGB branch and bound uses it).
+    #[allow(clippy::too_many_arguments)]
+    fn refine_diffuse(
+        &self,
+        o: &RefineObject,
+        c: usize,
+        q: f64,
+        start: f64,
+        proj: &Projection,
+        sat: f32,
+        top: f64,
+    ) -> f64 {
+        let (n, a, t) = (o.a.len(), o.a, &o.g.ts[c]);
+        let w = proj.weight[c];
+        let bounds = proj.diffuse[o.obj][c];
+        if self.space == Space::Srgb {
+            // Terms enc(min(a P + s, top)) against the encoded objective.
+            let terms: Vec<EncodedTerm> = (0..n)
+                .filter(|&i| a[i] > 0.0 && t[i].is_finite())
+                .map(|i| EncodedTerm {
+                    k: a[i] as f64,
+                    o: o.model(0.0, q, w, i),
+                    y: t[i] as f64,
+                    ye: o.g.te[c][i],
+                    saturated: t[i] >= sat,
+                })
+                .collect();
+            encoded_line_min(&terms, self.norm, top, bounds, start)
+        } else if self.norm == Norm::L1 {
+            // Terms |min(a P + s, top) - y|: coefficient a, offset s (the lobe).
+            let terms = (0..n)
+                .filter(|&i| a[i] > 0.0 && t[i].is_finite())
+                .map(|i| (a[i] as f64, o.model(0.0, q, w, i), t[i] as f64, t[i] >= sat));
+            l1_line_min(terms, bounds, top)
+        } else {
+            bisect(bounds, |pc| {
+                (0..n)
+                    .filter(|&i| a[i] > 0.0)
+                    .map(|i| a[i] as f64 * self.refine_slope(o.model(pc, q, w, i), t[i], sat, top))
+                    .sum()
+            })
+        }
+    }
+
+    /// [`Kernel::refine`]'s line search for Q of one glossy object given its diffuse products `pk`.
+    #[allow(clippy::too_many_arguments)]
+    fn refine_specular(
+        &self,
+        o: &RefineObject,
+        pk: [f64; 3],
+        q: f64,
+        proj: &Projection,
+        sat: f32,
+        top: f64,
+    ) -> f64 {
+        let (n, a, b, t) = (o.a.len(), o.a, o.b, &o.g.ts);
+        let bounds = proj.specular[o.obj];
+        if self.space == Space::Srgb {
+            let terms: Vec<EncodedTerm> = (0..3)
+                .flat_map(|c| {
+                    (0..n)
+                        .filter(move |&i| b[i] > 0.0 && t[c][i].is_finite())
+                        .map(move |i| EncodedTerm {
+                            k: proj.weight[c] as f64 * b[i] as f64,
+                            o: pk[c] * a[i] as f64,
+                            y: t[c][i] as f64,
+                            ye: o.g.te[c][i],
+                            saturated: t[c][i] >= sat,
+                        })
+                })
+                .collect();
+            encoded_line_min(&terms, self.norm, top, bounds, q)
+        } else if self.norm == Norm::L1 {
+            let terms = (0..3).flat_map(|c| {
+                (0..n)
+                    .filter(move |&i| b[i] > 0.0 && t[c][i].is_finite())
+                    .map(move |i| {
+                        let k = proj.weight[c] as f64 * b[i] as f64;
+                        (k, pk[c] * a[i] as f64, t[c][i] as f64, t[c][i] >= sat)
+                    })
+            });
+            l1_line_min(terms, bounds, top)
+        } else {
+            bisect(bounds, |q| {
+                (0..3)
+                    .map(|c| {
+                        let w = proj.weight[c];
+                        (0..n)
+                            .filter(|&i| b[i] > 0.0)
+                            .map(|i| {
+                                w as f64
+                                    * b[i] as f64
+                                    * self.refine_slope(o.model(pk[c], q, w, i), t[c][i], sat, top)
+                            })
+                            .sum::<f64>()
+                    })
+                    .sum()
+            })
+        }
+    }
+
+    /// d/dm of one pixel's loss at model value m against objective `y` (a silhouette pixel, y = inf,
+    /// counts nothing; a saturated one only while the model is below `top`).
+    fn refine_slope(&self, m: f64, y: f32, sat: f32, top: f64) -> f64 {
+        if !y.is_finite() {
+            0.0
+        } else if y < sat {
+            self.norm.slope(m - y as f64)
+        } else {
+            self.norm.slope((m - top).min(0.0))
+        }
+    }
+}
+
+/// One object's pixels and unit-light factors, for [`Kernel::refine`].
+struct RefineObject<'a> {
+    g: &'a Group,
+    obj: usize,
+    a: &'a [f32],
+    b: &'a [f32],
+    specular: bool,
+    /// A channel with a pixel that is lit and informs the products.
+    informed: [bool; 3],
+}
+
+impl RefineObject<'_> {
+    /// Model value of pixel `i` in a channel of specular weight `w` at products `pc` and `q`.
+    fn model(&self, pc: f64, q: f64, w: f32, i: usize) -> f64 {
+        pc * self.a[i] as f64
+            + if self.specular {
+                q * w as f64 * self.b[i] as f64
+            } else {
+                0.0
+            }
     }
 }
 
@@ -1202,6 +1288,188 @@ impl SolveSums {
         self.sbb[c] += bb;
         self.sya[c] += ya;
         self.syb[c] += yb;
+    }
+}
+
+impl SolveSums {
+    fn add(&mut self, o: &SolveSums) {
+        for c in 0..3 {
+            self.saa[c] += o.saa[c];
+            self.sab[c] += o.sab[c];
+            self.sbb[c] += o.sbb[c];
+            self.sya[c] += o.sya[c];
+            self.syb[c] += o.syb[c];
+        }
+    }
+}
+
+/// Pixels per unit of work of the projected kernel: its sums are taken per run of `CHUNK` pixels and the
+/// runs added in order, so that a parallel evaluation gives the serial one's value bit for bit.
+pub const CHUNK: usize = 8 * BLOCK;
+
+/// One object's pixels under one candidate light, for the projected kernel's runs of `CHUNK` pixels.
+struct Run<'a> {
+    g: &'a Group,
+    light: &'a Light,
+    specular: bool,
+    shininess: f32,
+    sat: f32,
+    top: f32,
+    norm: Norm,
+}
+
+impl Run<'_> {
+    /// Pass 1 over the run starting at pixel `start` of the group: unit-light diffuse factors into `e`,
+    /// specular factors into `b` (specular objects only), and their normal equations.
+    #[inline(always)]
+    fn factors<const AVX2: bool>(&self, start: usize, e: &mut [f32], b: &mut [f32]) -> SolveSums {
+        let g = self.g;
+        let mut sums = SolveSums::default();
+        let mut i0 = 0;
+        while i0 < e.len() {
+            let len = BLOCK.min(e.len() - i0);
+            let r = start + i0..start + i0 + len;
+            let e = &mut e[i0..i0 + len];
+            irradiance::<AVX2>(g, r.clone(), self.light, e);
+            shadow(g, r.clone(), self.light, e);
+            for ei in e.iter_mut() {
+                *ei *= INV_PI;
+            }
+            if self.specular {
+                let b = &mut b[i0..i0 + len];
+                let norm = (self.shininess + 8.0) / 8.0;
+                for (i, s) in r.clone().enumerate() {
+                    // (s+8)/(8 pi) max(0, n.h)^s cos / d² = e · (s+8)/8 · max(0, n.h)^s
+                    b[i] = if e[i] > 0.0 {
+                        (e[i] * norm * blinn_phong(g, s, self.light, self.shininess)).min(f32::MAX)
+                    } else {
+                        0.0
+                    };
+                }
+                for c in 0..3 {
+                    sums.add_specular(c, e, b, &g.ts[c][r.clone()], self.sat);
+                }
+            } else {
+                for c in 0..3 {
+                    let (a, b) = normal_equations(e, &g.ts[c][r.clone()], self.sat);
+                    sums.sya[c] += a as f64;
+                    sums.saa[c] += b as f64;
+                }
+            }
+            i0 += len;
+        }
+        sums
+    }
+
+    /// `factors` compiled for AVX2 where `AVX2` says the CPU has it, for a task of the thread pool.
+    fn factors_dispatch<const AVX2: bool>(
+        &self,
+        start: usize,
+        e: &mut [f32],
+        b: &mut [f32],
+    ) -> SolveSums {
+        #[cfg(target_arch = "x86_64")]
+        if AVX2 {
+            // SAFETY: `AVX2` is only true on the path dispatched after checking the CPU's features.
+            return unsafe { self.factors_avx2(start, e, b) };
+        }
+        self.factors::<false>(start, e, b)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn factors_avx2(&self, start: usize, e: &mut [f32], b: &mut [f32]) -> SolveSums {
+        self.factors::<true>(start, e, b)
+    }
+
+    /// Pass 2 over the run starting at pixel `start`: the per-channel loss at products `pk` (and `qw`, the
+    /// specular product per channel, where `q_on`). With `stop = Some((acc, bound))` it returns early once
+    /// `acc` plus the run's loss so far exceeds `bound`.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn loss<const AVX2: bool, E: Encoding>(
+        &self,
+        start: usize,
+        e: &[f32],
+        b: &[f32],
+        pk: [f32; 3],
+        qw: [f32; 3],
+        q_on: bool,
+        enc: E,
+        stop: Option<([f64; 3], f64)>,
+    ) -> [f64; 3] {
+        let g = self.g;
+        // The objective in the loss space (the solve uses the linear `ts`).
+        let gt = if E::ENCODES { &g.te } else { &g.t };
+        let mut part = [0.0f64; 3];
+        let mut i0 = 0;
+        while i0 < e.len() {
+            let len = BLOCK.min(e.len() - i0);
+            let r = start + i0..start + i0 + len;
+            let e = &e[i0..i0 + len];
+            let t = [&gt[0][r.clone()], &gt[1][r.clone()], &gt[2][r.clone()]];
+            let sums = if q_on {
+                let b = &b[i0..i0 + len];
+                let mut sums = [0.0f32; 3];
+                for c in 0..3 {
+                    for i in 0..len {
+                        let v = (pk[c] * e[i] + qw[c] * b[i]).min(self.top);
+                        sums[c] += self.norm.penalty(enc.any(v) - t[c][i]);
+                    }
+                }
+                sums
+            } else {
+                rgb_loss_in(self.norm, e, t, [0.0; 3], pk, self.top, enc)
+            };
+            for c in 0..3 {
+                part[c] += sums[c] as f64;
+            }
+            i0 += len;
+            if let Some((acc, bound)) = stop {
+                if (acc[0] + part[0]) + (acc[1] + part[1]) + (acc[2] + part[2]) > bound {
+                    return part;
+                }
+            }
+        }
+        part
+    }
+
+    /// `loss` compiled for AVX2 where `AVX2` says the CPU has it, for a task of the thread pool.
+    #[allow(clippy::too_many_arguments)]
+    fn loss_dispatch<const AVX2: bool, E: Encoding>(
+        &self,
+        start: usize,
+        e: &[f32],
+        b: &[f32],
+        pk: [f32; 3],
+        qw: [f32; 3],
+        q_on: bool,
+        enc: E,
+        stop: Option<([f64; 3], f64)>,
+    ) -> [f64; 3] {
+        #[cfg(target_arch = "x86_64")]
+        if AVX2 {
+            // SAFETY: as in `factors_dispatch`.
+            return unsafe { self.loss_avx2(start, e, b, pk, qw, q_on, enc, stop) };
+        }
+        self.loss::<false, E>(start, e, b, pk, qw, q_on, enc, stop)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    #[allow(clippy::too_many_arguments)]
+    unsafe fn loss_avx2<E: Encoding>(
+        &self,
+        start: usize,
+        e: &[f32],
+        b: &[f32],
+        pk: [f32; 3],
+        qw: [f32; 3],
+        q_on: bool,
+        enc: E,
+        stop: Option<([f64; 3], f64)>,
+    ) -> [f64; 3] {
+        self.loss::<true, E>(start, e, b, pk, qw, q_on, enc, stop)
     }
 }
 

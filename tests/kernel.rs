@@ -203,6 +203,75 @@ fn projected_kernel_matches_the_plain_solve() {
     }
 }
 
+/// A polish evaluates one candidate at a time and spreads its pixels over the pool: the value must be
+/// the population path's, bit for bit, on any number of threads (matte and glossy, linear and sRGB,
+/// candidates near and far from the truth, the truth itself).
+#[test]
+fn one_candidate_alone_gives_the_serial_value_bit_for_bit_on_any_thread_count() {
+    let mut rng = Rng::new(17);
+    let glossy = glossy_scene([1.5, 3.0, -2.0], 0.3, 40.0, 30.0);
+    let mut cases: Vec<(Scene, bool)> = vec![(glossy, true)];
+    for k in 0..3 {
+        cases.push((random_scene(&mut rng, 1 + k, false, false), false));
+    }
+    for (scene, shiny) in &cases {
+        let target: Vec<f32> = render(scene, None, None, 1)
+            .unwrap()
+            .rgb
+            .iter()
+            .map(|v| v.min(1.0))
+            .collect();
+        let (mut f, layout) = if *shiny {
+            glossy_fitness(scene, &target)
+        } else {
+            let layout = ParamLayout::new(scene, &["light.position".to_string()]).unwrap();
+            let bounds = vec![[(0.0, 200.0); 3]; scene.objects.len()];
+            let f = Fitness::new(
+                scene,
+                layout.clone(),
+                &target,
+                None,
+                LossKind::L1Projected,
+                true,
+                Some(Projection::matte(bounds)),
+            )
+            .unwrap();
+            (f, layout)
+        };
+        let mut xs: Vec<Vec<f64>> = (0..5)
+            .map(|_| random_candidate(&mut rng, &layout))
+            .collect();
+        let mut truth = scene.light.position.to_vec();
+        if *shiny {
+            truth.push(scene.objects[0].material.shininess);
+        }
+        xs.push(truth);
+        for space in [rtloop::Space::Linear, rtloop::Space::Srgb] {
+            f.set_space(space);
+            for x in &xs {
+                let mut serial = [0.0];
+                f.evaluate(x, &mut serial);
+                assert!(serial[0].is_finite());
+                for threads in [1, 2, 3, 5] {
+                    let pool = rayon::ThreadPoolBuilder::new()
+                        .num_threads(threads)
+                        .build()
+                        .unwrap();
+                    let mut alone = [0.0];
+                    pool.install(|| f.evaluate_alone(x, &mut alone));
+                    assert_eq!(
+                        serial[0].to_bits(),
+                        alone[0].to_bits(),
+                        "{space:?} threads={threads} x={x:?}: {} vs {}",
+                        serial[0],
+                        alone[0]
+                    );
+                }
+            }
+        }
+    }
+}
+
 #[test]
 fn light_inside_an_occluder_or_on_a_surface_gives_finite_losses() {
     let mut rng = Rng::new(9);

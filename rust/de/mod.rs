@@ -28,6 +28,13 @@ pub trait Objective: Sync {
         let _ = bound;
         self.evaluate(x, out);
     }
+
+    /// Like `evaluate`, for a candidate evaluated alone (as a local search does, one point after the
+    /// other): an implementation may spread the one evaluation over the current rayon pool. It must give
+    /// exactly `evaluate`'s value, on any number of threads.
+    fn evaluate_alone(&self, x: &[f64], out: &mut [f64]) {
+        self.evaluate(x, out);
+    }
 }
 
 impl<F: Fn(&[f64]) -> f64 + Sync> Objective for F {

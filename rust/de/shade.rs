@@ -767,7 +767,7 @@ pub fn nelder_mead<O: Objective + ?Sized>(
     };
     let eval = |x: &[f64]| {
         let mut o = [0.0];
-        obj.evaluate(x, &mut o);
+        obj.evaluate_alone(x, &mut o);
         if o[0].is_nan() {
             f64::INFINITY
         } else {
