@@ -73,6 +73,36 @@ fn fitness(
     Fitness::new(scene, layout.clone(), target, None, kind, clip, None).unwrap()
 }
 
+/// The scene's render, clipped at 1 as a photo saturates.
+fn clipped_render(scene: &Scene) -> Vec<f32> {
+    render(scene, None, None, 1)
+        .unwrap()
+        .rgb
+        .iter()
+        .map(|v| v.min(1.0))
+        .collect()
+}
+
+/// The closed-form (projected) fitness of `layout` over the whole image.
+fn projected(
+    scene: &Scene,
+    layout: ParamLayout,
+    target: &[f32],
+    proj: Projection,
+    clip: bool,
+) -> Fitness {
+    Fitness::new(
+        scene,
+        layout,
+        target,
+        None,
+        LossKind::L1Projected,
+        clip,
+        Some(proj),
+    )
+    .unwrap()
+}
+
 fn random_candidate(rng: &mut Rng, layout: &ParamLayout) -> Vec<f64> {
     layout
         .bounds
@@ -96,12 +126,7 @@ fn kernel_matches_the_plain_path_on_random_scenes() {
         let ambient = trial % 4 == 2;
         let scene = random_scene(&mut rng, spheres, specular, ambient);
         // The objective: the scene itself, saturating at 1, so some pixels are clipped.
-        let target: Vec<f32> = render(&scene, None, None, 1)
-            .unwrap()
-            .rgb
-            .iter()
-            .map(|v| v.min(1.0))
-            .collect();
+        let target: Vec<f32> = clipped_render(&scene);
         let layout = ParamLayout::all(&scene);
         for kind in [LossKind::L1, LossKind::L1PerChannel] {
             let f = fitness(&scene, &layout, &target, kind, true);
@@ -157,24 +182,16 @@ fn projected_kernel_matches_the_plain_solve() {
     let mut rng = Rng::new(5);
     for trial in 0..12 {
         let scene = random_scene(&mut rng, 1 + trial % 3, false, false);
-        let target: Vec<f32> = render(&scene, None, None, 1)
-            .unwrap()
-            .rgb
-            .iter()
-            .map(|v| v.min(1.0))
-            .collect();
+        let target: Vec<f32> = clipped_render(&scene);
         let layout = ParamLayout::new(&scene, &["light.position".to_string()]).unwrap();
         let bounds = vec![[(0.0, 200.0); 3]; scene.objects.len()];
-        let f = Fitness::new(
+        let f = projected(
             &scene,
             layout.clone(),
             &target,
-            None,
-            LossKind::L1Projected,
+            Projection::matte(bounds),
             true,
-            Some(Projection::matte(bounds)),
-        )
-        .unwrap();
+        );
         for _ in 0..6 {
             let x = random_candidate(&mut rng, &layout);
             let (a, b) = (f.channel_losses(&x), f.reference_channel_losses(&x));
@@ -215,27 +232,19 @@ fn one_candidate_alone_gives_the_serial_value_bit_for_bit_on_any_thread_count() 
         cases.push((random_scene(&mut rng, 1 + k, false, false), false));
     }
     for (scene, shiny) in &cases {
-        let target: Vec<f32> = render(scene, None, None, 1)
-            .unwrap()
-            .rgb
-            .iter()
-            .map(|v| v.min(1.0))
-            .collect();
+        let target: Vec<f32> = clipped_render(scene);
         let (mut f, layout) = if *shiny {
             glossy_fitness(scene, &target)
         } else {
             let layout = ParamLayout::new(scene, &["light.position".to_string()]).unwrap();
             let bounds = vec![[(0.0, 200.0); 3]; scene.objects.len()];
-            let f = Fitness::new(
+            let f = projected(
                 scene,
                 layout.clone(),
                 &target,
-                None,
-                LossKind::L1Projected,
+                Projection::matte(bounds),
                 true,
-                Some(Projection::matte(bounds)),
-            )
-            .unwrap();
+            );
             (f, layout)
         };
         let mut xs: Vec<Vec<f64>> = (0..5)
@@ -298,12 +307,7 @@ fn early_exit_changes_cost_not_results() {
     // DE only asks whether a trial beats its target; stopping the sum early must not change any choice.
     let mut rng = Rng::new(11);
     let scene = random_scene(&mut rng, 2, false, false);
-    let target: Vec<f32> = render(&scene, None, None, 1)
-        .unwrap()
-        .rgb
-        .iter()
-        .map(|v| v.min(1.0))
-        .collect();
+    let target: Vec<f32> = clipped_render(&scene);
     let paths = vec!["light.position".to_string(), "light.intensity".to_string()];
     let layout = ParamLayout::new(&scene, &paths).unwrap();
     let cfg = rtloop::DeConfig {
@@ -421,12 +425,7 @@ fn directional_light_kernel_matches_the_plain_path() {
     let mut rng = Rng::new(33);
     for trial in 0..8 {
         let scene = random_sun_scene(&mut rng, 1 + trial % 4, trial % 2 == 1);
-        let target: Vec<f32> = render(&scene, None, None, 1)
-            .unwrap()
-            .rgb
-            .iter()
-            .map(|v| v.min(1.0))
-            .collect();
+        let target: Vec<f32> = clipped_render(&scene);
         let layout = ParamLayout::all(&scene);
         assert_eq!(layout.names[0], "light.direction.x");
         let f = fitness(&scene, &layout, &target, LossKind::L1, true);
@@ -478,16 +477,7 @@ fn glossy_fitness(scene: &Scene, target: &[f32]) -> (Fitness, ParamLayout) {
     let layout = ParamLayout::new(scene, &paths).unwrap();
     let mut proj = Projection::matte(vec![[(0.0, 500.0); 3]; 3]);
     proj.specular[0] = (0.0, 500.0);
-    let f = Fitness::new(
-        scene,
-        layout.clone(),
-        target,
-        None,
-        LossKind::L1Projected,
-        true,
-        Some(proj),
-    )
-    .unwrap();
+    let f = projected(scene, layout.clone(), target, proj, true);
     (f, layout)
 }
 
@@ -499,12 +489,7 @@ fn projected_kernel_with_a_specular_term_matches_the_plain_solve_and_recovers_th
         let light = [u(-4.0, 4.0), u(2.0, 6.0), u(-4.0, 1.0)];
         let (ks, s, intensity) = (u(0.1, 0.6), u(5.0, 120.0), u(20.0, 60.0));
         let scene = glossy_scene(light, ks, s, intensity);
-        let target: Vec<f32> = render(&scene, None, None, 1)
-            .unwrap()
-            .rgb
-            .iter()
-            .map(|v| v.min(1.0))
-            .collect();
+        let target: Vec<f32> = clipped_render(&scene);
         let (f, layout) = glossy_fitness(&scene, &target);
         for _ in 0..6 {
             let x = random_candidate(&mut rng, &layout);
@@ -661,16 +646,7 @@ fn refined_products_minimise_the_loss_and_undo_the_saturation_bias() {
             })
             .collect();
         let proj = Projection::matte(vec![[(0.0, 400.0); 3]; 2]);
-        let f = Fitness::new(
-            &scene,
-            layout.clone(),
-            &target,
-            None,
-            LossKind::L1Projected,
-            true,
-            Some(proj),
-        )
-        .unwrap();
+        let f = projected(&scene, layout.clone(), &target, proj, true);
         let ls = f.solved(&x);
         let ls_loss: f64 = f.channel_losses(&x).iter().sum();
         let (refined, loss) = f.refined(&x).unwrap();
@@ -698,12 +674,7 @@ fn refined_products_minimise_the_loss_and_undo_the_saturation_bias() {
 fn refined_products_are_exact_on_a_clean_glossy_image() {
     let light = [1.5, 4.0, -2.5];
     let scene = glossy_scene(light, 0.3, 30.0, 160.0);
-    let target: Vec<f32> = render(&scene, None, None, 1)
-        .unwrap()
-        .rgb
-        .iter()
-        .map(|v| v.min(1.0))
-        .collect();
+    let target: Vec<f32> = clipped_render(&scene);
     let (f, _) = glossy_fitness(&scene, &target);
     let (refined, loss) = f.refined(&[light[0], light[1], light[2], 30.0]).unwrap();
     for c in 0..3 {
@@ -896,16 +867,13 @@ fn projected_srgb_loss_matches_the_plain_solve_and_vanishes_at_the_truth() {
                 .collect();
             for norm in [Norm::L1, Norm::L2, Norm::Huber(0.01)] {
                 let bounds = vec![[(0.0, 200.0); 3]; scene.objects.len()];
-                let mut f = Fitness::new(
+                let mut f = projected(
                     &scene,
                     layout.clone(),
                     &target,
-                    None,
-                    LossKind::L1Projected,
+                    Projection::matte(bounds),
                     clip,
-                    Some(Projection::matte(bounds)),
-                )
-                .unwrap();
+                );
                 f.set_norm(norm);
                 f.set_space(Space::Srgb);
                 for _ in 0..3 {
@@ -940,12 +908,7 @@ fn projected_srgb_loss_with_a_specular_term_matches_the_plain_solve() {
         let light = [u(-4.0, 4.0), u(2.0, 6.0), u(-4.0, 1.0)];
         let (ks, s, intensity) = (u(0.1, 0.6), u(5.0, 120.0), u(20.0, 60.0));
         let scene = glossy_scene(light, ks, s, intensity);
-        let target: Vec<f32> = render(&scene, None, None, 1)
-            .unwrap()
-            .rgb
-            .iter()
-            .map(|v| v.min(1.0))
-            .collect();
+        let target: Vec<f32> = clipped_render(&scene);
         let (mut f, layout) = glossy_fitness(&scene, &target);
         f.set_space(Space::Srgb);
         for _ in 0..4 {
