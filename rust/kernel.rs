@@ -1351,7 +1351,7 @@ impl Run<'_> {
                 }
             } else {
                 for c in 0..3 {
-                    let (a, b) = normal_equations(e, &g.ts[c][r.clone()], self.sat);
+                    let (a, b) = normal_equations::<AVX2>(e, &g.ts[c][r.clone()], self.sat);
                     sums.sya[c] += a as f64;
                     sums.saa[c] += b as f64;
                 }
@@ -1703,16 +1703,41 @@ fn rgb_sum_encoded<E: Encoding>(
     [s0.iter().sum(), s1.iter().sum(), s2.iter().sum()]
 }
 
-/// (Σ e·t, Σ e²) over the pixels with t < `sat`, in `LANES` partial sums each.
+/// (Σ e·t, Σ e²) over the pixels with t < `sat`, in `LANES` partial sums each (lane j takes the pixels
+/// j, j + LANES, ...; the lanes are added in order). `AVX2` selects the intrinsics form, which the
+/// compiler does not find for this masked sum on its own; both forms round alike (no fused multiply-add).
 #[inline(always)]
-fn normal_equations(e: &[f32], t: &[f32], sat: f32) -> (f32, f32) {
-    let (mut a, mut b) = ([0.0f32; LANES], [0.0f32; LANES]);
+fn normal_equations<const AVX2: bool>(e: &[f32], t: &[f32], sat: f32) -> (f32, f32) {
     let n = e.len().min(t.len());
     let full = n - n % LANES;
-    for (x, y) in e[..full]
-        .chunks_exact(LANES)
-        .zip(t[..full].chunks_exact(LANES))
-    {
+    let (mut a, mut b) = ([0.0f32; LANES], [0.0f32; LANES]);
+    #[cfg(target_arch = "x86_64")]
+    if AVX2 {
+        // SAFETY: `AVX2` is only true on the path dispatched after checking the CPU's features.
+        (a, b) = unsafe { normal_equation_lanes_avx2(&e[..full], &t[..full], sat) };
+    } else {
+        normal_equation_lanes(&e[..full], &t[..full], sat, &mut a, &mut b);
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    normal_equation_lanes(&e[..full], &t[..full], sat, &mut a, &mut b);
+    for j in full..n {
+        let keep = t[j] < sat;
+        a[j - full] += if keep { e[j] * t[j] } else { 0.0 };
+        b[j - full] += if keep { e[j] * e[j] } else { 0.0 };
+    }
+    (a.iter().sum(), b.iter().sum())
+}
+
+/// The lane sums of `normal_equations` over whole runs of `LANES` pixels.
+#[inline(always)]
+fn normal_equation_lanes(
+    e: &[f32],
+    t: &[f32],
+    sat: f32,
+    a: &mut [f32; LANES],
+    b: &mut [f32; LANES],
+) {
+    for (x, y) in e.chunks_exact(LANES).zip(t.chunks_exact(LANES)) {
         for j in 0..LANES {
             // Select, not multiply by a 0/1 weight: excluded pixels carry t = +inf.
             let keep = y[j] < sat;
@@ -1720,12 +1745,31 @@ fn normal_equations(e: &[f32], t: &[f32], sat: f32) -> (f32, f32) {
             b[j] += if keep { x[j] * x[j] } else { 0.0 };
         }
     }
-    for j in full..n {
-        let keep = t[j] < sat;
-        a[j - full] += if keep { e[j] * t[j] } else { 0.0 };
-        b[j - full] += if keep { e[j] * e[j] } else { 0.0 };
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+unsafe fn normal_equation_lanes_avx2(
+    e: &[f32],
+    t: &[f32],
+    sat: f32,
+) -> ([f32; LANES], [f32; LANES]) {
+    use std::arch::x86_64::*;
+    let (mut a, mut b) = (_mm256_setzero_ps(), _mm256_setzero_ps());
+    let satv = _mm256_set1_ps(sat);
+    for (x, y) in e.chunks_exact(LANES).zip(t.chunks_exact(LANES)) {
+        let (x, y) = (_mm256_loadu_ps(x.as_ptr()), _mm256_loadu_ps(y.as_ptr()));
+        // Where t >= sat (or t = +inf) both factors become 0: the lane adds 0, as the scalar select.
+        let keep = _mm256_cmp_ps::<_CMP_LT_OQ>(y, satv);
+        let (x, y) = (_mm256_and_ps(x, keep), _mm256_and_ps(y, keep));
+        a = _mm256_add_ps(a, _mm256_mul_ps(x, y));
+        b = _mm256_add_ps(b, _mm256_mul_ps(x, x));
     }
-    (a.iter().sum(), b.iter().sum())
+    let (mut sa, mut sb) = ([0.0f32; LANES], [0.0f32; LANES]);
+    _mm256_storeu_ps(sa.as_mut_ptr(), a);
+    _mm256_storeu_ps(sb.as_mut_ptr(), b);
+    (sa, sb)
 }
 
 /// e = max(0, n·l) / d² (unit light), written into `e`; 0 for a light on the surface.

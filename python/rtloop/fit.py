@@ -299,7 +299,7 @@ def fit(
 
     def run(name: str, stage_scene: Scene, paths: list[str], loss: str, pixels: np.ndarray | None,
             generations: int, stage_seed: int, product_bounds: np.ndarray | None = None,
-            method: str = "de", polish: int = 0) -> StageResult:
+            method: str = "de", polish: int = 0, polish_tol: float | None = None) -> StageResult:
         nonlocal evaluations
         history: list[tuple[int, float, list[float], np.ndarray]] = []
         base_full = np.array(stage_scene.get_params(all_paths))
@@ -325,7 +325,7 @@ def fit(
             stage_scene, paths, target, pixels=pixels, loss=loss, clip=clip, population=pop,
             generations=generations, f=f_, cr=cr_, seed=stage_seed, threads=threads, callback=on_generation,
             product_bounds=product_bounds, method=method, polish=polish, norm=norm, space=space,
-            with_products=callback is not None,
+            with_products=callback is not None, polish_tol=polish_tol,
         )
         generations_run = out["generations"]
         if "polish" in out and not out["stopped"]:
@@ -384,7 +384,8 @@ def fit(
         where = ["light.direction"] if "light.direction" in all_paths else ["light.position"]
         where += [p for p in all_paths if p.endswith(".shininess")]  # searched with the light
         s = run("light+colour", current, where, "l1_projected", use, gens[0], int(seeds[0]),
-                product_bounds=_product_bounds(scene), method=optimizer, polish=polish)
+                product_bounds=_product_bounds(scene), method=optimizer, polish=polish,
+                polish_tol=proto.get("polish_tol"))
         stages.append(s)
         current = _split_products(current.with_params(list(s.x), where), s.products, scene)
         current = _keep_undetermined(current, scene, all_paths, ident, s.lit_pixels)

@@ -390,7 +390,7 @@ fn evaluate<'py>(
 #[pyo3(signature = (scene, paths, target, *, pixels=None, loss="l1", clip=true, population=60,
                     generations=200, f=0.6, cr=0.8, seed=0, threads=None, callback=None,
                     product_bounds=None, method="de", max_evaluations=None, polish=0, norm="l1",
-                    with_products=true, space="linear"))]
+                    with_products=true, space="linear", polish_tol=None))]
 #[allow(clippy::too_many_arguments)]
 fn optimize<'py>(
     py: Python<'py>,
@@ -414,6 +414,7 @@ fn optimize<'py>(
     norm: &str,
     with_products: bool,
     space: &str,
+    polish_tol: Option<f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let scene = &scene.get().0;
     let (fitness, bounds) = make_fitness(
@@ -474,6 +475,8 @@ fn optimize<'py>(
                         max_evaluations: max_evaluations.unwrap_or(population * (generations + 1)),
                         population_init: Some(population),
                         polish_evaluations: polish,
+                        polish_x_tol: polish_tol
+                            .unwrap_or(de::shade::ShadeConfig::default().polish_x_tol),
                         seed,
                         ..de::shade::ShadeConfig::lshade()
                     };
