@@ -102,11 +102,21 @@ exit status: 0 done, 1 bad input or failed run, 2 bad command line,
 
 def _protocol_help() -> str:
     parts = []
-    for name, p in PROTOCOLS.items():
-        g = p["generations"]
+    def two_stage(pop: int, g: Any, refine: bool) -> str:
         gens = f"{g[0]} + {g[1]}" if isinstance(g, (tuple, list)) else str(g)
-        refine = ", then a refine pass" if p.get("refine") else ""
-        parts.append(f"'{name}' (population {p['population']}, {gens} generations{refine})")
+        return f"population {pop}, {gens} generations{', then a refine pass' if refine else ''}"
+
+    for name, p in PROTOCOLS.items():
+        if p.get("projected"):
+            g = p["generations"]
+            g0 = g[0] if isinstance(g, (tuple, list)) else g
+            fallback = two_stage(p.get("fallback_population", p["population"]),
+                                 p.get("fallback_generations", g), bool(p.get("refine")))
+            parts.append(f"'{name}' (closed form: L-SHADE, population {p['population']}, "
+                         f"{p['population'] * (g0 + 1)} evaluations, then a Nelder-Mead polish of up to "
+                         f"{p.get('polish', 0)}; where it does not apply, two stages: {fallback})")
+        else:
+            parts.append(f"'{name}' ({two_stage(p['population'], p['generations'], bool(p.get('refine')))})")
     return "named settings: " + "; ".join(parts) + " (default: rtloop)"
 
 
