@@ -72,8 +72,10 @@ def optimize(
     norm: str = "l1",
     with_products: bool = True,
     space: str = "linear",
+    polish_tol: float | None = None,
 ) -> dict[str, Any]:
-    """Keys: x, objectives, evaluations, generations, stopped, stop_reason, active_pixels, polish (when
+    """polish_tol: the polish stops once every simplex vertex is within this fraction of each range of
+    the best (default 1e-13). Keys: x, objectives, evaluations, generations, stopped, stop_reason, active_pixels, polish (when
     run); for the projected loss also products (per object [P_r, P_g, P_b, Q]: the products minimising
     the loss at x), lit_pixels (per object) and search_objectives (the loss at the least-squares
     products the search ranked candidates by). product_bounds: (objects, 3, 2), or (objects, 4, 2) whose

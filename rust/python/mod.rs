@@ -385,7 +385,8 @@ fn evaluate<'py>(
 /// [P_r, P_g, P_b, Q], Q = intensity x specular), else None. `product_bounds` is (objects, 3, 2), or
 /// (objects, 4, 2) with row 4 bounding Q for objects with a specular term. `norm` and `space` as for
 /// `evaluate`; in "srgb" the closed-form products stay least squares in linear space, and the reported
-/// `products` minimise the sRGB-space loss.
+/// `products` minimise the sRGB-space loss. `polish_tol`: the polish stops once its simplex spans less
+/// than this fraction of every range (default 1e-13).
 #[pyfunction]
 #[pyo3(signature = (scene, paths, target, *, pixels=None, loss="l1", clip=true, population=60,
                     generations=200, f=0.6, cr=0.8, seed=0, threads=None, callback=None,
