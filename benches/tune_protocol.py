@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import copy
 import csv
-import io
 import json
 import sys
 import tempfile
@@ -30,9 +29,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
 
 import rtloop
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from loss_space import neutral_start, through_file
+
 from rtloop.fit import lit_pixel_counts
 
 REPO = Path(__file__).resolve().parents[1]
@@ -44,29 +46,15 @@ DAMAGE = ("clean", "noise0.02", "jpeg70")
 
 # ----------------------------------------------------------------------------------------------- scenes
 
-def _start(truth: dict) -> dict:
-    """As tests/test_hard_cases.py: light to the middle of its box, albedos grey."""
-    start = copy.deepcopy(truth)
-    lo, hi = np.array(truth["fit"]["light.position"]["min"]), np.array(truth["fit"]["light.position"]["max"])
-    start["light"]["position"] = list((lo + hi) / 2)
-    for o in start["objects"]:
-        o["material"]["albedo"] = [0.5, 0.5, 0.5]
-    return start
-
-
 def _photo(truth: dict) -> np.ndarray:
     return np.minimum(rtloop.render(truth), 1.0)
 
 
 def _jpeg(linear: np.ndarray, scene: dict, quality: int) -> np.ndarray:
-    """8-bit sRGB JPEG and back through rtloop's own acquisition (as _through_file/_load_bytes)."""
-    x = np.clip(linear, 0, 1)
-    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
-    buf = io.BytesIO()
-    Image.fromarray(np.round(srgb * 255).astype(np.uint8)).save(buf, "JPEG", quality=quality)
+    """8-bit sRGB JPEG and back through rtloop's own acquisition."""
     with tempfile.TemporaryDirectory(prefix="tune_jpg") as d:
         p = Path(d) / "photo.jpg"
-        p.write_bytes(buf.getvalue())
+        p.write_bytes(through_file(linear, "JPEG", quality=quality))
         return rtloop.load_image(p, rtloop.load_scene(scene))
 
 
@@ -129,7 +117,7 @@ def make_tuning_set(n_single: int = 18, n_double: int = 6, seed: int = SET_SEED)
         counts = lit_pixel_counts(rtloop.load_scene(truth))
         cases.append({
             "id": f"s{k:02d}-{family}-{damage}", "family": family, "damage": damage, "truth": truth,
-            "start": _start(truth), "photo": photo, "lit": counts, "bright": bright, "clipped": clipped,
+            "start": neutral_start(truth), "photo": photo, "lit": counts, "bright": bright, "clipped": clipped,
         })
     print(f"tuning set: {len(cases)} scenes, rejected {rejected}", file=sys.stderr)
     return cases
