@@ -9,7 +9,7 @@
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use rayon::prelude::*;
 use rtloop::{
-    de, de::Objective, render, DeConfig, Fitness, LossKind, ParamLayout, Projection, Scene, Space,
+    render, search, search::Objective, DeConfig, Fitness, LossKind, ParamLayout, Projection, Scene, Space,
 };
 
 fn scene() -> Scene {
@@ -22,7 +22,7 @@ fn scene() -> Scene {
 }
 
 fn population(layout: &ParamLayout, n: usize) -> Vec<Vec<f64>> {
-    let mut rng = de::Rng::new(1);
+    let mut rng = search::Rng::new(1);
     (0..n)
         .map(|_| {
             layout
@@ -194,7 +194,7 @@ fn bench(c: &mut Criterion) {
             seed: 1,
         };
         g.bench_function(format!("paper stage1 60x200 early_exit={early}"), |b| {
-            b.iter(|| de::minimize(&fitness, &layout.bounds, &cfg, |_| true).unwrap())
+            b.iter(|| search::rand1bin::minimize(&fitness, &layout.bounds, &cfg, |_| true).unwrap())
         });
     }
     g.finish();

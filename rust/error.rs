@@ -6,9 +6,12 @@ pub enum Error {
     /// The scene description is malformed or physically invalid.
     #[error("{0}")]
     Scene(String),
-    /// A call was given inconsistent arguments (array shapes, options).
+    /// A call was given inconsistent arguments (options, budgets).
     #[error("{0}")]
     Invalid(String),
+    /// An argument has the wrong shape or value (an array's shape, a count; Python's `ValueError`).
+    #[error("{0}")]
+    Value(String),
     /// Reading or writing a file failed.
     #[error("{path}: {message}")]
     Io { path: String, message: String },

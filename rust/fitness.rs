@@ -7,7 +7,7 @@
 
 use glam::Vec3A;
 
-use crate::de::Objective;
+use crate::search::Objective;
 use crate::error::{Error, Result};
 use crate::kernel::{solve_object, Kernel, Norm, Projection, SolveSums, Solved};
 use crate::params::{ParamLayout, Target};

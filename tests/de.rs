@@ -1,10 +1,11 @@
-//! Integration tests of the differential-evolution engine (`rtloop::de`): known optima, bounds, fixed
+//! Integration tests of the differential-evolution engine (`rtloop::search::rand1bin`): known optima, bounds, fixed
 //! dimensions, determinism across thread counts, Pareto selection, early stopping and NaN handling.
 //!
 //! Expected values come from the test functions' definitions (their known minima), never from earlier
 //! runs. Run with `cargo test --test de`.
 
-use rtloop::de::{minimize, replaces, DeConfig, DeResult, GenerationReport, Objective};
+use rtloop::search::rand1bin::minimize;
+use rtloop::search::{replaces, DeConfig, DeResult, GenerationReport, Objective};
 
 // ---------------------------------------------------------------------------------------------------
 // Test functions and helpers

@@ -1,4 +1,4 @@
-//! Integration tests of L-SHADE / jSO and the Nelder–Mead polish (`rtloop::de::shade`): standard test
+//! Integration tests of L-SHADE / jSO and the Nelder–Mead polish (`rtloop::search::lshade`, `rtloop::search::nelder_mead`): standard test
 //! functions in 2–10 dimensions, bounds and fixed dimensions, NaN handling, the population reduction,
 //! stopping rules and their reasons, the callback, evaluation counts, determinism across thread counts,
 //! and the configuration checks.
@@ -8,11 +8,15 @@
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use rtloop::de::shade::{
-    minimize, nelder_mead, normalized_spread, test_functions as lib, Init, ShadeConfig,
-    ShadeResult, StopReason, Variant,
+use rtloop::search::lshade::minimize;
+use rtloop::search::{
+    nelder_mead, normalized_spread, rand1bin, DeConfig, GenerationReport, Init, LshadeConfig,
+    LshadeResult, Objective, Rng, StopReason, Variant,
 };
-use rtloop::de::{self, DeConfig, GenerationReport, Objective, Rng};
+
+#[path = "common/test_functions.rs"]
+mod test_functions;
+use test_functions as lib;
 
 // ---------------------------------------------------------------------------------------------------
 // Test functions (independent definitions) and helpers
@@ -72,15 +76,15 @@ fn distance(a: &[f64], b: &[f64]) -> f64 {
         .sqrt()
 }
 
-fn cfg(max_evaluations: usize, seed: u64) -> ShadeConfig {
-    ShadeConfig {
+fn cfg(max_evaluations: usize, seed: u64) -> LshadeConfig {
+    LshadeConfig {
         max_evaluations,
         seed,
-        ..ShadeConfig::default()
+        ..LshadeConfig::default()
     }
 }
 
-fn run<O: Objective + ?Sized>(obj: &O, bounds: &[(f64, f64)], cfg: &ShadeConfig) -> ShadeResult {
+fn run<O: Objective + ?Sized>(obj: &O, bounds: &[(f64, f64)], cfg: &LshadeConfig) -> LshadeResult {
     minimize(obj, bounds, cfg, |_: &GenerationReport| true).expect("valid configuration")
 }
 
@@ -95,7 +99,7 @@ fn median(v: &[f64]) -> f64 {
 // ---------------------------------------------------------------------------------------------------
 
 #[test]
-fn library_test_functions_match_their_definitions() {
+fn shared_test_functions_match_their_definitions() {
     let mut rng = Rng::new(5);
     for (name, f, xstar, (lo, hi)) in CASES {
         let g = lib::by_name(name).expect("known name");
@@ -160,10 +164,10 @@ fn jso_solves_standard_functions_in_5_and_10_dimensions() {
             let bounds = vec![(lo, hi); dim];
             let values: Vec<f64> = (1..=3)
                 .map(|seed| {
-                    let c = ShadeConfig {
+                    let c = LshadeConfig {
                         max_evaluations: 10_000 * dim,
                         seed,
-                        ..ShadeConfig::jso()
+                        ..LshadeConfig::jso()
                     };
                     run(&f, &bounds, &c).best_objectives[0]
                 })
@@ -184,14 +188,14 @@ fn lshade_beats_the_paper_de_at_equal_budget() {
         let bounds = vec![(lo, hi); dim];
         let (mut a, mut b) = (Vec::new(), Vec::new());
         for seed in 1..=5 {
-            let c = ShadeConfig {
+            let c = LshadeConfig {
                 x_tol: 0.0,
                 ..cfg(60 * 333, seed)
             };
             let r = run(&f, &bounds, &c);
             assert_eq!(r.evaluations, 60 * 333, "x_tol 0: the whole budget is used");
             a.push(r.best_objectives[0]);
-            let d = de::minimize(
+            let d = rand1bin::minimize(
                 &f,
                 &bounds,
                 &DeConfig {
@@ -241,9 +245,9 @@ fn every_individual_stays_within_bounds_and_fixed_dimensions_stay_fixed() {
         (0.0, 1e-3),
     ];
     let obj = |x: &[f64]| rastrigin(&[x[0], x[2], x[3]]) + (x[5] - 5e-4).powi(2) + x[1] + x[4];
-    for variant in [ShadeConfig::lshade(), ShadeConfig::jso()] {
+    for variant in [LshadeConfig::lshade(), LshadeConfig::jso()] {
         for seed in [1, 2] {
-            let c = ShadeConfig {
+            let c = LshadeConfig {
                 max_evaluations: 20_000,
                 seed,
                 polish_evaluations: 300,
@@ -289,7 +293,7 @@ fn optimum_outside_the_box_ends_on_the_corner() {
     let expected = 3.0 * 49.0 + 64.0;
     for seed in [1, 2] {
         for polish in [0, 200] {
-            let c = ShadeConfig {
+            let c = LshadeConfig {
                 polish_evaluations: polish,
                 ..cfg(8_000, seed)
             };
@@ -319,7 +323,7 @@ fn nan_never_wins() {
     };
     let bounds = [(-5.0, 5.0), (-5.0, 5.0)];
     for seed in [1, 2, 3] {
-        let c = ShadeConfig {
+        let c = LshadeConfig {
             polish_evaluations: 200,
             ..cfg(4_000, seed)
         };
@@ -353,7 +357,7 @@ fn population_shrinks_linearly_from_18d_to_4() {
     let dim = 5;
     let bounds = vec![(-5.12, 5.12); dim];
     let max = 10_000;
-    let c = ShadeConfig {
+    let c = LshadeConfig {
         x_tol: 0.0,
         ..cfg(max, 3)
     };
@@ -379,7 +383,7 @@ fn population_shrinks_linearly_from_18d_to_4() {
     minimize(
         &rastrigin,
         &bounds,
-        &ShadeConfig::jso(),
+        &LshadeConfig::jso(),
         |r: &GenerationReport| {
             first = r.population.len();
             false
@@ -397,7 +401,7 @@ fn evaluation_count_matches_calls_to_the_objective() {
             calls.fetch_add(1, Ordering::Relaxed);
             rosenbrock(x)
         };
-        let c = ShadeConfig {
+        let c = LshadeConfig {
             x_tol,
             polish_evaluations: polish,
             ..cfg(3_001, 4)
@@ -419,7 +423,7 @@ fn callback_can_stop_early_and_the_polish_is_then_skipped() {
     let bounds = [(-5.0, 3.0); 3];
     for stop_at in [0usize, 1, 7] {
         let mut seen = Vec::new();
-        let c = ShadeConfig {
+        let c = LshadeConfig {
             polish_evaluations: 100,
             ..cfg(10_000, 5)
         };
@@ -463,7 +467,7 @@ fn best_is_monotone_and_is_the_population_minimum() {
 fn stop_reasons() {
     let bounds = [(-5.0, 5.0); 4];
     // Converged: the population collapses on the sphere's minimum long before the budget.
-    let c = ShadeConfig {
+    let c = LshadeConfig {
         x_tol: 1e-6,
         ..cfg(1_000_000, 1)
     };
@@ -478,7 +482,7 @@ fn stop_reasons() {
     assert!(last_spread < 1e-6 && res.evaluations < 100_000);
 
     // Stalled: a constant objective never improves, so the search stops after exactly K generations.
-    let c = ShadeConfig {
+    let c = LshadeConfig {
         stall_generations: 7,
         ..cfg(1_000_000, 1)
     };
@@ -488,7 +492,7 @@ fn stop_reasons() {
     // Stall with a tolerance: improvements smaller than stall_tol do not count. The sphere is at most
     // 100 on this box, so no improvement can reach 1e3 and the search stops after exactly K generations
     // although the best does improve.
-    let c = ShadeConfig {
+    let c = LshadeConfig {
         stall_generations: 5,
         stall_tol: 1e3,
         ..cfg(1_000_000, 1)
@@ -503,7 +507,7 @@ fn stop_reasons() {
     assert!(best[5] < best[0]);
 
     // Generation cap.
-    let c = ShadeConfig {
+    let c = LshadeConfig {
         max_generations: Some(5),
         ..cfg(1_000_000, 1)
     };
@@ -521,7 +525,7 @@ fn stop_reasons() {
 fn latin_hypercube_and_uniform_initialisation() {
     let bounds = [(-3.0, 1.0), (10.0, 20.0), (0.0, 0.0)];
     for init in [Init::LatinHypercube, Init::Uniform] {
-        let c = ShadeConfig {
+        let c = LshadeConfig {
             init,
             population_init: Some(40),
             ..cfg(1_000, 2)
@@ -549,8 +553,8 @@ fn latin_hypercube_and_uniform_initialisation() {
 
 #[test]
 fn success_history_memory_stays_in_range() {
-    for variant in [ShadeConfig::lshade(), ShadeConfig::jso()] {
-        let c = ShadeConfig {
+    for variant in [LshadeConfig::lshade(), LshadeConfig::jso()] {
+        let c = LshadeConfig {
             max_evaluations: 20_000,
             seed: 3,
             ..variant
@@ -598,8 +602,8 @@ impl Objective for EarlyExit {
 #[test]
 fn early_exit_objective_gives_identical_results() {
     let bounds = [(-5.12, 5.12); 6];
-    for variant in [ShadeConfig::lshade(), ShadeConfig::jso()] {
-        let c = ShadeConfig {
+    for variant in [LshadeConfig::lshade(), LshadeConfig::jso()] {
+        let c = LshadeConfig {
             max_evaluations: 12_000,
             seed: 8,
             polish_evaluations: 200,
@@ -661,12 +665,12 @@ fn polish_improves_an_unconverged_result_and_reports_it() {
     // so a polish from anywhere should reach it.
     let bounds = [(-5.0, 10.0); 3];
     for seed in [1, 2, 3] {
-        let base = ShadeConfig {
+        let base = LshadeConfig {
             x_tol: 0.0,
             ..cfg(600, seed)
         };
         let plain = run(&rosenbrock, &bounds, &base);
-        let c = ShadeConfig {
+        let c = LshadeConfig {
             polish_evaluations: 3_000,
             ..base
         };
@@ -695,7 +699,7 @@ fn bits(v: &[f64]) -> Vec<u64> {
     v.iter().map(|x| x.to_bits()).collect()
 }
 
-fn history_on_threads(threads: usize, c: &ShadeConfig) -> History {
+fn history_on_threads(threads: usize, c: &LshadeConfig) -> History {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
@@ -733,8 +737,8 @@ fn history_on_threads(threads: usize, c: &ShadeConfig) -> History {
 
 #[test]
 fn result_is_bit_identical_on_1_2_4_8_threads() {
-    for variant in [ShadeConfig::lshade(), ShadeConfig::jso()] {
-        let c = ShadeConfig {
+    for variant in [LshadeConfig::lshade(), LshadeConfig::jso()] {
+        let c = LshadeConfig {
             max_evaluations: 8_000,
             seed: 42,
             polish_evaluations: 300,
@@ -745,7 +749,7 @@ fn result_is_bit_identical_on_1_2_4_8_threads() {
         for n in [2, 4, 8] {
             assert_eq!(history_on_threads(n, &c), reference, "{n} threads");
         }
-        let other = history_on_threads(4, &ShadeConfig { seed: 43, ..c });
+        let other = history_on_threads(4, &LshadeConfig { seed: 43, ..c });
         assert_ne!(other.0[0], reference.0[0], "another seed, another start");
     }
 }
@@ -771,43 +775,43 @@ fn bad_configuration_is_an_error_not_a_panic() {
     let f = |x: &[f64]| x[0];
     let b = [(0.0, 1.0)];
     let bad = [
-        ShadeConfig {
+        LshadeConfig {
             min_population: 3,
             ..Default::default()
         },
-        ShadeConfig {
+        LshadeConfig {
             population_init: Some(3),
             ..Default::default()
         },
-        ShadeConfig {
+        LshadeConfig {
             max_evaluations: 10,
             ..Default::default()
         },
-        ShadeConfig {
+        LshadeConfig {
             memory_size: 0,
             ..Default::default()
         },
-        ShadeConfig {
+        LshadeConfig {
             memory_f: 0.0,
             ..Default::default()
         },
-        ShadeConfig {
+        LshadeConfig {
             memory_cr: 1.5,
             ..Default::default()
         },
-        ShadeConfig {
+        LshadeConfig {
             p_best: 0.0,
             ..Default::default()
         },
-        ShadeConfig {
+        LshadeConfig {
             archive_rate: -1.0,
             ..Default::default()
         },
-        ShadeConfig {
+        LshadeConfig {
             x_tol: f64::NAN,
             ..Default::default()
         },
-        ShadeConfig {
+        LshadeConfig {
             stall_tol: -1.0,
             ..Default::default()
         },
@@ -815,7 +819,7 @@ fn bad_configuration_is_an_error_not_a_panic() {
     for c in bad {
         assert!(minimize(&f, &b, &c, |_| true).is_err(), "{c:?}");
     }
-    let ok = ShadeConfig::default();
+    let ok = LshadeConfig::default();
     assert!(minimize(&f, &[(1.0, 0.0)], &ok, |_| true).is_err());
     assert!(minimize(&f, &[(0.0, f64::INFINITY)], &ok, |_| true).is_err());
     assert!(minimize(&TwoObjectives, &b, &ok, |_| true).is_err());

@@ -2,7 +2,7 @@
 //! through the renderer's `shade`, on random scenes with shadows, several spheres, specular terms,
 //! ambient light and saturated objective pixels.
 
-use rtloop::de::{Objective, Rng};
+use rtloop::search::{Objective, Rng};
 use rtloop::{render, Fitness, LossKind, ParamLayout, Projection, Scene};
 
 fn random_scene(rng: &mut Rng, spheres: usize, specular: bool, ambient: bool) -> Scene {
@@ -320,7 +320,7 @@ fn early_exit_changes_cost_not_results() {
         let mut f = fitness(&scene, &layout, &target, LossKind::L1, true);
         f.early_exit = early;
         let mut history = Vec::new();
-        let r = rtloop::de::minimize(&f, &layout.bounds, &cfg, |g| {
+        let r = rtloop::search::rand1bin::minimize(&f, &layout.bounds, &cfg, |g| {
             history.push((
                 g.best.to_vec(),
                 g.best_objectives.to_vec(),

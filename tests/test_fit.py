@@ -255,7 +255,7 @@ def test_projected_fitness_equals_l1_at_the_solved_products(ball_scene):
     for light in ([1.0, 5.0, -2.0], [-3.0, 2.0, 1.0], [2.5, 4.5, -1.0]):
         out = _native.optimize(scene, ["light.position"], photo, loss="l1_projected", population=4,
                                generations=0, product_bounds=pb, seed=0)
-        assert out["generations"] == 0
+        assert out.generations == 0
         proj = _native.evaluate(scene, ["light.position"], photo, np.array([light]), loss="l1_projected",
                                 product_bounds=pb)[0, 0]
         # Re-render with intensity 1 and albedo = product: the same image, the same L1.

@@ -73,30 +73,41 @@ def optimize(
     with_products: bool = True,
     space: str = "linear",
     polish_tol: float | None = None,
-) -> dict[str, Any]:
+) -> OptimizeResult:
     """polish_tol: the polish stops once every simplex vertex is within this fraction of each range of
-    the best (default 1e-13). Keys: x, objectives, evaluations, generations, stopped, stop_reason, active_pixels, polish (when
-    run); for the projected loss also products (per object [P_r, P_g, P_b, Q]: the products minimising
-    the loss at x), lit_pixels (per object) and search_objectives (the loss at the least-squares
-    products the search ranked candidates by). product_bounds: (objects, 3, 2), or (objects, 4, 2) whose
-    row 4 bounds Q = intensity x specular. space: "linear" or "srgb" (the loss compares the sRGB
-    encodings of the clipped render and of target; the least-squares products stay linear)."""
+    the best (default 1e-13). product_bounds: (objects, 3, 2), or (objects, 4, 2) whose row 4 bounds
+    Q = intensity x specular. space: "linear" or "srgb" (the loss compares the sRGB encodings of the
+    clipped render and of target; the least-squares products stay linear)."""
 
-# Test hooks for the optimisers (rust/python/de.rs), used by tests/test_de_scipy.py.
-def minimize_test_function(
-    name: str,
-    dim: int,
-    lo: float,
-    hi: float,
-    *,
-    method: str = "lshade",
-    max_evaluations: int = 10000,
-    seed: int = 0,
-    polish: int = 0,
-    population: int | None = None,
-    x_tol: float | None = None,
-    stall_generations: int = 0,
-    init: str = "lhs",
-    threads: int | None = None,
-) -> dict[str, Any]: ...
-def test_function_value(name: str, x: list[float]) -> float: ...
+class OptimizeResult:
+    """What ``optimize`` found (immutable). For the projected loss ``products`` (per object
+    [P_r, P_g, P_b, Q]: the products minimising the loss at x), ``lit_pixels`` (per object) and
+    ``search_objectives`` (the loss at the least-squares products the search ranked candidates by) are
+    set, else None."""
+
+    @property
+    def x(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def objectives(self) -> list[float]: ...
+    @property
+    def search_objectives(self) -> list[float] | None: ...
+    @property
+    def evaluations(self) -> int: ...
+    @property
+    def generations(self) -> int: ...
+    @property
+    def stopped(self) -> bool: ...
+    @property
+    def stop_reason(self) -> str: ...
+    @property
+    def polish(self) -> tuple[int, float, float] | None:
+        """(evaluations, value before, value after) of the Nelder-Mead polish; None when none ran."""
+    @property
+    def active_pixels(self) -> int: ...
+    @property
+    def products(self) -> list[list[float]] | None: ...
+    @property
+    def lit_pixels(self) -> list[int] | None: ...
+
+# The optimisers' test hooks (minimize_test_function, test_function_value) are not in this module: they
+# live in the test-only extension _rtloop_test_hooks (cargo feature test-hooks, rust/python/test_hooks.rs).

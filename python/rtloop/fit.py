@@ -334,19 +334,19 @@ def fit(
             product_bounds=product_bounds, method=method, polish=polish, norm=norm, space=space,
             with_products=callback is not None, polish_tol=polish_tol,
         )
-        generations_run = out["generations"]
-        if "polish" in out and not out["stopped"]:
+        generations_run = out.generations
+        if out.polish is not None and not out.stopped:
             # The Nelder-Mead polish after the last generation is logged as one more generation, so the
             # history (and the CSV, the report) ends at the fitted values.
             generations_run += 1
-            on_generation(generations_run, np.asarray(out["x"]), list(out["objectives"]), out["evaluations"],
-                          out.get("products"))
-        evaluations += out["evaluations"]
+            on_generation(generations_run, np.asarray(out.x), list(out.objectives), out.evaluations,
+                          out.products)
+        evaluations += out.evaluations
         return StageResult(
-            name=name, paths=paths, param_names=stage_scene.param_names(paths), x=np.asarray(out["x"]),
-            objectives=list(out["objectives"]), evaluations=out["evaluations"], generations=generations_run,
-            seconds=time.perf_counter() - t, loss=loss, pixels=int(out["active_pixels"]), history=history,
-            products=out.get("products"), lit_pixels=out.get("lit_pixels"),
+            name=name, paths=paths, param_names=stage_scene.param_names(paths), x=np.asarray(out.x),
+            objectives=list(out.objectives), evaluations=out.evaluations, generations=generations_run,
+            seconds=time.perf_counter() - t, loss=loss, pixels=int(out.active_pixels), history=history,
+            products=out.products, lit_pixels=out.lit_pixels,
         )
 
     def light_stage(name: str, stage_scene: Scene, stage_seed: int) -> Scene:

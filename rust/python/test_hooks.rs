@@ -1,27 +1,35 @@
-//! Test hooks for the optimisers: run L-SHADE, jSO or the paper's DE/rand/1/bin on a standard test
-//! function from Python (`tests/test_de_scipy.py` compares them with SciPy). Conversions only.
+//! Test hooks for the optimisers, only with the `test-hooks` feature (the wheel does not build it): the
+//! extension module `_rtloop_test_hooks` runs L-SHADE, jSO or the paper's DE/rand/1/bin on a standard
+//! test function from Python (`tests/test_de_scipy.py` compares them with SciPy; `.ci/build-test-hooks`
+//! builds it). Conversions only.
 
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use super::pool;
-use crate::de::shade::{self, test_functions, Init, ShadeConfig};
-use crate::de::{self, DeConfig};
+use super::errors::RtloopError;
+use super::pool::detach_in_pool;
+use crate::error::Error;
+use crate::search::{lshade, nelder_mead, normalized_spreads, rand1bin};
+use crate::search::{DeConfig, Init, LshadeConfig};
 
-pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+#[path = "../../tests/common/test_functions.rs"]
+mod test_functions;
+
+#[pymodule(gil_used = false)]
+fn _rtloop_test_hooks(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(minimize_test_function, m)?)?;
     m.add_function(wrap_pyfunction!(test_function_value, m)?)?;
+    m.add("RtloopError", m.py().get_type::<RtloopError>())?;
     Ok(())
 }
 
 /// Minimise the test function `name` (sphere, rosenbrock, rastrigin, ackley, griewank; minimum 0) in
 /// `dim` dimensions on the box [lo, hi]^dim.
 ///
-/// `method`: "lshade", "jso" (both from `rtloop::de::shade`) or "de" (the paper's DE/rand/1/bin, F 0.6,
+/// `method`: "lshade", "jso" (both from `rtloop::search::lshade`) or "de" (the paper's DE/rand/1/bin, F 0.6,
 /// CR 0.8, run for `max_evaluations // population - 1` generations). `polish`: Nelder–Mead evaluation
 /// budget after the evolution (0: none). `population`: L-SHADE's initial population (default 18 D) or
-/// DE's population (default 60). `x_tol`, `stall_generations`: the stopping rules of `ShadeConfig`
+/// DE's population (default 60). `x_tol`, `stall_generations`: the stopping rules of `LshadeConfig`
 /// (defaults 1e-9 and 0 = off; `x_tol` applies to "de" too, through its callback). Returns a dict with
 /// `x`, `f`, `evaluations` (polish included), `generations`, `stop_reason`, `population` (final size),
 /// `polish_evaluations`, `polish_improvement` and `history` (best value after every generation).
@@ -46,26 +54,26 @@ fn minimize_test_function<'py>(
     threads: Option<usize>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let f = test_functions::by_name(name).ok_or_else(|| {
-        PyValueError::new_err(format!(
+        Error::Value(format!(
             "unknown test function {name:?} (known: {})",
             test_functions::NAMES.join(", ")
         ))
     })?;
     if dim == 0 {
-        return Err(PyValueError::new_err("dim must be >= 1"));
+        return Err(Error::Value("dim must be >= 1".into()).into());
     }
     let init = match init {
         "lhs" => Init::LatinHypercube,
         "uniform" => Init::Uniform,
         _ => {
-            return Err(PyValueError::new_err(format!(
+            return Err(Error::Value(format!(
                 "init must be \"lhs\" or \"uniform\" (got {init:?})"
-            )))
+            ))
+            .into())
         }
     };
     let bounds = vec![(lo, hi); dim];
-    let x_tol = x_tol.unwrap_or(ShadeConfig::default().x_tol);
-    let pool = pool(threads)?;
+    let x_tol = x_tol.unwrap_or(LshadeConfig::default().x_tol);
     let mut history: Vec<f64> = Vec::new();
 
     struct Out {
@@ -81,7 +89,7 @@ fn minimize_test_function<'py>(
 
     let out: Out = match method {
         "lshade" | "jso" => {
-            let cfg = ShadeConfig {
+            let cfg = LshadeConfig {
                 max_evaluations,
                 population_init: population,
                 x_tol,
@@ -90,19 +98,17 @@ fn minimize_test_function<'py>(
                 init,
                 seed,
                 ..if method == "jso" {
-                    ShadeConfig::jso()
+                    LshadeConfig::jso()
                 } else {
-                    ShadeConfig::lshade()
+                    LshadeConfig::lshade()
                 }
             };
-            let r = py.detach(|| {
-                pool.install(|| {
-                    shade::minimize(&f, &bounds, &cfg, |rep| {
-                        history.push(rep.best_objectives[0]);
-                        true
-                    })
+            let r = detach_in_pool(py, threads, || {
+                lshade::minimize(&f, &bounds, &cfg, |rep| {
+                    history.push(rep.best_objectives[0]);
+                    true
                 })
-            })?;
+            })??;
             let (pe, pi) = r
                 .polish
                 .as_ref()
@@ -121,9 +127,10 @@ fn minimize_test_function<'py>(
         "de" => {
             let np = population.unwrap_or(60);
             if max_evaluations < np {
-                return Err(PyValueError::new_err(format!(
+                return Err(Error::Value(format!(
                     "max_evaluations ({max_evaluations}) must cover the population ({np})"
-                )));
+                ))
+                .into());
             }
             let cfg = DeConfig {
                 population: np,
@@ -133,16 +140,14 @@ fn minimize_test_function<'py>(
             };
             let mut spread = vec![0.0; dim];
             let mut converged = false;
-            let r = py.detach(|| {
-                pool.install(|| {
-                    de::minimize(&f, &bounds, &cfg, |rep| {
-                        history.push(rep.best_objectives[0]);
-                        spread = shade::normalized_spreads(rep.population, &bounds);
-                        converged = x_tol > 0.0 && spread.iter().all(|&s| s < x_tol);
-                        !converged
-                    })
+            let r = detach_in_pool(py, threads, || {
+                rand1bin::minimize(&f, &bounds, &cfg, |rep| {
+                    history.push(rep.best_objectives[0]);
+                    spread = normalized_spreads(rep.population, &bounds);
+                    converged = x_tol > 0.0 && spread.iter().all(|&s| s < x_tol);
+                    !converged
                 })
-            })?;
+            })??;
             let mut out = Out {
                 x: r.best.clone(),
                 f: r.best_objectives[0],
@@ -159,19 +164,17 @@ fn minimize_test_function<'py>(
             };
             if polish > 0 {
                 let step: Vec<f64> = spread.iter().map(|s| s.clamp(1e-8, 0.1)).collect();
-                let nm = py.detach(|| {
-                    pool.install(|| {
-                        shade::nelder_mead(
-                            &f,
-                            &bounds,
-                            &r.best,
-                            out.f,
-                            &step,
-                            polish,
-                            ShadeConfig::default().polish_x_tol,
-                        )
-                    })
-                })?;
+                let nm = detach_in_pool(py, threads, || {
+                    nelder_mead(
+                        &f,
+                        &bounds,
+                        &r.best,
+                        out.f,
+                        &step,
+                        polish,
+                        LshadeConfig::default().polish_x_tol,
+                    )
+                })??;
                 out.evaluations += nm.evaluations;
                 out.polish_evaluations = nm.evaluations;
                 if nm.f < out.f {
@@ -183,9 +186,10 @@ fn minimize_test_function<'py>(
             out
         }
         _ => {
-            return Err(PyValueError::new_err(format!(
+            return Err(Error::Value(format!(
                 "method must be \"lshade\", \"jso\" or \"de\" (got {method:?})"
-            )))
+            ))
+            .into())
         }
     };
     let d = PyDict::new(py);
@@ -205,6 +209,6 @@ fn minimize_test_function<'py>(
 #[pyfunction]
 fn test_function_value(name: &str, x: Vec<f64>) -> PyResult<f64> {
     let f = test_functions::by_name(name)
-        .ok_or_else(|| PyValueError::new_err(format!("unknown test function {name:?}")))?;
+        .ok_or_else(|| Error::Value(format!("unknown test function {name:?}")))?;
     Ok(f(&x))
 }

@@ -8,7 +8,9 @@ use serde::Deserialize;
 use serde_json::{json, Map, Value};
 
 use crate::error::{Error, Result};
-use crate::params::Target;
+
+mod target;
+pub use target::{Target, FITTABLE};
 
 pub type V3 = [f64; 3];
 
@@ -396,12 +398,7 @@ impl Scene {
             .collect();
         let mut fit = Map::new();
         for p in &self.fit {
-            let (min, max) = if p.min.len() == 1 {
-                (json!(p.min[0]), json!(p.max[0]))
-            } else {
-                (json!(p.min), json!(p.max))
-            };
-            fit.insert(p.path.clone(), json!({"min": min, "max": max}));
+            fit.insert(p.path.clone(), p.to_value());
         }
         let mut out = Map::new();
         for key in ["name", "description"] {
@@ -438,6 +435,48 @@ impl Scene {
             }
         }
         Value::Object(out)
+    }
+
+    /// A copy whose fit section has `bounds` for each `(path, bounds)` (added when the path is new),
+    /// validated as [`Scene::from_json`] validates a fit entry. `bounds` is the JSON form
+    /// `{"min": ..., "max": ...}`, each a number or one per component.
+    pub fn with_bounds(&self, changes: &[(String, Value)]) -> Result<Scene> {
+        let mut scene = self.clone();
+        for (path, bounds) in changes {
+            let entry = parse_fit_entry(&scene, path, bounds)?;
+            match scene.fit.iter_mut().find(|f| f.path == *path) {
+                Some(f) => *f = entry,
+                None => scene.fit.push(entry),
+            }
+        }
+        scene.fit.sort_by_key(|p| p.target.order_key());
+        Ok(scene)
+    }
+
+    /// A copy with `other`'s fit section, validated against this scene (its objects and light).
+    pub fn with_fit(&self, other: &Scene) -> Result<Scene> {
+        let mut scene = self.without_fit();
+        let mut changes: Vec<(String, Value)> = other
+            .fit
+            .iter()
+            .map(|p| (p.path.clone(), p.to_value()))
+            .collect();
+        changes.sort_by(|a, b| a.0.cmp(&b.0)); // the order `from_json` checks them in
+        let mut fit = Vec::with_capacity(changes.len());
+        for (path, bounds) in &changes {
+            fit.push(parse_fit_entry(&scene, path, bounds)?);
+        }
+        fit.sort_by_key(|p| p.target.order_key());
+        scene.fit = fit;
+        Ok(scene)
+    }
+
+    /// A copy with an empty fit section.
+    pub fn without_fit(&self) -> Scene {
+        Scene {
+            fit: Vec::new(),
+            ..self.clone()
+        }
     }
 
     /// True when some object sits between a surface and the light for some light position: with one
@@ -539,6 +578,18 @@ fn parse_object(i: usize, o: RawObject, previous: &[Object]) -> Result<Object> {
         shape,
         material,
     })
+}
+
+impl FitParam {
+    /// The entry in the public format: `{"min": ..., "max": ...}` (numbers for one component, else lists).
+    fn to_value(&self) -> Value {
+        let (min, max) = if self.min.len() == 1 {
+            (json!(self.min[0]), json!(self.max[0]))
+        } else {
+            (json!(self.min), json!(self.max))
+        };
+        json!({"min": min, "max": max})
+    }
 }
 
 fn bound_values(field: &str, v: Option<&Value>, len: usize) -> Result<Vec<f64>> {

@@ -1,9 +1,10 @@
 //! L-SHADE (Tanabe & Fukunaga, CEC 2014): success-history based parameter adaptation (SHADE, Tanabe &
 //! Fukunaga 2013) with linear population size reduction, current-to-pbest/1 mutation with an external
 //! archive, binomial crossover and the midpoint-to-bound repair, plus the jSO refinements (Brest, Maučec
-//! & Bošković 2017) as an option, stopping rules on convergence, and a final Nelder–Mead polish.
+//! & Bošković 2017) as an option, stopping rules on convergence, and a final Nelder–Mead polish
+//! ([`super::nelder_mead`]).
 //!
-//! The plain DE/rand/1/bin of [`super::minimize`] stays the engine of the paper protocol; this module is
+//! The plain DE/rand/1/bin of [`super::rand1bin`] stays the engine of the paper protocol; this module is
 //! the modern alternative with the same contracts:
 //!
 //! * one objective ([`Objective`] with `n_objectives() == 1`), minimised within `bounds`; a dimension with
@@ -40,9 +41,13 @@
 //! 60%, the pbest difference weighted by `F_w = 0.7 F, 0.8 F, 1.2 F` (before 20%, 40%, after), and the
 //! memory update averaging the new mean with the old value.
 
-use rayon::prelude::*;
-
-use super::{evaluate_all, pick, report, GenerationReport, Objective, Rng};
+use super::nelder_mead::nelder_mead;
+use super::rng::{pick, Rng};
+use super::select::{best_index, normalized_spread, normalized_spreads, ranking};
+use super::{
+    check_single_objective, evaluate_all, report, GenerationReport, Objective, PolishReport,
+    StopReason,
+};
 use crate::error::{Error, Result};
 
 /// Which adaptive DE.
@@ -50,7 +55,7 @@ use crate::error::{Error, Result};
 pub enum Variant {
     /// L-SHADE as published (Tanabe & Fukunaga 2014).
     LShade,
-    /// L-SHADE with the jSO refinements (Brest et al. 2017). Use [`ShadeConfig::jso`] for its defaults.
+    /// L-SHADE with the jSO refinements (Brest et al. 2017). Use [`LshadeConfig::jso`] for its defaults.
     Jso,
 }
 
@@ -64,44 +69,10 @@ pub enum Init {
     Uniform,
 }
 
-/// Why [`minimize`] stopped.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum StopReason {
-    /// The evaluation budget `max_evaluations` is spent.
-    MaxEvaluations,
-    /// `max_generations` generations were run.
-    MaxGenerations,
-    /// The population's spread in normalised parameter space fell below `x_tol`.
-    Converged,
-    /// The best value did not improve by more than `stall_tol` for `stall_generations` generations.
-    Stalled,
-    /// The callback returned `false`.
-    Callback,
-}
-
-impl StopReason {
-    /// `"max_evaluations"`, `"max_generations"`, `"converged"`, `"stalled"` or `"callback"`.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            StopReason::MaxEvaluations => "max_evaluations",
-            StopReason::MaxGenerations => "max_generations",
-            StopReason::Converged => "converged",
-            StopReason::Stalled => "stalled",
-            StopReason::Callback => "callback",
-        }
-    }
-}
-
-impl std::fmt::Display for StopReason {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-/// Settings of [`minimize`]. `Default` is L-SHADE with the paper's parameters; [`ShadeConfig::jso`] gives
+/// Settings of [`minimize`]. `Default` is L-SHADE with the paper's parameters; [`LshadeConfig::jso`] gives
 /// jSO's. `D` below is the number of free dimensions (those with `min < max`, at least 1).
 #[derive(Clone, Debug)]
-pub struct ShadeConfig {
+pub struct LshadeConfig {
     pub variant: Variant,
     /// Evaluation budget of the evolution (the polish has its own). The population reduction is scheduled
     /// over this budget, and the last generation evaluates only as many trials as are left, so the count
@@ -144,10 +115,10 @@ pub struct ShadeConfig {
     pub seed: u64,
 }
 
-impl Default for ShadeConfig {
+impl Default for LshadeConfig {
     /// L-SHADE with the parameters of Tanabe & Fukunaga (2014).
     fn default() -> Self {
-        ShadeConfig {
+        LshadeConfig {
             variant: Variant::LShade,
             max_evaluations: 12_000,
             max_generations: None,
@@ -169,7 +140,7 @@ impl Default for ShadeConfig {
     }
 }
 
-impl ShadeConfig {
+impl LshadeConfig {
     /// L-SHADE's defaults (same as `Default`).
     pub fn lshade() -> Self {
         Self::default()
@@ -177,7 +148,7 @@ impl ShadeConfig {
 
     /// jSO's defaults (Brest, Maučec & Bošković 2017).
     pub fn jso() -> Self {
-        ShadeConfig {
+        LshadeConfig {
             variant: Variant::Jso,
             memory_size: 5,
             memory_f: 0.3,
@@ -258,21 +229,8 @@ impl ShadeConfig {
     }
 }
 
-/// What the final Nelder–Mead polish did.
 #[derive(Clone, Debug)]
-pub struct PolishReport {
-    pub evaluations: usize,
-    /// Best value before and after the polish (`after <= before`: a worse point is never taken).
-    pub f_before: f64,
-    pub f_after: f64,
-    /// `f_before − f_after` (0 when the polish found nothing better; `inf` when `f_before` was `inf`).
-    pub improvement: f64,
-    /// The simplex shrank below `polish_x_tol` before the budget was spent.
-    pub converged: bool,
-}
-
-#[derive(Clone, Debug)]
-pub struct ShadeResult {
+pub struct LshadeResult {
     pub best: Vec<f64>,
     /// The best value, as a one-element vector like [`super::DeResult::best_objectives`].
     pub best_objectives: Vec<f64>,
@@ -290,7 +248,7 @@ pub struct ShadeResult {
     pub polish: Option<PolishReport>,
 }
 
-impl ShadeResult {
+impl LshadeResult {
     /// The callback asked to stop.
     pub fn stopped(&self) -> bool {
         self.stop == StopReason::Callback
@@ -307,23 +265,6 @@ fn normal(rng: &mut Rng, mean: f64, sd: f64) -> f64 {
 /// A Cauchy draw.
 fn cauchy(rng: &mut Rng, loc: f64, scale: f64) -> f64 {
     loc + scale * (std::f64::consts::PI * (rng.uniform() - 0.5)).tan()
-}
-
-fn check_problem<O: Objective + ?Sized>(obj: &O, bounds: &[(f64, f64)]) -> Result<()> {
-    if obj.n_objectives() != 1 {
-        return Err(Error::Invalid(format!(
-            "L-SHADE and Nelder-Mead minimise one objective (got {})",
-            obj.n_objectives()
-        )));
-    }
-    for (k, &(lo, hi)) in bounds.iter().enumerate() {
-        if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
-            return Err(Error::Invalid(format!(
-                "bounds[{k}] must be finite with min <= max (got {lo}, {hi})"
-            )));
-        }
-    }
-    Ok(())
 }
 
 /// Initial population of `n` individuals within `bounds` (fixed dimensions at their value).
@@ -356,45 +297,6 @@ fn initial_population(rng: &mut Rng, bounds: &[(f64, f64)], n: usize, init: Init
     pop
 }
 
-/// Largest per-dimension spread of `pop`, as a fraction of each free dimension's range (0 if none is free).
-pub fn normalized_spread(pop: &[Vec<f64>], bounds: &[(f64, f64)]) -> f64 {
-    normalized_spreads(pop, bounds)
-        .into_iter()
-        .fold(0.0, f64::max)
-}
-
-/// Per-dimension spread `(max − min) / (hi − lo)` of `pop` (0 for fixed dimensions).
-pub fn normalized_spreads(pop: &[Vec<f64>], bounds: &[(f64, f64)]) -> Vec<f64> {
-    bounds
-        .iter()
-        .enumerate()
-        .map(|(j, &(lo, hi))| {
-            if lo == hi || pop.is_empty() {
-                return 0.0;
-            }
-            let (a, b) = pop
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
-                    (a.min(x[j]), b.max(x[j]))
-                });
-            (b - a) / (hi - lo)
-        })
-        .collect()
-}
-
-/// Indices of `fit` from best to worst (ties by index, so the order is deterministic).
-fn ranking(fit: &[Vec<f64>]) -> Vec<usize> {
-    let mut order: Vec<usize> = (0..fit.len()).collect();
-    order.sort_by(|&a, &b| fit[a][0].total_cmp(&fit[b][0]).then(a.cmp(&b)));
-    order
-}
-
-fn best_index(fit: &[Vec<f64>]) -> usize {
-    (0..fit.len())
-        .min_by(|&a, &b| fit[a][0].total_cmp(&fit[b][0]))
-        .expect("population is never empty")
-}
-
 /// Improvement-weighted Lehmer mean `Σ w s² / Σ w s` of `s` (weights proportional to `delta`).
 fn weighted_lehmer_mean(s: &[f64], delta: &[f64]) -> f64 {
     // Improvements are > 0; an infinite one (a trial beating an infinite/NaN parent) takes all the weight.
@@ -418,23 +320,23 @@ fn weighted_lehmer_mean(s: &[f64], delta: &[f64]) -> f64 {
     }
 }
 
-/// Minimise the single objective `obj` within `bounds` with L-SHADE (or jSO, see [`ShadeConfig`]).
+/// Minimise the single objective `obj` within `bounds` with L-SHADE (or jSO, see [`LshadeConfig`]).
 ///
 /// `callback` runs after the initial population and after every generation with the current (shrinking)
 /// population; returning `false` stops the search (and skips the polish). The search also stops on the
-/// budget, the generation cap, convergence or stall; [`ShadeResult::stop`] says which (checked in the
+/// budget, the generation cap, convergence or stall; [`LshadeResult::stop`] says which (checked in the
 /// order callback, converged, stalled, evaluations, generations).
 pub fn minimize<O, C>(
     obj: &O,
     bounds: &[(f64, f64)],
-    cfg: &ShadeConfig,
+    cfg: &LshadeConfig,
     mut callback: C,
-) -> Result<ShadeResult>
+) -> Result<LshadeResult>
 where
     O: Objective + ?Sized,
     C: FnMut(&GenerationReport) -> bool,
 {
-    check_problem(obj, bounds)?;
+    check_single_objective(obj, bounds)?;
     let dim = bounds.len();
     let free = bounds.iter().filter(|(lo, hi)| lo < hi).count();
     let n_init = cfg.initial_population(free);
@@ -693,7 +595,7 @@ where
         });
     }
 
-    Ok(ShadeResult {
+    Ok(LshadeResult {
         best,
         best_objectives: vec![best_f],
         evaluations,
@@ -704,296 +606,6 @@ where
         memory_cr,
         polish,
     })
-}
-
-/// Result of [`nelder_mead`].
-#[derive(Clone, Debug)]
-pub struct NelderMeadResult {
-    /// The best point seen (`x0` itself, bit for bit, when nothing beat `f0`).
-    pub x: Vec<f64>,
-    pub f: f64,
-    pub evaluations: usize,
-    /// The simplex shrank below `x_tol` before the budget was spent.
-    pub converged: bool,
-}
-
-struct Vertex {
-    /// Normalised coordinates of the free dimensions, in [0, 1].
-    t: Vec<f64>,
-    x: Vec<f64>,
-    f: f64,
-}
-
-/// Bounded Nelder–Mead from `x0` (whose value `f0` is known), with the adaptive coefficients of Gao & Han
-/// (2012): reflection 1, expansion 1 + 2/n, contraction 0.75 − 1/(2n), shrink 1 − 1/n for n free
-/// dimensions.
-///
-/// The search runs in normalised coordinates `t = (x − lo) / (hi − lo)` of the free dimensions; every
-/// point is clamped to the box before it is evaluated (fixed dimensions keep `x0`'s value). The initial
-/// simplex is `x0` plus `step[j]` (a fraction of the range) along each free dimension `j` (minus, where
-/// plus would leave the box). It stops after `max_evaluations` evaluations or when every vertex lies
-/// within `x_tol` (normalised, per dimension) of the best. The initial simplex and shrink steps are
-/// evaluated in parallel; the result does not depend on the number of threads.
-pub fn nelder_mead<O: Objective + ?Sized>(
-    obj: &O,
-    bounds: &[(f64, f64)],
-    x0: &[f64],
-    f0: f64,
-    step: &[f64],
-    max_evaluations: usize,
-    x_tol: f64,
-) -> Result<NelderMeadResult> {
-    check_problem(obj, bounds)?;
-    if x0.len() != bounds.len() || step.len() != bounds.len() {
-        return Err(Error::Invalid(format!(
-            "x0 and step need {} values (got {} and {})",
-            bounds.len(),
-            x0.len(),
-            step.len()
-        )));
-    }
-    let free: Vec<usize> = (0..bounds.len())
-        .filter(|&j| bounds[j].0 < bounds[j].1)
-        .collect();
-    let n = free.len();
-    let f0 = if f0.is_nan() { f64::INFINITY } else { f0 };
-    let to_x = |t: &[f64]| -> Vec<f64> {
-        let mut x = x0.to_vec();
-        for (k, &j) in free.iter().enumerate() {
-            let (lo, hi) = bounds[j];
-            x[j] = (lo + (hi - lo) * t[k]).clamp(lo, hi);
-        }
-        x
-    };
-    let eval = |x: &[f64]| {
-        let mut o = [0.0];
-        obj.evaluate_alone(x, &mut o);
-        if o[0].is_nan() {
-            f64::INFINITY
-        } else {
-            o[0]
-        }
-    };
-    let make = |t: Vec<f64>| {
-        let t: Vec<f64> = t.into_iter().map(|v| v.clamp(0.0, 1.0)).collect();
-        let x = to_x(&t);
-        Vertex { t, x, f: 0.0 }
-    };
-    let evaluate_batch = |vs: &mut [Vertex]| {
-        vs.par_iter_mut().for_each(|v| v.f = eval(&v.x));
-    };
-
-    let t0: Vec<f64> = free
-        .iter()
-        .map(|&j| {
-            let (lo, hi) = bounds[j];
-            ((x0[j] - lo) / (hi - lo)).clamp(0.0, 1.0)
-        })
-        .collect();
-    let mut simplex = vec![Vertex {
-        t: t0.clone(),
-        x: x0.to_vec(),
-        f: f0,
-    }];
-    let mut evaluations = 0usize;
-    if n == 0 || max_evaluations == 0 {
-        return Ok(NelderMeadResult {
-            x: x0.to_vec(),
-            f: f0,
-            evaluations,
-            converged: n == 0,
-        });
-    }
-    let mut initial: Vec<Vertex> = free
-        .iter()
-        .enumerate()
-        .take(max_evaluations)
-        .map(|(k, &j)| {
-            let s = if step[j].is_finite() && step[j] > 0.0 {
-                step[j].min(0.5)
-            } else {
-                0.05
-            };
-            let mut t = t0.clone();
-            t[k] = if t0[k] + s <= 1.0 {
-                t0[k] + s
-            } else {
-                t0[k] - s
-            };
-            make(t)
-        })
-        .collect();
-    evaluate_batch(&mut initial);
-    evaluations += initial.len();
-    simplex.extend(initial);
-    let mut converged = false;
-
-    if simplex.len() == n + 1 {
-        let nf = n as f64;
-        let (alpha, beta, gamma, delta) = (1.0, 1.0 + 2.0 / nf, 0.75 - 0.5 / nf, 1.0 - 1.0 / nf);
-        // Points along the line from the centroid `c` through the worst vertex: c + coef (c - worst).
-        let along = |c: &[f64], w: &[f64], coef: f64| -> Vec<f64> {
-            c.iter().zip(w).map(|(c, w)| c + coef * (c - w)).collect()
-        };
-        loop {
-            simplex.sort_by(|a, b| a.f.total_cmp(&b.f));
-            let spread = simplex[1..]
-                .iter()
-                .flat_map(|v| v.t.iter().zip(&simplex[0].t).map(|(a, b)| (a - b).abs()))
-                .fold(0.0, f64::max);
-            if spread <= x_tol {
-                converged = true;
-                break;
-            }
-            if evaluations >= max_evaluations {
-                break;
-            }
-            let mut c = vec![0.0; n];
-            for v in &simplex[..n] {
-                for (c, t) in c.iter_mut().zip(&v.t) {
-                    *c += t / nf;
-                }
-            }
-            let worst_t = simplex[n].t.clone();
-            let (f_best, f_second, f_worst) = (simplex[0].f, simplex[n - 1].f, simplex[n].f);
-            let mut r = make(along(&c, &worst_t, alpha));
-            r.f = eval(&r.x);
-            evaluations += 1;
-            let mut shrink = false;
-            if r.f < f_best {
-                if evaluations < max_evaluations {
-                    let mut e = make(along(&c, &worst_t, alpha * beta));
-                    e.f = eval(&e.x);
-                    evaluations += 1;
-                    simplex[n] = if e.f < r.f { e } else { r };
-                } else {
-                    simplex[n] = r;
-                }
-            } else if r.f < f_second {
-                simplex[n] = r;
-            } else if evaluations >= max_evaluations {
-                if r.f < f_worst {
-                    simplex[n] = r;
-                }
-            } else if r.f < f_worst {
-                // Outside contraction.
-                let mut oc = make(along(&c, &worst_t, alpha * gamma));
-                oc.f = eval(&oc.x);
-                evaluations += 1;
-                if oc.f <= r.f {
-                    simplex[n] = oc;
-                } else {
-                    simplex[n] = r;
-                    shrink = true;
-                }
-            } else {
-                // Inside contraction.
-                let mut ic = make(along(&c, &worst_t, -gamma));
-                ic.f = eval(&ic.x);
-                evaluations += 1;
-                if ic.f < f_worst {
-                    simplex[n] = ic;
-                } else {
-                    shrink = true;
-                }
-            }
-            if shrink && evaluations < max_evaluations {
-                let best_t = simplex[0].t.clone();
-                let take = n.min(max_evaluations - evaluations);
-                let mut shrunk: Vec<Vertex> = simplex[1..=take]
-                    .iter()
-                    .map(|v| {
-                        make(
-                            best_t
-                                .iter()
-                                .zip(&v.t)
-                                .map(|(b, t)| b + delta * (t - b))
-                                .collect(),
-                        )
-                    })
-                    .collect();
-                evaluate_batch(&mut shrunk);
-                evaluations += take;
-                for (k, v) in shrunk.into_iter().enumerate() {
-                    simplex[1 + k] = v;
-                }
-            }
-        }
-    }
-    let best = simplex
-        .into_iter()
-        .min_by(|a, b| a.f.total_cmp(&b.f))
-        .expect("simplex is never empty");
-    Ok(NelderMeadResult {
-        x: best.x,
-        f: best.f,
-        evaluations,
-        converged,
-    })
-}
-
-/// Standard test functions for validating the optimisers (all with minimum 0).
-pub mod test_functions {
-    use std::f64::consts::PI;
-
-    /// Σ x².  Minimum 0 at the origin.
-    pub fn sphere(x: &[f64]) -> f64 {
-        x.iter().map(|v| v * v).sum()
-    }
-
-    /// Σ 100 (x_{i+1} − x_i²)² + (1 − x_i)².  Minimum 0 at (1, …, 1).
-    pub fn rosenbrock(x: &[f64]) -> f64 {
-        x.windows(2)
-            .map(|w| 100.0 * (w[1] - w[0] * w[0]).powi(2) + (1.0 - w[0]).powi(2))
-            .sum()
-    }
-
-    /// 10 n + Σ x² − 10 cos(2π x).  Minimum 0 at the origin.
-    pub fn rastrigin(x: &[f64]) -> f64 {
-        10.0 * x.len() as f64
-            + x.iter()
-                .map(|v| v * v - 10.0 * (2.0 * PI * v).cos())
-                .sum::<f64>()
-    }
-
-    /// −20 exp(−0.2 √(Σx²/n)) − exp(Σ cos(2π x)/n) + 20 + e.  Minimum 0 at the origin.
-    pub fn ackley(x: &[f64]) -> f64 {
-        let n = x.len().max(1) as f64;
-        let s2 = x.iter().map(|v| v * v).sum::<f64>() / n;
-        let sc = x.iter().map(|v| (2.0 * PI * v).cos()).sum::<f64>() / n;
-        -20.0 * (-0.2 * s2.sqrt()).exp() - sc.exp() + 20.0 + std::f64::consts::E
-    }
-
-    /// 1 + Σ x²/4000 − Π cos(x_i / √i).  Minimum 0 at the origin.
-    pub fn griewank(x: &[f64]) -> f64 {
-        let s = x.iter().map(|v| v * v).sum::<f64>() / 4000.0;
-        let p: f64 = x
-            .iter()
-            .enumerate()
-            .map(|(i, v)| (v / ((i + 1) as f64).sqrt()).cos())
-            .product();
-        1.0 + s - p
-    }
-
-    /// The function called `name` (`sphere`, `rosenbrock`, `rastrigin`, `ackley`, `griewank`).
-    pub fn by_name(name: &str) -> Option<fn(&[f64]) -> f64> {
-        Some(match name {
-            "sphere" => sphere,
-            "rosenbrock" => rosenbrock,
-            "rastrigin" => rastrigin,
-            "ackley" => ackley,
-            "griewank" => griewank,
-            _ => return None,
-        })
-    }
-
-    /// Where each function has its minimum (value 0) in `dim` dimensions.
-    pub fn minimizer(name: &str, dim: usize) -> Option<Vec<f64>> {
-        by_name(name)?;
-        Some(vec![if name == "rosenbrock" { 1.0 } else { 0.0 }; dim])
-    }
-
-    pub const NAMES: [&str; 5] = ["sphere", "rosenbrock", "rastrigin", "ackley", "griewank"];
 }
 
 #[cfg(test)]

@@ -57,6 +57,16 @@ impl Rng {
     }
 }
 
+/// A uniform index in [0, n) not in `exclude` (drawn again until it is not).
+pub(crate) fn pick(rng: &mut Rng, n: usize, exclude: &[usize]) -> usize {
+    loop {
+        let r = rng.below(n);
+        if !exclude.contains(&r) {
+            return r;
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

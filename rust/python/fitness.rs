@@ -1,0 +1,165 @@
+//! Conversions between Python's arrays and the fitness: building a [`Fitness`] from the arguments of
+//! `evaluate`/`optimize`, and the typed result of `optimize`.
+
+use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray3, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+
+use crate::error::Error;
+use crate::fitness::{Fitness, LossKind};
+use crate::kernel::{Norm, Projection};
+use crate::params::ParamLayout;
+use crate::scene::Scene;
+use crate::space::Space;
+use crate::stage::StageResult;
+
+fn target_vec(scene: &Scene, target: &PyReadonlyArray3<'_, f32>) -> PyResult<Vec<f32>> {
+    let shape = target.shape();
+    if shape != [scene.height as usize, scene.width as usize, 3] {
+        return Err(Error::Value(format!(
+            "objective image has shape {shape:?}; the scene needs ({}, {}, 3)",
+            scene.height, scene.width
+        ))
+        .into());
+    }
+    Ok(target.as_slice()?.to_vec())
+}
+
+/// The fitness of `paths` against `target` and the search bounds of `paths`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn make_fitness(
+    scene: &Scene,
+    paths: &[String],
+    target: &PyReadonlyArray3<'_, f32>,
+    pixels: Option<PyReadonlyArray1<'_, u32>>,
+    loss: &str,
+    clip: bool,
+    product_bounds: Option<PyReadonlyArray3<'_, f64>>,
+    norm: &str,
+    space: &str,
+) -> PyResult<(Fitness, Vec<(f64, f64)>)> {
+    let space = Space::parse(space).map_err(Error::Invalid)?;
+    let layout = ParamLayout::new(scene, paths)?;
+    let bounds = layout.bounds.clone();
+    let target = target_vec(scene, target)?;
+    let pixels: Option<Vec<u32>> = match pixels {
+        Some(p) => Some(p.as_slice()?.to_vec()),
+        None => None,
+    };
+    let projection = match product_bounds {
+        Some(b) => {
+            let a = b.as_array();
+            let n = scene.objects.len();
+            if a.ndim() != 3
+                || a.shape()[0] != n
+                || !(3..=4).contains(&a.shape()[1])
+                || a.shape()[2] != 2
+            {
+                return Err(Error::Value(format!(
+                    "product_bounds must have shape ({n}, 3, 2) or ({n}, 4, 2) (row 4: intensity x \
+                     specular), got {:?}",
+                    a.shape()
+                ))
+                .into());
+            }
+            let mut proj = Projection::matte(
+                (0..n)
+                    .map(|k| std::array::from_fn(|c| (a[[k, c, 0]], a[[k, c, 1]])))
+                    .collect(),
+            );
+            if a.shape()[1] == 4 {
+                proj.specular = (0..n).map(|k| (a[[k, 3, 0]], a[[k, 3, 1]])).collect();
+            }
+            Some(proj)
+        }
+        None => None,
+    };
+    let kind = LossKind::parse(loss)?;
+    let mut fitness = Fitness::new(
+        scene,
+        layout,
+        &target,
+        pixels.as_deref(),
+        kind,
+        clip,
+        projection,
+    )?;
+    fitness.set_norm(Norm::parse(norm).map_err(Error::Invalid)?);
+    fitness.set_space(space);
+    Ok((fitness, bounds))
+}
+
+/// What `optimize` found (immutable). For the projected loss `products` (per object [P_r, P_g, P_b, Q]:
+/// the products minimising the loss at `x`), `lit_pixels` (per object) and `search_objectives` (the loss
+/// at the least-squares products the search ranked candidates by) are set, else None.
+#[pyclass(frozen, name = "OptimizeResult", module = "rtloop._native")]
+pub struct OptimizeResult(pub StageResult);
+
+#[pymethods]
+impl OptimizeResult {
+    /// The best parameter vector (float64).
+    #[getter]
+    fn x<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_slice(py, &self.0.x)
+    }
+    /// The loss at `x` (for the projected loss: its sum at `products`).
+    #[getter]
+    fn objectives(&self) -> Vec<f64> {
+        self.0.objectives.clone()
+    }
+    #[getter]
+    fn search_objectives(&self) -> Option<Vec<f64>> {
+        self.0.search_objectives.clone()
+    }
+    /// All evaluations, the polish's included.
+    #[getter]
+    fn evaluations(&self) -> usize {
+        self.0.evaluations
+    }
+    #[getter]
+    fn generations(&self) -> usize {
+        self.0.generations
+    }
+    /// The callback stopped the search.
+    #[getter]
+    fn stopped(&self) -> bool {
+        self.0.stop == crate::search::StopReason::Callback
+    }
+    /// "max_generations", "max_evaluations", "converged", "stalled" or "callback".
+    #[getter]
+    fn stop_reason(&self) -> &'static str {
+        self.0.stop.as_str()
+    }
+    /// (evaluations, value before, value after) of the Nelder-Mead polish; None when none ran.
+    #[getter]
+    fn polish(&self) -> Option<(usize, f64, f64)> {
+        self.0
+            .polish
+            .as_ref()
+            .map(|p| (p.evaluations, p.f_before, p.f_after))
+    }
+    #[getter]
+    fn active_pixels(&self) -> usize {
+        self.0.active_pixels
+    }
+    #[getter]
+    fn products(&self) -> Option<Vec<Vec<f64>>> {
+        self.0
+            .products
+            .as_ref()
+            .map(|rows| rows.iter().map(|r| r.to_vec()).collect())
+    }
+    #[getter]
+    fn lit_pixels(&self) -> Option<Vec<usize>> {
+        self.0.lit_pixels.clone()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "<rtloop.OptimizeResult objectives={:?}, {} evaluations, {} generations, stop {}>",
+            self.0.objectives,
+            self.0.evaluations,
+            self.0.generations,
+            self.0.stop.as_str()
+        )
+    }
+}

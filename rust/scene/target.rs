@@ -1,0 +1,156 @@
+//! What a dotted fit path (`light.position`, `objects.NAME.albedo`, ...) refers to in a scene, and how
+//! to read and write it.
+
+use super::Scene;
+
+/// What a dotted fit path refers to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Target {
+    LightPosition,
+    /// A directional light's direction (3 components, normalised on use).
+    LightDirection,
+    LightIntensity,
+    LightColor,
+    Ambient,
+    Exposure,
+    Albedo(usize),
+    Specular(usize),
+    Shininess(usize),
+}
+
+/// The fittable paths, for error messages and documentation.
+pub const FITTABLE: &str = "light.position (point light), light.direction (directional light), \
+light.intensity, light.color, ambient, exposure, \
+objects.NAME.albedo, objects.NAME.specular, objects.NAME.shininess";
+
+impl Target {
+    /// Parse a dotted path such as `objects.ball.albedo`. The error is a bare reason; the caller adds the field.
+    pub fn parse(path: &str, scene: &Scene) -> std::result::Result<Target, String> {
+        let directional = scene.light.direction.is_some();
+        let t = match path {
+            "light.position" if directional => {
+                return Err("the light is directional: fit light.direction, not light.position".into())
+            }
+            "light.direction" if !directional => {
+                return Err("the light is a point light: fit light.position (or make it \"type\": \"directional\")".into())
+            }
+            "light.position" => Target::LightPosition,
+            "light.direction" => Target::LightDirection,
+            "light.intensity" => Target::LightIntensity,
+            "light.color" => Target::LightColor,
+            "ambient" => Target::Ambient,
+            "exposure" => Target::Exposure,
+            _ => {
+                let parts: Vec<&str> = path.split('.').collect();
+                if parts.len() != 3 || parts[0] != "objects" {
+                    return Err(format!(
+                        "unknown parameter path {path:?} (fittable: {FITTABLE})"
+                    ));
+                }
+                let i = scene.object_index(parts[1]).ok_or_else(|| {
+                    let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
+                    format!(
+                        "unknown object {:?} (objects are: {})",
+                        parts[1],
+                        names.join(", ")
+                    )
+                })?;
+                match parts[2] {
+                    "albedo" => Target::Albedo(i),
+                    "specular" => Target::Specular(i),
+                    "shininess" => Target::Shininess(i),
+                    other => {
+                        return Err(format!(
+                            "objects.{}.{other} cannot be fitted (fittable per object: albedo, specular, shininess)",
+                            parts[1]
+                        ))
+                    }
+                }
+            }
+        };
+        Ok(t)
+    }
+
+    /// Number of scalar components.
+    pub fn len(&self) -> usize {
+        match self {
+            Target::LightPosition
+            | Target::LightDirection
+            | Target::LightColor
+            | Target::Ambient
+            | Target::Albedo(_) => 3,
+            Target::LightIntensity
+            | Target::Exposure
+            | Target::Specular(_)
+            | Target::Shininess(_) => 1,
+        }
+    }
+
+    /// Canonical order: the paper's [light x, y, z, power, objects' RGB...].
+    pub fn order_key(&self) -> (usize, usize, usize) {
+        match *self {
+            Target::LightPosition | Target::LightDirection => (0, 0, 0),
+            Target::LightIntensity => (0, 0, 1),
+            Target::LightColor => (0, 0, 2),
+            Target::Ambient => (1, 0, 0),
+            Target::Exposure => (1, 0, 1),
+            Target::Albedo(i) => (2, i, 0),
+            Target::Specular(i) => (2, i, 1),
+            Target::Shininess(i) => (2, i, 2),
+        }
+    }
+
+    /// The smallest physically meaningful value, if any.
+    pub fn lower_limit(&self) -> Option<f64> {
+        match self {
+            Target::LightPosition | Target::LightDirection => None,
+            _ => Some(0.0),
+        }
+    }
+
+    /// True for parameters the image depends on linearly (albedo, intensity, colour, ambient, exposure, specular).
+    pub fn is_linear(&self) -> bool {
+        !matches!(
+            self,
+            Target::LightPosition | Target::LightDirection | Target::Shininess(_)
+        )
+    }
+
+    /// Current value in `scene`.
+    pub fn get(&self, scene: &Scene) -> Vec<f64> {
+        match *self {
+            Target::LightPosition => scene.light.position.to_vec(),
+            Target::LightDirection => scene.light.direction.unwrap_or([0.0, 1.0, 0.0]).to_vec(),
+            Target::LightIntensity => vec![scene.light.intensity],
+            Target::LightColor => scene.light.color.to_vec(),
+            Target::Ambient => scene.ambient.to_vec(),
+            Target::Exposure => vec![scene.exposure],
+            Target::Albedo(i) => scene.objects[i].material.albedo.to_vec(),
+            Target::Specular(i) => vec![scene.objects[i].material.specular],
+            Target::Shininess(i) => vec![scene.objects[i].material.shininess],
+        }
+    }
+
+    /// Write `v` (of length `self.len()`) into `scene`.
+    pub fn set(&self, scene: &mut Scene, v: &[f64]) {
+        let v3 = || [v[0], v[1], v[2]];
+        match *self {
+            Target::LightPosition => scene.light.position = v3(),
+            Target::LightDirection => {
+                let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                scene.light.direction = Some(if n > 0.0 && n.is_finite() {
+                    [v[0] / n, v[1] / n, v[2] / n]
+                } else {
+                    [0.0, 1.0, 0.0]
+                });
+            }
+            Target::LightIntensity => scene.light.intensity = v[0],
+            Target::LightColor => scene.light.color = v3(),
+            Target::Ambient => scene.ambient = v3(),
+            Target::Exposure => scene.exposure = v[0],
+            Target::Albedo(i) => scene.objects[i].material.albedo = v3(),
+            Target::Specular(i) => scene.objects[i].material.specular = v[0],
+            Target::Shininess(i) => scene.objects[i].material.shininess = v[0],
+        }
+    }
+}

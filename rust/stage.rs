@@ -1,0 +1,100 @@
+//! One search stage of a fit: run a search [`Method`] on a [`Fitness`], then what the fit needs at the
+//! best point (for the projected loss: the products that minimise the loss itself there, and that loss).
+
+use crate::error::Result;
+use crate::fitness::{Fitness, LossKind};
+use crate::kernel::Solved;
+use crate::search::{self, GenerationReport, Method, PolishReport, StopReason};
+
+/// Per object `[P_r, P_g, P_b, Q]`: the colour products and `Q` = intensity × specular (0 when matte).
+pub type ProductRow = [f64; 4];
+
+/// The products of `s`, one row per object.
+pub fn product_rows(s: &Solved) -> Vec<ProductRow> {
+    s.products
+        .iter()
+        .zip(&s.specular)
+        .map(|(p, &q)| [p[0], p[1], p[2], q])
+        .collect()
+}
+
+/// What the per-generation callback of [`run_stage`] sees.
+pub struct StageReport<'a> {
+    /// 0 for the initial population, then 1, 2, ...
+    pub generation: usize,
+    pub best: &'a [f64],
+    pub best_objectives: &'a [f64],
+    pub evaluations: usize,
+    /// The closed-form products of `best` (one more evaluation): only when asked for, for the projected loss.
+    pub products: Option<Vec<ProductRow>>,
+}
+
+/// What a stage found.
+#[derive(Clone, Debug)]
+pub struct StageResult {
+    pub x: Vec<f64>,
+    /// The loss at `x`: for the projected loss its sum at the refined products, else the search's objectives.
+    pub objectives: Vec<f64>,
+    /// Projected loss only: the loss at the least-squares products the search ranked candidates by.
+    pub search_objectives: Option<Vec<f64>>,
+    /// All evaluations, a polish's included.
+    pub evaluations: usize,
+    pub generations: usize,
+    pub stop: StopReason,
+    pub polish: Option<PolishReport>,
+    pub active_pixels: usize,
+    /// Projected loss only: the products minimising the loss at `x` and each object's lit pixels.
+    pub products: Option<Vec<ProductRow>>,
+    pub lit_pixels: Option<Vec<usize>>,
+}
+
+/// Search `fitness` within `bounds` with `method`. `callback` runs after the initial population and
+/// after every generation (returning `false` stops); with `with_products` its report carries the
+/// closed-form products of the best, for the projected loss.
+pub fn run_stage<C>(
+    fitness: &Fitness,
+    bounds: &[(f64, f64)],
+    method: &Method,
+    with_products: bool,
+    mut callback: C,
+) -> Result<StageResult>
+where
+    C: FnMut(&StageReport) -> bool,
+{
+    let active_pixels = fitness.active_pixels();
+    let products_wanted = with_products && fitness.kind() == LossKind::L1Projected;
+    let found = search::run(method, fitness, bounds, |rep: &GenerationReport| {
+        let products = products_wanted.then(|| product_rows(&fitness.solved(rep.best)));
+        callback(&StageReport {
+            generation: rep.generation,
+            best: rep.best,
+            best_objectives: rep.best_objectives,
+            evaluations: rep.evaluations,
+            products,
+        })
+    })?;
+    // The search ranks lights by least-squares products; the result carries the products that minimise
+    // the loss itself (saturated pixels one-sided), and that loss.
+    let refined = fitness.refined(&found.best);
+    let mut out = StageResult {
+        x: found.best,
+        objectives: found.best_objectives,
+        search_objectives: None,
+        evaluations: found.evaluations,
+        generations: found.generations,
+        stop: found.stop,
+        polish: found.polish,
+        active_pixels,
+        products: None,
+        lit_pixels: None,
+    };
+    if let Some((solved, loss)) = refined {
+        out.products = Some(product_rows(&solved));
+        out.lit_pixels = Some(solved.lit);
+        out.search_objectives = Some(std::mem::replace(
+            &mut out.objectives,
+            vec![loss.iter().sum::<f64>()],
+        ));
+    }
+    Ok(out)
+}
