@@ -9,7 +9,8 @@
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use rayon::prelude::*;
 use rtloop::{
-    render, search, search::Objective, DeConfig, Fitness, LossKind, ParamLayout, Projection, Scene, Space,
+    render, search, search::Objective, DeConfig, Fitness, LossKind, ParamLayout, Projection, Scene,
+    Space,
 };
 
 fn scene() -> Scene {

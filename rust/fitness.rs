@@ -7,12 +7,12 @@
 
 use glam::Vec3A;
 
-use crate::search::Objective;
 use crate::error::{Error, Result};
 use crate::kernel::{solve_object, Kernel, Norm, Projection, SolveSums, Solved};
 use crate::params::{ParamLayout, Target};
 use crate::render::{shade, GBuffer, Geometry, PShape, ShadeParams, Surfel};
 use crate::scene::Scene;
+use crate::search::Objective;
 use crate::space::{srgb_encode_exact, Space, SrgbLut};
 
 /// How a candidate's image is compared with the objective.

@@ -76,10 +76,9 @@ fn object_ids<'py>(
 fn save_image(py: Python<'_>, path: PathBuf, image: PyReadonlyArray3<'_, f32>) -> PyResult<()> {
     let shape = image.shape().to_vec();
     if shape[2] != 3 {
-        return Err(Error::Value(format!(
-            "expected an (H, W, 3) image, got shape {shape:?}"
-        ))
-        .into());
+        return Err(
+            Error::Value(format!("expected an (H, W, 3) image, got shape {shape:?}")).into(),
+        );
     }
     let data = image.as_slice()?.to_vec();
     py.detach(|| core_render::save_srgb8(&path, shape[1] as u32, shape[0] as u32, &data))?;

@@ -65,12 +65,9 @@ impl PyScene {
     fn with_params(&self, values: Vec<f64>, paths: Option<Vec<String>>) -> PyResult<PyScene> {
         let l = layout(&self.0, paths)?;
         if values.len() != l.dim() {
-            return Err(Error::Value(format!(
-                "expected {} values, got {}",
-                l.dim(),
-                values.len()
-            ))
-            .into());
+            return Err(
+                Error::Value(format!("expected {} values, got {}", l.dim(), values.len())).into(),
+            );
         }
         if let Some(v) = values.iter().find(|v| !v.is_finite()) {
             return Err(Error::Value(format!("parameter values must be finite (got {v})")).into());
@@ -88,7 +85,8 @@ impl PyScene {
             let path: String = path.extract()?;
             let (min, max): (Limit, Limit) = bounds.extract()?;
             let field = |side: &str| format!("fit.{path}.{side}");
-            let bounds = json!({"min": min.value(&field("min"))?, "max": max.value(&field("max"))?});
+            let bounds =
+                json!({"min": min.value(&field("min"))?, "max": max.value(&field("max"))?});
             list.push((path, bounds));
         }
         Ok(PyScene(self.0.with_bounds(&list)?))
@@ -135,7 +133,11 @@ enum Limit {
 impl Limit {
     /// The JSON value; a NaN or infinity is an error naming `field` as `load_scene` names it.
     fn value(&self, field: &str) -> Result<serde_json::Value, Error> {
-        let bad = |at: String| Error::Scene(format!("{at}: must be a finite number (got NaN or infinity)"));
+        let bad = |at: String| {
+            Error::Scene(format!(
+                "{at}: must be a finite number (got NaN or infinity)"
+            ))
+        };
         match self {
             Limit::One(v) if !v.is_finite() => Err(bad(field.to_string())),
             Limit::One(v) => Ok(json!(v)),

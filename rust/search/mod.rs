@@ -152,9 +152,7 @@ impl Method {
                     .unwrap_or(b.population * (b.generations + 1)),
                 population_init: Some(b.population),
                 polish_evaluations: b.polish,
-                polish_x_tol: b
-                    .polish_tol
-                    .unwrap_or(LshadeConfig::default().polish_x_tol),
+                polish_x_tol: b.polish_tol.unwrap_or(LshadeConfig::default().polish_x_tol),
                 seed: b.seed,
                 ..LshadeConfig::lshade()
             })),
@@ -200,8 +198,8 @@ where
     C: FnMut(&GenerationReport) -> bool,
 {
     match method {
-        Method::RandOneBin(cfg) => rand1bin::minimize(obj, bounds, cfg, callback).map(|r| {
-            SearchResult {
+        Method::RandOneBin(cfg) => {
+            rand1bin::minimize(obj, bounds, cfg, callback).map(|r| SearchResult {
                 stop: if r.stopped {
                     StopReason::Callback
                 } else {
@@ -212,8 +210,8 @@ where
                 evaluations: r.evaluations,
                 generations: r.generations,
                 polish: None,
-            }
-        }),
+            })
+        }
         Method::Lshade(cfg) => lshade::minimize(obj, bounds, cfg, callback).map(|r| SearchResult {
             best: r.best,
             best_objectives: r.best_objectives,
