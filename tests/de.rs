@@ -525,7 +525,7 @@ fn callback_can_stop_early_and_counts_are_consistent() {
             },
         )
         .unwrap();
-        assert!(res.stopped);
+        assert!(res.stopped());
         assert_eq!(res.generations, stop_at);
         assert_eq!(seen, (0..=stop_at).collect::<Vec<_>>());
         assert_eq!(res.evaluations, np * (res.generations + 1));
@@ -544,7 +544,7 @@ fn callback_can_stop_early_and_counts_are_consistent() {
             },
         )
         .unwrap();
-        assert!(!res.stopped);
+        assert!(!res.stopped());
         assert_eq!(res.generations, gens);
         assert_eq!(calls, gens + 1);
         assert_eq!(res.evaluations, np * (gens + 1));

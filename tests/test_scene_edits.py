@@ -54,7 +54,8 @@ def test_with_bounds_errors_equal_the_json_route(ball_scene):
         {"light.intensity": (1.0, float("nan"))},
         {"objects.floor.albedo": ([0, float("inf"), 0], [1, 1, 1])},
     ):
-        assert _error(lambda: scene.with_bounds(changes)) == _error(lambda: _json_with_bounds(scene, changes))
+        native = _error(lambda c=changes: scene.with_bounds(c))
+        assert native == _error(lambda c=changes: _json_with_bounds(scene, c))
 
 
 def test_with_fit_and_without_fit_equal_the_json_route(ball_scene):

@@ -46,7 +46,7 @@ use super::rng::{pick, Rng};
 use super::select::{best_index, normalized_spread, normalized_spreads, ranking};
 use super::{
     check_single_objective, evaluate_all, report, GenerationReport, Objective, PolishReport,
-    StopReason,
+    SearchResult, StopReason,
 };
 use crate::error::{Error, Result};
 
@@ -229,29 +229,19 @@ impl LshadeConfig {
     }
 }
 
+/// What [`minimize`] found: the common [`SearchResult`] (its fields read through), plus the final memory.
 #[derive(Clone, Debug)]
 pub struct LshadeResult {
-    pub best: Vec<f64>,
-    /// The best value, as a one-element vector like [`super::DeResult::best_objectives`].
-    pub best_objectives: Vec<f64>,
-    /// All evaluations, the polish's included.
-    pub evaluations: usize,
-    /// Generations run after the initial population.
-    pub generations: usize,
-    pub stop: StopReason,
-    /// Final population size.
-    pub population: usize,
+    pub search: SearchResult,
     /// Final success-history memory (`None`: the terminal CR value).
     pub memory_f: Vec<f64>,
     pub memory_cr: Vec<Option<f64>>,
-    /// Present when a polish ran.
-    pub polish: Option<PolishReport>,
 }
 
-impl LshadeResult {
-    /// The callback asked to stop.
-    pub fn stopped(&self) -> bool {
-        self.stop == StopReason::Callback
+impl std::ops::Deref for LshadeResult {
+    type Target = SearchResult;
+    fn deref(&self) -> &SearchResult {
+        &self.search
     }
 }
 
@@ -596,15 +586,17 @@ where
     }
 
     Ok(LshadeResult {
-        best,
-        best_objectives: vec![best_f],
-        evaluations,
-        generations,
-        stop,
-        population: pop.len(),
+        search: SearchResult {
+            best,
+            best_objectives: vec![best_f],
+            evaluations,
+            generations,
+            stop,
+            population: pop.len(),
+            polish,
+        },
         memory_f,
         memory_cr,
-        polish,
     })
 }
 

@@ -163,7 +163,7 @@ impl Method {
     }
 }
 
-/// What any search found.
+/// What a search found.
 #[derive(Clone, Debug)]
 pub struct SearchResult {
     pub best: Vec<f64>,
@@ -173,6 +173,8 @@ pub struct SearchResult {
     /// Generations run after the initial population.
     pub generations: usize,
     pub stop: StopReason,
+    /// Final population size.
+    pub population: usize,
     /// Present when a polish ran.
     pub polish: Option<PolishReport>,
 }
@@ -198,28 +200,8 @@ where
     C: FnMut(&GenerationReport) -> bool,
 {
     match method {
-        Method::RandOneBin(cfg) => {
-            rand1bin::minimize(obj, bounds, cfg, callback).map(|r| SearchResult {
-                stop: if r.stopped {
-                    StopReason::Callback
-                } else {
-                    StopReason::MaxGenerations
-                },
-                best: r.best,
-                best_objectives: r.best_objectives,
-                evaluations: r.evaluations,
-                generations: r.generations,
-                polish: None,
-            })
-        }
-        Method::Lshade(cfg) => lshade::minimize(obj, bounds, cfg, callback).map(|r| SearchResult {
-            best: r.best,
-            best_objectives: r.best_objectives,
-            evaluations: r.evaluations,
-            generations: r.generations,
-            stop: r.stop,
-            polish: r.polish,
-        }),
+        Method::RandOneBin(cfg) => rand1bin::minimize(obj, bounds, cfg, callback),
+        Method::Lshade(cfg) => lshade::minimize(obj, bounds, cfg, callback).map(|r| r.search),
     }
 }
 

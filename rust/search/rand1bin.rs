@@ -8,7 +8,9 @@
 
 use super::rng::{pick, Rng};
 use super::select::{best_by_sum, replaces};
-use super::{check_bounds, evaluate_all, report, GenerationReport, Objective};
+use super::{
+    check_bounds, evaluate_all, report, GenerationReport, Objective, SearchResult, StopReason,
+};
 use crate::error::{Error, Result};
 
 #[derive(Clone, Debug)]
@@ -35,15 +37,8 @@ impl Default for DeConfig {
     }
 }
 
-#[derive(Clone, Debug)]
-pub struct DeResult {
-    pub best: Vec<f64>,
-    pub best_objectives: Vec<f64>,
-    pub evaluations: usize,
-    pub generations: usize,
-    /// True when the callback asked to stop early.
-    pub stopped: bool,
-}
+/// What [`minimize`] found (its stop reason: the callback or the generation budget).
+pub type DeResult = SearchResult;
 
 /// Minimise `obj` within `bounds` (min, max per dimension; min == max fixes a dimension).
 ///
@@ -136,12 +131,18 @@ where
         b = best_by_sum(&fit);
         stopped = !callback(&report(generations, b, &pop, &fit, evaluations));
     }
-    Ok(DeResult {
+    Ok(SearchResult {
         best: pop[b].clone(),
         best_objectives: fit[b].clone(),
         evaluations,
         generations,
-        stopped,
+        stop: if stopped {
+            StopReason::Callback
+        } else {
+            StopReason::MaxGenerations
+        },
+        population: np,
+        polish: None,
     })
 }
 
