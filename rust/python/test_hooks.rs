@@ -108,7 +108,8 @@ fn minimize_test_function<'py>(
                     history.push(rep.best_objectives[0]);
                     true
                 })
-            })??;
+            })??
+            .search;
             let (pe, pi) = r
                 .polish
                 .as_ref()
