@@ -5,20 +5,16 @@
 pub mod de;
 pub mod error;
 pub mod fitness;
-pub mod kernel;
 pub mod params;
 pub mod render;
 pub mod scene;
-pub mod space;
 
 #[cfg(feature = "python")]
 mod python;
 
 pub use de::{DeConfig, DeResult, GenerationReport, Objective};
 pub use error::{Error, Result};
-pub use fitness::{Fitness, LossKind};
-pub use kernel::{Norm, Projection};
+pub use fitness::{Fitness, LossKind, Norm, Projection, Space};
 pub use params::ParamLayout;
 pub use render::{render, GBuffer, Image};
 pub use scene::Scene;
-pub use space::Space;

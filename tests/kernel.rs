@@ -539,7 +539,7 @@ fn projected_kernel_with_a_specular_term_matches_the_plain_solve_and_recovers_th
 
 #[test]
 fn specular_solve_matches_a_dense_least_squares_solve() {
-    use rtloop::kernel::{solve_object, SolveSums};
+    use rtloop::fitness::{solve_object, SolveSums};
     let mut rng = Rng::new(23);
     for _ in 0..50 {
         let n = 40;
@@ -698,7 +698,7 @@ fn refined_products_are_exact_on_a_clean_glossy_image() {
 
 #[test]
 fn l1_line_min_finds_the_global_minimum_of_the_clipped_loss() {
-    use rtloop::kernel::l1_line_min;
+    use rtloop::fitness::l1_line_min;
     let mut rng = Rng::new(41);
     for trial in 0..200 {
         let n = 1 + trial % 60;
@@ -814,7 +814,7 @@ fn srgb_losses_match_the_plain_path_for_every_norm_clip_and_loss() {
 #[test]
 fn srgb_loss_is_the_loss_of_the_encoded_images() {
     // From the definition: render the candidate, encode it (clipped) and the objective exactly, penalise.
-    use rtloop::space::srgb_encode_exact;
+    use rtloop::render::film::srgb_encode_exact;
     use rtloop::{Norm, Space};
     let mut rng = Rng::new(72);
     for trial in 0..4 {
@@ -979,8 +979,8 @@ fn grid_min(f: impl Fn(f64) -> f64, (lo, hi): (f64, f64), n: usize) -> (f64, f64
 
 #[test]
 fn encoded_line_min_finds_the_global_minimum() {
-    use rtloop::kernel::{encoded_line_min, EncodedTerm};
-    use rtloop::space::SrgbLut;
+    use rtloop::fitness::SrgbLut;
+    use rtloop::fitness::{encoded_line_min, EncodedTerm};
     use rtloop::Norm;
     let lut = SrgbLut::get();
     let term = |k: f64, o: f64, y: f64| EncodedTerm {

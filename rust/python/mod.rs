@@ -13,12 +13,10 @@ use pyo3::types::PyDict;
 
 use crate::de::{self, DeConfig};
 use crate::error::Error;
-use crate::fitness::{Fitness, LossKind};
-use crate::kernel::{Norm, Projection, Solved};
+use crate::fitness::{Fitness, LossKind, Norm, Projection, Solved, Space};
 use crate::params::ParamLayout;
 use crate::render as core_render;
 use crate::scene::Scene;
-use crate::space::Space;
 
 #[path = "de.rs"]
 mod de_hooks;

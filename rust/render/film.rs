@@ -23,6 +23,16 @@ pub fn linear_to_srgb(x: f32) -> f32 {
     }
 }
 
+/// The sRGB encoding of IEC 61966-2-1: 12.92 x for x <= 0.0031308, else 1.055 x^(1/2.4) - 0.055 (the same
+/// formula above 1 and, linearly, below 0).
+pub fn srgb_encode_exact(x: f64) -> f64 {
+    if x <= 0.003_130_8 {
+        12.92 * x
+    } else {
+        1.055 * x.powf(1.0 / 2.4) - 0.055
+    }
+}
+
 /// Encode linear RGB as 8-bit sRGB.
 pub fn to_srgb8(rgb: &[f32]) -> Vec<u8> {
     rgb.iter()

@@ -9,11 +9,21 @@ use glam::Vec3A;
 
 use crate::de::Objective;
 use crate::error::{Error, Result};
-use crate::kernel::{solve_object, Kernel, Norm, Projection, SolveSums, Solved};
+pub mod kernel;
+pub mod loss;
+pub mod pixels;
+pub mod projected;
+pub mod refine;
+
 use crate::params::{ParamLayout, Target};
+use crate::render::film::srgb_encode_exact;
 use crate::render::{shade, GBuffer, Geometry, PShape, ShadeParams, Surfel};
 use crate::scene::Scene;
-use crate::space::{srgb_encode_exact, Space, SrgbLut};
+pub use kernel::Kernel;
+use loss::penalty_sums;
+pub use loss::{Norm, Space, SrgbLut, SATURATED};
+pub use projected::{closed_form, fallback_sums, solve_object, Projection, SolveSums, Solved};
+pub use refine::{encoded_line_min, l1_line_min, EncodedTerm};
 
 /// How a candidate's image is compared with the objective.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -427,11 +437,7 @@ impl Fitness {
                     shade(s, &q, &self.shapes, self.shadows).x
                 })
                 .collect();
-            let sat = if self.clip {
-                crate::kernel::SATURATED
-            } else {
-                f32::INFINITY
-            };
+            let sat = if self.clip { SATURATED } else { f32::INFINITY };
             for (i, (s, t)) in self.surfels.iter().zip(&self.target).enumerate() {
                 if s.object != u32::MAX && self.solve[i] {
                     let (m, ai, bi) = (&mut sums[s.object as usize], a[i] as f64, b[i] as f64);
@@ -458,7 +464,7 @@ impl Fitness {
                             .filter(|((s, _), _)| s.object == k as u32)
                             .map(|((_, t), &ai)| (ai, t[c]))
                             .unzip();
-                        crate::kernel::fallback_sums(&e, &t, sat)
+                        fallback_sums(&e, &t, sat)
                     };
                     solve_object(
                         &sums[k],
@@ -494,25 +500,6 @@ impl Fitness {
         }
         acc
     }
-}
-
-/// Per-channel sums of `norm`'s penalty over fixed (model, objective) pairs, compared in `space` with
-/// the kernel's encoding.
-fn penalty_sums(fixed: &[(Vec3A, Vec3A)], norm: Norm, space: Space) -> [f64; 3] {
-    let mut acc = [0.0f64; 3];
-    for &(m, t) in fixed {
-        let d = match space {
-            Space::Linear => m - t,
-            Space::Srgb => {
-                let lut = SrgbLut::get();
-                Vec3A::from_array(std::array::from_fn(|c| lut.encode(m[c]) - lut.encode(t[c])))
-            }
-        };
-        for c in 0..3 {
-            acc[c] += norm.penalty(d[c]) as f64;
-        }
-    }
-    acc
 }
 
 impl Fitness {

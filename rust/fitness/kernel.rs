@@ -1,0 +1,282 @@
+//! The fused fitness kernel: the grouped pixels of one fit, and the direct (stage-1) loss of a candidate.
+
+use glam::Vec3A;
+
+use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut};
+use super::pixels::{
+    blinn_phong, irradiance, shadow, Group, Light, PlaneOccluder, SphereOccluder, BLOCK,
+};
+use crate::render::{PShape, ShadeParams, Surfel};
+
+const INV_PI: f32 = std::f32::consts::FRAC_1_PI;
+
+pub struct Kernel {
+    /// The per-pixel penalty of every loss this kernel computes.
+    pub norm: Norm,
+    /// Where the penalty compares values (see [`Kernel::set_space`]).
+    pub(crate) space: Space,
+    pub(crate) groups: Vec<Group>,
+    pub(crate) pixels: usize,
+}
+
+impl Kernel {
+    /// `surfels` and `targets` are the active pixels; `shapes` the scene's shapes.
+    /// `solve[i]` says whether pixel i may inform the closed-form products (see `projected`).
+    pub fn new(
+        surfels: &[Surfel],
+        targets: &[Vec3A],
+        solve: &[bool],
+        shapes: &[PShape],
+        shadows: bool,
+    ) -> Kernel {
+        // Pixels grouped by object (background last), row-major inside a group: a counting sort.
+        let slot = |o: u32| {
+            if o == u32::MAX {
+                shapes.len()
+            } else {
+                o as usize
+            }
+        };
+        let mut count = vec![0usize; shapes.len() + 2];
+        for s in surfels {
+            count[slot(s.object) + 1] += 1;
+        }
+        for k in 1..count.len() {
+            count[k] += count[k - 1];
+        }
+        let mut order = vec![0usize; surfels.len()];
+        for (i, s) in surfels.iter().enumerate() {
+            let k = slot(s.object);
+            order[count[k]] = i;
+            count[k] += 1;
+        }
+        let mut groups: Vec<Group> = Vec::new();
+        let mut start = 0;
+        while start < order.len() {
+            let obj = surfels[order[start]].object;
+            let mut end = start;
+            while end < order.len() && surfels[order[end]].object == obj {
+                end += 1;
+            }
+            let idx = &order[start..end];
+            let col = |f: &dyn Fn(&Surfel) -> f32| {
+                idx.iter().map(|&i| f(&surfels[i])).collect::<Vec<f32>>()
+            };
+            let tcol = |c: usize| idx.iter().map(|&i| targets[i][c]).collect::<Vec<f32>>();
+            let object = (obj != u32::MAX).then_some(obj as usize);
+            let mut g = Group {
+                object,
+                p: [
+                    col(&|s| s.position.x),
+                    col(&|s| s.position.y),
+                    col(&|s| s.position.z),
+                ],
+                n: [
+                    col(&|s| s.normal.x),
+                    col(&|s| s.normal.y),
+                    col(&|s| s.normal.z),
+                ],
+                v: [col(&|s| s.view.x), col(&|s| s.view.y), col(&|s| s.view.z)],
+                t: [tcol(0), tcol(1), tcol(2)],
+                te: Default::default(),
+                ts: std::array::from_fn(|c| {
+                    idx.iter()
+                        .map(|&i| {
+                            if solve[i] {
+                                targets[i][c]
+                            } else {
+                                f32::INFINITY
+                            }
+                        })
+                        .collect()
+                }),
+                spheres: Vec::new(),
+                planes: Vec::new(),
+                blocks: idx
+                    .chunks(BLOCK)
+                    .map(|chunk| {
+                        let pos = |&i: &usize| surfels[i].position;
+                        let centre = chunk.iter().map(pos).fold(Vec3A::ZERO, |a, p| a + p)
+                            / chunk.len() as f32;
+                        let radius = chunk
+                            .iter()
+                            .map(|i| (pos(i) - centre).length())
+                            .fold(0.0f32, f32::max);
+                        (centre.to_array(), radius)
+                    })
+                    .collect(),
+            };
+            if shadows && object.is_some() {
+                for (k, shape) in shapes.iter().enumerate() {
+                    if Some(k) == object {
+                        continue;
+                    }
+                    match *shape {
+                        PShape::Sphere { center, radius } => g.spheres.push(SphereOccluder {
+                            center: center.to_array(),
+                            radius,
+                            c: idx
+                                .iter()
+                                .map(|&i| {
+                                    let oc = surfels[i].position - center;
+                                    let l = oc.length();
+                                    (l - radius) * (l + radius)
+                                })
+                                .collect(),
+                        }),
+                        PShape::Plane { point, normal } => g.planes.push(PlaneOccluder {
+                            normal: normal.to_array(),
+                            point: point.to_array(),
+                            side: idx
+                                .iter()
+                                .map(|&i| normal.dot(surfels[i].position - point))
+                                .collect(),
+                        }),
+                    }
+                }
+            }
+            groups.push(g);
+            start = end;
+        }
+        Kernel {
+            norm: Norm::L1,
+            space: Space::Linear,
+            groups,
+            pixels: surfels.len(),
+        }
+    }
+
+    pub fn pixels(&self) -> usize {
+        self.pixels
+    }
+
+    /// Compare values in `space` in every loss of this kernel: for sRGB the objective is encoded here,
+    /// once, and every model value per evaluation (see [`super::loss`]).
+    pub fn set_space(&mut self, space: Space) {
+        self.space = space;
+        let lut = SrgbLut::get();
+        for g in &mut self.groups {
+            g.te = match space {
+                Space::Linear => Default::default(),
+                Space::Srgb => {
+                    std::array::from_fn(|c| g.t[c].iter().map(|&t| lut.encode(t)).collect())
+                }
+            };
+        }
+    }
+
+    pub fn space(&self) -> Space {
+        self.space
+    }
+
+    /// Per-channel sums of penalty(enc(min(render, 1)) - enc(objective)) (no clamp without `clip`; enc the
+    /// identity in the linear space, the sRGB encoding in [`Space::Srgb`]). Once the running total
+    /// exceeds `bound` the sum stops early and the partial sums (already above `bound`) are returned: pass
+    /// `f64::INFINITY` for the exact value.
+    pub fn l1(&self, p: &ShadeParams, clip: bool, bound: f64) -> [f64; 3] {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                // SAFETY: the CPU supports the features the function was compiled for.
+                return unsafe {
+                    match self.space {
+                        Space::Linear => self.l1_avx2(p, clip, bound, Identity),
+                        Space::Srgb => self.l1_avx2(p, clip, bound, SrgbLut::get()),
+                    }
+                };
+            }
+        }
+        match self.space {
+            Space::Linear => self.l1_generic::<false, _>(p, clip, bound, Identity),
+            Space::Srgb => self.l1_generic::<false, _>(p, clip, bound, SrgbLut::get()),
+        }
+    }
+
+    /// One function per encoding, so the linear space's is exactly the code it was without the option.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn l1_avx2<E: Encoding>(
+        &self,
+        p: &ShadeParams,
+        clip: bool,
+        bound: f64,
+        enc: E,
+    ) -> [f64; 3] {
+        self.l1_generic::<true, E>(p, clip, bound, enc)
+    }
+
+    #[inline(always)]
+    fn l1_generic<const AVX2: bool, E: Encoding>(
+        &self,
+        p: &ShadeParams,
+        clip: bool,
+        bound: f64,
+        enc: E,
+    ) -> [f64; 3] {
+        let light = Light {
+            pos: p.light_position.to_array(),
+            dir: p.light_direction.map(|d| d.to_array()),
+            rgb: p.light_rgb.to_array(),
+        };
+        let mut acc = [0.0f64; 3];
+        let mut e = [0.0f32; BLOCK];
+        for g in &self.groups {
+            let n = g.len();
+            // The objective in the loss space.
+            let gt = if E::ENCODES { &g.te } else { &g.t };
+            let Some(obj) = g.object else {
+                // Background whose value a free parameter (exposure) changes.
+                let bg = p.exposure * p.background;
+                for s in 0..n {
+                    for c in 0..3 {
+                        let m = if clip { bg[c].min(1.0) } else { bg[c] };
+                        acc[c] += self.norm.penalty(enc.any(m) - gt[c][s]) as f64;
+                    }
+                }
+                continue;
+            };
+            let m = &p.materials[obj];
+            let specular = p.any_specular && m.specular > 0.0;
+            // m_c = exposure * (rho_c * ambient_c + e * I_c * rho_c / pi)  (+ specular lobe)
+            let a: [f32; 3] = std::array::from_fn(|c| p.exposure * m.albedo[c] * p.ambient[c]);
+            let k: [f32; 3] =
+                std::array::from_fn(|c| p.exposure * light.rgb[c] * m.albedo[c] * INV_PI);
+            let ks: [f32; 3] = std::array::from_fn(|c| {
+                p.exposure * light.rgb[c] * m.specular * (m.shininess + 8.0) * (INV_PI / 8.0)
+            });
+            let mut start = 0;
+            while start < n {
+                let len = BLOCK.min(n - start);
+                let r = start..start + len;
+                irradiance::<AVX2>(g, r.clone(), &light, &mut e[..len]);
+                shadow(g, r.clone(), &light, &mut e[..len]);
+                if specular {
+                    for c in 0..3 {
+                        let mut sum = 0.0f32;
+                        for (i, s) in r.clone().enumerate() {
+                            let lobe = blinn_phong(g, s, &light, m.shininess);
+                            let v = a[c] + e[i] * (k[c] + ks[c] * lobe);
+                            let v = if clip { v.min(1.0) } else { v };
+                            sum += self.norm.penalty(enc.any(v) - gt[c][s]);
+                        }
+                        acc[c] += sum as f64;
+                    }
+                } else {
+                    let t = [&gt[0][r.clone()], &gt[1][r.clone()], &gt[2][r.clone()]];
+                    let top = if clip { 1.0 } else { f32::INFINITY };
+                    let sums = rgb_loss_in(self.norm, &e[..len], t, a, k, top, enc);
+                    for c in 0..3 {
+                        acc[c] += sums[c] as f64;
+                    }
+                }
+                start += len;
+                if acc[0] + acc[1] + acc[2] > bound {
+                    return acc;
+                }
+            }
+        }
+        acc
+    }
+}
