@@ -6,9 +6,10 @@ use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut};
 use super::pixels::{
     blinn_phong, irradiance, shadow, Group, Light, PlaneOccluder, SphereOccluder, BLOCK,
 };
+use super::simd::{self, Simd};
+use crate::render::brdf::{lambert, specular_scale};
+use crate::render::shape::sphere_power;
 use crate::render::{PShape, ShadeParams, Surfel};
-
-const INV_PI: f32 = std::f32::consts::FRAC_1_PI;
 
 pub struct Kernel {
     /// The per-pixel penalty of every loss this kernel computes.
@@ -117,11 +118,7 @@ impl Kernel {
                             radius,
                             c: idx
                                 .iter()
-                                .map(|&i| {
-                                    let oc = surfels[i].position - center;
-                                    let l = oc.length();
-                                    (l - radius) * (l + radius)
-                                })
+                                .map(|&i| sphere_power(surfels[i].position - center, radius))
                                 .collect(),
                         }),
                         PShape::Plane { point, normal } => g.planes.push(PlaneOccluder {
@@ -173,48 +170,36 @@ impl Kernel {
     /// identity in the linear space, the sRGB encoding in [`Space::Srgb`]). Once the running total
     /// exceeds `bound` the sum stops early and the partial sums (already above `bound`) are returned: pass
     /// `f64::INFINITY` for the exact value.
-    pub fn l1(&self, p: &ShadeParams, clip: bool, bound: f64) -> [f64; 3] {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx2")
-                && std::arch::is_x86_feature_detected!("fma")
-            {
-                // SAFETY: the CPU supports the features the function was compiled for.
-                return unsafe {
-                    match self.space {
-                        Space::Linear => self.l1_avx2(p, clip, bound, Identity),
-                        Space::Srgb => self.l1_avx2(p, clip, bound, SrgbLut::get()),
-                    }
-                };
-            }
-        }
+    pub fn l1(&self, c: Candidate) -> [f64; 3] {
+        let avx2 = simd::detected();
         match self.space {
-            Space::Linear => self.l1_generic::<false, _>(p, clip, bound, Identity),
-            Space::Srgb => self.l1_generic::<false, _>(p, clip, bound, SrgbLut::get()),
+            Space::Linear => simd::dispatch(
+                L1 {
+                    k: self,
+                    c,
+                    enc: Identity,
+                },
+                avx2,
+            ),
+            Space::Srgb => simd::dispatch(
+                L1 {
+                    k: self,
+                    c,
+                    enc: SrgbLut::get(),
+                },
+                avx2,
+            ),
         }
-    }
-
-    /// One function per encoding, so the linear space's is exactly the code it was without the option.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    unsafe fn l1_avx2<E: Encoding>(
-        &self,
-        p: &ShadeParams,
-        clip: bool,
-        bound: f64,
-        enc: E,
-    ) -> [f64; 3] {
-        self.l1_generic::<true, E>(p, clip, bound, enc)
     }
 
     #[inline(always)]
-    fn l1_generic<const AVX2: bool, E: Encoding>(
-        &self,
-        p: &ShadeParams,
-        clip: bool,
-        bound: f64,
-        enc: E,
-    ) -> [f64; 3] {
+    fn l1_generic<const AVX2: bool, E: Encoding>(&self, cand: Candidate, enc: E) -> [f64; 3] {
+        let Candidate {
+            params: p,
+            clip,
+            bound,
+            ..
+        } = cand;
         let light = Light {
             pos: p.light_position.to_array(),
             dir: p.light_direction.map(|d| d.to_array()),
@@ -242,9 +227,9 @@ impl Kernel {
             // m_c = exposure * (rho_c * ambient_c + e * I_c * rho_c / pi)  (+ specular lobe)
             let a: [f32; 3] = std::array::from_fn(|c| p.exposure * m.albedo[c] * p.ambient[c]);
             let k: [f32; 3] =
-                std::array::from_fn(|c| p.exposure * light.rgb[c] * m.albedo[c] * INV_PI);
+                std::array::from_fn(|c| lambert(p.exposure * light.rgb[c] * m.albedo[c]));
             let ks: [f32; 3] = std::array::from_fn(|c| {
-                p.exposure * light.rgb[c] * m.specular * (m.shininess + 8.0) * (INV_PI / 8.0)
+                specular_scale(p.exposure * light.rgb[c] * m.specular, m.shininess)
             });
             let mut start = 0;
             while start < n {
@@ -278,5 +263,32 @@ impl Kernel {
             }
         }
         acc
+    }
+}
+
+/// One evaluation: the candidate's shading parameters, whether the model is clipped at 1, the bound
+/// above which a sum may stop early (`f64::INFINITY` for the exact value) and whether to spread the
+/// pixels over the current rayon pool (the projected loss only; the same value either way).
+#[derive(Clone, Copy)]
+pub struct Candidate<'a> {
+    pub params: &'a ShadeParams,
+    pub clip: bool,
+    pub bound: f64,
+    pub parallel: bool,
+}
+
+/// [`Kernel::l1`] for [`simd::dispatch`]: one build per encoding, so the linear space's is exactly the
+/// code it was without the option.
+struct L1<'a, E> {
+    k: &'a Kernel,
+    c: Candidate<'a>,
+    enc: E,
+}
+
+impl<E: Encoding> Simd for L1<'_, E> {
+    type Output = [f64; 3];
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) -> [f64; 3] {
+        self.k.l1_generic::<AVX2, E>(self.c, self.enc)
     }
 }

@@ -288,7 +288,6 @@ pub(crate) fn rgb_sum(
 /// `rgb_loss` in the loss space of `enc`: Σ penalty(enc(min(a_c + e·k_c, top)) - t_c) with `t` already
 /// encoded. The linear space ([`Identity`]) is `rgb_loss` itself.
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn rgb_loss_in<E: Encoding>(
     norm: Norm,
     e: &[f32],

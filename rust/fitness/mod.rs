@@ -14,12 +14,13 @@ pub mod loss;
 pub mod pixels;
 pub mod projected;
 pub mod refine;
+mod simd;
 
 use crate::params::{ParamLayout, Target};
 use crate::render::film::srgb_encode_exact;
 use crate::render::{shade, GBuffer, Geometry, PShape, ShadeParams, Surfel};
 use crate::scene::Scene;
-pub use kernel::Kernel;
+pub use kernel::{Candidate, Kernel};
 use loss::penalty_sums;
 pub use loss::{Norm, Space, SrgbLut, SATURATED};
 pub use projected::{closed_form, fallback_sums, solve_object, Projection, SolveSums, Solved};
@@ -288,15 +289,13 @@ impl Fitness {
         let proj = self.projection.as_ref()?;
         let p = self.params(x);
         let (mut solved, mut scratch) = (Solved::default(), Vec::new());
-        self.kernel.projected(
-            &p,
-            self.clip,
-            proj,
-            &mut solved,
-            &mut scratch,
-            f64::INFINITY,
-            false,
-        );
+        let c = Candidate {
+            params: &p,
+            clip: self.clip,
+            bound: f64::INFINITY,
+            parallel: false,
+        };
+        self.kernel.projected(c, proj, &mut solved, &mut scratch);
         let mut loss = self.kernel.refine(self.clip, proj, &mut solved, &scratch);
         for c in 0..3 {
             loss[c] += self.constant[c];
@@ -364,17 +363,15 @@ impl Fitness {
         let p = params.get_or_insert_with(|| self.base.clone());
         self.params_into(x, p);
         let kernel_bound = bound - (self.constant[0] + self.constant[1] + self.constant[2]);
+        let c = Candidate {
+            params: p,
+            clip: self.clip,
+            bound: kernel_bound,
+            parallel,
+        };
         let mut acc = match &self.projection {
-            Some(proj) => self.kernel.projected(
-                p,
-                self.clip,
-                proj,
-                solved,
-                irradiance,
-                kernel_bound,
-                parallel,
-            ),
-            None => self.kernel.l1(p, self.clip, kernel_bound),
+            Some(proj) => self.kernel.projected(c, proj, solved, irradiance),
+            None => self.kernel.l1(c),
         };
         for c in 0..3 {
             acc[c] += self.constant[c];

@@ -4,6 +4,9 @@
 
 use glam::Vec3A;
 
+use crate::render::light::{self, directional_irradiance, point_irradiance};
+use crate::render::{brdf, shape::segment_meets_sphere};
+
 /// Pixels per block: the working set of one block stays in L1.
 pub const BLOCK: usize = 64;
 
@@ -72,75 +75,21 @@ pub(crate) fn irradiance<const AVX2: bool>(
             &g.n[2][r.start..][..n],
         );
         for i in 0..n {
-            e[i] = (nx[i] * d[0] + ny[i] * d[1] + nz[i] * d[2]).max(0.0);
+            e[i] = directional_irradiance(d, [nx[i], ny[i], nz[i]]);
         }
         return;
     }
     #[cfg(target_arch = "x86_64")]
     if AVX2 {
         // SAFETY: `AVX2` is only true on the path dispatched after checking the CPU's features.
-        unsafe { irradiance_avx2(g, r, light, e) };
+        unsafe { super::simd::irradiance_avx2(g, r, light, e) };
         return;
     }
     irradiance_exact(g, r, light, e);
 }
 
-/// AVX2 form of `irradiance`: 1/d³ from the hardware reciprocal square root refined by one Newton step
-/// (relative error about 1e-7, the same as the exact `nl / (d2 * sqrt(d2))` in f32), eight pixels at a
-/// time; the tail goes through the exact form.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline]
-pub(crate) unsafe fn irradiance_avx2(
-    g: &Group,
-    r: std::ops::Range<usize>,
-    light: &Light,
-    e: &mut [f32],
-) {
-    use std::arch::x86_64::*;
-    let n = e.len();
-    let full = n - n % 8;
-    let s = r.start;
-    let (lx, ly, lz) = (
-        _mm256_set1_ps(light.pos[0]),
-        _mm256_set1_ps(light.pos[1]),
-        _mm256_set1_ps(light.pos[2]),
-    );
-    let (half, three_halves) = (_mm256_set1_ps(0.5), _mm256_set1_ps(1.5));
-    let (tiny, big, zero) = (
-        _mm256_set1_ps(f32::MIN_POSITIVE),
-        _mm256_set1_ps(f32::MAX),
-        _mm256_setzero_ps(),
-    );
-    let mut i = 0;
-    while i < full {
-        let ld = |v: &Vec<f32>| _mm256_loadu_ps(v.as_ptr().add(s + i));
-        let dx = _mm256_sub_ps(lx, ld(&g.p[0]));
-        let dy = _mm256_sub_ps(ly, ld(&g.p[1]));
-        let dz = _mm256_sub_ps(lz, ld(&g.p[2]));
-        let d2 = _mm256_fmadd_ps(dz, dz, _mm256_fmadd_ps(dy, dy, _mm256_mul_ps(dx, dx)));
-        let nl = _mm256_fmadd_ps(
-            ld(&g.n[2]),
-            dz,
-            _mm256_fmadd_ps(ld(&g.n[1]), dy, _mm256_mul_ps(ld(&g.n[0]), dx)),
-        );
-        let nl = _mm256_max_ps(nl, zero);
-        // y ~ 1/sqrt(d2), one Newton step: y (1.5 - 0.5 d2 y²).
-        let y = _mm256_rsqrt_ps(d2);
-        let y = _mm256_mul_ps(
-            y,
-            _mm256_fnmadd_ps(_mm256_mul_ps(half, d2), _mm256_mul_ps(y, y), three_halves),
-        );
-        let inv3 = _mm256_mul_ps(_mm256_mul_ps(y, y), y);
-        let v = _mm256_min_ps(_mm256_mul_ps(nl, inv3), big);
-        let ok = _mm256_cmp_ps::<_CMP_GT_OQ>(d2, tiny);
-        _mm256_storeu_ps(e.as_mut_ptr().add(i), _mm256_and_ps(v, ok));
-        i += 8;
-    }
-    irradiance_exact(g, s + full..r.end, light, &mut e[full..]);
-}
-
 #[inline(always)]
+/// The scalar form of `irradiance` for a point light.
 pub(crate) fn irradiance_exact(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mut [f32]) {
     let n = e.len();
     let (px, py, pz) = (
@@ -155,13 +104,8 @@ pub(crate) fn irradiance_exact(g: &Group, r: std::ops::Range<usize>, light: &Lig
     );
     let [lx, ly, lz] = light.pos;
     for i in 0..n {
-        let dx = lx - px[i];
-        let dy = ly - py[i];
-        let dz = lz - pz[i];
-        let d2 = dx * dx + dy * dy + dz * dz;
-        let nl = (nx[i] * dx + ny[i] * dy + nz[i] * dz).max(0.0);
-        let v = (nl / (d2 * d2.sqrt())).min(f32::MAX);
-        e[i] = if d2 > f32::MIN_POSITIVE { v } else { 0.0 };
+        let d = [lx - px[i], ly - py[i], lz - pz[i]];
+        e[i] = point_irradiance(d, [nx[i], ny[i], nz[i]]);
     }
 }
 
@@ -204,13 +148,7 @@ pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mu
             let dz = lz - pz[i];
             let a = dx * dx + dy * dy + dz * dz;
             let b = (px[i] - cx) * dx + (py[i] - cy) * dy + (pz[i] - cz) * dz;
-            let c = cc[i];
-            let disc = b * b - a * c;
-            // Roots (-b ± √disc)/a: the far one is > 0 and the near one < 1.
-            let ab = a + b;
-            let far_positive = (b < 0.0) | (c < 0.0);
-            let near_below_one = (ab > 0.0) | (disc > ab * ab);
-            let hit = (disc >= 0.0) & far_positive & near_below_one;
+            let hit = segment_meets_sphere::<true>(a, b, cc[i]);
             e[i] = if hit { 0.0 } else { e[i] };
         }
     }
@@ -238,10 +176,9 @@ pub(crate) fn shadow_directional(g: &Group, r: std::ops::Range<usize>, d: [f32; 
         let cc = &s.c[r.start..][..n];
         let [cx, cy, cz] = s.center;
         for i in 0..n {
-            // |p - c + t d|² = r² with |d| = 1: t² + 2bt + c = 0; blocked when the far root is positive.
+            // |d| = 1: blocked when the far root of t² + 2bt + c = 0 is positive.
             let b = (px[i] - cx) * d[0] + (py[i] - cy) * d[1] + (pz[i] - cz) * d[2];
-            let c = cc[i];
-            let hit = (b * b - c >= 0.0) & ((b < 0.0) | (c < 0.0));
+            let hit = segment_meets_sphere::<false>(1.0, b, cc[i]);
             e[i] = if hit { 0.0 } else { e[i] };
         }
     }
@@ -261,10 +198,10 @@ pub(crate) fn blinn_phong(g: &Group, s: usize, light: &Light, shininess: f32) ->
     let p = Vec3A::new(g.p[0][s], g.p[1][s], g.p[2][s]);
     let n = Vec3A::new(g.n[0][s], g.n[1][s], g.n[2][s]);
     let v = Vec3A::new(g.v[0][s], g.v[1][s], g.v[2][s]);
-    let l = match light.dir {
-        Some(d) => Vec3A::from_array(d),
-        None => (Vec3A::from_array(light.pos) - p).normalize_or_zero(),
-    };
-    let h = (l + v).normalize_or_zero();
-    n.dot(h).max(0.0).powf(shininess)
+    let l = light::toward(
+        Vec3A::from_array(light.pos),
+        light.dir.map(Vec3A::from_array),
+        p,
+    );
+    brdf::blinn_phong(n, l, v, shininess)
 }

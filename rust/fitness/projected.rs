@@ -3,12 +3,29 @@
 
 use rayon::prelude::*;
 
-use super::kernel::Kernel;
+use super::kernel::{Candidate, Kernel};
 use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, LANES, SATURATED};
 use super::pixels::{blinn_phong, irradiance, shadow, Group, Light, BLOCK};
-use crate::render::ShadeParams;
+use super::simd::{self, Simd};
+use crate::render::brdf::{lambert, specular_per_lambert};
 
-const INV_PI: f32 = std::f32::consts::FRAC_1_PI;
+/// [`Kernel::projected`] for [`simd::dispatch`], one build per encoding.
+struct Projected<'a, E> {
+    k: &'a Kernel,
+    c: Candidate<'a>,
+    proj: &'a Projection,
+    out: &'a mut Solved,
+    s: &'a mut Vec<f32>,
+    enc: E,
+}
+
+impl<E: Encoding + Send + Sync> Simd for Projected<'_, E> {
+    type Output = [f64; 3];
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) -> [f64; 3] {
+        self.k.projected_generic::<AVX2, E>(self)
+    }
+}
 
 impl Kernel {
     /// Variable projection for a scene without ambient light: for the light `p`, the per-object,
@@ -20,89 +37,63 @@ impl Kernel {
     /// (for one candidate alone, as a local polish evaluates them; the early exit at `bound` is then
     /// skipped). Either way every sum is taken run by run and the runs are added in order, so the result
     /// is the same bit for bit, serial or parallel, on any number of threads.
-    #[allow(clippy::too_many_arguments)]
     pub fn projected(
         &self,
-        p: &ShadeParams,
-        clip: bool,
+        c: Candidate,
         proj: &Projection,
         out: &mut Solved,
         scratch: &mut Vec<f32>,
-        bound: f64,
-        parallel: bool,
     ) -> [f64; 3] {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx2")
-                && std::arch::is_x86_feature_detected!("fma")
-            {
-                // SAFETY: the CPU supports the features the function was compiled for.
-                return unsafe {
-                    match self.space {
-                        Space::Linear => self
-                            .projected_avx2(p, clip, proj, out, scratch, bound, parallel, Identity),
-                        Space::Srgb => self.projected_avx2(
-                            p,
-                            clip,
-                            proj,
-                            out,
-                            scratch,
-                            bound,
-                            parallel,
-                            SrgbLut::get(),
-                        ),
-                    }
-                };
+        let avx2 = simd::detected();
+        let (k, s) = (self, scratch);
+        match self.space {
+            Space::Linear => simd::dispatch(
+                Projected {
+                    k,
+                    c,
+                    proj,
+                    out,
+                    s,
+                    enc: Identity,
+                },
+                avx2,
+            ),
+            Space::Srgb => {
+                let enc = SrgbLut::get();
+                simd::dispatch(
+                    Projected {
+                        k,
+                        c,
+                        proj,
+                        out,
+                        s,
+                        enc,
+                    },
+                    avx2,
+                )
             }
         }
-        match self.space {
-            Space::Linear => self.projected_generic::<false, _>(
-                p, clip, proj, out, scratch, bound, parallel, Identity,
-            ),
-            Space::Srgb => self.projected_generic::<false, _>(
-                p,
-                clip,
-                proj,
-                out,
-                scratch,
-                bound,
-                parallel,
-                SrgbLut::get(),
-            ),
-        }
-    }
-
-    /// One function per encoding, as `l1_avx2`.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    #[allow(clippy::too_many_arguments)]
-    unsafe fn projected_avx2<E: Encoding + Send + Sync>(
-        &self,
-        p: &ShadeParams,
-        clip: bool,
-        proj: &Projection,
-        out: &mut Solved,
-        scratch: &mut Vec<f32>,
-        bound: f64,
-        parallel: bool,
-        enc: E,
-    ) -> [f64; 3] {
-        self.projected_generic::<true, E>(p, clip, proj, out, scratch, bound, parallel, enc)
     }
 
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
     fn projected_generic<const AVX2: bool, E: Encoding + Send + Sync>(
         &self,
-        p: &ShadeParams,
-        clip: bool,
-        proj: &Projection,
-        out: &mut Solved,
-        scratch: &mut Vec<f32>,
-        bound: f64,
-        parallel: bool,
-        enc: E,
+        job: Projected<'_, E>,
     ) -> [f64; 3] {
+        let Projected {
+            c:
+                Candidate {
+                    params: p,
+                    clip,
+                    bound,
+                    parallel,
+                },
+            proj,
+            out,
+            s: scratch,
+            enc,
+            ..
+        } = job;
         let light = Light {
             pos: p.light_position.to_array(),
             dir: p.light_direction.map(|d| d.to_array()),
@@ -151,7 +142,18 @@ impl Kernel {
                     .par_chunks_mut(CHUNK)
                     .zip(s_all.par_chunks_mut(CHUNK))
                     .enumerate()
-                    .map(|(k, (e, b))| run.factors_dispatch::<AVX2>(k * CHUNK, e, b))
+                    .map(|(k, (e, b))| {
+                        let start = k * CHUNK;
+                        simd::dispatch(
+                            Factors {
+                                run: &run,
+                                start,
+                                e,
+                                b,
+                            },
+                            AVX2,
+                        )
+                    })
                     .collect();
                 for part in &parts {
                     sums.add(part);
@@ -180,7 +182,11 @@ impl Kernel {
             out.specular[obj] = q;
             let pk: [f32; 3] = std::array::from_fn(|c| pk[c] as f32);
             let qw: [f32; 3] = std::array::from_fn(|c| (q * proj.weight[c] as f64) as f32);
-            let q_on = run.specular && q > 0.0;
+            let products = Products {
+                pk,
+                qw,
+                on: run.specular && q > 0.0,
+            };
             // Pass 2: the loss at those products (serially, stopping once it exceeds `bound`).
             let (e_all, s_all) = (&*e_all, &*s_all);
             if parallel {
@@ -189,7 +195,18 @@ impl Kernel {
                     .zip(s_all.par_chunks(CHUNK))
                     .enumerate()
                     .map(|(k, (e, b))| {
-                        run.loss_dispatch::<AVX2, E>(k * CHUNK, e, b, pk, qw, q_on, enc, None)
+                        let (run, start) = (&run, k * CHUNK);
+                        simd::dispatch(
+                            Loss {
+                                run,
+                                start,
+                                e,
+                                b,
+                                products,
+                                enc,
+                            },
+                            AVX2,
+                        )
                     })
                     .collect();
                 for part in &parts {
@@ -200,7 +217,7 @@ impl Kernel {
             } else {
                 for (k, (e, b)) in e_all.chunks(CHUNK).zip(s_all.chunks(CHUNK)).enumerate() {
                     let part =
-                        run.loss::<AVX2, E>(k * CHUNK, e, b, pk, qw, q_on, enc, Some((acc, bound)));
+                        run.loss::<AVX2, E>(k * CHUNK, e, b, products, enc, Some((acc, bound)));
                     for c in 0..3 {
                         acc[c] += part[c];
                     }
@@ -326,11 +343,11 @@ impl Run<'_> {
             irradiance::<AVX2>(g, r.clone(), self.light, e);
             shadow(g, r.clone(), self.light, e);
             for ei in e.iter_mut() {
-                *ei *= INV_PI;
+                *ei = lambert(*ei);
             }
             if self.specular {
                 let b = &mut b[i0..i0 + len];
-                let norm = (self.shininess + 8.0) / 8.0;
+                let norm = specular_per_lambert(self.shininess);
                 for (i, s) in r.clone().enumerate() {
                     // (s+8)/(8 pi) max(0, n.h)^s cos / d² = e · (s+8)/8 · max(0, n.h)^s
                     b[i] = if e[i] > 0.0 {
@@ -354,48 +371,19 @@ impl Run<'_> {
         sums
     }
 
-    /// `factors` compiled for AVX2 where `AVX2` says the CPU has it, for a task of the thread pool.
-    pub(crate) fn factors_dispatch<const AVX2: bool>(
-        &self,
-        start: usize,
-        e: &mut [f32],
-        b: &mut [f32],
-    ) -> SolveSums {
-        #[cfg(target_arch = "x86_64")]
-        if AVX2 {
-            // SAFETY: `AVX2` is only true on the path dispatched after checking the CPU's features.
-            return unsafe { self.factors_avx2(start, e, b) };
-        }
-        self.factors::<false>(start, e, b)
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    pub(crate) unsafe fn factors_avx2(
-        &self,
-        start: usize,
-        e: &mut [f32],
-        b: &mut [f32],
-    ) -> SolveSums {
-        self.factors::<true>(start, e, b)
-    }
-
-    /// Pass 2 over the run starting at pixel `start`: the per-channel loss at products `pk` (and `qw`, the
-    /// specular product per channel, where `q_on`). With `stop = Some((acc, bound))` it returns early once
+    /// Pass 2 over the run starting at pixel `start`: the per-channel loss at `products`. With `stop = Some((acc, bound))` it returns early once
     /// `acc` plus the run's loss so far exceeds `bound`.
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
     pub(crate) fn loss<const AVX2: bool, E: Encoding>(
         &self,
         start: usize,
         e: &[f32],
         b: &[f32],
-        pk: [f32; 3],
-        qw: [f32; 3],
-        q_on: bool,
+        products: Products,
         enc: E,
         stop: Option<([f64; 3], f64)>,
     ) -> [f64; 3] {
+        let Products { pk, qw, on: q_on } = products;
         let g = self.g;
         // The objective in the loss space (the solve uses the linear `ts`).
         let gt = if E::ENCODES { &g.te } else { &g.t };
@@ -431,43 +419,56 @@ impl Run<'_> {
         }
         part
     }
+}
 
-    /// `loss` compiled for AVX2 where `AVX2` says the CPU has it, for a task of the thread pool.
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn loss_dispatch<const AVX2: bool, E: Encoding>(
-        &self,
-        start: usize,
-        e: &[f32],
-        b: &[f32],
-        pk: [f32; 3],
-        qw: [f32; 3],
-        q_on: bool,
-        enc: E,
-        stop: Option<([f64; 3], f64)>,
-    ) -> [f64; 3] {
-        #[cfg(target_arch = "x86_64")]
-        if AVX2 {
-            // SAFETY: as in `factors_dispatch`.
-            return unsafe { self.loss_avx2(start, e, b, pk, qw, q_on, enc, stop) };
-        }
-        self.loss::<false, E>(start, e, b, pk, qw, q_on, enc, stop)
+/// The solved products of one object as pass 2 uses them: the diffuse `pk` per channel and, where `on`,
+/// the specular product per channel `qw`.
+#[derive(Clone, Copy)]
+pub(crate) struct Products {
+    pk: [f32; 3],
+    qw: [f32; 3],
+    on: bool,
+}
+
+/// [`Run::factors`] of one run for [`simd::dispatch`] (a task of the thread pool).
+struct Factors<'a, 'r> {
+    run: &'a Run<'r>,
+    start: usize,
+    e: &'a mut [f32],
+    b: &'a mut [f32],
+}
+
+impl Simd for Factors<'_, '_> {
+    type Output = SolveSums;
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) -> SolveSums {
+        self.run.factors::<AVX2>(self.start, self.e, self.b)
     }
+}
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) unsafe fn loss_avx2<E: Encoding>(
-        &self,
-        start: usize,
-        e: &[f32],
-        b: &[f32],
-        pk: [f32; 3],
-        qw: [f32; 3],
-        q_on: bool,
-        enc: E,
-        stop: Option<([f64; 3], f64)>,
-    ) -> [f64; 3] {
-        self.loss::<true, E>(start, e, b, pk, qw, q_on, enc, stop)
+/// [`Run::loss`] of one run for [`simd::dispatch`] (a task of the thread pool; no early exit).
+struct Loss<'a, 'r, E> {
+    run: &'a Run<'r>,
+    start: usize,
+    e: &'a [f32],
+    b: &'a [f32],
+    products: Products,
+    enc: E,
+}
+
+impl<E: Encoding> Simd for Loss<'_, '_, E> {
+    type Output = [f64; 3];
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) -> [f64; 3] {
+        let Loss {
+            run,
+            start,
+            e,
+            b,
+            products,
+            enc,
+        } = self;
+        run.loss::<AVX2, E>(start, e, b, products, enc, None)
     }
 }
 
@@ -580,7 +581,7 @@ pub(crate) fn normal_equations<const AVX2: bool>(e: &[f32], t: &[f32], sat: f32)
     #[cfg(target_arch = "x86_64")]
     if AVX2 {
         // SAFETY: `AVX2` is only true on the path dispatched after checking the CPU's features.
-        (a, b) = unsafe { normal_equation_lanes_avx2(&e[..full], &t[..full], sat) };
+        (a, b) = unsafe { super::simd::normal_equation_lanes_avx2(&e[..full], &t[..full], sat) };
     } else {
         normal_equation_lanes(&e[..full], &t[..full], sat, &mut a, &mut b);
     }
@@ -611,29 +612,4 @@ pub(crate) fn normal_equation_lanes(
             b[j] += if keep { x[j] * x[j] } else { 0.0 };
         }
     }
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-#[inline]
-pub(crate) unsafe fn normal_equation_lanes_avx2(
-    e: &[f32],
-    t: &[f32],
-    sat: f32,
-) -> ([f32; LANES], [f32; LANES]) {
-    use std::arch::x86_64::*;
-    let (mut a, mut b) = (_mm256_setzero_ps(), _mm256_setzero_ps());
-    let satv = _mm256_set1_ps(sat);
-    for (x, y) in e.chunks_exact(LANES).zip(t.chunks_exact(LANES)) {
-        let (x, y) = (_mm256_loadu_ps(x.as_ptr()), _mm256_loadu_ps(y.as_ptr()));
-        // Where t >= sat (or t = +inf) both factors become 0: the lane adds 0, as the scalar select.
-        let keep = _mm256_cmp_ps::<_CMP_LT_OQ>(y, satv);
-        let (x, y) = (_mm256_and_ps(x, keep), _mm256_and_ps(y, keep));
-        a = _mm256_add_ps(a, _mm256_mul_ps(x, y));
-        b = _mm256_add_ps(b, _mm256_mul_ps(x, x));
-    }
-    let (mut sa, mut sb) = ([0.0f32; LANES], [0.0f32; LANES]);
-    _mm256_storeu_ps(sa.as_mut_ptr(), a);
-    _mm256_storeu_ps(sb.as_mut_ptr(), b);
-    (sa, sb)
 }

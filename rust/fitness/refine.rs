@@ -74,6 +74,7 @@ impl Kernel {
         } else {
             1
         };
+        let limits = Limits { proj, sat, top };
         for round in 0..rounds {
             let tasks: Vec<(usize, usize)> = objects
                 .iter()
@@ -86,7 +87,7 @@ impl Kernel {
                 .map(|&(k, c)| {
                     let o = &objects[k];
                     let q = out.specular[o.obj];
-                    self.refine_diffuse(o, c, q, out.products[o.obj][c], proj, sat, top)
+                    self.refine_diffuse(o, c, q, out.products[o.obj][c], limits)
                 })
                 .collect();
             for (&(k, c), v) in tasks.iter().zip(solved) {
@@ -100,7 +101,7 @@ impl Kernel {
                 .map(|&k| {
                     let o = &objects[k];
                     let (pk, q) = (out.products[o.obj], out.specular[o.obj]);
-                    self.refine_specular(o, pk, q, proj, sat, top)
+                    self.refine_specular(o, pk, q, limits)
                 })
                 .collect();
             for (&k, v) in glossy.iter().zip(solved) {
@@ -136,17 +137,15 @@ impl Kernel {
 
     /// [`Kernel::refine`]'s line search for P_c of one object given its specular product `q`, starting
     /// from `start` (the sRGB branch and bound uses it).
-    #[allow(clippy::too_many_arguments)]
     fn refine_diffuse(
         &self,
         o: &RefineObject,
         c: usize,
         q: f64,
         start: f64,
-        proj: &Projection,
-        sat: f32,
-        top: f64,
+        limits: Limits,
     ) -> f64 {
+        let Limits { proj, sat, top } = limits;
         let (n, a, t) = (o.a.len(), o.a, &o.g.ts[c]);
         let w = proj.weight[c];
         let bounds = proj.diffuse[o.obj][c];
@@ -180,16 +179,8 @@ impl Kernel {
     }
 
     /// [`Kernel::refine`]'s line search for Q of one glossy object given its diffuse products `pk`.
-    #[allow(clippy::too_many_arguments)]
-    fn refine_specular(
-        &self,
-        o: &RefineObject,
-        pk: [f64; 3],
-        q: f64,
-        proj: &Projection,
-        sat: f32,
-        top: f64,
-    ) -> f64 {
+    fn refine_specular(&self, o: &RefineObject, pk: [f64; 3], q: f64, limits: Limits) -> f64 {
+        let Limits { proj, sat, top } = limits;
         let (n, a, b, t) = (o.a.len(), o.a, o.b, &o.g.ts);
         let bounds = proj.specular[o.obj];
         if self.space == Space::Srgb {
@@ -247,6 +238,14 @@ impl Kernel {
             self.norm.slope((m - top).min(0.0))
         }
     }
+}
+
+/// What every line search of one [`Kernel::refine`] shares: the products' bounds and the clip.
+#[derive(Clone, Copy)]
+struct Limits<'a> {
+    proj: &'a Projection,
+    sat: f32,
+    top: f64,
 }
 
 /// One object's pixels and unit-light factors, for [`Kernel::refine`].
