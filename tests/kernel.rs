@@ -1179,3 +1179,35 @@ fn refined_srgb_products_minimise_the_srgb_loss() {
         }
     }
 }
+
+/// The projected fitness refuses a scene the closed form does not model, for the reason
+/// `projection_blocker` gives (the one decision, which Python's fit asks too).
+#[test]
+fn projected_fitness_refuses_what_projection_blocker_refuses() {
+    let mut rng = Rng::new(11);
+    let paths = ["light.position".to_string()];
+    for ambient in [false, true] {
+        let scene = random_scene(&mut rng, 1, false, ambient);
+        let layout = ParamLayout::new(&scene, &paths).unwrap();
+        let target = clipped_render(&scene);
+        let bounds = vec![[(0.0, 400.0); 3]; scene.objects.len()];
+        let why = rtloop::fitness::projection_blocker(&scene, &paths);
+        let made = Fitness::new(
+            &scene,
+            layout,
+            &target,
+            None,
+            LossKind::L1Projected,
+            true,
+            Some(Projection::matte(bounds)),
+        );
+        match (why, made) {
+            (None, Ok(_)) => assert!(!ambient),
+            (Some(why), Err(e)) => {
+                assert!(ambient && why.contains("ambient light"), "{why}");
+                assert!(e.to_string().contains(&why), "{e}");
+            }
+            (why, made) => panic!("blocker {why:?} but Fitness::new {:?}", made.err()),
+        }
+    }
+}

@@ -23,7 +23,9 @@ use crate::scene::Scene;
 pub use kernel::{Candidate, Kernel};
 use loss::penalty_sums;
 pub use loss::{Norm, Space, SrgbLut, SATURATED};
-pub use projected::{closed_form, fallback_sums, solve_object, Projection, SolveSums, Solved};
+pub use projected::{
+    closed_form, fallback_sums, projection_blocker, solve_object, Projection, SolveSums, Solved,
+};
 pub use refine::{encoded_line_min, l1_line_min, EncodedTerm};
 
 /// How a candidate's image is compared with the objective.
@@ -158,10 +160,11 @@ impl Fitness {
                     proj.specular.len(),
                 )));
             }
-            if base.ambient != Vec3A::ZERO {
-                return Err(Error::Invalid(
-                    "the projected loss models scenes without ambient light (ambient 0)".into(),
-                ));
+            let paths: Vec<String> = layout.entries.iter().map(|e| e.0.clone()).collect();
+            if let Some(why) = projection_blocker(scene, &paths) {
+                return Err(Error::Invalid(format!(
+                    "the projected loss does not apply: {why}"
+                )));
             }
             if let Some(o) = scene
                 .objects

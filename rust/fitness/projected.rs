@@ -8,6 +8,7 @@ use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, LANES, 
 use super::pixels::{blinn_phong, irradiance, shadow, Group, Light, BLOCK};
 use super::simd::{self, Simd};
 use crate::render::brdf::{lambert, specular_per_lambert};
+use crate::scene::Scene;
 
 /// [`Kernel::projected`] for [`simd::dispatch`], one build per encoding.
 struct Projected<'a, E> {
@@ -229,6 +230,64 @@ impl Kernel {
         }
         acc
     }
+}
+
+/// `None` when the closed form (the projected method) applies to `scene` with the fit section `paths`
+/// free, else why not: the one decision of it (Python's fit asks this too).
+pub fn projection_blocker(scene: &Scene, paths: &[String]) -> Option<String> {
+    let free = |p: &str| paths.iter().any(|q| q == p);
+    if !free("light.position") && !free("light.direction") {
+        return Some("neither light.position nor light.direction is free".into());
+    }
+    if scene.ambient.iter().any(|&v| v != 0.0) {
+        return Some("the scene has ambient light".into());
+    }
+    let allowed = |p: &str| {
+        matches!(p, "light.position" | "light.direction" | "light.intensity")
+            || scene.objects.iter().any(|o| {
+                ["albedo", "specular", "shininess"]
+                    .iter()
+                    .any(|m| p == format!("objects.{}.{m}", o.name))
+            })
+    };
+    let extra: Vec<&str> = paths
+        .iter()
+        .map(String::as_str)
+        .filter(|p| !allowed(p))
+        .collect();
+    if !extra.is_empty() {
+        return Some(format!(
+            "{} cannot be solved in closed form",
+            extra.join(", ")
+        ));
+    }
+    if free("light.intensity") {
+        let names = |f: &dyn Fn(&crate::scene::Object) -> bool| {
+            let v: Vec<&str> = scene
+                .objects
+                .iter()
+                .filter(|o| f(o))
+                .map(|o| o.name.as_str())
+                .collect();
+            v.join(", ")
+        };
+        let known = names(&|o| {
+            o.material.specular != 0.0 && !free(&format!("objects.{}.specular", o.name))
+        });
+        if !known.is_empty() {
+            return Some(format!(
+                "light.intensity is free and the specular of {known} is fixed (the highlight then \
+                 measures the intensity, which the closed form does not model)"
+            ));
+        }
+        let fixed = names(&|o| !free(&format!("objects.{}.albedo", o.name)));
+        if !fixed.is_empty() {
+            return Some(format!(
+                "light.intensity is free but the albedo of {fixed} is fixed"
+            ));
+        }
+    }
+    None
 }
 
 /// What the closed-form solve may choose, per object: the bounds of its diffuse products
