@@ -3,12 +3,9 @@
 use glam::Vec3A;
 
 use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut};
-use super::pixels::{
-    blinn_phong, irradiance, shadow, Group, Light, PlaneOccluder, SphereOccluder, BLOCK,
-};
+use super::pixels::{blinn_phong, group, irradiance, shadow, Group, Light, BLOCK};
 use super::simd::{self, Simd};
 use crate::render::brdf::{lambert, specular_scale};
-use crate::render::shape::sphere_power;
 use crate::render::{PShape, ShadeParams, Surfel};
 
 pub struct Kernel {
@@ -30,111 +27,7 @@ impl Kernel {
         shapes: &[PShape],
         shadows: bool,
     ) -> Kernel {
-        // Pixels grouped by object (background last), row-major inside a group: a counting sort.
-        let slot = |o: u32| {
-            if o == u32::MAX {
-                shapes.len()
-            } else {
-                o as usize
-            }
-        };
-        let mut count = vec![0usize; shapes.len() + 2];
-        for s in surfels {
-            count[slot(s.object) + 1] += 1;
-        }
-        for k in 1..count.len() {
-            count[k] += count[k - 1];
-        }
-        let mut order = vec![0usize; surfels.len()];
-        for (i, s) in surfels.iter().enumerate() {
-            let k = slot(s.object);
-            order[count[k]] = i;
-            count[k] += 1;
-        }
-        let mut groups: Vec<Group> = Vec::new();
-        let mut start = 0;
-        while start < order.len() {
-            let obj = surfels[order[start]].object;
-            let mut end = start;
-            while end < order.len() && surfels[order[end]].object == obj {
-                end += 1;
-            }
-            let idx = &order[start..end];
-            let col = |f: &dyn Fn(&Surfel) -> f32| {
-                idx.iter().map(|&i| f(&surfels[i])).collect::<Vec<f32>>()
-            };
-            let tcol = |c: usize| idx.iter().map(|&i| targets[i][c]).collect::<Vec<f32>>();
-            let object = (obj != u32::MAX).then_some(obj as usize);
-            let mut g = Group {
-                object,
-                p: [
-                    col(&|s| s.position.x),
-                    col(&|s| s.position.y),
-                    col(&|s| s.position.z),
-                ],
-                n: [
-                    col(&|s| s.normal.x),
-                    col(&|s| s.normal.y),
-                    col(&|s| s.normal.z),
-                ],
-                v: [col(&|s| s.view.x), col(&|s| s.view.y), col(&|s| s.view.z)],
-                t: [tcol(0), tcol(1), tcol(2)],
-                te: Default::default(),
-                ts: std::array::from_fn(|c| {
-                    idx.iter()
-                        .map(|&i| {
-                            if solve[i] {
-                                targets[i][c]
-                            } else {
-                                f32::INFINITY
-                            }
-                        })
-                        .collect()
-                }),
-                spheres: Vec::new(),
-                planes: Vec::new(),
-                blocks: idx
-                    .chunks(BLOCK)
-                    .map(|chunk| {
-                        let pos = |&i: &usize| surfels[i].position;
-                        let centre = chunk.iter().map(pos).fold(Vec3A::ZERO, |a, p| a + p)
-                            / chunk.len() as f32;
-                        let radius = chunk
-                            .iter()
-                            .map(|i| (pos(i) - centre).length())
-                            .fold(0.0f32, f32::max);
-                        (centre.to_array(), radius)
-                    })
-                    .collect(),
-            };
-            if shadows && object.is_some() {
-                for (k, shape) in shapes.iter().enumerate() {
-                    if Some(k) == object {
-                        continue;
-                    }
-                    match *shape {
-                        PShape::Sphere { center, radius } => g.spheres.push(SphereOccluder {
-                            center: center.to_array(),
-                            radius,
-                            c: idx
-                                .iter()
-                                .map(|&i| sphere_power(surfels[i].position - center, radius))
-                                .collect(),
-                        }),
-                        PShape::Plane { point, normal } => g.planes.push(PlaneOccluder {
-                            normal: normal.to_array(),
-                            point: point.to_array(),
-                            side: idx
-                                .iter()
-                                .map(|&i| normal.dot(surfels[i].position - point))
-                                .collect(),
-                        }),
-                    }
-                }
-            }
-            groups.push(g);
-            start = end;
-        }
+        let groups = group(surfels, targets, solve, shapes, shadows);
         Kernel {
             norm: Norm::L1,
             space: Space::Linear,

@@ -23,6 +23,7 @@ use crate::scene::Scene;
 pub use kernel::{Candidate, Kernel};
 use loss::penalty_sums;
 pub use loss::{Norm, Space, SrgbLut, SATURATED};
+pub use pixels::{interior, ActivePixels};
 pub use projected::{
     closed_form, fallback_sums, projection_blocker, solve_object, Projection, SolveSums, Solved,
 };
@@ -210,43 +211,20 @@ impl Fitness {
             .iter()
             .any(|(_, t, _)| *t == Target::Exposure);
         let background_fixed = !exposure_free || base.background == Vec3A::ZERO;
-        // Silhouette pixels (a 4-neighbour shows another object) mix two surfaces in a photo; the
-        // closed-form solve leaves them out.
-        let (w, h) = (scene.width as usize, scene.height as usize);
-        let id = |x: usize, y: usize| gbuffer.surfels[y * w + x].object;
-        let interior = |i: usize| {
-            let (x, y) = (i % w, i / w);
-            let o = id(x, y);
-            (x == 0 || id(x - 1, y) == o)
-                && (x + 1 == w || id(x + 1, y) == o)
-                && (y == 0 || id(x, y - 1) == o)
-                && (y + 1 == h || id(x, y + 1) == o)
-        };
-        let (mut surfels, mut tgt, mut solve, mut fixed) =
-            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        for &i in pixels {
-            let s = gbuffer.surfels[i as usize];
-            let t = Vec3A::from_slice(&target[3 * i as usize..3 * i as usize + 3]);
-            if s.object == u32::MAX && background_fixed {
-                let m = shade(&s, &base, &[], false);
-                let m = if clip { m.min(Vec3A::ONE) } else { m };
-                fixed.push((m, t));
+        let background = background_fixed.then(|| {
+            let m = shade(&Surfel::MISS, &base, &[], false);
+            if clip {
+                m.min(Vec3A::ONE)
             } else {
-                surfels.push(s);
-                solve.push(interior(i as usize));
-                tgt.push(t);
+                m
             }
-        }
-        // An object seen only at its silhouette (tiny, or almost hidden) still needs its pixels.
-        for k in 0..scene.objects.len() as u32 {
-            let mine = || surfels.iter().zip(0..).filter(move |(s, _)| s.object == k);
-            if !mine().any(|(_, i)| solve[i]) {
-                let all: Vec<usize> = mine().map(|(_, i)| i).collect();
-                for i in all {
-                    solve[i] = true;
-                }
-            }
-        }
+        });
+        let ActivePixels {
+            surfels,
+            targets: tgt,
+            solve,
+            fixed,
+        } = ActivePixels::select(&gbuffer, target, pixels, background, scene.objects.len());
         Ok(Fitness {
             layout,
             early_exit: true,

@@ -5,7 +5,75 @@
 use glam::Vec3A;
 
 use crate::render::light::{self, directional_irradiance, point_irradiance};
-use crate::render::{brdf, shape::segment_meets_sphere};
+use crate::render::shape::{segment_meets_sphere, sphere_power};
+use crate::render::{brdf, GBuffer, PShape, Surfel};
+
+/// The pixels one fit shades, and the (clipped model, objective) of those no free parameter changes.
+#[derive(Clone, Debug, Default)]
+pub struct ActivePixels {
+    pub surfels: Vec<Surfel>,
+    /// The objective per active pixel (linear RGB).
+    pub targets: Vec<Vec3A>,
+    /// Per active pixel: may it inform the closed-form products (not on a silhouette)?
+    pub solve: Vec<bool>,
+    /// (clipped model, objective) of the pixels left out: background under a fixed background.
+    pub fixed: Vec<(Vec3A, Vec3A)>,
+}
+
+impl ActivePixels {
+    /// Split `pixels` of `gbuffer` (objective `target`, H x W x 3) into active pixels and, where
+    /// `background` is the fixed (clipped) background value, the background's fixed pairs.
+    pub fn select(
+        gbuffer: &GBuffer,
+        target: &[f32],
+        pixels: &[u32],
+        background: Option<Vec3A>,
+        objects: usize,
+    ) -> ActivePixels {
+        let mut a = ActivePixels::default();
+        for &i in pixels {
+            let s = gbuffer.surfels[i as usize];
+            let t = Vec3A::from_slice(&target[3 * i as usize..3 * i as usize + 3]);
+            match background {
+                Some(m) if s.object == u32::MAX => a.fixed.push((m, t)),
+                _ => {
+                    a.surfels.push(s);
+                    a.solve.push(interior(gbuffer, i as usize));
+                    a.targets.push(t);
+                }
+            }
+        }
+        // An object seen only at its silhouette (tiny, or almost hidden) still needs its pixels.
+        for k in 0..objects as u32 {
+            let mine = || {
+                a.surfels
+                    .iter()
+                    .zip(0..)
+                    .filter(move |(s, _)| s.object == k)
+            };
+            if !mine().any(|(_, i)| a.solve[i]) {
+                let all: Vec<usize> = mine().map(|(_, i)| i).collect();
+                for i in all {
+                    a.solve[i] = true;
+                }
+            }
+        }
+        a
+    }
+}
+
+/// Whether pixel `i` is off every silhouette: its 4-neighbours show its own object. A silhouette pixel
+/// mixes two surfaces in a photo; the closed-form solve leaves it out.
+pub fn interior(gbuffer: &GBuffer, i: usize) -> bool {
+    let (w, h) = (gbuffer.width as usize, gbuffer.height as usize);
+    let id = |x: usize, y: usize| gbuffer.surfels[y * w + x].object;
+    let (x, y) = (i % w, i / w);
+    let o = id(x, y);
+    (x == 0 || id(x - 1, y) == o)
+        && (x + 1 == w || id(x + 1, y) == o)
+        && (y == 0 || id(x, y - 1) == o)
+        && (y + 1 == h || id(x, y + 1) == o)
+}
 
 /// Pixels per block: the working set of one block stays in L1.
 pub const BLOCK: usize = 64;
@@ -56,6 +124,123 @@ pub(crate) struct Light {
     pub(crate) dir: Option<[f32; 3]>,
     /// intensity x colour.
     pub(crate) rgb: [f32; 3],
+}
+
+/// The active pixels grouped by object (background last), row-major inside a group, as structures of
+/// arrays with their occluders' light-independent terms (`shadows`: the scene can shadow at all).
+/// `solve[i]` says whether pixel i may inform the closed-form products.
+pub(crate) fn group(
+    surfels: &[Surfel],
+    targets: &[Vec3A],
+    solve: &[bool],
+    shapes: &[PShape],
+    shadows: bool,
+) -> Vec<Group> {
+    // Pixels grouped by object (background last), row-major inside a group: a counting sort.
+    let slot = |o: u32| {
+        if o == u32::MAX {
+            shapes.len()
+        } else {
+            o as usize
+        }
+    };
+    let mut count = vec![0usize; shapes.len() + 2];
+    for s in surfels {
+        count[slot(s.object) + 1] += 1;
+    }
+    for k in 1..count.len() {
+        count[k] += count[k - 1];
+    }
+    let mut order = vec![0usize; surfels.len()];
+    for (i, s) in surfels.iter().enumerate() {
+        let k = slot(s.object);
+        order[count[k]] = i;
+        count[k] += 1;
+    }
+    let mut groups: Vec<Group> = Vec::new();
+    let mut start = 0;
+    while start < order.len() {
+        let obj = surfels[order[start]].object;
+        let mut end = start;
+        while end < order.len() && surfels[order[end]].object == obj {
+            end += 1;
+        }
+        let idx = &order[start..end];
+        let col =
+            |f: &dyn Fn(&Surfel) -> f32| idx.iter().map(|&i| f(&surfels[i])).collect::<Vec<f32>>();
+        let tcol = |c: usize| idx.iter().map(|&i| targets[i][c]).collect::<Vec<f32>>();
+        let object = (obj != u32::MAX).then_some(obj as usize);
+        let mut g = Group {
+            object,
+            p: [
+                col(&|s| s.position.x),
+                col(&|s| s.position.y),
+                col(&|s| s.position.z),
+            ],
+            n: [
+                col(&|s| s.normal.x),
+                col(&|s| s.normal.y),
+                col(&|s| s.normal.z),
+            ],
+            v: [col(&|s| s.view.x), col(&|s| s.view.y), col(&|s| s.view.z)],
+            t: [tcol(0), tcol(1), tcol(2)],
+            te: Default::default(),
+            ts: std::array::from_fn(|c| {
+                idx.iter()
+                    .map(|&i| {
+                        if solve[i] {
+                            targets[i][c]
+                        } else {
+                            f32::INFINITY
+                        }
+                    })
+                    .collect()
+            }),
+            spheres: Vec::new(),
+            planes: Vec::new(),
+            blocks: idx
+                .chunks(BLOCK)
+                .map(|chunk| {
+                    let pos = |&i: &usize| surfels[i].position;
+                    let centre =
+                        chunk.iter().map(pos).fold(Vec3A::ZERO, |a, p| a + p) / chunk.len() as f32;
+                    let radius = chunk
+                        .iter()
+                        .map(|i| (pos(i) - centre).length())
+                        .fold(0.0f32, f32::max);
+                    (centre.to_array(), radius)
+                })
+                .collect(),
+        };
+        if shadows && object.is_some() {
+            for (k, shape) in shapes.iter().enumerate() {
+                if Some(k) == object {
+                    continue;
+                }
+                match *shape {
+                    PShape::Sphere { center, radius } => g.spheres.push(SphereOccluder {
+                        center: center.to_array(),
+                        radius,
+                        c: idx
+                            .iter()
+                            .map(|&i| sphere_power(surfels[i].position - center, radius))
+                            .collect(),
+                    }),
+                    PShape::Plane { point, normal } => g.planes.push(PlaneOccluder {
+                        normal: normal.to_array(),
+                        point: point.to_array(),
+                        side: idx
+                            .iter()
+                            .map(|&i| normal.dot(surfels[i].position - point))
+                            .collect(),
+                    }),
+                }
+            }
+        }
+        groups.push(g);
+        start = end;
+    }
+    groups
 }
 
 /// e = max(0, n·l) / d² (unit light), written into `e`; 0 for a light on the surface.
