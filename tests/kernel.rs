@@ -2,6 +2,9 @@
 //! through the renderer's `shade`, on random scenes with shadows, several spheres, specular terms,
 //! ambient light and saturated objective pixels.
 
+mod common;
+
+use common::Oracle;
 use rtloop::de::{Objective, Rng};
 use rtloop::{render, Fitness, LossKind, ParamLayout, Projection, Scene};
 

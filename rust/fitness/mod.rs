@@ -17,7 +17,6 @@ pub mod refine;
 mod simd;
 
 use crate::params::{ParamLayout, Target};
-use crate::render::film::srgb_encode_exact;
 use crate::render::{shade, GBuffer, Geometry, PShape, ShadeParams, Surfel};
 use crate::scene::Scene;
 pub use kernel::{Candidate, Kernel};
@@ -66,17 +65,14 @@ pub struct Fitness {
     kernel: Kernel,
     base: ShadeParams,
     shapes: Vec<PShape>,
-    surfels: Vec<Surfel>,
-    /// Per active pixel: may it inform the closed-form products (not on a silhouette)?
-    solve: Vec<bool>,
-    target: Vec<Vec3A>,
+    /// The pixels shaded per evaluation, and the fixed ones (kept to recompute `constant` for another
+    /// norm or space).
+    active: ActivePixels,
     kind: LossKind,
     clip: bool,
     shadows: bool,
-    /// Per-channel loss of the pixels left out because no free parameter changes them...
+    /// Per-channel loss of the pixels left out because no free parameter changes them.
     constant: [f64; 3],
-    /// ...from their fixed (clipped model, objective), kept to recompute it for another norm or space.
-    fixed: Vec<(Vec3A, Vec3A)>,
     /// For `L1Projected`: the bounds of the closed-form unknowns.
     projection: Option<Projection>,
 }
@@ -219,32 +215,25 @@ impl Fitness {
                 m
             }
         });
-        let ActivePixels {
-            surfels,
-            targets: tgt,
-            solve,
-            fixed,
-        } = ActivePixels::select(&gbuffer, target, pixels, background, scene.objects.len());
+        let active =
+            ActivePixels::select(&gbuffer, target, pixels, background, scene.objects.len());
         Ok(Fitness {
             layout,
             early_exit: true,
             base,
             kernel: Kernel::new(
-                &surfels,
-                &tgt,
-                &solve,
+                &active.surfels,
+                &active.targets,
+                &active.solve,
                 &geometry.shapes,
                 scene.can_occlude(),
             ),
-            solve,
             shapes: geometry.shapes,
-            surfels,
-            target: tgt,
             kind,
             clip,
             shadows: scene.can_occlude(),
-            constant: penalty_sums(&fixed, Norm::L1, Space::Linear),
-            fixed,
+            constant: penalty_sums(&active.fixed, Norm::L1, Space::Linear),
+            active,
             projection,
         })
     }
@@ -287,7 +276,7 @@ impl Fitness {
     /// Penalise pixel differences with `norm` (L1 by default) in every loss of this fitness.
     pub fn set_norm(&mut self, norm: Norm) {
         self.kernel.norm = norm;
-        self.constant = penalty_sums(&self.fixed, norm, self.space());
+        self.constant = penalty_sums(&self.active.fixed, norm, self.space());
     }
 
     pub fn norm(&self) -> Norm {
@@ -301,7 +290,7 @@ impl Fitness {
     /// reports, are in `space`.
     pub fn set_space(&mut self, space: Space) {
         self.kernel.set_space(space);
-        self.constant = penalty_sums(&self.fixed, self.norm(), space);
+        self.constant = penalty_sums(&self.active.fixed, self.norm(), space);
     }
 
     pub fn space(&self) -> Space {
@@ -365,118 +354,24 @@ impl Fitness {
         with_scratch(|s| self.fast_losses(x, s, f64::INFINITY, false))
     }
 
-    /// penalty(enc(m) - enc(t)) per channel for a clipped model `m` and objective `t`, with the exact
-    /// encoding of this fitness's space (the plain path's; the kernel interpolates a table).
-    fn exact_penalty(&self, m: Vec3A, t: Vec3A) -> [f64; 3] {
-        std::array::from_fn(|c| {
-            let d = match self.space() {
-                Space::Linear => m[c] - t[c],
-                Space::Srgb => {
-                    (srgb_encode_exact(m[c] as f64) - srgb_encode_exact(t[c] as f64)) as f32
-                }
-            };
-            self.norm().penalty(d) as f64
-        })
+    /// The active pixels (first hits, objective, silhouette flags) and the fixed background pairs.
+    pub fn active(&self) -> &ActivePixels {
+        &self.active
     }
 
-    /// The same losses computed the plain way, pixel by pixel through the renderer's `shade` and with the
-    /// exact sRGB encoding (the reference the kernel is tested against).
-    pub fn reference_channel_losses(&self, x: &[f64]) -> [f64; 3] {
-        let p = self.params(x);
-        let mut acc = [0.0f64; 3];
-        for &(m, t) in &self.fixed {
-            let l = self.exact_penalty(m, t);
-            for c in 0..3 {
-                acc[c] += l[c];
-            }
-        }
-        if let Some(proj) = &self.projection {
-            // Unit light, white albedo, no lobe: shade gives the diffuse factor a. Albedo 0 and specular 1
-            // give the specular factor b. Sum the normal equations pixel by pixel, solve, then the loss.
-            let n = proj.diffuse.len();
-            let mut sums = vec![SolveSums::default(); n];
-            let a: Vec<f32> = self
-                .surfels
-                .iter()
-                .map(|s| shade(s, &p, &self.shapes, self.shadows).x)
-                .collect();
-            let b: Vec<f32> = self
-                .surfels
-                .iter()
-                .map(|s| {
-                    let k = s.object as usize;
-                    if s.object == u32::MAX || proj.specular[k].1 <= 0.0 {
-                        return 0.0;
-                    }
-                    let mut q = p.clone();
-                    q.materials[k].albedo = Vec3A::ZERO;
-                    q.materials[k].specular = 1.0;
-                    q.any_specular = true;
-                    shade(s, &q, &self.shapes, self.shadows).x
-                })
-                .collect();
-            let sat = if self.clip { SATURATED } else { f32::INFINITY };
-            for (i, (s, t)) in self.surfels.iter().zip(&self.target).enumerate() {
-                if s.object != u32::MAX && self.solve[i] {
-                    let (m, ai, bi) = (&mut sums[s.object as usize], a[i] as f64, b[i] as f64);
-                    for c in 0..3 {
-                        if t[c] < sat {
-                            let y = t[c] as f64;
-                            m.saa[c] += ai * ai;
-                            m.sab[c] += ai * bi;
-                            m.sbb[c] += bi * bi;
-                            m.sya[c] += y * ai;
-                            m.syb[c] += y * bi;
-                        }
-                    }
-                }
-            }
-            let solved: Vec<([f64; 3], f64)> = (0..n)
-                .map(|k| {
-                    let fallback = |c: usize| {
-                        let (e, t): (Vec<f32>, Vec<f32>) = self
-                            .surfels
-                            .iter()
-                            .zip(&self.target)
-                            .zip(&a)
-                            .filter(|((s, _), _)| s.object == k as u32)
-                            .map(|((_, t), &ai)| (ai, t[c]))
-                            .unzip();
-                        fallback_sums(&e, &t, sat)
-                    };
-                    solve_object(
-                        &sums[k],
-                        proj.weight,
-                        &proj.diffuse[k],
-                        proj.specular[k],
-                        fallback,
-                    )
-                })
-                .collect();
-            for (i, (s, t)) in self.surfels.iter().zip(&self.target).enumerate() {
-                let m = if s.object == u32::MAX {
-                    Vec3A::ZERO
-                } else {
-                    let (pk, q) = solved[s.object as usize];
-                    Vec3A::from_array(std::array::from_fn(|c| {
-                        (pk[c] * a[i] as f64 + q * proj.weight[c] as f64 * b[i] as f64) as f32
-                    }))
-                };
-                let l = self.exact_penalty(if self.clip { m.min(Vec3A::ONE) } else { m }, *t);
-                for c in 0..3 {
-                    acc[c] += l[c];
-                }
-            }
-            return acc;
-        }
-        for (s, t) in self.surfels.iter().zip(&self.target) {
-            let m = shade(s, &p, &self.shapes, self.shadows);
-            let l = self.exact_penalty(if self.clip { m.min(Vec3A::ONE) } else { m }, *t);
-            for c in 0..3 {
-                acc[c] += l[c];
-            }
-        }
-        acc
+    /// The scene's shapes, and whether any of them can shadow another.
+    pub fn shapes(&self) -> (&[PShape], bool) {
+        (&self.shapes, self.shadows)
+    }
+
+    /// Whether the model is clipped at 1 before comparison.
+    pub fn clip(&self) -> bool {
+        self.clip
+    }
+
+    /// For `L1Projected`: the bounds of the closed-form unknowns.
+    pub fn projection(&self) -> Option<&Projection> {
+        self.projection.as_ref()
     }
 }
 
