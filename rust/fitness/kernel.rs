@@ -1,4 +1,7 @@
 //! The fused fitness kernel: the grouped pixels of one fit, and the direct (stage-1) loss of a candidate.
+//!
+//! It models only what the scene needs: no object is its own occluder, one object has no shadow tests,
+//! the lobe is compiled out when every specular is 0, and the linear space compiles the encoding away.
 
 use glam::Vec3A;
 

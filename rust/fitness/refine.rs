@@ -1,5 +1,5 @@
 //! The refine: the products that minimise the fit's own loss (norm, clip, space) at the found light, by
-//! exact line searches per product.
+//! exact line searches per product (`l1_line_min`, `encoded_line_min`, `bisect`).
 
 use rayon::prelude::*;
 
@@ -9,19 +9,11 @@ use super::pixels::Group;
 use super::projected::{Projection, Solved};
 
 impl Kernel {
-    /// The products that minimise this kernel's own loss (norm, clip and space) rather than least squares,
-    /// for one light: called once at the end of a search, after `projected` has filled `out` and `scratch`
-    /// for that light. Least squares treats a pixel saturated in the objective as missing, which biases
-    /// a bright channel down under noise (the pixels that noise pushed up to 1 are dropped, those it pushed
-    /// down are kept). Here a saturated pixel counts one-sidedly, as the loss does: it pulls the product up
-    /// while the model is below 1, and says nothing once the model reaches 1. The loss is then minimised
-    /// per object by block coordinate descent, each P_c given Q and then Q given the P's. In the linear
-    /// space each step is exact for L1 ([`l1_line_min`]) and otherwise bisection on the loss's
-    /// derivative, e.g. Σ a·slope(P a + Q w b - y) (non-decreasing: every term is convex once an
-    /// unsaturated pixel's clip at 1 is dropped). In the sRGB space no term is linear or convex in the
-    /// unknown any more, but each is still unimodal in it with the same breakpoint (the encoding is
-    /// monotone), so each step is the branch and bound of [`encoded_line_min`], for every norm. Returns
-    /// the per-channel loss at the refined products.
+    /// The products that minimise this kernel's own loss (norm, clip, space) at one light, after
+    /// `projected` filled `out` and `scratch` for it; a saturated pixel counts one-sidedly, as in the loss
+    /// (least squares drops it, which biases bright channels down). Block coordinate descent per object
+    /// (each P_c given Q, then Q), each step an exact line search ([`l1_line_min`], bisection on the
+    /// derivative, or [`encoded_line_min`] in sRGB). Returns the per-channel loss there.
     pub fn refine(
         &self,
         clip: bool,
@@ -316,25 +308,9 @@ impl EncodedTerm {
 /// Midpoints evaluated at most by one [`encoded_line_min`] (each one pass over the terms; typically 20-50).
 pub(crate) const MAX_SPLITS: usize = 200;
 
-/// The minimiser over [lo, hi] of F(x) = Σ_j ℓ_j(x) for the sRGB-space terms of [`EncodedTerm`], with
-/// `norm`'s penalty: the exact step of [`Kernel::refine`] in the sRGB space.
-///
-/// Each g_j is concave and non-decreasing (the encoding is, so is its table, and so is a clip), so each
-/// ℓ_j is unimodal, least at its breakpoint `at` (where the model meets the objective), but a sum of them
-/// is not, and unlike in linear space need not be least at a breakpoint: a term rising in the encoding's
-/// flat part beside one falling in its steep part makes an interior minimum (see the tests). So this is a
-/// branch and bound on x with a convex minorant per interval [u, v]: a term with its breakpoint at or
-/// left of u rises there, and ℓ ≥ penalty(chord of g - ye) (g is concave, the penalty increasing on the
-/// positive side), which is convex; one with its breakpoint at or right of v falls there, and is convex
-/// itself (an increasing convex penalty of the convex ye - g); any other term is at least 0. Their sum Λ
-/// is convex and at least the larger of its tangents at u and v, whose least value on [u, v] is the
-/// interval's bound. The bound's gap shrinks with the square of the interval's width, so only intervals
-/// near the minimum survive: the interval with the lowest bound is split at its midpoint until no
-/// bound is below the best value found by more than 1e-8 of it (the best is then the global minimum to
-/// that tolerance; the terms are f32), intervals narrower than 1e-7 of their position (the model is f32)
-/// are not split, and at most `MAX_SPLITS` midpoints are evaluated. `start` (clamped to the bounds) is
-/// evaluated first: the result is never worse than it. Each evaluated point keeps every term's g and g'
-/// while an interval ends there, so a split encodes each term once.
+/// The minimiser over [lo, hi] of Σ_j ℓ_j(x) for the sRGB-space terms (each unimodal, their sum not):
+/// branch and bound over intervals with a convex minorant per interval, to 1e-8 of the best value, at
+/// most `MAX_SPLITS` midpoints, never worse than `start`.
 pub fn encoded_line_min(
     terms: &[EncodedTerm],
     norm: Norm,
@@ -520,12 +496,9 @@ impl Ord for Interval {
     }
 }
 
-/// The exact minimiser over [lo, hi] of Σ_j ℓ_j(x) for terms (k > 0, o, y, saturated): ℓ = |min(k x + o,
-/// top) - y| for an unsaturated pixel, max(0, top - k x - o) for a saturated one (it only says "at least
-/// top"). Each ℓ is piecewise linear in x, so the minimum lies at a breakpoint ((y - o)/k or
-/// (top - o)/k) or an end: one sweep over the sorted breakpoints, tracking the slope, finds it. Unlike a
-/// convex stand-in, this keeps the clip exact, so the estimate stays median-unbiased where noise pushes a
-/// pixel across the clip (an unsaturated pixel of a model already at `top` costs a constant).
+/// The exact minimiser over [lo, hi] of Σ_j ℓ_j(x) for terms (k > 0, o, y, saturated), ℓ = |min(kx + o,
+/// top) - y| (max(0, top - kx - o) when saturated): piecewise linear, so one sweep over the sorted
+/// breakpoints finds it, with the clip kept exact.
 pub fn l1_line_min(
     terms: impl Iterator<Item = (f64, f64, f64, bool)>,
     (lo, hi): (f64, f64),
@@ -570,10 +543,8 @@ pub fn l1_line_min(
     best_x
 }
 
-/// Sort (position, slope change) events by position: an LSD radix sort on an order-preserving 32-bit key
-/// of the position rounded to f32 (three 11-bit passes; a comparison sort of the ~10⁴ events per object and
-/// channel cost more than the rest of a small fit's finish). Rounding to f32 (a relative 6e-8) only
-/// merges breakpoints closer than the renderer's own precision.
+/// Sort (position, slope change) events by position: LSD radix sort on the position rounded to f32 (it
+/// only merges breakpoints closer than the renderer's precision; a comparison sort cost more).
 pub(crate) fn radix_sort_by_position(events: &mut Vec<(f64, f64)>) {
     let key = |x: f64| {
         let b = (x as f32).to_bits();
