@@ -225,71 +225,8 @@ impl Encoding for &SrgbLut {
 /// results stay bit-reproducible).
 pub(crate) const LANES: usize = 8;
 
-/// Σ penalty(min(a_c + e·k_c, top) - t_c) for the three channels, one loop per norm so each vectorises.
-#[inline(always)]
-pub(crate) fn rgb_loss(
-    norm: Norm,
-    e: &[f32],
-    t: [&[f32]; 3],
-    a: [f32; 3],
-    k: [f32; 3],
-    top: f32,
-) -> [f32; 3] {
-    match norm {
-        Norm::L1 => rgb_sum(e, t, a, k, top, |d| d.abs()),
-        Norm::L2 => rgb_sum(e, t, a, k, top, |d| d * d),
-        Norm::Huber(h) => rgb_sum(e, t, a, k, top, move |d| {
-            let ad = d.abs();
-            if ad <= h {
-                0.5 * d * d / h
-            } else {
-                ad - 0.5 * h
-            }
-        }),
-    }
-}
-
-/// Σ f(min(a_c + e·k_c, top) - t_c) for the three channels in one pass over `e`, in `LANES` partial sums.
-#[inline(always)]
-pub(crate) fn rgb_sum(
-    e: &[f32],
-    t: [&[f32]; 3],
-    a: [f32; 3],
-    k: [f32; 3],
-    top: f32,
-    f: impl Fn(f32) -> f32,
-) -> [f32; 3] {
-    let n = e.len();
-    let (t0, t1, t2) = (&t[0][..n], &t[1][..n], &t[2][..n]);
-    let (mut s0, mut s1, mut s2) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
-    let full = n - n % LANES;
-    let mut i = 0;
-    while i < full {
-        let (ec, c0, c1, c2) = (
-            &e[i..i + LANES],
-            &t0[i..i + LANES],
-            &t1[i..i + LANES],
-            &t2[i..i + LANES],
-        );
-        for j in 0..LANES {
-            let ej = ec[j];
-            s0[j] += f((a[0] + ej * k[0]).min(top) - c0[j]);
-            s1[j] += f((a[1] + ej * k[1]).min(top) - c1[j]);
-            s2[j] += f((a[2] + ej * k[2]).min(top) - c2[j]);
-        }
-        i += LANES;
-    }
-    for j in 0..n - full {
-        let ej = e[full + j];
-        s0[j] += f((a[0] + ej * k[0]).min(top) - t0[full + j]);
-        s1[j] += f((a[1] + ej * k[1]).min(top) - t1[full + j]);
-        s2[j] += f((a[2] + ej * k[2]).min(top) - t2[full + j]);
-    }
-    [s0.iter().sum(), s1.iter().sum(), s2.iter().sum()]
-}
-
-/// `rgb_loss` in the loss space of `enc`: Σ penalty(enc(min(a_c + e·k_c, top)) - t_c) with `t` already
-/// encoded. The linear space ([`Identity`]) is `rgb_loss` itself.
+/// Σ penalty(enc(min(a_c + e·k_c, top)) - t_c) for the three channels, `t` already encoded (the linear
+/// space's [`Identity`] compiles the encoding away), one loop per norm so each vectorises.
 #[inline(always)]
 pub(crate) fn rgb_loss_in<E: Encoding>(
     norm: Norm,
@@ -300,27 +237,19 @@ pub(crate) fn rgb_loss_in<E: Encoding>(
     top: f32,
     enc: E,
 ) -> [f32; 3] {
-    if !E::ENCODES {
-        return rgb_loss(norm, e, t, a, k, top);
-    }
     match norm {
-        Norm::L1 => rgb_sum_encoded(e, t, a, k, top, enc, |d| d.abs()),
-        Norm::L2 => rgb_sum_encoded(e, t, a, k, top, enc, |d| d * d),
-        Norm::Huber(h) => rgb_sum_encoded(e, t, a, k, top, enc, move |d| {
-            let ad = d.abs();
-            if ad <= h {
-                0.5 * d * d / h
-            } else {
-                ad - 0.5 * h
-            }
-        }),
+        // One closure per norm with the norm a constant, so each loop vectorises on its own.
+        Norm::L1 => rgb_sum(e, t, a, k, top, enc, |d| Norm::L1.penalty(d)),
+        Norm::L2 => rgb_sum(e, t, a, k, top, enc, |d| Norm::L2.penalty(d)),
+        Norm::Huber(h) => rgb_sum(e, t, a, k, top, enc, move |d| Norm::Huber(h).penalty(d)),
     }
 }
 
-/// `rgb_sum` with the model encoded by `enc` (the table lookups are scalar; the rest vectorises). Without
-/// a clip (`top` > 1) every value goes through [`Encoding::any`], which branches above 1.
+/// Σ f(enc(min(a_c + e·k_c, top)) - t_c) for the three channels in one pass over `e`, in `LANES` partial
+/// sums (the table lookups are scalar; the rest vectorises). An encoding without a clip (`top` > 1)
+/// sends every value through [`Encoding::any`], which branches above 1.
 #[inline(always)]
-pub(crate) fn rgb_sum_encoded<E: Encoding>(
+pub(crate) fn rgb_sum<E: Encoding>(
     e: &[f32],
     t: [&[f32]; 3],
     a: [f32; 3],
@@ -332,7 +261,11 @@ pub(crate) fn rgb_sum_encoded<E: Encoding>(
     let n = e.len();
     let (t0, t1, t2) = (&t[0][..n], &t[1][..n], &t[2][..n]);
     let (mut s0, mut s1, mut s2) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
-    let full = if top <= 1.0 { n - n % LANES } else { 0 };
+    let full = if !E::ENCODES || top <= 1.0 {
+        n - n % LANES
+    } else {
+        0
+    };
     let mut i = 0;
     while i < full {
         let (ec, c0, c1, c2) = (
