@@ -237,58 +237,79 @@ pub(crate) fn rgb_loss_in<E: Encoding>(
     top: f32,
     enc: E,
 ) -> [f32; 3] {
+    let terms = Terms {
+        e,
+        t,
+        a,
+        k,
+        top,
+        enc,
+    };
     match norm {
         // One closure per norm with the norm a constant, so each loop vectorises on its own.
-        Norm::L1 => rgb_sum(e, t, a, k, top, enc, |d| Norm::L1.penalty(d)),
-        Norm::L2 => rgb_sum(e, t, a, k, top, enc, |d| Norm::L2.penalty(d)),
-        Norm::Huber(h) => rgb_sum(e, t, a, k, top, enc, move |d| Norm::Huber(h).penalty(d)),
+        Norm::L1 => terms.sum(|d| Norm::L1.penalty(d)),
+        Norm::L2 => terms.sum(|d| Norm::L2.penalty(d)),
+        Norm::Huber(h) => terms.sum(move |d| Norm::Huber(h).penalty(d)),
     }
 }
 
-/// Σ f(enc(min(a_c + e·k_c, top)) - t_c) for the three channels in one pass over `e`, in `LANES` partial
-/// sums (the table lookups are scalar; the rest vectorises). An encoding without a clip (`top` > 1)
-/// sends every value through [`Encoding::any`], which branches above 1.
-#[inline(always)]
-pub(crate) fn rgb_sum<E: Encoding>(
-    e: &[f32],
-    t: [&[f32]; 3],
+/// The model terms enc(min(a_c + e·k_c, top)) of a run of pixels against the encoded objective `t`.
+#[derive(Clone, Copy)]
+struct Terms<'a, E> {
+    e: &'a [f32],
+    t: [&'a [f32]; 3],
     a: [f32; 3],
     k: [f32; 3],
     top: f32,
     enc: E,
-    f: impl Fn(f32) -> f32,
-) -> [f32; 3] {
-    let n = e.len();
-    let (t0, t1, t2) = (&t[0][..n], &t[1][..n], &t[2][..n]);
-    let (mut s0, mut s1, mut s2) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
-    let full = if !E::ENCODES || top <= 1.0 {
-        n - n % LANES
-    } else {
-        0
-    };
-    let mut i = 0;
-    while i < full {
-        let (ec, c0, c1, c2) = (
-            &e[i..i + LANES],
-            &t0[i..i + LANES],
-            &t1[i..i + LANES],
-            &t2[i..i + LANES],
-        );
-        for j in 0..LANES {
-            let ej = ec[j];
-            s0[j] += f(enc.unit((a[0] + ej * k[0]).min(top)) - c0[j]);
-            s1[j] += f(enc.unit((a[1] + ej * k[1]).min(top)) - c1[j]);
-            s2[j] += f(enc.unit((a[2] + ej * k[2]).min(top)) - c2[j]);
+}
+
+impl<E: Encoding> Terms<'_, E> {
+    /// Σ f(enc(min(a_c + e·k_c, top)) - t_c) for the three channels in one pass over `e`, in `LANES` partial
+    /// sums (the table lookups are scalar; the rest vectorises). An encoding without a clip (`top` > 1)
+    /// sends every value through [`Encoding::any`], which branches above 1.
+    #[inline(always)]
+    fn sum(self, f: impl Fn(f32) -> f32) -> [f32; 3] {
+        let Terms {
+            e,
+            t,
+            a,
+            k,
+            top,
+            enc,
+        } = self;
+        let n = e.len();
+        let (t0, t1, t2) = (&t[0][..n], &t[1][..n], &t[2][..n]);
+        let (mut s0, mut s1, mut s2) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
+        let full = if !E::ENCODES || top <= 1.0 {
+            n - n % LANES
+        } else {
+            0
+        };
+        let mut i = 0;
+        while i < full {
+            let (ec, c0, c1, c2) = (
+                &e[i..i + LANES],
+                &t0[i..i + LANES],
+                &t1[i..i + LANES],
+                &t2[i..i + LANES],
+            );
+            for j in 0..LANES {
+                let ej = ec[j];
+                s0[j] += f(enc.unit((a[0] + ej * k[0]).min(top)) - c0[j]);
+                s1[j] += f(enc.unit((a[1] + ej * k[1]).min(top)) - c1[j]);
+                s2[j] += f(enc.unit((a[2] + ej * k[2]).min(top)) - c2[j]);
+            }
+            i += LANES;
         }
-        i += LANES;
+        for (j, s) in (full..n).enumerate() {
+            let (es, l) = (e[s], j % LANES);
+            s0[l] += f(enc.any((a[0] + es * k[0]).min(top)) - t0[s]);
+            s1[l] += f(enc.any((a[1] + es * k[1]).min(top)) - t1[s]);
+            s2[l] += f(enc.any((a[2] + es * k[2]).min(top)) - t2[s]);
+        }
+        [s0.iter().sum(), s1.iter().sum(), s2.iter().sum()]
     }
-    for (j, s) in (full..n).enumerate() {
-        let (es, l) = (e[s], j % LANES);
-        s0[l] += f(enc.any((a[0] + es * k[0]).min(top)) - t0[s]);
-        s1[l] += f(enc.any((a[1] + es * k[1]).min(top)) - t1[s]);
-        s2[l] += f(enc.any((a[2] + es * k[2]).min(top)) - t2[s]);
-    }
-    [s0.iter().sum(), s1.iter().sum(), s2.iter().sum()]
 }
 
 /// Per-channel sums of `norm`'s penalty over fixed (model, objective) pairs, compared in `space` with
