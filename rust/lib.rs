@@ -4,25 +4,21 @@
 
 pub mod error;
 pub mod fitness;
-pub mod kernel;
 pub mod params;
 pub mod render;
 pub mod scene;
 pub mod search;
-pub mod space;
 pub mod stage;
 
 #[cfg(feature = "python")]
 mod python;
 
 pub use error::{Error, Result};
-pub use fitness::{Fitness, LossKind};
-pub use kernel::{Norm, Projection};
+pub use fitness::{Fitness, LossKind, Norm, Projection, Space};
 pub use params::ParamLayout;
 pub use render::{render, GBuffer, Image};
 pub use scene::Scene;
 pub use search::{
     DeConfig, DeResult, GenerationReport, Method, Objective, SearchResult, StopReason,
 };
-pub use space::Space;
 pub use stage::{run_stage, StageResult};

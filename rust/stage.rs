@@ -3,7 +3,7 @@
 
 use crate::error::Result;
 use crate::fitness::{Fitness, LossKind};
-use crate::kernel::Solved;
+use crate::fitness::Solved;
 use crate::search::{self, GenerationReport, Method, PolishReport, StopReason};
 
 /// Per object `[P_r, P_g, P_b, Q]`: the colour products and `Q` = intensity × specular (0 when matte).

@@ -2,6 +2,9 @@
 //! through the renderer's `shade`, on random scenes with shadows, several spheres, specular terms,
 //! ambient light and saturated objective pixels.
 
+mod common;
+
+use common::Oracle;
 use rtloop::search::{Objective, Rng};
 use rtloop::{render, Fitness, LossKind, ParamLayout, Projection, Scene};
 
@@ -539,7 +542,7 @@ fn projected_kernel_with_a_specular_term_matches_the_plain_solve_and_recovers_th
 
 #[test]
 fn specular_solve_matches_a_dense_least_squares_solve() {
-    use rtloop::kernel::{solve_object, SolveSums};
+    use rtloop::fitness::{solve_object, SolveSums};
     let mut rng = Rng::new(23);
     for _ in 0..50 {
         let n = 40;
@@ -698,7 +701,7 @@ fn refined_products_are_exact_on_a_clean_glossy_image() {
 
 #[test]
 fn l1_line_min_finds_the_global_minimum_of_the_clipped_loss() {
-    use rtloop::kernel::l1_line_min;
+    use rtloop::fitness::l1_line_min;
     let mut rng = Rng::new(41);
     for trial in 0..200 {
         let n = 1 + trial % 60;
@@ -814,7 +817,7 @@ fn srgb_losses_match_the_plain_path_for_every_norm_clip_and_loss() {
 #[test]
 fn srgb_loss_is_the_loss_of_the_encoded_images() {
     // From the definition: render the candidate, encode it (clipped) and the objective exactly, penalise.
-    use rtloop::space::srgb_encode_exact;
+    use rtloop::render::film::srgb_encode_exact;
     use rtloop::{Norm, Space};
     let mut rng = Rng::new(72);
     for trial in 0..4 {
@@ -979,8 +982,8 @@ fn grid_min(f: impl Fn(f64) -> f64, (lo, hi): (f64, f64), n: usize) -> (f64, f64
 
 #[test]
 fn encoded_line_min_finds_the_global_minimum() {
-    use rtloop::kernel::{encoded_line_min, EncodedTerm};
-    use rtloop::space::SrgbLut;
+    use rtloop::fitness::SrgbLut;
+    use rtloop::fitness::{encoded_line_min, EncodedTerm};
     use rtloop::Norm;
     let lut = SrgbLut::get();
     let term = |k: f64, o: f64, y: f64| EncodedTerm {
@@ -1176,6 +1179,38 @@ fn refined_srgb_products_minimise_the_srgb_loss() {
                 let rel = refined.products[k][c] / want[k][c] - 1.0;
                 assert!(rel.abs() < 0.05, "{norm:?}: {:?}", refined.products);
             }
+        }
+    }
+}
+
+/// The projected fitness refuses a scene the closed form does not model, for the reason
+/// `projection_blocker` gives (the one decision, which Python's fit asks too).
+#[test]
+fn projected_fitness_refuses_what_projection_blocker_refuses() {
+    let mut rng = Rng::new(11);
+    let paths = ["light.position".to_string()];
+    for ambient in [false, true] {
+        let scene = random_scene(&mut rng, 1, false, ambient);
+        let layout = ParamLayout::new(&scene, &paths).unwrap();
+        let target = clipped_render(&scene);
+        let bounds = vec![[(0.0, 400.0); 3]; scene.objects.len()];
+        let why = rtloop::fitness::projection_blocker(&scene, &paths);
+        let made = Fitness::new(
+            &scene,
+            layout,
+            &target,
+            None,
+            LossKind::L1Projected,
+            true,
+            Some(Projection::matte(bounds)),
+        );
+        match (why, made) {
+            (None, Ok(_)) => assert!(!ambient),
+            (Some(why), Err(e)) => {
+                assert!(ambient && why.contains("ambient light"), "{why}");
+                assert!(e.to_string().contains(&why), "{e}");
+            }
+            (why, made) => panic!("blocker {why:?} but Fitness::new {:?}", made.err()),
         }
     }
 }

@@ -6,10 +6,10 @@ use pyo3::prelude::*;
 
 use crate::error::Error;
 use crate::fitness::{Fitness, LossKind};
-use crate::kernel::{Norm, Projection};
+use crate::fitness::{Norm, Projection};
 use crate::params::ParamLayout;
 use crate::scene::Scene;
-use crate::space::Space;
+use crate::fitness::Space;
 use crate::stage::StageResult;
 
 fn target_vec(scene: &Scene, target: &PyReadonlyArray3<'_, f32>) -> PyResult<Vec<f32>> {

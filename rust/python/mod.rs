@@ -71,6 +71,12 @@ fn object_ids<'py>(
     PyArray1::from_vec(py, ids).reshape([h as usize, w as usize])
 }
 
+/// None when the closed-form (projected) method applies to `scene` with the fit section `paths`, else why.
+#[pyfunction]
+fn projection_blocker(scene: &Bound<'_, PyScene>, paths: Vec<String>) -> Option<String> {
+    crate::fitness::projection_blocker(&scene.get().0, &paths)
+}
+
 /// Write a linear float (H, W, 3) image as 8-bit sRGB PNG or BMP, atomically.
 #[pyfunction]
 fn save_image(py: Python<'_>, path: PathBuf, image: PyReadonlyArray3<'_, f32>) -> PyResult<()> {
@@ -241,6 +247,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(object_ids, m)?)?;
     m.add_function(wrap_pyfunction!(save_image, m)?)?;
+    m.add_function(wrap_pyfunction!(projection_blocker, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     m.add_function(wrap_pyfunction!(optimize, m)?)?;
     m.add("RtloopError", m.py().get_type::<RtloopError>())?;

@@ -1,4 +1,4 @@
-//! Pinhole camera: the public pixel-to-ray convention of the scene format.
+//! Pinhole camera: the public pixel-to-ray convention of the scene format, and sub-pixel sample positions.
 
 use glam::{DVec3, Vec3A};
 
@@ -42,6 +42,34 @@ impl CameraFrame {
     }
 }
 
+/// Sub-pixel sample positions in [0, 1)²: a stratified grid when `spp` is a square, otherwise the R2
+/// low-discrepancy sequence. One sample is the pixel centre.
+pub fn sample_offsets(spp: u32) -> Vec<(f32, f32)> {
+    let spp = spp.max(1);
+    let k = (spp as f64).sqrt().round() as u32;
+    if k * k == spp {
+        (0..spp)
+            .map(|s| {
+                (
+                    ((s % k) as f32 + 0.5) / k as f32,
+                    ((s / k) as f32 + 0.5) / k as f32,
+                )
+            })
+            .collect()
+    } else {
+        let g = 1.324_717_957_244_746_f64;
+        let (a1, a2) = (1.0 / g, 1.0 / (g * g));
+        (0..spp)
+            .map(|n| {
+                (
+                    ((0.5 + a1 * n as f64).fract()) as f32,
+                    ((0.5 + a2 * n as f64).fract()) as f32,
+                )
+            })
+            .collect()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -78,5 +106,21 @@ mod tests {
         assert!((angle - 35.0).abs() < 1e-3, "{angle}");
         let centre = c.generate_ray(64.0, 48.0, w, h);
         assert!((centre - c.forward).length() < 1e-6);
+    }
+
+    #[test]
+    fn sample_patterns_are_inside_the_pixel_and_balanced() {
+        for spp in [1, 2, 3, 4, 5, 16] {
+            let o = sample_offsets(spp);
+            assert_eq!(o.len(), spp as usize);
+            let mean = o.iter().fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+            for &(x, y) in &o {
+                assert!((0.0..1.0).contains(&x) && (0.0..1.0).contains(&y));
+            }
+            assert!(
+                (mean.0 / spp as f32 - 0.5).abs() < 0.25
+                    && (mean.1 / spp as f32 - 0.5).abs() < 0.25
+            );
+        }
     }
 }

@@ -1,15 +1,16 @@
-//! Direct lighting from one point light: Lambert plus normalised Blinn–Phong, with a shadow ray.
+//! Render's per-pixel shading: direct light from one light (`light`) through the material (`brdf`),
+//! with a shadow ray (`hit::occluded`), plus ambient.
 //!
 //! L = ρ·ambient + V·I·color·max(0, n·l)/d² · [ρ/π + k_s·(s+8)/(8π)·max(0, n·h)^s], pixel = exposure·L.
 
 use glam::Vec3A;
 
+use super::brdf::{blinn_phong, lambert, specular_scale};
+use super::hit::{occluded, Surfel};
+use super::light::{incidence, irradiance};
 use super::shape::PShape;
-use super::Surfel;
 use crate::params::Target;
 use crate::scene::Scene;
-
-const INV_PI: f32 = std::f32::consts::FRAC_1_PI;
 
 /// A material in working form.
 #[derive(Clone, Copy, Debug)]
@@ -124,20 +125,6 @@ impl ShadeParams {
     }
 }
 
-/// True if any object other than `skip` blocks the segment from `s` to the light.
-///
-/// A sphere (convex) or a plane can never shadow its own lit side, so the surface the point lies on is
-/// not tested at all: no self-intersection and no offset that could leak light through thin occluders.
-#[inline]
-pub fn occluded(s: &Surfel, to_light: Vec3A, dist: f32, shapes: &[PShape]) -> bool {
-    let tmin = s.eps;
-    let tmax = dist * (1.0 - 4.0 * f32::EPSILON);
-    shapes
-        .iter()
-        .enumerate()
-        .any(|(k, sh)| k as u32 != s.object && sh.hits_segment(s.position, to_light, tmin, tmax))
-}
-
 /// Exposure-scaled radiance towards the eye at surfel `s` (the background for a miss).
 #[inline]
 pub fn shade(s: &Surfel, p: &ShadeParams, shapes: &[PShape], shadows: bool) -> Vec3A {
@@ -146,32 +133,19 @@ pub fn shade(s: &Surfel, p: &ShadeParams, shapes: &[PShape], shadows: bool) -> V
     }
     let m = &p.materials[s.object as usize];
     let mut l = m.albedo * p.ambient;
-    // Unit direction to the light, its distance and the inverse-square factor.
-    let (dir, dist, falloff) = match p.light_direction {
-        Some(dir) => (dir, f32::INFINITY, 1.0),
-        None => {
-            let d = p.light_position - s.position;
-            let d2 = d.length_squared();
-            // A light on the surface itself (d = 0) lies in the tangent plane: no direct light.
-            if d2 <= f32::MIN_POSITIVE {
-                return (p.exposure * l).min(Vec3A::splat(f32::MAX));
-            }
-            let dist = d2.sqrt();
-            (d / dist, dist, 1.0 / d2)
-        }
+    let Some((dir, dist, falloff)) = incidence(p.light_position, p.light_direction, s.position)
+    else {
+        return (p.exposure * l).min(Vec3A::splat(f32::MAX));
     };
     let ndotl = s.normal.dot(dir);
     if ndotl > 0.0 && !(shadows && occluded(s, dir, dist, shapes)) {
-        let mut brdf = m.albedo * INV_PI;
+        let mut brdf = lambert(m.albedo);
         if p.any_specular && m.specular > 0.0 {
-            let h = (dir + s.view).normalize_or_zero();
-            let ndoth = s.normal.dot(h).max(0.0);
-            let lobe = m.specular * (m.shininess + 8.0) * (INV_PI / 8.0) * ndoth.powf(m.shininess);
+            let lobe = specular_scale(m.specular, m.shininess)
+                * blinn_phong(s.normal, dir, s.view, m.shininess);
             brdf += Vec3A::splat(lobe);
         }
-        // Clamp so that a light almost touching a surface gives a huge but finite value.
-        let e = (ndotl * falloff).min(f32::MAX);
-        l += (p.light_rgb * brdf * e).min(Vec3A::splat(f32::MAX));
+        l += (p.light_rgb * brdf * irradiance(ndotl, falloff)).min(Vec3A::splat(f32::MAX));
     }
     (p.exposure * l).min(Vec3A::splat(f32::MAX))
 }

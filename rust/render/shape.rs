@@ -70,9 +70,7 @@ impl PShape {
                     return None;
                 }
                 let sq = disc.sqrt();
-                // c = |oc|² - r², factored to keep its relative accuracy near the surface.
-                let oc_len = oc.length();
-                let c = (oc_len - radius) * (oc_len + radius);
+                let c = sphere_power(oc, radius);
                 let q = if b > 0.0 { -b - sq } else { -b + sq };
                 let (t0, t1) = if q == 0.0 {
                     (0.0, 0.0)
@@ -139,6 +137,29 @@ impl PShape {
     }
 }
 
+/// |oc|² - r² for the offset `oc` from a sphere's centre (the power of the point), factored to keep its
+/// relative accuracy near the surface.
+#[inline(always)]
+pub fn sphere_power(oc: Vec3A, radius: f32) -> f32 {
+    let l = oc.length();
+    (l - radius) * (l + radius)
+}
+
+/// Whether the segment x(t) = p + t·d, t in (0, 1) (in (0, ∞) without `BOUNDED`), meets a sphere, from
+/// a = |d|², b = (p - c)·d and the power c = |p - c|² - r²: the roots (-b ± √(b² - ac))/a are real, the
+/// far one is > 0 and (bounded) the near one < 1. Branch-free, for the fitness kernel's lane loops.
+#[inline(always)]
+pub fn segment_meets_sphere<const BOUNDED: bool>(a: f32, b: f32, c: f32) -> bool {
+    let disc = b * b - a * c;
+    let far_positive = (b < 0.0) | (c < 0.0);
+    if !BOUNDED {
+        return (disc >= 0.0) & far_positive;
+    }
+    let ab = a + b;
+    let near_below_one = (ab > 0.0) | (disc > ab * ab);
+    (disc >= 0.0) & far_positive & near_below_one
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -163,6 +184,33 @@ mod tests {
         let t = -b - disc.sqrt();
         let t = if t > 0.0 { t } else { -b + disc.sqrt() };
         (t > 0.0).then(|| (t, (o + t * d - c) / r))
+    }
+
+    #[test]
+    fn segment_test_agrees_with_the_ray_test() {
+        let s = sphere([0.0, 1.0, 0.0], 0.5);
+        let PShape::Sphere { center, radius } = s else {
+            unreachable!()
+        };
+        for (p, l) in [
+            ([0.0, 0.0, 0.0], [0.0, 2.0, 0.0]),
+            ([0.0, 0.0, 0.0], [0.0, 0.2, 0.0]),
+            ([3.0, 0.0, 0.0], [0.0, 2.0, 0.0]),
+            ([0.0, 3.0, 0.0], [0.0, 4.0, 0.0]),
+        ] {
+            let (p, l) = (Vec3A::from_array(p), Vec3A::from_array(l));
+            let d = l - p;
+            let (a, b, c) = (
+                d.length_squared(),
+                (p - center).dot(d),
+                sphere_power(p - center, radius),
+            );
+            let want = s.hits_segment(p, d.normalize(), 0.0, d.length());
+            assert_eq!(segment_meets_sphere::<true>(a, b, c), want, "{p} -> {l}");
+            let ray = s.hits_segment(p, d.normalize(), 0.0, f32::INFINITY);
+            let (b1, c1) = ((p - center).dot(d.normalize()), c);
+            assert_eq!(segment_meets_sphere::<false>(1.0, b1, c1), ray, "{p} ray");
+        }
     }
 
     #[test]

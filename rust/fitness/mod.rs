@@ -8,12 +8,25 @@
 use glam::Vec3A;
 
 use crate::error::{Error, Result};
-use crate::kernel::{solve_object, Kernel, Norm, Projection, SolveSums, Solved};
+pub mod kernel;
+pub mod loss;
+pub mod pixels;
+pub mod projected;
+pub mod refine;
+mod simd;
+
 use crate::params::{ParamLayout, Target};
 use crate::render::{shade, GBuffer, Geometry, PShape, ShadeParams, Surfel};
 use crate::scene::Scene;
 use crate::search::Objective;
-use crate::space::{srgb_encode_exact, Space, SrgbLut};
+pub use kernel::{Candidate, Kernel};
+use loss::penalty_sums;
+pub use loss::{Norm, Space, SrgbLut, SATURATED};
+pub use pixels::{interior, ActivePixels};
+pub use projected::{
+    closed_form, fallback_sums, projection_blocker, solve_object, Projection, SolveSums, Solved,
+};
+pub use refine::{encoded_line_min, l1_line_min, EncodedTerm};
 
 /// How a candidate's image is compared with the objective.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -52,17 +65,14 @@ pub struct Fitness {
     kernel: Kernel,
     base: ShadeParams,
     shapes: Vec<PShape>,
-    surfels: Vec<Surfel>,
-    /// Per active pixel: may it inform the closed-form products (not on a silhouette)?
-    solve: Vec<bool>,
-    target: Vec<Vec3A>,
+    /// The pixels shaded per evaluation, and the fixed ones (kept to recompute `constant` for another
+    /// norm or space).
+    active: ActivePixels,
     kind: LossKind,
     clip: bool,
     shadows: bool,
-    /// Per-channel loss of the pixels left out because no free parameter changes them...
+    /// Per-channel loss of the pixels left out because no free parameter changes them.
     constant: [f64; 3],
-    /// ...from their fixed (clipped model, objective), kept to recompute it for another norm or space.
-    fixed: Vec<(Vec3A, Vec3A)>,
     /// For `L1Projected`: the bounds of the closed-form unknowns.
     projection: Option<Projection>,
 }
@@ -147,10 +157,11 @@ impl Fitness {
                     proj.specular.len(),
                 )));
             }
-            if base.ambient != Vec3A::ZERO {
-                return Err(Error::Invalid(
-                    "the projected loss models scenes without ambient light (ambient 0)".into(),
-                ));
+            let paths: Vec<String> = layout.entries.iter().map(|e| e.0.clone()).collect();
+            if let Some(why) = projection_blocker(scene, &paths) {
+                return Err(Error::Invalid(format!(
+                    "the projected loss does not apply: {why}"
+                )));
             }
             if let Some(o) = scene
                 .objects
@@ -196,63 +207,33 @@ impl Fitness {
             .iter()
             .any(|(_, t, _)| *t == Target::Exposure);
         let background_fixed = !exposure_free || base.background == Vec3A::ZERO;
-        // Silhouette pixels (a 4-neighbour shows another object) mix two surfaces in a photo; the
-        // closed-form solve leaves them out.
-        let (w, h) = (scene.width as usize, scene.height as usize);
-        let id = |x: usize, y: usize| gbuffer.surfels[y * w + x].object;
-        let interior = |i: usize| {
-            let (x, y) = (i % w, i / w);
-            let o = id(x, y);
-            (x == 0 || id(x - 1, y) == o)
-                && (x + 1 == w || id(x + 1, y) == o)
-                && (y == 0 || id(x, y - 1) == o)
-                && (y + 1 == h || id(x, y + 1) == o)
-        };
-        let (mut surfels, mut tgt, mut solve, mut fixed) =
-            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-        for &i in pixels {
-            let s = gbuffer.surfels[i as usize];
-            let t = Vec3A::from_slice(&target[3 * i as usize..3 * i as usize + 3]);
-            if s.object == u32::MAX && background_fixed {
-                let m = shade(&s, &base, &[], false);
-                let m = if clip { m.min(Vec3A::ONE) } else { m };
-                fixed.push((m, t));
+        let background = background_fixed.then(|| {
+            let m = shade(&Surfel::MISS, &base, &[], false);
+            if clip {
+                m.min(Vec3A::ONE)
             } else {
-                surfels.push(s);
-                solve.push(interior(i as usize));
-                tgt.push(t);
+                m
             }
-        }
-        // An object seen only at its silhouette (tiny, or almost hidden) still needs its pixels.
-        for k in 0..scene.objects.len() as u32 {
-            let mine = || surfels.iter().zip(0..).filter(move |(s, _)| s.object == k);
-            if !mine().any(|(_, i)| solve[i]) {
-                let all: Vec<usize> = mine().map(|(_, i)| i).collect();
-                for i in all {
-                    solve[i] = true;
-                }
-            }
-        }
+        });
+        let active =
+            ActivePixels::select(&gbuffer, target, pixels, background, scene.objects.len());
         Ok(Fitness {
             layout,
             early_exit: true,
             base,
             kernel: Kernel::new(
-                &surfels,
-                &tgt,
-                &solve,
+                &active.surfels,
+                &active.targets,
+                &active.solve,
                 &geometry.shapes,
                 scene.can_occlude(),
             ),
-            solve,
             shapes: geometry.shapes,
-            surfels,
-            target: tgt,
             kind,
             clip,
             shadows: scene.can_occlude(),
-            constant: penalty_sums(&fixed, Norm::L1, Space::Linear),
-            fixed,
+            constant: penalty_sums(&active.fixed, Norm::L1, Space::Linear),
+            active,
             projection,
         })
     }
@@ -278,15 +259,13 @@ impl Fitness {
         let proj = self.projection.as_ref()?;
         let p = self.params(x);
         let (mut solved, mut scratch) = (Solved::default(), Vec::new());
-        self.kernel.projected(
-            &p,
-            self.clip,
-            proj,
-            &mut solved,
-            &mut scratch,
-            f64::INFINITY,
-            false,
-        );
+        let c = Candidate {
+            params: &p,
+            clip: self.clip,
+            bound: f64::INFINITY,
+            parallel: false,
+        };
+        self.kernel.projected(c, proj, &mut solved, &mut scratch);
         let mut loss = self.kernel.refine(self.clip, proj, &mut solved, &scratch);
         for c in 0..3 {
             loss[c] += self.constant[c];
@@ -297,7 +276,7 @@ impl Fitness {
     /// Penalise pixel differences with `norm` (L1 by default) in every loss of this fitness.
     pub fn set_norm(&mut self, norm: Norm) {
         self.kernel.norm = norm;
-        self.constant = penalty_sums(&self.fixed, norm, self.space());
+        self.constant = penalty_sums(&self.active.fixed, norm, self.space());
     }
 
     pub fn norm(&self) -> Norm {
@@ -311,7 +290,7 @@ impl Fitness {
     /// reports, are in `space`.
     pub fn set_space(&mut self, space: Space) {
         self.kernel.set_space(space);
-        self.constant = penalty_sums(&self.fixed, self.norm(), space);
+        self.constant = penalty_sums(&self.active.fixed, self.norm(), space);
     }
 
     pub fn space(&self) -> Space {
@@ -354,17 +333,15 @@ impl Fitness {
         let p = params.get_or_insert_with(|| self.base.clone());
         self.params_into(x, p);
         let kernel_bound = bound - (self.constant[0] + self.constant[1] + self.constant[2]);
+        let c = Candidate {
+            params: p,
+            clip: self.clip,
+            bound: kernel_bound,
+            parallel,
+        };
         let mut acc = match &self.projection {
-            Some(proj) => self.kernel.projected(
-                p,
-                self.clip,
-                proj,
-                solved,
-                irradiance,
-                kernel_bound,
-                parallel,
-            ),
-            None => self.kernel.l1(p, self.clip, kernel_bound),
+            Some(proj) => self.kernel.projected(c, proj, solved, irradiance),
+            None => self.kernel.l1(c),
         };
         for c in 0..3 {
             acc[c] += self.constant[c];
@@ -377,142 +354,25 @@ impl Fitness {
         with_scratch(|s| self.fast_losses(x, s, f64::INFINITY, false))
     }
 
-    /// penalty(enc(m) - enc(t)) per channel for a clipped model `m` and objective `t`, with the exact
-    /// encoding of this fitness's space (the plain path's; the kernel interpolates a table).
-    fn exact_penalty(&self, m: Vec3A, t: Vec3A) -> [f64; 3] {
-        std::array::from_fn(|c| {
-            let d = match self.space() {
-                Space::Linear => m[c] - t[c],
-                Space::Srgb => {
-                    (srgb_encode_exact(m[c] as f64) - srgb_encode_exact(t[c] as f64)) as f32
-                }
-            };
-            self.norm().penalty(d) as f64
-        })
+    /// The active pixels (first hits, objective, silhouette flags) and the fixed background pairs.
+    pub fn active(&self) -> &ActivePixels {
+        &self.active
     }
 
-    /// The same losses computed the plain way, pixel by pixel through the renderer's `shade` and with the
-    /// exact sRGB encoding (the reference the kernel is tested against).
-    pub fn reference_channel_losses(&self, x: &[f64]) -> [f64; 3] {
-        let p = self.params(x);
-        let mut acc = [0.0f64; 3];
-        for &(m, t) in &self.fixed {
-            let l = self.exact_penalty(m, t);
-            for c in 0..3 {
-                acc[c] += l[c];
-            }
-        }
-        if let Some(proj) = &self.projection {
-            // Unit light, white albedo, no lobe: shade gives the diffuse factor a. Albedo 0 and specular 1
-            // give the specular factor b. Sum the normal equations pixel by pixel, solve, then the loss.
-            let n = proj.diffuse.len();
-            let mut sums = vec![SolveSums::default(); n];
-            let a: Vec<f32> = self
-                .surfels
-                .iter()
-                .map(|s| shade(s, &p, &self.shapes, self.shadows).x)
-                .collect();
-            let b: Vec<f32> = self
-                .surfels
-                .iter()
-                .map(|s| {
-                    let k = s.object as usize;
-                    if s.object == u32::MAX || proj.specular[k].1 <= 0.0 {
-                        return 0.0;
-                    }
-                    let mut q = p.clone();
-                    q.materials[k].albedo = Vec3A::ZERO;
-                    q.materials[k].specular = 1.0;
-                    q.any_specular = true;
-                    shade(s, &q, &self.shapes, self.shadows).x
-                })
-                .collect();
-            let sat = if self.clip {
-                crate::kernel::SATURATED
-            } else {
-                f32::INFINITY
-            };
-            for (i, (s, t)) in self.surfels.iter().zip(&self.target).enumerate() {
-                if s.object != u32::MAX && self.solve[i] {
-                    let (m, ai, bi) = (&mut sums[s.object as usize], a[i] as f64, b[i] as f64);
-                    for c in 0..3 {
-                        if t[c] < sat {
-                            let y = t[c] as f64;
-                            m.saa[c] += ai * ai;
-                            m.sab[c] += ai * bi;
-                            m.sbb[c] += bi * bi;
-                            m.sya[c] += y * ai;
-                            m.syb[c] += y * bi;
-                        }
-                    }
-                }
-            }
-            let solved: Vec<([f64; 3], f64)> = (0..n)
-                .map(|k| {
-                    let fallback = |c: usize| {
-                        let (e, t): (Vec<f32>, Vec<f32>) = self
-                            .surfels
-                            .iter()
-                            .zip(&self.target)
-                            .zip(&a)
-                            .filter(|((s, _), _)| s.object == k as u32)
-                            .map(|((_, t), &ai)| (ai, t[c]))
-                            .unzip();
-                        crate::kernel::fallback_sums(&e, &t, sat)
-                    };
-                    solve_object(
-                        &sums[k],
-                        proj.weight,
-                        &proj.diffuse[k],
-                        proj.specular[k],
-                        fallback,
-                    )
-                })
-                .collect();
-            for (i, (s, t)) in self.surfels.iter().zip(&self.target).enumerate() {
-                let m = if s.object == u32::MAX {
-                    Vec3A::ZERO
-                } else {
-                    let (pk, q) = solved[s.object as usize];
-                    Vec3A::from_array(std::array::from_fn(|c| {
-                        (pk[c] * a[i] as f64 + q * proj.weight[c] as f64 * b[i] as f64) as f32
-                    }))
-                };
-                let l = self.exact_penalty(if self.clip { m.min(Vec3A::ONE) } else { m }, *t);
-                for c in 0..3 {
-                    acc[c] += l[c];
-                }
-            }
-            return acc;
-        }
-        for (s, t) in self.surfels.iter().zip(&self.target) {
-            let m = shade(s, &p, &self.shapes, self.shadows);
-            let l = self.exact_penalty(if self.clip { m.min(Vec3A::ONE) } else { m }, *t);
-            for c in 0..3 {
-                acc[c] += l[c];
-            }
-        }
-        acc
+    /// The scene's shapes, and whether any of them can shadow another.
+    pub fn shapes(&self) -> (&[PShape], bool) {
+        (&self.shapes, self.shadows)
     }
-}
 
-/// Per-channel sums of `norm`'s penalty over fixed (model, objective) pairs, compared in `space` with
-/// the kernel's encoding.
-fn penalty_sums(fixed: &[(Vec3A, Vec3A)], norm: Norm, space: Space) -> [f64; 3] {
-    let mut acc = [0.0f64; 3];
-    for &(m, t) in fixed {
-        let d = match space {
-            Space::Linear => m - t,
-            Space::Srgb => {
-                let lut = SrgbLut::get();
-                Vec3A::from_array(std::array::from_fn(|c| lut.encode(m[c]) - lut.encode(t[c])))
-            }
-        };
-        for c in 0..3 {
-            acc[c] += norm.penalty(d[c]) as f64;
-        }
+    /// Whether the model is clipped at 1 before comparison.
+    pub fn clip(&self) -> bool {
+        self.clip
     }
-    acc
+
+    /// For `L1Projected`: the bounds of the closed-form unknowns.
+    pub fn projection(&self) -> Option<&Projection> {
+        self.projection.as_ref()
+    }
 }
 
 impl Fitness {

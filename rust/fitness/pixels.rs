@@ -1,0 +1,392 @@
+//! The active pixels in structure-of-arrays form: grouped by object, each group with its objective,
+//! its possible occluders' light-independent terms, and the per-block light terms (irradiance, shadow,
+//! lobe) an evaluation computes.
+
+use glam::Vec3A;
+
+use crate::render::light::{self, directional_irradiance, point_irradiance};
+use crate::render::shape::{segment_meets_sphere, sphere_power};
+use crate::render::{brdf, GBuffer, PShape, Surfel};
+
+/// The pixels one fit shades, and the (clipped model, objective) of those no free parameter changes.
+#[derive(Clone, Debug, Default)]
+pub struct ActivePixels {
+    pub surfels: Vec<Surfel>,
+    /// The objective per active pixel (linear RGB).
+    pub targets: Vec<Vec3A>,
+    /// Per active pixel: may it inform the closed-form products (not on a silhouette)?
+    pub solve: Vec<bool>,
+    /// (clipped model, objective) of the pixels left out: background under a fixed background.
+    pub fixed: Vec<(Vec3A, Vec3A)>,
+}
+
+impl ActivePixels {
+    /// Split `pixels` of `gbuffer` (objective `target`, H x W x 3) into active pixels and, where
+    /// `background` is the fixed (clipped) background value, the background's fixed pairs.
+    pub fn select(
+        gbuffer: &GBuffer,
+        target: &[f32],
+        pixels: &[u32],
+        background: Option<Vec3A>,
+        objects: usize,
+    ) -> ActivePixels {
+        let mut a = ActivePixels::default();
+        for &i in pixels {
+            let s = gbuffer.surfels[i as usize];
+            let t = Vec3A::from_slice(&target[3 * i as usize..3 * i as usize + 3]);
+            match background {
+                Some(m) if s.object == u32::MAX => a.fixed.push((m, t)),
+                _ => {
+                    a.surfels.push(s);
+                    a.solve.push(interior(gbuffer, i as usize));
+                    a.targets.push(t);
+                }
+            }
+        }
+        // An object seen only at its silhouette (tiny, or almost hidden) still needs its pixels.
+        for k in 0..objects as u32 {
+            let mine = || {
+                a.surfels
+                    .iter()
+                    .zip(0..)
+                    .filter(move |(s, _)| s.object == k)
+            };
+            if !mine().any(|(_, i)| a.solve[i]) {
+                let all: Vec<usize> = mine().map(|(_, i)| i).collect();
+                for i in all {
+                    a.solve[i] = true;
+                }
+            }
+        }
+        a
+    }
+}
+
+/// Whether pixel `i` is off every silhouette: its 4-neighbours show its own object. A silhouette pixel
+/// mixes two surfaces in a photo; the closed-form solve leaves it out.
+pub fn interior(gbuffer: &GBuffer, i: usize) -> bool {
+    let (w, h) = (gbuffer.width as usize, gbuffer.height as usize);
+    let id = |x: usize, y: usize| gbuffer.surfels[y * w + x].object;
+    let (x, y) = (i % w, i / w);
+    let o = id(x, y);
+    (x == 0 || id(x - 1, y) == o)
+        && (x + 1 == w || id(x + 1, y) == o)
+        && (y == 0 || id(x, y - 1) == o)
+        && (y + 1 == h || id(x, y + 1) == o)
+}
+
+/// Pixels per block: the working set of one block stays in L1.
+pub const BLOCK: usize = 64;
+
+pub(crate) struct SphereOccluder {
+    pub(crate) center: [f32; 3],
+    pub(crate) radius: f32,
+    /// |p - c|² - r² per pixel of the group.
+    pub(crate) c: Vec<f32>,
+}
+
+pub(crate) struct PlaneOccluder {
+    pub(crate) normal: [f32; 3],
+    pub(crate) point: [f32; 3],
+    /// n·(p - q) per pixel of the group: which side of the plane the pixel lies on.
+    pub(crate) side: Vec<f32>,
+}
+
+/// The pixels of one object (or of the background, `object == None`).
+pub(crate) struct Group {
+    pub(crate) object: Option<usize>,
+    pub(crate) p: [Vec<f32>; 3],
+    pub(crate) n: [Vec<f32>; 3],
+    pub(crate) v: [Vec<f32>; 3],
+    pub(crate) t: [Vec<f32>; 3],
+    /// The objective in the loss space (its sRGB encoding); empty in the linear space, which uses `t`.
+    pub(crate) te: [Vec<f32>; 3],
+    /// The objective as the closed-form solve uses it: +inf where a pixel must not inform the products
+    /// (a silhouette pixel, which the photo averages over two surfaces), so the saturation test drops it.
+    pub(crate) ts: [Vec<f32>; 3],
+    pub(crate) spheres: Vec<SphereOccluder>,
+    pub(crate) planes: Vec<PlaneOccluder>,
+    /// Bounding sphere (centre, radius) of each run of `BLOCK` pixels, for culling shadow tests.
+    pub(crate) blocks: Vec<([f32; 3], f32)>,
+}
+
+impl Group {
+    pub(crate) fn len(&self) -> usize {
+        self.t[0].len()
+    }
+}
+
+/// Per-candidate light terms shared by all groups.
+#[derive(Clone, Copy)]
+pub(crate) struct Light {
+    pub(crate) pos: [f32; 3],
+    /// A directional light's unit direction towards the light (then `pos` is unused).
+    pub(crate) dir: Option<[f32; 3]>,
+    /// intensity x colour.
+    pub(crate) rgb: [f32; 3],
+}
+
+/// The active pixels grouped by object (background last), row-major inside a group, as structures of
+/// arrays with their occluders' light-independent terms (`shadows`: the scene can shadow at all).
+/// `solve[i]` says whether pixel i may inform the closed-form products.
+pub(crate) fn group(
+    surfels: &[Surfel],
+    targets: &[Vec3A],
+    solve: &[bool],
+    shapes: &[PShape],
+    shadows: bool,
+) -> Vec<Group> {
+    // Pixels grouped by object (background last), row-major inside a group: a counting sort.
+    let slot = |o: u32| {
+        if o == u32::MAX {
+            shapes.len()
+        } else {
+            o as usize
+        }
+    };
+    let mut count = vec![0usize; shapes.len() + 2];
+    for s in surfels {
+        count[slot(s.object) + 1] += 1;
+    }
+    for k in 1..count.len() {
+        count[k] += count[k - 1];
+    }
+    let mut order = vec![0usize; surfels.len()];
+    for (i, s) in surfels.iter().enumerate() {
+        let k = slot(s.object);
+        order[count[k]] = i;
+        count[k] += 1;
+    }
+    let mut groups: Vec<Group> = Vec::new();
+    let mut start = 0;
+    while start < order.len() {
+        let obj = surfels[order[start]].object;
+        let mut end = start;
+        while end < order.len() && surfels[order[end]].object == obj {
+            end += 1;
+        }
+        let idx = &order[start..end];
+        let col =
+            |f: &dyn Fn(&Surfel) -> f32| idx.iter().map(|&i| f(&surfels[i])).collect::<Vec<f32>>();
+        let tcol = |c: usize| idx.iter().map(|&i| targets[i][c]).collect::<Vec<f32>>();
+        let object = (obj != u32::MAX).then_some(obj as usize);
+        let mut g = Group {
+            object,
+            p: [
+                col(&|s| s.position.x),
+                col(&|s| s.position.y),
+                col(&|s| s.position.z),
+            ],
+            n: [
+                col(&|s| s.normal.x),
+                col(&|s| s.normal.y),
+                col(&|s| s.normal.z),
+            ],
+            v: [col(&|s| s.view.x), col(&|s| s.view.y), col(&|s| s.view.z)],
+            t: [tcol(0), tcol(1), tcol(2)],
+            te: Default::default(),
+            ts: std::array::from_fn(|c| {
+                idx.iter()
+                    .map(|&i| {
+                        if solve[i] {
+                            targets[i][c]
+                        } else {
+                            f32::INFINITY
+                        }
+                    })
+                    .collect()
+            }),
+            spheres: Vec::new(),
+            planes: Vec::new(),
+            blocks: idx
+                .chunks(BLOCK)
+                .map(|chunk| {
+                    let pos = |&i: &usize| surfels[i].position;
+                    let centre =
+                        chunk.iter().map(pos).fold(Vec3A::ZERO, |a, p| a + p) / chunk.len() as f32;
+                    let radius = chunk
+                        .iter()
+                        .map(|i| (pos(i) - centre).length())
+                        .fold(0.0f32, f32::max);
+                    (centre.to_array(), radius)
+                })
+                .collect(),
+        };
+        if shadows && object.is_some() {
+            for (k, shape) in shapes.iter().enumerate() {
+                if Some(k) == object {
+                    continue;
+                }
+                match *shape {
+                    PShape::Sphere { center, radius } => g.spheres.push(SphereOccluder {
+                        center: center.to_array(),
+                        radius,
+                        c: idx
+                            .iter()
+                            .map(|&i| sphere_power(surfels[i].position - center, radius))
+                            .collect(),
+                    }),
+                    PShape::Plane { point, normal } => g.planes.push(PlaneOccluder {
+                        normal: normal.to_array(),
+                        point: point.to_array(),
+                        side: idx
+                            .iter()
+                            .map(|&i| normal.dot(surfels[i].position - point))
+                            .collect(),
+                    }),
+                }
+            }
+        }
+        groups.push(g);
+        start = end;
+    }
+    groups
+}
+
+/// e = max(0, n·l) / d² (unit light), written into `e`; 0 for a light on the surface.
+#[inline(always)]
+pub(crate) fn irradiance<const AVX2: bool>(
+    g: &Group,
+    r: std::ops::Range<usize>,
+    light: &Light,
+    e: &mut [f32],
+) {
+    if let Some(d) = light.dir {
+        // Directional light: no fall-off, e = max(0, n·l).
+        let n = e.len();
+        let (nx, ny, nz) = (
+            &g.n[0][r.start..][..n],
+            &g.n[1][r.start..][..n],
+            &g.n[2][r.start..][..n],
+        );
+        for i in 0..n {
+            e[i] = directional_irradiance(d, [nx[i], ny[i], nz[i]]);
+        }
+        return;
+    }
+    #[cfg(target_arch = "x86_64")]
+    if AVX2 {
+        // SAFETY: `AVX2` is only true on the path dispatched after checking the CPU's features.
+        unsafe { super::simd::irradiance_avx2(g, r, light, e) };
+        return;
+    }
+    irradiance_exact(g, r, light, e);
+}
+
+#[inline(always)]
+/// The scalar form of `irradiance` for a point light.
+pub(crate) fn irradiance_exact(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mut [f32]) {
+    let n = e.len();
+    let (px, py, pz) = (
+        &g.p[0][r.start..][..n],
+        &g.p[1][r.start..][..n],
+        &g.p[2][r.start..][..n],
+    );
+    let (nx, ny, nz) = (
+        &g.n[0][r.start..][..n],
+        &g.n[1][r.start..][..n],
+        &g.n[2][r.start..][..n],
+    );
+    let [lx, ly, lz] = light.pos;
+    for i in 0..n {
+        let d = [lx - px[i], ly - py[i], lz - pz[i]];
+        e[i] = point_irradiance(d, [nx[i], ny[i], nz[i]]);
+    }
+}
+
+/// Zero `e` where the segment from the pixel to the light is blocked by another object.
+#[inline(always)]
+pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mut [f32]) {
+    if let Some(d) = light.dir {
+        shadow_directional(g, r, d, e);
+        return;
+    }
+    let n = e.len();
+    let (px, py, pz) = (
+        &g.p[0][r.start..][..n],
+        &g.p[1][r.start..][..n],
+        &g.p[2][r.start..][..n],
+    );
+    let [lx, ly, lz] = light.pos;
+    let (centre, reach) = g.blocks[r.start / BLOCK];
+    let (b, l) = (Vec3A::from_array(centre), Vec3A::from_array(light.pos));
+    for s in &g.spheres {
+        // Every segment from a pixel of this block to the light stays within `reach` of the segment from
+        // the block's centre to the light: if the sphere is farther than that, no pixel is shadowed by it.
+        let c = Vec3A::from_array(s.center);
+        let v = l - b;
+        let t = if v.length_squared() > 0.0 {
+            ((c - b).dot(v) / v.length_squared()).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let gap = (c - (b + t * v)).length();
+        if gap > (s.radius + reach) * (1.0 + 1e-4) + 1e-6 * (c.abs().max_element() + s.radius) {
+            continue;
+        }
+        let cc = &s.c[r.start..][..n];
+        let [cx, cy, cz] = s.center;
+        for i in 0..n {
+            // Segment x(t) = p + t·d, t in [0, 1], d = L - p; sphere |x - c|² = r².
+            let dx = lx - px[i];
+            let dy = ly - py[i];
+            let dz = lz - pz[i];
+            let a = dx * dx + dy * dy + dz * dz;
+            let b = (px[i] - cx) * dx + (py[i] - cy) * dy + (pz[i] - cz) * dz;
+            let hit = segment_meets_sphere::<true>(a, b, cc[i]);
+            e[i] = if hit { 0.0 } else { e[i] };
+        }
+    }
+    for pl in &g.planes {
+        let side_l = pl.normal[0] * (lx - pl.point[0])
+            + pl.normal[1] * (ly - pl.point[1])
+            + pl.normal[2] * (lz - pl.point[2]);
+        let side = &pl.side[r.start..][..n];
+        for i in 0..n {
+            e[i] = if side[i] * side_l < 0.0 { 0.0 } else { e[i] };
+        }
+    }
+}
+
+/// `shadow` for a directional light: rays p + t·d, t in (0, inf), d the unit direction to the light.
+#[inline(always)]
+pub(crate) fn shadow_directional(g: &Group, r: std::ops::Range<usize>, d: [f32; 3], e: &mut [f32]) {
+    let n = e.len();
+    let (px, py, pz) = (
+        &g.p[0][r.start..][..n],
+        &g.p[1][r.start..][..n],
+        &g.p[2][r.start..][..n],
+    );
+    for s in &g.spheres {
+        let cc = &s.c[r.start..][..n];
+        let [cx, cy, cz] = s.center;
+        for i in 0..n {
+            // |d| = 1: blocked when the far root of t² + 2bt + c = 0 is positive.
+            let b = (px[i] - cx) * d[0] + (py[i] - cy) * d[1] + (pz[i] - cz) * d[2];
+            let hit = segment_meets_sphere::<false>(1.0, b, cc[i]);
+            e[i] = if hit { 0.0 } else { e[i] };
+        }
+    }
+    for pl in &g.planes {
+        // The ray heads towards the plane's other side when n·d and the pixel's side differ in sign.
+        let side_l = pl.normal[0] * d[0] + pl.normal[1] * d[1] + pl.normal[2] * d[2];
+        let side = &pl.side[r.start..][..n];
+        for i in 0..n {
+            e[i] = if side[i] * side_l < 0.0 { 0.0 } else { e[i] };
+        }
+    }
+}
+
+/// max(0, n·h)^s for the pixel `s` of the group.
+#[inline(always)]
+pub(crate) fn blinn_phong(g: &Group, s: usize, light: &Light, shininess: f32) -> f32 {
+    let p = Vec3A::new(g.p[0][s], g.p[1][s], g.p[2][s]);
+    let n = Vec3A::new(g.n[0][s], g.n[1][s], g.n[2][s]);
+    let v = Vec3A::new(g.v[0][s], g.v[1][s], g.v[2][s]);
+    let l = light::toward(
+        Vec3A::from_array(light.pos),
+        light.dir.map(Vec3A::from_array),
+        p,
+    );
+    brdf::blinn_phong(n, l, v, shininess)
+}

@@ -1,0 +1,127 @@
+//! AVX2: the one dispatch of the kernels onto an `avx2,fma` build of themselves, and the two loops the
+//! compiler does not vectorise on its own (written with intrinsics).
+
+#[cfg(target_arch = "x86_64")]
+use super::loss::LANES;
+#[cfg(target_arch = "x86_64")]
+use super::pixels::{irradiance_exact, Group, Light};
+
+/// A kernel compiled twice: `run::<true>` inside an `avx2,fma` function, `run::<false>` for any CPU.
+pub(crate) trait Simd {
+    type Output;
+    fn run<const AVX2: bool>(self) -> Self::Output;
+}
+
+/// True where the CPU has AVX2 and FMA (std caches the check).
+#[inline]
+pub(crate) fn detected() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// `k.run::<true>()` built for AVX2 + FMA when `avx2`, else `k.run::<false>()`. `avx2` must come from
+/// [`detected`] or from the `AVX2` of a `Simd::run` reached through here (a task of the thread pool
+/// re-enters this way).
+#[inline(always)]
+pub(crate) fn dispatch<K: Simd>(k: K, avx2: bool) -> K::Output {
+    #[cfg(target_arch = "x86_64")]
+    if avx2 {
+        // SAFETY: `avx2` is only true once the CPU's features were checked (see above).
+        return unsafe { run_avx2(k) };
+    }
+    let _ = avx2;
+    k.run::<false>()
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn run_avx2<K: Simd>(k: K) -> K::Output {
+    k.run::<true>()
+}
+
+/// AVX2 form of `irradiance`: 1/d³ from the hardware reciprocal square root refined by one Newton step
+/// (relative error about 1e-7, the same as the exact `nl / (d2 * sqrt(d2))` in f32), eight pixels at a
+/// time; the tail goes through the exact form.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+pub(crate) unsafe fn irradiance_avx2(
+    g: &Group,
+    r: std::ops::Range<usize>,
+    light: &Light,
+    e: &mut [f32],
+) {
+    use std::arch::x86_64::*;
+    let n = e.len();
+    let full = n - n % 8;
+    let s = r.start;
+    let (lx, ly, lz) = (
+        _mm256_set1_ps(light.pos[0]),
+        _mm256_set1_ps(light.pos[1]),
+        _mm256_set1_ps(light.pos[2]),
+    );
+    let (half, three_halves) = (_mm256_set1_ps(0.5), _mm256_set1_ps(1.5));
+    let (tiny, big, zero) = (
+        _mm256_set1_ps(f32::MIN_POSITIVE),
+        _mm256_set1_ps(f32::MAX),
+        _mm256_setzero_ps(),
+    );
+    let mut i = 0;
+    while i < full {
+        let ld = |v: &Vec<f32>| _mm256_loadu_ps(v.as_ptr().add(s + i));
+        let dx = _mm256_sub_ps(lx, ld(&g.p[0]));
+        let dy = _mm256_sub_ps(ly, ld(&g.p[1]));
+        let dz = _mm256_sub_ps(lz, ld(&g.p[2]));
+        let d2 = _mm256_fmadd_ps(dz, dz, _mm256_fmadd_ps(dy, dy, _mm256_mul_ps(dx, dx)));
+        let nl = _mm256_fmadd_ps(
+            ld(&g.n[2]),
+            dz,
+            _mm256_fmadd_ps(ld(&g.n[1]), dy, _mm256_mul_ps(ld(&g.n[0]), dx)),
+        );
+        let nl = _mm256_max_ps(nl, zero);
+        // y ~ 1/sqrt(d2), one Newton step: y (1.5 - 0.5 d2 y²).
+        let y = _mm256_rsqrt_ps(d2);
+        let y = _mm256_mul_ps(
+            y,
+            _mm256_fnmadd_ps(_mm256_mul_ps(half, d2), _mm256_mul_ps(y, y), three_halves),
+        );
+        let inv3 = _mm256_mul_ps(_mm256_mul_ps(y, y), y);
+        let v = _mm256_min_ps(_mm256_mul_ps(nl, inv3), big);
+        let ok = _mm256_cmp_ps::<_CMP_GT_OQ>(d2, tiny);
+        _mm256_storeu_ps(e.as_mut_ptr().add(i), _mm256_and_ps(v, ok));
+        i += 8;
+    }
+    irradiance_exact(g, s + full..r.end, light, &mut e[full..]);
+}
+
+/// The lane sums of `projected::normal_equations` over whole runs of `LANES` pixels.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+pub(crate) unsafe fn normal_equation_lanes_avx2(
+    e: &[f32],
+    t: &[f32],
+    sat: f32,
+) -> ([f32; LANES], [f32; LANES]) {
+    use std::arch::x86_64::*;
+    let (mut a, mut b) = (_mm256_setzero_ps(), _mm256_setzero_ps());
+    let satv = _mm256_set1_ps(sat);
+    for (x, y) in e.chunks_exact(LANES).zip(t.chunks_exact(LANES)) {
+        let (x, y) = (_mm256_loadu_ps(x.as_ptr()), _mm256_loadu_ps(y.as_ptr()));
+        // Where t >= sat (or t = +inf) both factors become 0: the lane adds 0, as the scalar select.
+        let keep = _mm256_cmp_ps::<_CMP_LT_OQ>(y, satv);
+        let (x, y) = (_mm256_and_ps(x, keep), _mm256_and_ps(y, keep));
+        a = _mm256_add_ps(a, _mm256_mul_ps(x, y));
+        b = _mm256_add_ps(b, _mm256_mul_ps(x, x));
+    }
+    let (mut sa, mut sb) = ([0.0f32; LANES], [0.0f32; LANES]);
+    _mm256_storeu_ps(sa.as_mut_ptr(), a);
+    _mm256_storeu_ps(sb.as_mut_ptr(), b);
+    (sa, sb)
+}
