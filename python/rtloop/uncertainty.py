@@ -83,15 +83,15 @@ from typing import Any
 import numpy as np
 
 from . import _native
+from ._pixels import SATURATED, edges
 from .errors import RtloopError
+from .fit.products import product_range, products_of, specular_product, specular_range, unit_light
 from .scene import Scene, load_scene, scene_to_dict
 
 __all__ = ["estimate_uncertainty"]
 
 #: Default finite-difference step: this fraction of each parameter's scale (its bound range; 1 rad for an angle).
 STEP_FRACTION = 1e-3
-#: Objective channels at or above this are saturated and left out (the pixel's other channels are used).
-SATURATED = 0.999
 #: Singular values below this fraction of the largest (unit-norm columns) count as zero.
 RCOND = 1e-4
 #: A parameter whose component in a null singular vector exceeds this is reported as not determined.
@@ -190,12 +190,12 @@ def estimate_uncertainty(
         return _native.render(work.with_params(space.native(theta), paths))
 
     # Pixels the model can represent as a smooth function of the parameters.
-    ids, unit = _ids_and_unit_light(wd, work)
+    ids, unit = _native.object_ids(work), unit_light(wd)
     lit = unit > 0
     sat = target.reshape(-1, 3) >= SATURATED  # per channel: the others of the pixel still count
     saturated = sat.all(axis=1).reshape(ids.shape)
-    silhouette = _edges(ids)
-    shadow_edge = _edges(np.where(ids >= 0, lit.astype(np.int32), -1)) & ~silhouette
+    silhouette = edges(ids)
+    shadow_edge = edges(np.where(ids >= 0, lit.astype(np.int32), -1)) & ~silhouette
     use = ~(saturated | silhouette | shadow_edge)
     if mask is not None:  # pixels the fit left out (bool (H, W), True = used)
         use &= np.asarray(mask, bool)
@@ -454,7 +454,7 @@ def _products_space(scene: Scene, d: dict[str, Any]) -> tuple[_Space, dict[str, 
     Q x w_c x lobe, as exposure x intensity x colour_c x specular x lobe does in the fitted scene.
     """
     paths = scene.fit_paths
-    light = np.array(d["light"]["color"], float) * d["light"]["intensity"] * d["exposure"]
+    prods = products_of(d)
     glossy = [o for o in d["objects"] if f"objects.{o['name']}.specular" in paths]
     w = np.array(d["light"]["color"], float) * d["exposure"]
     w_work = np.where((w > 0) | bool(glossy), w, 1.0)  # a dark channel stays dark only under a lobe
@@ -484,9 +484,8 @@ def _products_space(scene: Scene, d: dict[str, Any]) -> tuple[_Space, dict[str, 
     for o in d["objects"]:
         p = f"objects.{o['name']}.albedo"
         ab = np.array(scene.bounds([p]))
-        prod = light * np.array(o["material"]["albedo"], float)
-        plo = ilo * color_scale[0] * ab[:, 0]
-        phi = ihi * color_scale[1] * ab[:, 1]
+        prod = prods[o["name"]]
+        plo, phi = product_range(ilo, ihi, color_scale[0], color_scale[1], ab[:, 0], ab[:, 1])
         o["material"]["albedo"] = [float(v) for v in prod * inv_w]
         top = float(max(np.max(phi), np.max(prod), 1.0) * np.max(inv_w))
         fit_new[p] = {"min": [0.0, 0.0, 0.0], "max": [top] * 3}
@@ -498,9 +497,10 @@ def _products_space(scene: Scene, d: dict[str, Any]) -> tuple[_Space, dict[str, 
         # Q = intensity x specular (at the fitted exposure, which the work light's colour carries).
         p = f"objects.{o['name']}.specular"
         klo, khi = scene.bounds([p])[0]
-        q = d["light"]["intensity"] * o["material"]["specular"]
+        q = specular_product(d["light"]["intensity"], o["material"]["specular"])
         o["material"]["specular"] = float(q)
-        bounds[p] = (float(ilo * klo * e_range[0]), float(ihi * khi * e_range[1]))
+        qlo, qhi = specular_range(ilo, ihi, klo, khi)
+        bounds[p] = (float(qlo * e_range[0]), float(qhi * e_range[1]))
         fit_new[p] = {"min": 0.0, "max": float(max(bounds[p][1], q, 1.0))}
         rename[p] = f"products.{o['name']}.specular"
     for p in paths:
@@ -596,32 +596,6 @@ def _steps(names: list[str], scale: np.ndarray, step: float | dict[str, float] |
     return out
 
 
-def _ids_and_unit_light(d: dict[str, Any], work: Scene) -> tuple[np.ndarray, np.ndarray]:
-    """Object index per pixel (-1 for background) and, from the same render, the scene ``d`` under a
-    light of unit intensity, unit albedos, no ambient or specular and exposure 1 (red channel): > 0 where
-    the light reaches the surface a pixel shows, and the geometric factor an albedo multiplies.
-
-    One render does both: the light is red only, and a green ambient light of 1 shows object k, whose
-    albedo is (1, k + 1, 0), as green k + 1 exactly (the background is black). Should that ever not hold,
-    the index comes from ``object_ids``.
-    """
-    unit = {
-        **d,
-        "light": {**d["light"], "intensity": 1.0, "color": [1.0, 0.0, 0.0]},
-        "ambient": [0.0, 1.0, 0.0],
-        "exposure": 1.0,
-        "background": [0.0, 0.0, 0.0],
-        "objects": [{**o, "material": {"albedo": [1.0, k + 1.0, 0.0]}} for k, o in enumerate(d["objects"])],
-        "fit": {},
-    }
-    img = _native.render(Scene(json.dumps(unit, allow_nan=False)))
-    green = img[..., 1]
-    ids = green.astype(np.int32) - 1
-    if not np.array_equal(ids + 1, green) or ids.max(initial=-1) >= len(d["objects"]):
-        ids = _native.object_ids(work)
-    return ids, img[..., 0]
-
-
 def _lobes(d: dict[str, Any], objects: set[int]) -> np.ndarray:
     """The scene ``d`` with only the specular lobes of ``objects`` (specular 1, their shininess; every
     albedo, the ambient light and the background 0): exactly the derivative of the render with respect
@@ -636,15 +610,3 @@ def _lobes(d: dict[str, Any], objects: set[int]) -> np.ndarray:
         "fit": {},
     }
     return _native.render(Scene(json.dumps(lobes, allow_nan=False)))
-
-
-def _edges(labels: np.ndarray) -> np.ndarray:
-    """Pixels with a 4-neighbour of a different label."""
-    e = np.zeros(labels.shape, dtype=bool)
-    diff_v = labels[1:, :] != labels[:-1, :]
-    diff_h = labels[:, 1:] != labels[:, :-1]
-    e[1:, :] |= diff_v
-    e[:-1, :] |= diff_v
-    e[:, 1:] |= diff_h
-    e[:, :-1] |= diff_h
-    return e

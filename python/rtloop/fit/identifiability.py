@@ -6,7 +6,8 @@ from __future__ import annotations
 from typing import Any
 
 from .. import _native
-from ..scene import Scene, load_scene, scene_to_dict
+from ..scene import Scene, scene_to_dict
+from .products import unit_light
 
 __all__ = ["identifiability", "keep_undetermined", "lit_pixel_counts"]
 
@@ -43,13 +44,8 @@ def identifiability(scene: Scene, paths: list[str]) -> dict[str, Any]:
 def lit_pixel_counts(scene: Scene) -> list[int]:
     """Per object: how many of its visible pixels receive direct light from the scene's light."""
     d = scene_to_dict(scene)
-    d["light"]["intensity"], d["light"]["color"], d["ambient"], d["exposure"] = 1.0, [1.0, 1.0, 1.0], [0, 0, 0], 1.0
-    for o in d["objects"]:
-        o["material"] = {"albedo": [1.0, 1.0, 1.0]}
-    d["fit"] = {}
-    unit = load_scene(d)
-    lit = _native.render(unit)[..., 0] > 0
-    ids = _native.object_ids(unit)
+    lit = unit_light(d) > 0
+    ids = _native.object_ids(scene)
     return [int(((ids == k) & lit).sum()) for k in range(len(d["objects"]))]
 
 

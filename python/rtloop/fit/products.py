@@ -3,13 +3,16 @@ per object and channel, Q = intensity x specular; their bounds and their split b
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import numpy as np
 
+from .. import _native
 from ..scene import Scene, load_scene, scene_to_dict
 
-__all__ = ["fix_gauge", "product_bounds", "product_range", "products", "products_of", "specular_range", "split_products"]
+__all__ = ["fix_gauge", "product_bounds", "product_range", "products", "products_of", "specular_product", "specular_range",
+           "split_products", "unit_light"]
 
 
 def products_of(d: dict[str, Any]) -> dict[str, np.ndarray]:
@@ -29,9 +32,29 @@ def product_range(ilo: float, ihi: float, scale_lo: Any, scale_hi: Any, albedo_l
     return ilo * scale_lo * albedo_lo, ihi * scale_hi * albedo_hi
 
 
+def specular_product(intensity: float, specular: float) -> float:
+    """Q = intensity x specular."""
+    return intensity * specular
+
+
 def specular_range(ilo: float, ihi: float, klo: float, khi: float) -> tuple[float, float]:
     """Bounds of Q = intensity x specular."""
     return ilo * klo, ihi * khi
+
+
+def unit_light(d: dict[str, Any]) -> np.ndarray:
+    """The render of scene dict ``d`` per unit product (red channel): unit light, albedo 1, no ambient, no
+    specular, exposure 1, black background. > 0 where the light reaches the surface a pixel shows."""
+    unit = {
+        **d,
+        "light": {**d["light"], "intensity": 1.0, "color": [1.0, 1.0, 1.0]},
+        "ambient": [0.0, 0.0, 0.0],
+        "exposure": 1.0,
+        "background": [0.0, 0.0, 0.0],
+        "objects": [{**o, "material": {"albedo": [1.0, 1.0, 1.0]}} for o in d["objects"]],
+        "fit": {},
+    }
+    return _native.render(Scene(json.dumps(unit, allow_nan=False)))[..., 0]
 
 
 def product_bounds(scene: Scene) -> np.ndarray:
