@@ -11,15 +11,12 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
 import math
 import os
 import re
-import secrets
 import shutil
 import signal
 import sys
-import tempfile
 import textwrap
 import threading
 import time
@@ -30,6 +27,7 @@ from typing import Any, NoReturn, TextIO
 import numpy as np
 
 import rtloop
+from rtloop._files import PlaceError, move_into_place, staging_dir, write_json
 from rtloop.fit import PROTOCOLS
 from rtloop.report import truth_errors, truth_values
 
@@ -237,6 +235,9 @@ def _build_parser() -> _Parser:
     p.add_argument("--report", action="store_true",
                    help="also write DIR/report.html, a self-contained page that shows the search (PNGs in "
                    "DIR/report/)")
+    p.add_argument("--speed-plot", type=Path, metavar="PNG",
+                   help="with --report: a speed-against-error plot to include (e.g. "
+                   "benches/results/speed_vs_error.png)")
     p.add_argument("--truth", metavar="SCENE",
                    help="the true scene (JSON, e.g. a reference scene's scene.json): print the errors of the "
                    "fitted values and draw the truth in the report")
@@ -353,46 +354,15 @@ def _check_out(out: Path, force: bool, inputs: list[Path]) -> bool:
 
 def _commit(tmp: Path, out: Path, replace: bool) -> None:
     """Move the finished results into place; an old DIR is renamed aside first and deleted last."""
-    if not replace:
-        try:
-            os.rename(tmp, out)
-        except OSError as e:
-            raise _Failure(f"{out}: cannot move the results into place ({e.strerror or e})") from None
-        return
-    aside = out.with_name(f".{out.name}.rtloop-old-{secrets.token_hex(4)}")
     try:
-        os.rename(out, aside)
-    except OSError as e:
-        raise _Failure(f"{out}: cannot move the old directory aside ({e.strerror or e})") from None
-    try:
-        os.rename(tmp, out)
-    except OSError as e:
-        os.rename(aside, out)
-        raise _Failure(f"{out}: cannot move the results into place ({e.strerror or e})") from None
-    shutil.rmtree(aside, ignore_errors=True)
-    if os.path.lexists(aside):
-        print(f"{PROG}: warning: could not delete the old results in {aside}", file=sys.stderr)
+        left = move_into_place(tmp, out, replace, "rtloop")
+    except PlaceError as e:
+        raise _Failure(f"{out}: {e}") from None
+    if left is not None:
+        print(f"{PROG}: warning: could not delete the old results in {left}", file=sys.stderr)
 
 
 # --- the run ---------------------------------------------------------------------------------------------
-
-
-def _json_safe(value: Any) -> Any:
-    """Plain JSON types; NaN and infinities become null."""
-    if isinstance(value, dict):
-        return {str(k): _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _json_safe(value.tolist())
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        v = float(value)
-        return v if math.isfinite(v) else None
-    return value
 
 
 _SAFE_NAME = re.compile(r"[^A-Za-z0-9_+-]+")
@@ -430,6 +400,8 @@ class _Run:
                 truth_values(scene, truth)
             except rtloop.RtloopError as e:
                 raise _Failure(f"{args.truth}: does not match {args.scene}: {e}") from None
+        if args.speed_plot is not None and not args.speed_plot.is_file():
+            raise _Failure(f"--speed-plot: {args.speed_plot}: no such file")
         self.progress.message(
             f"{PROG}: fitting {len(names)} parameters of {args.scene} to {args.image} "
             f"({scene.width}x{scene.height}, {args.protocol} protocol)"
@@ -476,9 +448,7 @@ class _Run:
         }
         data = rtloop.scene_to_dict(result.scene)
         data["fit_report"] = report
-        (tmp / "result.json").write_text(
-            json.dumps(_json_safe(data), indent=2, allow_nan=False) + "\n", encoding="utf-8"
-        )
+        write_json(tmp / "result.json", data)
 
         k = args.final_scale
         self.progress.message(
@@ -492,19 +462,9 @@ class _Run:
         if args.report:
             self.progress.message("writing report.html")
             rtloop.report(result, tmp / "report.html", objective=image, truth=truth, generations=rows,
-                          speed_vs_error_png=_speed_vs_error_png())
+                          speed_plot=args.speed_plot)
             self.check_stop()
         return result
-
-
-def _speed_vs_error_png() -> Path | None:
-    """The benchmark's plot, benches/results/speed_vs_error.png of rtloop's repository: beside the package
-    when it runs from its source tree, else under the current directory (the repository root); else None."""
-    for repo in (Path(rtloop.__file__).resolve().parents[2], Path.cwd()):
-        png = repo / "benches" / "results" / "speed_vs_error.png"
-        if png.is_file():
-            return png
-    return None
 
 
 def _summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = None,
@@ -613,6 +573,9 @@ def _main(argv: list[str] | None, t0: float) -> int:
         return 2
     except SystemExit as e:  # --help
         return int(e.code or 0)
+    if args.speed_plot is not None and not args.report:
+        _error("--speed-plot: only with --report")
+        return 2
 
     proto = PROTOCOLS[args.protocol]
     # Generations shown per stage: the closed-form stage has an evaluation budget instead (see _Progress),
@@ -625,13 +588,8 @@ def _main(argv: list[str] | None, t0: float) -> int:
     tmp: Path | None = None
     try:
         replace = _check_out(out, args.force, [Path(args.scene), Path(args.image)])
-        parent = out.parent
         try:
-            parent.mkdir(parents=True, exist_ok=True)
-            tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.rtloop-tmp-", dir=parent))
-            umask = os.umask(0o022)
-            os.umask(umask)
-            os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; DIR should look like any mkdir's
+            tmp = staging_dir(out, "rtloop-tmp")
         except OSError as e:
             raise _Failure(f"{out}: cannot create the output directory ({e.strerror or e})") from None
         run = _Run(args, progress, stop)

@@ -32,6 +32,9 @@ from typing import Any
 import numpy as np
 
 from . import _native
+from . import _srgb as _srgb_codec
+from ._files import write_bytes
+from .fit.products import products_of
 from .scene import Scene, load_scene, scene_to_dict
 
 __all__ = ["GenerationRow", "Report", "report", "truth_errors", "truth_values"]
@@ -82,13 +85,6 @@ class Report:
 # --- truth -------------------------------------------------------------------------------------------------
 
 
-def _products(scene: Scene) -> dict[str, np.ndarray]:
-    """Per object: exposure x light intensity x light colour x albedo (what a matte image determines)."""
-    d = scene_to_dict(scene)
-    light = np.asarray(d["light"]["color"], float) * float(d["light"]["intensity"]) * float(d["exposure"])
-    return {o["name"]: light * np.asarray(o["material"]["albedo"], float) for o in d["objects"]}
-
-
 def truth_values(scene: Scene, truth: Any) -> tuple[Scene, np.ndarray]:
     """The truth scene (path, dict or Scene) read with ``scene``'s fit section, and the true values of
     ``scene.param_names()``. Raises RtloopError/SceneError if the truth lacks one of the fitted things."""
@@ -114,7 +110,7 @@ def truth_errors(result: Any, truth: Any) -> dict[str, Any]:
     pos = [names.index(f"light.position.{c}") for c in "xyz" if f"light.position.{c}" in names]
     if len(pos) == 3:
         out["light_position_m"] = float(np.linalg.norm(fitted[pos] - true[pos]))
-    fit_p, true_p = _products(scene), _products(aligned)
+    fit_p, true_p = products_of(scene_to_dict(scene)), products_of(scene_to_dict(aligned))
     rel = {}
     for name, p in fit_p.items():
         t = true_p.get(name)
@@ -209,12 +205,11 @@ def _stage_axis(rows: Sequence[GenerationRow]) -> tuple[np.ndarray, list[tuple[s
 
 
 def _srgb(linear: np.ndarray) -> np.ndarray:
-    x = np.clip(np.asarray(linear, np.float64), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return _srgb_codec.encode(linear, np.float64)
 
 
 def _srgb8(linear: np.ndarray) -> np.ndarray:
-    return np.round(_srgb(linear) * 255.0).astype(np.uint8)
+    return _srgb_codec.encode8(linear, np.float64)
 
 
 def _png_of_array(rgb8: np.ndarray) -> bytes:
@@ -365,7 +360,7 @@ def plot_search(
         data[pid] = _read_back(ax)
 
     if products:
-        per_row = [_products(scene.with_params(list(map(float, r.params)))) for r in rows]
+        per_row = [products_of(scene.with_params(list(map(float, r.params))).to_dict()) for r in rows]
         for obj in scene.object_names:
             fig, ax = new(f"{obj}: product intensity × albedo, R, G, B")
             for c, colour in enumerate(_RGB):
@@ -409,15 +404,6 @@ def _strip_frames(rows: Sequence[GenerationRow], every: int | None) -> list[int]
 
 
 # --- files -------------------------------------------------------------------------------------------------
-
-
-def _write_atomic(path: Path, data: bytes) -> None:
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    try:
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 _SAFE = re.compile(r"[^A-Za-z0-9_.+-]+")
@@ -503,7 +489,7 @@ class _Page:
 
     def png(self, name: str, data: bytes, alt: str, caption: str | None = None) -> str:
         path = self.folder / name
-        _write_atomic(path, data)
+        write_bytes(path, data)
         self.files.append(path)
         uri = "data:image/png;base64," + base64.b64encode(data).decode("ascii")
         cap = f"<figcaption>{caption}</figcaption>" if caption else ""
@@ -535,9 +521,10 @@ def report(
     objective: np.ndarray | str | os.PathLike[str] | None = None,
     truth: Any = None,
     generations: Iterable[Any] | None = None,
-    speed_vs_error_png: str | os.PathLike[str] | None = None,
+    speed_plot: str | os.PathLike[str] | None = None,
     strip_every: int | None = None,
     title: str | None = None,
+    speed_vs_error_png: str | os.PathLike[str] | None = None,
 ) -> Report:
     """Write the fit report of ``result`` (a :class:`FitResult`) to the HTML page ``path``.
 
@@ -548,7 +535,9 @@ def report(
     generation with all fit parameters, e.g. the ``GenerationInfo`` objects that ``rtloop.fit(...,
     callback=rows.append)`` collects, or (stage, generation[, fitness], params) tuples; without it they
     are rebuilt from ``result.stages[i].history`` (exact for the searched parameters only, see the page).
-    ``speed_vs_error_png``: a benchmark plot to include (skipped if the file does not exist).
+    ``speed_plot``: a PNG to include as the speed-against-error plot (e.g. the benchmark's
+    benches/results/speed_vs_error.png; skipped if the file does not exist; ``speed_vs_error_png`` is its
+    older name). Nothing else is read from outside ``result``, ``objective`` and ``truth``.
     ``strip_every``: render every k-th generation in the strip (default: about ten frames).
 
     The PNGs go into a folder named after the page (``report.html`` -> ``report/``) beside it; they are
@@ -751,8 +740,9 @@ def report(
             page.add(f"<p class='note'>{html.escape(str(w))}</p>")
 
     # 6. speed against error -------------------------------------------------------------------------------
-    if speed_vs_error_png is not None and Path(speed_vs_error_png).is_file():
-        data = Path(speed_vs_error_png).read_bytes()
+    speed_plot = speed_plot if speed_plot is not None else speed_vs_error_png
+    if speed_plot is not None and Path(speed_plot).is_file():
+        data = Path(speed_plot).read_bytes()
         page.add("<h2>Speed against error (benchmark)</h2>")
         fig_html = page.png("speed_vs_error.png", data, "speed against error")
         page.add('<div class="row wide">' + fig_html + "</div>")
@@ -764,6 +754,6 @@ def report(
     for old in folder.iterdir():
         if old.name not in written and _OURS.match(old.name) and old.is_file():
             old.unlink(missing_ok=True)
-    _write_atomic(page_path, "".join(page.parts).encode("utf-8"))
+    write_bytes(page_path, "".join(page.parts).encode("utf-8"))
     return Report(path=page_path, files=page.files, metrics=metrics, plots=plots, strip=strip, truth=terr,
                   source=source, notes=notes)

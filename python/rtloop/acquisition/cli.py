@@ -8,12 +8,12 @@ tested without a subprocess.
 from __future__ import annotations
 
 import argparse
+import io
 import math
 import os
 import shlex
 import shutil
 import sys
-import tempfile
 import textwrap
 import warnings
 from collections.abc import Sequence
@@ -23,9 +23,10 @@ from typing import Any, NoReturn
 import numpy as np
 from PIL import Image
 
+from .._files import move_into_place, staging_dir, write_bytes
 from ..errors import RtloopError
 from . import capture as capture_module
-from ._common import AcquisitionError, _umask, write_json, write_png8, write_png16_srgb
+from ._common import AcquisitionError, write_json, write_png8, write_png16_srgb
 from .boards import DEFAULT_DICTIONARY, board_image, parse_board
 from .calibration import CameraIntrinsics, calibrate_camera, undistort_to_pinhole
 from .response import load_photo
@@ -327,10 +328,9 @@ def _cmd_board(args: argparse.Namespace) -> int:
     px_per_square = max(20, round(spec.square_m / 0.0254 * args.dpi))
     margin_px = round(args.margin / 0.0254 * args.dpi)
     image = board_image(spec, px_per_square, margin_px)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp.png")
-    Image.fromarray(image).save(tmp, dpi=(args.dpi, args.dpi))
-    os.replace(tmp, out)
+    buf = io.BytesIO()
+    Image.fromarray(image).save(buf, format="PNG", dpi=(args.dpi, args.dpi))
+    write_bytes(out, buf.getvalue(), parents=True)
     spec_path = out.with_suffix(".json")
     actual_square = px_per_square / args.dpi * 0.0254
     write_json(
@@ -626,23 +626,13 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         "board": parse_board(args.board).to_dict(),
         "response": args.response,
     }
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.rtloop-scene-", dir=out.parent))
-    os.chmod(tmp, 0o777 & ~_umask())  # mkdtemp makes 0700
+    tmp = staging_dir(out, "rtloop-scene")
     try:
         write_json(tmp / "scene.json", acq.scene)
         write_png16_srgb(tmp / "objective.png", acq.objective)
         write_png16_srgb(tmp / "photo.png", acq.photo)
         write_png8(tmp / "overlay.png", acq.overlay)
-        if out.exists():
-            old = out.with_name(f".{out.name}.rtloop-scene-old")
-            if old.exists():
-                shutil.rmtree(old)
-            os.replace(out, old)
-            os.replace(tmp, out)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, out)
+        move_into_place(tmp, out, out.exists(), "rtloop-scene")
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
