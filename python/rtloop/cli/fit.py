@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import math
 import os
 import re
 import shutil
@@ -22,7 +21,7 @@ import threading
 import time
 import warnings
 from pathlib import Path
-from typing import Any, NoReturn, TextIO
+from typing import Any, TextIO
 
 import numpy as np
 
@@ -30,6 +29,8 @@ import rtloop
 from rtloop._files import PlaceError, move_into_place, staging_dir, write_json
 from rtloop.fit import PROTOCOLS
 from rtloop.report import truth_errors, truth_values
+
+from .args import Parser, UsageError, float_in, generations, int_at_least
 
 __all__ = ["main"]
 
@@ -118,10 +119,6 @@ def _protocol_help() -> str:
     return "named settings: " + "; ".join(parts) + " (default: rtloop)"
 
 
-class _UsageError(Exception):
-    """A problem with the command line found by argparse (exit status 2)."""
-
-
 class _Failure(Exception):
     """A problem with the input or the output directory (exit status 1), reported as one line."""
 
@@ -134,55 +131,8 @@ class _Terminated(KeyboardInterrupt):
     """SIGTERM, handled like Ctrl-C (clean up, nothing half-written) but reported as such."""
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> NoReturn:
-        raise _UsageError(message)
-
-
-# --- argument types ---------------------------------------------------------------------------------------
-
-
-def _int_at_least(minimum: int, what: str):
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"expected {what}, got {value}")
-        return value
-
-    return parse
-
-
-def _generations(text: str) -> int | tuple[int, int]:
-    parts = [p.strip() for p in text.split(",")]
-    try:
-        values = [int(p) for p in parts]
-    except ValueError:
-        values = []
-    if len(values) not in (1, 2) or min(values) < 0:
-        raise argparse.ArgumentTypeError(
-            f"expected N or N1,N2 (whole numbers >= 0: light stages, colour stages), got {text!r}"
-        )
-    return values[0] if len(values) == 1 else (values[0], values[1])
-
-
-def _float_in(lo: float, hi: float, lo_open: bool, what: str):
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
-        if not (math.isfinite(value) and (value > lo if lo_open else value >= lo) and value <= hi):
-            raise argparse.ArgumentTypeError(f"expected {what}, got {text}")
-        return value
-
-    return parse
-
-
-def _build_parser() -> _Parser:
-    p = _Parser(
+def _build_parser() -> Parser:
+    p = Parser(
         prog=PROG,
         description=DESCRIPTION,
         epilog=EPILOG,
@@ -195,18 +145,18 @@ def _build_parser() -> _Parser:
         "--protocol", choices=sorted(PROTOCOLS), default="rtloop",
         help=_protocol_help(),
     )
-    p.add_argument("--population", type=_int_at_least(4, "a whole number >= 4"), metavar="N",
+    p.add_argument("--population", type=int_at_least(4, "a whole number >= 4"), metavar="N",
                    help="individuals per generation (default: the protocol's)")
-    p.add_argument("--generations", type=_generations, metavar="N|N1,N2",
+    p.add_argument("--generations", type=generations, metavar="N|N1,N2",
                    help="generations per stage: one number for every stage, or N1 for the light stages "
                    "and N2 for the colour stages (default: the protocol's)")
-    p.add_argument("--f", type=_float_in(0.0, 2.0, True, "a number in (0, 2]"), metavar="F",
+    p.add_argument("--f", type=float_in(0.0, 2.0, True, "a number in (0, 2]"), metavar="F",
                    help="DE differential weight (default: the protocol's)")
-    p.add_argument("--cr", type=_float_in(0.0, 1.0, False, "a number in [0, 1]"), metavar="CR",
+    p.add_argument("--cr", type=float_in(0.0, 1.0, False, "a number in [0, 1]"), metavar="CR",
                    help="DE crossover probability (default: the protocol's)")
-    p.add_argument("--seed", type=_int_at_least(0, "a whole number >= 0"), default=0,
+    p.add_argument("--seed", type=int_at_least(0, "a whole number >= 0"), default=0,
                    help="random seed; the result is the same for any --threads (default 0)")
-    p.add_argument("--threads", type=_int_at_least(1, "a whole number >= 1"), metavar="N",
+    p.add_argument("--threads", type=int_at_least(1, "a whole number >= 1"), metavar="N",
                    help="worker threads (default: all cores)")
     p.add_argument("--response", choices=("srgb", "linear"), default="srgb",
                    help="how IMAGE's stored values relate to light: 'srgb' (default, cameras and image "
@@ -223,12 +173,12 @@ def _build_parser() -> _Parser:
     p.add_argument("--mask", type=Path, metavar="PNG",
                    help="an image of IMAGE's size (or the scene's): white where the scene models the photo, "
                    "black where it does not (another object, a reflection); black pixels are left out of the fit")
-    p.add_argument("--snapshot-every", type=_int_at_least(0, "a whole number >= 0"), default=5, metavar="N",
+    p.add_argument("--snapshot-every", type=int_at_least(0, "a whole number >= 0"), default=5, metavar="N",
                    help="render the best individual every N generations of every stage into snapshots/ "
                    "(default 5; 0 disables)")
-    p.add_argument("--final-scale", type=_int_at_least(1, "a whole number >= 1"), default=4, metavar="K",
+    p.add_argument("--final-scale", type=int_at_least(1, "a whole number >= 1"), default=4, metavar="K",
                    help="final.png is K times the scene's width and height (default 4)")
-    p.add_argument("--final-spp", type=_int_at_least(1, "a whole number >= 1"), default=16, metavar="S",
+    p.add_argument("--final-spp", type=int_at_least(1, "a whole number >= 1"), default=16, metavar="S",
                    help="samples per pixel of final.png (default 16)")
     p.add_argument("--force", action="store_true",
                    help="replace DIR if it exists and is not empty (only after the new results are complete)")
@@ -568,7 +518,7 @@ def _main(argv: list[str] | None, t0: float) -> int:
     parser = _build_parser()
     try:
         args = parser.parse_args(argv)
-    except _UsageError as e:
+    except UsageError as e:
         _error(e)
         return 2
     except SystemExit as e:  # --help
