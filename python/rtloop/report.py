@@ -587,7 +587,7 @@ def report(
     panels = []
     if objective is not None:
         if isinstance(objective, (str, os.PathLike)):
-            from .acquire import load_image
+            from .acquisition.objective import load_image
 
             objective = load_image(objective, scene)
         obj = np.asarray(objective, np.float64)

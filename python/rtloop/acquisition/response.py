@@ -31,8 +31,8 @@ import numpy as np
 from PIL import Image
 
 from .._srgb import decode
-from ..acquire import load_image
 from ._common import AcquisitionError
+from .objective import load_image
 
 __all__ = ["CameraResponse", "load_photo", "parse_response", "photo_info"]
 

@@ -46,8 +46,8 @@ import cv2
 import numpy as np
 from PIL import Image
 
-from ._srgb import decode
-from .errors import AcquisitionError
+from .._srgb import decode
+from ..errors import AcquisitionError
 
 __all__ = ["RESPONSES", "load_image", "load_mask"]
 
