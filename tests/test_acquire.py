@@ -1,4 +1,4 @@
-"""Tests for rtloop.load_image (acquisition/objective.py): decoding, EXIF orientation, linearisation, resizing.
+"""Tests for rtloop.load_image (acquisition/objective.py): decoding, EXIF orientation, linearising, resizing.
 
 Every test image is generated in ``tmp_path``. Expected values come from the sRGB formulas and
 the EXIF specification written out here, not from the code under test.
