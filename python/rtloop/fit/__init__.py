@@ -1,27 +1,8 @@
-"""The fit: the paper's two stages, or rtloop's closed-form method, with all the arithmetic in Rust.
+"""The fit: rtloop's closed-form method or the paper's two stages, with all the arithmetic in Rust.
 
-Method ``projected`` (the default protocol ``rtloop`` uses it whenever the scene allows): for a scene
-without ambient light, every pixel is linear in the products exposure x intensity x colour x albedo of its
-object, and for a glossy object in intensity x specular. For each candidate light position (or direction)
-and shininess those products are solved in closed form (least squares over the unsaturated pixels away
-from silhouettes, clamped to their bounds) inside the fitness, so L-SHADE searches only the light's three
-coordinates (and any free shininess) against the whole-image loss. This removes stage 1's bias from the
-wrong starting colours and stage 2's separate search. The products reported are re-solved at the fitted
-light to minimise the loss itself, saturated pixels one-sided (see the README, "Photos saturate").
-
-Stage 1 ("light") frees the light (``light.*`` paths of the fit section) and minimises the sum of
-absolute RGB differences over the whole image, every other parameter held at the scene's value.
-Stage 2 ("colour") fixes that light and frees everything else (albedos, ...), with R, G and B as three
-objectives (Pareto selection) on pixels sampled inside each object's visible, lit area.
-
-Identifiability. With no ambient light and no specular term the image depends on the light's intensity
-and an object's albedo only through their product. rtloop detects this from the scene and the fit
-section and resolves it in one documented way: stage 2 may raise an albedo above its upper bound if the
-image asks for it (the search range is widened by max intensity / stage-1 intensity), and the light is
-then made just bright enough that every fitted albedo is back within its bounds (products unchanged).
-Otherwise the intensity stays at the stage-1 value. The closed-form method splits its products the same
-way around the scene's own intensity. The report names the determined products, and objects that no
-visible pixel shows lit (their albedo is not in the photo: it keeps the scene's value).
+``fit()`` checks its inputs, picks the budget and method (:mod:`.protocol`), runs the stages
+(:mod:`.stages`), splits the solved products back into scene values (:mod:`.products`) and names what
+the photo does not determine (:mod:`.identifiability`). README: "Methods".
 """
 
 from __future__ import annotations

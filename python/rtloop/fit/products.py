@@ -12,7 +12,7 @@ from .. import _native
 from ..scene import Scene, load_scene, scene_to_dict
 
 __all__ = ["fix_gauge", "product_bounds", "product_range", "products", "products_of", "specular_product", "specular_range",
-           "split_products", "unit_light"]
+           "split_products", "unit_light", "unit_lobes"]
 
 
 def products_of(d: dict[str, Any]) -> dict[str, np.ndarray]:
@@ -55,6 +55,22 @@ def unit_light(d: dict[str, Any]) -> np.ndarray:
         "fit": {},
     }
     return _native.render(Scene(json.dumps(unit, allow_nan=False)))[..., 0]
+
+
+def unit_lobes(d: dict[str, Any], objects: set[int]) -> np.ndarray:
+    """The scene ``d`` with only the specular lobes of ``objects`` (specular 1, their shininess; every
+    albedo, the ambient light and the background 0): exactly the derivative of the render with respect
+    to those objects' specular, on their pixels."""
+    lobes = {
+        **d,
+        "ambient": [0.0, 0.0, 0.0],
+        "background": [0.0, 0.0, 0.0],
+        "objects": [{**o, "material": {"albedo": [0.0, 0.0, 0.0], "specular": 1.0 if k in objects else 0.0,
+                                       "shininess": o["material"]["shininess"]}}
+                    for k, o in enumerate(d["objects"])],
+        "fit": {},
+    }
+    return _native.render(Scene(json.dumps(lobes, allow_nan=False)))
 
 
 def product_bounds(scene: Scene) -> np.ndarray:
