@@ -1,26 +1,11 @@
-"""The fit report: one self-contained HTML page that shows the search, not just its numbers.
-
-    rows = []
-    result = rtloop.fit(scene, photo, callback=rows.append)
-    rtloop.report(result, "out/report.html", objective=photo, truth="scene.json", generations=rows)
-
-The page shows the objective, the fitted render and their signed difference with the error numbers; a
-strip of the best render through all stages (the paper's Fig. 5); the parameters and the fitness against
-generation (the truth dashed when given); the fit report (method, budgets, time, identifiability, the
-determined products); and a speed-against-error plot when one is given. Every image is embedded as a
-base64 data URI (the page needs no network and no other file) and also written as a PNG into a folder
-named after the page (``report.html`` -> ``report/``). Every file is written atomically.
-
-matplotlib (Agg, through ``Figure`` directly: no pyplot, no global backend change) is imported only when a
-report is made, so ``import rtloop`` stays fast.
-"""
+"""The report page: one self-contained HTML file (every image embedded, also written beside it) and
+:func:`report`, which lays out the sections."""
 
 from __future__ import annotations
 
 import base64
 import datetime as _dt
 import html
-import io
 import math
 import os
 import re
@@ -31,32 +16,29 @@ from typing import Any
 
 import numpy as np
 
-from . import _native
-from . import _srgb as _srgb_codec
-from ._files import write_bytes
-from .fit.products import products_of
-from .scene import Scene, load_scene, scene_to_dict
+from .. import _native
+from .._files import write_bytes
+from ..scene import Scene
+from .plots import (
+    GenerationRow,
+    _enlarge,
+    _image_panel,
+    _png_of_array,
+    _png_of_figure,
+    _rows_from_history,
+    _rows_given,
+    _srgb,
+    _srgb8,
+    plot_search,
+)
+from .truth import image_metrics, truth_errors
 
-__all__ = ["GenerationRow", "Report", "report", "truth_errors", "truth_values"]
+__all__ = ["Report", "report"]
 
 #: About this many frames in the strip when ``strip_every`` is not given (plus the last of every stage).
 STRIP_FRAMES = 10
 #: Strip frames are enlarged (nearest neighbour, whole factors) to at least this many pixels wide.
 STRIP_MIN_WIDTH = 192
-_DPI = 110
-_RGB = ("#d62728", "#2ca02c", "#1f77b4")
-_XYZ = ("#1f77b4", "#ff7f0e", "#2ca02c")
-
-
-@dataclass(frozen=True)
-class GenerationRow:
-    """The best individual of one generation: all of the scene's fit parameters (``params``, in the order
-    of ``scene.param_names()``), as ``rtloop.fit``'s callback reports them in a ``GenerationInfo``."""
-
-    stage: str
-    generation: int
-    fitness: float
-    params: np.ndarray
 
 
 @dataclass
@@ -82,314 +64,6 @@ class Report:
     notes: list[str] = field(default_factory=list)
 
 
-# --- truth -------------------------------------------------------------------------------------------------
-
-
-def truth_values(scene: Scene, truth: Any) -> tuple[Scene, np.ndarray]:
-    """The truth scene (path, dict or Scene) read with ``scene``'s fit section, and the true values of
-    ``scene.param_names()``. Raises RtloopError/SceneError if the truth lacks one of the fitted things."""
-    truth_scene = load_scene(truth)
-    d = scene_to_dict(truth_scene)
-    d["fit"] = scene_to_dict(scene)["fit"]
-    aligned = load_scene(d)
-    return aligned, np.asarray(aligned.get_params(scene.fit_paths), float)
-
-
-def truth_errors(result: Any, truth: Any) -> dict[str, Any]:
-    """Compare a fit with the true scene: per-parameter values and errors, the light position error in
-    metres (when the position was fitted) and each object's product relative error,
-    |P_fit - P_true| / |P_true| over R, G, B (products: exposure x intensity x colour x albedo)."""
-    scene = result.scene
-    aligned, true = truth_values(scene, truth)
-    names = scene.param_names()
-    fitted = np.asarray(scene.get_params(scene.fit_paths), float)
-    out: dict[str, Any] = {
-        "values": {n: float(v) for n, v in zip(names, true)},
-        "errors": {n: float(f - t) for n, f, t in zip(names, fitted, true)},
-    }
-    pos = [names.index(f"light.position.{c}") for c in "xyz" if f"light.position.{c}" in names]
-    if len(pos) == 3:
-        out["light_position_m"] = float(np.linalg.norm(fitted[pos] - true[pos]))
-    fit_p, true_p = products_of(scene_to_dict(scene)), products_of(scene_to_dict(aligned))
-    rel = {}
-    for name, p in fit_p.items():
-        t = true_p.get(name)
-        if t is not None:
-            denom = float(np.linalg.norm(t))
-            rel[name] = float(np.linalg.norm(p - t) / denom) if denom > 0 else float("nan")
-    out["products_true"] = {k: [float(v) for v in p] for k, p in true_p.items()}
-    out["product_relative"] = rel
-    return out
-
-
-# --- the rows of the search --------------------------------------------------------------------------------
-
-
-def _rows_given(result: Any, generations: Iterable[Any], n: int) -> list[GenerationRow]:
-    fitness_of = {(s.name, int(h[0])): float(h[1]) for s in result.stages for h in s.history}
-    rows = []
-    for r in generations:
-        if hasattr(r, "params"):
-            stage, gen, fit_, params = r.stage, r.generation, getattr(r, "fitness", None), r.params
-        elif isinstance(r, dict):
-            stage, gen, fit_, params = r["stage"], r["generation"], r.get("fitness"), r["params"]
-        elif len(r) == 3:
-            stage, gen, params = r
-            fit_ = None
-        elif len(r) == 4:
-            stage, gen, fit_, params = r
-        else:
-            raise ValueError(
-                "generations: rows must be GenerationInfo-like (stage, generation, fitness, params), "
-                f"dicts with those keys, or (stage, generation[, fitness], params) tuples; got {r!r}"
-            )
-        params = np.asarray(params, float).reshape(-1)
-        if params.size != n:
-            raise ValueError(
-                f"generations: row ({stage!r}, {gen}) has {params.size} parameter values; the scene has {n}"
-            )
-        gen = int(gen)
-        fit_ = float(fit_) if fit_ is not None else fitness_of.get((str(stage), gen), float("nan"))
-        rows.append(GenerationRow(str(stage), gen, fit_, params))
-    return rows
-
-
-def _rows_from_history(result: Any) -> tuple[list[GenerationRow], list[str]]:
-    """Full parameter vectors rebuilt from ``result.stages[i].history``: a stage's own parameters from its
-    history, the others at the value the previous stages left them (the fitted value if none set them)."""
-    scene = result.scene
-    names = scene.param_names()
-    current = np.asarray(scene.get_params(scene.fit_paths), float)
-    rows, notes = [], []
-    held: list[str] = []
-    for s in result.stages:
-        idx = [names.index(n) for n in s.param_names]
-        for gen, fitness, _objectives, x in s.history:
-            full = current.copy()
-            full[idx] = np.asarray(x, float)
-            rows.append(GenerationRow(s.name, int(gen), float(fitness), full))
-        if s.history:
-            current = current.copy()
-            current[idx] = np.asarray(s.history[-1][3], float)
-        if s.products is not None:
-            held.append(s.name)
-    notes.append(
-        "Rebuilt from the fit history: each stage's own parameters per generation; the others at the value "
-        "the earlier stages left them, or at the fitted value where no earlier stage set them. Pass the fit "
-        "callback's rows (generations=) for the exact values."
-    )
-    if held:
-        notes.append(
-            f"Stage {', '.join(held)} solves the colours in closed form; the history keeps only the light "
-            "position, so the colours (and intensity) are shown at their fitted values."
-        )
-    return rows, notes
-
-
-def _stage_axis(rows: Sequence[GenerationRow]) -> tuple[np.ndarray, list[tuple[str, float, float]]]:
-    """A global x (generations counted on across stages) per row, and each stage's (name, first x, last x)."""
-    xs = np.zeros(len(rows))
-    spans: list[list[Any]] = []
-    offset, base = 0.0, 0
-    for i, r in enumerate(rows):
-        if i == 0 or r.stage != rows[i - 1].stage:
-            offset = xs[i - 1] + 1 if i else 0.0
-            base = r.generation
-            spans.append([r.stage, offset, offset])
-        xs[i] = offset + (r.generation - base)
-        spans[-1][2] = float(xs[i])
-    return xs, [(str(a), float(b), float(c)) for a, b, c in spans]
-
-
-# --- images ------------------------------------------------------------------------------------------------
-
-
-def _srgb(linear: np.ndarray) -> np.ndarray:
-    return _srgb_codec.encode(linear, np.float64)
-
-
-def _srgb8(linear: np.ndarray) -> np.ndarray:
-    return _srgb_codec.encode8(linear, np.float64)
-
-
-def _png_of_array(rgb8: np.ndarray) -> bytes:
-    from PIL import Image
-
-    buf = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(rgb8), "RGB").save(buf, "PNG", optimize=True)
-    return buf.getvalue()
-
-
-def _png_of_figure(fig: Any) -> bytes:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-    FigureCanvasAgg(fig)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=_DPI, metadata={"Software": None})
-    return buf.getvalue()
-
-
-def _enlarge(rgb8: np.ndarray, min_width: int) -> np.ndarray:
-    k = max(1, math.ceil(min_width / rgb8.shape[1]))
-    return np.repeat(np.repeat(rgb8, k, axis=0), k, axis=1) if k > 1 else rgb8
-
-
-def image_metrics(render_linear: np.ndarray, objective_linear: np.ndarray) -> dict[str, float]:
-    """L1 (mean |difference|) and RMSE in linear RGB, PSNR (dB, peak 1) of the sRGB-encoded images, and the
-    fit's own whole-image loss (sum of |difference|). The render is clipped to 1 as the fit compares it."""
-    r = np.minimum(np.asarray(render_linear, np.float64), 1.0)
-    o = np.asarray(objective_linear, np.float64)
-    d = r - o
-    mse_srgb = float(np.mean((_srgb(r) - _srgb(o)) ** 2))
-    return {
-        "l1_linear": float(np.mean(np.abs(d))),
-        "rmse_linear": float(np.sqrt(np.mean(d * d))),
-        "psnr_srgb_db": float(10 * np.log10(1.0 / mse_srgb)) if mse_srgb > 0 else float("inf"),
-        "sum_abs_linear": float(np.sum(np.abs(d))),
-    }
-
-
-def _image_panel(title: str, image: np.ndarray, *, diverging: bool = False, vmax: float = 1.0) -> Any:
-    """One image with a title and a colour-bar slot (used by the difference, left empty by the others), so
-    that the panels side by side are the same size. Fixed margins: no layout engine (fast)."""
-    from matplotlib.figure import Figure
-
-    h, w = image.shape[:2]
-    fig_w, img_w, pad, title_h, cbar_w = 4.4, 3.55, 0.1, 0.34, 0.14
-    img_h = img_w * h / w
-    fig_h = img_h + title_h + 2 * pad
-    fig = Figure(figsize=(fig_w, fig_h))
-    ax = fig.add_axes((pad / fig_w, pad / fig_h, img_w / fig_w, img_h / fig_h))
-    ax.set_title(title, fontsize=10)
-    ax.set_xticks([])
-    ax.set_yticks([])
-    if diverging:
-        im = ax.imshow(image, cmap="RdBu_r", vmin=-vmax, vmax=vmax, interpolation="nearest", aspect="auto")
-        cax = fig.add_axes(((pad + img_w + 0.1) / fig_w, pad / fig_h, cbar_w / fig_w, img_h / fig_h))
-        cb = fig.colorbar(im, cax=cax)
-        cb.ax.tick_params(labelsize=8)
-    else:
-        ax.imshow(image, interpolation="nearest", aspect="auto")
-    return fig
-
-
-# --- plots -------------------------------------------------------------------------------------------------
-
-
-def _panels_spec(scene: Scene, names: list[str]) -> list[tuple[str, str, list[str], Sequence[str]]]:
-    """(panel id, title, parameter names, colours) for every fit path, in the fit section's order."""
-    out = []
-    for path in scene.fit_paths:
-        members = scene.param_names([path])
-        if path == "light.position":
-            title, colours = "light position (m)", _XYZ
-        elif path == "light.intensity":
-            title, colours = "light intensity (W/sr)", ("#9467bd",)
-        elif path.startswith("objects.") and path.endswith(".albedo"):
-            title, colours = f"{path.split('.')[1]}: albedo R, G, B", _RGB
-        elif len(members) == 3 and path in ("light.color", "ambient"):
-            title, colours = f"{path} R, G, B", _RGB
-        else:
-            title, colours = path, ("C0", "C1", "C2", "C3")
-        out.append((path, title, members, colours))
-    return out
-
-
-def _stage_marks(ax: Any, spans: list[tuple[str, float, float]]) -> None:
-    from matplotlib.transforms import blended_transform_factory
-
-    tr = blended_transform_factory(ax.transData, ax.transAxes)
-    for i, (stage, start, _end) in enumerate(spans):
-        if i:
-            ax.axvline(start - 0.5, color="0.55", lw=0.8, ls=":")
-        if len(spans) > 1:
-            ax.text(start, 1.005, stage, transform=tr, fontsize=7, color="0.35", va="bottom", ha="left")
-
-
-def _read_back(ax: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """The (x, y) of every line drawn with a gid: exactly what the figure shows."""
-    return {
-        line.get_gid(): (np.asarray(line.get_xdata(), float), np.asarray(line.get_ydata(), float))
-        for line in ax.get_lines()
-        if line.get_gid()
-    }
-
-
-def plot_search(
-    scene: Scene, rows: Sequence[GenerationRow], truth: np.ndarray | None = None,
-    truth_products: dict[str, Sequence[float]] | None = None, products: bool = False,
-) -> tuple[list[tuple[str, Any]], dict[str, Any]]:
-    """Parameter evolution (one panel per fit path, optionally the products per object) and the fitness
-    (log y) against generation across stages. Returns [(panel id, Figure)] and the plotted data read back
-    from the figures (see :attr:`Report.plots`)."""
-    from matplotlib.figure import Figure
-
-    names = scene.param_names()
-    xs, spans = _stage_axis(rows)
-    P = np.array([r.params for r in rows], float).reshape(len(rows), len(names))
-    figs: list[tuple[str, Any]] = []
-    data: dict[str, Any] = {"_generation": {"x": xs, "rows": [(r.stage, r.generation) for r in rows]}}
-
-    def new(title: str, ylabel: str = "") -> tuple[Any, Any]:
-        fig = Figure(figsize=(5.2, 3.1))
-        ax = fig.subplots()
-        fig.subplots_adjust(left=0.12, right=0.98, bottom=0.15, top=0.88 if len(spans) > 1 else 0.9)
-        ax.set_title(title, fontsize=10, pad=13 if len(spans) > 1 else 6)
-        ax.set_xlabel("generation (across stages)", fontsize=8)
-        if ylabel:
-            ax.set_ylabel(ylabel, fontsize=8)
-        ax.tick_params(labelsize=8)
-        ax.grid(alpha=0.25)
-        _stage_marks(ax, spans)
-        return fig, ax
-
-    for pid, title, members, colours in _panels_spec(scene, names):
-        fig, ax = new(title)
-        for k, name in enumerate(members):
-            j = names.index(name)
-            colour = colours[k % len(colours)]
-            ax.plot(xs, P[:, j], color=colour, lw=1.4, label=name.rsplit(".", 1)[-1], gid=name)
-            if truth is not None:
-                ax.plot([xs[0], xs[-1]], [truth[j], truth[j]], color=colour, lw=1.0, ls="--",
-                        gid=f"truth:{name}")
-        if truth is not None:
-            ax.plot([], [], color="0.3", ls="--", lw=1.0, label="truth")
-        if len(members) > 1 or truth is not None:
-            ax.legend(fontsize=7, ncol=4, loc="best", framealpha=0.8)
-        figs.append((pid, fig))
-        data[pid] = _read_back(ax)
-
-    if products:
-        per_row = [products_of(scene.with_params(list(map(float, r.params))).to_dict()) for r in rows]
-        for obj in scene.object_names:
-            fig, ax = new(f"{obj}: product intensity × albedo, R, G, B")
-            for c, colour in enumerate(_RGB):
-                ys = np.array([p[obj][c] for p in per_row])
-                ax.plot(xs, ys, color=colour, lw=1.4, label="RGB"[c], gid=f"product:{obj}.{'rgb'[c]}")
-                if truth_products is not None and obj in truth_products:
-                    t = float(truth_products[obj][c])
-                    ax.plot([xs[0], xs[-1]], [t, t], color=colour, lw=1.0, ls="--",
-                            gid=f"truth:product:{obj}.{'rgb'[c]}")
-            if truth_products is not None:
-                ax.plot([], [], color="0.3", ls="--", lw=1.0, label="truth")
-            ax.legend(fontsize=7, ncol=4, loc="best", framealpha=0.8)
-            pid = f"products.{obj}"
-            figs.append((pid, fig))
-            data[pid] = _read_back(ax)
-
-    fig, ax = new("best fitness per stage (log scale)")
-    ax.set_yscale("log")
-    fitness = np.array([r.fitness for r in rows], float)
-    for i, (stage, start, end) in enumerate(spans):
-        sel = (xs >= start) & (xs <= end)
-        ax.plot(xs[sel], fitness[sel], color=f"C{i % 10}", lw=1.5, label=stage, gid=f"fitness:{stage}")
-    if len(spans) > 1:
-        ax.legend(fontsize=7, loc="best", framealpha=0.8)
-    figs.append(("fitness", fig))
-    data["fitness"] = _read_back(ax)
-    return figs, data
-
-
 def _strip_frames(rows: Sequence[GenerationRow], every: int | None) -> list[int]:
     """Indices of the rows to render: every k-th generation of every stage, and each stage's last."""
     if not rows:
@@ -401,9 +75,6 @@ def _strip_frames(rows: Sequence[GenerationRow], every: int | None) -> list[int]
         if r.generation % k == 0 or last_of_stage:
             keep.append(i)
     return keep
-
-
-# --- files -------------------------------------------------------------------------------------------------
 
 
 _SAFE = re.compile(r"[^A-Za-z0-9_.+-]+")
@@ -587,7 +258,7 @@ def report(
     panels = []
     if objective is not None:
         if isinstance(objective, (str, os.PathLike)):
-            from .acquisition.objective import load_image
+            from ..acquisition.objective import load_image
 
             objective = load_image(objective, scene)
         obj = np.asarray(objective, np.float64)
