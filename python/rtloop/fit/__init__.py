@@ -16,21 +16,17 @@ import numpy as np
 from ..errors import RtloopError
 from ..scene import Scene, load_scene
 from .identifiability import identifiability as _identifiability
-from .identifiability import keep_undetermined as _keep_undetermined
 from .identifiability import lit_pixel_counts
-from .products import fix_gauge as _fix_gauge
 from .products import product_bounds as _product_bounds
 from .products import products as _products
-from .products import split_products as _split_products
-from .protocol import LOSS_SPACES, PIXELS_PER_OBJECT, PROTOCOLS, _projection_blocker, budget, choose_method
+from .protocol import LOSS_SPACES, PIXELS_PER_OBJECT, PROTOCOLS, budget, choose_method
 from .result import FitResult, GenerationInfo, StageResult
 from .stages import Stages, sample_object_pixels
 
 __all__ = ["LOSS_SPACES", "PROTOCOLS", "FitResult", "GenerationInfo", "StageResult", "fit"]
 
-# Re-exported for callers of the single module this package replaces.
-_REEXPORTED = (_fix_gauge, _keep_undetermined, _product_bounds, _projection_blocker, _split_products,
-               lit_pixel_counts, sample_object_pixels, PIXELS_PER_OBJECT)
+# Kept importable from here, as from the single module this package replaces (tests and benches use them).
+_REEXPORTED = (_product_bounds, lit_pixel_counts, sample_object_pixels)
 
 
 def fit(
