@@ -1,4 +1,5 @@
-"""Small helpers shared by the acquisition modules: encoding for display and detection, files, errors."""
+"""Small helpers shared by the acquisition modules: encoding for display and detection, PNG and JSON
+files (written through rtloop._files), errors."""
 
 from __future__ import annotations
 
@@ -9,14 +10,12 @@ from typing import Any
 import cv2
 import numpy as np
 
-from .._files import jsonable, write_json
-from .._files import write_bytes as _write_bytes
+from .._files import jsonable, write_bytes, write_json
 from .._srgb import encode
 from ..errors import AcquisitionError
 
 __all__ = [
     "AcquisitionError",
-    "atomic_write_bytes",
     "check_image",
     "encode_srgb",
     "jsonable",
@@ -105,11 +104,11 @@ def write_png16_srgb(path: str | os.PathLike[str], linear: np.ndarray) -> None:
     """
     enc = encode_srgb(linear)
     data = (enc[:, :, ::-1] * 65535.0 + 0.5).astype(np.uint16)
-    atomic_write_bytes(path, encode_png(np.ascontiguousarray(data)))
+    write_bytes(path, encode_png(np.ascontiguousarray(data)), parents=True)
 
 
 def write_png8(path: str | os.PathLike[str], image_bgr: np.ndarray) -> None:
-    atomic_write_bytes(path, encode_png(np.ascontiguousarray(image_bgr)))
+    write_bytes(path, encode_png(np.ascontiguousarray(image_bgr)), parents=True)
 
 
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
@@ -134,8 +133,3 @@ def undistort_points(
     else:
         out = cv2.undistortPoints(pts, k, d, R=None, P=new_matrix, criteria=_UNDISTORT_CRITERIA)
     return out.reshape(-1, 2)
-
-
-def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
-    """Write a file atomically, its directory created first."""
-    _write_bytes(path, data, parents=True)
