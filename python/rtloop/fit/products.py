@@ -11,7 +11,7 @@ import numpy as np
 from .. import _native
 from ..scene import Scene, load_scene, scene_to_dict
 
-__all__ = ["fix_gauge", "product_bounds", "product_range", "products", "products_of", "specular_product", "specular_range",
+__all__ = ["albedo_derivative", "fix_gauge", "product_bounds", "product_range", "products", "products_of", "specular_product", "specular_range",
            "split_products", "unit_light", "unit_lobes"]
 
 
@@ -55,6 +55,13 @@ def unit_light(d: dict[str, Any]) -> np.ndarray:
         "fit": {},
     }
     return _native.render(Scene(json.dumps(unit, allow_nan=False)))[..., 0]
+
+
+def albedo_derivative(d: dict[str, Any], c: int, unit: np.ndarray) -> np.ndarray:
+    """d render / d albedo in channel ``c`` of scene dict ``d``: exposure x (ambient + intensity x colour x
+    the unit-light render ``unit``)."""
+    light_rgb = np.array(d["light"]["color"], float) * d["light"]["intensity"]
+    return d["exposure"] * (d["ambient"][c] + light_rgb[c] * unit)
 
 
 def unit_lobes(d: dict[str, Any], objects: set[int]) -> np.ndarray:

@@ -5,23 +5,24 @@
     u["sigma"]["products.ball.r"]       # exposure x intensity x colour x albedo, where only products count
 
 The Jacobian comes from central differences of rtloop's renderer (exact columns for albedos and
-speculars); pixels it cannot differentiate are left out; parameters no used pixel fixes get None. The
-parameters are chosen in :mod:`.space`, the decomposition is :mod:`.linalg`'s. See the README.
+speculars); parameters no used pixel fixes get None. The parameters are chosen in :mod:`.space`, the
+pixels in :mod:`.pixels`, the decomposition is :mod:`.linalg`'s. See the README.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from .. import _native
-from .._pixels import SATURATED, edges
 from ..errors import RtloopError
-from ..fit.products import unit_light, unit_lobes
+from ..fit.products import albedo_derivative, unit_lobes
 from ..scene import Scene, load_scene, scene_to_dict
 from .linalg import _svd_scaled
-from .space import _products_blocker, _products_space, _scene_space
+from .pixels import UsedPixels, used_pixels
+from .space import _products_blocker, _products_space, _scene_space, _Space
 
 __all__ = ["estimate_uncertainty"]
 
@@ -84,36 +85,76 @@ def estimate_uncertainty(
     degenerate = bool(ident["degenerate"]) if ident is not None else why_not is None
     use_products = params == "products" or (params == "auto" and why_not is None and degenerate)
     space, wd = _products_space(scene, d) if use_products else _scene_space(scene, d)
-    work, paths, names, theta0 = space.work, space.paths, space.names, space.theta0
+    names = space.names
     warnings: list[str] = []
+    px = used_pixels(space.work, wd, target, mask)
+    steps = _steps(names, space.scale, step)
+    Jt, f0, kink = _jacobian(space, wd, px, steps, clip, warnings)
+    r0 = np.subtract(f0, np.take(target.reshape(-1, 3), px.idx, axis=0).ravel(), dtype=np.float64)
+    n_kink = int(kink.sum())
+    drop = px.sat_u | kink[:, None]  # residuals left out
+    if drop.any():  # zero rows: the same JᵀJ, QR and |r|² as without them
+        rows = drop.ravel()
+        Jt[:, rows] = 0.0
+        r0[rows] = 0.0
+    excluded = {
+        "saturated": int(px.saturated.sum()),
+        "saturated_channels": int(px.sat_u[~kink].sum()),
+        "silhouette": int((px.silhouette & ~px.saturated).sum()),
+        "shadow_edge": int((px.shadow_edge & ~px.saturated).sum()),
+        "clip_kink": n_kink,
+    }
+    n_pix = px.idx.size - n_kink
+    n_res = 3 * n_pix - excluded["saturated_channels"]
+    rr = float(np.einsum("i,i->", r0, r0))  # not r0 @ r0: a threaded BLAS dot waits on the render's threads
+    fit = _covariance(Jt, space, rr, n_res, warnings)
+    dof = n_res - fit.rank
+    rms = float(np.sqrt(rr / n_res)) if n_res else float("nan")
+    if rms < 1e-6:
+        warnings.append(
+            f"residual rms {rms:.1e}: the image is reproduced to float32 rounding (a noise-free render?), so "
+            "sigma reflects rounding only; the optimiser's own scatter (refit with other seeds) is larger"
+        )
+    out = {
+        "method": "gauss-newton",
+        "parametrization": "products" if use_products else "scene",
+        "names": names,
+        "values": [float(v) for v in space.theta0],
+        "sigma": fit.sigma,
+        "correlation": fit.corr,
+        "residual_rms": rms,
+        "pixels": n_pix,
+        "excluded": excluded,
+        "dof": int(dof),
+        "condition": fit.condition,
+        "step": [float(h) for h in steps],
+        "warnings": warnings,
+    }
+    if space.direction is not None:
+        out["light_direction"] = _direction_cone(space, fit)
+    return out
+
+
+def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarray, clip: bool,
+              warnings: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The Jacobian's transpose over the used pixels' channels, the render there at the optimum (flat,
+    min(render, 1) with ``clip``) and which used pixels sit on the clip's kink.
+
+    Central differences (one-sided where a step would cross a bound). With ``clip``, a pixel whose render
+    crosses 1 inside a step in a channel that is not saturated sits on the clip's kink and is left out.
+    The image is linear in an albedo and in a specular: their columns are the exact derivatives (the
+    unit-light render, scaled; the lobe alone), and a pixel is on the kink where that line crosses 1.
+    """
+    work, paths, names, theta0, idx = space.work, space.paths, space.names, space.theta0, px.idx
 
     def raw(theta: np.ndarray) -> np.ndarray:
         return _native.render(work.with_params(space.native(theta), paths))
 
-    # Pixels the model can represent as a smooth function of the parameters.
-    ids, unit = _native.object_ids(work), unit_light(wd)
-    lit = unit > 0
-    sat = target.reshape(-1, 3) >= SATURATED  # per channel: the others of the pixel still count
-    saturated = sat.all(axis=1).reshape(ids.shape)
-    silhouette = edges(ids)
-    shadow_edge = edges(np.where(ids >= 0, lit.astype(np.int32), -1)) & ~silhouette
-    use = ~(saturated | silhouette | shadow_edge)
-    if mask is not None:  # pixels the fit left out (bool (H, W), True = used)
-        use &= np.asarray(mask, bool)
-    idx = np.flatnonzero(use)  # everything below works on the used pixels only
     n = idx.size
-    sat_u = np.take(sat, idx, axis=0)  # saturated channels of used pixels: left out one by one
-    free_u = ~sat_u
+    free_u = ~px.sat_u
     raw0_img = raw(theta0)
     raw0 = np.take(raw0_img.reshape(-1, 3), idx, axis=0)
     clipped0 = raw0 >= 1.0
-
-    # Jacobian by central differences (one-sided where a step would cross a bound). With ``clip``, a pixel
-    # whose render crosses 1 inside a step in a channel that is not saturated sits on the clip's kink and
-    # is left out ("clip_kink"). The image is linear in an albedo and in a specular: their columns are
-    # the exact derivatives (the unit-light render, scaled; the lobe alone), with no render per
-    # parameter, and a pixel is on the kink where that line crosses 1 inside the step.
-    steps = _steps(names, space.scale, step)
     P = len(names)
     kink = np.zeros(n, dtype=bool)
     Jt = np.zeros((P, 3 * n))  # the Jacobian's transpose: one contiguous row per parameter
@@ -129,9 +170,8 @@ def estimate_uncertainty(
         return g.ravel()
 
     f0 = clipped(raw0_img)
-    ids_u = np.take(ids.ravel(), idx)
-    unit_u = np.take(unit.ravel(), idx).astype(np.float64)
-    light_rgb = np.array(wd["light"]["color"], float) * wd["light"]["intensity"]
+    ids_u = np.take(px.ids.ravel(), idx)
+    unit_u = np.take(px.unit.ravel(), idx).astype(np.float64)
     lobe_u = None
     if EXACT_ALBEDO and space.specular:
         lobe_u = np.take(unit_lobes(wd, set(space.specular.values())).reshape(-1, 3), idx, axis=0).astype(np.float64)
@@ -161,8 +201,8 @@ def estimate_uncertainty(
                 pixels_of[o] = (on, raw0[on].astype(np.float64), clipped0[on], free_u[on])
             on, base, was, free = pixels_of[o]
             base, was, free = base[:, chans], was[:, chans], free[:, chans]  # views
-            if k in space.albedo:  # d render / d albedo: exposure x (ambient + light x unit-light factor)
-                slope = (wd["exposure"] * (wd["ambient"][c] + light_rgb[c] * unit_u[on]))[:, None]
+            if k in space.albedo:
+                slope = albedo_derivative(wd, c, unit_u[on])[:, None]
             else:  # d render / d specular: the lobe alone (albedo 0, specular 1)
                 slope = lobe_u[on]
             slope = slope * space.factor[k]  # per unit of the parameter
@@ -183,24 +223,27 @@ def estimate_uncertainty(
             warnings.append(
                 f"{names[k]}: at its bound ({theta0[k]:.6g}); the Gauss-Newton sigma assumes an interior optimum"
             )
-    r0 = np.subtract(f0, np.take(target.reshape(-1, 3), idx, axis=0).ravel(), dtype=np.float64)
-    n_kink = int(kink.sum())
-    drop = sat_u | kink[:, None]  # residuals left out
-    if drop.any():  # zero rows: the same JᵀJ, QR and |r|² as without them
-        rows = drop.ravel()
-        Jt[:, rows] = 0.0
-        r0[rows] = 0.0
-    excluded = {
-        "saturated": int(saturated.sum()),
-        "saturated_channels": int(sat_u[~kink].sum()),
-        "silhouette": int((silhouette & ~saturated).sum()),
-        "shadow_edge": int((shadow_edge & ~saturated).sum()),
-        "clip_kink": n_kink,
-    }
-    n_pix = n - n_kink
-    n_res = 3 * n_pix - excluded["saturated_channels"]
-    rr = float(np.einsum("i,i->", r0, r0))  # not r0 @ r0: a threaded BLAS dot waits on the render's threads
+    return Jt, f0, kink
 
+
+@dataclass
+class _Covariance:
+    """The covariance of the determined parameters and what follows from it."""
+
+    sigma: dict[str, float | None]
+    corr: list[list[float | None]]
+    condition: float | None
+    rank: int
+    cov: np.ndarray | None  # over the parameters idx_p
+    determined: np.ndarray
+    idx_p: np.ndarray
+
+
+def _covariance(Jt: np.ndarray, space: _Space, rr: float, n_res: int, warnings: list[str]) -> _Covariance:
+    """s² (JᵀJ)⁺ from the column-scaled decomposition; parameters no used pixel responds to, or in a
+    numerically zero singular direction, are not determined (sigma None)."""
+    names = space.names
+    P = len(names)
     determined = np.ones(P, dtype=bool)
     gram = Jt @ Jt.T
     col = np.sqrt(np.diag(gram))
@@ -225,7 +268,6 @@ def estimate_uncertainty(
     corr: list[list[float | None]] = [[None] * P for _ in range(P)]
     condition = None
     rank = 0
-    s2 = float("nan")
     cov = None
     if idx_p.size:
         s, vt = _svd_scaled(Jt, idx_p, gram[np.ix_(idx_p, idx_p)], col[idx_p])
@@ -258,40 +300,21 @@ def estimate_uncertainty(
                 sigma[names[idx_p[a]]] = float(sd[a])
                 for b in keep:
                     corr[idx_p[a]][idx_p[b]] = r[a][b]
-    dof = n_res - rank
-    rms = float(np.sqrt(rr / n_res)) if n_res else float("nan")
-    if rms < 1e-6:
-        warnings.append(
-            f"residual rms {rms:.1e}: the image is reproduced to float32 rounding (a noise-free render?), so "
-            "sigma reflects rounding only; the optimiser's own scatter (refit with other seeds) is larger"
-        )
-    out = {
-        "method": "gauss-newton",
-        "parametrization": "products" if use_products else "scene",
-        "names": names,
-        "values": [float(v) for v in theta0],
-        "sigma": sigma,
-        "correlation": corr,
-        "residual_rms": rms,
-        "pixels": n_pix,
-        "excluded": excluded,
-        "dof": int(dof),
-        "condition": condition,
-        "step": [float(h) for h in steps],
-        "warnings": warnings,
-    }
-    if space.direction is not None:
-        k, dvec, u, v = space.direction
-        block: dict[str, Any] = {"direction": dvec.tolist(), "u": u.tolist(), "v": v.tolist(),
-                                 "angle_deg": None, "rms_angle_deg": None}
-        if cov is not None and determined[k] and determined[k + 1]:
-            at = [int(np.flatnonzero(idx_p == k)[0]), int(np.flatnonzero(idx_p == k + 1)[0])]
-            c2 = cov[np.ix_(at, at)]
-            block["angle_deg"] = float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(c2)[-1], 0.0))))
-            block["rms_angle_deg"] = float(np.degrees(np.sqrt(max(np.trace(c2), 0.0))))
-        out["light_direction"] = block
-    return out
+    return _Covariance(sigma, corr, condition, rank, cov, determined, idx_p)
 
+
+def _direction_cone(space: _Space, fit: _Covariance) -> dict[str, Any]:
+    """A directional light's frame and its two angles' sigma as cone angles in degrees (None where an
+    angle is not determined)."""
+    k, dvec, u, v = space.direction
+    block: dict[str, Any] = {"direction": dvec.tolist(), "u": u.tolist(), "v": v.tolist(),
+                             "angle_deg": None, "rms_angle_deg": None}
+    if fit.cov is not None and fit.determined[k] and fit.determined[k + 1]:
+        at = [int(np.flatnonzero(fit.idx_p == k)[0]), int(np.flatnonzero(fit.idx_p == k + 1)[0])]
+        c2 = fit.cov[np.ix_(at, at)]
+        block["angle_deg"] = float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(c2)[-1], 0.0))))
+        block["rms_angle_deg"] = float(np.degrees(np.sqrt(max(np.trace(c2), 0.0))))
+    return block
 
 def _steps(names: list[str], scale: np.ndarray, step: float | dict[str, float] | None) -> np.ndarray:
     if isinstance(step, dict):
