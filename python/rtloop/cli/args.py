@@ -11,6 +11,7 @@ import warnings
 from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
+from ..acquisition.boards import length_m
 from ..errors import RtloopError
 
 __all__ = ["BOARD_HELP", "RESPONSE_HELP", "Parser", "UsageError", "float_in", "formatter", "generations", "info",
@@ -95,14 +96,8 @@ def generations(text: str) -> int | tuple[int, int]:
 
 def length(text: str) -> float:
     """A length > 0 in metres, or with a unit: 0.0335, 33.5mm, 3.35cm."""
-    t = text.strip().lower()
-    scale = 1.0
-    for suffix, s in (("mm", 1e-3), ("cm", 1e-2), ("m", 1.0)):
-        if t.endswith(suffix):
-            t, scale = t[: -len(suffix)], s
-            break
     try:
-        v = float(t) * scale
+        v = length_m(text)
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"expected a length such as 0.0335, 33.5mm or 3.35cm, got {text!r}"
