@@ -4,6 +4,7 @@ RANSAC to edge points), and the seeds and pattern search that :func:`locate_ball
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import cv2
 import numpy as np
@@ -158,34 +159,12 @@ def find_ball(
     feat = _edge_image(image)
     candidates: list[tuple[float, float, float, str]] = []
     if mask is not None:
-        m = np.asarray(mask)
-        if m.shape[:2] != (h, w):
-            raise AcquisitionError(
-                f"{where}: the ball mask is {m.shape[1]}x{m.shape[0]} but the photo is {w}x{h}; draw the "
-                "mask "
-                "on the photo itself (same size)"
-            )
-        m8 = (
-            (m.reshape(h, w, -1).max(axis=2) > 0).astype(np.uint8)
-            if m.ndim == 3
-            else (m > 0).astype(np.uint8)
-        )
-        contours, _ = cv2.findContours(m8, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-        if not contours:
-            raise AcquisitionError(f"{where}: the ball mask is empty; paint the ball white on black")
-        big = max(contours, key=cv2.contourArea)
+        big = _mask_outline(mask, h, w, where)
         (cx, cy), _r = cv2.minEnclosingCircle(big)
         r = math.sqrt(cv2.contourArea(big) / math.pi)
         candidates.append((cx, cy, r, "mask"))
     elif hint is not None:
-        x, y, r = (float(v) for v in hint)
-        if not (0 <= x < w and 0 <= y < h and r > 2):
-            raise AcquisitionError(
-                f"{where}: the ball hint ({x:g}, {y:g}, radius {r:g}) is outside the {w}x{h} photo or too "
-                "small; "
-                "give X,Y,R in pixels of the photo"
-            )
-        candidates.append((x, y, r, "hint"))
+        candidates.append((*_checked_hint(hint, h, w, where), "hint"))
     else:
         lo, hi = radius_range_px or (max(4.0, min(h, w) / 60), min(h, w) / 2)
         candidates.extend((*c, "hough") for c in _hough_candidates(image, int(lo), math.ceil(hi)))
@@ -236,37 +215,44 @@ def _seeds(
 ) -> list[tuple[float, float, float, str]]:
     h, w = image.shape[:2]
     if mask is not None:
-        m = np.asarray(mask)
-        if m.shape[:2] != (h, w):
-            raise AcquisitionError(
-                f"{where}: the ball mask is {m.shape[1]}x{m.shape[0]} but the photo is {w}x{h}; draw the "
-                "mask "
-                "on the photo itself (same size)"
-            )
-        m8 = (m.reshape(h, w, -1).max(axis=2) > 0).astype(np.uint8)
-        contours, _ = cv2.findContours(m8, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-        if not contours:
-            raise AcquisitionError(f"{where}: the ball mask is empty; paint the ball white on black")
-        big = max(contours, key=cv2.contourArea)
-        mo = cv2.moments(big)
+        mo = cv2.moments(_mask_outline(mask, h, w, where))
         if mo["m00"] <= 0:
             raise AcquisitionError(f"{where}: the ball mask is empty; paint the ball white on black")
         return [(mo["m10"] / mo["m00"], mo["m01"] / mo["m00"], math.sqrt(mo["m00"] / math.pi), "mask")]
     if hint is not None:
-        x, y, r = (float(v) for v in hint)
-        if not (0 <= x < w and 0 <= y < h and r > 2):
-            raise AcquisitionError(
-                f"{where}: the ball hint ({x:g}, {y:g}, radius {r:g}) is outside the {w}x{h} photo or too "
-                "small; "
-                "give X,Y,R in pixels of the photo"
-            )
-        return [(x, y, r, "hint")]
+        return [(*_checked_hint(hint, h, w, where), "hint")]
     lo, hi = max(4.0, min(h, w) / 60), min(h, w) / 2
     cands = [(*c, "hough") for c in _hough_candidates(image, int(lo), math.ceil(hi))]
     if exclude is not None and len(exclude) >= 3:
         poly = np.asarray(exclude, np.float32).reshape(-1, 1, 2)
         cands = [c for c in cands if cv2.pointPolygonTest(poly, (c[0], c[1]), False) < 0]
     return _dedupe(cands)[:12]
+
+
+def _mask_outline(mask: Any, h: int, w: int, where: str) -> np.ndarray:
+    """The largest outer contour of a user-drawn ball mask (white on black, the photo's size)."""
+    m = np.asarray(mask)
+    if m.shape[:2] != (h, w):
+        raise AcquisitionError(
+            f"{where}: the ball mask is {m.shape[1]}x{m.shape[0]} but the photo is {w}x{h}; draw the "
+            "mask on the photo itself (same size)"
+        )
+    m8 = (m.reshape(h, w, -1).max(axis=2) > 0).astype(np.uint8)
+    contours, _ = cv2.findContours(m8, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    if not contours:
+        raise AcquisitionError(f"{where}: the ball mask is empty; paint the ball white on black")
+    return max(contours, key=cv2.contourArea)
+
+
+def _checked_hint(hint: Any, h: int, w: int, where: str) -> tuple[float, float, float]:
+    """The user's ball hint (x, y, r) in pixels, checked against the photo."""
+    x, y, r = (float(v) for v in hint)
+    if not (0 <= x < w and 0 <= y < h and r > 2):
+        raise AcquisitionError(
+            f"{where}: the ball hint ({x:g}, {y:g}, radius {r:g}) is outside the {w}x{h} photo or too "
+            "small; give X,Y,R in pixels of the photo"
+        )
+    return x, y, r
 
 
 def _pattern_search(
