@@ -222,8 +222,6 @@ def report(
     page = _Page(folder, folder.name)
     scene: Scene = result.scene
     names = scene.param_names()
-    fitted = np.asarray(scene.get_params(scene.fit_paths), float)
-    bounds = scene.bounds()
     ident = result.identifiability or {}
 
     true_vals = None
@@ -252,7 +250,27 @@ def report(
         f"{html.escape(stamp)}</p>"
     )
 
-    # 1. objective, fitted, difference ---------------------------------------------------------------------
+    metrics = _objective_section(page, scene, objective)
+    strip = _strip_section(page, scene, rows, strip_every, notes)
+    plots = _plots_section(page, scene, rows, true_vals, terr, ident)
+    _values_section(page, scene, terr)
+    _fit_report_section(page, result, terr, ident)
+    _speed_section(page, speed_plot if speed_plot is not None else speed_vs_error_png)
+
+    page.add(f'<p class="muted">rtloop {html.escape(_native.__version__)} · images also in '
+             f"<code>{html.escape(folder.name)}/</code></p></body></html>\n")
+
+    written = {p.name for p in page.files}
+    for old in folder.iterdir():
+        if old.name not in written and _OURS.match(old.name) and old.is_file():
+            old.unlink(missing_ok=True)
+    write_bytes(page_path, "".join(page.parts).encode("utf-8"))
+    return Report(path=page_path, files=page.files, metrics=metrics, plots=plots, strip=strip, truth=terr,
+                  source=source, notes=notes)
+
+
+def _objective_section(page: _Page, scene: Scene, objective: Any) -> dict[str, float]:
+    """The objective, the fitted render and their difference, with the error numbers (returned)."""
     metrics: dict[str, float] = {}
     fitted_img = np.asarray(_native.render(scene), np.float64)
     panels = []
@@ -293,8 +311,12 @@ def report(
         ))
     else:
         page.add('<p class="muted">No objective given: no difference image or error numbers.</p>')
+    return metrics
 
-    # 2. the strip ---------------------------------------------------------------------------------------
+
+def _strip_section(page: _Page, scene: Scene, rows: Sequence[GenerationRow], strip_every: int | None,
+                   notes: list[str]) -> list[tuple[str, int, float]]:
+    """The best render through the stages; (stage, generation, fitness) of each frame."""
     strip: list[tuple[str, int, float]] = []
     frames = []
     for n, i in enumerate(_strip_frames(rows, strip_every)):
@@ -312,8 +334,12 @@ def report(
         page.add('<p class="muted">No generations recorded.</p>')
     for note in notes:
         page.add(f'<p class="muted">{html.escape(note)}</p>')
+    return strip
 
-    # 3. parameter evolution and fitness -------------------------------------------------------------------
+
+def _plots_section(page: _Page, scene: Scene, rows: Sequence[GenerationRow], true_vals: np.ndarray | None,
+                   terr: dict[str, Any] | None, ident: dict[str, Any]) -> dict[str, Any]:
+    """The parameters and the fitness against generation; the plotted data read back."""
     plots: dict[str, Any] = {}
     if rows:
         figs, plots = plot_search(
@@ -326,8 +352,14 @@ def report(
         if true_vals is not None:
             page.add('<p class="muted">Dashed: the true values.</p>')
         page.add('<div class="row plots">' + "".join(imgs) + "</div>")
+    return plots
 
-    # 4. fitted values -----------------------------------------------------------------------------------
+
+def _values_section(page: _Page, scene: Scene, terr: dict[str, Any] | None) -> None:
+    """The fitted values with their bounds (and the truth and the errors when known)."""
+    names = scene.param_names()
+    fitted = np.asarray(scene.get_params(scene.fit_paths), float)
+    bounds = scene.bounds()
     page.add("<h2>Fitted values</h2>")
     if terr is not None:
         body = [[n, fitted[j], terr["values"][n], terr["errors"][n], f"{_fmt(lo, 4)} … {_fmt(hi, 4)}"]
@@ -345,7 +377,9 @@ def report(
                 for j, (n, (lo, hi)) in enumerate(zip(names, bounds))]
         page.add(_table(["parameter", "fitted", "bounds"], body))
 
-    # 5. the fit report --------------------------------------------------------------------------------------
+
+def _fit_report_section(page: _Page, result: Any, terr: dict[str, Any] | None, ident: dict[str, Any]) -> None:
+    """The fit report: settings, stages, identifiability, products, uncertainty."""
     rep = result.report()
     st = rep.get("settings", {})
     page.add("<h2>Fit report</h2>")
@@ -410,21 +444,11 @@ def report(
         for w in (uncertainty.get("warnings", []) if isinstance(uncertainty, dict) else []):
             page.add(f"<p class='note'>{html.escape(str(w))}</p>")
 
-    # 6. speed against error -------------------------------------------------------------------------------
-    speed_plot = speed_plot if speed_plot is not None else speed_vs_error_png
+
+def _speed_section(page: _Page, speed_plot: str | os.PathLike[str] | None) -> None:
+    """The speed-against-error plot, only when the caller gave one."""
     if speed_plot is not None and Path(speed_plot).is_file():
         data = Path(speed_plot).read_bytes()
         page.add("<h2>Speed against error (benchmark)</h2>")
         fig_html = page.png("speed_vs_error.png", data, "speed against error")
         page.add('<div class="row wide">' + fig_html + "</div>")
-
-    page.add(f'<p class="muted">rtloop {html.escape(_native.__version__)} · images also in '
-             f"<code>{html.escape(folder.name)}/</code></p></body></html>\n")
-
-    written = {p.name for p in page.files}
-    for old in folder.iterdir():
-        if old.name not in written and _OURS.match(old.name) and old.is_file():
-            old.unlink(missing_ok=True)
-    write_bytes(page_path, "".join(page.parts).encode("utf-8"))
-    return Report(path=page_path, files=page.files, metrics=metrics, plots=plots, strip=strip, truth=terr,
-                  source=source, notes=notes)
