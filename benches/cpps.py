@@ -30,6 +30,7 @@ import numpy as np
 
 import rtloop
 from rtloop import _native
+from rtloop._files import write_text
 
 REPO = Path(__file__).resolve().parents[1]
 SCENE = REPO / "examples" / "yellow-ball"
@@ -253,11 +254,8 @@ def main(argv: list[str] | None = None) -> int:
             n = max(60, int(600 * 12288 / (w * h)))
             cpps = rtloop_cpps(s, t, population(s, n), threads_all, repeats)
             say(f"| {w}x{h} | {k} | {cpps:.3g} | {1e6 * w * h / cpps:.0f} | {1e9 / cpps:.2f} |")
-    args.out.mkdir(parents=True, exist_ok=True)
     out = args.out / ("cpps_quick.md" if args.quick else "cpps.md")
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text("\n".join(lines) + "\n")
-    os.replace(tmp, out)
+    write_text(out, "\n".join(lines) + "\n", parents=True)
     print(f"\nwrote {out}", file=sys.stderr)
     return 0
 

@@ -39,6 +39,7 @@ import numpy as np
 from PIL import Image
 
 import rtloop
+from rtloop._srgb import encode8
 
 REPO = Path(__file__).resolve().parents[1]
 SCENES = REPO.parent / "shared" / "scenes"
@@ -73,10 +74,8 @@ def load_score():
 
 def through_file(linear: np.ndarray, fmt: str, **save: Any) -> bytes:
     """8-bit sRGB file bytes of a linear image."""
-    x = np.clip(linear, 0, 1)
-    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
     buf = io.BytesIO()
-    Image.fromarray(np.round(srgb * 255).astype(np.uint8)).save(buf, fmt, **save)
+    Image.fromarray(encode8(linear)).save(buf, fmt, **save)
     return buf.getvalue()
 
 

@@ -44,7 +44,6 @@ import os
 import platform
 import statistics
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -220,31 +219,15 @@ def success_runs(rtloop, score, scene_dir: Path, truth: dict, seeds: int, max_ev
     return text, rows
 
 
-def atomic_write(path: Path, write) -> None:
-    """Call ``write(tmp_path)`` and move the result onto ``path`` in one rename."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        write(Path(tmp))
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes the file private; give it ordinary permissions
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
-    def write(tmp: Path) -> None:
-        with open(tmp, "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=FIELDS)
-            w.writeheader()
-            for r in rows:
-                w.writerow({k: (f"{r[k]:.6g}" if isinstance(r[k], float) else r[k]) for k in FIELDS})
+    from rtloop._files import write_text
 
-    atomic_write(path, write)
+    fh = io.StringIO(newline="")
+    w = csv.DictWriter(fh, fieldnames=FIELDS)
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: (f"{r[k]:.6g}" if isinstance(r[k], float) else r[k]) for k in FIELDS})
+    write_text(path, fh.getvalue(), parents=True)
 
 
 def write_plot(path: Path, rows: list[dict[str, Any]], title: str) -> bool:
@@ -299,11 +282,12 @@ def write_plot(path: Path, rows: list[dict[str, Any]], title: str) -> bool:
     axes[0].legend(fontsize=8)
     fig.suptitle(title, fontsize=9)
 
-    def write(tmp: Path) -> None:
-        fig.savefig(tmp, format="png", dpi=120)
+    from rtloop._files import write_bytes
 
     try:
-        atomic_write(path, write)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=120)
+        write_bytes(path, buf.getvalue(), parents=True)
     finally:
         plt.close(fig)
     return True
@@ -358,6 +342,7 @@ def main(argv: list[str] | None = None) -> int:
     import json
 
     import rtloop
+    from rtloop._files import write_text
 
     protocols = importlib.import_module("rtloop.fit").PROTOCOLS
     unknown = [m for m in args.methods if m.removesuffix(NO_POLISH) not in protocols]
@@ -415,7 +400,7 @@ def main(argv: list[str] | None = None) -> int:
         line, _ = success_runs(rtloop, score, success_dir, truth, args.success_seeds, args.success_evals,
                                args.success_threshold, args.threads)
         text = text.replace(f"\n{machine}\n", line + f"\n{machine}\n")
-    atomic_write(out / f"{stem}.md", lambda tmp: tmp.write_text(text))
+    write_text(out / f"{stem}.md", text, parents=True)
     plotted = write_plot(out / f"{stem}.png", rows, f"rtloop speed against error; {machine}")
     print(text)
     written = [f"{stem}.csv", f"{stem}.md"] + ([f"{stem}.png"] if plotted else [])

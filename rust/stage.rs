@@ -2,8 +2,7 @@
 //! best point (for the projected loss: the products that minimise the loss itself there, and that loss).
 
 use crate::error::Result;
-use crate::fitness::{Fitness, LossKind};
-use crate::fitness::Solved;
+use crate::fitness::{Fitness, LossKind, Solved};
 use crate::search::{self, GenerationReport, Method, PolishReport, StopReason};
 
 /// Per object `[P_r, P_g, P_b, Q]`: the colour products and `Q` = intensity × specular (0 when matte).

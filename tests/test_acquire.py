@@ -1,4 +1,4 @@
-"""Tests for rtloop.acquire.load_image: decoding, EXIF orientation, linearisation, resizing, errors.
+"""Tests for rtloop.load_image (acquisition/objective.py): decoding, EXIF orientation, linearising, resizing.
 
 Every test image is generated in ``tmp_path``. Expected values come from the sRGB formulas and
 the EXIF specification written out here, not from the code under test.
@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from PIL import Image, ImageOps
 
-from rtloop.acquire import load_image
+from rtloop.acquisition.objective import load_image
 from rtloop.errors import AcquisitionError
 
 # --- reference formulas ---------------------------------------------------------------------

@@ -16,7 +16,7 @@ import pytest
 
 import rtloop.acquisition.capture as capture_module
 from rtloop.acquisition import AcquisitionError, capture_photo, save_capture
-from rtloop.acquisition.cli import acquire_main
+from rtloop.cli.acquire import acquire_main
 
 H, W = 48, 64
 

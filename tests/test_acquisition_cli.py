@@ -25,8 +25,9 @@ from rtloop.acquisition import (
     parse_board,
 )
 from rtloop.acquisition._common import to_detection_grey, write_png16_srgb
-from rtloop.acquisition.cli import acquire_main, scene_main
 from rtloop.acquisition.synthetic import board_view, paste_board_on_floor
+from rtloop.cli.acquire import acquire_main
+from rtloop.cli.scene import scene_main
 
 W, H = 800, 600
 BOARD = "6x4,70mm,52mm,DICT_5X5_100"

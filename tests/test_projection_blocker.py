@@ -1,5 +1,6 @@
-"""The native `projection_blocker` (rust/fitness/projected.rs) gives exactly the answer of Python's
-`fit._projection_blocker` for scene / fit-section combinations covering every reason and the None case."""
+"""The native `projection_blocker` (rust/fitness/projected.rs, the one decision of whether the closed form
+applies, which `rtloop.fit` asks) gives exactly the answer of the rules written again here in Python over the
+scene dict, for scene / fit-section combinations covering every reason and the None case."""
 
 from __future__ import annotations
 
@@ -8,9 +9,36 @@ import json
 
 import pytest
 
+import rtloop
 from conftest import BALL_ON_FLOOR
 from rtloop import _native
-from rtloop.fit import _projection_blocker
+
+
+def _python_blocker(scene: rtloop.Scene, paths: list[str]) -> str | None:
+    """The rules as the README states them, written again over the scene dict (the oracle)."""
+    d = scene.to_dict()
+    if "light.position" not in paths and "light.direction" not in paths:
+        return "neither light.position nor light.direction is free"
+    if any(v != 0 for v in d["ambient"]):
+        return "the scene has ambient light"
+    allowed = {"light.position", "light.direction", "light.intensity"}
+    for o in d["objects"]:
+        allowed |= {f"objects.{o['name']}.{m}" for m in ("albedo", "specular", "shininess")}
+    extra = [p for p in paths if p not in allowed]
+    if extra:
+        return f"{', '.join(extra)} cannot be solved in closed form"
+    if "light.intensity" in paths:
+        known = [o["name"] for o in d["objects"]
+                 if o["material"]["specular"] != 0 and f"objects.{o['name']}.specular" not in paths]
+        if known:
+            return (f"light.intensity is free and the specular of {', '.join(known)} is fixed (the highlight "
+                    "then measures the intensity, which the closed form does not model)")
+    if "light.intensity" in paths:
+        fixed = [o["name"] for o in d["objects"] if f"objects.{o['name']}.albedo" not in paths]
+        if fixed:
+            return f"light.intensity is free but the albedo of {', '.join(fixed)} is fixed"
+    return None
+
 
 LIGHT = ["light.position", "light.intensity", "objects.ball.albedo", "objects.floor.albedo"]
 
@@ -52,11 +80,11 @@ CASES = [
 @pytest.mark.parametrize(("name", "scene", "paths"), CASES, ids=[c[0] for c in CASES])
 def test_native_blocker_equals_python(name, scene, paths):
     s = _scene(**scene)
-    assert _native.projection_blocker(s, paths) == _projection_blocker(s, paths)
+    assert _native.projection_blocker(s, paths) == _python_blocker(s, paths)
 
 
 def test_cases_cover_every_answer():
-    answers = {_projection_blocker(_scene(**s), p) for _, s, p in CASES}
+    answers = {_python_blocker(_scene(**s), p) for _, s, p in CASES}
     assert None in answers
     reasons = ["neither", "ambient", "cannot be solved", "highlight", "albedo of"]
     for r in reasons:

@@ -22,7 +22,6 @@ from rtloop.report import image_metrics, truth_errors
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "examples" / "yellow-ball"
-SPEED_VS_ERROR = REPO / "benches" / "results" / "speed_vs_error.png"
 W, H = 32, 24
 BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable", "chrome")
 
@@ -40,6 +39,14 @@ def truth_dict() -> dict:
     d["objects"][0]["material"]["albedo"] = [0.8, 0.7, 0.1]
     d["objects"][1]["material"]["albedo"] = [0.4, 0.5, 0.6]
     return d
+
+
+@pytest.fixture
+def speed_png(tmp_path) -> Path:
+    """A PNG the caller passes as the speed-against-error plot (a report reads no file of the repository)."""
+    path = tmp_path / "my_speed_plot.png"
+    Image.fromarray(np.tile(np.arange(64, dtype=np.uint8)[:, None, None] * 4, (1, 48, 3))).save(path)
+    return path
 
 
 @pytest.fixture(scope="module")
@@ -92,12 +99,11 @@ def browse(browser: str, page: Path, profile: Path, *args: str) -> subprocess.Co
     return done
 
 
-def test_page_renders_in_a_headless_browser_with_every_image(projected, photo, tmp_path):
+def test_page_renders_in_a_headless_browser_with_every_image(projected, photo, tmp_path, speed_png):
     browser = find_browser()
     result, rows = projected
-    speed = SPEED_VS_ERROR if SPEED_VS_ERROR.is_file() else None
     rep = rtloop.report(result, tmp_path / "report.html", objective=photo, truth=truth_dict(),
-                        generations=rows, speed_vs_error_png=speed)
+                        generations=rows, speed_plot=speed_png)
     page = rep.path.read_text(encoding="utf-8")
     n_images = page.count("<img ")
     assert n_images == len(rep.files) >= 3 + 2 + 2  # objective/fitted/difference, strip, plots
@@ -219,11 +225,11 @@ def test_plotted_data_are_the_fit_history_two_stages(two_stage, tmp_path):
 # --- (3) self-contained: no external URLs, the embedded images are the files -------------------------------
 
 
-def test_page_is_self_contained(projected, photo, tmp_path):
+def test_page_is_self_contained(projected, photo, tmp_path, speed_png):
     result, rows = projected
     out = tmp_path / "deep" / "report.html"
     rep = rtloop.report(result, out, objective=photo, truth=truth_dict(), generations=rows,
-                        speed_vs_error_png=SPEED_VS_ERROR if SPEED_VS_ERROR.is_file() else None)
+                        speed_plot=speed_png)
     assert rep.path == out and out.is_file()
     page = out.read_text(encoding="utf-8")
     assert page.startswith("<!doctype html>") and page.rstrip().endswith("</html>")
@@ -242,9 +248,8 @@ def test_page_is_self_contained(projected, photo, tmp_path):
     assert embedded == [p.read_bytes() for p in rep.files]
     assert sorted(os.listdir(tmp_path / "deep")) == ["report", "report.html"]  # no temporary files left
     assert sorted(os.listdir(tmp_path / "deep" / "report")) == sorted(p.name for p in rep.files)
-    if SPEED_VS_ERROR.is_file():
-        copied = tmp_path / "deep" / "report" / "speed_vs_error.png"
-        assert copied.read_bytes() == SPEED_VS_ERROR.read_bytes()
+    copied = tmp_path / "deep" / "report" / "speed_vs_error.png"
+    assert copied.read_bytes() == speed_png.read_bytes() and "Speed against error" in page
     # The numbers are on the page: error metrics, truth errors, products, identifiability.
     for text in ("L1", "RMSE", "PSNR", "light position error (m)", "product relative error",
                  result.identifiability["note"].split(":")[0]):
@@ -264,6 +269,24 @@ def test_page_is_self_contained(projected, photo, tmp_path):
     kept = {p.name for p in rep.files if not p.name.startswith(("strip_", "param_"))}
     assert sorted(os.listdir(tmp_path / "deep" / "report")) == sorted({p.name for p in rep2.files} | kept)
     assert len(rep2.strip) == 2  # generation 0 and the last
+
+
+def test_speed_plot_only_when_given(projected, tmp_path, monkeypatch, capsys):
+    """A report reads no file of the repository: run from its root without a speed plot, neither
+    rtloop.report nor rtloop-fit --report includes one."""
+    result, rows = projected
+    monkeypatch.chdir(REPO)
+    rep = rtloop.report(result, tmp_path / "r.html", generations=rows)
+    assert "speed_vs_error.png" not in {p.name for p in rep.files}
+    assert "Speed against error" not in rep.path.read_text(encoding="utf-8")
+    scene_path, image_path, out = tmp_path / "scene.json", tmp_path / "objective.png", tmp_path / "fit"
+    scene_path.write_text(json.dumps(scene_dict()), encoding="utf-8")
+    rtloop.save_image(image_path, rtloop.render(truth_dict()))
+    code = cli.main([str(scene_path), str(image_path), "--out", str(out), "--population", "8", "--generations",
+                     "3", "--final-scale", "1", "--final-spp", "1", "--snapshot-every", "0", "--report", "-q"])
+    assert code == 0, capsys.readouterr().err
+    assert not (out / "report" / "speed_vs_error.png").exists()
+    assert "Speed against error" not in (out / "report.html").read_text(encoding="utf-8")
 
 
 def test_error_numbers_follow_their_formulas():
@@ -356,7 +379,7 @@ def test_import_rtloop_does_not_import_matplotlib():
 # --- (4) the command line -----------------------------------------------------------------------------------
 
 
-def test_cli_report_and_truth(tmp_path, capsys):
+def test_cli_report_and_truth(tmp_path, capsys, speed_png):
     scene_path = tmp_path / "scene.json"
     scene_path.write_text(json.dumps(scene_dict()), encoding="utf-8")
     truth_path = tmp_path / "truth.json"
@@ -366,7 +389,7 @@ def test_cli_report_and_truth(tmp_path, capsys):
     out = tmp_path / "fit"
     code = cli.main([str(scene_path), str(image_path), "--out", str(out), "--population", "8",
                      "--generations", "5", "--final-scale", "1", "--final-spp", "1", "--report",
-                     "--truth", str(truth_path), "--quiet"])
+                     "--truth", str(truth_path), "--quiet", "--speed-plot", str(speed_png)])
     captured = capsys.readouterr()
     assert code == 0, captured.err
     assert captured.err == ""
@@ -376,7 +399,8 @@ def test_cli_report_and_truth(tmp_path, capsys):
     html_text = page.read_text(encoding="utf-8")
     assert "http://" not in html_text and "https://" not in html_text
     files = sorted(os.listdir(out / "report"))
-    assert {"objective.png", "fitted.png", "difference.png", "fitness.png"} <= set(files)
+    assert {"objective.png", "fitted.png", "difference.png", "fitness.png", "speed_vs_error.png"} <= set(files)
+    assert (out / "report" / "speed_vs_error.png").read_bytes() == speed_png.read_bytes()
     assert len(data_uris(html_text)) == len(files)
     # The rows the CLI recorded are those of best_per_generation.csv: the plots show them.
     assert "light+colour" in html_text and "truth" in html_text
@@ -405,3 +429,13 @@ def test_cli_report_and_truth(tmp_path, capsys):
     assert code == 1 and captured.out == ""
     assert captured.err.startswith(f"rtloop-fit: error: {bad_path}: ") and "floor" in captured.err
     assert not (tmp_path / "x").exists()
+
+    # --speed-plot: a file that is not there, or without --report, is one clear line, before any fitting.
+    for extra, status, message in ((["--report", "--speed-plot", str(tmp_path / "none.png")], 1,
+                                    f"rtloop-fit: error: --speed-plot: {tmp_path / 'none.png'}: no such file"),
+                                   (["--speed-plot", str(speed_png)], 2,
+                                    "rtloop-fit: error: --speed-plot: only with --report")):
+        code = cli.main([str(scene_path), str(image_path), "--out", str(tmp_path / "x"), *extra])
+        captured = capsys.readouterr()
+        assert (code, captured.out, captured.err.strip()) == (status, "", message)
+        assert not (tmp_path / "x").exists()

@@ -18,7 +18,7 @@ import numpy as np
 
 from . import _native
 from ._native import Scene, __version__
-from .acquire import load_image, load_mask
+from .acquisition.objective import load_image, load_mask
 from .errors import AcquisitionError, RtloopError, SceneError
 from .fit import FitResult, StageResult, fit
 from .report import report

@@ -10,6 +10,7 @@ import re
 from pathlib import Path
 from typing import Any
 
+from ._files import write_text
 from ._native import Scene
 from .errors import RtloopError, SceneError
 
@@ -80,13 +81,4 @@ def scene_to_dict(scene: Scene) -> dict[str, Any]:
 def save_scene(scene: Scene | dict[str, Any], path: str | os.PathLike[str]) -> None:
     """Write a scene (or any JSON-able dict) to ``path`` atomically: a temporary file renamed into place."""
     data = scene_to_dict(scene) if isinstance(scene, Scene) else scene
-    write_text_atomic(Path(path), json.dumps(data, indent=2, allow_nan=False) + "\n")
-
-
-def write_text_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    write_text(path, json.dumps(data, indent=2, allow_nan=False) + "\n")

@@ -5,11 +5,9 @@ use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray3, PyUntypedArrayMethods}
 use pyo3::prelude::*;
 
 use crate::error::Error;
-use crate::fitness::{Fitness, LossKind};
-use crate::fitness::{Norm, Projection};
+use crate::fitness::{Fitness, LossKind, Norm, Projection, Space};
 use crate::params::ParamLayout;
 use crate::scene::Scene;
-use crate::fitness::Space;
 use crate::stage::StageResult;
 
 fn target_vec(scene: &Scene, target: &PyReadonlyArray3<'_, f32>) -> PyResult<Vec<f32>> {

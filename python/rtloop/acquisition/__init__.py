@@ -1,4 +1,5 @@
-"""Acquisition from real cameras and photos: everything between a real scene and ``rtloop-fit``.
+"""Acquisition from real cameras and photos: everything between a real scene and ``rtloop-fit``
+(the command lines ``rtloop-acquire`` and ``rtloop-scene`` are in :mod:`rtloop.cli`).
 
 rtloop fits a hand-described scene to a photo. This subpackage measures that scene instead of
 asking for it by hand, from a photo of a ball lying on the floor beside a ChArUco board:
@@ -20,7 +21,8 @@ module                 what it does
 ``colour``             white balance from a grey card, colour correction from a ColorChecker (cv2.mcc)
 ``build``              the whole chain: scene JSON with a ``fit`` section, objective image, overlay
 ``synthetic``          synthetic photos with known geometry (tests, and checking a setup)
-``cli``                the ``rtloop-acquire`` and ``rtloop-scene`` command lines
+``objective``          the image a fit compares with, from a file at the scene's size (``load_image``,
+                       ``rtloop.load_image``) and a mask of the pixels the scene models (``load_mask``)
 =====================  ================================================================================
 
 Conventions are the scene format's (README): metres, right-handed, +y up; the board's face is the
@@ -38,6 +40,7 @@ from .calibration import CameraIntrinsics, PinholeRemap, calibrate_camera, undis
 from .camera import PinholeCamera, focal_from_vfov, vfov_from_focal
 from .capture import CaptureResult, FrameSource, capture_photo, open_camera, save_capture
 from .colour import ColourCorrection, colorchecker_correction, grey_card_balance, mcc_available
+from .objective import load_image, load_mask
 from .pose import WORLD_FROM_BOARD, FloorPose, estimate_floor_pose
 from .response import CameraResponse, load_photo, parse_response, photo_info
 
@@ -69,6 +72,8 @@ __all__ = [
     "fit_section",
     "focal_from_vfov",
     "grey_card_balance",
+    "load_image",
+    "load_mask",
     "load_photo",
     "locate_ball",
     "mcc_available",

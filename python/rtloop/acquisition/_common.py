@@ -1,24 +1,24 @@
-"""Small helpers shared by the acquisition modules: encoding for display and detection, files, errors."""
+"""Small helpers shared by the acquisition modules: encoding for display and detection, PNG and JSON
+files (written through rtloop._files), errors."""
 
 from __future__ import annotations
 
 import json
-import math
 import os
-import tempfile
-from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 
+from .._files import jsonable, write_bytes, write_json
+from .._srgb import encode
 from ..errors import AcquisitionError
 
 __all__ = [
     "AcquisitionError",
-    "atomic_write_bytes",
     "check_image",
     "encode_srgb",
+    "jsonable",
     "read_json",
     "to_detection_grey",
     "to_display_bgr8",
@@ -50,8 +50,7 @@ def check_image(image: Any, what: str = "image") -> np.ndarray:
 
 def encode_srgb(linear: np.ndarray) -> np.ndarray:
     """Linear values -> sRGB-encoded values in [0, 1] (clipped), float32."""
-    x = np.clip(np.asarray(linear, dtype=np.float32), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055).astype(np.float32)
+    return encode(linear, np.float32).astype(np.float32)
 
 
 def to_display_bgr8(linear: np.ndarray) -> np.ndarray:
@@ -73,60 +72,6 @@ def to_detection_grey(linear: np.ndarray, stretch: bool = True) -> np.ndarray:
         if top > 1e-6:
             lum = lum / top
     return (encode_srgb(lum) * 255.0 + 0.5).astype(np.uint8)
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
-    """Write a file through a temporary file in the same directory and rename it into place."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual permissions
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-
-
-def jsonable(value: Any) -> Any:
-    """``value`` with numpy types made plain and NaN/infinity made None (JSON has neither)."""
-    return _jsonable(value)
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, (np.floating, float)):
-        v = float(value)
-        if not math.isfinite(v):
-            return None
-        return v
-    if isinstance(value, np.bool_):
-        return bool(value)
-    return value
-
-
-def write_json(path: str | os.PathLike[str], data: Any) -> None:
-    """Write ``data`` as indented JSON (numpy values converted), atomically."""
-    text = json.dumps(_jsonable(data), indent=2) + "\n"
-    atomic_write_bytes(path, text.encode("utf-8"))
 
 
 def read_json(path: str | os.PathLike[str], what: str) -> Any:
@@ -159,11 +104,11 @@ def write_png16_srgb(path: str | os.PathLike[str], linear: np.ndarray) -> None:
     """
     enc = encode_srgb(linear)
     data = (enc[:, :, ::-1] * 65535.0 + 0.5).astype(np.uint16)
-    atomic_write_bytes(path, encode_png(np.ascontiguousarray(data)))
+    write_bytes(path, encode_png(np.ascontiguousarray(data)), parents=True)
 
 
 def write_png8(path: str | os.PathLike[str], image_bgr: np.ndarray) -> None:
-    atomic_write_bytes(path, encode_png(np.ascontiguousarray(image_bgr)))
+    write_bytes(path, encode_png(np.ascontiguousarray(image_bgr)), parents=True)
 
 
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)

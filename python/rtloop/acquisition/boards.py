@@ -171,14 +171,20 @@ def _dictionary_size(name: str) -> int:
     return int(m.group(1)) if m and name.count("X") == 1 else 0
 
 
-def _length(text: str) -> float:
+def length_m(text: str) -> float:
+    """A length in metres from 0.0335, 33.5mm or 3.35cm (ValueError if it is no number; not checked
+    for being finite or positive)."""
     t = text.strip().lower()
     scale = 1.0
     for suffix, s in (("mm", 1e-3), ("cm", 1e-2), ("m", 1.0)):
         if t.endswith(suffix):
             t, scale = t[: -len(suffix)], s
             break
-    value = float(t) * scale
+    return float(t) * scale
+
+
+def _length(text: str) -> float:
+    value = length_m(text)
     if not math.isfinite(value):
         raise ValueError(text)
     return value

@@ -33,7 +33,8 @@ from typing import Any, Protocol
 import cv2
 import numpy as np
 
-from ._common import AcquisitionError, atomic_write_bytes, encode_png, write_json
+from .._files import write_bytes
+from ._common import AcquisitionError, encode_png, write_json
 
 __all__ = ["BACKENDS", "CaptureResult", "FrameSource", "capture_photo", "open_camera", "save_capture"]
 
@@ -372,7 +373,7 @@ def save_capture(result: CaptureResult, path: str | os.PathLike[str]) -> tuple[s
     png = os.fspath(path)
     if not png.lower().endswith(".png"):
         raise AcquisitionError(f"{png}: the capture is saved as PNG; give a file name ending in .png")
-    atomic_write_bytes(png, encode_png(np.ascontiguousarray(result.image)))
+    write_bytes(png, encode_png(np.ascontiguousarray(result.image)), parents=True)
     report = os.path.splitext(png)[0] + ".json"
     write_json(report, {**result.settings, "image": os.path.basename(png)})
     return png, report

@@ -23,6 +23,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from .._srgb import decode
 from ._common import AcquisitionError, check_image, to_display_bgr8
 
 __all__ = [
@@ -70,8 +71,7 @@ COLORCHECKER_SRGB8 = np.array(
 
 
 def _srgb8_to_linear(v: np.ndarray) -> np.ndarray:
-    x = np.asarray(v, dtype=np.float64) / 255.0
-    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
+    return decode(np.asarray(v, dtype=np.float64) / 255.0)
 
 
 @dataclass

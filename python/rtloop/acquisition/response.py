@@ -30,8 +30,9 @@ import cv2
 import numpy as np
 from PIL import Image
 
-from ..acquire import load_image
+from .._srgb import decode
 from ._common import AcquisitionError
+from .objective import load_image
 
 __all__ = ["CameraResponse", "load_photo", "parse_response", "photo_info"]
 
@@ -65,7 +66,7 @@ class CameraResponse:
         if self.kind == "linear":
             return x
         if self.kind == "srgb":
-            return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)
+            return decode(x).astype(np.float32)
         if self.kind == "gamma":
             return np.power(x, np.float32(self.gamma)).astype(np.float32)
         codes = np.asarray(self.codes, dtype=np.float64)

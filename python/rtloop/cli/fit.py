@@ -11,27 +11,26 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
-import math
 import os
 import re
-import secrets
 import shutil
 import signal
 import sys
-import tempfile
 import textwrap
 import threading
 import time
 import warnings
 from pathlib import Path
-from typing import Any, NoReturn, TextIO
+from typing import Any, TextIO
 
 import numpy as np
 
 import rtloop
+from rtloop._files import PlaceError, move_into_place, staging_dir, write_json
 from rtloop.fit import PROTOCOLS
 from rtloop.report import truth_errors, truth_values
+
+from .args import Parser, UsageError, float_in, generations, int_at_least
 
 __all__ = ["main"]
 
@@ -120,10 +119,6 @@ def _protocol_help() -> str:
     return "named settings: " + "; ".join(parts) + " (default: rtloop)"
 
 
-class _UsageError(Exception):
-    """A problem with the command line found by argparse (exit status 2)."""
-
-
 class _Failure(Exception):
     """A problem with the input or the output directory (exit status 1), reported as one line."""
 
@@ -136,55 +131,8 @@ class _Terminated(KeyboardInterrupt):
     """SIGTERM, handled like Ctrl-C (clean up, nothing half-written) but reported as such."""
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> NoReturn:
-        raise _UsageError(message)
-
-
-# --- argument types ---------------------------------------------------------------------------------------
-
-
-def _int_at_least(minimum: int, what: str):
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"expected {what}, got {value}")
-        return value
-
-    return parse
-
-
-def _generations(text: str) -> int | tuple[int, int]:
-    parts = [p.strip() for p in text.split(",")]
-    try:
-        values = [int(p) for p in parts]
-    except ValueError:
-        values = []
-    if len(values) not in (1, 2) or min(values) < 0:
-        raise argparse.ArgumentTypeError(
-            f"expected N or N1,N2 (whole numbers >= 0: light stages, colour stages), got {text!r}"
-        )
-    return values[0] if len(values) == 1 else (values[0], values[1])
-
-
-def _float_in(lo: float, hi: float, lo_open: bool, what: str):
-    def parse(text: str) -> float:
-        try:
-            value = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
-        if not (math.isfinite(value) and (value > lo if lo_open else value >= lo) and value <= hi):
-            raise argparse.ArgumentTypeError(f"expected {what}, got {text}")
-        return value
-
-    return parse
-
-
-def _build_parser() -> _Parser:
-    p = _Parser(
+def _build_parser() -> Parser:
+    p = Parser(
         prog=PROG,
         description=DESCRIPTION,
         epilog=EPILOG,
@@ -197,18 +145,18 @@ def _build_parser() -> _Parser:
         "--protocol", choices=sorted(PROTOCOLS), default="rtloop",
         help=_protocol_help(),
     )
-    p.add_argument("--population", type=_int_at_least(4, "a whole number >= 4"), metavar="N",
+    p.add_argument("--population", type=int_at_least(4, "a whole number >= 4"), metavar="N",
                    help="individuals per generation (default: the protocol's)")
-    p.add_argument("--generations", type=_generations, metavar="N|N1,N2",
+    p.add_argument("--generations", type=generations, metavar="N|N1,N2",
                    help="generations per stage: one number for every stage, or N1 for the light stages "
                    "and N2 for the colour stages (default: the protocol's)")
-    p.add_argument("--f", type=_float_in(0.0, 2.0, True, "a number in (0, 2]"), metavar="F",
+    p.add_argument("--f", type=float_in(0.0, 2.0, True, "a number in (0, 2]"), metavar="F",
                    help="DE differential weight (default: the protocol's)")
-    p.add_argument("--cr", type=_float_in(0.0, 1.0, False, "a number in [0, 1]"), metavar="CR",
+    p.add_argument("--cr", type=float_in(0.0, 1.0, False, "a number in [0, 1]"), metavar="CR",
                    help="DE crossover probability (default: the protocol's)")
-    p.add_argument("--seed", type=_int_at_least(0, "a whole number >= 0"), default=0,
+    p.add_argument("--seed", type=int_at_least(0, "a whole number >= 0"), default=0,
                    help="random seed; the result is the same for any --threads (default 0)")
-    p.add_argument("--threads", type=_int_at_least(1, "a whole number >= 1"), metavar="N",
+    p.add_argument("--threads", type=int_at_least(1, "a whole number >= 1"), metavar="N",
                    help="worker threads (default: all cores)")
     p.add_argument("--response", choices=("srgb", "linear"), default="srgb",
                    help="how IMAGE's stored values relate to light: 'srgb' (default, cameras and image "
@@ -225,18 +173,21 @@ def _build_parser() -> _Parser:
     p.add_argument("--mask", type=Path, metavar="PNG",
                    help="an image of IMAGE's size (or the scene's): white where the scene models the photo, "
                    "black where it does not (another object, a reflection); black pixels are left out of the fit")
-    p.add_argument("--snapshot-every", type=_int_at_least(0, "a whole number >= 0"), default=5, metavar="N",
+    p.add_argument("--snapshot-every", type=int_at_least(0, "a whole number >= 0"), default=5, metavar="N",
                    help="render the best individual every N generations of every stage into snapshots/ "
                    "(default 5; 0 disables)")
-    p.add_argument("--final-scale", type=_int_at_least(1, "a whole number >= 1"), default=4, metavar="K",
+    p.add_argument("--final-scale", type=int_at_least(1, "a whole number >= 1"), default=4, metavar="K",
                    help="final.png is K times the scene's width and height (default 4)")
-    p.add_argument("--final-spp", type=_int_at_least(1, "a whole number >= 1"), default=16, metavar="S",
+    p.add_argument("--final-spp", type=int_at_least(1, "a whole number >= 1"), default=16, metavar="S",
                    help="samples per pixel of final.png (default 16)")
     p.add_argument("--force", action="store_true",
                    help="replace DIR if it exists and is not empty (only after the new results are complete)")
     p.add_argument("--report", action="store_true",
                    help="also write DIR/report.html, a self-contained page that shows the search (PNGs in "
                    "DIR/report/)")
+    p.add_argument("--speed-plot", type=Path, metavar="PNG",
+                   help="with --report: a speed-against-error plot to include (e.g. "
+                   "benches/results/speed_vs_error.png)")
     p.add_argument("--truth", metavar="SCENE",
                    help="the true scene (JSON, e.g. a reference scene's scene.json): print the errors of the "
                    "fitted values and draw the truth in the report")
@@ -353,46 +304,15 @@ def _check_out(out: Path, force: bool, inputs: list[Path]) -> bool:
 
 def _commit(tmp: Path, out: Path, replace: bool) -> None:
     """Move the finished results into place; an old DIR is renamed aside first and deleted last."""
-    if not replace:
-        try:
-            os.rename(tmp, out)
-        except OSError as e:
-            raise _Failure(f"{out}: cannot move the results into place ({e.strerror or e})") from None
-        return
-    aside = out.with_name(f".{out.name}.rtloop-old-{secrets.token_hex(4)}")
     try:
-        os.rename(out, aside)
-    except OSError as e:
-        raise _Failure(f"{out}: cannot move the old directory aside ({e.strerror or e})") from None
-    try:
-        os.rename(tmp, out)
-    except OSError as e:
-        os.rename(aside, out)
-        raise _Failure(f"{out}: cannot move the results into place ({e.strerror or e})") from None
-    shutil.rmtree(aside, ignore_errors=True)
-    if os.path.lexists(aside):
-        print(f"{PROG}: warning: could not delete the old results in {aside}", file=sys.stderr)
+        left = move_into_place(tmp, out, replace, "rtloop")
+    except PlaceError as e:
+        raise _Failure(f"{out}: {e}") from None
+    if left is not None:
+        print(f"{PROG}: warning: could not delete the old results in {left}", file=sys.stderr)
 
 
 # --- the run ---------------------------------------------------------------------------------------------
-
-
-def _json_safe(value: Any) -> Any:
-    """Plain JSON types; NaN and infinities become null."""
-    if isinstance(value, dict):
-        return {str(k): _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _json_safe(value.tolist())
-    if isinstance(value, (bool, np.bool_)):
-        return bool(value)
-    if isinstance(value, (int, np.integer)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        v = float(value)
-        return v if math.isfinite(v) else None
-    return value
 
 
 _SAFE_NAME = re.compile(r"[^A-Za-z0-9_+-]+")
@@ -430,6 +350,8 @@ class _Run:
                 truth_values(scene, truth)
             except rtloop.RtloopError as e:
                 raise _Failure(f"{args.truth}: does not match {args.scene}: {e}") from None
+        if args.speed_plot is not None and not args.speed_plot.is_file():
+            raise _Failure(f"--speed-plot: {args.speed_plot}: no such file")
         self.progress.message(
             f"{PROG}: fitting {len(names)} parameters of {args.scene} to {args.image} "
             f"({scene.width}x{scene.height}, {args.protocol} protocol)"
@@ -476,9 +398,7 @@ class _Run:
         }
         data = rtloop.scene_to_dict(result.scene)
         data["fit_report"] = report
-        (tmp / "result.json").write_text(
-            json.dumps(_json_safe(data), indent=2, allow_nan=False) + "\n", encoding="utf-8"
-        )
+        write_json(tmp / "result.json", data)
 
         k = args.final_scale
         self.progress.message(
@@ -492,19 +412,9 @@ class _Run:
         if args.report:
             self.progress.message("writing report.html")
             rtloop.report(result, tmp / "report.html", objective=image, truth=truth, generations=rows,
-                          speed_vs_error_png=_speed_vs_error_png())
+                          speed_plot=args.speed_plot)
             self.check_stop()
         return result
-
-
-def _speed_vs_error_png() -> Path | None:
-    """The benchmark's plot, benches/results/speed_vs_error.png of rtloop's repository: beside the package
-    when it runs from its source tree, else under the current directory (the repository root); else None."""
-    for repo in (Path(rtloop.__file__).resolve().parents[2], Path.cwd()):
-        png = repo / "benches" / "results" / "speed_vs_error.png"
-        if png.is_file():
-            return png
-    return None
 
 
 def _summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = None,
@@ -608,11 +518,14 @@ def _main(argv: list[str] | None, t0: float) -> int:
     parser = _build_parser()
     try:
         args = parser.parse_args(argv)
-    except _UsageError as e:
+    except UsageError as e:
         _error(e)
         return 2
     except SystemExit as e:  # --help
         return int(e.code or 0)
+    if args.speed_plot is not None and not args.report:
+        _error("--speed-plot: only with --report")
+        return 2
 
     proto = PROTOCOLS[args.protocol]
     # Generations shown per stage: the closed-form stage has an evaluation budget instead (see _Progress),
@@ -625,13 +538,8 @@ def _main(argv: list[str] | None, t0: float) -> int:
     tmp: Path | None = None
     try:
         replace = _check_out(out, args.force, [Path(args.scene), Path(args.image)])
-        parent = out.parent
         try:
-            parent.mkdir(parents=True, exist_ok=True)
-            tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.rtloop-tmp-", dir=parent))
-            umask = os.umask(0o022)
-            os.umask(umask)
-            os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; DIR should look like any mkdir's
+            tmp = staging_dir(out, "rtloop-tmp")
         except OSError as e:
             raise _Failure(f"{out}: cannot create the output directory ({e.strerror or e})") from None
         run = _Run(args, progress, stop)

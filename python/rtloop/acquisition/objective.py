@@ -46,7 +46,8 @@ import cv2
 import numpy as np
 from PIL import Image
 
-from .errors import AcquisitionError
+from .._srgb import decode
+from ..errors import AcquisitionError
 
 __all__ = ["RESPONSES", "load_image", "load_mask"]
 
@@ -317,7 +318,7 @@ def _lookup_table(levels: int, response: str) -> np.ndarray:
     if response == "linear":
         linear = encoded
     else:  # inverse of the sRGB transfer function (IEC 61966-2-1)
-        linear = np.where(encoded <= 0.04045, encoded / 12.92, ((encoded + 0.055) / 1.055) ** 2.4)
+        linear = decode(encoded)
     table = linear.astype(np.float32)
     table.flags.writeable = False
     return table

@@ -1,0 +1,28 @@
+"""The sRGB transfer function (IEC 61966-2-1), both ways: the one copy in Python (the Rust core has its
+own in the film). ``dtype`` keeps each caller's precision: float32 callers get float32 arithmetic."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+__all__ = ["decode", "encode", "encode8"]
+
+
+def encode(linear: Any, dtype: Any = None) -> np.ndarray:
+    """Linear values -> sRGB-encoded values in [0, 1] (clipped), computed in ``dtype`` (default: the
+    input's)."""
+    x = np.clip(np.asarray(linear, dtype=dtype), 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def encode8(linear: Any, dtype: Any = None) -> np.ndarray:
+    """8-bit sRGB code values (rounded to nearest) of linear values, encoded in ``dtype``."""
+    return np.round(encode(linear, dtype) * 255.0).astype(np.uint8)
+
+
+def decode(encoded: Any) -> np.ndarray:
+    """sRGB-encoded values in [0, 1] -> linear values, computed in the input's dtype (not clipped)."""
+    x = np.asarray(encoded)
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)

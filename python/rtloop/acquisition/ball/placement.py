@@ -1,0 +1,261 @@
+"""The sphere in the world: :func:`place_sphere` fits its centre to an outline's edge rays (resting on the
+floor or free), :func:`locate_ball` searches the floor position whose predicted outline lies on edges."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+
+from .._common import AcquisitionError, check_image
+from ..camera import PinholeCamera
+from .cone import BallSilhouette, _cone_points, _gauss_newton, _project_cam, _rays_cam
+from .edges import MIN_EDGE_POINTS, _edge_image, _edges_across, _OutlineScore, _refine
+from .search import _NO_BALL_HELP, _pattern_search, _seeds
+
+#: Least outline score (mean edge support along the predicted outline, 0..1) for a ball to be accepted.
+MIN_OUTLINE_SCORE = 0.4
+
+
+@dataclass
+class SpherePlacement:
+    """The sphere placed in the world."""
+
+    centre: np.ndarray
+    radius: float
+    resting: bool
+    rms_px: float
+    height_above_floor: float  # of the centre, in metres (= radius when resting)
+
+    def report(self) -> dict[str, Any]:
+        return {
+            "centre": [float(v) for v in self.centre],
+            "radius": self.radius,
+            "resting_on_floor": self.resting,
+            "fit_rms_px": self.rms_px,
+            "centre_height_m": self.height_above_floor,
+        }
+
+
+def _world_model(camera: PinholeCamera, radius: float, height: float | None):
+    """Residual function (params, camera-frame rays) -> angle off the outline, for a sphere whose centre
+    is (x, height, z) (``height`` given: resting) or (x, y, z)."""
+    c = camera.position
+    r_cw = camera.rotation.T
+
+    def centre_of(p: np.ndarray) -> np.ndarray:
+        return np.array([p[0], height, p[1]]) if height is not None else np.asarray(p, dtype=float)
+
+    def model(p: np.ndarray, rays: np.ndarray) -> np.ndarray:
+        v = r_cw @ (centre_of(p) - c)
+        d = float(np.linalg.norm(v))
+        if d <= radius * 1.0001:
+            return np.full(len(rays), 10.0)
+        return np.arccos(np.clip(rays @ (v / d), -1.0, 1.0)) - math.asin(radius / d)
+
+    return model, centre_of
+
+
+def _cone_of_centre(camera: PinholeCamera, centre: np.ndarray, radius: float) -> tuple[np.ndarray, float]:
+    v = camera.rotation.T @ (centre - camera.position)
+    d = float(np.linalg.norm(v))
+    return v / d, math.asin(min(1.0, radius / d))
+
+
+def place_sphere(
+    silhouette: BallSilhouette,
+    camera: PinholeCamera,
+    radius: float,
+    *,
+    resting: bool = True,
+    floor_height: float = 0.0,
+    where: str = "photo",
+) -> SpherePlacement:
+    """The sphere's centre in the world from its outline, the camera, its radius and the floor.
+
+    Args:
+        silhouette: from :func:`find_ball` or :func:`locate_ball`, found in the image ``camera``
+            describes (same size).
+        camera: the posed camera (from ``estimate_floor_pose``).
+        radius: the ball's radius in metres (measure it: circumference / 2 pi).
+        resting: the ball lies on the floor plane ``y = floor_height`` (centre ``radius`` above it);
+            False fits the centre freely in 3-D.
+
+    Raises:
+        AcquisitionError: bad radius, a photo of another size, or no solution in front of the camera.
+    """
+    _check_radius(radius)
+    if (silhouette.width, silhouette.height) != (camera.width, camera.height):
+        raise AcquisitionError(
+            f"{where}: the ball was found in a {silhouette.width}x{silhouette.height} image but the camera "
+            "is "
+            f"{camera.width}x{camera.height}; use the same (undistorted) photo for both"
+        )
+    f = camera.focal_px
+    rays = _rays_cam(silhouette.edge_points, f, camera.width, camera.height)
+    c = camera.position
+    u = camera.rotation @ silhouette.axis
+    free_guess = c + radius / math.sin(silhouette.alpha) * u
+    height = floor_height + radius
+    if resting:
+        guess = free_guess
+        if abs(u[1]) > 1e-3:
+            t = (height - c[1]) / u[1]
+            if t > radius:
+                guess = c + t * u
+        model, centre_of = _world_model(camera, radius, height)
+        p = _gauss_newton(lambda q: model(q, rays), np.array([guess[0], guess[2]]))
+    else:
+        model, centre_of = _world_model(camera, radius, None)
+        p = _gauss_newton(lambda q: model(q, rays), free_guess)
+    centre = centre_of(p)
+    if np.dot(centre - c, camera.forward) <= radius:
+        raise AcquisitionError(
+            f"{where}: the ball's fitted centre is behind the camera; check --ball-radius and the board"
+        )
+    rms = float(np.sqrt(np.mean((model(p, rays) * f) ** 2)))
+    return SpherePlacement(centre, float(radius), resting, rms, float(centre[1] - floor_height))
+
+
+def _check_radius(radius: float) -> None:
+    if not (isinstance(radius, (int, float)) and math.isfinite(radius) and radius > 0):
+        raise AcquisitionError(f"ball radius must be > 0 metres (got {radius}); give it with --ball-radius")
+
+
+def locate_ball(
+    image: np.ndarray,
+    camera: PinholeCamera,
+    radius: float,
+    *,
+    hint: tuple[float, float, float] | None = None,
+    mask: np.ndarray | None = None,
+    resting: bool = True,
+    floor_height: float = 0.0,
+    exclude: np.ndarray | None = None,
+    keep_off: tuple[float, float, float, float] | None = None,
+    where: str = "photo",
+) -> tuple[BallSilhouette, SpherePlacement]:
+    """Find the ball of known radius resting on the floor, seen by a posed camera, and place it.
+
+    Every candidate (Hough circles, or the hint, or the mask's outline) only seeds a search over the
+    ball's position on the floor: for each position the outline is predicted exactly (its size follows
+    from the distance) and scored by how well it lies on colour edges of the photo. This tells the ball
+    from its own shadow (also a crisp ellipse, but not the outline of a resting ball of this radius) and
+    from shading inside the ball. The best position is then refined by least squares on the edge
+    points along the outline. With ``resting=False`` a last fit frees the centre's height.
+
+    Args:
+        hint, mask: as for :func:`find_ball` (seed the search there instead of Hough circles).
+        exclude: a polygon (N, 2) in pixels where Hough candidates are ignored.
+        keep_off: a floor rectangle ``(x_min, x_max, z_min, z_max)`` (world metres) the ball's contact
+            point cannot be in: the board (whose pattern is full of edges).
+
+    Returns:
+        The outline (a :class:`BallSilhouette`) and the placed sphere (:class:`SpherePlacement`).
+
+    Raises:
+        AcquisitionError: no outline consistent with a resting ball of this radius was found.
+    """
+    image = check_image(image, where)
+    _check_radius(radius)
+    h, w = image.shape[:2]
+    if (w, h) != (camera.width, camera.height):
+        raise AcquisitionError(
+            f"{where}: photo is {w}x{h} but the camera was posed on a {camera.width}x{camera.height} image; "
+            "use the same (undistorted) photo for the board and the ball"
+        )
+    f = camera.focal_px
+    feat = _edge_image(image)
+    score = _OutlineScore(feat)
+    height = floor_height + radius
+    model, centre_of = _world_model(camera, radius, height)
+
+    def outline(p: np.ndarray, n: int = 120) -> np.ndarray | None:
+        centre = centre_of(p)
+        if keep_off is not None and keep_off[0] <= p[0] <= keep_off[1] and keep_off[2] <= p[1] <= keep_off[3]:
+            return None
+        if np.dot(centre - camera.position, camera.forward) <= radius * 1.01:
+            return None
+        axis, alpha = _cone_of_centre(camera, centre, radius)
+        rays = _cone_points(axis, alpha, n)
+        if np.any(rays[:, 2] <= 1e-3):
+            return None
+        return _project_cam(rays, f, w, h)
+
+    def value(p: np.ndarray, tol: float, cap: float = 1.0) -> float:
+        poly = outline(p)
+        return -1.0 if poly is None else score(poly, tol, cap)
+
+    seeds = _seeds(image, feat, hint, mask, exclude, where)
+    starts = []
+    for cx, cy, r_px, _src in seeds:
+        ray = camera.rays(np.array([[cx, cy]]))[0]
+        if abs(ray[1]) < 1e-6:
+            continue
+        t = (height - camera.position[1]) / ray[1]
+        if t <= radius:
+            continue
+        start = camera.position + t * ray
+        starts.append((np.array([start[0], start[2]]), max(r_px, 3.0), _src))
+    if not starts:
+        raise AcquisitionError(
+            f"{where}: no ball found (no candidate circle on the floor in front of the camera); "
+            f"{_NO_BALL_HELP}"
+        )
+    # Coarse screening with a wide tolerance, then a pattern search on the best few.
+    ranked = []
+    for p0, r_px, src in starts:
+        poly = outline(p0)
+        if poly is None:
+            continue
+        pred_r = math.sqrt(abs(cv2.contourArea(poly.astype(np.float32))) / math.pi)
+        ranked.append((value(p0, max(2.0, 0.25 * pred_r)), p0, pred_r, src))
+    ranked.sort(key=lambda item: -item[0])
+    best = None
+    for _, p0, pred_r, src in ranked[:4]:
+        metres_per_px = float(np.linalg.norm(centre_of(p0) - camera.position)) / f
+        p = p0
+        for tol_px, step_px in ((0.25 * pred_r, 0.25 * pred_r), (0.08 * pred_r, 0.06 * pred_r), (1.0, 0.5)):
+            tol_px = max(tol_px, 1.0)
+            p, v = _pattern_search(
+                lambda q, t=tol_px: value(q, t), p, max(step_px, 0.25) * metres_per_px, 0.1 * metres_per_px
+            )
+        # Last, uncapped: among outlines on edges everywhere, the one on the strongest (the true outline
+        # rather than shading just inside it).
+        p, _ = _pattern_search(lambda q: value(q, 1.0, 100.0), p, 0.5 * metres_per_px, 0.05 * metres_per_px)
+        if best is None or v > best[0]:
+            best = (v, p, src)
+    if best is None or best[0] < MIN_OUTLINE_SCORE:
+        raise AcquisitionError(
+            f"{where}: no ball of radius {radius:g} m resting on the floor found (best outline matched "
+            f"{0 if best is None else best[0]:.0%} of edges); check --ball-radius (metres) and "
+            f"{_NO_BALL_HELP}"
+        )
+    _, p, source = best
+    # Edge points across the found outline, then least squares on those near it (the exact fit).
+    centre = centre_of(p)
+    axis, alpha = _cone_of_centre(camera, centre, radius)
+    provisional = BallSilhouette(axis, alpha, f, w, h, np.zeros((0, 2)), 0.0, 0.0, source)
+    edges = _edges_across(feat, provisional, f)
+    chosen = np.zeros(0, int)
+    if edges is not None:
+        p, chosen = _refine(model, p, edges, f, 1.5)
+    if edges is None or len(chosen) < MIN_EDGE_POINTS:
+        raise AcquisitionError(f"{where}: the ball's outline has too few sharp edge points; {_NO_BALL_HELP}")
+    points = edges.points[chosen]
+    if resting:
+        centre = centre_of(p)
+    else:
+        free_model, free_centre = _world_model(camera, radius, None)
+        centre = free_centre(_gauss_newton(lambda q: free_model(q, edges.rays[chosen]), centre_of(p)))
+    axis, alpha = _cone_of_centre(camera, centre, radius)
+    res = (np.arccos(np.clip(edges.rays[chosen] @ axis, -1, 1)) - alpha) * f
+    rms = float(np.sqrt(np.mean(res**2)))
+    final = BallSilhouette(
+        axis, alpha, f, w, h, points, rms, len(chosen) / edges.k, source, {"outline_score": best[0]}
+    )
+    placement = SpherePlacement(centre, float(radius), resting, rms, float(centre[1] - floor_height))
+    return final, placement

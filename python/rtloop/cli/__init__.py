@@ -1,0 +1,8 @@
+"""The command lines: ``rtloop-fit`` (:mod:`.fit`), ``rtloop-acquire`` (:mod:`.acquire`) and
+``rtloop-scene`` (:mod:`.scene`), with their shared argument types in :mod:`.args`."""
+
+from __future__ import annotations
+
+from .fit import main
+
+__all__ = ["main"]

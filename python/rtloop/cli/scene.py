@@ -1,0 +1,256 @@
+"""``rtloop-scene``: a scene from a photo of a ball on a board, over :mod:`rtloop.acquisition`.
+``scene_main(argv)`` returns the exit status (0 done, 1 bad input or failed step, 2 bad command line)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shlex
+import shutil
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from .._files import move_into_place, staging_dir
+from ..acquisition._common import AcquisitionError, write_json, write_png8, write_png16_srgb
+from ..acquisition.boards import parse_board
+from ..acquisition.calibration import CameraIntrinsics
+from ..acquisition.response import load_photo
+from .acquire import DEFAULT_BOARD
+from .args import (
+    BOARD_HELP,
+    RESPONSE_HELP,
+    Parser,
+    formatter,
+    info,
+    length,
+    positive_float,
+    positive_int,
+    run_subcommands,
+    triple,
+)
+
+__all__ = ["scene_main"]
+
+SCENE_DESCRIPTION = """\
+Build an rtloop scene from a photo of a ball on the floor with a ChArUco board lying
+flat beside it, ready for 'rtloop-fit'.
+
+From PHOTO it finds the board (camera position and orientation, and the floor: the
+board's face is the plane y = 0; metres, +y up, origin at the board's centre), then the
+ball (searched as a ball of --ball-radius resting on that floor, its outline fitted to
+a fraction of a pixel), and writes the scene: camera, floor plane, sphere, a first guess
+of the light, and a "fit" section (light position and intensity, the two albedos) with
+bounds scaled to the scene.
+
+The camera: --camera (a calibration: the photo is undistorted and its principal point
+re-centred, since the scene's camera is an ideal pinhole) is best; --vfov (the vertical
+field of view of a photo without noticeable distortion) is next; with neither the focal
+length is estimated from the board (less accurate).
+
+Colour: --grey-card X,Y,W,H (a neutral card's rectangle in PHOTO) white-balances, and
+--colorchecker finds a ColorChecker Classic (needs OpenCV contrib's cv2.mcc) for a full
+colour correction; either is measured in PHOTO and applied in linear light.
+
+Put the ball beside the board, not on it (the board's pattern is full of edges, and the
+ball is searched for off the board), lit so that its outline stands out from the floor;
+if it is not found, give --ball X,Y,R or --ball-mask. The board is part of the floor in
+the photo but not in the scene; for the fit, take a second photo with the board (and
+card) removed, camera and light untouched, and pass it as --objective. The fit does not
+move the sphere (centres are not fittable): check overlay.png that it lines up.
+"""
+
+SCENE_EPILOG = """\
+files written into DIR:
+  scene.json      the scene (README format) with a "fit" section, and "meta.acquisition":
+                  the board's reprojection error, the ball's fit, the colour correction,
+                  warnings
+  objective.png   the photo to fit (--objective, else PHOTO) after colour correction and
+                  undistortion, as a 16-bit sRGB PNG (rtloop-fit reads it as it is)
+  overlay.png     PHOTO with the board's corners, outline and axes (x red, y up green,
+                  z blue), the ball's edge points (red) and fitted outline (cyan), and
+                  the ball as rtloop renders the new scene (dashed magenta): check that
+                  they line up
+  photo.png       PHOTO after the same corrections (what the geometry was measured on)
+
+example:
+  rtloop-scene scene.png --board board.json --camera camera.json --ball-radius 33.5mm \\
+      --objective scene-without-board.png --grey-card 1200,800,60,40 --out myscene
+  rtloop-fit myscene/scene.json myscene/objective.png --out myscene/fit
+
+exit status: 0 done, 1 bad input or a step failed (the message says what to do),
+2 bad command line.
+"""
+
+
+def _build_scene_parser() -> Parser:
+    p = Parser(
+        prog="rtloop-scene", description=SCENE_DESCRIPTION, epilog=SCENE_EPILOG, formatter_class=formatter()
+    )
+    p.add_argument("photo", metavar="PHOTO", help="the photo: the board flat on the floor, and the ball")
+    p.add_argument("--board", default=DEFAULT_BOARD, help=BOARD_HELP + f" (default {DEFAULT_BOARD})")
+    p.add_argument(
+        "--ball-radius",
+        type=length,
+        required=True,
+        metavar="LENGTH",
+        help="the ball's radius: metres, or with mm/cm (measure the circumference and divide by 2 pi)",
+    )
+    p.add_argument("--out", "-o", required=True, metavar="DIR", help="output directory (created)")
+    p.add_argument("--force", action="store_true", help="replace DIR if it exists and is not empty")
+    g = p.add_argument_group("camera")
+    cam = g.add_mutually_exclusive_group()
+    cam.add_argument("--camera", metavar="CAMERA.json", help="calibration from 'rtloop-acquire calibrate'")
+    cam.add_argument(
+        "--vfov",
+        type=positive_float,
+        metavar="DEG",
+        help="vertical field of view of a distortion-free photo, in degrees",
+    )
+    g = p.add_argument_group("photos")
+    g.add_argument(
+        "--objective",
+        metavar="PHOTO2",
+        help="the photo to fit, from the same camera position and settings (e.g. the board removed); "
+        "default PHOTO",
+    )
+    g.add_argument("--response", default="srgb", help=RESPONSE_HELP)
+    g.add_argument(
+        "--black-level",
+        type=float,
+        default=0.0,
+        metavar="CODE",
+        help="raw data: the code value of black (in the file's integer scale)",
+    )
+    g.add_argument(
+        "--white-level",
+        type=float,
+        metavar="CODE",
+        help="raw data: the code value of saturation (e.g. 4095 for 12-bit data in a 16-bit TIFF)",
+    )
+    g = p.add_argument_group("colour")
+    col = g.add_mutually_exclusive_group()
+    col.add_argument(
+        "--grey-card", metavar="X,Y,W,H", help="white balance from a neutral card at this rectangle of PHOTO"
+    )
+    col.add_argument(
+        "--colorchecker",
+        action="store_true",
+        help="colour correction from a ColorChecker Classic in PHOTO (OpenCV contrib's cv2.mcc)",
+    )
+    g = p.add_argument_group("ball")
+    g.add_argument(
+        "--ball",
+        type=triple,
+        metavar="X,Y,R",
+        help="where the ball is in PHOTO (centre and radius in pixels, roughly), if it is not found",
+    )
+    g.add_argument(
+        "--ball-mask", metavar="MASK.png", help="an image of PHOTO's size, white on the ball, black elsewhere"
+    )
+    g.add_argument(
+        "--ball-free",
+        action="store_true",
+        help="do not assume the ball rests on the floor: fit its centre's height too (less precise)",
+    )
+    g.add_argument("--ball-name", default="ball", help="the sphere's name in the scene (default ball)")
+    g.add_argument("--floor-name", default="floor", help="the plane's name in the scene (default floor)")
+    g = p.add_argument_group("scene")
+    g.add_argument(
+        "--width",
+        type=positive_int,
+        default=160,
+        help="the scene's working width in pixels, the height following the photo (default 160)",
+    )
+    g.add_argument(
+        "--light-range",
+        type=positive_float,
+        default=2.0,
+        metavar="FACTOR",
+        help="the light's search box, in units of the camera's distance to the ball (default 2)",
+    )
+    p.set_defaults(handler=_cmd_scene)
+    return p
+
+
+def scene_main(argv: Sequence[str] | None = None) -> int:
+    """``rtloop-scene``: build a scene JSON (and objective, overlay) from a photo. Returns the exit status."""
+    return run_subcommands(_build_scene_parser, argv, "rtloop-scene")
+
+
+def _cmd_scene(args: argparse.Namespace) -> int:
+    from ..acquisition.build import build_scene
+
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise AcquisitionError(f"{out}: exists and is not a directory")
+    if out.is_dir() and any(out.iterdir()) and not args.force:
+        raise AcquisitionError(
+            f"{out}: exists and is not empty; pass --force to replace it, or choose another --out"
+        )
+    load = {"response": args.response, "black_level": args.black_level, "white_level": args.white_level}
+    photo = load_photo(args.photo, **load)
+    objective = load_photo(args.objective, **load) if args.objective else None
+    intrinsics = CameraIntrinsics.load(args.camera) if args.camera else None
+    mask = None
+    if args.ball_mask:
+        m = load_photo(args.ball_mask, response="linear")
+        mask = m.max(axis=2) > 0.5
+    colour: Any = "colorchecker" if args.colorchecker else args.grey_card
+    acq = build_scene(
+        photo,
+        args.board,
+        args.ball_radius,
+        intrinsics=intrinsics,
+        vfov_deg=args.vfov,
+        objective=objective,
+        colour=colour,
+        ball_hint=args.ball,
+        ball_mask=mask,
+        resting=not args.ball_free,
+        width=args.width,
+        light_range=args.light_range,
+        names=(args.ball_name, args.floor_name),
+        where=args.photo,
+        objective_where=args.objective or args.photo,
+    )
+    acq.scene["meta"]["acquisition"]["inputs"] = {
+        "photo": os.path.abspath(args.photo),
+        "objective": os.path.abspath(args.objective) if args.objective else None,
+        "camera": os.path.abspath(args.camera) if args.camera else None,
+        "board": parse_board(args.board).to_dict(),
+        "response": args.response,
+    }
+    tmp = staging_dir(out, "rtloop-scene")
+    try:
+        write_json(tmp / "scene.json", acq.scene)
+        write_png16_srgb(tmp / "objective.png", acq.objective)
+        write_png16_srgb(tmp / "photo.png", acq.photo)
+        write_png8(tmp / "overlay.png", acq.overlay)
+        move_into_place(tmp, out, out.exists(), "rtloop-scene")
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    cam = acq.scene["camera"]
+    ball = acq.scene["objects"][0]
+    rep = acq.scene["meta"]["acquisition"]
+    for note in acq.warnings:
+        info(f"warning: {note}")
+    print(f"wrote {out}/scene.json, objective.png, overlay.png, photo.png")
+    print(
+        f"  camera at ({', '.join(f'{v:.3f}' for v in cam['position'])}) m, vertical field of view "
+        f"{cam['vfov_deg']:.2f} deg ({rep['camera_model']}); board reprojection "
+        f"{rep['pose']['reprojection_rms_px']:.2f} px RMS over {rep['pose']['corners']} corners"
+    )
+    print(
+        f"  ball '{ball['name']}' at ({', '.join(f'{v:.3f}' for v in ball['center'])}) m, radius "
+        f"{ball['radius']:g} m; "
+        f"outline fit {rep['ball']['rms_px']:.2f} px RMS over {rep['ball']['edge_points']} edge points"
+    )
+    print(f"  colour: {rep['colour']['source']}")
+    print("check overlay.png, then fit:")
+    print(
+        f"  rtloop-fit {shlex.quote(str(out / 'scene.json'))} {shlex.quote(str(out / 'objective.png'))} "
+        f"--out {shlex.quote(str(out / 'fit'))}"
+    )
+    return 0

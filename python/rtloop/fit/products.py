@@ -1,0 +1,169 @@
+"""The products the image determines, and their one owner: P = exposure x intensity x colour x albedo
+per object and channel, Q = intensity x specular; their bounds and their split back into scene values."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+
+from .. import _native
+from ..scene import Scene, load_scene, scene_to_dict
+
+__all__ = ["albedo_derivative", "fix_gauge", "product_bounds", "product_range", "products", "products_of", "specular_product", "specular_range",
+           "split_products", "unit_light", "unit_lobes"]
+
+
+def products_of(d: dict[str, Any]) -> dict[str, np.ndarray]:
+    """Per object of the scene dict ``d``: exposure x light intensity x light colour x albedo (float64)."""
+    light = np.asarray(d["light"]["color"], float) * float(d["light"]["intensity"]) * float(d["exposure"])
+    return {o["name"]: light * np.asarray(o["material"]["albedo"], float) for o in d["objects"]}
+
+
+def products(scene: Scene) -> dict[str, list[float]]:
+    """:func:`products_of` the scene, as lists of floats (FitResult.products)."""
+    return {name: [float(v) for v in p] for name, p in products_of(scene_to_dict(scene)).items()}
+
+
+def product_range(ilo: float, ihi: float, scale_lo: Any, scale_hi: Any, albedo_lo: Any, albedo_hi: Any
+                  ) -> tuple[Any, Any]:
+    """Bounds of P from those of the intensity, of the channel scale (exposure x colour) and the albedo."""
+    return ilo * scale_lo * albedo_lo, ihi * scale_hi * albedo_hi
+
+
+def specular_product(intensity: float, specular: float) -> float:
+    """Q = intensity x specular."""
+    return intensity * specular
+
+
+def specular_range(ilo: float, ihi: float, klo: float, khi: float) -> tuple[float, float]:
+    """Bounds of Q = intensity x specular."""
+    return ilo * klo, ihi * khi
+
+
+def unit_light(d: dict[str, Any]) -> np.ndarray:
+    """The render of scene dict ``d`` per unit product (red channel): unit light, albedo 1, no ambient, no
+    specular, exposure 1, black background. > 0 where the light reaches the surface a pixel shows."""
+    unit = {
+        **d,
+        "light": {**d["light"], "intensity": 1.0, "color": [1.0, 1.0, 1.0]},
+        "ambient": [0.0, 0.0, 0.0],
+        "exposure": 1.0,
+        "background": [0.0, 0.0, 0.0],
+        "objects": [{**o, "material": {"albedo": [1.0, 1.0, 1.0]}} for o in d["objects"]],
+        "fit": {},
+    }
+    return _native.render(Scene(json.dumps(unit, allow_nan=False)))[..., 0]
+
+
+def albedo_derivative(d: dict[str, Any], c: int, unit: np.ndarray) -> np.ndarray:
+    """d render / d albedo in channel ``c`` of scene dict ``d``: exposure x (ambient + intensity x colour x
+    the unit-light render ``unit``)."""
+    light_rgb = np.array(d["light"]["color"], float) * d["light"]["intensity"]
+    return d["exposure"] * (d["ambient"][c] + light_rgb[c] * unit)
+
+
+def unit_lobes(d: dict[str, Any], objects: set[int]) -> np.ndarray:
+    """The scene ``d`` with only the specular lobes of ``objects`` (specular 1, their shininess; every
+    albedo, the ambient light and the background 0): exactly the derivative of the render with respect
+    to those objects' specular, on their pixels."""
+    lobes = {
+        **d,
+        "ambient": [0.0, 0.0, 0.0],
+        "background": [0.0, 0.0, 0.0],
+        "objects": [{**o, "material": {"albedo": [0.0, 0.0, 0.0], "specular": 1.0 if k in objects else 0.0,
+                                       "shininess": o["material"]["shininess"]}}
+                    for k, o in enumerate(d["objects"])],
+        "fit": {},
+    }
+    return _native.render(Scene(json.dumps(lobes, allow_nan=False)))
+
+
+def product_bounds(scene: Scene) -> np.ndarray:
+    """(objects, 4, 2) bounds of the closed-form unknowns from the fit section: rows 0-2 exposure x
+    intensity x colour x albedo per channel, row 3 intensity x specular ((0, 0) for a matte object, which
+    then costs no specular work)."""
+    d = scene_to_dict(scene)
+    paths = scene.fit_paths
+    scale = np.array(d["light"]["color"], float) * d["exposure"]
+    if "light.intensity" in paths:
+        ilo, ihi = scene.bounds(["light.intensity"])[0]
+    else:
+        ilo = ihi = d["light"]["intensity"]
+    out = np.zeros((len(d["objects"]), 4, 2))
+    for k, o in enumerate(d["objects"]):
+        p = f"objects.{o['name']}.albedo"
+        b = np.array(scene.bounds([p])) if p in paths else np.repeat(np.array(o["material"]["albedo"])[:, None], 2, 1)
+        out[k, :3, 0], out[k, :3, 1] = product_range(ilo, ihi, scale, scale, b[:, 0], b[:, 1])
+        sp = f"objects.{o['name']}.specular"
+        klo, khi = scene.bounds([sp])[0] if sp in paths else (o["material"]["specular"],) * 2
+        out[k, 3] = specular_range(ilo, ihi, klo, khi)
+    return out
+
+
+def split_products(fitted: Scene, rows: list[list[float]], original: Scene) -> Scene:
+    """Write closed-form products back as albedos, speculars and an intensity.
+
+    ``rows``: per object [P_r, P_g, P_b] or [P_r, P_g, P_b, Q]. Intensity x albedo (and x specular) is all
+    the image determines; rtloop keeps the intensity at the scene's own value (the user's estimate of the
+    lamp) unless an albedo or a specular would then exceed its upper bound, in which case the light is
+    made just bright enough (the dimmest light consistent with the photo and the bounds).
+    """
+    d = scene_to_dict(fitted)
+    paths = original.fit_paths
+    scale = np.array(d["light"]["color"], float) * d["exposure"]
+    intensity = d["light"]["intensity"]
+    arr = np.asarray(rows, float)
+    P = arr[:, :3]
+    Q = arr[:, 3] if arr.shape[1] > 3 else np.zeros(len(arr))
+    if "light.intensity" in paths:
+        ilo, ihi = original.bounds(["light.intensity"])[0]
+        intensity = min(max(scene_to_dict(original)["light"]["intensity"], ilo), ihi)
+        need = intensity
+        for k, o in enumerate(d["objects"]):
+            p = f"objects.{o['name']}.albedo"
+            if p in paths:
+                hi = np.array([b[1] for b in original.bounds([p])])
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    req = np.where((hi > 0) & (scale > 0), P[k] / (scale * np.maximum(hi, 1e-300)), 0.0)
+                need = max(need, float(np.max(req)))
+            sp = f"objects.{o['name']}.specular"
+            if sp in paths and Q[k] > 0:
+                khi = original.bounds([sp])[0][1]
+                need = max(need, float(Q[k] / khi) if khi > 0 else need)
+        intensity = min(max(need, ilo), ihi)
+        d["light"]["intensity"] = intensity
+    for k, o in enumerate(d["objects"]):
+        p = f"objects.{o['name']}.albedo"
+        if p in paths:
+            lo = np.array([b[0] for b in original.bounds([p])])
+            hi = np.array([b[1] for b in original.bounds([p])])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                rho = np.where(scale > 0, P[k] / (intensity * scale), lo)
+            o["material"]["albedo"] = [float(v) for v in np.clip(np.nan_to_num(rho), lo, hi)]
+        sp = f"objects.{o['name']}.specular"
+        if sp in paths:
+            klo, khi = original.bounds([sp])[0]
+            ks = Q[k] / intensity if intensity > 0 else klo
+            o["material"]["specular"] = float(np.clip(np.nan_to_num(ks), klo, khi))
+    # Through the dict, not ``with_params``: the scene's JSON parser is not correctly rounded (1 ulp off
+    # for some values), and the fits' results depend on the values it gives.
+    return load_scene(d)
+
+
+def fix_gauge(fitted: Scene, albedo_paths: list[str], bounds_scene: Scene) -> Scene:
+    """Scale the light up (and the albedos down) until every albedo is within its original bounds."""
+    s = 1.0
+    for p in albedo_paths:
+        vals = fitted.get_params([p])
+        for v, (_, hi) in zip(vals, bounds_scene.bounds([p])):
+            if hi > 0:
+                s = max(s, v / hi)
+    if s <= 1.0:
+        return fitted
+    intensity = fitted.get_params(["light.intensity"])[0] * s
+    out = fitted.with_params([intensity], ["light.intensity"])
+    for p in albedo_paths:
+        out = out.with_params([v / s for v in fitted.get_params([p])], [p])
+    return out

@@ -1,0 +1,102 @@
+"""What a fit returns: FitResult (the fitted scene and its report), StageResult per stage, and the
+GenerationInfo a callback receives."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..scene import Scene
+
+__all__ = ["FitResult", "GenerationInfo", "StageResult"]
+
+
+@dataclass
+class GenerationInfo:
+    """What a fit's callback receives after every generation of every stage."""
+
+    stage: str
+    generation: int
+    fitness: float
+    objectives: list[float]
+    #: Values of all of the scene's fit parameters (the stage's best individual, the rest held fixed).
+    params: np.ndarray
+    evaluations: int
+
+
+@dataclass
+class StageResult:
+    name: str
+    paths: list[str]
+    param_names: list[str]
+    x: np.ndarray
+    objectives: list[float]
+    evaluations: int
+    generations: int
+    seconds: float
+    loss: str
+    pixels: int
+    #: (generation, fitness, objectives, x) of the best individual of every generation.
+    history: list[tuple[int, float, list[float], np.ndarray]] = field(default_factory=list)
+    #: For the projected loss: the closed-form products of the best individual, per object
+    #: [P_r, P_g, P_b, Q] (Q = intensity x specular, 0 for a matte object).
+    products: list[list[float]] | None = None
+    #: For the projected loss: per object, its (unmasked) pixels that the fitted light reaches.
+    lit_pixels: list[int] | None = None
+
+
+@dataclass
+class FitResult:
+    """The outcome of :func:`fit`, in the spirit of scipy's OptimizeResult."""
+
+    scene: Scene
+    #: The fitted values of all fit parameters by scalar name (e.g. ``light.position.x``).
+    x: dict[str, float]
+    stages: list[StageResult]
+    evaluations: int
+    seconds: float
+    protocol: str
+    seed: int
+    #: Per object: light intensity x light colour x albedo, the combination the image determines.
+    products: dict[str, list[float]]
+    identifiability: dict[str, Any]
+    settings: dict[str, Any]
+    success: bool = True
+    message: str = ""
+    #: Per-parameter 1-sigma uncertainty (see rtloop.uncertainty), or None when not estimated.
+    uncertainty: dict[str, Any] | None = None
+
+    @property
+    def fitness(self) -> float:
+        return float(sum(self.stages[-1].objectives)) if self.stages else float("nan")
+
+    def report(self) -> dict[str, Any]:
+        """A JSON-able summary (the ``fit_report`` of result.json)."""
+        return {
+            "protocol": self.protocol,
+            "seed": self.seed,
+            "settings": self.settings,
+            "evaluations": self.evaluations,
+            "seconds": round(self.seconds, 4),
+            "stages": [
+                {
+                    "name": s.name,
+                    "parameters": s.param_names,
+                    "loss": s.loss,
+                    "pixels": s.pixels,
+                    "fitness": float(sum(s.objectives)),
+                    "objectives": [float(v) for v in s.objectives],
+                    "evaluations": s.evaluations,
+                    "generations": s.generations,
+                    "seconds": round(s.seconds, 4),
+                }
+                for s in self.stages
+            ],
+            "fitted": self.x,
+            "products": self.products,
+            "identifiability": self.identifiability,
+            "uncertainty": self.uncertainty,
+            "message": self.message,
+        }

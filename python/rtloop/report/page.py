@@ -1,0 +1,454 @@
+"""The report page: one self-contained HTML file (every image embedded, also written beside it) and
+:func:`report`, which lays out the sections."""
+
+from __future__ import annotations
+
+import base64
+import datetime as _dt
+import html
+import math
+import os
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import _native
+from .._files import write_bytes
+from ..scene import Scene
+from .plots import (
+    GenerationRow,
+    _enlarge,
+    _image_panel,
+    _png_of_array,
+    _png_of_figure,
+    _rows_from_history,
+    _rows_given,
+    _srgb,
+    _srgb8,
+    plot_search,
+)
+from .truth import image_metrics, truth_errors
+
+__all__ = ["Report", "report"]
+
+#: About this many frames in the strip when ``strip_every`` is not given (plus the last of every stage).
+STRIP_FRAMES = 10
+#: Strip frames are enlarged (nearest neighbour, whole factors) to at least this many pixels wide.
+STRIP_MIN_WIDTH = 192
+
+
+@dataclass
+class Report:
+    """What :func:`report` wrote and showed."""
+
+    #: The HTML page.
+    path: Path
+    #: The PNGs written beside it (in the folder named after the page), in page order.
+    files: list[Path]
+    #: Error numbers of the fitted render against the objective (empty without an objective).
+    metrics: dict[str, float]
+    #: The data of every plot as drawn, read back from matplotlib: ``plots[panel][series] = (x, y)``;
+    #: series ids are parameter names (``light.position.x``), ``truth:<name>``, ``product:<object>.<c>``,
+    #: ``fitness:<stage>``. ``plots["_generation"]`` maps the x axis back to (stage, generation).
+    plots: dict[str, Any]
+    #: (stage, generation, fitness) of every frame of the strip.
+    strip: list[tuple[str, int, float]]
+    #: :func:`truth_errors` when a truth scene was given, else None.
+    truth: dict[str, Any] | None = None
+    #: Where the parameter rows came from: ``"generations"`` (given) or ``"history"`` (rebuilt).
+    source: str = "generations"
+    notes: list[str] = field(default_factory=list)
+
+
+def _strip_frames(rows: Sequence[GenerationRow], every: int | None) -> list[int]:
+    """Indices of the rows to render: every k-th generation of every stage, and each stage's last."""
+    if not rows:
+        return []
+    k = every if every and every > 0 else max(1, math.ceil(len(rows) / STRIP_FRAMES))
+    keep = []
+    for i, r in enumerate(rows):
+        last_of_stage = i == len(rows) - 1 or rows[i + 1].stage != r.stage
+        if r.generation % k == 0 or last_of_stage:
+            keep.append(i)
+    return keep
+
+
+_SAFE = re.compile(r"[^A-Za-z0-9_.+-]+")
+_OURS = re.compile(r"^(strip_\d+_.*|param_.*)\.png$")
+
+
+#: The two angles of a directional light in rtloop.uncertainty's sigma (radians).
+_ANGLE_NAMES = ("light.direction.u", "light.direction.v")
+
+
+def _fmt(v: Any, digits: int = 6) -> str:
+    if v is None:
+        return "–"
+    if isinstance(v, (bool, np.bool_)):
+        return "yes" if v else "no"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        return f"{float(v):.{digits}g}" if math.isfinite(float(v)) else str(float(v))
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return "[" + ", ".join(_fmt(x, digits) for x in v) + "]"
+    return str(v)
+
+
+_CSS = """
+:root{color-scheme:light}
+*{box-sizing:border-box}
+body{font:15px/1.45 system-ui,-apple-system,"Segoe UI",Roboto,Helvetica,Arial,sans-serif;color:#1d1d1f;
+ background:#fafafa;margin:0 auto;max-width:1280px;padding:0 14px 40px}
+h1{font-size:1.45em;margin:18px 0 4px}
+h2{font-size:1.15em;margin:28px 0 8px;padding-bottom:4px;border-bottom:1px solid #ddd}
+h3{font-size:1em;margin:16px 0 6px}
+p.sub{color:#555;margin:0 0 10px}
+img{max-width:100%;height:auto;display:block}
+.row{display:flex;flex-wrap:wrap;gap:12px;align-items:flex-start}
+figure{margin:0;background:#fff;border:1px solid #e4e4e4;border-radius:6px;padding:6px}
+.row.three>figure{flex:1 1 260px;max-width:440px}
+.row.plots>figure{flex:1 1 340px;max-width:600px}
+.row.wide>figure{flex:1 1 100%;max-width:1000px}
+.row.strip{display:grid;grid-template-columns:repeat(auto-fill,minmax(140px,1fr));gap:10px}
+.strip img{width:100%;image-rendering:pixelated}
+figcaption{font-size:.8em;color:#444;margin-top:4px;text-align:center}
+.scroll{overflow-x:auto;max-width:100%}
+table{border-collapse:collapse;font-size:.9em;background:#fff;margin:4px 0 8px}
+th,td{border:1px solid #ddd;padding:3px 8px;text-align:left;vertical-align:top}
+td.n{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}
+th{background:#f1f1f1}
+.note{background:#fff8e1;border-left:4px solid #f0b400;padding:6px 10px;margin:8px 0;font-size:.92em}
+.muted{color:#666;font-size:.88em}
+code{font-size:.92em}
+"""
+
+# After load, record on <body> how many images there are, how many decoded, and any script or load errors
+# (a headless browser's --dump-dom then shows them; tests use this).
+_CHECK = """
+(function(){
+  var errors = [];
+  window.addEventListener('error', function(e){
+    errors.push(e.message || (e.target && e.target.tagName) || 'error');
+  }, true);
+  window.addEventListener('load', function(){
+    var imgs = Array.prototype.slice.call(document.images);
+    var ok = imgs.filter(function(i){ return i.complete && i.naturalWidth > 0; }).length;
+    var b = document.body;
+    b.setAttribute('data-images', String(imgs.length));
+    b.setAttribute('data-images-ok', String(ok));
+    b.setAttribute('data-errors', String(errors.length));
+    b.setAttribute('data-loaded', '1');
+  });
+})();
+"""
+
+
+class _Page:
+    def __init__(self, folder: Path, folder_ref: str):
+        self.parts: list[str] = []
+        self.folder = folder
+        self.folder_ref = folder_ref
+        self.files: list[Path] = []
+
+    def add(self, text: str) -> None:
+        self.parts.append(text)
+
+    def png(self, name: str, data: bytes, alt: str, caption: str | None = None) -> str:
+        path = self.folder / name
+        write_bytes(path, data)
+        self.files.append(path)
+        uri = "data:image/png;base64," + base64.b64encode(data).decode("ascii")
+        cap = f"<figcaption>{caption}</figcaption>" if caption else ""
+        return (
+            f'<figure><img src="{uri}" alt="{html.escape(alt)}" '
+            f'title="{html.escape(self.folder_ref + "/" + name)}">{cap}</figure>'
+        )
+
+
+def _table(header: Sequence[str], body: Iterable[Sequence[Any]], numeric_from: int = 1) -> str:
+    out = ['<div class="scroll"><table><thead><tr>']
+    out += [f"<th>{html.escape(h)}</th>" for h in header]
+    out.append("</tr></thead><tbody>")
+    for row in body:
+        out.append("<tr>")
+        for i, cell in enumerate(row):
+            cls = ' class="n"' if i >= numeric_from and not isinstance(cell, str) else ""
+            text = cell if isinstance(cell, str) else _fmt(cell)
+            out.append(f"<td{cls}>{html.escape(text)}</td>")
+        out.append("</tr>")
+    out.append("</tbody></table></div>")
+    return "".join(out)
+
+
+def report(
+    result: Any,
+    path: str | os.PathLike[str],
+    *,
+    objective: np.ndarray | str | os.PathLike[str] | None = None,
+    truth: Any = None,
+    generations: Iterable[Any] | None = None,
+    speed_plot: str | os.PathLike[str] | None = None,
+    strip_every: int | None = None,
+    title: str | None = None,
+    speed_vs_error_png: str | os.PathLike[str] | None = None,
+) -> Report:
+    """Write the fit report of ``result`` (a :class:`FitResult`) to the HTML page ``path``.
+
+    ``objective``: the photo the fit saw (linear float (H, W, 3) at the scene's size, or an image path,
+    loaded with :func:`rtloop.load_image`) for the objective / fitted / difference panels and the error
+    numbers; without it only the fitted render is shown. ``truth``: the true scene (path, dict or Scene)
+    drawn dashed in the plots and compared in the tables. ``generations``: the best individual of every
+    generation with all fit parameters, e.g. the ``GenerationInfo`` objects that ``rtloop.fit(...,
+    callback=rows.append)`` collects, or (stage, generation[, fitness], params) tuples; without it they
+    are rebuilt from ``result.stages[i].history`` (exact for the searched parameters only, see the page).
+    ``speed_plot``: a PNG to include as the speed-against-error plot (e.g. the benchmark's
+    benches/results/speed_vs_error.png; skipped if the file does not exist; ``speed_vs_error_png`` is its
+    older name). Nothing else is read from outside ``result``, ``objective`` and ``truth``.
+    ``strip_every``: render every k-th generation in the strip (default: about ten frames).
+
+    The PNGs go into a folder named after the page (``report.html`` -> ``report/``) beside it; they are
+    also embedded in the page, which needs nothing else to display. Returns a :class:`Report`.
+    """
+    from matplotlib.figure import Figure  # noqa: F401  (fail early, before writing anything)
+
+    page_path = Path(path)
+    folder = page_path.with_name(page_path.stem if page_path.suffix else page_path.name + "_files")
+    folder.mkdir(parents=True, exist_ok=True)
+    page = _Page(folder, folder.name)
+    scene: Scene = result.scene
+    names = scene.param_names()
+    ident = result.identifiability or {}
+
+    true_vals = None
+    terr = None
+    if truth is not None:
+        terr = truth_errors(result, truth)
+        true_vals = np.array([terr["values"][n] for n in names], float)
+
+    if generations is not None:
+        rows = _rows_given(result, generations, len(names))
+        source, notes = "generations", []
+    else:
+        rows, notes = _rows_from_history(result)
+        source = "history"
+
+    heading = title or "rtloop fit report"
+    stamp = _dt.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")
+    page.add(
+        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+        '<meta name="viewport" content="width=device-width, initial-scale=1">'
+        f"<title>{html.escape(heading)}</title><style>{_CSS}</style><script>{_CHECK}</script></head><body>"
+        f"<h1>{html.escape(heading)}</h1>"
+        f'<p class="sub">{html.escape(result.protocol)} protocol, method '
+        f"{html.escape(str(result.settings.get('method', '?')))}, seed {result.seed}, "
+        f"{result.evaluations} evaluations in {result.seconds:.2f} s · {scene.width}×{scene.height} · "
+        f"{html.escape(stamp)}</p>"
+    )
+
+    metrics = _objective_section(page, scene, objective)
+    strip = _strip_section(page, scene, rows, strip_every, notes)
+    plots = _plots_section(page, scene, rows, true_vals, terr, ident)
+    _values_section(page, scene, terr)
+    _fit_report_section(page, result, terr, ident)
+    _speed_section(page, speed_plot if speed_plot is not None else speed_vs_error_png)
+
+    page.add(f'<p class="muted">rtloop {html.escape(_native.__version__)} · images also in '
+             f"<code>{html.escape(folder.name)}/</code></p></body></html>\n")
+
+    written = {p.name for p in page.files}
+    for old in folder.iterdir():
+        if old.name not in written and _OURS.match(old.name) and old.is_file():
+            old.unlink(missing_ok=True)
+    write_bytes(page_path, "".join(page.parts).encode("utf-8"))
+    return Report(path=page_path, files=page.files, metrics=metrics, plots=plots, strip=strip, truth=terr,
+                  source=source, notes=notes)
+
+
+def _objective_section(page: _Page, scene: Scene, objective: Any) -> dict[str, float]:
+    """The objective, the fitted render and their difference, with the error numbers (returned)."""
+    metrics: dict[str, float] = {}
+    fitted_img = np.asarray(_native.render(scene), np.float64)
+    panels = []
+    if objective is not None:
+        if isinstance(objective, (str, os.PathLike)):
+            from ..acquisition.objective import load_image
+
+            objective = load_image(objective, scene)
+        obj = np.asarray(objective, np.float64)
+        if obj.shape != fitted_img.shape:
+            raise ValueError(f"objective: shape {obj.shape} does not match the scene's {fitted_img.shape}")
+        metrics = image_metrics(fitted_img, obj)
+        diff = (np.minimum(fitted_img, 1.0) - obj).mean(axis=2)
+        vmax = max(float(np.max(np.abs(diff))), 1e-6)
+        panels.append(page.png("objective.png", _png_of_figure(_image_panel("objective (photo)", _srgb(obj))),
+                               "the objective"))
+        panels.append(page.png("fitted.png", _png_of_figure(_image_panel("fitted render", _srgb(fitted_img))),
+                               "the fitted render"))
+        panels.append(page.png(
+            "difference.png",
+            _png_of_figure(_image_panel("render − objective (linear, mean of RGB)", diff, diverging=True,
+                                        vmax=vmax)),
+            "signed difference, fitted render minus objective",
+            "red: render brighter, blue: render darker; symmetric scale",
+        ))
+    else:
+        panels.append(page.png("fitted.png", _png_of_figure(_image_panel("fitted render", _srgb(fitted_img))),
+                               "the fitted render"))
+    page.add("<h2>Objective, fit and difference</h2>")
+    page.add('<div class="row three">' + "".join(panels) + "</div>")
+    if metrics:
+        page.add(_table(
+            ["error (fitted render vs objective)", "value"],
+            [["L1, mean |difference| (linear)", metrics["l1_linear"]],
+             ["RMSE (linear)", metrics["rmse_linear"]],
+             ["PSNR (sRGB, dB)", metrics["psnr_srgb_db"]],
+             ["sum |difference| over the image (linear, the fit's L1 loss)", metrics["sum_abs_linear"]]],
+        ))
+    else:
+        page.add('<p class="muted">No objective given: no difference image or error numbers.</p>')
+    return metrics
+
+
+def _strip_section(page: _Page, scene: Scene, rows: Sequence[GenerationRow], strip_every: int | None,
+                   notes: list[str]) -> list[tuple[str, int, float]]:
+    """The best render through the stages; (stage, generation, fitness) of each frame."""
+    strip: list[tuple[str, int, float]] = []
+    frames = []
+    for n, i in enumerate(_strip_frames(rows, strip_every)):
+        r = rows[i]
+        shot = _native.render(scene.with_params([float(v) for v in r.params]))
+        name = f"strip_{n:02d}_{_SAFE.sub('_', r.stage)}_g{r.generation:04d}.png"
+        cap = f"{html.escape(r.stage)} · gen {r.generation}<br>fitness {_fmt(r.fitness, 4)}"
+        frames.append(page.png(name, _png_of_array(_enlarge(_srgb8(shot), STRIP_MIN_WIDTH)),
+                               f"best render, {r.stage} generation {r.generation}", cap))
+        strip.append((r.stage, r.generation, r.fitness))
+    page.add("<h2>The search: best render through the stages</h2>")
+    if frames:
+        page.add('<div class="row strip">' + "".join(frames) + "</div>")
+    else:
+        page.add('<p class="muted">No generations recorded.</p>')
+    for note in notes:
+        page.add(f'<p class="muted">{html.escape(note)}</p>')
+    return strip
+
+
+def _plots_section(page: _Page, scene: Scene, rows: Sequence[GenerationRow], true_vals: np.ndarray | None,
+                   terr: dict[str, Any] | None, ident: dict[str, Any]) -> dict[str, Any]:
+    """The parameters and the fitness against generation; the plotted data read back."""
+    plots: dict[str, Any] = {}
+    if rows:
+        figs, plots = plot_search(
+            scene, rows, true_vals, terr["products_true"] if terr else None,
+            products=bool(ident.get("degenerate")),
+        )
+        imgs = [page.png(f"param_{_SAFE.sub('_', pid)}.png" if pid != "fitness" else "fitness.png",
+                         _png_of_figure(fig), f"plot: {pid}") for pid, fig in figs]
+        page.add("<h2>Parameters and fitness against generation</h2>")
+        if true_vals is not None:
+            page.add('<p class="muted">Dashed: the true values.</p>')
+        page.add('<div class="row plots">' + "".join(imgs) + "</div>")
+    return plots
+
+
+def _values_section(page: _Page, scene: Scene, terr: dict[str, Any] | None) -> None:
+    """The fitted values with their bounds (and the truth and the errors when known)."""
+    names = scene.param_names()
+    fitted = np.asarray(scene.get_params(scene.fit_paths), float)
+    bounds = scene.bounds()
+    page.add("<h2>Fitted values</h2>")
+    if terr is not None:
+        body = [[n, fitted[j], terr["values"][n], terr["errors"][n], f"{_fmt(lo, 4)} … {_fmt(hi, 4)}"]
+                for j, (n, (lo, hi)) in enumerate(zip(names, bounds))]
+        page.add(_table(["parameter", "fitted", "truth", "error", "bounds"], body))
+        errs = []
+        if "light_position_m" in terr:
+            errs.append(["light position error (m)", terr["light_position_m"]])
+        for obj, rel in terr["product_relative"].items():
+            errs.append([f"{obj}: product relative error", rel])
+        if errs:
+            page.add(_table(["compared with the truth", "value"], errs))
+    else:
+        body = [[n, fitted[j], f"{_fmt(lo, 4)} … {_fmt(hi, 4)}"]
+                for j, (n, (lo, hi)) in enumerate(zip(names, bounds))]
+        page.add(_table(["parameter", "fitted", "bounds"], body))
+
+
+def _fit_report_section(page: _Page, result: Any, terr: dict[str, Any] | None, ident: dict[str, Any]) -> None:
+    """The fit report: settings, stages, identifiability, products, uncertainty."""
+    rep = result.report()
+    st = rep.get("settings", {})
+    page.add("<h2>Fit report</h2>")
+    info = [
+        ["protocol", str(rep.get("protocol"))],
+        ["method", str(st.get("method", "?"))],
+        ["seed", str(rep.get("seed"))],
+        ["population", _fmt(st.get("population"))],
+        ["generations (light stages, colour stages)", _fmt(st.get("generations"))],
+        ["F, CR", f"{_fmt(st.get('f'))}, {_fmt(st.get('cr'))}"],
+        ["render clipped to 1", _fmt(st.get("clip"))],
+        ["threads", "all cores" if st.get("threads") is None else _fmt(st.get("threads"))],
+        ["evaluations", _fmt(rep.get("evaluations"))],
+        ["time (s)", _fmt(rep.get("seconds"), 4)],
+    ]
+    if st.get("projection_unavailable"):
+        info.append(["closed-form method not used because", str(st["projection_unavailable"])])
+    if rep.get("message"):
+        info.append(["message", str(rep["message"])])
+    page.add(_table(["setting", "value"], info))
+    page.add("<h3>Stages</h3>")
+    page.add(_table(
+        ["stage", "parameters", "loss", "pixels", "generations", "evaluations", "seconds", "fitness"],
+        [[s["name"], ", ".join(s["parameters"]), s["loss"], s["pixels"] or "all", s["generations"],
+          s["evaluations"], s["seconds"], s["fitness"]] for s in rep.get("stages", [])],
+        numeric_from=3,
+    ))
+    page.add("<h3>Identifiability</h3>")
+    if ident.get("degenerate"):
+        if ident.get("note"):
+            page.add(f'<div class="note">{html.escape(str(ident["note"]))}</div>')
+        if ident.get("determined"):
+            page.add('<p class="muted">Determined: ' + ", ".join(
+                f"<code>{html.escape(str(d))}</code>" for d in ident["determined"]) + "</p>")
+    else:
+        page.add('<p class="muted">Every fitted parameter is determined by the image separately.</p>')
+    prods = rep.get("products") or {}
+    if prods:
+        page.add("<h3>Products (exposure × intensity × light colour × albedo), R, G, B</h3>")
+        if terr is not None:
+            body = [[obj, _fmt(p), _fmt(terr["products_true"].get(obj)), terr["product_relative"].get(obj)]
+                    for obj, p in prods.items()]
+            page.add(_table(["object", "fitted", "truth", "relative error"], body, numeric_from=3))
+        else:
+            body = [[obj, _fmt(p)] for obj, p in prods.items()]
+            page.add(_table(["object", "fitted"], body, numeric_from=2))
+    uncertainty = getattr(result, "uncertainty", None) or rep.get("uncertainty")
+    if uncertainty:
+        page.add("<h3>Uncertainty (1 sigma, Gauss-Newton at the optimum, from the residual)</h3>")
+        sigma = uncertainty.get("sigma", uncertainty) if isinstance(uncertainty, dict) else {}
+        body = [[f"{k} (rad)" if str(k) in _ANGLE_NAMES else str(k), "not determined" if v is None else _fmt(v)]
+                for k, v in sigma.items()]
+        cone = uncertainty.get("light_direction") if isinstance(uncertainty, dict) else None
+        if isinstance(cone, dict):  # a directional light: its two angles (radians) as one cone, in degrees
+            line = ["light direction (angle, degrees)", "not determined"]
+            if cone.get("angle_deg") is not None and cone.get("rms_angle_deg") is not None:
+                line[1] = (f"{_fmt(cone['angle_deg'], 3)}° along the worse axis, "
+                           f"{_fmt(cone['rms_angle_deg'], 3)}° rms")
+            after = [i for i, row in enumerate(body) if row[0].startswith("light.direction.")]
+            body.insert(after[-1] + 1 if after else len(body), line)
+        page.add(_table(["parameter", "sigma"], body))
+        for w in (uncertainty.get("warnings", []) if isinstance(uncertainty, dict) else []):
+            page.add(f"<p class='note'>{html.escape(str(w))}</p>")
+
+
+def _speed_section(page: _Page, speed_plot: str | os.PathLike[str] | None) -> None:
+    """The speed-against-error plot, only when the caller gave one."""
+    if speed_plot is not None and Path(speed_plot).is_file():
+        data = Path(speed_plot).read_bytes()
+        page.add("<h2>Speed against error (benchmark)</h2>")
+        fig_html = page.png("speed_vs_error.png", data, "speed against error")
+        page.add('<div class="row wide">' + fig_html + "</div>")

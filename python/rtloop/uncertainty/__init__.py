@@ -1,0 +1,332 @@
+"""Per-parameter uncertainty of a fit: the Gauss-Newton covariance at the optimum, scaled by the residual.
+
+    u = estimate_uncertainty(result, photo)
+    u["sigma"]["light.position.x"]      # one standard deviation, metres
+    u["sigma"]["products.ball.r"]       # exposure x intensity x colour x albedo, where only products count
+
+The Jacobian comes from central differences of rtloop's renderer (exact columns for albedos and
+speculars); parameters no used pixel fixes get None. The parameters are chosen in :mod:`.space`, the
+pixels in :mod:`.pixels`, the decomposition is :mod:`.linalg`'s. See the README.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .. import _native
+from ..errors import RtloopError
+from ..fit.products import albedo_derivative, unit_lobes
+from ..scene import Scene, load_scene, scene_to_dict
+from .linalg import _svd_scaled
+from .pixels import UsedPixels, used_pixels
+from .space import _products_blocker, _products_space, _scene_space, _Space
+
+__all__ = ["estimate_uncertainty"]
+
+#: Default finite-difference step: this fraction of each parameter's scale (its bound range; 1 rad for an angle).
+STEP_FRACTION = 1e-3
+#: Singular values below this fraction of the largest (unit-norm columns) count as zero.
+RCOND = 1e-4
+#: A parameter whose component in a null singular vector exceeds this is reported as not determined.
+NULL_COMPONENT = 1e-3
+#: Albedo and specular columns from the exact derivative rather than finite differences (False: render
+#: them, as a check).
+EXACT_ALBEDO = True
+
+
+def estimate_uncertainty(
+    result: Any,
+    image: np.ndarray,
+    *,
+    clip: bool = True,
+    step: float | dict[str, float] | None = None,
+    params: str = "auto",
+    mask: np.ndarray | None = None,
+) -> dict[str, Any]:
+    """Per-parameter standard deviations and correlations of a fit (Gauss-Newton at the optimum).
+
+    ``result``: a :class:`rtloop.FitResult` (or a Scene at the optimum with its ``fit`` section).
+    ``image``: the objective the fit saw, linear float (H, W, 3) at the scene's size. ``clip`` compares
+    min(render, 1) with it, as the fit does. ``step``: finite-difference step as a fraction of each
+    parameter's scale (its bound range, 1 rad for a direction angle; default 1e-3), or
+    ``{name: absolute step}`` for some parameters. ``params``: ``"auto"`` (products where the scene
+    determines only products, else the scene's fit parameters), ``"products"`` or ``"scene"``.
+
+    Returns a JSON-able dict: ``method`` ("gauss-newton"), ``names``, ``values`` (the parameters at the
+    optimum; 0 for the direction angles), ``sigma`` ({name: float or None}), ``correlation`` (rows and
+    columns in ``names`` order, None where a parameter is not determined), ``residual_rms``, ``pixels``
+    (used), ``excluded`` (saturated / silhouette / shadow-edge / clip-kink pixel counts, and saturated
+    channels left out of pixels otherwise used), ``dof``,
+    ``condition`` (of the column-scaled Jacobian over the determined parameters), ``parametrization``,
+    ``step`` and ``warnings``; for a directional light also ``light_direction`` (the frame u, v and two
+    cone angles in degrees).
+    """
+    scene: Scene = result.scene if hasattr(result, "scene") else load_scene(result)
+    ident = getattr(result, "identifiability", None)
+    target = np.asarray(image, dtype=np.float64)
+    if target.shape != (scene.height, scene.width, 3):
+        raise RtloopError(
+            f"image: shape {target.shape} does not match the scene's ({scene.height}, {scene.width}, 3)"
+        )
+    if not np.isfinite(target).all():
+        raise RtloopError("image: contains NaN or infinite values")
+    if params not in ("auto", "products", "scene"):
+        raise RtloopError(f"params: must be 'auto', 'products' or 'scene' (got {params!r})")
+    if not scene.fit_paths:
+        raise RtloopError("fit: the scene's fit section names no free parameters")
+
+    d = scene_to_dict(scene)
+    why_not = _products_blocker(scene, d)
+    if params == "products" and why_not:
+        raise RtloopError(f"params: products do not describe this scene ({why_not})")
+    degenerate = bool(ident["degenerate"]) if ident is not None else why_not is None
+    use_products = params == "products" or (params == "auto" and why_not is None and degenerate)
+    space, wd = _products_space(scene, d) if use_products else _scene_space(scene, d)
+    names = space.names
+    warnings: list[str] = []
+    px = used_pixels(space.work, wd, target, mask)
+    steps = _steps(names, space.scale, step)
+    Jt, f0, kink = _jacobian(space, wd, px, steps, clip, warnings)
+    r0 = np.subtract(f0, np.take(target.reshape(-1, 3), px.idx, axis=0).ravel(), dtype=np.float64)
+    n_kink = int(kink.sum())
+    drop = px.sat_u | kink[:, None]  # residuals left out
+    if drop.any():  # zero rows: the same JᵀJ, QR and |r|² as without them
+        rows = drop.ravel()
+        Jt[:, rows] = 0.0
+        r0[rows] = 0.0
+    excluded = {
+        "saturated": int(px.saturated.sum()),
+        "saturated_channels": int(px.sat_u[~kink].sum()),
+        "silhouette": int((px.silhouette & ~px.saturated).sum()),
+        "shadow_edge": int((px.shadow_edge & ~px.saturated).sum()),
+        "clip_kink": n_kink,
+    }
+    n_pix = px.idx.size - n_kink
+    n_res = 3 * n_pix - excluded["saturated_channels"]
+    rr = float(np.einsum("i,i->", r0, r0))  # not r0 @ r0: a threaded BLAS dot waits on the render's threads
+    fit = _covariance(Jt, space, rr, n_res, warnings)
+    dof = n_res - fit.rank
+    rms = float(np.sqrt(rr / n_res)) if n_res else float("nan")
+    if rms < 1e-6:
+        warnings.append(
+            f"residual rms {rms:.1e}: the image is reproduced to float32 rounding (a noise-free render?), so "
+            "sigma reflects rounding only; the optimiser's own scatter (refit with other seeds) is larger"
+        )
+    out = {
+        "method": "gauss-newton",
+        "parametrization": "products" if use_products else "scene",
+        "names": names,
+        "values": [float(v) for v in space.theta0],
+        "sigma": fit.sigma,
+        "correlation": fit.corr,
+        "residual_rms": rms,
+        "pixels": n_pix,
+        "excluded": excluded,
+        "dof": int(dof),
+        "condition": fit.condition,
+        "step": [float(h) for h in steps],
+        "warnings": warnings,
+    }
+    if space.direction is not None:
+        out["light_direction"] = _direction_cone(space, fit)
+    return out
+
+
+def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarray, clip: bool,
+              warnings: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The Jacobian's transpose over the used pixels' channels, the render there at the optimum (flat,
+    min(render, 1) with ``clip``) and which used pixels sit on the clip's kink.
+
+    Central differences (one-sided where a step would cross a bound). With ``clip``, a pixel whose render
+    crosses 1 inside a step in a channel that is not saturated sits on the clip's kink and is left out.
+    The image is linear in an albedo and in a specular: their columns are the exact derivatives (the
+    unit-light render, scaled; the lobe alone), and a pixel is on the kink where that line crosses 1.
+    """
+    work, paths, names, theta0, idx = space.work, space.paths, space.names, space.theta0, px.idx
+
+    def raw(theta: np.ndarray) -> np.ndarray:
+        return _native.render(work.with_params(space.native(theta), paths))
+
+    n = idx.size
+    free_u = ~px.sat_u
+    raw0_img = raw(theta0)
+    raw0 = np.take(raw0_img.reshape(-1, 3), idx, axis=0)
+    clipped0 = raw0 >= 1.0
+    P = len(names)
+    kink = np.zeros(n, dtype=bool)
+    Jt = np.zeros((P, 3 * n))  # the Jacobian's transpose: one contiguous row per parameter
+
+    def clipped(img: np.ndarray) -> np.ndarray:
+        """The used pixels of ``img`` (float32, flat), min(img, 1) with ``clip``, noting kink pixels."""
+        g = np.take(img.reshape(-1, 3), idx, axis=0)
+        if clip:
+            cross = (g >= 1.0) != clipped0
+            if cross.any():
+                kink[(cross & free_u).any(axis=1)] = True
+            g = np.minimum(g, np.float32(1.0))
+        return g.ravel()
+
+    f0 = clipped(raw0_img)
+    ids_u = np.take(px.ids.ravel(), idx)
+    unit_u = np.take(px.unit.ravel(), idx).astype(np.float64)
+    lobe_u = None
+    if EXACT_ALBEDO and space.specular:
+        lobe_u = np.take(unit_lobes(wd, set(space.specular.values())).reshape(-1, 3), idx, axis=0).astype(np.float64)
+    pixels_of: dict[int, tuple[np.ndarray, ...]] = {}
+    for k in range(P):
+        h = steps[k]
+        up_ok, down_ok = theta0[k] + h <= space.hi[k], theta0[k] - h >= space.lo[k]
+        tp, tm = theta0.copy(), theta0.copy()
+        if up_ok and down_ok or not (up_ok or down_ok):
+            tp[k] += h
+            tm[k] -= h
+            denom = 2 * h
+        elif up_ok:
+            tp[k] += h
+            denom = h
+        else:
+            tm[k] -= h
+            denom = h
+        if EXACT_ALBEDO and (k in space.albedo or k in space.specular):
+            if k in space.albedo:
+                o, c = space.albedo[k]
+                chans = slice(c, c + 1)
+            else:
+                o, chans = space.specular[k], slice(0, 3)
+            if o not in pixels_of:  # the object's used pixels, their render and clip state at the optimum
+                on = np.flatnonzero(ids_u == o)
+                pixels_of[o] = (on, raw0[on].astype(np.float64), clipped0[on], free_u[on])
+            on, base, was, free = pixels_of[o]
+            base, was, free = base[:, chans], was[:, chans], free[:, chans]  # views
+            if k in space.albedo:
+                slope = albedo_derivative(wd, c, unit_u[on])[:, None]
+            else:  # d render / d specular: the lobe alone (albedo 0, specular 1)
+                slope = lobe_u[on]
+            slope = slope * space.factor[k]  # per unit of the parameter
+            moved = [t - theta0[k] for t in (tp[k], tm[k]) if t != theta0[k]]
+            if clip:
+                for dt in moved:
+                    hit = ((base + dt * slope >= 1.0) != was) & free
+                    kink[on[hit[:, 0] if hit.shape[1] == 1 else hit.any(axis=1)]] = True
+                slope = np.where(was, 0.0, slope)  # clipped at the optimum and on both sides: flat
+            if moved:
+                Jt[k].reshape(-1, 3)[on, chans] = slope
+        else:
+            fp = clipped(raw(tp)) if tp[k] != theta0[k] else f0
+            fm = clipped(raw(tm)) if tm[k] != theta0[k] else f0
+            np.subtract(fp, fm, out=Jt[k], dtype=np.float64)  # float32 values, exact difference in float64
+            Jt[k] /= denom
+        if theta0[k] <= space.lo[k] or theta0[k] >= space.hi[k]:
+            warnings.append(
+                f"{names[k]}: at its bound ({theta0[k]:.6g}); the Gauss-Newton sigma assumes an interior optimum"
+            )
+    return Jt, f0, kink
+
+
+@dataclass
+class _Covariance:
+    """The covariance of the determined parameters and what follows from it."""
+
+    sigma: dict[str, float | None]
+    corr: list[list[float | None]]
+    condition: float | None
+    rank: int
+    cov: np.ndarray | None  # over the parameters idx_p
+    determined: np.ndarray
+    idx_p: np.ndarray
+
+
+def _covariance(Jt: np.ndarray, space: _Space, rr: float, n_res: int, warnings: list[str]) -> _Covariance:
+    """s² (JᵀJ)⁺ from the column-scaled decomposition; parameters no used pixel responds to, or in a
+    numerically zero singular direction, are not determined (sigma None)."""
+    names = space.names
+    P = len(names)
+    determined = np.ones(P, dtype=bool)
+    gram = Jt @ Jt.T
+    col = np.sqrt(np.diag(gram))
+    finite = np.isfinite(col)  # a column with a NaN or an infinity has one on the diagonal
+    effect = np.where(finite, col * space.scale, 0.0)
+    big = effect.max() if P else 0.0
+    zero = ~finite | (col == 0) | (effect <= 1e-9 * big)
+    if zero.any():
+        determined[zero] = False
+        warnings.append(
+            f"{', '.join(names[k] for k in np.flatnonzero(zero))}: not determined: no pixel used in the fit "
+            "changes with it (an object no pixel shows, one the light does not reach, a term the scene does "
+            "not use)"
+        )
+
+    # Null directions among the rest: columns scaled to unit norm, SVD. A parameter with a component in a
+    # numerically zero singular direction is not determined; the others get the pseudo-inverse's
+    # covariance, which leaves the undetermined combination free (their sigma is marginal over it, not
+    # conditional on holding the undetermined parameters at their fitted values).
+    idx_p = np.flatnonzero(determined)
+    sigma: dict[str, float | None] = {name: None for name in names}
+    corr: list[list[float | None]] = [[None] * P for _ in range(P)]
+    condition = None
+    rank = 0
+    cov = None
+    if idx_p.size:
+        s, vt = _svd_scaled(Jt, idx_p, gram[np.ix_(idx_p, idx_p)], col[idx_p])
+        null = s < RCOND * s[0]
+        rank = int((~null).sum())
+        condition = float(s[0] / s[~null].min())
+        if null.any():
+            involved = (np.abs(vt[null]) > NULL_COMPONENT).any(axis=0)
+            group = [names[i] for i in idx_p[involved]]
+            warnings.append(
+                f"{', '.join(group)}: not determined: the image fixes only a combination of them "
+                f"(singular value {s[null].min() / s[0]:.1e} of the largest)"
+            )
+            determined[idx_p[involved]] = False
+        if n_res - rank <= 0:
+            warnings.append(f"only {n_res} residuals for {rank} parameters: no uncertainty can be estimated")
+            determined[:] = False
+        else:
+            s2 = rr / (n_res - rank)
+            # (JsᵀJs)⁺ = V S⁻² Vᵀ over the non-zero singular values: no explicit normal-equation inverse.
+            v = vt[~null]
+            cov_scaled = (v.T / s[~null] ** 2) @ v
+            cov = s2 * cov_scaled / np.outer(col[idx_p], col[idx_p])
+            sd = np.sqrt(np.diag(cov))
+            # Correlations from the scaled covariance: independent of s2 (defined for a perfect fit too).
+            dg = np.sqrt(np.diag(cov_scaled))
+            r = np.clip(cov_scaled / np.outer(dg, dg), -1.0, 1.0).tolist()
+            keep = np.flatnonzero(determined[idx_p]).tolist()
+            for a in keep:
+                sigma[names[idx_p[a]]] = float(sd[a])
+                for b in keep:
+                    corr[idx_p[a]][idx_p[b]] = r[a][b]
+    return _Covariance(sigma, corr, condition, rank, cov, determined, idx_p)
+
+
+def _direction_cone(space: _Space, fit: _Covariance) -> dict[str, Any]:
+    """A directional light's frame and its two angles' sigma as cone angles in degrees (None where an
+    angle is not determined)."""
+    k, dvec, u, v = space.direction
+    block: dict[str, Any] = {"direction": dvec.tolist(), "u": u.tolist(), "v": v.tolist(),
+                             "angle_deg": None, "rms_angle_deg": None}
+    if fit.cov is not None and fit.determined[k] and fit.determined[k + 1]:
+        at = [int(np.flatnonzero(fit.idx_p == k)[0]), int(np.flatnonzero(fit.idx_p == k + 1)[0])]
+        c2 = fit.cov[np.ix_(at, at)]
+        block["angle_deg"] = float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(c2)[-1], 0.0))))
+        block["rms_angle_deg"] = float(np.degrees(np.sqrt(max(np.trace(c2), 0.0))))
+    return block
+
+def _steps(names: list[str], scale: np.ndarray, step: float | dict[str, float] | None) -> np.ndarray:
+    if isinstance(step, dict):
+        unknown = [n for n in step if n not in names]
+        if unknown:
+            raise RtloopError(f"step: unknown parameter {unknown[0]!r} (parameters are: {', '.join(names)})")
+        out = STEP_FRACTION * scale
+        for k, n in enumerate(names):
+            if n in step:
+                out[k] = float(step[n])
+    else:
+        out = (STEP_FRACTION if step is None else float(step)) * scale
+    if not (np.isfinite(out).all() and (out > 0).all()):
+        raise RtloopError("step: every finite-difference step must be a positive number")
+    return out
