@@ -302,11 +302,21 @@ impl<E: Encoding> Terms<'_, E> {
             }
             i += LANES;
         }
-        for (j, s) in (full..n).enumerate() {
-            let (es, l) = (e[s], j % LANES);
-            s0[l] += f(enc.any((a[0] + es * k[0]).min(top)) - t0[s]);
-            s1[l] += f(enc.any((a[1] + es * k[1]).min(top)) - t1[s]);
-            s2[l] += f(enc.any((a[2] + es * k[2]).min(top)) - t2[s]);
+        if E::ENCODES {
+            for (j, s) in (full..n).enumerate() {
+                let (es, l) = (e[s], j % LANES);
+                s0[l] += f(enc.any((a[0] + es * k[0]).min(top)) - t0[s]);
+                s1[l] += f(enc.any((a[1] + es * k[1]).min(top)) - t1[s]);
+                s2[l] += f(enc.any((a[2] + es * k[2]).min(top)) - t2[s]);
+            }
+        } else {
+            // Linear: fewer than LANES left, one to a lane (the loop the compiler unrolls best).
+            for j in 0..n - full {
+                let ej = e[full + j];
+                s0[j] += f((a[0] + ej * k[0]).min(top) - t0[full + j]);
+                s1[j] += f((a[1] + ej * k[1]).min(top) - t1[full + j]);
+                s2[j] += f((a[2] + ej * k[2]).min(top) - t2[full + j]);
+            }
         }
         [s0.iter().sum(), s1.iter().sum(), s2.iter().sum()]
     }
