@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from .. import _native
-from ..scene import Scene, load_scene, scene_to_dict
+from ..scene import Scene, scene_to_dict
 
 __all__ = ["albedo_derivative", "fix_gauge", "product_bounds", "product_range", "products", "products_of", "specular_product", "specular_range",
            "split_products", "unit_light", "unit_lobes"]
@@ -133,7 +133,7 @@ def split_products(fitted: Scene, rows: list[list[float]], original: Scene) -> S
                 khi = original.bounds([sp])[0][1]
                 need = max(need, float(Q[k] / khi) if khi > 0 else need)
         intensity = min(max(need, ilo), ihi)
-        d["light"]["intensity"] = intensity
+        fitted = fitted.with_params([intensity], ["light.intensity"])
     for k, o in enumerate(d["objects"]):
         p = f"objects.{o['name']}.albedo"
         if p in paths:
@@ -141,15 +141,13 @@ def split_products(fitted: Scene, rows: list[list[float]], original: Scene) -> S
             hi = np.array([b[1] for b in original.bounds([p])])
             with np.errstate(divide="ignore", invalid="ignore"):
                 rho = np.where(scale > 0, P[k] / (intensity * scale), lo)
-            o["material"]["albedo"] = [float(v) for v in np.clip(np.nan_to_num(rho), lo, hi)]
+            fitted = fitted.with_params([float(v) for v in np.clip(np.nan_to_num(rho), lo, hi)], [p])
         sp = f"objects.{o['name']}.specular"
         if sp in paths:
             klo, khi = original.bounds([sp])[0]
             ks = Q[k] / intensity if intensity > 0 else klo
-            o["material"]["specular"] = float(np.clip(np.nan_to_num(ks), klo, khi))
-    # Through the dict, not ``with_params``: the scene's JSON parser is not correctly rounded (1 ulp off
-    # for some values), and the fits' results depend on the values it gives.
-    return load_scene(d)
+            fitted = fitted.with_params([float(np.clip(np.nan_to_num(ks), klo, khi))], [sp])
+    return fitted
 
 
 def fix_gauge(fitted: Scene, albedo_paths: list[str], bounds_scene: Scene) -> Scene:
