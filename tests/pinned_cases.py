@@ -20,29 +20,14 @@ from typing import Any
 import numpy as np
 
 import rtloop
+from conftest import BALL_ON_FLOOR
 
 REPO = Path(__file__).resolve().parents[1]
 FIXTURE = REPO / "tests" / "fixtures" / "pinned_fits.json"
 SHARED_SCENES = REPO.parent / "shared" / "scenes"
 REFERENCE = ("noisy-blue", "red-ball-low-light", "two-balls", "yellow-ball")
 
-BALL = {
-    "image": {"width": 64, "height": 48},
-    "camera": {"position": [0, 1.6, -6], "look_at": [0, 0.8, 0], "up": [0, 1, 0], "vfov_deg": 35},
-    "light": {"position": [2.5, 4.5, -1.0], "intensity": 70.0, "color": [1, 1, 1]},
-    "objects": [
-        {"name": "ball", "shape": "sphere", "center": [0, 1, 0], "radius": 1,
-         "material": {"albedo": [0.8, 0.7, 0.1]}},
-        {"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0],
-         "material": {"albedo": [0.6, 0.6, 0.6]}},
-    ],
-    "fit": {
-        "light.position": {"min": [-8, 0.5, -8], "max": [8, 8, 8]},
-        "light.intensity": {"min": 1, "max": 400},
-        "objects.ball.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]},
-        "objects.floor.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]},
-    },
-}
+BALL = BALL_ON_FLOOR
 
 
 def _ball(**changes: Any) -> dict:
