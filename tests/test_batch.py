@@ -201,6 +201,17 @@ def test_batch_cli_bad_jobs_file(tmp_path, capsys):
     assert err == [f"rtloop-fit: error: {bad}:1: missing 'scene'"]
 
 
+def test_ray_flag_without_ray_says_how_to_install(photos, tmp_path, capsys, monkeypatch):
+    scene, paths = photos
+    monkeypatch.setitem(sys.modules, "ray", None)  # import ray -> ImportError
+    jobs_file = write_jobs(tmp_path / "jobs.jsonl", jobs_of(scene, paths[:1]))
+    assert batch_cli.main(["--batch", str(jobs_file), "--out", str(tmp_path / "o"), "--ray"]) == 1
+    assert capsys.readouterr().err == ("rtloop-fit: error: --ray: Ray is not installed: pip install 'rtloop[ray]' "
+                                       "(or pip install 'ray>=2.9')\n")
+    with pytest.raises(rtloop.RtloopError, match=r"pip install 'rtloop\[ray\]'"):
+        list(fit_many(jobs_of(scene, paths[:1]), "ray"))
+
+
 def test_interrupted_batch_leaves_whole_lines_and_resumes(photos, tmp_path):
     scene, paths = photos
     jobs = [{"id": f"k{i}", "scene": str(scene), "photo": str(paths[i % 3]), "seed": i} for i in range(400)]

@@ -15,6 +15,7 @@ from typing import Any, TextIO
 
 import rtloop
 from rtloop.batch import fit_many, load_jobs
+from rtloop.batch.on_ray import RAY_HINT
 from rtloop.fit import PROTOCOLS
 
 from .args import Parser, UsageError, generations, int_at_least
@@ -50,7 +51,6 @@ exit status: 0 every job ok, 1 a job failed or bad input, 2 bad command line,
 130 interrupted (Ctrl-C), 143 terminated (SIGTERM).
 """
 
-RAY_HINT = "Ray is not installed: pip install 'rtloop[ray]' (or pip install 'ray>=2.9')"
 
 
 class _Terminated(KeyboardInterrupt):
