@@ -242,3 +242,19 @@ def test_interrupted_batch_leaves_whole_lines_and_resumes(photos, tmp_path):
     proc.stderr.close()
     after = records(out)
     assert len(after) > n0 and len({r["id"] for r in after}) == len(after)  # nothing run twice
+
+
+def test_history_is_recorded_without_a_callback(photos):
+    """The per-generation history comes from the core (no GIL per generation); a callback sees the same."""
+    scene, paths = photos
+    seen: list[tuple[str, int, float]] = []
+    for kw in ({}, {"protocol": "paper", "generations": (4, 4), "population": 8}):
+        seen.clear()
+        quiet = single(scene, paths[0], 5, **kw)
+        watched = single(scene, paths[0], 5, callback=lambda i: seen.append((i.stage, i.generation, i.fitness)),
+                         **kw)
+        assert quiet.x == watched.x
+        for a, b in zip(quiet.stages, watched.stages, strict=True):
+            assert [(g, f, o) for g, f, o, _ in a.history] == [(g, f, o) for g, f, o, _ in b.history]
+            assert all((xa == xb).all() for (*_, xa), (*_, xb) in zip(a.history, b.history, strict=True))
+        assert seen == [(s.name, g, f) for s in quiet.stages for g, f, _, _ in s.history]
