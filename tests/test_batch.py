@@ -167,6 +167,12 @@ def test_batch_cli_outputs_and_resume(photos, tmp_path, capsys):
         assert not (out / r["id"] / "final.png").exists()
     ref = single(scene, paths[1], 11)
     assert next(r for r in recs if r["id"] == "f1")["x"] == ref.x
+    # and equal to a single rtloop-fit with the same seed
+    assert rtloop.cli.main([str(scene), str(paths[1]), "--out", str(tmp_path / "one"), "--seed", "11", "-q"]) == 0
+    one = json.loads((tmp_path / "one" / "result.json").read_text(encoding="utf-8"))
+    assert next(r for r in recs if r["id"] == "f1")["light"] == one["light"]
+    assert next(r for r in recs if r["id"] == "f1")["x"] == one["fit_report"]["fitted"]
+    capsys.readouterr()
 
     # a re-run skips all three; after f1's photo changes, only f1 runs again
     assert batch_cli.main(["--batch", str(jobs_file), "--out", str(out), "--no-images"]) == 0
@@ -178,6 +184,16 @@ def test_batch_cli_outputs_and_resume(photos, tmp_path, capsys):
     assert [r["id"] for r in recs[3:]] == ["f1"]
     assert recs[3]["x"] == single(scene, paths[2], 11).x
     assert (out / "f1" / "final.png").is_file() and (out / "f1" / "objective.png").is_file()
+
+
+def test_batch_cli_without_uncertainty_fits_the_same(photos, tmp_path, capsys):
+    scene, paths = photos
+    jobs_file = write_jobs(tmp_path / "jobs.jsonl", jobs_of(scene, paths[:1]))
+    out = tmp_path / "out"
+    assert batch_cli.main(["--batch", str(jobs_file), "--out", str(out), "--no-images", "--no-uncertainty"]) == 0
+    (rec,) = records(out)
+    assert rec["x"] == single(scene, paths[0], 10).x
+    assert json.loads((out / "f0" / "result.json").read_text(encoding="utf-8"))["fit_report"]["uncertainty"] is None
 
 
 def test_batch_cli_failed_job_exit_status(photos, tmp_path, capsys):
