@@ -185,9 +185,9 @@ def run_job(job: Job, *, threads: int | None = None, options: dict[str, Any] | N
             warm: dict[str, float] | None = None, warm_fraction: float = 0.1) -> JobResult:
     """Load and fit one job (``options`` under the job's own) on ``threads`` threads; with ``out``, write
     its outputs into ``out``/<id>/ (staged, moved into place whole; ``images`` False skips the PNGs).
-    ``warm`` (fit values by name, e.g. the previous frame's) starts the light's search in bounds narrowed
-    to +-``warm_fraction`` of their range around them. A failure (RtloopError, an unreadable file) becomes
-    a result with status "error"; other exceptions propagate."""
+    ``warm`` (fit values by name, e.g. the previous frame's) starts the search for the light's position (or
+    direction) in bounds narrowed to +-``warm_fraction`` of their range around it. A failure (RtloopError,
+    an unreadable file, a bad option) becomes a result with status "error"; other exceptions propagate."""
     import rtloop
 
     t0 = time.perf_counter()
@@ -231,10 +231,12 @@ def _message(job: Job, e: BaseException) -> str:
 
 
 def _warm_scene(scene: Any, warm: dict[str, float], fraction: float) -> Any:
-    """``scene`` with its light's fit values set to ``warm`` and their bounds narrowed around them."""
+    """``scene`` with its light's position (or direction) set to ``warm`` and its bounds narrowed around it."""
     from ..fit.bounds import narrowed
 
-    paths = [p for p in scene.fit_paths if p.startswith("light.")]
+    # the light's geometry only: its intensity (and colour) trade off against the albedos, and the fit
+    # splits those products inside the scene's own bounds
+    paths = [p for p in scene.fit_paths if p in ("light.position", "light.direction")]
     names = scene.param_names(paths)
     if not paths or any(n not in warm for n in names):
         return scene
