@@ -19,6 +19,7 @@ import numpy as np
 from . import _native
 from ._native import Scene, __version__
 from .acquisition.objective import load_image, load_mask
+from .batch import JobResult, fit_many
 from .errors import AcquisitionError, RtloopError, SceneError
 from .fit import FitResult, StageResult, fit
 from .report import report
@@ -28,6 +29,7 @@ from .uncertainty import estimate_uncertainty
 __all__ = [
     "AcquisitionError",
     "FitResult",
+    "JobResult",
     "RtloopError",
     "Scene",
     "SceneError",
@@ -35,6 +37,7 @@ __all__ = [
     "__version__",
     "estimate_uncertainty",
     "fit",
+    "fit_many",
     "load_image",
     "load_mask",
     "load_scene",

@@ -116,6 +116,10 @@ class OptimizeResult:
     def products(self) -> list[list[float]] | None: ...
     @property
     def lit_pixels(self) -> list[int] | None: ...
+    @property
+    def history(self) -> list[tuple[int, npt.NDArray[np.float64], list[float], int]]:
+        """(generation, best, best's objectives, evaluations) after the initial population and every
+        generation: recorded in the core, so no callback (and no GIL) is needed for it."""
 
 # The optimisers' test hooks (minimize_test_function, test_function_value) are not in this module: they
 # live in the test-only extension _rtloop_test_hooks (cargo feature test-hooks, rust/python/test_hooks.rs).

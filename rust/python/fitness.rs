@@ -88,76 +88,104 @@ pub(crate) fn make_fitness(
 
 /// What `optimize` found (immutable). For the projected loss `products` (per object [P_r, P_g, P_b, Q]:
 /// the products minimising the loss at `x`), `lit_pixels` (per object) and `search_objectives` (the loss
-/// at the least-squares products the search ranked candidates by) are set, else None.
+/// at the least-squares products the search ranked candidates by) are set, else None. `history` holds
+/// the best of every generation, recorded without the GIL (a Python callback is needed only to watch).
 #[pyclass(frozen, name = "OptimizeResult", module = "rtloop._native")]
-pub struct OptimizeResult(pub StageResult);
+pub struct OptimizeResult {
+    pub result: StageResult,
+    pub history: Vec<Generation>,
+}
+
+/// One generation's best: generation, best parameter vector, its objectives, evaluations so far.
+pub struct Generation {
+    pub generation: usize,
+    pub best: Vec<f64>,
+    pub objectives: Vec<f64>,
+    pub evaluations: usize,
+}
 
 #[pymethods]
 impl OptimizeResult {
     /// The best parameter vector (float64).
     #[getter]
     fn x<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        PyArray1::from_slice(py, &self.0.x)
+        PyArray1::from_slice(py, &self.result.x)
     }
     /// The loss at `x` (for the projected loss: its sum at `products`).
     #[getter]
     fn objectives(&self) -> Vec<f64> {
-        self.0.objectives.clone()
+        self.result.objectives.clone()
     }
     #[getter]
     fn search_objectives(&self) -> Option<Vec<f64>> {
-        self.0.search_objectives.clone()
+        self.result.search_objectives.clone()
     }
     /// All evaluations, the polish's included.
     #[getter]
     fn evaluations(&self) -> usize {
-        self.0.evaluations
+        self.result.evaluations
     }
     #[getter]
     fn generations(&self) -> usize {
-        self.0.generations
+        self.result.generations
     }
     /// The callback stopped the search.
     #[getter]
     fn stopped(&self) -> bool {
-        self.0.stop == crate::search::StopReason::Callback
+        self.result.stop == crate::search::StopReason::Callback
     }
     /// "max_generations", "max_evaluations", "converged", "stalled" or "callback".
     #[getter]
     fn stop_reason(&self) -> &'static str {
-        self.0.stop.as_str()
+        self.result.stop.as_str()
     }
     /// (evaluations, value before, value after) of the Nelder-Mead polish; None when none ran.
     #[getter]
     fn polish(&self) -> Option<(usize, f64, f64)> {
-        self.0
+        self.result
             .polish
             .as_ref()
             .map(|p| (p.evaluations, p.f_before, p.f_after))
     }
     #[getter]
     fn active_pixels(&self) -> usize {
-        self.0.active_pixels
+        self.result.active_pixels
     }
     #[getter]
     fn products(&self) -> Option<Vec<Vec<f64>>> {
-        self.0
+        self.result
             .products
             .as_ref()
             .map(|rows| rows.iter().map(|r| r.to_vec()).collect())
     }
     #[getter]
     fn lit_pixels(&self) -> Option<Vec<usize>> {
-        self.0.lit_pixels.clone()
+        self.result.lit_pixels.clone()
+    }
+
+    /// (generation, best (float64), best's objectives, evaluations) after the initial population and
+    /// after every generation, as the callback sees them.
+    #[getter]
+    fn history<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> Vec<(usize, Bound<'py, PyArray1<f64>>, Vec<f64>, usize)> {
+        self.history
+            .iter()
+            .map(|g| {
+                let best = PyArray1::from_slice(py, &g.best);
+                (g.generation, best, g.objectives.clone(), g.evaluations)
+            })
+            .collect()
     }
 
     fn __repr__(&self) -> String {
         format!(
             "<rtloop.OptimizeResult objectives={:?}, {} evaluations, {} generations, stop {}>",
-            self.0.objectives,
-            self.0.evaluations,
-            self.0.generations,
-            self.0.stop.as_str()
+            self.result.objectives,
+            self.result.evaluations,
+            self.result.generations,
+            self.result.stop.as_str()
         )
     }
 }

@@ -22,7 +22,7 @@ mod scene;
 mod test_hooks;
 
 use errors::{RtloopError, SceneError};
-use fitness::{make_fitness, OptimizeResult};
+use fitness::{make_fitness, Generation, OptimizeResult};
 use pool::detach_in_pool;
 use scene::PyScene;
 
@@ -209,10 +209,17 @@ fn optimize<'py>(
         polish_tol,
     };
     let mut error: Option<PyErr> = None;
+    let mut history = Vec::new();
     let result = detach_in_pool(py, threads, || {
         let method = Method::named(method, &budget)?;
         let with_products = with_products && callback.is_some();
         run_stage(&fitness, &bounds, &method, with_products, |rep| {
+            history.push(Generation {
+                generation: rep.generation,
+                best: rep.best.to_vec(),
+                objectives: rep.best_objectives.to_vec(),
+                evaluations: rep.evaluations,
+            });
             let Some(cb) = &callback else { return true };
             let products: Option<Vec<Vec<f64>>> = rep
                 .products
@@ -237,7 +244,7 @@ fn optimize<'py>(
     if let Some(e) = error {
         return Err(e);
     }
-    Ok(OptimizeResult(result))
+    Ok(OptimizeResult { result, history })
 }
 
 #[pymodule(gil_used = false)]

@@ -26,11 +26,12 @@ from typing import Any, TextIO
 import numpy as np
 
 import rtloop
-from rtloop._files import PlaceError, move_into_place, staging_dir, write_json
+from rtloop._files import PlaceError, move_into_place, staging_dir
 from rtloop.fit import PROTOCOLS
 from rtloop.report import truth_errors, truth_values
 
 from .args import Parser, UsageError, float_in, generations, int_at_least
+from .outputs import input_paths, write_result
 
 __all__ = ["main"]
 
@@ -93,6 +94,9 @@ existing, non-empty DIR is replaced only with --force, and only at the end.
 example:
   rtloop-fit examples/yellow-ball/scene_input.json \\
       examples/yellow-ball/objective.png --out yellow-ball-fit --seed 1
+
+many photos: rtloop-fit --batch JOBS.jsonl --out DIR (see rtloop-fit --batch
+  --help): one job a line, in-process or on Ray (--ray), resumable.
 
 exit status: 0 done, 1 bad input or failed run, 2 bad command line,
 130 interrupted (Ctrl-C), 143 terminated (SIGTERM).
@@ -388,17 +392,7 @@ class _Run:
         self.progress.end_line()
         self.check_stop()
 
-        report = result.report()
-        report["inputs"] = {
-            "scene": os.path.abspath(args.scene),
-            "image": os.path.abspath(args.image),
-            "response": args.response,
-            "crop": bool(args.crop),
-            "mask": None if args.mask is None else os.path.abspath(args.mask),
-        }
-        data = rtloop.scene_to_dict(result.scene)
-        data["fit_report"] = report
-        write_json(tmp / "result.json", data)
+        write_result(tmp, result, input_paths(args.scene, args.image, args.response, args.crop, args.mask))
 
         k = args.final_scale
         self.progress.message(
@@ -495,7 +489,12 @@ def _run_interruptibly(work: Any, stop: threading.Event) -> Any:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``rtloop-fit``; returns the exit status (0 done, 1 bad input or failed run, 2 bad
-    command line, 130 interrupted, 143 terminated)."""
+    command line, 130 interrupted, 143 terminated). With ``--batch JOBS`` it is :mod:`.batch`'s."""
+    args = sys.argv[1:] if argv is None else argv
+    if any(a == "--batch" or a.startswith("--batch=") for a in args):
+        from .batch import main as batch_main
+
+        return batch_main(list(args))
     t0 = time.perf_counter()
     previous_term = None
     if threading.current_thread() is threading.main_thread():

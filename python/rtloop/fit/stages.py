@@ -62,41 +62,44 @@ class Stages:
     def run(self, name: str, stage_scene: Scene, paths: list[str], loss: str, pixels: np.ndarray | None,
             generations: int, stage_seed: int, product_bounds: np.ndarray | None = None,
             method: str = "de", polish: int = 0, polish_tol: float | None = None) -> StageResult:
-        """One search over ``paths`` of ``stage_scene``, the rest held; its history and callbacks."""
-        history: list[tuple[int, float, list[float], np.ndarray]] = []
+        """One search over ``paths`` of ``stage_scene``, the rest held; its history and callbacks. The
+        history comes back from the core; the user's callback (if any) alone takes the GIL per generation."""
         base_full = np.array(stage_scene.get_params(self.all_paths))
         index = [self.all_names.index(n) for n in stage_scene.param_names(paths)]
         callback = self.callback
 
         def on_generation(gen: int, best: np.ndarray, objectives: list[float], evals: int,
                           products: list[list[float]] | None) -> bool:
-            fitness = float(sum(objectives))
-            history.append((gen, fitness, list(objectives), np.array(best)))
-            if callback is not None:
-                full = base_full.copy()
+            assert callback is not None
+            full = base_full.copy()
+            full[index] = best
+            if products is not None:
+                split = split_products(stage_scene, products, self.scene)
+                full = np.array(split.get_params(self.all_paths))
                 full[index] = best
-                if products is not None:
-                    split = split_products(stage_scene, products, self.scene)
-                    full = np.array(split.get_params(self.all_paths))
-                    full[index] = best
-                info = GenerationInfo(name, gen, fitness, list(objectives), full, self.evaluations + evals)
-                return callback(info) is not False
-            return True
+            info = GenerationInfo(name, gen, float(sum(objectives)), list(objectives), full,
+                                  self.evaluations + evals)
+            return callback(info) is not False
 
         b = self.budget
         t = time.perf_counter()
         out = _native.optimize(
             stage_scene, paths, self.target, pixels=pixels, loss=loss, clip=self.clip, population=b.population,
             generations=generations, f=b.f, cr=b.cr, seed=stage_seed, threads=self.threads,
-            callback=on_generation, product_bounds=product_bounds, method=method, polish=polish,
-            norm=self.norm, space=self.space, with_products=callback is not None, polish_tol=polish_tol,
+            callback=None if callback is None else on_generation, product_bounds=product_bounds,
+            method=method, polish=polish, norm=self.norm, space=self.space, with_products=callback is not None,
+            polish_tol=polish_tol,
         )
+        history = [(gen, float(sum(objectives)), list(objectives), np.array(best))
+                   for gen, best, objectives, _ in out.history]
         generations_run = out.generations
         if out.polish is not None and not out.stopped:
             # The Nelder-Mead polish after the last generation is logged as one more generation, so the
             # history (and the CSV, the report) ends at the fitted values.
             generations_run += 1
-            on_generation(generations_run, out.x, list(out.objectives), out.evaluations, out.products)
+            history.append((generations_run, float(sum(out.objectives)), list(out.objectives), np.array(out.x)))
+            if callback is not None:
+                on_generation(generations_run, out.x, list(out.objectives), out.evaluations, out.products)
         self.evaluations += out.evaluations
         stage = StageResult(
             name=name, paths=paths, param_names=stage_scene.param_names(paths), x=out.x,

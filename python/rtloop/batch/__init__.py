@@ -1,0 +1,78 @@
+"""Many photos: :func:`fit_many` fits a batch of jobs in-process (:mod:`.local`) or as Ray tasks
+(:mod:`.on_ray`), yielding each job's :class:`JobResult` as it finishes; a job is :mod:`.jobs`."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator, Mapping
+from typing import Any
+
+from ..errors import RtloopError
+from .jobs import Job, JobResult, as_job, job_hash, jobs_from, load_jobs, run_job
+from .local import plan
+
+__all__ = ["Job", "JobResult", "as_job", "fit_many", "job_hash", "load_jobs", "run_job"]
+
+
+def fit_many(
+    jobs: Iterable[Any],
+    engine: str = "local",
+    *,
+    workers: int | None = None,
+    threads: int | None = None,
+    options: Mapping[str, Any] | None = None,
+    out: Any = None,
+    images: bool = True,
+    final_scale: int = 4,
+    final_spp: int = 16,
+    skip: Mapping[str, str] | None = None,
+    warm_start: bool = False,
+    warm_fraction: float = 0.1,
+    address: str | None = None,
+    max_retries: int = 3,
+) -> Iterator[JobResult]:
+    """Fit every job; an iterator of :class:`JobResult` in the order they finish.
+
+    ``jobs``: :class:`Job` objects or dicts like a line of JOBS.jsonl (``id``, ``scene``, ``photo``,
+    optional ``seed`` (default 0), ``mask``, and options of :func:`rtloop.fit`: ``protocol``,
+    ``population``, ``generations``, ``norm``, ``space``, ... and of :func:`rtloop.load_image`:
+    ``response``, ``crop``). ``options`` apply to every job (a job's own win). A job's result equals
+    ``rtloop.fit`` with the same seed; a failing job gives status "error" and the batch goes on.
+
+    ``engine="local"``: ``workers`` concurrent fits of ``threads`` threads each (default one thread per
+    fit, one fit per core). ``engine="ray"``: one Ray task per job with ``num_cpus=threads`` (default 1)
+    on the cluster at ``address`` (None: a running one if any, else a local Ray), retried up to
+    ``max_retries`` times if its worker dies. ``out``: write each job's result.json (and, with
+    ``images``, objective.png and final.png) into ``out``/<id>/. ``skip``: ``{id: hash}`` of jobs already
+    done (see :func:`job_hash`), left out. ``warm_start`` (local only): the jobs run in order (frames of
+    a video), each light search in bounds narrowed to +-``warm_fraction`` around the previous light.
+    """
+    if engine not in ("local", "ray"):
+        raise RtloopError(f"fit_many: engine must be 'local' or 'ray', got {engine!r}")
+    for name, v in (("workers", workers), ("threads", threads)):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
+            raise RtloopError(f"fit_many: {name} must be a whole number >= 1, got {v!r}")
+    common = dict(options or {})
+    checked = jobs_from(jobs)
+    if common:
+        as_job({"id": "options", "scene": "", "photo": "", **common}, "options")  # unknown names fail here
+    todo = []
+    for job in checked:
+        digest = job_hash(job, common)
+        if skip is not None and skip.get(job.id) == digest:
+            continue
+        todo.append((job, digest))
+    kwargs = {"options": common, "out": out, "images": images, "final_scale": final_scale,
+              "final_spp": final_spp}
+    if engine == "ray":
+        if warm_start:
+            raise RtloopError("fit_many: warm_start runs the jobs in order, in-process: use engine='local'")
+        from .on_ray import run_ray
+
+        return run_ray(todo, address=address, threads=threads or 1, max_retries=max_retries, **kwargs)
+    from .local import cores, run_local
+
+    n_workers, n_threads = plan(workers, threads)
+    if warm_start:
+        n_workers, n_threads = 1, threads or cores()
+    return run_local(todo, workers=n_workers, threads=n_threads, warm_start=warm_start,
+                     warm_fraction=warm_fraction, **kwargs)

@@ -1,0 +1,79 @@
+"""The Ray engine: one task per job (``num_cpus`` = the fit's threads), the native objects built inside
+the task from the job's plain fields, results collected with ``ray.wait`` as they finish, a task whose
+worker dies retried ``max_retries`` times."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from typing import Any
+
+from ..errors import RtloopError
+from .jobs import Job, JobResult, run_job
+
+__all__ = ["RAY_HINT", "run_ray"]
+
+RAY_HINT = "Ray is not installed: pip install 'rtloop[ray]' (or pip install 'ray>=2.9')"
+
+
+def _task(job: dict[str, Any], digest: str, threads: int, kwargs: dict[str, Any]) -> JobResult:
+    """One job inside a Ray worker: plain inputs in, a plain JobResult out (no FitResult)."""
+    return run_job(Job(**job), threads=threads, hash=digest, keep_fit=False, **kwargs)
+
+
+def _plain(job: Job) -> dict[str, Any]:
+    return {"id": job.id, "scene": job.scene, "photo": job.photo, "seed": job.seed, "mask": job.mask,
+            "options": dict(job.options)}
+
+
+def run_ray(jobs: list[tuple[Job, str]], *, address: str | None, threads: int, max_retries: int,
+            task: Callable[..., JobResult] = _task, **kwargs: Any) -> Iterator[JobResult]:
+    """Run ``(job, hash)`` pairs as Ray tasks; yield results as they finish. Connects to the cluster at
+    ``address`` unless Ray is already initialised (None: a running cluster if ``RAY_ADDRESS`` names one,
+    else a local Ray). Paths in the jobs must be readable on the workers (a shared filesystem), and so
+    must ``out``. ``task`` is the function run per job (tests replace it)."""
+    try:
+        import ray
+    except ImportError:
+        raise RtloopError(f"engine='ray': {RAY_HINT}") from None
+    if not ray.is_initialized():
+        try:
+            ray.init(address=address or None, logging_level="warning", log_to_driver=False)
+        except ConnectionError as e:
+            raise RtloopError(f"ray: cannot connect to the cluster at {address!r}: {e}") from None
+    remote = ray.remote(task).options(num_cpus=threads, max_retries=max_retries, retry_exceptions=False)
+    return _collect(ray, remote, jobs, threads, kwargs)
+
+
+def _collect(ray: Any, remote: Any, jobs: list[tuple[Job, str]], threads: int,
+             kwargs: dict[str, Any]) -> Iterator[JobResult]:
+    # Keep a few tasks per CPU in flight: enough to keep the cluster busy, few enough that the driver
+    # does not hold a huge batch's references at once.
+    cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
+    limit = max(4, 4 * cpus // threads)
+    queue = iter(jobs)
+    which: dict[Any, tuple[Job, str]] = {}
+    kw = ray.put(kwargs)
+
+    def submit() -> bool:
+        nxt = next(queue, None)
+        if nxt is None:
+            return False
+        which[remote.remote(_plain(nxt[0]), nxt[1], threads, kw)] = nxt
+        return True
+
+    try:
+        while len(which) < limit and submit():
+            pass
+        while which:
+            ready, _ = ray.wait(list(which), num_returns=1, timeout=0.5)
+            for ref in ready:
+                job, digest = which.pop(ref)
+                try:
+                    yield ray.get(ref)
+                except ray.exceptions.RayError as e:  # the worker died more than max_retries times
+                    first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+                    yield JobResult(job.id, "error", digest, job.seed, error=f"ray: {first}")
+                submit()
+    finally:
+        for ref in which:
+            ray.cancel(ref, force=True)

@@ -1,0 +1,93 @@
+"""The Ray engine on a local Ray (``ray.init(num_cpus=2)``): equality with single fits, a failing job,
+a worker killed mid-batch, resume through the command line. Skipped when Ray is not installed."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+ray = pytest.importorskip("ray", reason="Ray not installed (pip install '.[ray]')")
+
+import test_batch as tb
+from rtloop.batch import fit_many, jobs
+from rtloop.batch.on_ray import run_ray
+from rtloop.cli import batch as batch_cli
+
+photos = tb.photos  # the fixture: a 32x24 scene and three photos of it
+jobs_of, records, single, write_jobs = tb.jobs_of, tb.records, tb.single, tb.write_jobs
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module", autouse=True)
+def local_ray():
+    # the workers import rtloop from this checkout, as the test does
+    saved = os.environ.get("PYTHONPATH")
+    os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO / "python"), os.environ.get("PYTHONPATH"))
+                                               if p)
+    ray.init(num_cpus=2, logging_level="warning", log_to_driver=False, include_dashboard=False)
+    yield
+    ray.shutdown()
+    if saved is None:
+        del os.environ["PYTHONPATH"]
+    else:
+        os.environ["PYTHONPATH"] = saved
+
+
+def test_ray_equals_single_fits_and_records_a_failure(photos, tmp_path):
+    scene, paths = photos
+    batch = jobs_of(scene, paths) + [{"id": "gone", "scene": str(scene), "photo": str(tmp_path / "x.png")}]
+    results = {r.id: r for r in fit_many(batch, "ray")}
+    assert sorted(results) == ["f0", "f1", "f2", "gone"]
+    for i, p in enumerate(paths):
+        r = results[f"f{i}"]
+        ref = single(scene, p, 10 + i, threads=1)
+        assert r.status == "ok" and r.x == ref.x and r.products == ref.products
+        assert r.fit is None  # only plain data comes back from a task
+    assert results["gone"].status == "error" and "x.png" in results["gone"].error
+
+
+def test_killed_worker_is_retried_and_the_batch_completes(photos, tmp_path):
+    scene, paths = photos
+    marker = tmp_path / "killed-once"
+
+    def dies_once(job, digest, threads, kwargs):  # pickled by value into the worker
+        from rtloop.batch.on_ray import _task
+
+        if job["id"] == "f1" and not os.path.exists(marker):
+            open(marker, "w").close()
+            os._exit(1)  # the worker process dies mid-task, as on a lost node
+        return _task(job, digest, threads, kwargs)
+
+    todo = [(j, jobs.job_hash(j)) for j in jobs.jobs_from(jobs_of(scene, paths))]
+    results = {r.id: r for r in run_ray(todo, address=None, threads=1, max_retries=2, task=dies_once,
+                                        options={}, out=None, images=False, final_scale=1, final_spp=1)}
+    assert marker.exists()
+    assert sorted(results) == ["f0", "f1", "f2"] and all(r.ok for r in results.values())
+    assert results["f1"].x == single(scene, paths[1], 11).x
+
+    # with no retries left, the job is recorded as failed and the others still finish
+    marker.unlink()
+    results = {r.id: r for r in run_ray(todo, address=None, threads=1, max_retries=0, task=dies_once,
+                                        options={}, out=None, images=False, final_scale=1, final_spp=1)}
+    assert results["f1"].status == "error" and results["f1"].error.startswith("ray: ")
+    assert results["f0"].ok and results["f2"].ok
+
+
+def test_ray_cli_resumes(photos, tmp_path, capsys):
+    scene, paths = photos
+    jobs_file = write_jobs(tmp_path / "jobs.jsonl", jobs_of(scene, paths))
+    out = tmp_path / "out"
+    # a previous run finished f0 only
+    (r0,) = list(fit_many(jobs_of(scene, paths[:1])))
+    out.mkdir()
+    (out / "results.jsonl").write_text(json.dumps(r0.record()) + "\n", encoding="utf-8")
+    assert batch_cli.main(["--batch", str(jobs_file), "--out", str(out), "--ray", "--no-images"]) == 0
+    assert "2/2 done, 0 failed, 1 already done" in capsys.readouterr().err
+    recs = records(out)
+    assert [r["id"] for r in recs[:1]] == ["f0"] and sorted(r["id"] for r in recs[1:]) == ["f1", "f2"]
+    for r in recs[1:]:
+        assert json.loads((out / r["id"] / "result.json").read_text(encoding="utf-8"))["light"] == r["light"]
