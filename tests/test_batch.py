@@ -249,7 +249,10 @@ def test_interrupted_batch_leaves_whole_lines_and_resumes(photos, tmp_path):
     assert 0 < len(done) < 1000
     assert all(r["status"] == "ok" for r in done)
     # Ctrl-C: a clean stop with status 130, every finished result kept
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    # Started from a background shell (as CI may be), SIGINT is ignored and the child would inherit that:
+    # give it the default disposition, as a terminal's Ctrl-C finds it.
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     n0 = len(done)
     while time.monotonic() < deadline and len(records(out)) < n0 + 5:
         time.sleep(0.02)
