@@ -234,7 +234,11 @@ def test_interrupted_batch_leaves_whole_lines_and_resumes(photos, tmp_path):
     jobs_file = write_jobs(tmp_path / "jobs.jsonl", jobs)
     out = tmp_path / "out"
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO / "python"), os.environ.get("PYTHONPATH", "")])}
-    cmd = [sys.executable, "-m", "rtloop.cli", "--batch", str(jobs_file), "--out", str(out), "--no-images",
+    # A shell may start background processes (CI, say) with SIGINT ignored, which the child inherits (the
+    # batch then runs to its end): restore Python's handler, as a terminal's Ctrl-C finds it.
+    launch = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+              "from rtloop.cli import main; sys.exit(main())")
+    cmd = [sys.executable, "-c", launch, "--batch", str(jobs_file), "--out", str(out), "--no-images",
            "--workers", "2"]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     deadline = time.monotonic() + 60
@@ -249,10 +253,7 @@ def test_interrupted_batch_leaves_whole_lines_and_resumes(photos, tmp_path):
     assert 0 < len(done) < 1000
     assert all(r["status"] == "ok" for r in done)
     # Ctrl-C: a clean stop with status 130, every finished result kept
-    # Started from a background shell (as CI may be), SIGINT is ignored and the child would inherit that:
-    # give it the default disposition, as a terminal's Ctrl-C finds it.
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     n0 = len(done)
     while time.monotonic() < deadline and len(records(out)) < n0 + 5:
         time.sleep(0.02)
