@@ -278,6 +278,12 @@ def test_wrong_image_file(inputs, tmp_path, capsys):
         ["--loss-space", "gamma"],
         ["--snapshot-every", "-1"],
         ["--final-scale", "0"],
+        ["--final-scale", "16385"],
+        ["--final-spp", "5000"],
+        ["--final-spp", "0"],
+        ["--norm", "bogus"],
+        ["--norm", "huber:-1"],
+        ["--norm", "huber:nan"],
         ["--bogus"],
     ],
 )
@@ -288,6 +294,17 @@ def test_bad_command_line(inputs, tmp_path, capsys, extra):
     assert code == 2
     error_line(stderr)
     assert stdout == ""
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(("extra", "flag"), [(["--final-spp", "5000"], "--final-spp"),
+                                             (["--norm", "bogus"], "--norm"),
+                                             (["--final-scale", "1000"], "--final-scale 1000")])
+def test_final_render_and_norm_checked_before_the_fit_naming_the_flag(inputs, tmp_path, capsys, extra, flag):
+    scene_path, image_path = inputs
+    code, _, stderr = run(capsys, scene_path, image_path, "--out", tmp_path / "out", *extra)
+    assert code == (1 if flag == "--final-scale 1000" else 2)  # the scene's size is known once it is loaded
+    assert flag in error_line(stderr) and "fitting" not in stderr
     assert not (tmp_path / "out").exists()
 
 
@@ -468,20 +485,17 @@ def test_signal_during_fit(inputs, tmp_path, sig, code, word):
            "--snapshot-every", "0"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:  # wait until the fit is under way
+        while True:  # wait for the event "the fit is under way": its CSV has rows (the fit asks for 10^6 gens)
             tmp = [p for p in tmp_path.iterdir() if "rtloop-tmp" in p.name]
             csv_file = tmp[0] / "best_per_generation.csv" if tmp else None
             if csv_file is not None and csv_file.exists() and csv_file.stat().st_size > 2000:
                 break
             assert proc.poll() is None, proc.communicate()
             time.sleep(0.05)
-        else:
-            pytest.fail("the fit did not start")
-        t = time.monotonic()
         proc.send_signal(sig)
-        stdout, stderr = proc.communicate(timeout=60)
-        assert time.monotonic() - t < 30
+        # The behaviour, not its speed: the run ends by itself on the signal (10^6 generations would not end
+        # in this test's lifetime), with the status and message below. The timeout is only a hang guard.
+        stdout, stderr = proc.communicate(timeout=600)
     finally:
         if proc.poll() is None:
             proc.kill()
