@@ -267,3 +267,13 @@ def test_import_does_not_load_opencv(module):
     code = f"import sys, {module}; print('cv2' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+@pytest.mark.parametrize(("ci", "outcome"), [("true", pytest.fail.Exception), ("", pytest.skip.Exception),
+                                             ("false", pytest.skip.Exception)])
+def test_absent_shared_inputs_fail_under_ci(monkeypatch, ci, outcome):
+    from conftest import shared_case
+
+    monkeypatch.setenv("CI", ci)
+    with pytest.raises(outcome, match="no-such-case"):
+        shared_case("no-such-case")
