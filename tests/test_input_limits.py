@@ -277,3 +277,29 @@ def test_absent_shared_inputs_fail_under_ci(monkeypatch, ci, outcome):
     monkeypatch.setenv("CI", ci)
     with pytest.raises(outcome, match="no-such-case"):
         shared_case("no-such-case")
+
+
+# ---------------------------------------------------------------- fitted values inside their bounds
+
+
+def _inside(result) -> list[str]:
+    s = result.scene
+    return [f"{n} = {v} not in [{lo}, {hi}]" for n, v, (lo, hi) in zip(s.param_names(), s.get_params(), s.bounds())
+            if not lo <= v <= hi]
+
+
+@pytest.mark.parametrize(
+    ("ball_albedo", "imax", "seed"),
+    [((1, 1), 400, 0), ((1, 1), 75, 1), ((0.9, 1), 72, 2), ((0, 1), 71, 3), ((0.95, 1), 400, 4)],
+)
+def test_two_stage_fits_stay_inside_the_scenes_bounds(ball_scene, ball_albedo, imax, seed):
+    truth = copy.deepcopy(ball_scene)
+    truth["objects"][0]["material"]["albedo"] = [0.95, 0.9, 0.85]
+    truth["objects"][1]["material"]["albedo"] = [0.9, 0.9, 0.9]
+    photo = rtloop.render(truth)
+    ball_scene["fit"]["light.intensity"] = {"min": 1, "max": imax}
+    ball_scene["fit"]["objects.ball.albedo"] = {"min": [ball_albedo[0]] * 3, "max": [ball_albedo[1]] * 3}
+    result = rtloop.fit(ball_scene, photo, protocol="paper", generations=(20, 20), seed=seed, uncertainty=False)
+    assert _inside(result) == []
+    assert all(math.isfinite(v) for row in result.products.values() for v in row)
+
