@@ -541,3 +541,40 @@ def test_mask_option(capsys, inputs, tmp_path):
     assert report["settings"]["masked_pixels"] == H * (W // 4)
     code, _, err = run(capsys, scene_path, image_path, "--out", tmp_path / "x", "--mask", tmp_path / "nope.png")
     assert code == 1 and "nope.png" in error_line(err)
+
+
+# --- what killed runs leave --------------------------------------------------------------------------------
+
+
+def _dead_pid() -> int:
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    return proc.pid
+
+
+def test_stale_staging_dirs_of_dead_runs_are_cleaned(inputs, tmp_path, capsys):
+    scene_path, image_path = inputs
+    dead = tmp_path / f".out.rtloop-tmp-p{_dead_pid()}-abc123"
+    live = tmp_path / f".out.rtloop-tmp-p{os.getpid()}-abc123"  # a run still under way: kept
+    other = tmp_path / f".other.rtloop-tmp-p{_dead_pid()}-abc123"  # another DIR's: not ours to clean
+    for d in (dead, live, other):
+        d.mkdir()
+        (d / "partial.csv").write_text("x")
+    code, _, stderr = run(capsys, scene_path, image_path, "--out", tmp_path / "out", "-q")
+    assert code == 0, stderr
+    assert f"deleted {dead.name}" in stderr
+    assert not dead.exists() and live.is_dir() and other.is_dir()
+
+
+def test_a_replace_killed_between_its_renames_is_recovered(inputs, tmp_path, capsys):
+    scene_path, image_path = inputs
+    out = tmp_path / "out"
+    aside = tmp_path / f".out.rtloop-old-p{_dead_pid()}-0123abcd"  # DIR renamed aside, then the kill
+    aside.mkdir()
+    (aside / "keep.txt").write_text("old results")
+    code, _, stderr = run(capsys, scene_path, image_path, "--out", out, "-q")
+    assert code == 1 and "recovered" in stderr and "--force" in stderr.splitlines()[-1]
+    assert (out / "keep.txt").read_text() == "old results" and not aside.exists()
+    code, _, stderr = run(capsys, scene_path, image_path, "--out", out, "-q", "--force")
+    assert code == 0, stderr
+    assert (out / "result.json").is_file() and leftovers(tmp_path) == []

@@ -26,7 +26,7 @@ from typing import Any, TextIO
 import numpy as np
 
 import rtloop
-from rtloop._files import PlaceError, move_into_place, staging_dir, write_json
+from rtloop._files import PlaceError, move_into_place, recover_leftovers, staging_dir, write_json
 from rtloop.fit import PROTOCOLS
 from rtloop.report import truth_errors, truth_values
 
@@ -550,6 +550,8 @@ def _main(argv: list[str] | None, t0: float) -> int:
     out = Path(os.path.abspath(args.out))  # normalised: "." and "x/.." have a name and a parent
     tmp: Path | None = None
     try:
+        for line in recover_leftovers(out):  # what killed runs left beside DIR
+            print(f"{PROG}: {line}", file=sys.stderr)
         replace = _check_out(out, args.force, [Path(args.scene), Path(args.image)])
         try:
             tmp = staging_dir(out, "rtloop-tmp")
