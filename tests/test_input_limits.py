@@ -182,7 +182,7 @@ def test_negative_image_values_warn(ball_scene, photo):
 def test_image_mostly_above_one_warns_in_python_and_in_the_report(ball_scene, photo):
     with pytest.warns(rtloop.RtloopWarning, match="above 1"):
         result = _fit(ball_scene, photo * 255 + 2)
-    assert any("above 1" in w for w in result.warnings)
+    assert any("above 1" in w for w in result.report()["warnings"])
 
 
 def test_an_ordinary_image_gives_no_input_warning(ball_scene, photo):

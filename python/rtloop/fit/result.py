@@ -101,4 +101,5 @@ class FitResult:
             "identifiability": self.identifiability,
             "uncertainty": self.uncertainty,
             "message": self.message,
+            "warnings": list(self.warnings),
         }
