@@ -578,3 +578,24 @@ def test_a_replace_killed_between_its_renames_is_recovered(inputs, tmp_path, cap
     code, _, stderr = run(capsys, scene_path, image_path, "--out", out, "-q", "--force")
     assert code == 0, stderr
     assert (out / "result.json").is_file() and leftovers(tmp_path) == []
+
+
+@pytest.mark.parametrize(("where", "argv0", "code"), [("rtloop._native", "/usr/bin/rtloop-fit", 130),
+                                                      ("rtloop.cli.fit", "/usr/bin/rtloop-fit", 130),
+                                                      ("rtloop._native", "my_script.py", None)])
+def test_ctrl_c_while_importing(where, argv0, code):
+    """A Ctrl-C that lands while the console script imports (the event made certain here: an import hook
+    raises it when ``where`` is imported) prints one line and exits 130; a library import re-raises it."""
+    launch = ("import sys\n"
+              f"sys.argv[0] = {argv0!r}\n"
+              "class Interrupt:\n"
+              "    def find_spec(self, name, path=None, target=None):\n"
+              f"        if name == {where!r}:\n"
+              "            raise KeyboardInterrupt\n"
+              "sys.meta_path.insert(0, Interrupt())\n"
+              "from rtloop.cli import main\n")
+    proc = subprocess.run([sys.executable, "-c", launch], capture_output=True, text=True, check=False)
+    if code == 130:
+        assert proc.returncode == 130 and proc.stderr == "rtloop-fit: interrupted\n", proc.stderr
+    else:  # not a console script: the interrupt propagates as usual
+        assert proc.returncode != 0 and "KeyboardInterrupt" in proc.stderr

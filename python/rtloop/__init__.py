@@ -14,17 +14,23 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
+from ._interrupt import interrupted_at_import
 
-from . import _native
-from ._native import Scene, __version__
-from .acquisition.objective import load_image, load_mask
-from .errors import AcquisitionError, RtloopError, RtloopWarning, SceneError
-from .fit import FitResult, StageResult, fit
-from .fit.protocol import whole
-from .report import report
-from .scene import load_scene, save_scene, scene_to_dict
-from .uncertainty import estimate_uncertainty
+try:
+    import numpy as np
+
+    from . import _native
+    from ._native import Scene, __version__
+    from .acquisition.objective import load_image, load_mask
+    from .errors import AcquisitionError, RtloopError, RtloopWarning, SceneError
+    from .fit import FitResult, StageResult, fit
+    from .fit.protocol import whole
+    from .report import report
+    from .scene import load_scene, save_scene, scene_to_dict
+    from .uncertainty import estimate_uncertainty
+except KeyboardInterrupt:
+    interrupted_at_import()  # a console script starting: one line, exit 130
+    raise
 
 __all__ = [
     "AcquisitionError",
