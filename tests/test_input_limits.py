@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import rtloop
+from conftest import BALL_ON_FLOOR
 from rtloop.fit.protocol import max_threads
 
 
@@ -303,3 +304,34 @@ def test_two_stage_fits_stay_inside_the_scenes_bounds(ball_scene, ball_albedo, i
     assert _inside(result) == []
     assert all(math.isfinite(v) for row in result.products.values() for v in row)
 
+
+
+def _extreme(edit):
+    d = copy.deepcopy(BALL_ON_FLOOR)
+    edit(d)
+    return d
+
+
+@pytest.mark.parametrize(
+    ("edit", "kw"),
+    [
+        (lambda d: d["light"].__setitem__("color", [1e8, 1, 1]), {}),
+        (lambda d: d.__setitem__("exposure", 1e8), {}),
+        (lambda d: (d["fit"].__setitem__("objects.ball.albedo", {"min": 1e7, "max": 1e8}),
+                    d["objects"][0]["material"].__setitem__("albedo", [1e7] * 3)), {}),
+        (lambda d: d["fit"].__setitem__("light.position", {"min": [-1e8, 0.5, -1e8], "max": [1e8] * 3}),
+         {"protocol": "paper", "generations": 5}),
+        (lambda d: d["fit"].__setitem__("exposure", {"min": 1e-8, "max": 1e8}), {"protocol": "paper", "generations": 5}),
+    ],
+)
+def test_numbers_at_the_limits_fit_end_to_end_with_a_json_report(photo, edit, kw):
+    """The issue's 1e308 cases, at the largest accepted values: no bare exception from the fit or the
+    uncertainty, a report JSON can hold (no inf or NaN), every value inside its bounds."""
+    import json
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", rtloop.RtloopWarning)
+        result = rtloop.fit(_extreme(edit), photo, **kw)
+    json.dumps(result.report(), allow_nan=False)
+    assert _inside(result) == []
