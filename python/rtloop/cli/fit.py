@@ -28,6 +28,7 @@ import numpy as np
 import rtloop
 from rtloop._files import PlaceError, move_into_place, recover_leftovers, staging_dir, write_json
 from rtloop.fit import PROTOCOLS
+from rtloop.fit.protocol import LIMITS, max_threads
 from rtloop.report import truth_errors, truth_values
 
 from .args import Parser, UsageError, float_in, generations, int_at_least, int_in, norm
@@ -149,7 +150,7 @@ def _build_parser() -> Parser:
         "--protocol", choices=sorted(PROTOCOLS), default="rtloop",
         help=_protocol_help(),
     )
-    p.add_argument("--population", type=int_at_least(4, "a whole number >= 4"), metavar="N",
+    p.add_argument("--population", type=int_in(*LIMITS["population"]), metavar="N",
                    help="individuals per generation (default: the protocol's)")
     p.add_argument("--generations", type=generations, metavar="N|N1,N2",
                    help="generations per stage: one number for every stage, or N1 for the light stages "
@@ -158,9 +159,9 @@ def _build_parser() -> Parser:
                    help="DE differential weight (default: the protocol's)")
     p.add_argument("--cr", type=float_in(0.0, 1.0, False, "a number in [0, 1]"), metavar="CR",
                    help="DE crossover probability (default: the protocol's)")
-    p.add_argument("--seed", type=int_at_least(0, "a whole number >= 0"), default=0,
+    p.add_argument("--seed", type=int_in(*LIMITS["seed"]), default=0,
                    help="random seed; the result is the same for any --threads (default 0)")
-    p.add_argument("--threads", type=int_at_least(1, "a whole number >= 1"), metavar="N",
+    p.add_argument("--threads", type=int_in(1, max_threads()), metavar="N",
                    help="worker threads (default: all cores)")
     p.add_argument("--response", choices=("srgb", "linear"), default="srgb",
                    help="how IMAGE's stored values relate to light: 'srgb' (default, cameras and image "
