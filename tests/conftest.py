@@ -1,8 +1,10 @@
-"""Shared fixtures: tiny scenes built in code, and the path to ../shared (tests skip cleanly without it)."""
+"""Shared fixtures: tiny scenes built in code, and the path to ../shared (tests skip without it, and fail
+under CI=true, where it must be present)."""
 
 from __future__ import annotations
 
 import copy
+import os
 from pathlib import Path
 
 import pytest
@@ -35,10 +37,17 @@ def ball_scene() -> dict:
     return copy.deepcopy(BALL_ON_FLOOR)
 
 
+def missing(what: str) -> None:
+    """Skip a test whose input ``what`` is absent, or fail it under CI (``CI`` set, as .ci/run sets it)."""
+    if os.environ.get("CI", "").lower() not in ("", "0", "false"):
+        pytest.fail(f"{what} (required when CI is set)")
+    pytest.skip(what)
+
+
 def shared_case(name: str) -> Path:
     path = SHARED_SCENES / name
     if not path.is_dir():
-        pytest.skip(f"{path} not found: the reference scenes live in ../shared/scenes beside the repo")
+        missing(f"{path} not found: the reference scenes live in ../shared/scenes beside the repo")
     return path
 
 

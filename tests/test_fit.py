@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 
 import rtloop
-from conftest import SHARED_SCENES, shared_case, shared_case_names
+from conftest import SHARED_SCENES, missing, shared_case, shared_case_names
 from rtloop import _native
 
 
 def _score(result_dict: dict, truth_dict: dict) -> dict:
     spec = importlib.util.spec_from_file_location("score_result", SHARED_SCENES.parent / "tools" / "score_result.py")
     if spec is None or not (SHARED_SCENES.parent / "tools" / "score_result.py").is_file():
-        pytest.skip("../shared/tools/score_result.py not found")
+        missing("../shared/tools/score_result.py not found")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod.score(result_dict, truth_dict)
@@ -371,7 +371,7 @@ def test_reference_scenes_median_targets():
     """Across the Mitsuba scenes: light within 1 cm (median) and colour products within 2 %."""
     names = shared_case_names()
     if not SHARED_SCENES.is_dir():
-        pytest.skip(f"{SHARED_SCENES} not found: the reference scenes live in ../shared/scenes beside the repo")
+        missing(f"{SHARED_SCENES} not found: the reference scenes live in ../shared/scenes beside the repo")
     scores = [_fit_reference_case(n) for n in names]
     assert np.median([s["light_err_m"] for s in scores]) < 0.01, scores
     assert max(max(s["product_rel_err"].values()) for s in scores) < 0.02, scores

@@ -14,23 +14,31 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
+from ._interrupt import interrupted_at_import
 
-from . import _native
-from ._native import Scene, __version__
-from .acquisition.objective import load_image, load_mask
-from .batch import JobResult, fit_many
-from .errors import AcquisitionError, RtloopError, SceneError
-from .fit import FitResult, StageResult, fit
-from .report import report
-from .scene import load_scene, save_scene, scene_to_dict
-from .uncertainty import estimate_uncertainty
+try:
+    import numpy as np
+
+    from . import _native
+    from ._native import Scene, __version__
+    from .acquisition.objective import load_image, load_mask
+    from .batch import JobResult, fit_many
+    from .errors import AcquisitionError, RtloopError, RtloopWarning, SceneError
+    from .fit import FitResult, StageResult, fit
+    from .fit.protocol import whole
+    from .report import report
+    from .scene import load_scene, save_scene, scene_to_dict
+    from .uncertainty import estimate_uncertainty
+except KeyboardInterrupt:
+    interrupted_at_import()  # a console script starting: one line, exit 130
+    raise
 
 __all__ = [
     "AcquisitionError",
     "FitResult",
     "JobResult",
     "RtloopError",
+    "RtloopWarning",
     "Scene",
     "SceneError",
     "StageResult",
@@ -57,17 +65,30 @@ def render(scene: Any, width: int | None = None, height: int | None = None, spp:
     supersamples each pixel (stratified grid when it is a square number) and averages in linear light.
     Values are radiance times exposure, not clipped.
     """
-    return _native.render(load_scene(scene), width, height, int(spp))
+    scene = load_scene(scene)
+    width, height = _size(width, height)
+    return _native.render(scene, width, height, whole("spp", spp, 1, MAX_SPP))
 
 
 def object_ids(scene: Any, width: int | None = None, height: int | None = None) -> np.ndarray:
     """Which object each pixel centre shows: int32 (H, W) index into ``objects``, -1 for background."""
-    return _native.object_ids(load_scene(scene), width, height)
+    scene = load_scene(scene)
+    return _native.object_ids(scene, *_size(width, height))
+
+
+#: Most samples per pixel render() takes (README: "Input limits"); the size is 1..16384 as in a scene.
+MAX_SPP = 4096
+
+
+def _size(width: Any, height: Any) -> tuple[int | None, int | None]:
+    """An optional (width, height), each None or 1..16384 pixels as a scene's image."""
+    return tuple(None if v is None else whole(n, v, 1, 16384)  # type: ignore[return-value]
+                 for n, v in (("width", width), ("height", height)))
 
 
 def save_image(path: Any, image_linear: np.ndarray) -> None:
     """Write a linear (H, W, 3) image as 8-bit sRGB PNG or BMP (by extension), atomically."""
     arr = np.ascontiguousarray(image_linear, dtype=np.float32)
     if arr.ndim != 3 or arr.shape[2] != 3:
-        raise ValueError(f"expected an (H, W, 3) image, got shape {arr.shape}")
+        raise RtloopError(f"image_linear: expected an (H, W, 3) image, got shape {arr.shape}")
     _native.save_image(str(path), arr)

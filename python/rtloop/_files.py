@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import secrets
 import shutil
 import tempfile
@@ -14,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["PlaceError", "jsonable", "move_into_place", "staging_dir", "umask", "write_bytes", "write_json",
-           "write_text"]
+__all__ = ["PlaceError", "jsonable", "move_into_place", "recover_leftovers", "staging_dir", "umask", "write_bytes",
+           "write_json", "write_text"]
 
 
 def umask() -> int:
@@ -79,9 +80,50 @@ def staging_dir(out: Path, tag: str) -> Path:
     """A new empty directory beside ``out`` (created with its parents) to write the results into, with
     the permissions a plain mkdir would give; :func:`move_into_place` makes it ``out``."""
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.{tag}-", dir=out.parent))
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.{tag}-p{os.getpid()}-", dir=out.parent))
     os.chmod(tmp, 0o777 & ~umask())  # mkdtemp makes it private
     return tmp
+
+
+def _pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (another user's counts as alive)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, ValueError):
+        return True
+    return True
+
+
+def recover_leftovers(out: Path) -> list[str]:
+    """Tidy what killed runs left beside ``out`` (names carry the writer's pid: ``.OUT.TAG-pPID-...``; a
+    live writer's are kept): a set-aside old ``out`` is renamed back when ``out`` is absent (a kill between
+    the two renames of a replace), else deleted, and staging directories are deleted. Returns what was done."""
+    done: list[str] = []
+    try:
+        entries = sorted(out.parent.iterdir()) if out.parent.is_dir() else []
+    except OSError:
+        return done
+    for p in entries:
+        m = _LEFTOVER.fullmatch(p.name)
+        if not m or m["name"] != out.name or not p.is_dir() or p.is_symlink() or _pid_alive(int(m["pid"])):
+            continue
+        if m["old"] and not os.path.lexists(out):
+            try:
+                os.rename(p, out)
+                done.append(f"recovered {out} from {p.name}")
+            except OSError:
+                pass
+            continue
+        shutil.rmtree(p, ignore_errors=True)
+        if not os.path.lexists(p):
+            done.append(f"deleted {p.name}")
+    return done
+
+
+#: A staging or set-aside directory's name: ``.OUT.TAG-pPID-XXXX`` or ``.OUT.TAG-old-pPID-XXXX``.
+_LEFTOVER = re.compile(r"\.(?P<name>.+)\.[A-Za-z0-9-]+?(?P<old>-old)?-p(?P<pid>[0-9]{1,10})-[A-Za-z0-9_]+")
 
 
 class PlaceError(OSError):
@@ -97,7 +139,7 @@ def move_into_place(tmp: Path, out: Path, replace: bool, tag: str) -> Path | Non
         except OSError as e:
             raise PlaceError(f"cannot move the results into place ({e.strerror or e})") from None
         return None
-    aside = out.with_name(f".{out.name}.{tag}-old-{secrets.token_hex(4)}")
+    aside = out.with_name(f".{out.name}.{tag}-old-p{os.getpid()}-{secrets.token_hex(4)}")
     try:
         os.rename(out, aside)
     except OSError as e:

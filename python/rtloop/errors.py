@@ -12,4 +12,9 @@ class AcquisitionError(RtloopError):
     """An objective image could not be read or does not fit the scene (file, format, size)."""
 
 
-__all__ = ["AcquisitionError", "RtloopError", "SceneError"]
+class RtloopWarning(UserWarning):
+    """An input rtloop accepts but doubts (an image that looks sRGB-encoded or 0..255, fitted values at their
+    bounds); the same text is in the fit's ``warnings`` (``fit_report.warnings``)."""
+
+
+__all__ = ["AcquisitionError", "RtloopError", "RtloopWarning", "SceneError"]

@@ -14,7 +14,13 @@ from ._files import write_text
 from ._native import Scene
 from .errors import RtloopError, SceneError
 
-__all__ = ["Scene", "load_scene", "save_scene", "scene_to_dict"]
+__all__ = ["MAX_INTENSITY", "MAX_MAGNITUDE", "Scene", "load_scene", "save_scene", "scene_to_dict"]
+
+#: The largest magnitude of a scene number or fit bound but a direction's components: the core's
+#: ``scene::MAX_MAGNITUDE`` (README: "Input limits"; tests/test_input_limits.py checks they agree).
+MAX_MAGNITUDE = 1e8
+#: The largest light intensity (value or bound): it grows with distance squared (``scene::MAX_INTENSITY``).
+MAX_INTENSITY = 1e20
 
 
 def _first_non_finite(value: Any, path: str = "") -> str | None:

@@ -20,7 +20,12 @@ impl CameraFrame {
         // The frame is built in f64 and rounded once, so nearly parallel `up` vectors stay orthonormal.
         let pos = DVec3::from_array(c.position);
         let forward = (DVec3::from_array(c.look_at) - pos).normalize();
-        let right = forward.cross(DVec3::from_array(c.up)).normalize();
+        let mut right = forward.cross(DVec3::from_array(c.up));
+        let l2 = right.length_squared();
+        if !(l2.is_finite() && l2 > 1e-290) {
+            right = forward.cross(crate::scene::unit(c.up)); // a huge or tiny `up`: scaled first
+        }
+        let right = right.normalize();
         let true_up = right.cross(forward);
         CameraFrame {
             origin: pos.as_vec3a(),

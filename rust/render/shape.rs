@@ -43,7 +43,7 @@ impl PShape {
             },
             Shape::Plane { point, normal } => PShape::Plane {
                 point: glam::DVec3::from_array(*point).as_vec3a(),
-                normal: glam::DVec3::from_array(*normal).normalize().as_vec3a(),
+                normal: crate::scene::unit(*normal).as_vec3a(),
             },
         }
     }

@@ -157,23 +157,53 @@ struct RawMaterial {
 
 // ---------------------------------------------------------------- validation helpers
 
+/// The largest magnitude of any scene number and fit bound but a direction's components (README: "Input
+/// limits"): metres, colours, intensities and exposures beyond it overflow the f32 renderer's products.
+pub const MAX_MAGNITUDE: f64 = 1e8;
+
+/// The largest light intensity: it scales as distance squared, so a light 1e8 m away needs 1e16 and more.
+pub const MAX_INTENSITY: f64 = 1e20;
+
 fn finite(field: &str, v: f64) -> Result<f64> {
-    if v.is_finite() {
-        Ok(v)
-    } else {
+    finite_upto(field, v, MAX_MAGNITUDE)
+}
+
+fn finite_upto(field: &str, v: f64, limit: f64) -> Result<f64> {
+    if !v.is_finite() {
         Err(Error::scene(
             field,
             format!("must be a finite number (got {v})"),
         ))
+    } else if v.abs() > limit {
+        Err(Error::scene(
+            field,
+            format!("must be within +-{limit:e} (got {v:e})"),
+        ))
+    } else {
+        Ok(v)
     }
 }
 
-fn finite3(field: &str, v: V3) -> Result<V3> {
+/// Finite components of any size: a direction (only its orientation is used).
+fn finite_direction(field: &str, v: V3) -> Result<V3> {
     for (k, c) in v.iter().enumerate() {
         if !c.is_finite() {
             return Err(Error::scene(
                 field,
                 format!("component {k} must be a finite number (got {c})"),
+            ));
+        }
+    }
+    Ok(v)
+}
+
+fn finite3(field: &str, v: V3) -> Result<V3> {
+    let v = finite_direction(field, v)?;
+    for (k, c) in v.iter().enumerate() {
+        if c.abs() > MAX_MAGNITUDE {
+            return Err(Error::scene(
+                field,
+                format!("component {k} must be within +-{MAX_MAGNITUDE:e} (got {c:e})"),
             ));
         }
     }
@@ -191,8 +221,26 @@ fn nonneg3(field: &str, v: V3) -> Result<V3> {
     Ok(v)
 }
 
+/// The Euclidean length, computed scaled so that no finite vector overflows (or underflows) to 0 or inf.
 pub(crate) fn norm(v: V3) -> f64 {
-    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+    let m = v[0].abs().max(v[1].abs()).max(v[2].abs());
+    if m == 0.0 || !m.is_finite() {
+        return m;
+    }
+    let (x, y, z) = (v[0] / m, v[1] / m, v[2] / m);
+    m * (x * x + y * y + z * z).sqrt()
+}
+
+/// `v` normalised in f64 as glam does it, scaled first when its squared length would overflow or
+/// underflow (a `[0, 1e300, 0]` normal), so the bits of ordinary vectors are glam's.
+pub(crate) fn unit(v: V3) -> glam::DVec3 {
+    let d = glam::DVec3::from_array(v);
+    let l2 = d.length_squared();
+    if l2.is_finite() && l2 > 1e-290 {
+        d.normalize()
+    } else {
+        (d / d.abs().max_element()).normalize()
+    }
 }
 
 fn cross(a: V3, b: V3) -> V3 {
@@ -235,7 +283,7 @@ impl Scene {
         let camera = Camera {
             position: finite3("camera.position", c.position)?,
             look_at: finite3("camera.look_at", c.look_at)?,
-            up: finite3("camera.up", c.up.unwrap_or([0.0, 1.0, 0.0]))?,
+            up: finite_direction("camera.up", c.up.unwrap_or([0.0, 1.0, 0.0]))?,
             vfov_deg: finite("camera.vfov_deg", c.vfov_deg)?,
         };
         if !(camera.vfov_deg > 0.0 && camera.vfov_deg < 180.0) {
@@ -258,11 +306,10 @@ impl Scene {
                 "coincides with camera.position",
             ));
         }
-        let up_len = norm(camera.up);
-        if up_len == 0.0 {
+        if norm(camera.up) == 0.0 {
             return Err(Error::scene("camera.up", "zero-length vector"));
         }
-        if norm(cross(fwd, camera.up)) <= 1e-9 * norm(fwd) * up_len {
+        if norm(cross(unit(fwd).to_array(), unit(camera.up).to_array())) <= 1e-9 {
             return Err(Error::scene(
                 "camera.up",
                 "is parallel to the viewing direction (look_at - position)",
@@ -290,7 +337,7 @@ impl Scene {
                 let d = l.direction.ok_or_else(|| {
                     Error::scene("light.direction", "missing field for a directional light")
                 })?;
-                let d = finite3("light.direction", d)?;
+                let d = finite_direction("light.direction", d)?;
                 let n = norm(d);
                 if n == 0.0 || !n.is_finite() {
                     return Err(Error::scene("light.direction", "zero-length direction"));
@@ -306,7 +353,7 @@ impl Scene {
         };
         let light = PointLight {
             position,
-            intensity: finite("light.intensity", l.intensity)?,
+            intensity: finite_upto("light.intensity", l.intensity, MAX_INTENSITY)?,
             color: nonneg3("light.color", l.color.unwrap_or([1.0; 3]))?,
             direction,
         };
@@ -504,7 +551,11 @@ fn parse_object(i: usize, o: RawObject, previous: &[Object]) -> Result<Object> {
     let need = |v: Option<V3>, field: &str| -> Result<V3> {
         let v =
             v.ok_or_else(|| Error::scene(f(field), format!("missing field for a {}", o.shape)))?;
-        finite3(&f(field), v)
+        if field == "normal" {
+            finite_direction(&f(field), v)
+        } else {
+            finite3(&f(field), v)
+        }
     };
     let forbid = |present: bool, field: &str| -> Result<()> {
         if present {
@@ -592,7 +643,7 @@ impl FitParam {
     }
 }
 
-fn bound_values(field: &str, v: Option<&Value>, len: usize) -> Result<Vec<f64>> {
+fn bound_values(field: &str, v: Option<&Value>, len: usize, limit: f64) -> Result<Vec<f64>> {
     let v = v.ok_or_else(|| Error::scene(field, "missing"))?;
     let nums: Vec<Option<f64>> = match v {
         Value::Number(n) => vec![n.as_f64(); len],
@@ -612,7 +663,11 @@ fn bound_values(field: &str, v: Option<&Value>, len: usize) -> Result<Vec<f64>> 
     };
     nums.into_iter()
         .map(|x| match x {
-            Some(x) if x.is_finite() => Ok(x),
+            Some(x) if x.is_finite() && x.abs() <= limit => Ok(x),
+            Some(x) if x.is_finite() => Err(Error::scene(
+                field,
+                format!("every bound must be within +-{limit:e} (got {x:e})"),
+            )),
             _ => Err(Error::scene(
                 field,
                 format!("every bound must be a finite number (got {v})"),
@@ -637,13 +692,24 @@ fn parse_fit_entry(scene: &Scene, path: &str, bounds: &Value) -> Result<FitParam
         ));
     }
     let len = target.len();
-    let min = bound_values(&format!("{field}.min"), obj.get("min"), len)?;
-    let max = bound_values(&format!("{field}.max"), obj.get("max"), len)?;
+    let limit = if target == Target::LightIntensity {
+        MAX_INTENSITY
+    } else {
+        MAX_MAGNITUDE
+    };
+    let min = bound_values(&format!("{field}.min"), obj.get("min"), len, limit)?;
+    let max = bound_values(&format!("{field}.max"), obj.get("max"), len, limit)?;
     for k in 0..len {
         if min[k] > max[k] {
             return Err(Error::scene(
                 &field,
                 format!("min > max in component {k} ({} > {})", min[k], max[k]),
+            ));
+        }
+        if target == Target::Exposure && min[k] <= 0.0 {
+            return Err(Error::scene(
+                format!("{field}.min"),
+                format!("must be > 0 for exposure (got {})", min[k]),
             ));
         }
         if let Some(lo) = target.lower_limit() {

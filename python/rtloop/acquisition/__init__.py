@@ -32,17 +32,65 @@ floor plane y = 0 with the origin at the board's centre. Every failure raises
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, Any
+
 from ..errors import AcquisitionError
-from .ball import BallSilhouette, SpherePlacement, find_ball, locate_ball, place_sphere
-from .boards import BoardDetection, BoardSpec, board_image, detect_board, parse_board
-from .build import AcquiredScene, build_scene, draw_overlay, fit_section
-from .calibration import CameraIntrinsics, PinholeRemap, calibrate_camera, undistort_to_pinhole
-from .camera import PinholeCamera, focal_from_vfov, vfov_from_focal
-from .capture import CaptureResult, FrameSource, capture_photo, open_camera, save_capture
-from .colour import ColourCorrection, colorchecker_correction, grey_card_balance, mcc_available
-from .objective import load_image, load_mask
-from .pose import WORLD_FROM_BOARD, FloorPose, estimate_floor_pose
-from .response import CameraResponse, load_photo, parse_response, photo_info
+
+if TYPE_CHECKING:
+    from .ball import BallSilhouette, SpherePlacement, find_ball, locate_ball, place_sphere
+    from .boards import BoardDetection, BoardSpec, board_image, detect_board, parse_board
+    from .build import AcquiredScene, build_scene, draw_overlay, fit_section
+    from .calibration import CameraIntrinsics, PinholeRemap, calibrate_camera, undistort_to_pinhole
+    from .camera import PinholeCamera, focal_from_vfov, vfov_from_focal
+    from .capture import CaptureResult, FrameSource, capture_photo, open_camera, save_capture
+    from .colour import ColourCorrection, colorchecker_correction, grey_card_balance, mcc_available
+    from .objective import load_image, load_mask
+    from .pose import WORLD_FROM_BOARD, FloorPose, estimate_floor_pose
+    from .response import CameraResponse, load_photo, parse_response, photo_info
+
+#: Where each public name lives: imported on first use, so ``import rtloop`` loads no OpenCV.
+_WHERE = {
+    "BallSilhouette": "ball",
+    "SpherePlacement": "ball",
+    "find_ball": "ball",
+    "locate_ball": "ball",
+    "place_sphere": "ball",
+    "BoardDetection": "boards",
+    "BoardSpec": "boards",
+    "board_image": "boards",
+    "detect_board": "boards",
+    "parse_board": "boards",
+    "AcquiredScene": "build",
+    "build_scene": "build",
+    "draw_overlay": "build",
+    "fit_section": "build",
+    "CameraIntrinsics": "calibration",
+    "PinholeRemap": "calibration",
+    "calibrate_camera": "calibration",
+    "undistort_to_pinhole": "calibration",
+    "PinholeCamera": "camera",
+    "focal_from_vfov": "camera",
+    "vfov_from_focal": "camera",
+    "CaptureResult": "capture",
+    "FrameSource": "capture",
+    "capture_photo": "capture",
+    "open_camera": "capture",
+    "save_capture": "capture",
+    "ColourCorrection": "colour",
+    "colorchecker_correction": "colour",
+    "grey_card_balance": "colour",
+    "mcc_available": "colour",
+    "load_image": "objective",
+    "load_mask": "objective",
+    "WORLD_FROM_BOARD": "pose",
+    "FloorPose": "pose",
+    "estimate_floor_pose": "pose",
+    "CameraResponse": "response",
+    "load_photo": "response",
+    "parse_response": "response",
+    "photo_info": "response",
+}
+
 
 __all__ = [
     "WORLD_FROM_BOARD",
@@ -86,3 +134,14 @@ __all__ = [
     "undistort_to_pinhole",
     "vfov_from_focal",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """The submodule's object on first use (PEP 562): OpenCV is imported only by what needs it."""
+    if name in _WHERE:
+        import importlib
+
+        value = getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

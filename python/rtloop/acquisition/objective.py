@@ -42,7 +42,6 @@ import os
 import warnings
 from typing import Protocol
 
-import cv2
 import numpy as np
 from PIL import Image
 
@@ -72,6 +71,11 @@ SceneLike = _HasSize | tuple[int, int]
 
 class _Fail(Exception):
     """Internal: a problem with the file, turned into an AcquisitionError that names it."""
+
+
+#: The most pixels a file may decode to (a 100-megapixel camera's photo fits; a "decompression bomb", a
+#: small file claiming a huge size, does not). README: "Input limits".
+MAX_DECODED_PIXELS = 120_000_000
 
 
 def load_image(
@@ -139,6 +143,8 @@ def _load(name: str, scene: SceneLike, response: str, crop: bool) -> np.ndarray:
                 f"{name}: image ({w}x{h}) is smaller than the scene ({width}x{height}) and is enlarged",
                 stacklevel=3,
             )
+        import cv2  # here, not at import: `import rtloop` loads no OpenCV
+
         linear = cv2.resize(linear, (width, height), interpolation=cv2.INTER_AREA)
     if linear.ndim == 2:
         linear = np.repeat(linear[:, :, np.newaxis], 3, axis=2)
@@ -182,7 +188,10 @@ def _decode(name: str) -> tuple[np.ndarray, int]:
     if data.size == 0:
         raise _Fail("file is empty")
 
+    _check_pixel_count(name)
     orientation = _exif_orientation(name)
+    import cv2  # here, not at import: `import rtloop` loads no OpenCV
+
     try:
         decoded = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)  # keeps bit depth; no EXIF rotation
     except cv2.error:
@@ -190,6 +199,23 @@ def _decode(name: str) -> tuple[np.ndarray, int]:
     if decoded is not None:
         return _from_opencv(decoded), orientation
     return _decode_with_pillow(name), orientation
+
+
+def _check_pixel_count(name: str) -> None:
+    """Refuse, from the header alone, a file that would decode to more than MAX_DECODED_PIXELS."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # decompression-bomb warnings: the size is checked here
+            with Image.open(name) as img:
+                w, h = img.size
+    except Image.DecompressionBombError:  # Pillow's own refusal (over twice its MAX_IMAGE_PIXELS)
+        raise _Fail(f"image claims more than {2 * (Image.MAX_IMAGE_PIXELS or 0) / 1e6:.0f} megapixels, more than "
+                    f"the {MAX_DECODED_PIXELS / 1e6:.0f} rtloop decodes; downscale it first") from None
+    except Exception:  # noqa: BLE001 - not a format Pillow reads: OpenCV's own limit applies
+        return
+    if w * h > MAX_DECODED_PIXELS:
+        raise _Fail(f"image claims {w}x{h} = {w * h / 1e6:.0f} megapixels, more than the "
+                    f"{MAX_DECODED_PIXELS / 1e6:.0f} rtloop decodes; downscale it first")
 
 
 def _from_opencv(image: np.ndarray) -> np.ndarray:
@@ -306,7 +332,7 @@ def _fit_aspect(image: np.ndarray, width: int, height: int, crop: bool) -> np.nd
     if abs(w / h - scene_aspect) / scene_aspect > ASPECT_TOLERANCE:
         raise _Fail(
             f"image is {w}x{h} but the scene is {width}x{height}: aspect ratios differ "
-            f"({w / h:.4g} vs {scene_aspect:.4g}); crop the image or pass crop=True"
+            f"({w / h:.4g} vs {scene_aspect:.4g}); crop the image or pass crop=True (--crop on the command line)"
         )
     return image
 

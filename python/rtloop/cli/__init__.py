@@ -3,6 +3,12 @@
 
 from __future__ import annotations
 
-from .fit import main
+from .._interrupt import interrupted_at_import
+
+try:
+    from .fit import main
+except KeyboardInterrupt:
+    interrupted_at_import()  # a console script starting: one line, exit 130
+    raise
 
 __all__ = ["main"]

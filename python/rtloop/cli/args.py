@@ -11,7 +11,6 @@ import warnings
 from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
-from ..acquisition.boards import length_m
 from ..errors import RtloopError
 
 __all__ = ["BOARD_HELP", "RESPONSE_HELP", "Parser", "UsageError", "float_in", "formatter", "generations", "info",
@@ -64,6 +63,34 @@ def int_at_least(minimum: int, what: str, not_a_number: str | None = None) -> Ca
     return parse
 
 
+def int_in(lo: int, hi: int) -> Callable[[str], int]:
+    """A whole number in [lo, hi]."""
+    what = f"a whole number from {lo} to {hi}"
+    at_least = int_at_least(lo, what)
+
+    def parse(text: str) -> int:
+        value = at_least(text)
+        if value > hi:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {value}")
+        return value
+
+    return parse
+
+
+def norm(text: str) -> str:
+    """A loss norm as the core reads it: l1, l2, huber or huber:H with H > 0 (checked here, before the fit)."""
+    if text in ("l1", "l2", "huber"):
+        return text
+    if text.startswith("huber:"):
+        try:
+            h = float(text[len("huber:"):])
+        except ValueError:
+            h = math.nan
+        if math.isfinite(h) and h > 0:
+            return text
+    raise argparse.ArgumentTypeError(f"expected l1, l2, huber or huber:H with H > 0, got {text!r}")
+
+
 def float_in(lo: float, hi: float, lo_open: bool, what: str, not_a_number: str | None = None
              ) -> Callable[[str], float]:
     """A finite number in [lo, hi] (or (lo, hi] with ``lo_open``)."""
@@ -97,6 +124,8 @@ def generations(text: str) -> int | tuple[int, int]:
 def length(text: str) -> float:
     """A length > 0 in metres, or with a unit: 0.0335, 33.5mm, 3.35cm."""
     try:
+        from ..acquisition.boards import length_m  # here: boards imports OpenCV
+
         v = length_m(text)
     except ValueError:
         raise argparse.ArgumentTypeError(

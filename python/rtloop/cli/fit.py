@@ -26,11 +26,12 @@ from typing import Any, TextIO
 import numpy as np
 
 import rtloop
-from rtloop._files import PlaceError, move_into_place, staging_dir
+from rtloop._files import PlaceError, move_into_place, recover_leftovers, staging_dir
 from rtloop.fit import PROTOCOLS
+from rtloop.fit.protocol import LIMITS, max_threads
 from rtloop.report import truth_errors, truth_values
 
-from .args import Parser, UsageError, float_in, generations, int_at_least
+from .args import Parser, UsageError, float_in, generations, int_at_least, int_in, norm
 from .outputs import input_paths, write_result
 
 __all__ = ["main"]
@@ -131,6 +132,10 @@ class _Interrupted(Exception):
     """Raised inside the fit's callback to stop the search after Ctrl-C."""
 
 
+#: The largest side of a rendered image, as of a scene's (README: "Input limits").
+MAX_SIZE = 16384
+
+
 class _Terminated(KeyboardInterrupt):
     """SIGTERM, handled like Ctrl-C (clean up, nothing half-written) but reported as such."""
 
@@ -149,7 +154,7 @@ def _build_parser() -> Parser:
         "--protocol", choices=sorted(PROTOCOLS), default="rtloop",
         help=_protocol_help(),
     )
-    p.add_argument("--population", type=int_at_least(4, "a whole number >= 4"), metavar="N",
+    p.add_argument("--population", type=int_in(*LIMITS["population"]), metavar="N",
                    help="individuals per generation (default: the protocol's)")
     p.add_argument("--generations", type=generations, metavar="N|N1,N2",
                    help="generations per stage: one number for every stage, or N1 for the light stages "
@@ -158,16 +163,16 @@ def _build_parser() -> Parser:
                    help="DE differential weight (default: the protocol's)")
     p.add_argument("--cr", type=float_in(0.0, 1.0, False, "a number in [0, 1]"), metavar="CR",
                    help="DE crossover probability (default: the protocol's)")
-    p.add_argument("--seed", type=int_at_least(0, "a whole number >= 0"), default=0,
+    p.add_argument("--seed", type=int_in(*LIMITS["seed"]), default=0,
                    help="random seed; the result is the same for any --threads (default 0)")
-    p.add_argument("--threads", type=int_at_least(1, "a whole number >= 1"), metavar="N",
+    p.add_argument("--threads", type=int_in(1, max_threads()), metavar="N",
                    help="worker threads (default: all cores)")
     p.add_argument("--response", choices=("srgb", "linear"), default="srgb",
                    help="how IMAGE's stored values relate to light: 'srgb' (default, cameras and image "
                    "editors) or 'linear' (raw linear sensor counts)")
     p.add_argument("--crop", action="store_true",
                    help="centre-crop IMAGE to the scene's aspect ratio (otherwise they must match)")
-    p.add_argument("--norm", default="l1", metavar="NORM",
+    p.add_argument("--norm", type=norm, default="l1", metavar="NORM",
                    help="per-pixel penalty of the loss: l1 (the paper's, default), l2 (Gaussian noise), "
                    "huber or huber:H (quadratic within H, linear beyond; robust to unmodelled pixels)")
     p.add_argument("--loss-space", choices=("linear", "srgb"), default="linear",
@@ -180,10 +185,10 @@ def _build_parser() -> Parser:
     p.add_argument("--snapshot-every", type=int_at_least(0, "a whole number >= 0"), default=5, metavar="N",
                    help="render the best individual every N generations of every stage into snapshots/ "
                    "(default 5; 0 disables)")
-    p.add_argument("--final-scale", type=int_at_least(1, "a whole number >= 1"), default=4, metavar="K",
-                   help="final.png is K times the scene's width and height (default 4)")
-    p.add_argument("--final-spp", type=int_at_least(1, "a whole number >= 1"), default=16, metavar="S",
-                   help="samples per pixel of final.png (default 16)")
+    p.add_argument("--final-scale", type=int_in(1, MAX_SIZE), default=4, metavar="K",
+                   help=f"final.png is K times the scene's width and height, at most {MAX_SIZE} pixels (default 4)")
+    p.add_argument("--final-spp", type=int_in(1, rtloop.MAX_SPP), default=16, metavar="S",
+                   help=f"samples per pixel of final.png, 1 to {rtloop.MAX_SPP} (default 16)")
     p.add_argument("--force", action="store_true",
                    help="replace DIR if it exists and is not empty (only after the new results are complete)")
     p.add_argument("--report", action="store_true",
@@ -337,6 +342,11 @@ class _Run:
         """Load, fit and write everything into ``tmp``; returns the FitResult."""
         args = self.args
         scene = rtloop.load_scene(args.scene)
+        k = args.final_scale
+        if max(scene.width, scene.height) * k > MAX_SIZE:
+            raise _Failure(f"--final-scale {k}: final.png would be {scene.width * k}x{scene.height * k}, more "
+                           f"than {MAX_SIZE} pixels on a side; use --final-scale "
+                           f"{max(1, MAX_SIZE // max(scene.width, scene.height))} or less")
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             image = rtloop.load_image(args.image, scene, response=args.response, crop=args.crop)
@@ -384,12 +394,16 @@ class _Run:
                     rtloop.save_image(snapshots / f"{stage}_gen{info.generation:04d}.bmp", shot)
                 self.progress.generation(info)
 
-            result = rtloop.fit(
-                scene, image, protocol=args.protocol, seed=args.seed, population=args.population,
-                generations=args.generations, f=args.f, cr=args.cr, threads=args.threads, callback=callback,
-                mask=mask, norm=args.norm, space=args.loss_space,
-            )
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", rtloop.RtloopWarning)  # printed below from result.warnings
+                result = rtloop.fit(
+                    scene, image, protocol=args.protocol, seed=args.seed, population=args.population,
+                    generations=args.generations, f=args.f, cr=args.cr, threads=args.threads,
+                    callback=callback, mask=mask, norm=args.norm, space=args.loss_space,
+                )
         self.progress.end_line()
+        for w in result.warnings:
+            print(f"{PROG}: warning: {w}", file=sys.stderr)
         self.check_stop()
 
         write_result(tmp, result, input_paths(args.scene, args.image, args.response, args.crop, args.mask))
@@ -536,6 +550,8 @@ def _main(argv: list[str] | None, t0: float) -> int:
     out = Path(os.path.abspath(args.out))  # normalised: "." and "x/.." have a name and a parent
     tmp: Path | None = None
     try:
+        for line in recover_leftovers(out):  # what killed runs left beside DIR
+            print(f"{PROG}: {line}", file=sys.stderr)
         replace = _check_out(out, args.force, [Path(args.scene), Path(args.image)])
         try:
             tmp = staging_dir(out, "rtloop-tmp")

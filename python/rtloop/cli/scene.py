@@ -11,7 +11,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from .._files import move_into_place, staging_dir
+from .._files import move_into_place, recover_leftovers, staging_dir
 from ..acquisition._common import AcquisitionError, write_json, write_png8, write_png16_srgb
 from ..acquisition.boards import parse_board
 from ..acquisition.calibration import CameraIntrinsics
@@ -221,6 +221,7 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         "board": parse_board(args.board).to_dict(),
         "response": args.response,
     }
+    recover_leftovers(out)  # what killed runs left beside OUT
     tmp = staging_dir(out, "rtloop-scene")
     try:
         write_json(tmp / "scene.json", acq.scene)

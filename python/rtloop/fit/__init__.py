@@ -8,18 +8,19 @@ the photo does not determine (:mod:`.identifiability`). README: "Methods".
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from ..errors import RtloopError
+from ..errors import RtloopError, RtloopWarning
 from ..scene import Scene, load_scene
 from .identifiability import identifiability as _identifiability
 from .identifiability import lit_pixel_counts
 from .products import product_bounds as _product_bounds
 from .products import products as _products
-from .protocol import LOSS_SPACES, PIXELS_PER_OBJECT, PROTOCOLS, budget, choose_method
+from .protocol import LOSS_SPACES, PIXELS_PER_OBJECT, PROTOCOLS, budget, check_arguments, choose_method
 from .result import FitResult, GenerationInfo, StageResult
 from .stages import Stages, sample_object_pixels
 
@@ -71,13 +72,18 @@ def fit(
     t0 = time.perf_counter()
     scene = load_scene(scene)
     b = budget(protocol, space, population, generations, f, cr)
-    target, use = _objective(scene, image, mask)
+    check_arguments(scene, seed=seed, threads=threads, polish=polish, pixels_per_object=pixels_per_object,
+                    population=b.population)
+    doubts: list[str] = []
+    target, use = _objective(scene, image, mask, doubts)
     all_paths = scene.fit_paths
     if not all_paths:
         raise RtloopError("fit: the scene's fit section names no free parameters")
     ident = _identifiability(scene, all_paths)
     choose_method(b, scene, all_paths, population=population, generations=generations, optimizer=optimizer,
                   polish=polish)
+    check_arguments(scene, seed=seed, threads=threads, polish=b.polish, pixels_per_object=pixels_per_object,
+                    population=b.population)  # the scaled budget too
     settings = {**b.settings(), "clip": clip,
                 "masked_pixels": None if use is None else int(scene.width * scene.height - use.size),
                 "norm": norm, "space": space, "pixels_per_object": pixels_per_object, "threads": threads,
@@ -101,6 +107,10 @@ def fit(
         identifiability=ident,
         settings=settings,
     )
+    doubts += _at_bounds(current, all_paths)
+    for d in doubts:
+        warnings.warn(d, RtloopWarning, stacklevel=2)
+    result.warnings = doubts
     if uncertainty:
         from ..uncertainty import estimate_uncertainty
 
@@ -112,8 +122,43 @@ def fit(
     return result
 
 
-def _objective(scene: Scene, image: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+#: A fitted value this close to a bound (as a fraction of its range) is reported as at the bound.
+AT_BOUND = 1e-6
+#: An image with at least this fraction of its pixels above 1 in some channel is doubted (0..255 or not linear).
+MOSTLY_ABOVE_ONE = 0.9
+
+
+def _at_bounds(scene: Scene, paths: list[str]) -> list[str]:
+    """A doubt naming the fitted values at one of their bounds (a range too narrow, or a wrong input)."""
+    at = []
+    for p in paths:
+        for n, v, (lo, hi) in zip(scene.param_names([p]), scene.get_params([p]), scene.bounds([p])):
+            near = AT_BOUND * (hi - lo)
+            if hi <= lo:
+                continue
+            # a physical limit is no doubt: 0 for what cannot be negative, 1 for an albedo (a yellow ball's red)
+            if (v - lo <= near and (lo != 0 or p == "light.position")) or (hi - v <= near and not (p.endswith(".albedo") and hi == 1)):
+                at.append(f"{n} = {v:.6g}")
+    if not at:
+        return []
+    return [(f"fitted values at their fit bounds: {', '.join(at)} (widen the bounds if the truth may lie "
+             "beyond)")]
+
+
+def _objective(scene: Scene, image: Any, mask: Any, doubts: list[str]) -> tuple[np.ndarray, np.ndarray | None]:
     """The image as float32 checked against the scene, and the mask's pixel indices (None: all)."""
+    kind = getattr(getattr(image, "dtype", None), "kind", None)
+    if kind is None:
+        image = np.asarray(image)
+        kind = image.dtype.kind
+    if kind in "uib":
+        raise RtloopError(
+            f"image: a {np.asarray(image).dtype} array is not linear radiance (a decoded file's code values?); "
+            "load the file with rtloop.load_image(path, scene), or pass float linear radiance (0 = black, 1 = "
+            "the brightest value a file could store)"
+        )
+    if kind != "f":
+        raise RtloopError(f"image: must be a float array of linear radiance (got dtype {np.asarray(image).dtype})")
     target = np.ascontiguousarray(image, dtype=np.float32)
     if target.shape != (scene.height, scene.width, 3):
         raise RtloopError(
@@ -122,11 +167,23 @@ def _objective(scene: Scene, image: np.ndarray, mask: np.ndarray | None) -> tupl
         )
     if not np.isfinite(target).all():
         raise RtloopError("image: contains NaN or infinite values")
+    if (target < 0).any():
+        doubts.append(f"image: {np.mean(target < 0):.2%} of the values are negative (min {float(target.min()):.4g}): "
+                      "linear radiance is >= 0 (zero-mean noise is fine, an offset or a wrong encoding is not)")
+    if np.mean(target.max(axis=2) > 1.0) >= MOSTLY_ABOVE_ONE:
+        doubts.append(f"image: {np.mean(target.max(axis=2) > 1.0):.0%} of the pixels are above 1: is it 0..255 "
+                      "code values or not linear? (rtloop.load_image gives linear 0..1)")
     if mask is None:
         return target, None
     m = np.asarray(mask)
     if m.shape != (scene.height, scene.width):
         raise RtloopError(f"mask: shape {m.shape} does not match the scene's ({scene.height}, {scene.width})")
+    if m.dtype.kind not in "biuf":
+        raise RtloopError(f"mask: must be bool (True = use) or 0/1 numbers (got dtype {m.dtype})")
+    if m.dtype.kind == "f" and not np.isfinite(m).all():
+        raise RtloopError("mask: contains NaN or infinite values (use a bool array, True = use)")
+    if m.dtype.kind != "b" and not np.isin(m, (0, 1)).all():
+        raise RtloopError("mask: numbers other than 0 and 1 (use a bool array, True = use)")
     if not m.any():
         raise RtloopError("mask: selects no pixel")
     return target, np.flatnonzero(m.astype(bool).ravel()).astype(np.uint32)

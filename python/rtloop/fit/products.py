@@ -4,6 +4,7 @@ per object and channel, Q = intensity x specular; their bounds and their split b
 from __future__ import annotations
 
 import json
+import math
 from typing import Any
 
 import numpy as np
@@ -151,17 +152,25 @@ def split_products(fitted: Scene, rows: list[list[float]], original: Scene) -> S
 
 
 def fix_gauge(fitted: Scene, albedo_paths: list[str], bounds_scene: Scene) -> Scene:
-    """Scale the light up (and the albedos down) until every albedo is within its original bounds."""
-    s = 1.0
+    """Scale the light up (and the albedos down) until every albedo is within its original bounds, as far as
+    the intensity's upper bound and the albedos' lower bounds allow; what is still outside is clamped, so
+    every value ends inside the bounds of ``bounds_scene``."""
+    s, s_max = 1.0, math.inf
+    intensity = fitted.get_params(["light.intensity"])[0]
+    ihi = bounds_scene.bounds(["light.intensity"])[0][1]
+    if intensity > 0:
+        s_max = ihi / intensity
     for p in albedo_paths:
-        vals = fitted.get_params([p])
-        for v, (_, hi) in zip(vals, bounds_scene.bounds([p])):
+        for v, (lo, hi) in zip(fitted.get_params([p]), bounds_scene.bounds([p])):
             if hi > 0:
                 s = max(s, v / hi)
-    if s <= 1.0:
-        return fitted
-    intensity = fitted.get_params(["light.intensity"])[0] * s
-    out = fitted.with_params([intensity], ["light.intensity"])
+            if lo > 0:
+                s_max = min(s_max, v / lo)
+    s = min(s, max(1.0, s_max))
+    out = fitted
+    if s > 1.0:
+        out = out.with_params([intensity * s], ["light.intensity"])
     for p in albedo_paths:
-        out = out.with_params([v / s for v in fitted.get_params([p])], [p])
+        b = bounds_scene.bounds([p])
+        out = out.with_params([min(max(v / s, lo), hi) for v, (lo, hi) in zip(fitted.get_params([p]), b)], [p])
     return out

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from typing import Any
 
@@ -12,7 +13,8 @@ from .. import _native
 from ..errors import RtloopError
 from ..scene import Scene
 
-__all__ = ["LOSS_SPACES", "PIXELS_PER_OBJECT", "PROTOCOLS", "Budget", "budget", "searched_paths"]
+__all__ = ["LIMITS", "LOSS_SPACES", "PIXELS_PER_OBJECT", "PROTOCOLS", "Budget", "budget", "check_arguments",
+           "searched_paths", "whole"]
 
 #: Where a loss compares pixel values: ``linear`` radiance (default) or ``srgb`` code values.
 LOSS_SPACES = ("linear", "srgb")
@@ -36,6 +38,59 @@ PROTOCOLS: dict[str, dict[str, Any]] = {
 
 #: Pixels sampled per object for stage 2.
 PIXELS_PER_OBJECT = 64
+
+#: The range of each whole-number argument of fit() (README: "Input limits"); threads also <= 64 x cores.
+LIMITS: dict[str, tuple[int, int]] = {
+    "seed": (0, 2**64 - 1),
+    "population": (4, 100_000),
+    "generations": (0, 1_000_000),
+    "polish": (0, 1_000_000),
+    "threads": (1, 1024),
+    "pixels_per_object": (1, 1_000_000),
+}
+
+#: Most pixel evaluations one generation may ask for (population x the scene's pixels): 4 x 10^9.
+MAX_POPULATION_PIXELS = 4_000_000_000
+
+
+def whole(name: str, value: Any, lo: int, hi: int) -> int:
+    """``value`` as an int in [lo, hi], else an RtloopError naming ``name``."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise RtloopError(f"{name}: must be a whole number (got {value!r})")
+    if not lo <= int(value) <= hi:
+        raise RtloopError(f"{name}: must be between {lo} and {hi} (got {value})")
+    return int(value)
+
+
+def _real(name: str, value: Any, lo: float, hi: float, *, open_low: bool = False) -> float:
+    """``value`` as a float in [lo, hi] (or (lo, hi]), else an RtloopError naming ``name``."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise RtloopError(f"{name}: must be a number (got {value!r})")
+    v = float(value)
+    if not (lo < v <= hi if open_low else lo <= v <= hi):
+        raise RtloopError(f"{name}: must be in {'(' if open_low else '['}{lo}, {hi}] (got {value})")
+    return v
+
+
+def max_threads() -> int:
+    """The most worker threads a fit may ask for: 1024, and at most 64 per core."""
+    return min(LIMITS["threads"][1], 64 * (os.cpu_count() or 1))
+
+
+def check_arguments(scene: Scene, *, seed: Any, threads: Any, polish: Any, pixels_per_object: Any,
+                    population: int) -> None:
+    """The whole-number arguments of fit() not checked by :func:`budget`, and the population's work."""
+    whole("seed", seed, *LIMITS["seed"])
+    if threads is not None:
+        whole("threads", threads, 1, max_threads())
+    if polish is not None:
+        whole("polish", polish, *LIMITS["polish"])
+    whole("pixels_per_object", pixels_per_object, *LIMITS["pixels_per_object"])
+    pixels = scene.width * scene.height
+    if population * pixels > MAX_POPULATION_PIXELS:
+        raise RtloopError(f"population: {population} individuals x {pixels} pixels is more than "
+                          f"{MAX_POPULATION_PIXELS:.0e} pixel evaluations a generation; use a smaller population "
+                          "or scene")
 
 
 @dataclass
@@ -67,15 +122,19 @@ def budget(protocol: str, space: str, population: int | None, generations: int |
     if space not in LOSS_SPACES:
         raise RtloopError(f"space: unknown loss space {space!r} (known: {', '.join(LOSS_SPACES)})")
     proto = PROTOCOLS[protocol]
-    pop = int(population if population is not None else proto["population"])
+    pop = whole("population", population if population is not None else proto["population"],
+                *LIMITS["population"])
     gens = generations if generations is not None else proto["generations"]
-    gens = (int(gens), int(gens)) if isinstance(gens, (int, np.integer)) else (int(gens[0]), int(gens[1]))
-    f_ = float(f if f is not None else proto["f"])
-    cr_ = float(cr if cr is not None else proto["cr"])
-    if pop < 4:
-        raise RtloopError(f"population: must be at least 4 (got {pop})")
-    if min(gens) < 0:
-        raise RtloopError(f"generations: must be >= 0 (got {gens})")
+    if isinstance(gens, (list, tuple)):
+        if len(gens) != 2:
+            raise RtloopError(f"generations: must be one number or a pair (stage 1, stage 2), got {gens!r}")
+        gens = (whole("generations[0]", gens[0], *LIMITS["generations"]),
+                whole("generations[1]", gens[1], *LIMITS["generations"]))
+    else:
+        g = whole("generations", gens, *LIMITS["generations"])
+        gens = (g, g)
+    f_ = _real("f", f if f is not None else proto["f"], 0.0, 2.0, open_low=True)
+    cr_ = _real("cr", cr if cr is not None else proto["cr"], 0.0, 1.0)
     return Budget(proto, pop, gens, f_, cr_)
 
 

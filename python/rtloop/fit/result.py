@@ -67,6 +67,8 @@ class FitResult:
     message: str = ""
     #: Per-parameter 1-sigma uncertainty (see rtloop.uncertainty), or None when not estimated.
     uncertainty: dict[str, Any] | None = None
+    #: Doubts about the inputs or the result (each also issued as an RtloopWarning), in the order found.
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def fitness(self) -> float:
@@ -99,4 +101,5 @@ class FitResult:
             "identifiability": self.identifiability,
             "uncertainty": self.uncertainty,
             "message": self.message,
+            "warnings": list(self.warnings),
         }

@@ -11,7 +11,7 @@ import numpy as np
 
 from .. import _native
 from .._pixels import edges
-from ..scene import Scene
+from ..scene import MAX_MAGNITUDE, Scene
 from .bounds import narrowed, restore_bounds, with_bounds
 from .identifiability import keep_undetermined
 from .products import fix_gauge, product_bounds, split_products
@@ -154,7 +154,8 @@ class Stages:
             for p in self.other_paths:
                 if p.endswith(".albedo"):
                     b = stage_scene.bounds([p])
-                    widen[p] = ([lo for lo, _ in b], [hi * factor for _, hi in b])
+                    # at most the scene format's largest number (MAX_MAGNITUDE), which with_bounds checks
+                    widen[p] = ([lo for lo, _ in b], [max(hi, min(hi * factor, MAX_MAGNITUDE)) for _, hi in b])
             search_scene = with_bounds(stage_scene, widen)
         s = self.run(name, search_scene, self.other_paths, "l1_rgb", pixels, self.budget.generations[1], seed)
         fitted = stage_scene.with_params(list(s.x), self.other_paths)
