@@ -233,7 +233,9 @@ def test_interrupted_batch_leaves_whole_lines_and_resumes(photos, tmp_path):
     jobs = [{"id": f"k{i}", "scene": str(scene), "photo": str(paths[i % 3]), "seed": i} for i in range(1000)]
     jobs_file = write_jobs(tmp_path / "jobs.jsonl", jobs)
     out = tmp_path / "out"
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO / "python"), os.environ.get("PYTHONPATH", "")])}
+    # The child imports the rtloop this test imported (a checkout's python/ or an installed wheel).
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(rtloop.__file__).resolve().parents[1]),
+                                                        os.environ.get("PYTHONPATH", "")])}
     # A shell may start background processes (CI, say) with SIGINT ignored, which the child inherits (the
     # batch then runs to its end): restore Python's handler, as a terminal's Ctrl-C finds it.
     launch = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "

@@ -11,6 +11,7 @@ import pytest
 
 ray = pytest.importorskip("ray", reason="Ray not installed (pip install '.[ray]')")
 
+import rtloop
 import test_batch as tb
 from rtloop.batch import fit_many, jobs
 from rtloop.batch.on_ray import run_ray
@@ -19,15 +20,14 @@ from rtloop.cli import batch as batch_cli
 photos = tb.photos  # the fixture: a 32x24 scene and three photos of it
 jobs_of, records, single, write_jobs = tb.jobs_of, tb.records, tb.single, tb.write_jobs
 
-REPO = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module", autouse=True)
 def local_ray():
-    # the workers import rtloop from this checkout, as the test does
+    # the workers import the rtloop this test imported (a checkout's python/ or an installed wheel)
     saved = os.environ.get("PYTHONPATH")
-    os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO / "python"), os.environ.get("PYTHONPATH"))
-                                               if p)
+    here = str(Path(rtloop.__file__).resolve().parents[1])
+    os.environ["PYTHONPATH"] = os.pathsep.join(p for p in (here, os.environ.get("PYTHONPATH")) if p)
     ray.init(num_cpus=2, logging_level="warning", log_to_driver=False, include_dashboard=False)
     yield
     ray.shutdown()
