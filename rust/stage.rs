@@ -5,15 +5,21 @@ use crate::error::Result;
 use crate::fitness::{Fitness, LossKind, Solved};
 use crate::search::{self, GenerationReport, Method, PolishReport, StopReason};
 
-/// Per object `[P_r, P_g, P_b, Q]`: the colour products and `Q` = intensity × specular (0 when matte).
-pub type ProductRow = [f64; 4];
+/// Per object `[P_r, P_g, P_b, Q]`: the colour products and `Q` = intensity × specular (0 when matte),
+/// then `[E_r, E_g, E_b]`, the environment products, when the projection has an environment term.
+pub type ProductRow = Vec<f64>;
 
 /// The products of `s`, one row per object.
 pub fn product_rows(s: &Solved) -> Vec<ProductRow> {
-    s.products
-        .iter()
-        .zip(&s.specular)
-        .map(|(p, &q)| [p[0], p[1], p[2], q])
+    (0..s.products.len())
+        .map(|k| {
+            let (p, q) = (s.products[k], s.specular[k]);
+            let mut row = vec![p[0], p[1], p[2], q];
+            if let Some(e) = s.environment.get(k) {
+                row.extend_from_slice(e);
+            }
+            row
+        })
         .collect()
 }
 

@@ -22,15 +22,17 @@ pub struct Kernel {
 
 impl Kernel {
     /// `surfels` and `targets` are the active pixels; `shapes` the scene's shapes.
-    /// `solve[i]` says whether pixel i may inform the closed-form products (see `projected`).
+    /// `solve[i]` says whether pixel i may inform the closed-form products (see `projected`); with
+    /// `environment` the kernel models the occluded environment (each pixel's sky view factor is kept).
     pub fn new(
         surfels: &[Surfel],
         targets: &[Vec3A],
         solve: &[bool],
         shapes: &[PShape],
         shadows: bool,
+        environment: bool,
     ) -> Kernel {
-        let groups = group(surfels, targets, solve, shapes, shadows);
+        let groups = group(surfels, targets, solve, shapes, shadows, environment);
         Kernel {
             norm: Norm::L1,
             space: Space::Linear,
@@ -120,8 +122,10 @@ impl Kernel {
             };
             let m = &p.materials[obj];
             let specular = p.any_specular && m.specular > 0.0;
-            // m_c = exposure * (rho_c * ambient_c + e * I_c * rho_c / pi)  (+ specular lobe)
+            // m_c = exposure * (rho_c * (ambient_c + env_c * sky) + e * I_c * rho_c / pi)  (+ specular lobe)
             let a: [f32; 3] = std::array::from_fn(|c| p.exposure * m.albedo[c] * p.ambient[c]);
+            let sky = !g.sky.is_empty() && p.environment != Vec3A::ZERO;
+            let ae: [f32; 3] = std::array::from_fn(|c| p.exposure * m.albedo[c] * p.environment[c]);
             let k: [f32; 3] =
                 std::array::from_fn(|c| lambert(p.exposure * light.rgb[c] * m.albedo[c]));
             let ks: [f32; 3] = std::array::from_fn(|c| {
@@ -133,12 +137,17 @@ impl Kernel {
                 let r = start..start + len;
                 irradiance::<AVX2>(g, r.clone(), &light, &mut e[..len]);
                 shadow(g, r.clone(), &light, &mut e[..len]);
-                if specular {
+                if specular || sky {
                     for c in 0..3 {
                         let mut sum = 0.0f32;
                         for (i, s) in r.clone().enumerate() {
-                            let lobe = blinn_phong(g, s, &light, m.shininess);
-                            let v = a[c] + e[i] * (k[c] + ks[c] * lobe);
+                            let lobe = if specular {
+                                ks[c] * blinn_phong(g, s, &light, m.shininess)
+                            } else {
+                                0.0
+                            };
+                            let base = if sky { a[c] + ae[c] * g.sky[s] } else { a[c] };
+                            let v = base + e[i] * (k[c] + lobe);
                             let v = if clip { v.min(1.0) } else { v };
                             sum += self.norm.penalty(enc.any(v) - gt[c][s]);
                         }

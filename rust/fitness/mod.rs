@@ -150,7 +150,10 @@ impl Fitness {
                 Error::Invalid("the projected loss needs product bounds for every object".into())
             })?;
             let n = scene.objects.len();
-            if proj.diffuse.len() != n || proj.specular.len() != n {
+            if proj.diffuse.len() != n
+                || proj.specular.len() != n
+                || !(proj.environment.is_empty() || proj.environment.len() == n)
+            {
                 return Err(Error::Invalid(format!(
                     "product bounds given for {} objects ({} specular); the scene has {n}",
                     proj.diffuse.len(),
@@ -198,6 +201,7 @@ impl Fitness {
                 m.specular = 0.0;
             }
             base.any_specular = false;
+            base.environment = Vec3A::ZERO; // solved in closed form (Projection::environment)
             Some(proj)
         } else {
             None
@@ -217,6 +221,14 @@ impl Fitness {
         });
         let active =
             ActivePixels::select(&gbuffer, target, pixels, background, scene.objects.len());
+        // The occluded environment costs a sky view factor per pixel only where the model has it.
+        let environment = match &projection {
+            Some(proj) => proj.has_environment(),
+            None => {
+                scene.environment != [0.0; 3]
+                    || layout.entries.iter().any(|e| e.1 == Target::Environment)
+            }
+        };
         Ok(Fitness {
             layout,
             early_exit: true,
@@ -227,6 +239,7 @@ impl Fitness {
                 &active.solve,
                 &geometry.shapes,
                 scene.can_occlude(),
+                environment,
             ),
             shapes: geometry.shapes,
             kind,

@@ -4,6 +4,7 @@
 
 use glam::Vec3A;
 
+use crate::render::environment::sky_view;
 use crate::render::light::{self, directional_irradiance, point_irradiance};
 use crate::render::shape::{segment_meets_sphere, sphere_power};
 use crate::render::{brdf, GBuffer, PShape, Surfel};
@@ -106,6 +107,9 @@ pub(crate) struct Group {
     pub(crate) ts: [Vec<f32>; 3],
     pub(crate) spheres: Vec<SphereOccluder>,
     pub(crate) planes: Vec<PlaneOccluder>,
+    /// The sky view factor per pixel (`render::environment::sky_view`; light-independent), for a
+    /// kernel that models the occluded environment; empty otherwise.
+    pub(crate) sky: Vec<f32>,
     /// Bounding sphere (centre, radius) of each run of `BLOCK` pixels, for culling shadow tests.
     pub(crate) blocks: Vec<([f32; 3], f32)>,
 }
@@ -128,13 +132,15 @@ pub(crate) struct Light {
 
 /// The active pixels grouped by object (background last), row-major inside a group, as structures of
 /// arrays with their occluders' light-independent terms (`shadows`: the scene can shadow at all).
-/// `solve[i]` says whether pixel i may inform the closed-form products.
+/// `solve[i]` says whether pixel i may inform the closed-form products; with `environment` each
+/// object's pixels carry their sky view factor.
 pub(crate) fn group(
     surfels: &[Surfel],
     targets: &[Vec3A],
     solve: &[bool],
     shapes: &[PShape],
     shadows: bool,
+    environment: bool,
 ) -> Vec<Group> {
     // Pixels grouped by object (background last), row-major inside a group: a counting sort.
     let slot = |o: u32| {
@@ -198,6 +204,13 @@ pub(crate) fn group(
             }),
             spheres: Vec::new(),
             planes: Vec::new(),
+            sky: match object {
+                Some(o) if environment => idx
+                    .iter()
+                    .map(|&i| sky_view(surfels[i].position, surfels[i].normal, o, shapes))
+                    .collect(),
+                _ => Vec::new(),
+            },
             blocks: idx
                 .chunks(BLOCK)
                 .map(|chunk| {

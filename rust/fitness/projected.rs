@@ -108,6 +108,9 @@ impl Kernel {
             .extend(proj.diffuse.iter().map(|b| [b[0].0, b[1].0, b[2].0])); // objects with no visible pixels
         out.specular.clear();
         out.specular.extend(proj.specular.iter().map(|b| b.0));
+        out.environment.clear();
+        out.environment
+            .extend(proj.environment.iter().map(|b| [b[0].0, b[1].0, b[2].0]));
         let sat = if clip { SATURATED } else { f32::INFINITY };
         let top = if clip { 1.0 } else { f32::INFINITY };
         let mut acc = [0.0f64; 3];
@@ -131,6 +134,7 @@ impl Kernel {
                 g,
                 light: &light,
                 specular: proj.specular[obj].1 > 0.0,
+                sky: proj.sky(obj, g),
                 shininess: p.materials[obj].shininess,
                 sat,
                 top,
@@ -168,24 +172,36 @@ impl Kernel {
                     sums.add(&run.factors::<AVX2>(k * CHUNK, e, b));
                 }
             }
-            let (pk, q) = solve_object(
-                &sums,
-                proj.weight,
-                &proj.diffuse[obj],
-                if run.specular {
-                    proj.specular[obj]
-                } else {
-                    (0.0, 0.0)
-                },
-                |c| fallback_sums(&e_all[..n], &g.t[c], sat),
-            );
+            let qb = if run.specular {
+                proj.specular[obj]
+            } else {
+                (0.0, 0.0)
+            };
+            let fallback = |c: usize| fallback_sums(&e_all[..n], &g.t[c], sat);
+            let (pk, q, ek) = if run.sky.is_some() {
+                solve_object_env(
+                    &sums,
+                    proj.weight,
+                    &proj.diffuse[obj],
+                    qb,
+                    &proj.environment[obj],
+                    fallback,
+                )
+            } else {
+                let (pk, q) = solve_object(&sums, proj.weight, &proj.diffuse[obj], qb, fallback);
+                (pk, q, [0.0; 3])
+            };
             out.products[obj] = pk;
             out.specular[obj] = q;
+            if run.sky.is_some() {
+                out.environment[obj] = ek;
+            }
             let pk: [f32; 3] = std::array::from_fn(|c| pk[c] as f32);
             let qw: [f32; 3] = std::array::from_fn(|c| (q * proj.weight[c] as f64) as f32);
             let products = Products {
                 pk,
                 qw,
+                ek: std::array::from_fn(|c| ek[c] as f32),
                 on: run.specular && q > 0.0,
             };
             // Pass 2: the loss at those products (serially, stopping once it exceeds `bound`).
@@ -243,12 +259,14 @@ pub fn projection_blocker(scene: &Scene, paths: &[String]) -> Option<String> {
         return Some("the scene has ambient light".into());
     }
     let allowed = |p: &str| {
-        matches!(p, "light.position" | "light.direction" | "light.intensity")
-            || scene.objects.iter().any(|o| {
-                ["albedo", "specular", "shininess"]
-                    .iter()
-                    .any(|m| p == format!("objects.{}.{m}", o.name))
-            })
+        matches!(
+            p,
+            "light.position" | "light.direction" | "light.intensity" | "environment"
+        ) || scene.objects.iter().any(|o| {
+            ["albedo", "specular", "shininess"]
+                .iter()
+                .any(|m| p == format!("objects.{}.{m}", o.name))
+        })
     };
     let extra: Vec<&str> = paths
         .iter()
@@ -293,11 +311,15 @@ pub fn projection_blocker(scene: &Scene, paths: &[String]) -> Option<String> {
 /// What the closed-form solve may choose, per object: the bounds of its diffuse products
 /// P_c = exposure x intensity x colour_c x albedo_c and of its specular product Q = intensity x specular,
 /// which enters channel c as Q x `weight[c]` (`weight` = exposure x light colour). An object whose
-/// specular bounds are (0, 0) is matte: no specular factor is computed for it at all.
+/// specular bounds are (0, 0) is matte: no specular factor is computed for it at all. `environment`
+/// (empty: no environment term) bounds each object's environment products E_c = exposure x env_c x
+/// albedo_c, the coefficient of its pixels' sky view factor; an object whose bounds are all (_, 0) gets
+/// no environment column.
 #[derive(Clone, Debug)]
 pub struct Projection {
     pub diffuse: Vec<[(f64, f64); 3]>,
     pub specular: Vec<(f64, f64)>,
+    pub environment: Vec<[(f64, f64); 3]>,
     pub weight: [f32; 3],
 }
 
@@ -308,22 +330,39 @@ impl Projection {
         Projection {
             diffuse,
             specular: vec![(0.0, 0.0); n],
+            environment: Vec::new(),
             weight: [1.0; 3],
         }
     }
+
+    /// Whether any object has an environment column.
+    pub fn has_environment(&self) -> bool {
+        self.environment.iter().any(|b| b.iter().any(|c| c.1 > 0.0))
+    }
+
+    /// The sky view factors of group `g` (object `obj`) when that object has an environment column.
+    pub(crate) fn sky<'g>(&self, obj: usize, g: &'g Group) -> Option<&'g [f32]> {
+        let on = self
+            .environment
+            .get(obj)
+            .is_some_and(|b| b.iter().any(|c| c.1 > 0.0));
+        (on && !g.sky.is_empty()).then_some(&g.sky[..])
+    }
 }
 
-/// The closed-form solution for one candidate: per object its diffuse products and specular product.
+/// The closed-form solution for one candidate: per object its diffuse products and specular product
+/// (and its environment products, when the projection has an environment term; else empty).
 #[derive(Clone, Debug, Default)]
 pub struct Solved {
     pub products: Vec<[f64; 3]>,
     pub specular: Vec<f64>,
+    pub environment: Vec<[f64; 3]>,
     /// Per object: its pixels that receive direct light (filled by `Kernel::refine` only).
     pub lit: Vec<usize>,
 }
 
 /// Per-channel sums over an object's informing pixels (t < saturation): diffuse factor a, specular
-/// factor b, objective y.
+/// factor b, sky view factor v (objects with an environment column), objective y.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct SolveSums {
     pub saa: [f64; 3],
@@ -331,6 +370,10 @@ pub struct SolveSums {
     pub sbb: [f64; 3],
     pub sya: [f64; 3],
     pub syb: [f64; 3],
+    pub sav: [f64; 3],
+    pub svv: [f64; 3],
+    pub syv: [f64; 3],
+    pub svb: [f64; 3],
 }
 
 impl SolveSums {
@@ -363,7 +406,50 @@ impl SolveSums {
             self.sbb[c] += o.sbb[c];
             self.sya[c] += o.sya[c];
             self.syb[c] += o.syb[c];
+            self.sav[c] += o.sav[c];
+            self.svv[c] += o.svv[c];
+            self.syv[c] += o.syv[c];
+            self.svb[c] += o.svb[c];
         }
+    }
+
+    /// Every sum of channel `c` over one run with an environment column: factors `a`, `b` (zero for a
+    /// matte object), sky view `v`, objective `t` (pixels at or above `sat` left out).
+    #[inline(always)]
+    pub(crate) fn add_environment(
+        &mut self,
+        c: usize,
+        a: &[f32],
+        b: Option<&[f32]>,
+        v: &[f32],
+        t: &[f32],
+        sat: f32,
+    ) {
+        let mut s = [0.0f64; 9];
+        for i in 0..a.len() {
+            if t[i] < sat {
+                let (ai, vi, yi) = (a[i] as f64, v[i] as f64, t[i] as f64);
+                let bi = b.map_or(0.0, |b| b[i] as f64);
+                s[0] += ai * ai;
+                s[1] += ai * bi;
+                s[2] += bi * bi;
+                s[3] += yi * ai;
+                s[4] += yi * bi;
+                s[5] += ai * vi;
+                s[6] += vi * vi;
+                s[7] += yi * vi;
+                s[8] += vi * bi;
+            }
+        }
+        self.saa[c] += s[0];
+        self.sab[c] += s[1];
+        self.sbb[c] += s[2];
+        self.sya[c] += s[3];
+        self.syb[c] += s[4];
+        self.sav[c] += s[5];
+        self.svv[c] += s[6];
+        self.syv[c] += s[7];
+        self.svb[c] += s[8];
     }
 }
 
@@ -376,6 +462,8 @@ pub(crate) struct Run<'a> {
     g: &'a Group,
     light: &'a Light,
     specular: bool,
+    /// The group's sky view factors when the object has an environment column.
+    sky: Option<&'a [f32]>,
     shininess: f32,
     sat: f32,
     top: f32,
@@ -404,19 +492,26 @@ impl Run<'_> {
             for ei in e.iter_mut() {
                 *ei = lambert(*ei);
             }
-            if self.specular {
+            if self.specular || self.sky.is_some() {
                 let b = &mut b[i0..i0 + len];
                 let norm = specular_per_lambert(self.shininess);
                 for (i, s) in r.clone().enumerate() {
                     // (s+8)/(8 pi) max(0, n.h)^s cos / d² = e · (s+8)/8 · max(0, n.h)^s
-                    b[i] = if e[i] > 0.0 {
+                    b[i] = if e[i] > 0.0 && self.specular {
                         (e[i] * norm * blinn_phong(g, s, self.light, self.shininess)).min(f32::MAX)
                     } else {
                         0.0
                     };
                 }
                 for c in 0..3 {
-                    sums.add_specular(c, e, b, &g.ts[c][r.clone()], self.sat);
+                    let t = &g.ts[c][r.clone()];
+                    match self.sky {
+                        Some(v) => {
+                            let bb = self.specular.then_some(&*b);
+                            sums.add_environment(c, e, bb, &v[r.clone()], t, self.sat)
+                        }
+                        None => sums.add_specular(c, e, b, t, self.sat),
+                    }
                 }
             } else {
                 for c in 0..3 {
@@ -442,7 +537,12 @@ impl Run<'_> {
         enc: E,
         stop: Option<([f64; 3], f64)>,
     ) -> [f64; 3] {
-        let Products { pk, qw, on: q_on } = products;
+        let Products {
+            pk,
+            qw,
+            ek,
+            on: q_on,
+        } = products;
         let g = self.g;
         // The objective in the loss space (the solve uses the linear `ts`).
         let gt = if E::ENCODES { &g.te } else { &g.t };
@@ -453,7 +553,18 @@ impl Run<'_> {
             let r = start + i0..start + i0 + len;
             let e = &e[i0..i0 + len];
             let t = [&gt[0][r.clone()], &gt[1][r.clone()], &gt[2][r.clone()]];
-            let sums = if q_on {
+            let sums = if let Some(sky) = self.sky {
+                let (b, sky) = (&b[i0..i0 + len], &sky[r.clone()]);
+                let mut sums = [0.0f32; 3];
+                for c in 0..3 {
+                    for i in 0..len {
+                        let lobe = if q_on { qw[c] * b[i] } else { 0.0 };
+                        let v = (pk[c] * e[i] + ek[c] * sky[i] + lobe).min(self.top);
+                        sums[c] += self.norm.penalty(enc.any(v) - t[c][i]);
+                    }
+                }
+                sums
+            } else if q_on {
                 let b = &b[i0..i0 + len];
                 let mut sums = [0.0f32; 3];
                 for c in 0..3 {
@@ -480,12 +591,13 @@ impl Run<'_> {
     }
 }
 
-/// The solved products of one object as pass 2 uses them: the diffuse `pk` per channel and, where `on`,
-/// the specular product per channel `qw`.
+/// The solved products of one object as pass 2 uses them: the diffuse `pk` per channel, where `on`
+/// the specular product per channel `qw`, and the environment products `ek` (objects with a column).
 #[derive(Clone, Copy)]
 pub(crate) struct Products {
     pk: [f32; 3],
     qw: [f32; 3],
+    ek: [f32; 3],
     on: bool,
 }
 
@@ -596,6 +708,148 @@ pub fn solve_object(
     (p, q)
 }
 
+/// [`solve_object`] for an object with an environment column: the least squares (P_c, E_c per channel,
+/// Q) of y_c = P_c·a + E_c·v + Q·w_c·b over the informing pixels, within the bounds. Q from the Schur
+/// complement of the per-channel 2x2 blocks, then each channel's (P_c, E_c) as a box-constrained 2x2
+/// least squares given Q ([`box_ls2`]); if a bound was active, Q again given them and the channels once
+/// more. A channel with no informing pixel takes P_c from `fallback(c)` and E_c at its lower bound.
+pub fn solve_object_env(
+    s: &SolveSums,
+    w: [f32; 3],
+    pb: &[(f64, f64); 3],
+    qb: (f64, f64),
+    eb: &[(f64, f64); 3],
+    fallback: impl Fn(usize) -> (f64, f64, f32),
+) -> ([f64; 3], f64, [f64; 3]) {
+    let w: [f64; 3] = std::array::from_fn(|c| w[c] as f64);
+    let informed = s.saa.iter().all(|&v| v > 0.0);
+    let glossy = qb.1 > 0.0 && informed;
+    let clampq = |q: f64| {
+        if q.is_finite() {
+            q.clamp(qb.0, qb.1)
+        } else {
+            qb.0
+        }
+    };
+    let gram = |c: usize| [[s.saa[c], s.sav[c]], [s.sav[c], s.svv[c]]];
+    let mut q = qb.0;
+    if glossy {
+        let (mut num, mut den) = (0.0, 0.0);
+        for c in 0..3 {
+            let g = gram(c);
+            let (r, k) = ([s.sya[c], s.syv[c]], [s.sab[c], s.svb[c]]);
+            // G^-1 applied through its 2x2 inverse; a singular G (no sky variation) drops v.
+            let (gr, gk) = match inverse2(g) {
+                Some(inv) => (mul2(inv, r), mul2(inv, k)),
+                None => ([r[0] / g[0][0], 0.0], [k[0] / g[0][0], 0.0]),
+            };
+            num += w[c] * (s.syb[c] - (k[0] * gr[0] + k[1] * gr[1]));
+            den += w[c] * w[c] * (s.sbb[c] - (k[0] * gk[0] + k[1] * gk[1]));
+        }
+        if den > 0.0 && num.is_finite() {
+            q = clampq(num / den);
+        }
+    }
+    let channels = |q: f64| -> ([f64; 3], [f64; 3], bool) {
+        let (mut p, mut e, mut active) = ([0.0; 3], [0.0; 3], false);
+        for c in 0..3 {
+            if s.saa[c] > 0.0 {
+                let r = [
+                    s.sya[c] - q * w[c] * s.sab[c],
+                    s.syv[c] - q * w[c] * s.svb[c],
+                ];
+                let (x, hit) = box_ls2(gram(c), r, pb[c], eb[c]);
+                (p[c], e[c], active) = (x[0], x[1], active || hit);
+            } else {
+                let (a, b, sat_min) = fallback(c);
+                (p[c], e[c]) = (closed_form(a, b, sat_min, pb[c]), eb[c].0);
+            }
+        }
+        (p, e, active)
+    };
+    let (mut p, mut e, active) = channels(q);
+    if glossy && active {
+        let (mut num, mut den) = (0.0, 0.0);
+        for c in 0..3 {
+            num += w[c] * (s.syb[c] - s.sab[c] * p[c] - s.svb[c] * e[c]);
+            den += w[c] * w[c] * s.sbb[c];
+        }
+        if den > 0.0 && num.is_finite() {
+            q = clampq(num / den);
+            (p, e, _) = channels(q);
+        }
+    }
+    (p, q, e)
+}
+
+/// The inverse of a symmetric 2x2 matrix, `None` when it is (numerically) singular.
+fn inverse2(g: [[f64; 2]; 2]) -> Option<[[f64; 2]; 2]> {
+    let det = g[0][0] * g[1][1] - g[0][1] * g[1][0];
+    // Relative to the diagonal's scale: collinear columns (Cauchy–Schwarz equality) are singular.
+    if !(det > 1e-12 * (g[0][0] * g[1][1]).abs()) || !det.is_finite() {
+        return None;
+    }
+    Some([
+        [g[1][1] / det, -g[0][1] / det],
+        [-g[1][0] / det, g[0][0] / det],
+    ])
+}
+
+fn mul2(m: [[f64; 2]; 2], r: [f64; 2]) -> [f64; 2] {
+    [
+        m[0][0] * r[0] + m[0][1] * r[1],
+        m[1][0] * r[0] + m[1][1] * r[1],
+    ]
+}
+
+/// The minimiser of ½xᵀGx - rᵀx over the box `b0` x `b1` (G symmetric positive semi-definite), and
+/// whether a bound is active: the unconstrained optimum when it is inside, else the best of the four
+/// edges, each the clamped one-dimensional optimum (a convex quadratic's box minimum lies on an edge
+/// when the unconstrained one is outside).
+pub fn box_ls2(g: [[f64; 2]; 2], r: [f64; 2], b0: (f64, f64), b1: (f64, f64)) -> ([f64; 2], bool) {
+    let inside = |x: [f64; 2]| {
+        x[0].is_finite()
+            && x[1].is_finite()
+            && (b0.0..=b0.1).contains(&x[0])
+            && (b1.0..=b1.1).contains(&x[1])
+    };
+    if let Some(inv) = inverse2(g) {
+        let x = mul2(inv, r);
+        if inside(x) {
+            return (x, false);
+        }
+    }
+    let clamp = |v: f64, (lo, hi): (f64, f64)| if v.is_finite() { v.clamp(lo, hi) } else { lo };
+    let f = |x: [f64; 2]| {
+        0.5 * (g[0][0] * x[0] * x[0] + 2.0 * g[0][1] * x[0] * x[1] + g[1][1] * x[1] * x[1])
+            - r[0] * x[0]
+            - r[1] * x[1]
+    };
+    let opt = |num: f64, den: f64, b: (f64, f64)| {
+        if den > 0.0 {
+            clamp(num / den, b)
+        } else {
+            b.0
+        }
+    };
+    let mut best = ([b0.0, b1.0], f64::INFINITY);
+    for x0 in [b0.0, b0.1] {
+        let x = [x0, opt(r[1] - g[0][1] * x0, g[1][1], b1)];
+        let fx = f(x);
+        if fx < best.1 {
+            best = (x, fx);
+        }
+    }
+    for x1 in [b1.0, b1.1] {
+        let x = [opt(r[0] - g[0][1] * x1, g[0][0], b0), x1];
+        let fx = f(x);
+        if fx < best.1 {
+            best = (x, fx);
+        }
+    }
+    (best.0, true)
+}
+
 /// The least-squares product `syg / sgg` clamped to `bounds`; without any unsaturated pixel
 /// (`sgg == 0`) the dimmest product that saturates every saturated lit pixel (`1 / sat_min`, with
 /// `sat_min` their smallest unit-light value), or the lower bound when the object is dark.
@@ -670,5 +924,109 @@ pub(crate) fn normal_equation_lanes(
             a[j] += if keep { x[j] * y[j] } else { 0.0 };
             b[j] += if keep { x[j] * x[j] } else { 0.0 };
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A small deterministic generator (the tests need no crate for it).
+    struct Lcg(u64);
+    impl Lcg {
+        fn next(&mut self) -> f64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (self.0 >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    #[test]
+    fn box_ls2_is_the_box_minimum() {
+        // Against a dense grid: the returned point is never beaten by more than the grid's resolution.
+        let mut rng = Lcg(7);
+        for trial in 0..300 {
+            let (a, b) = (rng.next() * 4.0 - 2.0, rng.next() * 4.0 - 2.0);
+            // G = MᵀM for a random 2x2 M (singular every 10th trial: collinear columns).
+            let c = if trial % 10 == 0 {
+                a
+            } else {
+                rng.next() * 4.0 - 2.0
+            };
+            let d = if trial % 10 == 0 {
+                b
+            } else {
+                rng.next() * 4.0 - 2.0
+            };
+            let g = [
+                [a * a + b * b, a * c + b * d],
+                [a * c + b * d, c * c + d * d],
+            ];
+            let r = [rng.next() * 6.0 - 3.0, rng.next() * 6.0 - 3.0];
+            let lo0 = rng.next() * 2.0 - 1.0;
+            let lo1 = rng.next() * 2.0 - 1.0;
+            let b0 = (lo0, lo0 + rng.next() * 2.0);
+            let b1 = (lo1, lo1 + rng.next() * 2.0);
+            let f = |x: [f64; 2]| {
+                0.5 * (g[0][0] * x[0] * x[0] + 2.0 * g[0][1] * x[0] * x[1] + g[1][1] * x[1] * x[1])
+                    - r[0] * x[0]
+                    - r[1] * x[1]
+            };
+            let (x, _) = box_ls2(g, r, b0, b1);
+            assert!(x[0] >= b0.0 && x[0] <= b0.1 && x[1] >= b1.0 && x[1] <= b1.1);
+            let k = 200;
+            let mut best = f64::INFINITY;
+            for i in 0..=k {
+                for j in 0..=k {
+                    let p = [
+                        b0.0 + (b0.1 - b0.0) * i as f64 / k as f64,
+                        b1.0 + (b1.1 - b1.0) * j as f64 / k as f64,
+                    ];
+                    best = best.min(f(p));
+                }
+            }
+            assert!(
+                f(x) <= best + 1e-9 * (1.0 + best.abs()),
+                "trial {trial}: {} > {best}",
+                f(x)
+            );
+        }
+    }
+
+    #[test]
+    fn environment_solve_recovers_exact_products() {
+        // y_c = P_c a + E_c v + Q w_c b on synthetic factors: the solve returns (P, E, Q) exactly.
+        let mut rng = Lcg(11);
+        let n = 400;
+        let a: Vec<f32> = (0..n).map(|_| rng.next() as f32).collect();
+        let v: Vec<f32> = (0..n).map(|_| rng.next() as f32).collect();
+        let b: Vec<f32> = (0..n)
+            .map(|i| if i % 3 == 0 { rng.next() as f32 } else { 0.0 })
+            .collect();
+        let (p, e, q, w) = ([0.3, 0.5, 0.2], [0.05, 0.02, 0.08], 0.7, [1.0f32, 0.9, 1.1]);
+        let mut s = SolveSums::default();
+        for c in 0..3 {
+            let y: Vec<f32> = (0..n)
+                .map(|i| {
+                    (p[c] * a[i] as f64 + e[c] * v[i] as f64 + q * w[c] as f64 * b[i] as f64) as f32
+                })
+                .collect();
+            s.add_environment(c, &a, Some(&b), &v, &y, f32::INFINITY);
+        }
+        let wide = [(0.0, 10.0); 3];
+        let (pk, qk, ek) = solve_object_env(&s, w, &wide, (0.0, 10.0), &wide, |_| (0.0, 0.0, 0.0));
+        for c in 0..3 {
+            assert!(
+                (pk[c] - p[c]).abs() < 1e-5 && (ek[c] - e[c]).abs() < 1e-5,
+                "{pk:?} {ek:?}"
+            );
+        }
+        assert!((qk - q).abs() < 1e-5, "{qk}");
+        // E bounded below its truth: it sits at the bound and P absorbs what it can.
+        let eb = [(0.0, 0.01); 3];
+        let (_, _, ek) = solve_object_env(&s, w, &wide, (0.0, 10.0), &eb, |_| (0.0, 0.0, 0.0));
+        assert!(ek.iter().all(|&x| (x - 0.01).abs() < 1e-12), "{ek:?}");
     }
 }

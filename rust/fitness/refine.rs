@@ -52,6 +52,7 @@ impl Kernel {
                 a,
                 b,
                 specular: proj.specular[obj].1 > 0.0,
+                sky: proj.sky(obj, g),
                 informed: std::array::from_fn(|c| {
                     (0..n).any(|i| g.ts[c][i].is_finite() && a[i] > 0.0)
                 }),
@@ -61,29 +62,52 @@ impl Kernel {
         // glossy object; one for a matte one, whose channels are independent). Every line search depends
         // only on its own object's values, so those of a round run in parallel over (object, channel)
         // and the result is the same on any number of threads.
-        let rounds = if objects.iter().any(|o| o.specular) {
+        // An environment column couples the channels' P_c and E_c: four rounds as for a glossy object.
+        let rounds = if objects.iter().any(|o| o.specular || o.sky.is_some()) {
             4
         } else {
             1
+        };
+        let env = |out: &Solved, o: &RefineObject| {
+            if o.sky.is_some() {
+                out.environment[o.obj]
+            } else {
+                [0.0; 3]
+            }
         };
         let limits = Limits { proj, sat, top };
         for round in 0..rounds {
             let tasks: Vec<(usize, usize)> = objects
                 .iter()
                 .enumerate()
-                .filter(|(_, o)| round == 0 || o.specular)
+                .filter(|(_, o)| round == 0 || o.specular || o.sky.is_some())
                 .flat_map(|(k, o)| (0..3).filter(|&c| o.informed[c]).map(move |c| (k, c)))
                 .collect();
             let solved: Vec<f64> = tasks
                 .par_iter()
                 .map(|&(k, c)| {
                     let o = &objects[k];
-                    let q = out.specular[o.obj];
-                    self.refine_diffuse(o, c, q, out.products[o.obj][c], limits)
+                    let (q, ec) = (out.specular[o.obj], env(out, o)[c]);
+                    self.refine_diffuse(o, c, q, ec, out.products[o.obj][c], limits)
                 })
                 .collect();
             for (&(k, c), v) in tasks.iter().zip(solved) {
                 out.products[objects[k].obj][c] = v;
+            }
+            let tasks: Vec<(usize, usize)> = (0..objects.len())
+                .filter(|&k| objects[k].sky.is_some())
+                .flat_map(|k| (0..3).map(move |c| (k, c)))
+                .collect();
+            let solved: Vec<f64> = tasks
+                .par_iter()
+                .map(|&(k, c)| {
+                    let o = &objects[k];
+                    let (pc, q) = (out.products[o.obj][c], out.specular[o.obj]);
+                    self.refine_environment(o, c, pc, q, out.environment[o.obj][c], limits)
+                })
+                .collect();
+            for (&(k, c), v) in tasks.iter().zip(solved) {
+                out.environment[objects[k].obj][c] = v;
             }
             let glossy: Vec<usize> = (0..objects.len())
                 .filter(|&k| objects[k].specular && objects[k].informed.iter().all(|&i| i))
@@ -93,7 +117,7 @@ impl Kernel {
                 .map(|&k| {
                     let o = &objects[k];
                     let (pk, q) = (out.products[o.obj], out.specular[o.obj]);
-                    self.refine_specular(o, pk, q, limits)
+                    self.refine_specular(o, pk, q, env(out, o), limits)
                 })
                 .collect();
             for (&k, v) in glossy.iter().zip(solved) {
@@ -105,11 +129,11 @@ impl Kernel {
             .into_par_iter()
             .map(|kc| {
                 let (o, c) = (&objects[kc / 3], kc % 3);
-                let (pc, q) = (out.products[o.obj][c], out.specular[o.obj]);
+                let (pc, q, ec) = (out.products[o.obj][c], out.specular[o.obj], env(out, o)[c]);
                 let gt = if srgb { &o.g.te[c] } else { &o.g.t[c] };
                 (0..o.a.len())
                     .map(|i| {
-                        let m = o.model(pc, q, proj.weight[c], i).min(top) as f32;
+                        let m = o.model(pc, q, ec, proj.weight[c], i).min(top) as f32;
                         let m = if srgb { SrgbLut::get().encode(m) } else { m };
                         self.norm.penalty(m - gt[i]) as f64
                     })
@@ -127,13 +151,14 @@ impl Kernel {
         total
     }
 
-    /// [`Kernel::refine`]'s line search for P_c of one object given its specular product `q`, starting
-    /// from `start` (the sRGB branch and bound uses it).
+    /// [`Kernel::refine`]'s line search for P_c of one object given its specular product `q` and
+    /// environment product `ec`, starting from `start` (the sRGB branch and bound uses it).
     fn refine_diffuse(
         &self,
         o: &RefineObject,
         c: usize,
         q: f64,
+        ec: f64,
         start: f64,
         limits: Limits,
     ) -> f64 {
@@ -147,7 +172,7 @@ impl Kernel {
                 .filter(|&i| a[i] > 0.0 && t[i].is_finite())
                 .map(|i| EncodedTerm {
                     k: a[i] as f64,
-                    o: o.model(0.0, q, w, i),
+                    o: o.model(0.0, q, ec, w, i),
                     y: t[i] as f64,
                     ye: o.g.te[c][i],
                     saturated: t[i] >= sat,
@@ -156,24 +181,89 @@ impl Kernel {
             encoded_line_min(&terms, self.norm, top, bounds, start)
         } else if self.norm == Norm::L1 {
             // Terms |min(a P + s, top) - y|: coefficient a, offset s (the lobe).
-            let terms = (0..n)
-                .filter(|&i| a[i] > 0.0 && t[i].is_finite())
-                .map(|i| (a[i] as f64, o.model(0.0, q, w, i), t[i] as f64, t[i] >= sat));
+            let terms = (0..n).filter(|&i| a[i] > 0.0 && t[i].is_finite()).map(|i| {
+                (
+                    a[i] as f64,
+                    o.model(0.0, q, ec, w, i),
+                    t[i] as f64,
+                    t[i] >= sat,
+                )
+            });
             l1_line_min(terms, bounds, top)
         } else {
             bisect(bounds, |pc| {
                 (0..n)
                     .filter(|&i| a[i] > 0.0)
-                    .map(|i| a[i] as f64 * self.refine_slope(o.model(pc, q, w, i), t[i], sat, top))
+                    .map(|i| {
+                        let m = o.model(pc, q, ec, w, i);
+                        a[i] as f64 * self.refine_slope(m, t[i], sat, top)
+                    })
                     .sum()
             })
         }
     }
 
-    /// [`Kernel::refine`]'s line search for Q of one glossy object given its diffuse products `pk`.
-    fn refine_specular(&self, o: &RefineObject, pk: [f64; 3], q: f64, limits: Limits) -> f64 {
+    /// [`Kernel::refine`]'s line search for E_c of one object with an environment column, given its
+    /// diffuse product `pc` and specular product `q`, starting from `start`.
+    fn refine_environment(
+        &self,
+        o: &RefineObject,
+        c: usize,
+        pc: f64,
+        q: f64,
+        start: f64,
+        limits: Limits,
+    ) -> f64 {
         let Limits { proj, sat, top } = limits;
-        let (n, a, b, t) = (o.a.len(), o.a, o.b, &o.g.ts);
+        let (Some(v), t) = (o.sky, &o.g.ts[c]) else {
+            return start;
+        };
+        let w = proj.weight[c];
+        let bounds = proj.environment[o.obj][c];
+        let seen = |i: &usize| v[*i] > 0.0 && t[*i].is_finite();
+        if self.space == Space::Srgb {
+            let terms: Vec<EncodedTerm> = (0..v.len())
+                .filter(seen)
+                .map(|i| EncodedTerm {
+                    k: v[i] as f64,
+                    o: o.model(pc, q, 0.0, w, i),
+                    y: t[i] as f64,
+                    ye: o.g.te[c][i],
+                    saturated: t[i] >= sat,
+                })
+                .collect();
+            encoded_line_min(&terms, self.norm, top, bounds, start)
+        } else if self.norm == Norm::L1 {
+            let terms = (0..v.len()).filter(seen).map(|i| {
+                let off = o.model(pc, q, 0.0, w, i);
+                (v[i] as f64, off, t[i] as f64, t[i] >= sat)
+            });
+            l1_line_min(terms, bounds, top)
+        } else {
+            bisect(bounds, |ec| {
+                (0..v.len())
+                    .filter(|&i| v[i] > 0.0)
+                    .map(|i| {
+                        let m = o.model(pc, q, ec, w, i);
+                        v[i] as f64 * self.refine_slope(m, t[i], sat, top)
+                    })
+                    .sum()
+            })
+        }
+    }
+
+    /// [`Kernel::refine`]'s line search for Q of one glossy object given its diffuse products `pk` and
+    /// environment products `e`.
+    fn refine_specular(
+        &self,
+        o: &RefineObject,
+        pk: [f64; 3],
+        q: f64,
+        e: [f64; 3],
+        limits: Limits,
+    ) -> f64 {
+        let Limits { proj, sat, top } = limits;
+        let (n, b, t) = (o.a.len(), o.b, &o.g.ts);
         let bounds = proj.specular[o.obj];
         if self.space == Space::Srgb {
             let terms: Vec<EncodedTerm> = (0..3)
@@ -182,7 +272,7 @@ impl Kernel {
                         .filter(move |&i| b[i] > 0.0 && t[c][i].is_finite())
                         .map(move |i| EncodedTerm {
                             k: proj.weight[c] as f64 * b[i] as f64,
-                            o: pk[c] * a[i] as f64,
+                            o: o.model(pk[c], 0.0, e[c], proj.weight[c], i),
                             y: t[c][i] as f64,
                             ye: o.g.te[c][i],
                             saturated: t[c][i] >= sat,
@@ -196,7 +286,8 @@ impl Kernel {
                     .filter(move |&i| b[i] > 0.0 && t[c][i].is_finite())
                     .map(move |i| {
                         let k = proj.weight[c] as f64 * b[i] as f64;
-                        (k, pk[c] * a[i] as f64, t[c][i] as f64, t[c][i] >= sat)
+                        let off = o.model(pk[c], 0.0, e[c], proj.weight[c], i);
+                        (k, off, t[c][i] as f64, t[c][i] >= sat)
                     })
             });
             l1_line_min(terms, bounds, top)
@@ -210,7 +301,12 @@ impl Kernel {
                             .map(|i| {
                                 w as f64
                                     * b[i] as f64
-                                    * self.refine_slope(o.model(pk[c], q, w, i), t[c][i], sat, top)
+                                    * self.refine_slope(
+                                        o.model(pk[c], q, e[c], w, i),
+                                        t[c][i],
+                                        sat,
+                                        top,
+                                    )
                             })
                             .sum::<f64>()
                     })
@@ -247,19 +343,25 @@ pub(crate) struct RefineObject<'a> {
     a: &'a [f32],
     b: &'a [f32],
     specular: bool,
+    /// The sky view factors, for an object with an environment column.
+    sky: Option<&'a [f32]>,
     /// A channel with a pixel that is lit and informs the products.
     informed: [bool; 3],
 }
 
 impl RefineObject<'_> {
-    /// Model value of pixel `i` in a channel of specular weight `w` at products `pc` and `q`.
-    pub(crate) fn model(&self, pc: f64, q: f64, w: f32, i: usize) -> f64 {
-        pc * self.a[i] as f64
+    /// Model value of pixel `i` in a channel of specular weight `w` at products `pc`, `q` and `ec`.
+    pub(crate) fn model(&self, pc: f64, q: f64, ec: f64, w: f32, i: usize) -> f64 {
+        let lit = pc * self.a[i] as f64
             + if self.specular {
                 q * w as f64 * self.b[i] as f64
             } else {
                 0.0
-            }
+            };
+        match self.sky {
+            Some(v) => lit + ec * v[i] as f64,
+            None => lit,
+        }
     }
 }
 

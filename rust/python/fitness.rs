@@ -49,12 +49,12 @@ pub(crate) fn make_fitness(
             let n = scene.objects.len();
             if a.ndim() != 3
                 || a.shape()[0] != n
-                || !(3..=4).contains(&a.shape()[1])
+                || ![3, 4, 7].contains(&a.shape()[1])
                 || a.shape()[2] != 2
             {
                 return Err(Error::Value(format!(
-                    "product_bounds must have shape ({n}, 3, 2) or ({n}, 4, 2) (row 4: intensity x \
-                     specular), got {:?}",
+                    "product_bounds must have shape ({n}, 3, 2), ({n}, 4, 2) (row 4: intensity x \
+                     specular) or ({n}, 7, 2) (rows 5-7: exposure x environment x albedo), got {:?}",
                     a.shape()
                 ))
                 .into());
@@ -64,8 +64,13 @@ pub(crate) fn make_fitness(
                     .map(|k| std::array::from_fn(|c| (a[[k, c, 0]], a[[k, c, 1]])))
                     .collect(),
             );
-            if a.shape()[1] == 4 {
+            if a.shape()[1] >= 4 {
                 proj.specular = (0..n).map(|k| (a[[k, 3, 0]], a[[k, 3, 1]])).collect();
+            }
+            if a.shape()[1] == 7 {
+                proj.environment = (0..n)
+                    .map(|k| std::array::from_fn(|c| (a[[k, 4 + c, 0]], a[[k, 4 + c, 1]])))
+                    .collect();
             }
             Some(proj)
         }
@@ -153,10 +158,7 @@ impl OptimizeResult {
     }
     #[getter]
     fn products(&self) -> Option<Vec<Vec<f64>>> {
-        self.result
-            .products
-            .as_ref()
-            .map(|rows| rows.iter().map(|r| r.to_vec()).collect())
+        self.result.products.as_ref().map(|rows| rows.to_vec())
     }
     #[getter]
     fn lit_pixels(&self) -> Option<Vec<usize>> {

@@ -7,6 +7,7 @@
 
 pub mod brdf;
 pub mod camera;
+pub mod environment;
 pub mod film;
 pub mod hit;
 pub mod light;

@@ -1,11 +1,13 @@
 //! Render's per-pixel shading: direct light from one light (`light`) through the material (`brdf`),
-//! with a shadow ray (`hit::occluded`), plus ambient.
+//! with a shadow ray (`hit::occluded`), plus ambient and the occluded environment (`environment`).
 //!
-//! L = ρ·ambient + V·I·color·max(0, n·l)/d² · [ρ/π + k_s·(s+8)/(8π)·max(0, n·h)^s], pixel = exposure·L.
+//! L = ρ·(ambient + env·S) + V·I·color·max(0, n·l)/d² · [ρ/π + k_s·(s+8)/(8π)·max(0, n·h)^s],
+//! pixel = exposure·L, with V the light's visibility and S the sky view factor.
 
 use glam::Vec3A;
 
 use super::brdf::{blinn_phong, lambert, specular_scale};
+use super::environment::sky_view;
 use super::hit::{occluded, Surfel};
 use super::light::{incidence, irradiance};
 use super::shape::PShape;
@@ -31,6 +33,8 @@ pub struct ShadeParams {
     /// I · color, in W/sr per channel (kept in step by `set`).
     pub light_rgb: Vec3A,
     pub ambient: Vec3A,
+    /// The environment radiance, occluded by the scene's shapes (see `environment`).
+    pub environment: Vec3A,
     pub background: Vec3A,
     pub exposure: f32,
     pub materials: Vec<PMaterial>,
@@ -56,6 +60,7 @@ impl Clone for ShadeParams {
         self.light_color = source.light_color;
         self.light_rgb = source.light_rgb;
         self.ambient = source.ambient;
+        self.environment = source.environment;
         self.background = source.background;
         self.exposure = source.exposure;
         self.any_specular = source.any_specular;
@@ -91,6 +96,7 @@ impl ShadeParams {
             light_color: v3(scene.light.color),
             light_rgb: v3(scene.light.color) * scene.light.intensity as f32,
             ambient: v3(scene.ambient),
+            environment: v3(scene.environment),
             background: v3(scene.background),
             exposure: scene.exposure as f32,
             any_specular: false,
@@ -113,6 +119,7 @@ impl ShadeParams {
             Target::LightIntensity => self.light_intensity = v[0] as f32,
             Target::LightColor => self.light_color = v3(),
             Target::Ambient => self.ambient = v3(),
+            Target::Environment => self.environment = v3(),
             Target::Exposure => self.exposure = v[0] as f32,
             Target::Albedo(i) => self.materials[i].albedo = v3(),
             Target::Specular(i) => {
@@ -133,6 +140,10 @@ pub fn shade(s: &Surfel, p: &ShadeParams, shapes: &[PShape], shadows: bool) -> V
     }
     let m = &p.materials[s.object as usize];
     let mut l = m.albedo * p.ambient;
+    if p.environment != Vec3A::ZERO {
+        let sky = sky_view(s.position, s.normal, s.object as usize, shapes);
+        l += m.albedo * p.environment * sky;
+    }
     let Some((dir, dist, falloff)) = incidence(p.light_position, p.light_direction, s.position)
     else {
         return (p.exposure * l).min(Vec3A::splat(f32::MAX));
@@ -163,6 +174,7 @@ mod tests {
             light_color: Vec3A::ONE,
             light_rgb: Vec3A::splat(10.0),
             ambient: Vec3A::ZERO,
+            environment: Vec3A::ZERO,
             background: Vec3A::new(0.1, 0.2, 0.3),
             exposure: 1.0,
             materials: vec![PMaterial {

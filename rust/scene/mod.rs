@@ -80,6 +80,9 @@ pub struct Scene {
     pub camera: Camera,
     pub light: PointLight,
     pub ambient: V3,
+    /// Constant environment radiance per channel (a room's light from every direction), occluded by the
+    /// scene's own spheres and planes (`render::environment`); `ambient` is the unoccluded constant term.
+    pub environment: V3,
     pub background: V3,
     pub exposure: f64,
     pub objects: Vec<Object>,
@@ -98,6 +101,7 @@ struct RawScene {
     camera: RawCamera,
     light: RawLight,
     ambient: Option<V3>,
+    environment: Option<V3>,
     background: Option<V3>,
     exposure: Option<f64>,
     objects: Vec<RawObject>,
@@ -365,6 +369,7 @@ impl Scene {
         }
 
         let ambient = nonneg3("ambient", raw.ambient.unwrap_or([0.0; 3]))?;
+        let environment = nonneg3("environment", raw.environment.unwrap_or([0.0; 3]))?;
         let background = nonneg3("background", raw.background.unwrap_or([0.0; 3]))?;
         let exposure = finite("exposure", raw.exposure.unwrap_or(1.0))?;
         if exposure <= 0.0 {
@@ -391,6 +396,7 @@ impl Scene {
             camera,
             light,
             ambient,
+            environment,
             background,
             exposure,
             objects,
@@ -472,6 +478,9 @@ impl Scene {
         };
         out.insert("light".into(), light);
         out.insert("ambient".into(), json!(self.ambient));
+        if self.environment != [0.0; 3] {
+            out.insert("environment".into(), json!(self.environment));
+        }
         out.insert("background".into(), json!(self.background));
         out.insert("exposure".into(), json!(self.exposure));
         out.insert("objects".into(), Value::Array(objects));

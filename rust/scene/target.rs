@@ -12,6 +12,8 @@ pub enum Target {
     LightIntensity,
     LightColor,
     Ambient,
+    /// The occluded constant environment radiance (3 components).
+    Environment,
     Exposure,
     Albedo(usize),
     Specular(usize),
@@ -20,7 +22,7 @@ pub enum Target {
 
 /// The fittable paths, for error messages and documentation.
 pub const FITTABLE: &str = "light.position (point light), light.direction (directional light), \
-light.intensity, light.color, ambient, exposure, \
+light.intensity, light.color, ambient, environment, exposure, \
 objects.NAME.albedo, objects.NAME.specular, objects.NAME.shininess";
 
 impl Target {
@@ -39,6 +41,7 @@ impl Target {
             "light.intensity" => Target::LightIntensity,
             "light.color" => Target::LightColor,
             "ambient" => Target::Ambient,
+            "environment" => Target::Environment,
             "exposure" => Target::Exposure,
             _ => {
                 let parts: Vec<&str> = path.split('.').collect();
@@ -78,6 +81,7 @@ impl Target {
             | Target::LightDirection
             | Target::LightColor
             | Target::Ambient
+            | Target::Environment
             | Target::Albedo(_) => 3,
             Target::LightIntensity
             | Target::Exposure
@@ -93,7 +97,8 @@ impl Target {
             Target::LightIntensity => (0, 0, 1),
             Target::LightColor => (0, 0, 2),
             Target::Ambient => (1, 0, 0),
-            Target::Exposure => (1, 0, 1),
+            Target::Environment => (1, 0, 1),
+            Target::Exposure => (1, 0, 2),
             Target::Albedo(i) => (2, i, 0),
             Target::Specular(i) => (2, i, 1),
             Target::Shininess(i) => (2, i, 2),
@@ -124,6 +129,7 @@ impl Target {
             Target::LightIntensity => vec![scene.light.intensity],
             Target::LightColor => scene.light.color.to_vec(),
             Target::Ambient => scene.ambient.to_vec(),
+            Target::Environment => scene.environment.to_vec(),
             Target::Exposure => vec![scene.exposure],
             Target::Albedo(i) => scene.objects[i].material.albedo.to_vec(),
             Target::Specular(i) => vec![scene.objects[i].material.specular],
@@ -147,6 +153,7 @@ impl Target {
             Target::LightIntensity => scene.light.intensity = v[0],
             Target::LightColor => scene.light.color = v3(),
             Target::Ambient => scene.ambient = v3(),
+            Target::Environment => scene.environment = v3(),
             Target::Exposure => scene.exposure = v[0],
             Target::Albedo(i) => scene.objects[i].material.albedo = v3(),
             Target::Specular(i) => scene.objects[i].material.specular = v[0],

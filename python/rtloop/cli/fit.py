@@ -179,6 +179,10 @@ def _build_parser() -> Parser:
                    help="where --norm compares render and IMAGE: 'linear' (default, radiance) or 'srgb' (both "
                    "sRGB-encoded, as an 8-bit file stores them: an error in the shadows counts as the file and "
                    "the eye resolve it; for dark or JPEG-compressed photos)")
+    p.add_argument("--environment", choices=("auto", "on", "off"), default="auto",
+                   help="the occluded environment term (a room's light from every direction, darker under and "
+                   "between the objects): 'auto' (default) adds it when the photo shows it and says why in "
+                   "result.json's fit_report.model, 'on' always fits it, 'off' never")
     p.add_argument("--mask", type=Path, metavar="PNG",
                    help="an image of IMAGE's size (or the scene's): white where the scene models the photo, "
                    "black where it does not (another object, a reflection); black pixels are left out of the fit")
@@ -400,6 +404,7 @@ class _Run:
                     scene, image, protocol=args.protocol, seed=args.seed, population=args.population,
                     generations=args.generations, f=args.f, cr=args.cr, threads=args.threads,
                     callback=callback, mask=mask, norm=args.norm, space=args.loss_space,
+                    environment=args.environment,
                 )
         self.progress.end_line()
         for w in result.warnings:
@@ -432,6 +437,7 @@ def _summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None =
         f"{stages} stage{'s' if stages != 1 else ''}, {result.evaluations} evaluations, "
         + f"fit {_duration(result.seconds)}, wall time {_duration(wall)}"
     ]
+    lines.extend(_model_lines(result.model or {}, dict(result.scene.to_dict())))
     ident = result.identifiability or {}
     if ident.get("degenerate"):
         lines.append("")
@@ -463,6 +469,21 @@ def _summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None =
     if report is not None:
         lines.append(f"report: {report}")
     return "\n".join(lines)
+
+
+def _model_lines(model: dict[str, Any], fitted: dict[str, Any]) -> list[str]:
+    """The image terms the fit used and the evidence for each it considered."""
+    terms = model.get("terms") or ["direct"]
+    lines = [f"image model: {' + '.join(terms)}"]
+    for term, ev in (model.get("evidence") or {}).items():
+        verdict = "added" if ev.get("selected") else "not added"
+        bic = ev.get("delta_bic")
+        lines.append(f"  {term}: {verdict} (loss at the light found without it {ev['loss_without']:.4g} -> "
+                     f"{ev['loss_with']:.4g} with it, {100 * ev['gain']:+.1f}%"
+                     + (f", BIC {-bic:+.4g})" if bic is not None else ")"))
+    if "environment" in terms and fitted.get("environment"):
+        lines.append("  environment radiance (r g b): " + "  ".join(f"{v:.4g}" for v in fitted["environment"]))
+    return lines
 
 
 def _error(message: str) -> None:

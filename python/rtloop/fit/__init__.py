@@ -22,6 +22,7 @@ from .products import product_bounds as _product_bounds
 from .products import products as _products
 from .protocol import LOSS_SPACES, PIXELS_PER_OBJECT, PROTOCOLS, budget, check_arguments, choose_method
 from .result import FitResult, GenerationInfo, StageResult
+from .selection import check_environment, environment_evidence, environment_given
 from .stages import Stages, sample_object_pixels
 
 __all__ = ["LOSS_SPACES", "PROTOCOLS", "FitResult", "GenerationInfo", "StageResult", "fit"]
@@ -50,6 +51,7 @@ def fit(
     mask: np.ndarray | None = None,
     norm: str = "l1",
     space: str = "linear",
+    environment: str = "auto",
 ) -> FitResult:
     """Fit the scene's free parameters (its ``fit`` section) to ``image``.
 
@@ -68,10 +70,15 @@ def fit(
     where it is taken: "linear" (default, radiance) or "srgb" (the sRGB encodings of the clipped render
     and of the image, as an 8-bit file stores them: a shadow's error counts as the file resolves it); the
     closed-form products stay least squares in linear space, the reported ones minimise the sRGB loss.
+    ``environment``: the occluded environment term (a room's light from every direction, darkened under
+    and between the objects): "auto" (default) adds it when the photo shows it (``result.model`` says
+    why), "on" always fits it, "off" never; a scene that gives ``environment`` or frees it always has it.
+    The closed-form method solves it (one product per object and channel); elsewhere it is the scene's.
     """
     t0 = time.perf_counter()
     scene = load_scene(scene)
     b = budget(protocol, space, population, generations, f, cr)
+    env_mode = check_environment(environment)
     check_arguments(scene, seed=seed, threads=threads, polish=polish, pixels_per_object=pixels_per_object,
                     population=b.population)
     doubts: list[str] = []
@@ -87,13 +94,33 @@ def fit(
     settings = {**b.settings(), "clip": clip,
                 "masked_pixels": None if use is None else int(scene.width * scene.height - use.size),
                 "norm": norm, "space": space, "pixels_per_object": pixels_per_object, "threads": threads,
-                "method": b.method, "optimizer": b.optimizer, "polish": b.polish}
+                "method": b.method, "optimizer": b.optimizer, "polish": b.polish, "environment": env_mode}
     if b.projection_unavailable is not None:
         settings["projection_unavailable"] = b.projection_unavailable
     stages = Stages(scene, target, use, mask, b, ident, clip=clip, norm=norm, space=space, threads=threads,
                     pixels_per_object=pixels_per_object, rng=np.random.default_rng(seed), callback=callback)
     seeds = np.random.SeedSequence(seed).generate_state(4, dtype=np.uint64)
-    current = stages.projected(int(seeds[0])) if b.method == "projected" else stages.two_stage(seeds)
+    model: dict[str, Any] = {"terms": ["direct"], "evidence": {}}
+    if b.method == "projected":
+        env = environment_given(scene) or env_mode == "on"
+        current = stages.projected(int(seeds[0]), environment=env)
+        if env_mode == "auto" and not env:
+            first = stages.stages[-1]
+            where = first.paths
+            evidence = environment_evidence(scene.with_params(list(first.x), where), where, list(first.x),
+                                            target, use, clip=clip, norm=norm, space=space, threads=threads,
+                                            active_pixels=first.pixels)
+            model["evidence"]["environment"] = evidence
+            if evidence["selected"]:
+                candidate = stages.projected(int(seeds[1]), environment=True, name="light+colour+environment")
+                if sum(stages.stages[-1].objectives) < sum(first.objectives):
+                    current, env = candidate, True
+        if env:
+            model["terms"].append("environment")
+    else:
+        if environment_given(scene):
+            model["terms"].append("environment")
+        current = stages.two_stage(seeds)
     values = current.get_params(all_paths)
     result = FitResult(
         scene=current,
@@ -106,6 +133,7 @@ def fit(
         products=_products(current),
         identifiability=ident,
         settings=settings,
+        model=model,
     )
     doubts += _at_bounds(current, all_paths)
     for d in doubts:

@@ -1,5 +1,6 @@
 """The products the image determines, and their one owner: P = exposure x intensity x colour x albedo
-per object and channel, Q = intensity x specular; their bounds and their split back into scene values."""
+per object and channel, Q = intensity x specular, E = exposure x environment x albedo (with the
+environment term); their bounds and their split back into scene values."""
 
 from __future__ import annotations
 
@@ -81,10 +82,29 @@ def unit_lobes(d: dict[str, Any], objects: set[int]) -> np.ndarray:
     return _native.render(Scene(json.dumps(lobes, allow_nan=False)))
 
 
-def product_bounds(scene: Scene) -> np.ndarray:
+#: The environment radiance's range when the fit adds the term itself (not in the fit section): up to the
+#: radiance that alone renders an unoccluded white surface at the top of the photo's range, 1 / exposure.
+AUTO_ENVIRONMENT_MAX = 1.0
+
+
+def environment_range(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """Per channel (min, max) of the environment radiance a fit may choose: its fit bounds when
+    ``environment`` is free, its value when the scene gives one, else [0, AUTO_ENVIRONMENT_MAX / exposure]."""
+    d = scene_to_dict(scene)
+    if "environment" in scene.fit_paths:
+        b = np.array(scene.bounds(["environment"]), float)
+        return b[:, 0], b[:, 1]
+    env = np.asarray(d.get("environment", [0.0, 0.0, 0.0]), float)
+    if env.any():
+        return env, env
+    return np.zeros(3), np.full(3, AUTO_ENVIRONMENT_MAX / d["exposure"])
+
+
+def product_bounds(scene: Scene, environment: bool = False) -> np.ndarray:
     """(objects, 4, 2) bounds of the closed-form unknowns from the fit section: rows 0-2 exposure x
     intensity x colour x albedo per channel, row 3 intensity x specular ((0, 0) for a matte object, which
-    then costs no specular work)."""
+    then costs no specular work); with ``environment`` (objects, 7, 2), rows 4-6 exposure x environment x
+    albedo per channel (:func:`environment_range`)."""
     d = scene_to_dict(scene)
     paths = scene.fit_paths
     scale = np.array(d["light"]["color"], float) * d["exposure"]
@@ -92,11 +112,15 @@ def product_bounds(scene: Scene) -> np.ndarray:
         ilo, ihi = scene.bounds(["light.intensity"])[0]
     else:
         ilo = ihi = d["light"]["intensity"]
-    out = np.zeros((len(d["objects"]), 4, 2))
+    out = np.zeros((len(d["objects"]), 7 if environment else 4, 2))
+    elo, ehi = environment_range(scene)
     for k, o in enumerate(d["objects"]):
         p = f"objects.{o['name']}.albedo"
         b = np.array(scene.bounds([p])) if p in paths else np.repeat(np.array(o["material"]["albedo"])[:, None], 2, 1)
         out[k, :3, 0], out[k, :3, 1] = product_range(ilo, ihi, scale, scale, b[:, 0], b[:, 1])
+        if environment:
+            out[k, 4:, 0], out[k, 4:, 1] = product_range(1.0, 1.0, d["exposure"] * elo, d["exposure"] * ehi,
+                                                         b[:, 0], b[:, 1])
         sp = f"objects.{o['name']}.specular"
         klo, khi = scene.bounds([sp])[0] if sp in paths else (o["material"]["specular"],) * 2
         out[k, 3] = specular_range(ilo, ihi, klo, khi)
@@ -106,10 +130,12 @@ def product_bounds(scene: Scene) -> np.ndarray:
 def split_products(fitted: Scene, rows: list[list[float]], original: Scene) -> Scene:
     """Write closed-form products back as albedos, speculars and an intensity.
 
-    ``rows``: per object [P_r, P_g, P_b] or [P_r, P_g, P_b, Q]. Intensity x albedo (and x specular) is all
-    the image determines; rtloop keeps the intensity at the scene's own value (the user's estimate of the
-    lamp) unless an albedo or a specular would then exceed its upper bound, in which case the light is
-    made just bright enough (the dimmest light consistent with the photo and the bounds).
+    ``rows``: per object [P_r, P_g, P_b], [P_r, P_g, P_b, Q] or [P_r, P_g, P_b, Q, E_r, E_g, E_b].
+    Intensity x albedo (and x specular) is all the image determines; rtloop keeps the intensity at the
+    scene's own value (the user's estimate of the lamp) unless an albedo or a specular would then exceed
+    its upper bound, in which case the light is made just bright enough (the dimmest light consistent with
+    the photo and the bounds). With E, the environment radiance is the least-squares value over the
+    objects given their albedos (E_o,c = exposure x environment_c x albedo_o,c), within its range.
     """
     d = scene_to_dict(fitted)
     paths = original.fit_paths
@@ -148,6 +174,18 @@ def split_products(fitted: Scene, rows: list[list[float]], original: Scene) -> S
             klo, khi = original.bounds([sp])[0]
             ks = Q[k] / intensity if intensity > 0 else klo
             fitted = fitted.with_params([float(np.clip(np.nan_to_num(ks), klo, khi))], [sp])
+    if arr.shape[1] >= 7:
+        rho = np.array([o["material"]["albedo"] for o in scene_to_dict(fitted)["objects"]], float)
+        E = arr[:, 4:7]
+        elo, ehi = environment_range(original)
+        den = d["exposure"] * np.sum(rho * rho, axis=0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            env = np.where(den > 0, np.sum(E * rho, axis=0) / den, elo)
+        env = [float(v) for v in np.clip(np.nan_to_num(env), elo, ehi)]
+        if "environment" in paths:
+            fitted = fitted.with_params(env, ["environment"])
+        else:  # the term the fit added itself (or the scene's fixed value): written in, not in the fit section
+            fitted = Scene(json.dumps({**scene_to_dict(fitted), "environment": env}, allow_nan=False))
     return fitted
 
 

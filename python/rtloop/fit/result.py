@@ -41,7 +41,8 @@ class StageResult:
     #: (generation, fitness, objectives, x) of the best individual of every generation.
     history: list[tuple[int, float, list[float], np.ndarray]] = field(default_factory=list)
     #: For the projected loss: the closed-form products of the best individual, per object
-    #: [P_r, P_g, P_b, Q] (Q = intensity x specular, 0 for a matte object).
+    #: [P_r, P_g, P_b, Q] (Q = intensity x specular, 0 for a matte object), then [E_r, E_g, E_b]
+    #: (exposure x environment x albedo) when the fit has the environment term.
     products: list[list[float]] | None = None
     #: For the projected loss: per object, its (unmasked) pixels that the fitted light reaches.
     lit_pixels: list[int] | None = None
@@ -69,6 +70,9 @@ class FitResult:
     uncertainty: dict[str, Any] | None = None
     #: Doubts about the inputs or the result (each also issued as an RtloopWarning), in the order found.
     warnings: list[str] = field(default_factory=list)
+    #: The image terms the fit used and why: ``{"terms": [...], "evidence": {term: {...}}}`` (see
+    #: :mod:`rtloop.fit.selection`).
+    model: dict[str, Any] = field(default_factory=dict)
 
     @property
     def fitness(self) -> float:
@@ -99,6 +103,7 @@ class FitResult:
             "fitted": self.x,
             "products": self.products,
             "identifiability": self.identifiability,
+            "model": self.model,
             "uncertainty": self.uncertainty,
             "message": self.message,
             "warnings": list(self.warnings),

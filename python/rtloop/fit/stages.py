@@ -110,12 +110,13 @@ class Stages:
         self.stages.append(stage)
         return stage
 
-    def projected(self, seed: int) -> Scene:
-        """The closed-form method: the light (and any shininess) searched, the products solved and split."""
+    def projected(self, seed: int, environment: bool = False, name: str = "light+colour") -> Scene:
+        """The closed-form method: the light (and any shininess) searched, the products solved and split;
+        with ``environment`` each object's occluded-environment product too."""
         b, where = self.budget, searched_paths(self.all_paths)
-        s = self.run("light+colour", self.scene, where, "l1_projected", self.use, b.generations[0], seed,
-                     product_bounds=product_bounds(self.scene), method=b.optimizer, polish=b.polish,
-                     polish_tol=b.protocol.get("polish_tol"))
+        s = self.run(name, self.scene, where, "l1_projected", self.use, b.generations[0], seed,
+                     product_bounds=product_bounds(self.scene, environment), method=b.optimizer,
+                     polish=b.polish, polish_tol=b.protocol.get("polish_tol"))
         current = split_products(self.scene.with_params(list(s.x), where), s.products, self.scene)
         return keep_undetermined(current, self.scene, self.all_paths, self.ident, s.lit_pixels)
 

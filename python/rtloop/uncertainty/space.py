@@ -132,6 +132,11 @@ def _products_space(scene: Scene, d: dict[str, Any]) -> tuple[_Space, dict[str, 
     for p in paths:
         if p not in _LIGHT_SCALE and p not in fit_new:
             fit_new[p] = fit_old[p]
+    if any(v != 0 for v in d.get("environment", [0, 0, 0])):
+        # The work albedo P_c / w_c is intensity x albedo_c: the environment term exposure x env x albedo
+        # stays the same with env / intensity at exposure 1 (held at its fitted value, not varied).
+        i = float(d["light"]["intensity"])
+        d["environment"] = [float(d["exposure"] * v / i) if i > 0 else 0.0 for v in d["environment"]]
     d["light"]["intensity"], d["light"]["color"], d["exposure"] = 1.0, [float(v) for v in w_work], 1.0
     d["fit"] = fit_new
     work = Scene(json.dumps(d, allow_nan=False))  # made from a valid scene: load_scene's checks not needed
