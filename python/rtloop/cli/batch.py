@@ -87,6 +87,8 @@ def _build_parser() -> Parser:
     p.add_argument("--loss-space", choices=("linear", "srgb"))
     p.add_argument("--environment", choices=("auto", "on", "off"), help="the occluded environment term "
                    "(default auto: added when the photo shows it)")
+    p.add_argument("--highlights", choices=("auto", "off"), help="free a matte sphere's specular lobe when the "
+                   "photo shows a highlight (default auto)")
     p.add_argument("--response", choices=("srgb", "linear"))
     p.add_argument("--final-scale", type=int_at_least(1, "a whole number >= 1"), default=4, metavar="K")
     p.add_argument("--final-spp", type=int_at_least(1, "a whole number >= 1"), default=16, metavar="S")
@@ -189,7 +191,7 @@ def _options(args: argparse.Namespace) -> dict[str, Any]:
     opts: dict[str, Any] = {}
     for key, name in (("protocol", "protocol"), ("population", "population"), ("generations", "generations"),
                       ("norm", "norm"), ("loss_space", "space"), ("response", "response"),
-                      ("environment", "environment")):
+                      ("environment", "environment"), ("highlights", "highlights")):
         value = getattr(args, key)
         if value is not None:
             opts[name] = value

@@ -183,6 +183,10 @@ def _build_parser() -> Parser:
                    help="the occluded environment term (a room's light from every direction, darker under and "
                    "between the objects): 'auto' (default) adds it when the photo shows it and says why in "
                    "result.json's fit_report.model, 'on' always fits it, 'off' never")
+    p.add_argument("--highlights", choices=("auto", "off"), default="auto",
+                   help="'auto' (default): a sphere the scene gives as matte gets a fitted specular lobe "
+                   "(specular and shininess) when the photo shows a highlight the diffuse model cannot explain; "
+                   "'off': never")
     p.add_argument("--mask", type=Path, metavar="PNG",
                    help="an image of IMAGE's size (or the scene's): white where the scene models the photo, "
                    "black where it does not (another object, a reflection); black pixels are left out of the fit")
@@ -404,7 +408,7 @@ class _Run:
                     scene, image, protocol=args.protocol, seed=args.seed, population=args.population,
                     generations=args.generations, f=args.f, cr=args.cr, threads=args.threads,
                     callback=callback, mask=mask, norm=args.norm, space=args.loss_space,
-                    environment=args.environment,
+                    environment=args.environment, highlights=args.highlights,
                 )
         self.progress.end_line()
         for w in result.warnings:

@@ -22,7 +22,15 @@ from .products import product_bounds as _product_bounds
 from .products import products as _products
 from .protocol import LOSS_SPACES, PIXELS_PER_OBJECT, PROTOCOLS, budget, check_arguments, choose_method
 from .result import FitResult, GenerationInfo, StageResult
-from .selection import check_environment, environment_evidence, environment_given
+from .selection import (
+    check_environment,
+    check_highlights,
+    environment_evidence,
+    environment_given,
+    highlight_candidates,
+    highlight_evidence,
+    with_highlights,
+)
 from .stages import Stages, sample_object_pixels
 
 __all__ = ["LOSS_SPACES", "PROTOCOLS", "FitResult", "GenerationInfo", "StageResult", "fit"]
@@ -52,6 +60,7 @@ def fit(
     norm: str = "l1",
     space: str = "linear",
     environment: str = "auto",
+    highlights: str = "auto",
 ) -> FitResult:
     """Fit the scene's free parameters (its ``fit`` section) to ``image``.
 
@@ -74,11 +83,15 @@ def fit(
     and between the objects): "auto" (default) adds it when the photo shows it (``result.model`` says
     why), "on" always fits it, "off" never; a scene that gives ``environment`` or frees it always has it.
     The closed-form method solves it (one product per object and channel); elsewhere it is the scene's.
+    ``highlights``: "auto" (default) frees the specular lobe (specular and shininess) of every sphere the
+    scene gives as matte when the photo shows a highlight the diffuse model cannot explain (the fitted
+    scene's fit section then lists them; ``result.model`` says why); "off" never.
     """
     t0 = time.perf_counter()
     scene = load_scene(scene)
     b = budget(protocol, space, population, generations, f, cr)
     env_mode = check_environment(environment)
+    check_highlights(highlights)
     check_arguments(scene, seed=seed, threads=threads, polish=polish, pixels_per_object=pixels_per_object,
                     population=b.population)
     doubts: list[str] = []
@@ -94,7 +107,8 @@ def fit(
     settings = {**b.settings(), "clip": clip,
                 "masked_pixels": None if use is None else int(scene.width * scene.height - use.size),
                 "norm": norm, "space": space, "pixels_per_object": pixels_per_object, "threads": threads,
-                "method": b.method, "optimizer": b.optimizer, "polish": b.polish, "environment": env_mode}
+                "method": b.method, "optimizer": b.optimizer, "polish": b.polish, "environment": env_mode,
+                "highlights": highlights}
     if b.projection_unavailable is not None:
         settings["projection_unavailable"] = b.projection_unavailable
     stages = Stages(scene, target, use, mask, b, ident, clip=clip, norm=norm, space=space, threads=threads,
@@ -104,19 +118,43 @@ def fit(
     if b.method == "projected":
         env = environment_given(scene) or env_mode == "on"
         current = stages.projected(int(seeds[0]), environment=env)
+        accepted = stages.stages[-1]
+        evaluate_kw = {"clip": clip, "norm": norm, "space": space, "threads": threads}
         if env_mode == "auto" and not env:
-            first = stages.stages[-1]
-            where = first.paths
-            evidence = environment_evidence(scene.with_params(list(first.x), where), where, list(first.x),
-                                            target, use, clip=clip, norm=norm, space=space, threads=threads,
-                                            active_pixels=first.pixels)
+            where = accepted.paths
+            evidence = environment_evidence(scene.with_params(list(accepted.x), where), where, list(accepted.x),
+                                            target, use, active_pixels=accepted.pixels, **evaluate_kw)
             model["evidence"]["environment"] = evidence
             if evidence["selected"]:
                 candidate = stages.projected(int(seeds[1]), environment=True, name="light+colour+environment")
-                if sum(stages.stages[-1].objectives) < sum(first.objectives):
-                    current, env = candidate, True
+                if sum(stages.stages[-1].objectives) < sum(accepted.objectives):
+                    current, env, accepted = candidate, True, stages.stages[-1]
         if env:
             model["terms"].append("environment")
+        names = highlight_candidates(scene) if highlights == "auto" else []
+        if names:
+            where = accepted.paths
+            evidence, shininess = highlight_evidence(scene.with_params(list(accepted.x), where), names, where,
+                                                     list(accepted.x), target, use, environment=env,
+                                                     active_pixels=accepted.pixels, **evaluate_kw)
+            model["evidence"]["specular"] = evidence
+            glossy = with_highlights(scene, names, shininess) if evidence["selected"] else None
+            if glossy is not None:
+                b2 = budget(protocol, space, population, generations, f, cr)
+                choose_method(b2, glossy, glossy.fit_paths, population=population, generations=generations,
+                              optimizer=optimizer, polish=polish)
+                if b2.method == "projected":
+                    more = Stages(glossy, target, use, mask, b2, _identifiability(glossy, glossy.fit_paths),
+                                  clip=clip, norm=norm, space=space, threads=threads,
+                                  pixels_per_object=pixels_per_object, rng=np.random.default_rng(seed),
+                                  callback=callback)
+                    candidate = more.projected(int(seeds[2]), environment=env, name="light+colour+specular")
+                    stages.stages += more.stages
+                    stages.evaluations += more.evaluations
+                    if sum(more.stages[-1].objectives) < sum(accepted.objectives):
+                        current, accepted = candidate, more.stages[-1]
+                        model["terms"].append("specular")
+                        model["specular_objects"] = names
     else:
         if environment_given(scene):
             model["terms"].append("environment")

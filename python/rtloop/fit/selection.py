@@ -20,11 +20,26 @@ from ..errors import RtloopError
 from ..scene import Scene, scene_to_dict
 from .products import product_bounds
 
-__all__ = ["ENVIRONMENT_MODES", "MIN_GAIN", "check_environment", "environment_evidence", "environment_given"]
+__all__ = ["ENVIRONMENT_MODES", "HIGHLIGHT_MODES", "MIN_GAIN", "SHININESS_TRIALS", "check_environment",
+           "check_highlights", "environment_evidence", "environment_given", "highlight_candidates",
+           "highlight_evidence", "with_highlights"]
 
 #: ``fit(environment=...)``: "auto" (default) adds the term when the photo shows it, "on" always fits
 #: it, "off" never (today's model).
 ENVIRONMENT_MODES = ("auto", "on", "off")
+
+#: ``fit(highlights=...)``: "auto" (default) frees a sphere's specular lobe when the photo shows a highlight
+#: the diffuse model cannot explain; "off" never.
+HIGHLIGHT_MODES = ("auto", "off")
+
+#: Blinn-Phong exponents tried at the found light to see whether a lobe explains the photo (from a broad
+#: sheen to a tight highlight, a factor of about 3 apart); the refit then searches the shininess.
+SHININESS_TRIALS = (10.0, 30.0, 100.0, 300.0, 1000.0)
+#: The bounds a freed lobe gets: specular in [0, 1]; shininess within a factor SHININESS_SPAN of the best
+#: trial (the trials' spacing: the refit searches between the neighbouring trials), inside [1, 2000].
+SPECULAR_RANGE = (0.0, 1.0)
+SHININESS_RANGE = (1.0, 2000.0)
+SHININESS_SPAN = 3.2
 
 #: The least relative reduction of the loss at the fitted light for "auto" to add a term. The information
 #: criterion alone accepts any term that explains a few pixels better (a photo has ~10^4 of them, so
@@ -38,6 +53,61 @@ def check_environment(mode: Any) -> str:
     if mode not in ENVIRONMENT_MODES:
         raise RtloopError(f"environment: must be one of {', '.join(ENVIRONMENT_MODES)} (got {mode!r})")
     return str(mode)
+
+
+def check_highlights(mode: Any) -> str:
+    """``mode`` if it is one of HIGHLIGHT_MODES, else an RtloopError naming the argument."""
+    if mode not in HIGHLIGHT_MODES:
+        raise RtloopError(f"highlights: must be one of {', '.join(HIGHLIGHT_MODES)} (got {mode!r})")
+    return str(mode)
+
+
+def highlight_candidates(scene: Scene) -> list[str]:
+    """The spheres whose lobe the fit may free: matte in the scene (specular 0), specular not in the fit
+    section, albedo free (the lobe's product then joins the closed form)."""
+    paths = scene.fit_paths
+    if "light.position" not in paths and "light.direction" not in paths:
+        return []
+    return [o["name"] for o in scene_to_dict(scene)["objects"]
+            if o["shape"] == "sphere" and o["material"]["specular"] == 0
+            and f"objects.{o['name']}.specular" not in paths and f"objects.{o['name']}.shininess" not in paths
+            and f"objects.{o['name']}.albedo" in paths]
+
+
+def with_highlights(scene: Scene, names: list[str], shininess: float) -> Scene:
+    """``scene`` with the specular and shininess of ``names`` freed (SPECULAR_RANGE; the shininess within
+    SHININESS_SPAN of ``shininess``, inside SHININESS_RANGE), the shininess at ``shininess``."""
+    lo = max(SHININESS_RANGE[0], shininess / SHININESS_SPAN)
+    hi = min(SHININESS_RANGE[1], shininess * SHININESS_SPAN)
+    changes: dict[str, tuple[Any, Any]] = {}
+    for n in names:
+        changes[f"objects.{n}.specular"] = SPECULAR_RANGE
+        changes[f"objects.{n}.shininess"] = (lo, hi)
+    out = scene.with_bounds(changes)
+    return out.with_params([shininess] * len(names), [f"objects.{n}.shininess" for n in names])
+
+
+def highlight_evidence(scene: Scene, names: list[str], paths: list[str], x: list[float], target: np.ndarray,
+                       pixels: np.ndarray | None, *, environment: bool, clip: bool, norm: str, space: str,
+                       threads: int | None, active_pixels: int) -> tuple[dict[str, Any], float]:
+    """Whether a specular lobe on the spheres ``names`` explains the photo better at the light ``x`` found
+    without it: the closed-form loss without, and with the lobe at each of SHININESS_TRIALS (its strength
+    solved in closed form); the best trial, the gain, the change in BIC (k = 2 per sphere: strength and
+    shininess) and the verdict (as :func:`environment_evidence`). Returns the evidence and the shininess."""
+    base = _native.evaluate(scene, paths, target, np.asarray([x], np.float64), pixels=pixels, loss="l1_projected",
+                            clip=clip, threads=threads, product_bounds=product_bounds(scene, environment),
+                            norm=norm, space=space)
+    glossy = with_highlights(scene, names, SHININESS_TRIALS[0])
+    gpaths = paths + [f"objects.{n}.shininess" for n in names]
+    rows = np.asarray([list(x) + [s] * len(names) for s in SHININESS_TRIALS], np.float64)
+    with_lobe = _native.evaluate(glossy, gpaths, target, rows, pixels=pixels, loss="l1_projected", clip=clip,
+                                 threads=threads, product_bounds=product_bounds(glossy, environment), norm=norm,
+                                 space=space)[:, 0]
+    k = int(np.argmin(with_lobe))
+    ev = _verdict(float(base[0, 0]), float(with_lobe[k]), active_pixels, 2 * len(names), norm)
+    ev["shininess_tried"] = list(SHININESS_TRIALS)
+    ev["loss_per_shininess"] = [float(v) for v in with_lobe]
+    return ev, SHININESS_TRIALS[k]
 
 
 def environment_given(scene: Scene) -> bool:
@@ -58,12 +128,18 @@ def environment_evidence(scene: Scene, paths: list[str], x: list[float], target:
         v = _native.evaluate(scene, paths, target, pop, pixels=pixels, loss="l1_projected", clip=clip,
                              threads=threads, product_bounds=product_bounds(scene, env), norm=norm, space=space)
         loss.append(float(v[0, 0]))
-    l0, l1 = loss
+    return _verdict(loss[0], loss[1], active_pixels, 3 * len(scene.object_names), norm)
+
+
+def _verdict(l0: float, l1: float, active_pixels: int, k: int, norm: str) -> dict[str, Any]:
+    """The evidence for a term that takes the loss from ``l0`` to ``l1`` with ``k`` more parameters."""
     n = 3 * max(int(active_pixels), 1)
-    k = 3 * len(scene.object_names)
     gain = (l0 - l1) / l0 if l0 > 0 else 0.0
     per = n if norm == "l2" else 2 * n
-    dbic = per * math.log(l0 / l1) - k * math.log(n) if l0 > 0 and l1 > 0 else (math.inf if l0 > l1 else -k * math.log(n))
+    if l0 > 0 and l1 > 0:
+        dbic = per * math.log(l0 / l1) - k * math.log(n)
+    else:
+        dbic = math.inf if l0 > l1 else -k * math.log(n)
     selected = bool(gain >= MIN_GAIN and dbic > 0)
     return {
         "loss_without": l0,

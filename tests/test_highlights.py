@@ -1,0 +1,59 @@
+"""Highlights the diffuse model cannot explain (issue "Photos as they are"): the default fit frees a
+matte sphere's specular lobe when the photo shows one. Against a GGX lobe rendered by Mitsuba 3 in
+tests/test_photos.py."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import rtloop
+from test_environment import _photo, _scene, _start, _user_fit
+
+
+def _glossy(specular=0.4, shininess=60.0) -> dict:
+    d = _scene(position=[1.5, 3.5, -2.5])
+    d["objects"][0]["material"] = {"albedo": [0.7, 0.3, 0.2], "specular": specular, "shininess": shininess}
+    return d
+
+
+def test_auto_frees_the_lobe_of_a_glossy_ball():
+    truth = _glossy()
+    photo = _photo(truth)
+    r = rtloop.fit(_start(truth, _user_fit(truth)), photo, uncertainty=False)
+    assert "specular" in r.model["terms"] and r.model["specular_objects"] == ["ball"]
+    ev = r.model["evidence"]["specular"]
+    assert ev["selected"] and ev["gain"] > 0.05
+    d = r.scene.to_dict()
+    assert np.linalg.norm(np.array(d["light"]["position"]) - truth["light"]["position"]) < 1e-3
+    ball = d["objects"][0]["material"]
+    assert ball["shininess"] == pytest.approx(60.0, rel=1e-2)
+    # intensity x specular is what the image determines (the gauge as for the albedos)
+    assert ball["specular"] * d["light"]["intensity"] == pytest.approx(0.4 * truth["light"]["intensity"], rel=1e-2)
+    assert "objects.ball.specular" in d["fit"] and "objects.ball.shininess" in d["fit"]
+    assert [s.name for s in r.stages] == ["light+colour", "light+colour+specular"]
+
+
+def test_auto_leaves_a_matte_ball_matte():
+    truth = _scene(position=[1.5, 3.5, -2.5])
+    photo = _photo(truth)
+    auto = rtloop.fit(_start(truth, _user_fit(truth)), photo, uncertainty=False)
+    off = rtloop.fit(_start(truth, _user_fit(truth)), photo, highlights="off", uncertainty=False)
+    assert "specular" not in auto.model["terms"] and not auto.model["evidence"]["specular"]["selected"]
+    assert auto.x == off.x and len(auto.stages) == 1
+    assert "objects.ball.specular" not in auto.scene.to_dict()["fit"]
+
+
+def test_a_lobe_the_user_fixed_or_freed_is_left_as_given():
+    truth = _glossy()
+    fit = _user_fit(truth)
+    fit["objects.ball.specular"] = {"min": 0, "max": 1}
+    fit["objects.ball.shininess"] = {"min": 20, "max": 200}
+    r = rtloop.fit(_start(truth, fit), _photo(truth), uncertainty=False)
+    assert "specular" not in r.model["evidence"] and len(r.stages) == 1
+
+
+def test_bad_mode_names_the_argument():
+    truth = _scene()
+    with pytest.raises(rtloop.RtloopError, match="highlights"):
+        rtloop.fit(_start(truth, _user_fit(truth)), np.zeros((48, 64, 3), np.float32), highlights="on")
