@@ -202,7 +202,7 @@ CASES: list[Case] = [
     ),
     Case(
         "env-bounce-overhead",
-        "light-blue ball, light high above (77 deg), dim grey environment and interreflection",
+        "light-blue ball, light high above (76 deg), dim grey environment and interreflection",
         "both the occluded environment and interreflection, a light almost overhead (a small shadow)",
         CAM_B, [0.4, 4.9, 0.9], 52.0, [1.0, 1.0, 1.0],
         [_sphere("ball", [0.0, 0.8, 0.0], 0.8, _diffuse([0.55, 0.68, 0.8])), _floor([0.7, 0.66, 0.6])],
