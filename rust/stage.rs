@@ -51,6 +51,8 @@ pub struct StageResult {
     /// Projected loss only: the products minimising the loss at `x` and each object's lit pixels.
     pub products: Option<Vec<ProductRow>>,
     pub lit_pixels: Option<Vec<usize>>,
+    /// Projected loss with interreflection: the gauge u = 1 / intensity the bounce was solved with.
+    pub gauge: Option<f64>,
 }
 
 /// Search `fitness` within `bounds` with `method`. `callback` runs after the initial population and
@@ -92,10 +94,12 @@ where
         active_pixels,
         products: None,
         lit_pixels: None,
+        gauge: None,
     };
     if let Some((solved, loss)) = refined {
         out.products = Some(product_rows(&solved));
         out.lit_pixels = Some(solved.lit);
+        out.gauge = solved.gauge;
         out.search_objectives = Some(std::mem::replace(
             &mut out.objectives,
             vec![loss.iter().sum::<f64>()],

@@ -53,6 +53,7 @@ def _photo(truth: dict) -> np.ndarray:
 def _start(truth: dict, fit: dict) -> rtloop.Scene:
     d = json.loads(json.dumps(truth))
     d.pop("environment", None)
+    d.pop("interreflection", None)
     d["light"] = {**d["light"], "position": [0.0, 4.0, 0.0], "intensity": 20.0}
     for o in d["objects"]:
         o["material"] = {"albedo": [0.5, 0.5, 0.5]}

@@ -6,8 +6,9 @@
 use glam::Vec3A;
 
 use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut};
-use super::pixels::{blinn_phong, group, irradiance, shadow, Group, Light, BLOCK};
+use super::pixels::{blinn_phong, gathers, group, irradiance, shadow, Gather, Group, Light, BLOCK};
 use super::simd::{self, Simd};
+use crate::render::bounce::{table_points, TABLE};
 use crate::render::brdf::{lambert, specular_scale};
 use crate::render::{PShape, ShadeParams, Surfel};
 
@@ -18,6 +19,9 @@ pub struct Kernel {
     pub(crate) space: Space,
     pub(crate) groups: Vec<Group>,
     pub(crate) pixels: usize,
+    /// With interreflection, per object: for a sphere the gathers of its table points (the light the
+    /// others bounce onto it, `render::bounce::TABLE`); empty otherwise.
+    pub(crate) tables: Vec<Vec<Gather>>,
 }
 
 impl Kernel {
@@ -31,9 +35,46 @@ impl Kernel {
         shapes: &[PShape],
         shadows: bool,
         environment: bool,
+        bounce: bool,
     ) -> Kernel {
-        let groups = group(surfels, targets, solve, shapes, shadows, environment);
+        let groups = group(
+            surfels,
+            targets,
+            solve,
+            shapes,
+            shadows,
+            environment,
+            bounce,
+        );
+        let tables = if bounce {
+            shapes
+                .iter()
+                .enumerate()
+                .map(|(k, shape)| match *shape {
+                    PShape::Sphere { center, radius } => {
+                        let at: Vec<Surfel> = table_points(center, radius)
+                            .into_iter()
+                            .map(|(position, normal)| Surfel {
+                                position,
+                                normal,
+                                view: normal,
+                                object: k as u32,
+                                eps: 64.0
+                                    * f32::EPSILON
+                                    * (position.abs().max_element() + shape.scale()),
+                            })
+                            .collect();
+                        let idx: Vec<usize> = (0..at.len()).collect();
+                        gathers(&at, &idx, k, shapes, shadows, environment)
+                    }
+                    PShape::Plane { .. } => Vec::new(),
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
         Kernel {
+            tables,
             norm: Norm::L1,
             space: Space::Linear,
             groups,
@@ -105,6 +146,11 @@ impl Kernel {
         };
         let mut acc = [0.0f64; 3];
         let mut e = [0.0f32; BLOCK];
+        let tables = if p.interreflection {
+            self.bounce_tables::<AVX2>(p, &light)
+        } else {
+            Vec::new()
+        };
         for g in &self.groups {
             let n = g.len();
             // The objective in the loss space.
@@ -126,6 +172,9 @@ impl Kernel {
             let a: [f32; 3] = std::array::from_fn(|c| p.exposure * m.albedo[c] * p.ambient[c]);
             let sky = !g.sky.is_empty() && p.environment != Vec3A::ZERO;
             let ae: [f32; 3] = std::array::from_fn(|c| p.exposure * m.albedo[c] * p.environment[c]);
+            // One bounce from the other objects, per pixel (exposure applied; times the albedo below).
+            let bounce = (p.interreflection && !g.gathers.is_empty())
+                .then(|| gathered::<AVX2>(g, p, &light, &tables));
             let k: [f32; 3] =
                 std::array::from_fn(|c| lambert(p.exposure * light.rgb[c] * m.albedo[c]));
             let ks: [f32; 3] = std::array::from_fn(|c| {
@@ -137,7 +186,7 @@ impl Kernel {
                 let r = start..start + len;
                 irradiance::<AVX2>(g, r.clone(), &light, &mut e[..len]);
                 shadow(g, r.clone(), &light, &mut e[..len]);
-                if specular || sky {
+                if specular || sky || bounce.is_some() {
                     for c in 0..3 {
                         let mut sum = 0.0f32;
                         for (i, s) in r.clone().enumerate() {
@@ -146,7 +195,10 @@ impl Kernel {
                             } else {
                                 0.0
                             };
-                            let base = if sky { a[c] + ae[c] * g.sky[s] } else { a[c] };
+                            let mut base = if sky { a[c] + ae[c] * g.sky[s] } else { a[c] };
+                            if let Some(b) = &bounce {
+                                base += m.albedo[c] * b[c][s];
+                            }
                             let v = base + e[i] * (k[c] + lobe);
                             let v = if clip { v.min(1.0) } else { v };
                             sum += self.norm.penalty(enc.any(v) - gt[c][s]);
@@ -169,6 +221,79 @@ impl Kernel {
         }
         acc
     }
+}
+
+impl Kernel {
+    /// Per object and channel, the light the others bounce onto each table point of a sphere (radiance
+    /// before its albedo, no exposure) under shading parameters `p`; empty for a plane.
+    pub(crate) fn bounce_tables<const AVX2: bool>(
+        &self,
+        p: &ShadeParams,
+        light: &Light,
+    ) -> Vec<[Vec<f32>; 3]> {
+        let mut e = Vec::new();
+        self.tables
+            .iter()
+            .map(|gths| {
+                let mut out: [Vec<f32>; 3] = std::array::from_fn(|_| {
+                    if gths.is_empty() {
+                        Vec::new()
+                    } else {
+                        vec![0.0; TABLE]
+                    }
+                });
+                for gth in gths {
+                    gth.light::<AVX2>(light, &mut e);
+                    let rho = p.materials[gth.sender].albedo;
+                    let sky = &gth.points.sky;
+                    for c in 0..3 {
+                        for (j, &i) in gth.pixel.iter().enumerate() {
+                            let mut l = light.rgb[c] * e[j] + p.ambient[c];
+                            if !sky.is_empty() {
+                                l += p.environment[c] * sky[j];
+                            }
+                            out[c][i as usize] += gth.form[j] * rho[c] * l;
+                        }
+                    }
+                }
+                out
+            })
+            .collect()
+    }
+}
+
+/// Per channel and pixel of group `g`: Σ over its gathers of form factor x the sender's radiance at its
+/// representative point (direct, environment, ambient; exposure applied), under shading parameters `p`.
+/// `render::shade` adds the same (times the receiver's albedo) with `render::bounce`.
+#[inline(always)]
+pub(crate) fn gathered<const AVX2: bool>(
+    g: &Group,
+    p: &ShadeParams,
+    light: &Light,
+    tables: &[[Vec<f32>; 3]],
+) -> [Vec<f32>; 3] {
+    let n = g.len();
+    let mut out: [Vec<f32>; 3] = std::array::from_fn(|_| vec![0.0f32; n]);
+    let mut e = Vec::new();
+    for gth in &g.gathers {
+        gth.light::<AVX2>(light, &mut e);
+        let rho = p.materials[gth.sender].albedo;
+        let sky = &gth.points.sky;
+        for c in 0..3 {
+            let k = p.exposure * rho[c];
+            for (j, &i) in gth.pixel.iter().enumerate() {
+                let mut l = light.rgb[c] * e[j] + p.ambient[c];
+                if !sky.is_empty() {
+                    l += p.environment[c] * sky[j];
+                }
+                if !gth.table.is_empty() {
+                    l += tables[gth.sender][c][gth.table[j] as usize];
+                }
+                out[c][i as usize] += gth.form[j] * k * l;
+            }
+        }
+    }
+    out
 }
 
 /// One evaluation: the candidate's shading parameters, whether the model is clipped at 1, the bound

@@ -8,6 +8,7 @@
 use glam::Vec3A;
 
 use crate::error::{Error, Result};
+pub mod bounce;
 pub mod kernel;
 pub mod loss;
 pub mod pixels;
@@ -75,6 +76,26 @@ pub struct Fitness {
     constant: [f64; 3],
     /// For `L1Projected`: the bounds of the closed-form unknowns.
     projection: Option<Projection>,
+}
+
+/// The gauge bounds of the bounce from the scene's fit section: u = 1/intensity over the intensity's
+/// bounds (its value when fixed), and each object's largest albedo (its value when fixed).
+fn gauge_bounds(scene: &Scene) -> bounce::Gauge {
+    let bounds = |t: Target| scene.fit.iter().find(|f| f.target == t);
+    let (ilo, ihi) = match bounds(Target::LightIntensity) {
+        Some(f) => (f.min[0], f.max[0]),
+        None => (scene.light.intensity, scene.light.intensity),
+    };
+    let inv = |i: f64| if i > 0.0 { 1.0 / i } else { f64::MAX };
+    bounce::Gauge {
+        u: (inv(ihi), inv(ilo)),
+        albedo_max: (0..scene.objects.len())
+            .map(|k| match bounds(Target::Albedo(k)) {
+                Some(f) => [f.max[0], f.max[1], f.max[2]],
+                None => scene.objects[k].material.albedo,
+            })
+            .collect(),
+    }
 }
 
 /// Per-thread scratch, reused across evaluations so the hot path never allocates.
@@ -202,6 +223,9 @@ impl Fitness {
             }
             base.any_specular = false;
             base.environment = Vec3A::ZERO; // solved in closed form (Projection::environment)
+            if scene.interreflection && scene.can_occlude() {
+                proj.gauge = Some(gauge_bounds(scene));
+            }
             Some(proj)
         } else {
             None
@@ -240,6 +264,7 @@ impl Fitness {
                 &geometry.shapes,
                 scene.can_occlude(),
                 environment,
+                scene.interreflection && scene.can_occlude(),
             ),
             shapes: geometry.shapes,
             kind,

@@ -4,6 +4,7 @@
 
 use glam::Vec3A;
 
+use crate::render::bounce::{gather, nearest_table, table_points};
 use crate::render::environment::sky_view;
 use crate::render::light::{self, directional_irradiance, point_irradiance};
 use crate::render::shape::{segment_meets_sphere, sphere_power};
@@ -110,6 +111,9 @@ pub(crate) struct Group {
     /// The sky view factor per pixel (`render::environment::sky_view`; light-independent), for a
     /// kernel that models the occluded environment; empty otherwise.
     pub(crate) sky: Vec<f32>,
+    /// Where each pixel gathers one bounce from the other objects (`render::bounce::gather`), per
+    /// sender; empty unless the kernel models interreflection.
+    pub(crate) gathers: Vec<Gather>,
     /// Bounding sphere (centre, radius) of each run of `BLOCK` pixels, for culling shadow tests.
     pub(crate) blocks: Vec<([f32; 3], f32)>,
 }
@@ -118,6 +122,96 @@ impl Group {
     pub(crate) fn len(&self) -> usize {
         self.t[0].len()
     }
+}
+
+/// One sender's representative points for the pixels of a receiving group (light-independent): the
+/// receiving pixels, their configuration factors, and the points as a group of the sender (its
+/// occluders and sky view factors), whose light an evaluation computes like a pixel's.
+pub(crate) struct Gather {
+    pub(crate) sender: usize,
+    pub(crate) pixel: Vec<u32>,
+    pub(crate) form: Vec<f32>,
+    pub(crate) points: Group,
+    /// For a sphere sender: each point's nearest table point (`render::bounce::TABLE`), whose tabulated
+    /// bounce the sender adds to its radiance there; empty for a plane.
+    pub(crate) table: Vec<u32>,
+}
+
+impl Gather {
+    /// The unit-light diffuse factor (irradiance / π, shadowed) at every point, into `e`.
+    #[inline(always)]
+    pub(crate) fn light<const AVX2: bool>(&self, light: &Light, e: &mut Vec<f32>) {
+        let n = self.points.len();
+        e.resize(n, 0.0);
+        let mut start = 0;
+        while start < n {
+            let len = BLOCK.min(n - start);
+            let r = start..start + len;
+            irradiance::<AVX2>(&self.points, r.clone(), light, &mut e[r.clone()]);
+            shadow(&self.points, r.clone(), light, &mut e[r.clone()]);
+            start += len;
+        }
+        for v in e.iter_mut() {
+            *v = brdf::lambert(*v);
+        }
+    }
+}
+
+/// The gathers of the pixels `idx` of `surfels` (all of object `own`).
+pub(crate) fn gathers(
+    surfels: &[Surfel],
+    idx: &[usize],
+    own: usize,
+    shapes: &[PShape],
+    shadows: bool,
+    environment: bool,
+) -> Vec<Gather> {
+    let mut per_sender: Vec<(Vec<u32>, Vec<f32>, Vec<Surfel>)> =
+        vec![Default::default(); shapes.len()];
+    let mut points = Vec::new();
+    for (j, &i) in idx.iter().enumerate() {
+        let s = &surfels[i];
+        gather(s.position, s.normal, own, shapes, &mut points);
+        for g in &points {
+            let slot = &mut per_sender[g.sender];
+            slot.0.push(j as u32);
+            slot.1.push(g.form);
+            let scale = g.position.abs().max_element() + shapes[g.sender].scale();
+            slot.2.push(Surfel {
+                position: g.position,
+                normal: g.normal,
+                view: g.normal,
+                object: g.sender as u32,
+                eps: 64.0 * f32::EPSILON * scale,
+            });
+        }
+    }
+    per_sender
+        .into_iter()
+        .enumerate()
+        .filter(|(_, s)| !s.0.is_empty())
+        .map(|(k, (pixel, form, pts))| {
+            let zeros = vec![Vec3A::ZERO; pts.len()];
+            let solve = vec![false; pts.len()];
+            let table = match shapes[k] {
+                PShape::Sphere { center, radius } => {
+                    let at = table_points(center, radius);
+                    pts.iter()
+                        .map(|s| nearest_table(&at, s.normal) as u32)
+                        .collect()
+                }
+                PShape::Plane { .. } => Vec::new(),
+            };
+            let mut g = group(&pts, &zeros, &solve, shapes, shadows, environment, false);
+            Gather {
+                sender: k,
+                pixel,
+                form,
+                points: g.pop().expect("one sender, one group"),
+                table,
+            }
+        })
+        .collect()
 }
 
 /// Per-candidate light terms shared by all groups.
@@ -133,7 +227,7 @@ pub(crate) struct Light {
 /// The active pixels grouped by object (background last), row-major inside a group, as structures of
 /// arrays with their occluders' light-independent terms (`shadows`: the scene can shadow at all).
 /// `solve[i]` says whether pixel i may inform the closed-form products; with `environment` each
-/// object's pixels carry their sky view factor.
+/// object's pixels carry their sky view factor, with `bounce` their gathers.
 pub(crate) fn group(
     surfels: &[Surfel],
     targets: &[Vec3A],
@@ -141,6 +235,7 @@ pub(crate) fn group(
     shapes: &[PShape],
     shadows: bool,
     environment: bool,
+    bounce: bool,
 ) -> Vec<Group> {
     // Pixels grouped by object (background last), row-major inside a group: a counting sort.
     let slot = |o: u32| {
@@ -209,6 +304,10 @@ pub(crate) fn group(
                     .iter()
                     .map(|&i| sky_view(surfels[i].position, surfels[i].normal, o, shapes))
                     .collect(),
+                _ => Vec::new(),
+            },
+            gathers: match object {
+                Some(o) if bounce => gathers(surfels, idx, o, shapes, shadows, environment),
                 _ => Vec::new(),
             },
             blocks: idx

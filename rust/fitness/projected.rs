@@ -3,6 +3,7 @@
 
 use rayon::prelude::*;
 
+use super::bounce::Gauge;
 use super::kernel::{Candidate, Kernel};
 use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, LANES, SATURATED};
 use super::pixels::{blinn_phong, irradiance, shadow, Group, Light, BLOCK};
@@ -95,6 +96,15 @@ impl Kernel {
             enc,
             ..
         } = job;
+        if let Some(gauge) = &proj.gauge {
+            let c = Candidate {
+                params: p,
+                clip,
+                bound,
+                parallel,
+            };
+            return self.projected_bounce::<AVX2, E>(c, proj, gauge, out, scratch, enc);
+        }
         let light = Light {
             pos: p.light_position.to_array(),
             dir: p.light_direction.map(|d| d.to_array()),
@@ -321,6 +331,8 @@ pub struct Projection {
     pub specular: Vec<(f64, f64)>,
     pub environment: Vec<[(f64, f64); 3]>,
     pub weight: [f32; 3],
+    /// With interreflection: the bounds of the gauge the bounce needs (`fitness::bounce`).
+    pub gauge: Option<Gauge>,
 }
 
 impl Projection {
@@ -332,6 +344,7 @@ impl Projection {
             specular: vec![(0.0, 0.0); n],
             environment: Vec::new(),
             weight: [1.0; 3],
+            gauge: None,
         }
     }
 
@@ -357,6 +370,8 @@ pub struct Solved {
     pub products: Vec<[f64; 3]>,
     pub specular: Vec<f64>,
     pub environment: Vec<[f64; 3]>,
+    /// With interreflection: the gauge u = 1 / intensity the bounce was solved with.
+    pub gauge: Option<f64>,
     /// Per object: its pixels that receive direct light (filled by `Kernel::refine` only).
     pub lit: Vec<usize>,
 }
@@ -468,6 +483,43 @@ pub(crate) struct Run<'a> {
     sat: f32,
     top: f32,
     norm: Norm,
+}
+
+impl<'a> Run<'a> {
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn new(
+        g: &'a Group,
+        light: &'a Light,
+        specular: bool,
+        sky: Option<&'a [f32]>,
+        shininess: f32,
+        sat: f32,
+        top: f32,
+        norm: Norm,
+    ) -> Run<'a> {
+        Run {
+            g,
+            light,
+            specular,
+            sky,
+            shininess,
+            sat,
+            top,
+            norm,
+        }
+    }
+
+    pub(crate) fn group(&self) -> &'a Group {
+        self.g
+    }
+
+    pub(crate) fn sky(&self) -> Option<&'a [f32]> {
+        self.sky
+    }
+
+    pub(crate) fn is_specular(&self) -> bool {
+        self.specular
+    }
 }
 
 impl Run<'_> {

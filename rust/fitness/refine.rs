@@ -21,7 +21,10 @@ impl Kernel {
         out: &mut Solved,
         scratch: &[f32],
     ) -> [f64; 3] {
-        let (a_all, b_all) = scratch.split_at(self.pixels);
+        let (a_all, rest) = scratch.split_at(self.pixels);
+        let b_all = &rest[..self.pixels];
+        // With the bounce the diffuse column differs per channel (a'_c, after b in the scratch).
+        let bounced = proj.gauge.is_some() && rest.len() >= 4 * self.pixels;
         let sat = if clip { SATURATED } else { f32::INFINITY };
         let top = if clip { 1.0f64 } else { f64::INFINITY };
         let srgb = self.space == Space::Srgb;
@@ -34,6 +37,11 @@ impl Kernel {
         for g in &self.groups {
             let n = g.len();
             let (a, b) = (&a_all[offset..offset + n], &b_all[offset..offset + n]);
+            let ac: [&[f32]; 3] = if bounced {
+                std::array::from_fn(|c| &rest[(1 + c) * self.pixels + offset..][..n])
+            } else {
+                [a; 3]
+            };
             offset += n;
             let Some(obj) = g.object else {
                 let gt = if srgb { &g.te } else { &g.t };
@@ -49,12 +57,12 @@ impl Kernel {
             objects.push(RefineObject {
                 g,
                 obj,
-                a,
+                a: ac,
                 b,
                 specular: proj.specular[obj].1 > 0.0,
                 sky: proj.sky(obj, g),
                 informed: std::array::from_fn(|c| {
-                    (0..n).any(|i| g.ts[c][i].is_finite() && a[i] > 0.0)
+                    (0..n).any(|i| g.ts[c][i].is_finite() && ac[c][i] > 0.0)
                 }),
             });
         }
@@ -131,9 +139,9 @@ impl Kernel {
                 let (o, c) = (&objects[kc / 3], kc % 3);
                 let (pc, q, ec) = (out.products[o.obj][c], out.specular[o.obj], env(out, o)[c]);
                 let gt = if srgb { &o.g.te[c] } else { &o.g.t[c] };
-                (0..o.a.len())
+                (0..o.b.len())
                     .map(|i| {
-                        let m = o.model(pc, q, ec, proj.weight[c], i).min(top) as f32;
+                        let m = o.model(c, pc, q, ec, proj.weight[c], i).min(top) as f32;
                         let m = if srgb { SrgbLut::get().encode(m) } else { m };
                         self.norm.penalty(m - gt[i]) as f64
                     })
@@ -163,7 +171,7 @@ impl Kernel {
         limits: Limits,
     ) -> f64 {
         let Limits { proj, sat, top } = limits;
-        let (n, a, t) = (o.a.len(), o.a, &o.g.ts[c]);
+        let (n, a, t) = (o.b.len(), o.a[c], &o.g.ts[c]);
         let w = proj.weight[c];
         let bounds = proj.diffuse[o.obj][c];
         if self.space == Space::Srgb {
@@ -172,7 +180,7 @@ impl Kernel {
                 .filter(|&i| a[i] > 0.0 && t[i].is_finite())
                 .map(|i| EncodedTerm {
                     k: a[i] as f64,
-                    o: o.model(0.0, q, ec, w, i),
+                    o: o.model(c, 0.0, q, ec, w, i),
                     y: t[i] as f64,
                     ye: o.g.te[c][i],
                     saturated: t[i] >= sat,
@@ -184,7 +192,7 @@ impl Kernel {
             let terms = (0..n).filter(|&i| a[i] > 0.0 && t[i].is_finite()).map(|i| {
                 (
                     a[i] as f64,
-                    o.model(0.0, q, ec, w, i),
+                    o.model(c, 0.0, q, ec, w, i),
                     t[i] as f64,
                     t[i] >= sat,
                 )
@@ -195,7 +203,7 @@ impl Kernel {
                 (0..n)
                     .filter(|&i| a[i] > 0.0)
                     .map(|i| {
-                        let m = o.model(pc, q, ec, w, i);
+                        let m = o.model(c, pc, q, ec, w, i);
                         a[i] as f64 * self.refine_slope(m, t[i], sat, top)
                     })
                     .sum()
@@ -226,7 +234,7 @@ impl Kernel {
                 .filter(seen)
                 .map(|i| EncodedTerm {
                     k: v[i] as f64,
-                    o: o.model(pc, q, 0.0, w, i),
+                    o: o.model(c, pc, q, 0.0, w, i),
                     y: t[i] as f64,
                     ye: o.g.te[c][i],
                     saturated: t[i] >= sat,
@@ -235,7 +243,7 @@ impl Kernel {
             encoded_line_min(&terms, self.norm, top, bounds, start)
         } else if self.norm == Norm::L1 {
             let terms = (0..v.len()).filter(seen).map(|i| {
-                let off = o.model(pc, q, 0.0, w, i);
+                let off = o.model(c, pc, q, 0.0, w, i);
                 (v[i] as f64, off, t[i] as f64, t[i] >= sat)
             });
             l1_line_min(terms, bounds, top)
@@ -244,7 +252,7 @@ impl Kernel {
                 (0..v.len())
                     .filter(|&i| v[i] > 0.0)
                     .map(|i| {
-                        let m = o.model(pc, q, ec, w, i);
+                        let m = o.model(c, pc, q, ec, w, i);
                         v[i] as f64 * self.refine_slope(m, t[i], sat, top)
                     })
                     .sum()
@@ -263,7 +271,7 @@ impl Kernel {
         limits: Limits,
     ) -> f64 {
         let Limits { proj, sat, top } = limits;
-        let (n, b, t) = (o.a.len(), o.b, &o.g.ts);
+        let (n, b, t) = (o.b.len(), o.b, &o.g.ts);
         let bounds = proj.specular[o.obj];
         if self.space == Space::Srgb {
             let terms: Vec<EncodedTerm> = (0..3)
@@ -272,7 +280,7 @@ impl Kernel {
                         .filter(move |&i| b[i] > 0.0 && t[c][i].is_finite())
                         .map(move |i| EncodedTerm {
                             k: proj.weight[c] as f64 * b[i] as f64,
-                            o: o.model(pk[c], 0.0, e[c], proj.weight[c], i),
+                            o: o.model(c, pk[c], 0.0, e[c], proj.weight[c], i),
                             y: t[c][i] as f64,
                             ye: o.g.te[c][i],
                             saturated: t[c][i] >= sat,
@@ -286,7 +294,7 @@ impl Kernel {
                     .filter(move |&i| b[i] > 0.0 && t[c][i].is_finite())
                     .map(move |i| {
                         let k = proj.weight[c] as f64 * b[i] as f64;
-                        let off = o.model(pk[c], 0.0, e[c], proj.weight[c], i);
+                        let off = o.model(c, pk[c], 0.0, e[c], proj.weight[c], i);
                         (k, off, t[c][i] as f64, t[c][i] >= sat)
                     })
             });
@@ -302,7 +310,7 @@ impl Kernel {
                                 w as f64
                                     * b[i] as f64
                                     * self.refine_slope(
-                                        o.model(pk[c], q, e[c], w, i),
+                                        o.model(c, pk[c], q, e[c], w, i),
                                         t[c][i],
                                         sat,
                                         top,
@@ -340,7 +348,8 @@ struct Limits<'a> {
 pub(crate) struct RefineObject<'a> {
     g: &'a Group,
     obj: usize,
-    a: &'a [f32],
+    /// The diffuse column per channel (the same unit-light factors unless a bounce is folded in).
+    a: [&'a [f32]; 3],
     b: &'a [f32],
     specular: bool,
     /// The sky view factors, for an object with an environment column.
@@ -350,9 +359,9 @@ pub(crate) struct RefineObject<'a> {
 }
 
 impl RefineObject<'_> {
-    /// Model value of pixel `i` in a channel of specular weight `w` at products `pc`, `q` and `ec`.
-    pub(crate) fn model(&self, pc: f64, q: f64, ec: f64, w: f32, i: usize) -> f64 {
-        let lit = pc * self.a[i] as f64
+    /// Model value of pixel `i` in channel `c` of specular weight `w` at products `pc`, `q` and `ec`.
+    pub(crate) fn model(&self, c: usize, pc: f64, q: f64, ec: f64, w: f32, i: usize) -> f64 {
+        let lit = pc * self.a[c][i] as f64
             + if self.specular {
                 q * w as f64 * self.b[i] as f64
             } else {

@@ -164,6 +164,11 @@ impl OptimizeResult {
     fn lit_pixels(&self) -> Option<Vec<usize>> {
         self.result.lit_pixels.clone()
     }
+    /// With interreflection (the projected loss): 1 / the intensity the bounce was solved with.
+    #[getter]
+    fn gauge(&self) -> Option<f64> {
+        self.result.gauge
+    }
 
     /// (generation, best (float64), best's objectives, evaluations) after the initial population and
     /// after every generation, as the callback sees them.

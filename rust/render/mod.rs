@@ -5,6 +5,7 @@
 //! with the `brdf` and `light` formulas. A fit does not call `render`: the fitness evaluates the same
 //! `brdf`/`light` formulas over precomputed first hits (see `crate::fitness`).
 
+pub mod bounce;
 pub mod brdf;
 pub mod camera;
 pub mod environment;
@@ -38,7 +39,8 @@ pub fn render(scene: &Scene, width: Option<u32>, height: Option<u32>, spp: u32) 
         return Err(Error::Invalid(format!("spp must be 1..4096 (got {spp})")));
     }
     let geometry = Geometry::new(scene);
-    let params = ShadeParams::new(scene);
+    let mut params = ShadeParams::new(scene);
+    params.prepare_bounce(&geometry.shapes);
     let shadows = scene.can_occlude();
     let offsets = sample_offsets(spp); // spp = 1: the pixel centre
     let inv = 1.0 / offsets.len() as f32;

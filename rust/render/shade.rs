@@ -1,11 +1,13 @@
 //! Render's per-pixel shading: direct light from one light (`light`) through the material (`brdf`),
 //! with a shadow ray (`hit::occluded`), plus ambient and the occluded environment (`environment`).
 //!
-//! L = ρ·(ambient + env·S) + V·I·color·max(0, n·l)/d² · [ρ/π + k_s·(s+8)/(8π)·max(0, n·h)^s],
+//! L = ρ·(ambient + env·S) + V·I·color·max(0, n·l)/d² · [ρ/π + k_s·(s+8)/(8π)·max(0, n·h)^s]
+//!     (+ ρ·Σ_k F_k·L_k, one bounce from the other objects, with `interreflection`: `bounce`),
 //! pixel = exposure·L, with V the light's visibility and S the sky view factor.
 
 use glam::Vec3A;
 
+use super::bounce::{gather, nearest_table, table_points, GatherPoint};
 use super::brdf::{blinn_phong, lambert, specular_scale};
 use super::environment::sky_view;
 use super::hit::{occluded, Surfel};
@@ -35,6 +37,11 @@ pub struct ShadeParams {
     pub ambient: Vec3A,
     /// The environment radiance, occluded by the scene's shapes (see `environment`).
     pub environment: Vec3A,
+    /// One diffuse bounce between the objects (see `bounce`).
+    pub interreflection: bool,
+    /// With `interreflection`, per sphere its table points and the light bounced onto each (radiance
+    /// before its albedo), made by [`ShadeParams::prepare_bounce`]; empty otherwise.
+    pub tables: Vec<(Vec<(Vec3A, Vec3A)>, Vec<Vec3A>)>,
     pub background: Vec3A,
     pub exposure: f32,
     pub materials: Vec<PMaterial>,
@@ -46,6 +53,7 @@ impl Clone for ShadeParams {
     fn clone(&self) -> Self {
         let mut p = ShadeParams {
             materials: Vec::with_capacity(self.materials.len()),
+            tables: self.tables.clone(),
             ..*self
         };
         p.materials.extend_from_slice(&self.materials);
@@ -61,11 +69,15 @@ impl Clone for ShadeParams {
         self.light_rgb = source.light_rgb;
         self.ambient = source.ambient;
         self.environment = source.environment;
+        self.interreflection = source.interreflection;
         self.background = source.background;
         self.exposure = source.exposure;
         self.any_specular = source.any_specular;
         self.materials.clear();
         self.materials.extend_from_slice(&source.materials);
+        if !source.tables.is_empty() || !self.tables.is_empty() {
+            self.tables.clone_from(&source.tables);
+        }
     }
 }
 
@@ -97,6 +109,8 @@ impl ShadeParams {
             light_rgb: v3(scene.light.color) * scene.light.intensity as f32,
             ambient: v3(scene.ambient),
             environment: v3(scene.environment),
+            interreflection: scene.interreflection,
+            tables: Vec::new(),
             background: v3(scene.background),
             exposure: scene.exposure as f32,
             any_specular: false,
@@ -104,6 +118,38 @@ impl ShadeParams {
         };
         p.update_flags();
         p
+    }
+
+    /// Tabulate, for every sphere, the light the other objects bounce onto it (see `bounce::TABLE`), for
+    /// the current parameters: the senders' second bounce that `shade` adds.
+    pub fn prepare_bounce(&mut self, shapes: &[PShape]) {
+        self.tables.clear();
+        if !self.interreflection {
+            return;
+        }
+        let mut points = Vec::new();
+        let tables: Vec<_> = shapes
+            .iter()
+            .enumerate()
+            .map(|(k, shape)| match *shape {
+                PShape::Sphere { center, radius } => {
+                    let at = table_points(center, radius);
+                    let light = at
+                        .iter()
+                        .map(|&(y, n)| {
+                            gather(y, n, k, shapes, &mut points);
+                            points
+                                .iter()
+                                .map(|g| g.form * sender_radiance(g, self, shapes))
+                                .fold(Vec3A::ZERO, |a, b| a + b)
+                        })
+                        .collect();
+                    (at, light)
+                }
+                PShape::Plane { .. } => (Vec::new(), Vec::new()),
+            })
+            .collect();
+        self.tables = tables;
     }
 
     fn update_flags(&mut self) {
@@ -132,6 +178,41 @@ impl ShadeParams {
     }
 }
 
+thread_local! {
+    static GATHER: std::cell::RefCell<Vec<GatherPoint>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// The radiance (before exposure) that the sender of `g` leaves at its representative point: its direct
+/// light (shadowed), environment and ambient, diffusely; not its own bounce.
+pub fn sender_radiance(g: &GatherPoint, p: &ShadeParams, shapes: &[PShape]) -> Vec3A {
+    let m = &p.materials[g.sender];
+    let mut l = m.albedo * p.ambient;
+    if p.environment != Vec3A::ZERO {
+        l += m.albedo * p.environment * sky_view(g.position, g.normal, g.sender, shapes);
+    }
+    if let Some((dir, dist, falloff)) = incidence(p.light_position, p.light_direction, g.position) {
+        let ndotl = g.normal.dot(dir);
+        let at = Surfel {
+            position: g.position,
+            normal: g.normal,
+            view: g.normal,
+            object: g.sender as u32,
+            eps: 64.0 * f32::EPSILON * (g.position.abs().max_element() + shapes[g.sender].scale()),
+        };
+        if ndotl > 0.0 && !occluded(&at, dir, dist, shapes) {
+            l += (p.light_rgb * lambert(m.albedo) * irradiance(ndotl, falloff))
+                .min(Vec3A::splat(f32::MAX));
+        }
+    }
+    // A sphere sender's own bounce (the second bounce), from its table once prepared.
+    if let Some((at, light)) = p.tables.get(g.sender) {
+        if !at.is_empty() {
+            l += m.albedo * light[nearest_table(at, g.normal)];
+        }
+    }
+    l
+}
+
 /// Exposure-scaled radiance towards the eye at surfel `s` (the background for a miss).
 #[inline]
 pub fn shade(s: &Surfel, p: &ShadeParams, shapes: &[PShape], shadows: bool) -> Vec3A {
@@ -143,6 +224,14 @@ pub fn shade(s: &Surfel, p: &ShadeParams, shapes: &[PShape], shadows: bool) -> V
     if p.environment != Vec3A::ZERO {
         let sky = sky_view(s.position, s.normal, s.object as usize, shapes);
         l += m.albedo * p.environment * sky;
+    }
+    if p.interreflection {
+        GATHER.with_borrow_mut(|points| {
+            gather(s.position, s.normal, s.object as usize, shapes, points);
+            for g in points.iter() {
+                l += m.albedo * g.form * sender_radiance(g, p, shapes);
+            }
+        });
     }
     let Some((dir, dist, falloff)) = incidence(p.light_position, p.light_direction, s.position)
     else {
@@ -175,6 +264,8 @@ mod tests {
             light_rgb: Vec3A::splat(10.0),
             ambient: Vec3A::ZERO,
             environment: Vec3A::ZERO,
+            interreflection: false,
+            tables: Vec::new(),
             background: Vec3A::new(0.1, 0.2, 0.3),
             exposure: 1.0,
             materials: vec![PMaterial {

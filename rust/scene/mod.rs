@@ -83,6 +83,8 @@ pub struct Scene {
     /// Constant environment radiance per channel (a room's light from every direction), occluded by the
     /// scene's own spheres and planes (`render::environment`); `ambient` is the unoccluded constant term.
     pub environment: V3,
+    /// Model one diffuse bounce between the objects (`render::bounce`); off by default.
+    pub interreflection: bool,
     pub background: V3,
     pub exposure: f64,
     pub objects: Vec<Object>,
@@ -102,6 +104,7 @@ struct RawScene {
     light: RawLight,
     ambient: Option<V3>,
     environment: Option<V3>,
+    interreflection: Option<bool>,
     background: Option<V3>,
     exposure: Option<f64>,
     objects: Vec<RawObject>,
@@ -397,6 +400,7 @@ impl Scene {
             light,
             ambient,
             environment,
+            interreflection: raw.interreflection.unwrap_or(false),
             background,
             exposure,
             objects,
@@ -480,6 +484,9 @@ impl Scene {
         out.insert("ambient".into(), json!(self.ambient));
         if self.environment != [0.0; 3] {
             out.insert("environment".into(), json!(self.environment));
+        }
+        if self.interreflection {
+            out.insert("interreflection".into(), json!(true));
         }
         out.insert("background".into(), json!(self.background));
         out.insert("exposure".into(), json!(self.exposure));

@@ -22,7 +22,8 @@ __all__ = ["FIT_OPTIONS", "Job", "JobResult", "as_job", "job_hash", "load_jobs",
 
 #: Per-job options passed on to :func:`rtloop.fit` (``loss_space`` is the CLI's name for ``space``).
 FIT_OPTIONS = ("protocol", "population", "generations", "f", "cr", "norm", "space", "optimizer", "polish",
-               "clip", "uncertainty", "pixels_per_object", "environment", "highlights")
+               "clip", "uncertainty", "pixels_per_object", "environment", "interreflection",
+               "highlights")
 #: Per-job options of how the photo is read.
 READ_OPTIONS = ("response", "crop")
 _ALIASES = {"loss_space": "space", "image": "photo"}

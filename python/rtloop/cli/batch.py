@@ -87,6 +87,8 @@ def _build_parser() -> Parser:
     p.add_argument("--loss-space", choices=("linear", "srgb"))
     p.add_argument("--environment", choices=("auto", "on", "off"), help="the occluded environment term "
                    "(default auto: added when the photo shows it)")
+    p.add_argument("--interreflection", choices=("auto", "on", "off"), help="one diffuse bounce between the "
+                   "objects (default auto: added when the photo shows it)")
     p.add_argument("--highlights", choices=("auto", "off"), help="free a matte sphere's specular lobe when the "
                    "photo shows a highlight (default auto)")
     p.add_argument("--response", choices=("srgb", "linear"))
@@ -191,7 +193,8 @@ def _options(args: argparse.Namespace) -> dict[str, Any]:
     opts: dict[str, Any] = {}
     for key, name in (("protocol", "protocol"), ("population", "population"), ("generations", "generations"),
                       ("norm", "norm"), ("loss_space", "space"), ("response", "response"),
-                      ("environment", "environment"), ("highlights", "highlights")):
+                      ("environment", "environment"), ("interreflection", "interreflection"),
+                      ("highlights", "highlights")):
         value = getattr(args, key)
         if value is not None:
             opts[name] = value

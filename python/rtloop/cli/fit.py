@@ -183,6 +183,10 @@ def _build_parser() -> Parser:
                    help="the occluded environment term (a room's light from every direction, darker under and "
                    "between the objects): 'auto' (default) adds it when the photo shows it and says why in "
                    "result.json's fit_report.model, 'on' always fits it, 'off' never")
+    p.add_argument("--interreflection", choices=("auto", "on", "off"), default="auto",
+                   help="one diffuse bounce between the objects (the floor lighting a ball's underside, a red ball "
+                   "tinting the floor): 'auto' (default) adds it when the photo shows it, 'on', 'off'; with it the "
+                   "fit also estimates the light's absolute intensity (a bounce is as bright as the albedos are)")
     p.add_argument("--highlights", choices=("auto", "off"), default="auto",
                    help="'auto' (default): a sphere the scene gives as matte gets a fitted specular lobe "
                    "(specular and shininess) when the photo shows a highlight the diffuse model cannot explain; "
@@ -408,7 +412,8 @@ class _Run:
                     scene, image, protocol=args.protocol, seed=args.seed, population=args.population,
                     generations=args.generations, f=args.f, cr=args.cr, threads=args.threads,
                     callback=callback, mask=mask, norm=args.norm, space=args.loss_space,
-                    environment=args.environment, highlights=args.highlights,
+                    environment=args.environment, interreflection=args.interreflection,
+                    highlights=args.highlights,
                 )
         self.progress.end_line()
         for w in result.warnings:

@@ -25,11 +25,15 @@ from .result import FitResult, GenerationInfo, StageResult
 from .selection import (
     check_environment,
     check_highlights,
+    check_interreflection,
     environment_evidence,
     environment_given,
     highlight_candidates,
     highlight_evidence,
+    interreflection_evidence,
+    interreflection_given,
     with_highlights,
+    with_interreflection,
 )
 from .stages import Stages, sample_object_pixels
 
@@ -60,6 +64,7 @@ def fit(
     norm: str = "l1",
     space: str = "linear",
     environment: str = "auto",
+    interreflection: str = "auto",
     highlights: str = "auto",
 ) -> FitResult:
     """Fit the scene's free parameters (its ``fit`` section) to ``image``.
@@ -83,6 +88,9 @@ def fit(
     and between the objects): "auto" (default) adds it when the photo shows it (``result.model`` says
     why), "on" always fits it, "off" never; a scene that gives ``environment`` or frees it always has it.
     The closed-form method solves it (one product per object and channel); elsewhere it is the scene's.
+    ``interreflection``: one diffuse bounce between the objects (the floor lighting a ball's underside, a
+    red ball tinting the floor): "auto" (default) adds it when the photo shows it, "on", "off"; the bounce
+    depends on the albedos themselves, so with it the fit also estimates the light's intensity.
     ``highlights``: "auto" (default) frees the specular lobe (specular and shininess) of every sphere the
     scene gives as matte when the photo shows a highlight the diffuse model cannot explain (the fitted
     scene's fit section then lists them; ``result.model`` says why); "off" never.
@@ -92,6 +100,7 @@ def fit(
     b = budget(protocol, space, population, generations, f, cr)
     env_mode = check_environment(environment)
     check_highlights(highlights)
+    check_interreflection(interreflection)
     check_arguments(scene, seed=seed, threads=threads, polish=polish, pixels_per_object=pixels_per_object,
                     population=b.population)
     doubts: list[str] = []
@@ -108,56 +117,26 @@ def fit(
                 "masked_pixels": None if use is None else int(scene.width * scene.height - use.size),
                 "norm": norm, "space": space, "pixels_per_object": pixels_per_object, "threads": threads,
                 "method": b.method, "optimizer": b.optimizer, "polish": b.polish, "environment": env_mode,
-                "highlights": highlights}
+                "interreflection": interreflection, "highlights": highlights}
     if b.projection_unavailable is not None:
         settings["projection_unavailable"] = b.projection_unavailable
-    stages = Stages(scene, target, use, mask, b, ident, clip=clip, norm=norm, space=space, threads=threads,
+    # The scene as fitted: with the interreflection term when asked for ("on"), else as given.
+    work = with_interreflection(scene) if interreflection == "on" else scene
+    stages = Stages(work, target, use, mask, b, ident, clip=clip, norm=norm, space=space, threads=threads,
                     pixels_per_object=pixels_per_object, rng=np.random.default_rng(seed), callback=callback)
     seeds = np.random.SeedSequence(seed).generate_state(4, dtype=np.uint64)
     model: dict[str, Any] = {"terms": ["direct"], "evidence": {}}
     if b.method == "projected":
-        env = environment_given(scene) or env_mode == "on"
-        current = stages.projected(int(seeds[0]), environment=env)
-        accepted = stages.stages[-1]
-        evaluate_kw = {"clip": clip, "norm": norm, "space": space, "threads": threads}
-        if env_mode == "auto" and not env:
-            where = accepted.paths
-            evidence = environment_evidence(scene.with_params(list(accepted.x), where), where, list(accepted.x),
-                                            target, use, active_pixels=accepted.pixels, **evaluate_kw)
-            model["evidence"]["environment"] = evidence
-            if evidence["selected"]:
-                candidate = stages.projected(int(seeds[1]), environment=True, name="light+colour+environment")
-                if sum(stages.stages[-1].objectives) < sum(accepted.objectives):
-                    current, env, accepted = candidate, True, stages.stages[-1]
-        if env:
-            model["terms"].append("environment")
-        names = highlight_candidates(scene) if highlights == "auto" else []
-        if names:
-            where = accepted.paths
-            evidence, shininess = highlight_evidence(scene.with_params(list(accepted.x), where), names, where,
-                                                     list(accepted.x), target, use, environment=env,
-                                                     active_pixels=accepted.pixels, **evaluate_kw)
-            model["evidence"]["specular"] = evidence
-            glossy = with_highlights(scene, names, shininess) if evidence["selected"] else None
-            if glossy is not None:
-                b2 = budget(protocol, space, population, generations, f, cr)
-                choose_method(b2, glossy, glossy.fit_paths, population=population, generations=generations,
-                              optimizer=optimizer, polish=polish)
-                if b2.method == "projected":
-                    more = Stages(glossy, target, use, mask, b2, _identifiability(glossy, glossy.fit_paths),
-                                  clip=clip, norm=norm, space=space, threads=threads,
-                                  pixels_per_object=pixels_per_object, rng=np.random.default_rng(seed),
-                                  callback=callback)
-                    candidate = more.projected(int(seeds[2]), environment=env, name="light+colour+specular")
-                    stages.stages += more.stages
-                    stages.evaluations += more.evaluations
-                    if sum(more.stages[-1].objectives) < sum(accepted.objectives):
-                        current, accepted = candidate, more.stages[-1]
-                        model["terms"].append("specular")
-                        model["specular_objects"] = names
+        current = _select_terms(scene, work, stages, seeds, model, env_mode=env_mode, inter_mode=interreflection,
+                                highlights=highlights, target=target, use=use, mask=mask, protocol=protocol,
+                                space=space, population=population, generations=generations, f=f, cr=cr,
+                                optimizer=optimizer, polish=polish, clip=clip, norm=norm, threads=threads,
+                                pixels_per_object=pixels_per_object, seed=seed, callback=callback)
     else:
         if environment_given(scene):
             model["terms"].append("environment")
+        if interreflection_given(work):
+            model["terms"].append("interreflection")
         current = stages.two_stage(seeds)
     values = current.get_params(all_paths)
     result = FitResult(
@@ -186,6 +165,84 @@ def fit(
             result.uncertainty = {"method": "gauss-newton", "sigma": {}, "warnings": [str(e)]}
     result.seconds = time.perf_counter() - t0
     return result
+
+
+def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, model: dict[str, Any], *,
+                  env_mode: str, inter_mode: str, highlights: str, target: np.ndarray, use: np.ndarray | None,
+                  mask: Any, protocol: str, space: str, population: Any, generations: Any, f: Any, cr: Any,
+                  optimizer: Any, polish: Any, clip: bool, norm: str, threads: Any, pixels_per_object: int,
+                  seed: int, callback: Any) -> Scene:
+    """The closed-form fit with the image terms the photo needs (:mod:`.selection`): fitted with the terms
+    given or forced on, then each auto term in turn (environment, interreflection, a sphere's lobe) tested
+    at the accepted light and, when the photo selects it, fitted again with it; a refit replaces the
+    accepted fit only when its loss is lower. ``model`` receives the terms and the evidence."""
+    env = environment_given(scene) or env_mode == "on"
+    current = stages.projected(int(seeds[0]), environment=env)
+    accepted = stages.stages[-1]
+    kw = {"clip": clip, "norm": norm, "space": space, "threads": threads}
+
+    def at_light(s: Scene) -> tuple[Scene, list[str], list[float]]:
+        where = accepted.paths
+        return s.with_params(list(accepted.x), where), where, list(accepted.x)
+
+    def refit(new_work: Scene, new_env: bool, term: str, k: int) -> tuple[Scene, StageResult] | None:
+        name = "+".join(["light", "colour", *model["terms"][1:], term])
+        if new_work is work:
+            cand = stages.projected(int(seeds[k]), environment=new_env, name=name)
+            return cand, stages.stages[-1]
+        b2 = budget(protocol, space, population, generations, f, cr)
+        choose_method(b2, new_work, new_work.fit_paths, population=population, generations=generations,
+                      optimizer=optimizer, polish=polish)
+        if b2.method != "projected":
+            return None
+        more = Stages(new_work, target, use, mask, b2, _identifiability(new_work, new_work.fit_paths), clip=clip,
+                      norm=norm, space=space, threads=threads, pixels_per_object=pixels_per_object,
+                      rng=np.random.default_rng(seed), callback=callback)
+        cand = more.projected(int(seeds[k]), environment=new_env, name=name)
+        stages.stages += more.stages
+        stages.evaluations += more.evaluations
+        return cand, more.stages[-1]
+
+    def better(r: tuple[Scene, StageResult] | None) -> bool:
+        return r is not None and sum(r[1].objectives) < sum(accepted.objectives)
+
+    if env:
+        model["terms"].append("environment")
+    elif env_mode == "auto":
+        s, where, x = at_light(work)
+        ev = environment_evidence(s, where, x, target, use, active_pixels=accepted.pixels, **kw)
+        model["evidence"]["environment"] = ev
+        r = refit(work, True, "environment", 1) if ev["selected"] else None
+        if better(r):
+            assert r is not None
+            (current, accepted), env = r, True
+            model["terms"].append("environment")
+    if interreflection_given(work):
+        model["terms"].append("interreflection")
+    elif inter_mode == "auto" and len(scene.object_names) > 1:
+        s, where, x = at_light(work)
+        ev = interreflection_evidence(s, where, x, target, use, environment=env, active_pixels=accepted.pixels, **kw)
+        model["evidence"]["interreflection"] = ev
+        bounced = with_interreflection(work)
+        r = refit(bounced, env, "interreflection", 2) if ev["selected"] else None
+        if better(r):
+            assert r is not None
+            current, accepted = r
+            work = bounced
+            model["terms"].append("interreflection")
+    names = highlight_candidates(work) if highlights == "auto" else []
+    if names:
+        s, where, x = at_light(work)
+        ev, shininess = highlight_evidence(s, names, where, x, target, use, environment=env,
+                                           active_pixels=accepted.pixels, **kw)
+        model["evidence"]["specular"] = ev
+        r = refit(with_highlights(work, names, shininess), env, "specular", 3) if ev["selected"] else None
+        if better(r):
+            assert r is not None
+            current, accepted = r
+            model["terms"].append("specular")
+            model["specular_objects"] = names
+    return current
 
 
 #: A fitted value this close to a bound (as a fraction of its range) is reported as at the bound.

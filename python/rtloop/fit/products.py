@@ -127,7 +127,7 @@ def product_bounds(scene: Scene, environment: bool = False) -> np.ndarray:
     return out
 
 
-def split_products(fitted: Scene, rows: list[list[float]], original: Scene) -> Scene:
+def split_products(fitted: Scene, rows: list[list[float]], original: Scene, gauge: float | None = None) -> Scene:
     """Write closed-form products back as albedos, speculars and an intensity.
 
     ``rows``: per object [P_r, P_g, P_b], [P_r, P_g, P_b, Q] or [P_r, P_g, P_b, Q, E_r, E_g, E_b].
@@ -135,7 +135,9 @@ def split_products(fitted: Scene, rows: list[list[float]], original: Scene) -> S
     scene's own value (the user's estimate of the lamp) unless an albedo or a specular would then exceed
     its upper bound, in which case the light is made just bright enough (the dimmest light consistent with
     the photo and the bounds). With E, the environment radiance is the least-squares value over the
-    objects given their albedos (E_o,c = exposure x environment_c x albedo_o,c), within its range.
+    objects given their albedos (E_o,c = exposure x environment_c x albedo_o,c), within its range. With
+    ``gauge`` (interreflection: 1 / the intensity the bounce was solved with, which the bounce measures)
+    the intensity is that one, within its bounds.
     """
     d = scene_to_dict(fitted)
     paths = original.fit_paths
@@ -160,6 +162,8 @@ def split_products(fitted: Scene, rows: list[list[float]], original: Scene) -> S
                 khi = original.bounds([sp])[0][1]
                 need = max(need, float(Q[k] / khi) if khi > 0 else need)
         intensity = min(max(need, ilo), ihi)
+        if gauge is not None and gauge > 0:
+            intensity = min(max(1.0 / gauge, ilo), ihi)
         fitted = fitted.with_params([intensity], ["light.intensity"])
     for k, o in enumerate(d["objects"]):
         p = f"objects.{o['name']}.albedo"

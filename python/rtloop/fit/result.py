@@ -46,6 +46,8 @@ class StageResult:
     products: list[list[float]] | None = None
     #: For the projected loss: per object, its (unmasked) pixels that the fitted light reaches.
     lit_pixels: list[int] | None = None
+    #: For the projected loss with interreflection: 1 / the light intensity the bounce was solved with.
+    gauge: float | None = None
 
 
 @dataclass

@@ -10,6 +10,7 @@ evaluation decides.
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Any
 
@@ -21,8 +22,9 @@ from ..scene import Scene, scene_to_dict
 from .products import product_bounds
 
 __all__ = ["ENVIRONMENT_MODES", "HIGHLIGHT_MODES", "MIN_GAIN", "SHININESS_TRIALS", "check_environment",
-           "check_highlights", "environment_evidence", "environment_given", "highlight_candidates",
-           "highlight_evidence", "with_highlights"]
+           "check_highlights", "check_interreflection", "environment_evidence", "environment_given",
+           "highlight_candidates", "highlight_evidence", "interreflection_evidence", "interreflection_given",
+           "with_highlights", "with_interreflection"]
 
 #: ``fit(environment=...)``: "auto" (default) adds the term when the photo shows it, "on" always fits
 #: it, "off" never (today's model).
@@ -108,6 +110,38 @@ def highlight_evidence(scene: Scene, names: list[str], paths: list[str], x: list
     ev["shininess_tried"] = list(SHININESS_TRIALS)
     ev["loss_per_shininess"] = [float(v) for v in with_lobe]
     return ev, SHININESS_TRIALS[k]
+
+
+def check_interreflection(mode: Any) -> str:
+    """``mode`` if it is one of ENVIRONMENT_MODES (auto, on, off), else an RtloopError naming the argument."""
+    if mode not in ENVIRONMENT_MODES:
+        raise RtloopError(f"interreflection: must be one of {', '.join(ENVIRONMENT_MODES)} (got {mode!r})")
+    return str(mode)
+
+
+def interreflection_given(scene: Scene) -> bool:
+    """Whether the scene itself models one bounce (``"interreflection": true``)."""
+    return bool(scene_to_dict(scene).get("interreflection", False))
+
+
+def with_interreflection(scene: Scene) -> Scene:
+    """``scene`` with one diffuse bounce between its objects."""
+    return Scene(json.dumps({**scene_to_dict(scene), "interreflection": True}, allow_nan=False))
+
+
+def interreflection_evidence(scene: Scene, paths: list[str], x: list[float], target: np.ndarray,
+                             pixels: np.ndarray | None, *, environment: bool, clip: bool, norm: str, space: str,
+                             threads: int | None, active_pixels: int) -> dict[str, Any]:
+    """Whether one bounce between the objects explains the photo better at the light ``x`` found without
+    it: the closed-form loss without and with it (its one extra unknown is the gauge, 1 / intensity: k =
+    1), as :func:`environment_evidence`."""
+    pop = np.asarray([x], dtype=np.float64)
+    loss = []
+    for s in (scene, with_interreflection(scene)):
+        v = _native.evaluate(s, paths, target, pop, pixels=pixels, loss="l1_projected", clip=clip, threads=threads,
+                             product_bounds=product_bounds(s, environment), norm=norm, space=space)
+        loss.append(float(v[0, 0]))
+    return _verdict(loss[0], loss[1], active_pixels, 1, norm)
 
 
 def environment_given(scene: Scene) -> bool:

@@ -105,7 +105,7 @@ class Stages:
             name=name, paths=paths, param_names=stage_scene.param_names(paths), x=out.x,
             objectives=list(out.objectives), evaluations=out.evaluations, generations=generations_run,
             seconds=time.perf_counter() - t, loss=loss, pixels=out.active_pixels, history=history,
-            products=out.products, lit_pixels=out.lit_pixels,
+            products=out.products, lit_pixels=out.lit_pixels, gauge=out.gauge,
         )
         self.stages.append(stage)
         return stage
@@ -117,7 +117,7 @@ class Stages:
         s = self.run(name, self.scene, where, "l1_projected", self.use, b.generations[0], seed,
                      product_bounds=product_bounds(self.scene, environment), method=b.optimizer,
                      polish=b.polish, polish_tol=b.protocol.get("polish_tol"))
-        current = split_products(self.scene.with_params(list(s.x), where), s.products, self.scene)
+        current = split_products(self.scene.with_params(list(s.x), where), s.products, self.scene, s.gauge)
         return keep_undetermined(current, self.scene, self.all_paths, self.ident, s.lit_pixels)
 
     def two_stage(self, seeds: np.ndarray) -> Scene:

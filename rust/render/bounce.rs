@@ -1,0 +1,241 @@
+//! One diffuse bounce between the scene's objects (interreflection): the floor lighting a ball's
+//! underside, a red ball tinting the white floor beside it, one ball lighting another.
+//!
+//! A diffuse point p (normal n, albedo ρ) of one object receives from each other object k the radiance
+//! that k sends it: ρ·Σ_k F_k(p)·L_k, with F_k the configuration factor of k from p (the cosine-weighted
+//! fraction of p's hemisphere that k covers, the same one that darkens the environment: `environment`)
+//! and L_k the radiance k leaves towards p (its direct light, environment and ambient, not its own
+//! bounce: one bounce). A sphere, seen small, gives one representative point, the one nearest p, with
+//! its closed-form factor; a plane, which covers much of the hemisphere with radiance that varies over
+//! it (a ball's shadow on the floor), is integrated with a fixed stratified set of 32 cosine-weighted
+//! directions from p, each that meets the plane first a point of weight 1/32.
+//! The renderer (`shade`) and the fitness (`fitness::pixels`, light-independent part precomputed) both
+//! call [`gather`], the only place the geometry lives.
+
+use glam::Vec3A;
+
+use super::environment::{plane_view, sphere_view};
+use super::shape::PShape;
+
+/// Senders whose configuration factor is below this are left out (a ball seen from a floor point more
+/// than about 20 radii away).
+pub const MIN_FORM: f32 = 2e-3;
+
+/// The quadrature over a plane sender: `STRATA` rings (cos² of the polar angle at their centres) times
+/// `PHI` azimuths, `DIRECTIONS` cosine-weighted directions in all.
+const STRATA: [f32; 4] = [0.125, 0.375, 0.625, 0.875];
+const PHI: [f32; 8] = [
+    0.0625, 0.1875, 0.3125, 0.4375, 0.5625, 0.6875, 0.8125, 0.9375,
+];
+const DIRECTIONS: usize = STRATA.len() * PHI.len();
+
+/// Where receiver point p gathers from one other object.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GatherPoint {
+    /// The sending object.
+    pub sender: usize,
+    /// Its configuration factor from p.
+    pub form: f32,
+    /// The representative point on it and its normal there (facing p).
+    pub position: Vec3A,
+    pub normal: Vec3A,
+}
+
+/// Points per sphere at which its own bounce is tabulated (a Fibonacci lattice): a sphere seen as a
+/// sender carries the light the floor (or another object) bounced onto it, the second bounce that colours
+/// the floor next to a red ball; a sender point takes the value of its nearest table point.
+pub const TABLE: usize = 64;
+
+/// The table points of a sphere: positions and outward normals, a Fibonacci lattice of [`TABLE`] points.
+pub fn table_points(center: Vec3A, radius: f32) -> Vec<(Vec3A, Vec3A)> {
+    let golden = std::f32::consts::PI * (3.0 - 5.0f32.sqrt());
+    (0..TABLE)
+        .map(|i| {
+            let y = 1.0 - 2.0 * (i as f32 + 0.5) / TABLE as f32;
+            let r = (1.0 - y * y).max(0.0).sqrt();
+            let phi = golden * i as f32;
+            let n = Vec3A::new(r * phi.cos(), y, r * phi.sin());
+            (center + radius * n, n)
+        })
+        .collect()
+}
+
+/// The table point of a sphere nearest to the point of it with outward normal `n`.
+pub fn nearest_table(points: &[(Vec3A, Vec3A)], n: Vec3A) -> usize {
+    let mut best = (0, f32::NEG_INFINITY);
+    for (k, &(_, m)) in points.iter().enumerate() {
+        let d = m.dot(n);
+        if d > best.1 {
+            best = (k, d);
+        }
+    }
+    best.0
+}
+
+/// The representative points of every other shape that the surface point `p` (unit normal `n`) of
+/// object `own` sees with a configuration factor of at least [`MIN_FORM`], in shape order.
+pub fn gather(p: Vec3A, n: Vec3A, own: usize, shapes: &[PShape], out: &mut Vec<GatherPoint>) {
+    out.clear();
+    for (k, shape) in shapes.iter().enumerate() {
+        if k == own {
+            continue;
+        }
+        match *shape {
+            PShape::Sphere { center, radius } => {
+                let form = sphere_view(p, n, center, radius);
+                let to = center - p;
+                let d = to.length();
+                if form < MIN_FORM || !(d > radius) {
+                    continue;
+                }
+                let w = to / d;
+                out.push(GatherPoint {
+                    sender: k,
+                    form,
+                    position: center - radius * w,
+                    normal: -w,
+                });
+            }
+            PShape::Plane { point, normal } => {
+                let form = plane_view(p, n, point, normal);
+                if form < MIN_FORM {
+                    continue;
+                }
+                let side = normal.dot(p - point);
+                let towards = if side > 0.0 { normal } else { -normal };
+                // A plane covers much of the hemisphere and its radiance varies over it (a ball's shadow on
+                // the floor below it): a fixed stratified set of cosine-weighted directions, each that meets
+                // the plane first (no other shape in between) a point of weight 1/DIRECTIONS.
+                let (t_axis, b_axis) = n.any_orthonormal_pair();
+                let w = 1.0 / DIRECTIONS as f32;
+                for (u1, u2) in STRATA
+                    .iter()
+                    .flat_map(|&u1| PHI.iter().map(move |&u2| (u1, u2)))
+                {
+                    let (r, phi) = (u1.sqrt(), std::f32::consts::TAU * u2);
+                    let d =
+                        t_axis * (r * phi.cos()) + b_axis * (r * phi.sin()) + n * (1.0 - u1).sqrt();
+                    let down = -d.dot(towards);
+                    if !(down > 1e-6) {
+                        continue;
+                    }
+                    let t = side.abs() / down;
+                    let blocked = shapes
+                        .iter()
+                        .enumerate()
+                        .any(|(j, sh)| j != k && j != own && sh.hits_segment(p, d, 0.0, t));
+                    if !blocked {
+                        out.push(GatherPoint {
+                            sender: k,
+                            form: w,
+                            position: p + t * d,
+                            normal: towards,
+                        });
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ball_on_floor() -> [PShape; 2] {
+        [
+            PShape::Plane {
+                point: Vec3A::ZERO,
+                normal: Vec3A::Y,
+            },
+            PShape::Sphere {
+                center: Vec3A::new(0.0, 1.0, 0.0),
+                radius: 1.0,
+            },
+        ]
+    }
+
+    #[test]
+    fn a_ball_gathers_from_the_floor_below_it() {
+        let shapes = ball_on_floor();
+        let mut out = Vec::new();
+        let total = |out: &[GatherPoint]| out.iter().map(|g| g.form).sum::<f32>();
+        // The ball's bottom (just above the floor) sees only floor: every direction, all near the contact.
+        gather(Vec3A::new(0.0, 0.01, 0.0), -Vec3A::Y, 1, &shapes, &mut out);
+        assert_eq!(out.len(), DIRECTIONS);
+        assert!((total(&out) - 1.0).abs() < 1e-5);
+        assert!(out
+            .iter()
+            .all(|g| g.sender == 0 && g.normal == Vec3A::Y && g.position.y.abs() < 1e-6));
+        // The quadrature's weight matches the closed-form factor within one direction's share, at any tilt.
+        for deg in [10.0f32, 45.0, 80.0, 100.0, 135.0] {
+            let (s, c) = deg.to_radians().sin_cos();
+            let n = Vec3A::new(s, c, 0.0);
+            let p = Vec3A::new(0.0, 1.0, 0.0) + n;
+            gather(p, n, 1, &shapes, &mut out);
+            let want = plane_view(p, n, Vec3A::ZERO, Vec3A::Y);
+            assert!(
+                (total(&out) - want).abs() <= 1.5 / DIRECTIONS as f32,
+                "{deg}: {} vs {want}",
+                total(&out)
+            );
+            assert!(out.iter().all(|g| g.position.y.abs() < 1e-4));
+        }
+        // The top sees no floor.
+        gather(Vec3A::new(0.0, 2.0, 0.0), Vec3A::Y, 1, &shapes, &mut out);
+        assert!(out.is_empty());
+    }
+
+    #[test]
+    fn a_ball_in_between_hides_the_floor_behind_it() {
+        // A second ball right beside the first: directions that meet it first do not reach the floor.
+        let mut shapes = ball_on_floor().to_vec();
+        shapes.push(PShape::Sphere {
+            center: Vec3A::new(2.2, 1.0, 0.0),
+            radius: 1.0,
+        });
+        let mut out = Vec::new();
+        let p = Vec3A::new(1.0, 1.0, 0.0);
+        gather(p, Vec3A::X, 1, &shapes, &mut out);
+        let floor: f32 = out.iter().filter(|g| g.sender == 0).map(|g| g.form).sum();
+        assert!(floor < 0.45, "{floor}");
+        assert!(out.iter().any(|g| g.sender == 2));
+    }
+
+    #[test]
+    fn table_points_cover_the_sphere() {
+        let at = table_points(Vec3A::new(1.0, 2.0, 3.0), 0.5);
+        assert_eq!(at.len(), TABLE);
+        for &(p, n) in &at {
+            assert!(
+                ((p - Vec3A::new(1.0, 2.0, 3.0)).length() - 0.5).abs() < 1e-5
+                    && (n.length() - 1.0).abs() < 1e-5
+            );
+        }
+        // Every direction has a table point within ~20 degrees.
+        for k in 0..200 {
+            let z = 1.0 - 2.0 * (k as f32 + 0.5) / 200.0;
+            let r = (1.0 - z * z).sqrt();
+            let n = Vec3A::new(r * (k as f32).cos(), z, r * (k as f32).sin());
+            let j = nearest_table(&at, n);
+            assert!(at[j].1.dot(n) > 20f32.to_radians().cos(), "{n}");
+        }
+    }
+
+    #[test]
+    fn the_floor_gathers_from_the_nearest_point_of_the_ball() {
+        let shapes = ball_on_floor();
+        let mut out = Vec::new();
+        gather(Vec3A::new(2.0, 0.0, 0.0), Vec3A::Y, 0, &shapes, &mut out);
+        assert_eq!(out.len(), 1);
+        let c = Vec3A::new(0.0, 1.0, 0.0);
+        let w = (c - Vec3A::new(2.0, 0.0, 0.0)).normalize();
+        assert!((out[0].position - (c - w)).length() < 1e-6);
+        assert!(
+            (out[0].form - sphere_view(Vec3A::new(2.0, 0.0, 0.0), Vec3A::Y, c, 1.0)).abs() < 1e-9
+        );
+        // Far away the ball's factor falls below MIN_FORM: nothing gathered.
+        gather(Vec3A::new(60.0, 0.0, 0.0), Vec3A::Y, 0, &shapes, &mut out);
+        assert!(out.is_empty());
+    }
+}

@@ -1,0 +1,136 @@
+"""Photos as cameras take them (issue "Photos as they are"), against an independent renderer: the Mitsuba 3
+renders in tests/fixtures/photos (tools/make_photos.py; path tracing, a constant environment, rough
+plastic, sphere lamps, noise and JPEG; pixels integrated over their area). The tests need no Mitsuba.
+
+Two kinds of checks: rtloop's renderer with the true scene against the photo (its environment and bounce
+terms model what Mitsuba renders), and the default fit, from the fit section a user writes today, against
+the truth it never saw (the issue's targets)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import rtloop
+from rtloop import _native
+from rtloop._srgb import encode
+from rtloop.fit.products import products_of
+
+PHOTOS = Path(__file__).parent / "fixtures" / "photos"
+CASES = sorted(p.name for p in PHOTOS.iterdir() if (p / "objective.png").exists())
+DIRECT = [c for c in CASES if c.startswith("direct-")]
+HARD = [c for c in CASES if not c.startswith("direct-")]
+
+
+def _truth(name: str) -> dict:
+    return json.loads((PHOTOS / name / "scene.json").read_text())
+
+
+def _photo(name: str, scene: rtloop.Scene) -> np.ndarray:
+    return rtloop.load_image(PHOTOS / name / "objective.png", scene)
+
+
+def _codes(render: np.ndarray, photo: np.ndarray, ids: np.ndarray, where: int | None = None) -> float:
+    """Mean absolute difference in 8-bit sRGB codes over the objects' pixels (or object ``where``'s)."""
+    a, b = (encode(np.clip(x, 0, 1)) for x in (render, photo))
+    m = ids >= 0 if where is None else ids == where
+    return float(np.abs(a - b)[m].mean() * 255)
+
+
+@pytest.mark.parametrize("name", [c for c in CASES if c.startswith("env-") and "bounce" not in c])
+def test_environment_renders_like_mitsuba(name):
+    """Direct light plus a constant environment occluded by the scene (Mitsuba: path tracing, depth 2):
+    the sky view factor reproduces it to a fraction of a code; without it the shadows are far too dark."""
+    truth = _truth(name)
+    scene = rtloop.Scene(json.dumps(truth))
+    photo = _photo(name, scene)
+    ids = _native.object_ids(scene)
+    with_env = _codes(_native.render(scene, None, None, 16), photo, ids)
+    without = _codes(_native.render(rtloop.Scene(json.dumps({**truth, "environment": [0, 0, 0]})), None, None, 16),
+                     photo, ids)
+    assert with_env < 0.5, with_env
+    assert without > 3 * with_env
+
+
+@pytest.mark.parametrize("name", [c for c in CASES if "bounce" in c])
+def test_interreflection_renders_like_mitsuba(name):
+    """Interreflection (Mitsuba: path tracing, depth 8): one bounce, with the spheres' own bounce as
+    senders, brings the whole image within a code of the photo (from 3-6 codes) and the ball's error
+    (18-33 codes without it: its underside lit by the floor) down by more than 6x."""
+    truth = _truth(name)
+    scene = rtloop.Scene(json.dumps(truth))
+    photo = _photo(name, scene)
+    ids = _native.object_ids(scene)
+    bounced = _native.render(rtloop.Scene(json.dumps({**truth, "interreflection": True})), None, None, 16)
+    plain = _native.render(scene, None, None, 16)
+    assert _codes(bounced, photo, ids) < 1.0
+    assert _codes(bounced, photo, ids) < 0.3 * _codes(plain, photo, ids)
+    assert _codes(bounced, photo, ids, 0) < 0.15 * _codes(plain, photo, ids, 0)  # the first ball
+
+
+def _fit(name: str) -> tuple[rtloop.FitResult, dict]:
+    scene = rtloop.load_scene(PHOTOS / name / "scene_input.json")
+    return rtloop.fit(scene, _photo(name, scene), uncertainty=False), _truth(name)
+
+
+def _errors(result: rtloop.FitResult, truth: dict) -> tuple[float, float]:
+    """The light's position error (m) and the worst product error over objects and channels (relative to
+    the object's largest true product; products are exposure x intensity x colour x albedo, what the
+    photo determines: the truth's lights are coloured, the user's scene says white)."""
+    fitted = result.scene.to_dict()
+    err = float(np.linalg.norm(np.subtract(fitted["light"]["position"], truth["light"]["position"])))
+    pf, pt = products_of(fitted), products_of(truth)
+    worst = max(float(np.max(np.abs(pf[k] - pt[k])) / np.max(pt[k])) for k in pt)
+    return err, worst
+
+
+@pytest.fixture(scope="module")
+def hard_fits() -> dict[str, tuple[float, float, list[str]]]:
+    out = {}
+    for name in HARD:
+        r, truth = _fit(name)
+        err, worst = _errors(r, truth)
+        out[name] = (err, worst, r.model["terms"])
+    return out
+
+
+@pytest.mark.parametrize("name", HARD)
+def test_hard_photo_within_3cm_and_3_percent(hard_fits, name):
+    """The issue's target per photo: environment, interreflection, gloss, a desk lamp, noise and JPEG,
+    fitted with the fit section a user writes today and no extra flag: the light within 3 cm, every
+    colour product within 3 %."""
+    err, worst, terms = hard_fits[name]
+    assert err < 0.03, f"{name}: light {1000 * err:.1f} mm off (terms {terms})"
+    assert worst < 0.03, f"{name}: product {100 * worst:.2f} % off (terms {terms})"
+
+
+def test_hard_photos_median_within_15mm(hard_fits):
+    errs = [v[0] for v in hard_fits.values()]
+    assert np.median(errs) < 0.015, sorted(round(1000 * e, 1) for e in errs)
+
+
+def test_terms_are_chosen_from_the_photo(hard_fits):
+    """Each photo gets the terms its renderer put in: an environment where there is one, a bounce where
+    the path tracer bounced, and nothing extra on photos without them."""
+    for name, (_, _, terms) in hard_fits.items():
+        if "bounce" in name:
+            assert "interreflection" in terms, (name, terms)
+        if name.startswith("env-") and "bounce" not in name:
+            assert "environment" in terms and "interreflection" not in terms, (name, terms)
+    for name in DIRECT:
+        r, _ = _fit(name)
+        assert r.model["terms"] == ["direct"], (name, r.model)
+
+
+def test_direct_photos_median_within_3mm():
+    """Photos with only what the base model has (Mitsuba's direct integrator; area-integrated pixels)."""
+    errs = []
+    for name in DIRECT:
+        r, truth = _fit(name)
+        err, worst = _errors(r, truth)
+        errs.append(err)
+        assert worst < 0.01, (name, worst)
+    assert np.median(errs) < 0.003, errs
