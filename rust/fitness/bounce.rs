@@ -22,12 +22,16 @@ use super::projected::{
 pub struct Gauge {
     pub u: (f64, f64),
     pub albedo_max: Vec<[f64; 3]>,
+    /// Fixed-point rounds of (gauge, products) after the bounce-free solve: [`SEARCH_ROUNDS`] while the
+    /// search ranks lights, [`FINAL_ROUNDS`] for the reported products.
+    pub rounds: usize,
 }
 
-/// Fixed-point rounds of (gauge, products) after the bounce-free solve. The gauge converges linearly
-/// (the products first absorb part of the bounce); every third round extrapolates it (Aitken's Δ²), which
-/// reaches the fixed point of rtloop's own renders to 1e-4 in six rounds where plain iteration needs ~20.
-const ROUNDS: usize = 6;
+/// The gauge converges linearly (the products first absorb part of the bounce); every third round
+/// extrapolates it (Aitken's Δ²). Six rounds reach the fixed point of rtloop's own renders to about 1e-3
+/// (the light within 0.5 mm; three leave it 10 mm off, plain iteration needs ~20), nine to 1e-4.
+pub const SEARCH_ROUNDS: usize = 6;
+pub const FINAL_ROUNDS: usize = 9;
 
 impl Kernel {
     /// [`Kernel::projected`] with the bounce (`proj.gauge` set). `scratch` ends as
@@ -144,7 +148,7 @@ impl Kernel {
         // The fixed point: the bounce columns from the senders' products, the gauge, the products.
         let mut u = gauge.u.0;
         let mut history: Vec<f64> = Vec::with_capacity(3);
-        for round in 0..ROUNDS {
+        for round in 0..gauge.rounds {
             // Per sphere and channel, the light bounced onto its table points (pixel units): R'.
             let tables: Vec<[Vec<f32>; 3]> = self
                 .tables

@@ -89,6 +89,7 @@ fn gauge_bounds(scene: &Scene) -> bounce::Gauge {
     let inv = |i: f64| if i > 0.0 { 1.0 / i } else { f64::MAX };
     bounce::Gauge {
         u: (inv(ihi), inv(ilo)),
+        rounds: bounce::SEARCH_ROUNDS,
         albedo_max: (0..scene.objects.len())
             .map(|k| match bounds(Target::Albedo(k)) {
                 Some(f) => [f.max[0], f.max[1], f.max[2]],
@@ -294,7 +295,11 @@ impl Fitness {
     /// [`Kernel::refine`]) and the per-channel loss there; the least-squares products of `solved` are
     /// what the search uses, these are what a fit reports. `None` for other losses.
     pub fn refined(&self, x: &[f64]) -> Option<(Solved, [f64; 3])> {
-        let proj = self.projection.as_ref()?;
+        let mut proj = self.projection.clone()?;
+        if let Some(g) = &mut proj.gauge {
+            g.rounds = bounce::FINAL_ROUNDS;
+        }
+        let proj = &proj;
         let p = self.params(x);
         let (mut solved, mut scratch) = (Solved::default(), Vec::new());
         let c = Candidate {

@@ -484,6 +484,10 @@ def _model_lines(model: dict[str, Any], fitted: dict[str, Any]) -> list[str]:
     """The image terms the fit used and the evidence for each it considered."""
     terms = model.get("terms") or ["direct"]
     lines = [f"image model: {' + '.join(terms)}"]
+    res = model.get("residual")
+    if res:
+        lines.append(f"  residual: {res['ratio']:.2g}x the photo's 8-bit quantisation floor"
+                     + (" (explained: no further term tested)" if "skipped" in model else ""))
     for term, ev in (model.get("evidence") or {}).items():
         verdict = "added" if ev.get("selected") else "not added"
         bic = ev.get("delta_bic")

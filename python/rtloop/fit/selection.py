@@ -21,10 +21,26 @@ from ..errors import RtloopError
 from ..scene import Scene, scene_to_dict
 from .products import product_bounds
 
-__all__ = ["ENVIRONMENT_MODES", "HIGHLIGHT_MODES", "MIN_GAIN", "SHININESS_TRIALS", "check_environment",
-           "check_highlights", "check_interreflection", "environment_evidence", "environment_given",
-           "highlight_candidates", "highlight_evidence", "interreflection_evidence", "interreflection_given",
-           "with_highlights", "with_interreflection"]
+__all__ = [
+    "ENVIRONMENT_MODES",
+    "EXPLAINED",
+    "HIGHLIGHT_MODES",
+    "MIN_GAIN",
+    "SHININESS_TRIALS",
+    "check_environment",
+    "check_highlights",
+    "check_interreflection",
+    "closed_form_loss",
+    "environment_evidence",
+    "environment_given",
+    "highlight_candidates",
+    "highlight_evidence",
+    "interreflection_evidence",
+    "interreflection_given",
+    "quantisation_floor",
+    "with_highlights",
+    "with_interreflection",
+]
 
 #: ``fit(environment=...)``: "auto" (default) adds the term when the photo shows it, "on" always fits
 #: it, "off" never (today's model).
@@ -43,11 +59,28 @@ SPECULAR_RANGE = (0.0, 1.0)
 SHININESS_RANGE = (1.0, 2000.0)
 SHININESS_SPAN = 3.2
 
+#: A fit whose loss is within this many times the photo's 8-bit quantisation floor explains the photo:
+#: the terms are not tested (a clean photo of what the base model has leaves 1.9-2.6x, from the pixel
+#: footprint at edges; every test photo with an environment, a bounce or gloss 3.7x and more).
+EXPLAINED = 3.0
+
 #: The least relative reduction of the loss at the fitted light for "auto" to add a term. The information
 #: criterion alone accepts any term that explains a few pixels better (a photo has ~10^4 of them, so
 #: ln n per parameter is cheap), including a column that only soaks up some other mismatch; a term must also
 #: explain a visible part of the residual.
 MIN_GAIN = 0.05
+
+
+def quantisation_floor(target: np.ndarray, pixels: np.ndarray | None) -> float:
+    """The L1 loss an exact model would leave on the photo from 8-bit sRGB quantisation alone: per pixel and
+    channel, a quarter of a code step (the mean absolute error of rounding) in linear units, summed over
+    ``pixels`` (all when None)."""
+    x = np.clip(np.asarray(target, np.float64).reshape(-1, 3), 0.0, 1.0)
+    if pixels is not None:
+        x = x[pixels]
+    e = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)  # sRGB code / 255
+    slope = np.where(e <= 0.04045, 1 / 12.92, 2.4 / 1.055 * np.power((e + 0.055) / 1.055, 1.4))
+    return float(np.sum(0.25 / 255 * slope))
 
 
 def check_environment(mode: Any) -> str:
@@ -90,23 +123,19 @@ def with_highlights(scene: Scene, names: list[str], shininess: float) -> Scene:
 
 
 def highlight_evidence(scene: Scene, names: list[str], paths: list[str], x: list[float], target: np.ndarray,
-                       pixels: np.ndarray | None, *, environment: bool, clip: bool, norm: str, space: str,
-                       threads: int | None, active_pixels: int) -> tuple[dict[str, Any], float]:
+                       pixels: np.ndarray | None, *, base: float, environment: bool, clip: bool, norm: str,
+                       space: str, threads: int | None, active_pixels: int) -> tuple[dict[str, Any], float]:
     """Whether a specular lobe on the spheres ``names`` explains the photo better at the light ``x`` found
     without it: the closed-form loss without, and with the lobe at each of SHININESS_TRIALS (its strength
     solved in closed form); the best trial, the gain, the change in BIC (k = 2 per sphere: strength and
     shininess) and the verdict (as :func:`environment_evidence`). Returns the evidence and the shininess."""
-    base = _native.evaluate(scene, paths, target, np.asarray([x], np.float64), pixels=pixels, loss="l1_projected",
-                            clip=clip, threads=threads, product_bounds=product_bounds(scene, environment),
-                            norm=norm, space=space)
     glossy = with_highlights(scene, names, SHININESS_TRIALS[0])
     gpaths = paths + [f"objects.{n}.shininess" for n in names]
-    rows = np.asarray([list(x) + [s] * len(names) for s in SHININESS_TRIALS], np.float64)
-    with_lobe = _native.evaluate(glossy, gpaths, target, rows, pixels=pixels, loss="l1_projected", clip=clip,
-                                 threads=threads, product_bounds=product_bounds(glossy, environment), norm=norm,
-                                 space=space)[:, 0]
+    rows = [list(x) + [s] * len(names) for s in SHININESS_TRIALS]
+    with_lobe = closed_form_loss(glossy, gpaths, rows, target, pixels, environment=environment, clip=clip,
+                                 norm=norm, space=space, threads=threads)
     k = int(np.argmin(with_lobe))
-    ev = _verdict(float(base[0, 0]), float(with_lobe[k]), active_pixels, 2 * len(names), norm)
+    ev = _verdict(base, float(with_lobe[k]), active_pixels, 2 * len(names), norm)
     ev["shininess_tried"] = list(SHININESS_TRIALS)
     ev["loss_per_shininess"] = [float(v) for v in with_lobe]
     return ev, SHININESS_TRIALS[k]
@@ -130,18 +159,14 @@ def with_interreflection(scene: Scene) -> Scene:
 
 
 def interreflection_evidence(scene: Scene, paths: list[str], x: list[float], target: np.ndarray,
-                             pixels: np.ndarray | None, *, environment: bool, clip: bool, norm: str, space: str,
-                             threads: int | None, active_pixels: int) -> dict[str, Any]:
+                             pixels: np.ndarray | None, *, base: float, environment: bool, clip: bool, norm: str,
+                             space: str, threads: int | None, active_pixels: int) -> dict[str, Any]:
     """Whether one bounce between the objects explains the photo better at the light ``x`` found without
-    it: the closed-form loss without and with it (its one extra unknown is the gauge, 1 / intensity: k =
-    1), as :func:`environment_evidence`."""
-    pop = np.asarray([x], dtype=np.float64)
-    loss = []
-    for s in (scene, with_interreflection(scene)):
-        v = _native.evaluate(s, paths, target, pop, pixels=pixels, loss="l1_projected", clip=clip, threads=threads,
-                             product_bounds=product_bounds(s, environment), norm=norm, space=space)
-        loss.append(float(v[0, 0]))
-    return _verdict(loss[0], loss[1], active_pixels, 1, norm)
+    it: the closed-form loss without (``base``) and with it (its one extra unknown is the gauge, 1 /
+    intensity: k = 1), as :func:`environment_evidence`."""
+    l1 = closed_form_loss(with_interreflection(scene), paths, [x], target, pixels, environment=environment,
+                          clip=clip, norm=norm, space=space, threads=threads)[0]
+    return _verdict(base, l1, active_pixels, 1, norm)
 
 
 def environment_given(scene: Scene) -> bool:
@@ -150,19 +175,27 @@ def environment_given(scene: Scene) -> bool:
 
 
 def environment_evidence(scene: Scene, paths: list[str], x: list[float], target: np.ndarray,
-                         pixels: np.ndarray | None, *, clip: bool, norm: str, space: str,
+                         pixels: np.ndarray | None, *, base: float, clip: bool, norm: str, space: str,
                          threads: int | None, active_pixels: int) -> dict[str, Any]:
     """Whether the occluded environment explains the photo better at the light ``x`` (of ``paths``) found
-    without it: the closed-form loss without and with each object's environment column, the relative gain,
+    without it: the closed-form loss without (``base``, :func:`closed_form_loss`) and with each object's
+    environment column, the relative gain,
     the change in BIC (for the L1 and Huber norms, a Laplace likelihood: 2 n ln(L0/L1); for L2, Gaussian:
     n ln(L0/L1); minus k ln n for the k = 3 x objects added products), and the verdict."""
-    pop = np.asarray([x], dtype=np.float64)
-    loss = []
-    for env in (False, True):
-        v = _native.evaluate(scene, paths, target, pop, pixels=pixels, loss="l1_projected", clip=clip,
-                             threads=threads, product_bounds=product_bounds(scene, env), norm=norm, space=space)
-        loss.append(float(v[0, 0]))
-    return _verdict(loss[0], loss[1], active_pixels, 3 * len(scene.object_names), norm)
+    l1 = closed_form_loss(scene, paths, [x], target, pixels, environment=True, clip=clip, norm=norm, space=space,
+                          threads=threads)[0]
+    return _verdict(base, l1, active_pixels, 3 * len(scene.object_names), norm)
+
+
+def closed_form_loss(scene: Scene, paths: list[str], rows: list[list[float]], target: np.ndarray,
+                     pixels: np.ndarray | None, *, environment: bool, clip: bool, norm: str, space: str,
+                     threads: int | None) -> np.ndarray:
+    """The closed-form (least-squares products) loss of ``scene`` at each row of values of ``paths``, with
+    or without the environment column: the measure every test of a term compares."""
+    v = _native.evaluate(scene, paths, target, np.asarray(rows, dtype=np.float64), pixels=pixels,
+                         loss="l1_projected", clip=clip, threads=threads,
+                         product_bounds=product_bounds(scene, environment), norm=norm, space=space)
+    return v[:, 0]
 
 
 def _verdict(l0: float, l1: float, active_pixels: int, k: int, norm: str) -> dict[str, Any]:

@@ -54,6 +54,8 @@ def _products_blocker(scene: Scene, d: dict[str, Any]) -> str | None:
         return "no light scale (intensity, colour, exposure) is free"
     if any(v != 0 for v in d["ambient"]) or "ambient" in paths:
         return "the scene has ambient light"
+    if d.get("interreflection"):
+        return "the scene has interreflection (a bounce is as bright as the albedos themselves)"
     known = [o["name"] for o in d["objects"]
              if o["material"]["specular"] != 0 and f"objects.{o['name']}.specular" not in paths]
     if known:
