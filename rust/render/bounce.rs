@@ -29,6 +29,12 @@ const PHI: [f32; 8] = [
 ];
 const DIRECTIONS: usize = STRATA.len() * PHI.len();
 
+/// A sphere whose configuration factor from p is at least this is integrated over the cap p sees
+/// (`CONE_RINGS` x `CONE_PHI` directions) rather than taken at its nearest point.
+pub const CONE_FORM: f32 = 0.05;
+const CONE_RINGS: [f32; 4] = [0.125, 0.375, 0.625, 0.875];
+const CONE_PHI: [f32; 4] = [0.125, 0.375, 0.625, 0.875];
+
 /// Where receiver point p gathers from one other object.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GatherPoint {
@@ -89,12 +95,60 @@ pub fn gather(p: Vec3A, n: Vec3A, own: usize, shapes: &[PShape], out: &mut Vec<G
                     continue;
                 }
                 let w = to / d;
-                out.push(GatherPoint {
-                    sender: k,
-                    form,
-                    position: center - radius * w,
-                    normal: -w,
-                });
+                if form < CONE_FORM {
+                    out.push(GatherPoint {
+                        sender: k,
+                        form,
+                        position: center - radius * w,
+                        normal: -w,
+                    });
+                    continue;
+                }
+                // Seen large (a floor point by the ball): its radiance varies over the visible cap (lit on
+                // one side), so a stratified set of directions inside the cone it subtends, each weighted by
+                // its cosine and solid angle, the weights scaled to the closed-form factor.
+                let cos_max = (1.0 - (radius / d).powi(2)).max(0.0).sqrt();
+                let (u_axis, v_axis) = w.any_orthonormal_pair();
+                let start = out.len();
+                let mut total = 0.0f32;
+                for (ci, pj) in CONE_RINGS
+                    .iter()
+                    .flat_map(|&c| CONE_PHI.iter().map(move |&p| (c, p)))
+                {
+                    let cos_t = 1.0 - ci * (1.0 - cos_max);
+                    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+                    let phi = std::f32::consts::TAU * pj;
+                    let dir =
+                        w * cos_t + u_axis * (sin_t * phi.cos()) + v_axis * (sin_t * phi.sin());
+                    let weight = n.dot(dir);
+                    if !(weight > 0.0) {
+                        continue;
+                    }
+                    // The near intersection with the sphere.
+                    let b = dir.dot(to);
+                    let t = b - (radius * radius - (d * d - b * b)).max(0.0).sqrt();
+                    // A direction another shape hides counts in the total (that shape gathers it).
+                    total += weight;
+                    let blocked = shapes
+                        .iter()
+                        .enumerate()
+                        .any(|(j, sh)| j != k && j != own && sh.hits_segment(p, dir, 0.0, t));
+                    if blocked {
+                        continue;
+                    }
+                    let y = p + t * dir;
+                    out.push(GatherPoint {
+                        sender: k,
+                        form: weight,
+                        position: y,
+                        normal: ((y - center) / radius).normalize_or_zero(),
+                    });
+                }
+                if total > 0.0 {
+                    for g in &mut out[start..] {
+                        g.form *= form / total;
+                    }
+                }
             }
             PShape::Plane { point, normal } => {
                 let form = plane_view(p, n, point, normal);
@@ -200,6 +254,56 @@ mod tests {
         let floor: f32 = out.iter().filter(|g| g.sender == 0).map(|g| g.form).sum();
         assert!(floor < 0.45, "{floor}");
         assert!(out.iter().any(|g| g.sender == 2));
+    }
+
+    #[test]
+    fn table_points_cover_the_sphere() {
+        let at = table_points(Vec3A::new(1.0, 2.0, 3.0), 0.5);
+        assert_eq!(at.len(), TABLE);
+        for &(p, n) in &at {
+            assert!(
+                ((p - Vec3A::new(1.0, 2.0, 3.0)).length() - 0.5).abs() < 1e-5
+                    && (n.length() - 1.0).abs() < 1e-5
+            );
+        }
+        // Every direction has a table point within ~20 degrees.
+        for k in 0..200 {
+            let z = 1.0 - 2.0 * (k as f32 + 0.5) / 200.0;
+            let r = (1.0 - z * z).sqrt();
+            let n = Vec3A::new(r * (k as f32).cos(), z, r * (k as f32).sin());
+            let j = nearest_table(&at, n);
+            assert!(at[j].1.dot(n) > 20f32.to_radians().cos(), "{n}");
+        }
+    }
+
+    #[test]
+    fn the_floor_gathers_from_the_ball() {
+        let shapes = ball_on_floor();
+        let mut out = Vec::new();
+        let c = Vec3A::new(0.0, 1.0, 0.0);
+        // Seen small, the ball is its nearest point with the closed-form factor.
+        let far = Vec3A::new(5.0, 0.0, 0.0);
+        gather(far, Vec3A::Y, 0, &shapes, &mut out);
+        assert_eq!(out.len(), 1);
+        let w = (c - far).normalize();
+        assert!((out[0].position - (c - w)).length() < 1e-5);
+        assert!((out[0].form - sphere_view(far, Vec3A::Y, c, 1.0)).abs() < 1e-9);
+        // Seen large, the cap it sees: points on the sphere facing p, weights summing to the factor.
+        let near = Vec3A::new(1.2, 0.0, 0.3);
+        gather(near, Vec3A::Y, 0, &shapes, &mut out);
+        assert!(out.len() > 8);
+        let total: f32 = out.iter().map(|g| g.form).sum();
+        assert!((total - sphere_view(near, Vec3A::Y, c, 1.0)).abs() < 1e-5);
+        for g in &out {
+            assert!(((g.position - c).length() - 1.0).abs() < 1e-4);
+            assert!(
+                g.normal.dot(near - g.position) > 0.0,
+                "a point of the cap faces p"
+            );
+        }
+        // Far away the ball's factor falls below MIN_FORM: nothing gathered.
+        gather(Vec3A::new(60.0, 0.0, 0.0), Vec3A::Y, 0, &shapes, &mut out);
+        assert!(out.is_empty());
     }
 
     #[test]

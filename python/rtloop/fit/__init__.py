@@ -16,6 +16,7 @@ import numpy as np
 
 from ..errors import RtloopError, RtloopWarning
 from ..scene import Scene, load_scene
+from .bounds import narrowed, restore_bounds
 from .identifiability import identifiability as _identifiability
 from .identifiability import lit_pixel_counts
 from .products import product_bounds as _product_bounds
@@ -175,107 +176,98 @@ def fit(
     return result
 
 
+#: The refit with the terms a photo selected searches near the light found without them (its box shrunk to
+#: +-REFIT_FRACTION of each range around it: the terms move the light by centimetres, the box by metres)
+#: with a smaller search (population, generations, polish).
+REFIT_FRACTION = 0.15
+REFIT_BUDGET = (10, 10, 200)
+
+
 def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, model: dict[str, Any], *,
                   env_mode: str, inter_mode: str, highlights: str, target: np.ndarray, use: np.ndarray | None,
                   mask: Any, protocol: str, space: str, population: Any, generations: Any, f: Any, cr: Any,
                   optimizer: Any, polish: Any, clip: bool, norm: str, threads: Any, pixels_per_object: int,
                   seed: int, callback: Any) -> Scene:
     """The closed-form fit with the image terms the photo needs (:mod:`.selection`): fitted with the terms
-    given or forced on, then each auto term in turn (environment, interreflection, a sphere's lobe) tested
-    at the accepted light and, when the photo selects it, fitted again with it; a refit replaces the
-    accepted fit only when its loss is lower. ``model`` receives the terms and the evidence."""
+    given or forced on; then, unless that fit explains the photo to its quantisation floor, each auto term
+    in turn (environment, interreflection, a sphere's lobe) is tested at the light found, on top of those
+    already selected, and one refit near that light has every selected term; it replaces the first fit
+    only when its loss is lower. ``model`` receives the terms and the evidence."""
     env = environment_given(scene) or env_mode == "on"
     current = stages.projected(int(seeds[0]), environment=env)
-    accepted = stages.stages[-1]
+    first = stages.stages[-1]
+    if env:
+        model["terms"].append("environment")
+    if interreflection_given(work):
+        model["terms"].append("interreflection")
     kw = {"clip": clip, "norm": norm, "space": space, "threads": threads}
-
-    base: dict[str, float] = {}
+    # A fit at the photo's noise level needs no more terms: the tests are skipped (one sum, no evaluation).
+    floor = quantisation_floor(target, use)
+    ratio = sum(first.objectives) / floor if floor > 0 else float("inf")
+    model["residual"] = {"loss": float(sum(first.objectives)), "quantisation_floor": floor, "ratio": ratio,
+                         "explained_below": EXPLAINED}
+    if ratio < EXPLAINED:
+        model["skipped"] = (f"the fit's loss is {ratio:.2g}x the photo's 8-bit quantisation floor (below "
+                            f"{EXPLAINED:g}x): the photo needs no more terms")
+        return current
     # The tests compare models on every other pixel in each direction: a term that explains 5 % of the loss
     # shows there as well, and the bounce's gathers cost a quarter.
     grid = np.arange(scene.width * scene.height, dtype=np.uint32).reshape(scene.height, scene.width)[::2, ::2]
     sub = grid.ravel() if use is None else np.intersect1d(grid.ravel(), use).astype(np.uint32)
-
-    def at_light(s: Scene) -> tuple[Scene, list[str], list[float], float]:
-        """``s`` at the accepted light, its paths and values, and the closed-form loss there (the base every
-        test compares with; computed once per accepted fit)."""
-        where = accepted.paths
-        at = s.with_params(list(accepted.x), where)
-        key = f"{id(accepted)}/{env}/{id(s)}"
-        if key not in base:
-            base[key] = float(closed_form_loss(at, where, [list(accepted.x)], target, sub, environment=env, **kw)[0])
-        return at, where, list(accepted.x), base[key]
-
-    def refit(new_work: Scene, new_env: bool, term: str, k: int) -> tuple[Scene, StageResult] | None:
-        name = "+".join(["light", "colour", *model["terms"][1:], term])
-        if new_work is work:
-            cand = stages.projected(int(seeds[k]), environment=new_env, name=name)
-            return cand, stages.stages[-1]
-        b2 = budget(protocol, space, population, generations, f, cr)
-        choose_method(b2, new_work, new_work.fit_paths, population=population, generations=generations,
-                      optimizer=optimizer, polish=polish)
-        if b2.method != "projected":
-            return None
-        more = Stages(new_work, target, use, mask, b2, _identifiability(new_work, new_work.fit_paths), clip=clip,
-                      norm=norm, space=space, threads=threads, pixels_per_object=pixels_per_object,
-                      rng=np.random.default_rng(seed), callback=callback)
-        cand = more.projected(int(seeds[k]), environment=new_env, name=name)
-        stages.stages += more.stages
-        stages.evaluations += more.evaluations
-        return cand, more.stages[-1]
-
-    def better(r: tuple[Scene, StageResult] | None) -> bool:
-        return r is not None and sum(r[1].objectives) < sum(accepted.objectives)
-
-    # A fit at the photo's noise level needs no more terms: the tests are skipped (one sum, no evaluation).
-    floor = quantisation_floor(target, use)
-    ratio = sum(accepted.objectives) / floor if floor > 0 else float("inf")
-    model["residual"] = {"loss": float(sum(accepted.objectives)), "quantisation_floor": floor,
-                         "ratio": ratio, "explained_below": EXPLAINED}
-    if ratio < EXPLAINED:
-        env_mode = "off" if env_mode == "auto" else env_mode
-        inter_mode = "off" if inter_mode == "auto" else inter_mode
-        highlights = "off"
-        model["skipped"] = (f"the fit's loss is {ratio:.2g}x the photo's 8-bit quantisation floor (below "
-                            f"{EXPLAINED:g}x): the photo needs no more terms")
-
-    if env:
-        model["terms"].append("environment")
-    elif env_mode == "auto":
-        s, where, x, b0 = at_light(work)
-        ev = environment_evidence(s, where, x, target, sub, base=b0, active_pixels=accepted.pixels // 4, **kw)
+    where, x = first.paths, list(first.x)
+    n_sub = first.pixels // 4
+    model_work, model_env, added = work, env, []
+    base = float(closed_form_loss(work.with_params(x, where), where, [x], target, sub, environment=env, **kw)[0])
+    if env_mode == "auto" and not env:
+        ev = environment_evidence(model_work.with_params(x, where), where, x, target, sub, base=base,
+                                  active_pixels=n_sub, **kw)
         model["evidence"]["environment"] = ev
-        r = refit(work, True, "environment", 1) if ev["selected"] else None
-        if better(r):
-            assert r is not None
-            (current, accepted), env = r, True
-            model["terms"].append("environment")
-    if interreflection_given(work):
-        model["terms"].append("interreflection")
-    elif inter_mode == "auto" and len(scene.object_names) > 1:
-        s, where, x, b0 = at_light(work)
-        ev = interreflection_evidence(s, where, x, target, sub, base=b0, environment=env,
-                                      active_pixels=accepted.pixels // 4, **kw)
-        model["evidence"]["interreflection"] = ev
-        bounced = with_interreflection(work)
-        r = refit(bounced, env, "interreflection", 2) if ev["selected"] else None
-        if better(r):
-            assert r is not None
-            current, accepted = r
-            work = bounced
-            model["terms"].append("interreflection")
-    names = highlight_candidates(work) if highlights == "auto" else []
+        if ev["selected"]:
+            model_env, base = True, ev["loss_with"]
+            added.append("environment")
+    if inter_mode != "off" and not interreflection_given(work) and len(scene.object_names) > 1:
+        if inter_mode == "on":
+            model_work = with_interreflection(model_work)
+        else:
+            ev = interreflection_evidence(model_work.with_params(x, where), where, x, target, sub, base=base,
+                                          environment=model_env, active_pixels=n_sub, **kw)
+            model["evidence"]["interreflection"] = ev
+            if ev["selected"]:
+                model_work, base = with_interreflection(model_work), ev["loss_with"]
+                added.append("interreflection")
+    names = highlight_candidates(model_work) if highlights == "auto" else []
     if names:
-        s, where, x, b0 = at_light(work)
-        ev, shininess = highlight_evidence(s, names, where, x, target, sub, base=b0, environment=env,
-                                           active_pixels=accepted.pixels // 4, **kw)
+        ev, shininess = highlight_evidence(model_work.with_params(x, where), names, where, x, target, sub,
+                                           base=base, environment=model_env, active_pixels=n_sub, **kw)
         model["evidence"]["specular"] = ev
-        r = refit(with_highlights(work, names, shininess), env, "specular", 3) if ev["selected"] else None
-        if better(r):
-            assert r is not None
-            current, accepted = r
-            model["terms"].append("specular")
-            model["specular_objects"] = names
-    return current
+        if ev["selected"]:
+            model_work = with_highlights(model_work, names, shininess)
+            added.append("specular")
+    if not added:
+        return current
+    # One refit with every selected term, in a box around the light found, with a smaller search.
+    box = narrowed(model_work.with_params(x, where), where, REFIT_FRACTION)
+    b2 = budget(protocol, space, REFIT_BUDGET[0] if population is None else population,
+                REFIT_BUDGET[1] if generations is None else generations, f, cr)
+    choose_method(b2, box, box.fit_paths, population=b2.population, generations=b2.generations,
+                  optimizer=optimizer, polish=REFIT_BUDGET[2] if polish is None else polish)
+    if b2.method != "projected":
+        return current
+    more = Stages(box, target, use, mask, b2, _identifiability(box, box.fit_paths), clip=clip, norm=norm,
+                  space=space, threads=threads, pixels_per_object=pixels_per_object,
+                  rng=np.random.default_rng(seed), callback=callback)
+    candidate = more.projected(int(seeds[1]), environment=model_env,
+                               name="+".join(["light", "colour", *model["terms"][1:], *added]))
+    stages.stages += more.stages
+    stages.evaluations += more.evaluations
+    if sum(more.stages[-1].objectives) >= sum(first.objectives):
+        model["rejected"] = f"the refit with {', '.join(added)} did not lower the loss"
+        return current
+    model["terms"] += added
+    if "specular" in added:
+        model["specular_objects"] = names
+    # The user's bounds back (the search box was narrowed), with the freed lobes' bounds kept.
+    return restore_bounds(candidate, model_work)
 
 
 #: A fitted value this close to a bound (as a fraction of its range) is reported as at the bound.
