@@ -91,7 +91,7 @@ impl Kernel {
         // Pass 1: factors and the bounce-free products, and each sender's light at its points.
         let mut offsets = Vec::with_capacity(self.groups.len());
         let mut offset = 0;
-        let mut gathered: Vec<Vec<Vec<f32>>> = Vec::with_capacity(self.groups.len());
+        let mut gathered: Vec<Vec<Compact>> = Vec::with_capacity(self.groups.len());
         for (g, run) in self.groups.iter().zip(&runs) {
             let n = g.len();
             offsets.push(offset);
@@ -106,7 +106,7 @@ impl Kernel {
                     .map(|gth| {
                         let mut e = Vec::new();
                         gth.light::<AVX2>(&light, &mut e);
-                        e
+                        Compact::new(gth, &e)
                     })
                     .collect(),
             );
@@ -132,7 +132,7 @@ impl Kernel {
             );
         }
         // Each sphere's table points: their senders' light (unit light), for the second bounce.
-        let table_light: Vec<Vec<Vec<f32>>> = self
+        let table_light: Vec<Vec<Compact>> = self
             .tables
             .iter()
             .map(|gths| {
@@ -140,12 +140,14 @@ impl Kernel {
                     .map(|gth| {
                         let mut e = Vec::new();
                         gth.light::<AVX2>(&light, &mut e);
-                        e
+                        Compact::new(gth, &e)
                     })
                     .collect()
             })
             .collect();
         // The fixed point: the bounce columns from the senders' products, the gauge, the products.
+        // From the brightest lamp the bounds allow (the dimmest bounce): converges faster than from the
+        // scene's own intensity.
         let mut u = gauge.u.0;
         let mut history: Vec<f64> = Vec::with_capacity(3);
         for round in 0..gauge.rounds {
@@ -160,13 +162,11 @@ impl Kernel {
                             return Vec::new();
                         }
                         let mut r = vec![0.0f32; crate::render::bounce::TABLE];
-                        for (gth, e) in gths.iter().zip(lights) {
+                        for (gth, cg) in gths.iter().zip(lights) {
                             let pk = out.products[gth.sender][c] as f32;
                             let ek = out.environment.get(gth.sender).map_or(0.0, |e| e[c] as f32);
-                            let sky = &gth.points.sky;
-                            for (j, &t) in gth.pixel.iter().enumerate() {
-                                let s = if sky.is_empty() { 0.0 } else { ek * sky[j] };
-                                r[t as usize] += gth.form[j] * (pk * e[j] + s);
+                            for (j, &t) in cg.pixels.iter().enumerate() {
+                                r[t as usize] += pk * cg.a[j] + ek * cg.s[j];
                             }
                         }
                         r
@@ -179,18 +179,20 @@ impl Kernel {
                 for c in 0..3 {
                     let col = &mut ab_all[c * n_px + o0..][..n];
                     col.fill(0.0);
-                    for (gth, e) in g.gathers.iter().zip(&gathered[gi]) {
+                    for (gth, cg) in g.gathers.iter().zip(&gathered[gi]) {
                         let pk = out.products[gth.sender][c] as f32;
                         let ek = out.environment.get(gth.sender).map_or(0.0, |e| e[c] as f32);
-                        let sky = &gth.points.sky;
+                        for (j, &i) in cg.pixels.iter().enumerate() {
+                            col[i as usize] += pk * cg.a[j] + ek * cg.s[j];
+                        }
                         // The sender's own bounce: its albedo P_k·u/g_c times the light on its table.
                         let second = (u / w[c]) as f32 * pk;
-                        for (j, &i) in gth.pixel.iter().enumerate() {
-                            let mut s = if sky.is_empty() { 0.0 } else { ek * sky[j] };
-                            if !gth.table.is_empty() {
-                                s += second * tables[gth.sender][c][gth.table[j] as usize];
+                        let table = &tables[gth.sender];
+                        if !table[c].is_empty() {
+                            for &(j, t, f) in &cg.table {
+                                col[cg.pixels[j as usize] as usize] +=
+                                    second * f * table[c][t as usize];
                             }
-                            col[i as usize] += gth.form[j] * (pk * e[j] + s);
                         }
                     }
                 }
@@ -343,5 +345,48 @@ impl Kernel {
             out.products[obj] = pk;
             out.specular[obj] = q;
         }
+    }
+}
+
+/// One gather for one candidate, summed per receiving pixel: Σ form·e (the unit light the sender's points
+/// get) and Σ form·S (their sky view), and for a sphere sender the (pixel, table point, Σ form) of its
+/// table lookups; a round of the fixed point then costs per pixel, not per point.
+struct Compact {
+    pixels: Vec<u32>,
+    a: Vec<f32>,
+    s: Vec<f32>,
+    table: Vec<(u32, u32, f32)>,
+}
+
+impl Compact {
+    fn new(gth: &super::pixels::Gather, e: &[f32]) -> Compact {
+        let sky = &gth.points.sky;
+        let mut c = Compact {
+            pixels: Vec::new(),
+            a: Vec::new(),
+            s: Vec::new(),
+            table: Vec::new(),
+        };
+        for (j, &i) in gth.pixel.iter().enumerate() {
+            // The gather's points come in pixel order: a new pixel starts a new entry.
+            if c.pixels.last() != Some(&i) {
+                c.pixels.push(i);
+                c.a.push(0.0);
+                c.s.push(0.0);
+            }
+            let k = c.pixels.len() - 1;
+            let f = gth.form[j];
+            c.a[k] += f * e[j];
+            if !sky.is_empty() {
+                c.s[k] += f * sky[j];
+            }
+            if let Some(&t) = gth.table.get(j) {
+                match c.table.last_mut() {
+                    Some(last) if last.0 == k as u32 && last.1 == t => last.2 += f,
+                    _ => c.table.push((k as u32, t, f)),
+                }
+            }
+        }
+        c
     }
 }

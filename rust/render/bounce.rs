@@ -305,41 +305,4 @@ mod tests {
         gather(Vec3A::new(60.0, 0.0, 0.0), Vec3A::Y, 0, &shapes, &mut out);
         assert!(out.is_empty());
     }
-
-    #[test]
-    fn table_points_cover_the_sphere() {
-        let at = table_points(Vec3A::new(1.0, 2.0, 3.0), 0.5);
-        assert_eq!(at.len(), TABLE);
-        for &(p, n) in &at {
-            assert!(
-                ((p - Vec3A::new(1.0, 2.0, 3.0)).length() - 0.5).abs() < 1e-5
-                    && (n.length() - 1.0).abs() < 1e-5
-            );
-        }
-        // Every direction has a table point within ~20 degrees.
-        for k in 0..200 {
-            let z = 1.0 - 2.0 * (k as f32 + 0.5) / 200.0;
-            let r = (1.0 - z * z).sqrt();
-            let n = Vec3A::new(r * (k as f32).cos(), z, r * (k as f32).sin());
-            let j = nearest_table(&at, n);
-            assert!(at[j].1.dot(n) > 20f32.to_radians().cos(), "{n}");
-        }
-    }
-
-    #[test]
-    fn the_floor_gathers_from_the_nearest_point_of_the_ball() {
-        let shapes = ball_on_floor();
-        let mut out = Vec::new();
-        gather(Vec3A::new(2.0, 0.0, 0.0), Vec3A::Y, 0, &shapes, &mut out);
-        assert_eq!(out.len(), 1);
-        let c = Vec3A::new(0.0, 1.0, 0.0);
-        let w = (c - Vec3A::new(2.0, 0.0, 0.0)).normalize();
-        assert!((out[0].position - (c - w)).length() < 1e-6);
-        assert!(
-            (out[0].form - sphere_view(Vec3A::new(2.0, 0.0, 0.0), Vec3A::Y, c, 1.0)).abs() < 1e-9
-        );
-        // Far away the ball's factor falls below MIN_FORM: nothing gathered.
-        gather(Vec3A::new(60.0, 0.0, 0.0), Vec3A::Y, 0, &shapes, &mut out);
-        assert!(out.is_empty());
-    }
 }
