@@ -3,7 +3,7 @@
 Every case folder (made by ``tools/make_photos.py``) is fitted with the default ``rtloop.fit`` on the
 fit section of its ``scene_input.json`` (light position, light intensity, every albedo; no extra options)
 and ``objective.png`` loaded with ``rtloop.load_image``, three times; the fitted scene is scored against
-``scene.json`` (read as plain JSON: rtloop's parser need not know its ``environment`` key) with
+``scene.json`` (read as plain JSON) with
 :func:`score`, the measures of ``../shared/tools/score_result.py``.
 
 Printed: a markdown table with, per case, the light position error (mm), the light direction error seen
@@ -95,6 +95,7 @@ def fit_case(folder: Path) -> dict[str, Any]:
         "fit_ms": 1000.0 * statistics.median(times),
         "fitted_light": result.scene.to_dict()["light"]["position"],
         "method": result.report()["settings"].get("method"),
+        "terms": "+".join(result.model.get("terms", ["direct"])[1:]) or "-",
     }
 
 
@@ -106,17 +107,18 @@ def table(rows: list[dict[str, Any]]) -> str:
     """The markdown table: one row per case, then median and max per group."""
     keys = ("light_err_mm", "light_dir_err_deg", "worst_product_err_pct", "fit_ms")
     fmt = ("{:.1f}", "{:.2f}", "{:.2f}", "{:.0f}")
-    lines = [_row(["case", "light error (mm)", "light direction (deg)", "worst product (%)", "fit (ms)"]),
-             _row(["---", "---:", "---:", "---:", "---:"])]
+    lines = [_row(["case", "light error (mm)", "light direction (deg)", "worst product (%)", "fit (ms)",
+                   "terms added"]),
+             _row(["---", "---:", "---:", "---:", "---:", "---"])]
     for r in rows:
-        lines.append(_row([r["case"]] + [f.format(r[k]) for k, f in zip(keys, fmt, strict=True)]))
+        lines.append(_row([r["case"]] + [f.format(r[k]) for k, f in zip(keys, fmt, strict=True)] + [r["terms"]]))
     for g in GROUPS:
         grp = [r for r in rows if r["group"] == g]
         if not grp:
             continue
         for label, agg in (("median", statistics.median), ("max", max)):
             lines.append(_row([f"**{g}: {label}** ({len(grp)})"]
-                              + [f.format(agg(r[k] for r in grp)) for k, f in zip(keys, fmt, strict=True)]))
+                              + [f.format(agg(r[k] for r in grp)) for k, f in zip(keys, fmt, strict=True)] + [""]))
     return "\n".join(lines)
 
 

@@ -74,17 +74,15 @@ impl Kernel {
             .groups
             .iter()
             .map(|g| {
-                g.object.map(|obj| {
-                    Run::new(
-                        g,
-                        &light,
-                        proj.specular[obj].1 > 0.0,
-                        proj.sky(obj, g),
-                        p.materials[obj].shininess,
-                        sat,
-                        top,
-                        self.norm,
-                    )
+                g.object.map(|obj| Run {
+                    g,
+                    light: &light,
+                    specular: proj.specular[obj].1 > 0.0,
+                    sky: proj.sky(obj, g),
+                    shininess: p.materials[obj].shininess,
+                    sat,
+                    top,
+                    norm: self.norm,
                 })
             })
             .collect();

@@ -474,41 +474,18 @@ pub const CHUNK: usize = 8 * BLOCK;
 
 /// One object's pixels under one candidate light, for the projected kernel's runs of `CHUNK` pixels.
 pub(crate) struct Run<'a> {
-    g: &'a Group,
-    light: &'a Light,
-    specular: bool,
+    pub(crate) g: &'a Group,
+    pub(crate) light: &'a Light,
+    pub(crate) specular: bool,
     /// The group's sky view factors when the object has an environment column.
-    sky: Option<&'a [f32]>,
-    shininess: f32,
-    sat: f32,
-    top: f32,
-    norm: Norm,
+    pub(crate) sky: Option<&'a [f32]>,
+    pub(crate) shininess: f32,
+    pub(crate) sat: f32,
+    pub(crate) top: f32,
+    pub(crate) norm: Norm,
 }
 
 impl<'a> Run<'a> {
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn new(
-        g: &'a Group,
-        light: &'a Light,
-        specular: bool,
-        sky: Option<&'a [f32]>,
-        shininess: f32,
-        sat: f32,
-        top: f32,
-        norm: Norm,
-    ) -> Run<'a> {
-        Run {
-            g,
-            light,
-            specular,
-            sky,
-            shininess,
-            sat,
-            top,
-            norm,
-        }
-    }
-
     pub(crate) fn group(&self) -> &'a Group {
         self.g
     }

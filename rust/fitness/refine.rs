@@ -170,45 +170,11 @@ impl Kernel {
         start: f64,
         limits: Limits,
     ) -> f64 {
-        let Limits { proj, sat, top } = limits;
-        let (n, a, t) = (o.b.len(), o.a[c], &o.g.ts[c]);
-        let w = proj.weight[c];
-        let bounds = proj.diffuse[o.obj][c];
-        if self.space == Space::Srgb {
-            // Terms enc(min(a P + s, top)) against the encoded objective.
-            let terms: Vec<EncodedTerm> = (0..n)
-                .filter(|&i| a[i] > 0.0 && t[i].is_finite())
-                .map(|i| EncodedTerm {
-                    k: a[i] as f64,
-                    o: o.model(c, 0.0, q, ec, w, i),
-                    y: t[i] as f64,
-                    ye: o.g.te[c][i],
-                    saturated: t[i] >= sat,
-                })
-                .collect();
-            encoded_line_min(&terms, self.norm, top, bounds, start)
-        } else if self.norm == Norm::L1 {
-            // Terms |min(a P + s, top) - y|: coefficient a, offset s (the lobe).
-            let terms = (0..n).filter(|&i| a[i] > 0.0 && t[i].is_finite()).map(|i| {
-                (
-                    a[i] as f64,
-                    o.model(c, 0.0, q, ec, w, i),
-                    t[i] as f64,
-                    t[i] >= sat,
-                )
-            });
-            l1_line_min(terms, bounds, top)
-        } else {
-            bisect(bounds, |pc| {
-                (0..n)
-                    .filter(|&i| a[i] > 0.0)
-                    .map(|i| {
-                        let m = o.model(c, pc, q, ec, w, i);
-                        a[i] as f64 * self.refine_slope(m, t[i], sat, top)
-                    })
-                    .sum()
-            })
-        }
+        let w = limits.proj.weight[c];
+        let bounds = limits.proj.diffuse[o.obj][c];
+        self.coefficient_line_min(o, c, o.a[c], bounds, start, limits, |pc, i| {
+            o.model(c, pc, q, ec, w, i)
+        })
     }
 
     /// [`Kernel::refine`]'s line search for E_c of one object with an environment column, given its
@@ -222,19 +188,40 @@ impl Kernel {
         start: f64,
         limits: Limits,
     ) -> f64 {
-        let Limits { proj, sat, top } = limits;
-        let (Some(v), t) = (o.sky, &o.g.ts[c]) else {
+        let Some(v) = o.sky else {
             return start;
         };
-        let w = proj.weight[c];
-        let bounds = proj.environment[o.obj][c];
-        let seen = |i: &usize| v[*i] > 0.0 && t[*i].is_finite();
+        let w = limits.proj.weight[c];
+        let bounds = limits.proj.environment[o.obj][c];
+        self.coefficient_line_min(o, c, v, bounds, start, limits, |ec, i| {
+            o.model(c, pc, q, ec, w, i)
+        })
+    }
+
+    /// The line search for one linear coefficient x of channel `c` of object `o`, whose column (the
+    /// pixel's factor of x) is `col`: `at(x, i)` is pixel i's model value; pixels with a zero factor do
+    /// not depend on x and are left out. sRGB: [`encoded_line_min`]; L1: [`l1_line_min`]; otherwise a
+    /// bisection on the derivative.
+    #[allow(clippy::too_many_arguments)]
+    fn coefficient_line_min(
+        &self,
+        o: &RefineObject,
+        c: usize,
+        col: &[f32],
+        bounds: (f64, f64),
+        start: f64,
+        limits: Limits,
+        at: impl Fn(f64, usize) -> f64,
+    ) -> f64 {
+        let Limits { sat, top, .. } = limits;
+        let (n, t) = (o.b.len(), &o.g.ts[c]);
         if self.space == Space::Srgb {
-            let terms: Vec<EncodedTerm> = (0..v.len())
-                .filter(seen)
+            // Terms enc(min(k x + s, top)) against the encoded objective.
+            let terms: Vec<EncodedTerm> = (0..n)
+                .filter(|&i| col[i] > 0.0 && t[i].is_finite())
                 .map(|i| EncodedTerm {
-                    k: v[i] as f64,
-                    o: o.model(c, pc, q, 0.0, w, i),
+                    k: col[i] as f64,
+                    o: at(0.0, i),
                     y: t[i] as f64,
                     ye: o.g.te[c][i],
                     saturated: t[i] >= sat,
@@ -242,19 +229,16 @@ impl Kernel {
                 .collect();
             encoded_line_min(&terms, self.norm, top, bounds, start)
         } else if self.norm == Norm::L1 {
-            let terms = (0..v.len()).filter(seen).map(|i| {
-                let off = o.model(c, pc, q, 0.0, w, i);
-                (v[i] as f64, off, t[i] as f64, t[i] >= sat)
-            });
+            // Terms |min(k x + s, top) - y|: coefficient k, offset s (the other terms).
+            let terms = (0..n)
+                .filter(|&i| col[i] > 0.0 && t[i].is_finite())
+                .map(|i| (col[i] as f64, at(0.0, i), t[i] as f64, t[i] >= sat));
             l1_line_min(terms, bounds, top)
         } else {
-            bisect(bounds, |ec| {
-                (0..v.len())
-                    .filter(|&i| v[i] > 0.0)
-                    .map(|i| {
-                        let m = o.model(c, pc, q, ec, w, i);
-                        v[i] as f64 * self.refine_slope(m, t[i], sat, top)
-                    })
+            bisect(bounds, |x| {
+                (0..n)
+                    .filter(|&i| col[i] > 0.0)
+                    .map(|i| col[i] as f64 * self.refine_slope(at(x, i), t[i], sat, top))
                     .sum()
             })
         }
