@@ -12,9 +12,8 @@
 use super::kernel::{Candidate, Kernel};
 use super::loss::{Encoding, SATURATED};
 use super::pixels::{Light, BLOCK};
-use super::projected::{
-    fallback_sums, solve_object, solve_object_env, Projection, Run, SolveSums, Solved,
-};
+use super::projected::{Projection, Run, Solved};
+use super::solve::{fallback_sums, solve_object, solve_object_env, SolveSums};
 
 /// The gauge's bounds for the bounce: u = 1/intensity from the intensity's range, and each object's
 /// largest albedo per channel (ρ = P·u/g_c may not exceed it).

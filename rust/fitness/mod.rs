@@ -15,6 +15,7 @@ pub mod pixels;
 pub mod projected;
 pub mod refine;
 mod simd;
+pub mod solve;
 
 use crate::params::{ParamLayout, Target};
 use crate::render::{shade, GBuffer, Geometry, PShape, ShadeParams, Surfel};
@@ -24,10 +25,9 @@ pub use kernel::{Candidate, Kernel};
 use loss::penalty_sums;
 pub use loss::{Norm, Space, SrgbLut, SATURATED};
 pub use pixels::{interior, ActivePixels};
-pub use projected::{
-    closed_form, fallback_sums, projection_blocker, solve_object, Projection, SolveSums, Solved,
-};
+pub use projected::{projection_blocker, Projection, Solved};
 pub use refine::{encoded_line_min, l1_line_min, EncodedTerm};
+pub use solve::{closed_form, fallback_sums, solve_object, SolveSums};
 
 /// How a candidate's image is compared with the objective.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
