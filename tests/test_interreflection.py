@@ -94,3 +94,11 @@ def test_bad_mode_names_the_argument():
     truth = _scene()
     with pytest.raises(rtloop.RtloopError, match="interreflection"):
         rtloop.fit(_start(truth, _user_fit(truth)), np.zeros((48, 64, 3), np.float32), interreflection="yes")
+
+
+def test_on_fits_the_bounce_without_testing_it():
+    truth = _bounced(position=[1.5, 3.5, -2.0])
+    r = rtloop.fit(_start(truth, _user_fit(truth)), _photo(truth), interreflection="on", uncertainty=False)
+    assert "interreflection" in r.model["terms"] and "interreflection" not in r.model["evidence"]
+    assert r.scene.to_dict()["interreflection"] is True
+    assert np.linalg.norm(np.subtract(r.scene.to_dict()["light"]["position"], truth["light"]["position"])) < 1e-3

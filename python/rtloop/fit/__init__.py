@@ -225,16 +225,13 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
         if ev["selected"]:
             model_env, base = True, ev["loss_with"]
             added.append("environment")
-    if inter_mode != "off" and not interreflection_given(work) and len(scene.object_names) > 1:
-        if inter_mode == "on":
-            model_work = with_interreflection(model_work)
-        else:
-            ev = interreflection_evidence(model_work.with_params(x, where), where, x, target, sub, base=base,
-                                          environment=model_env, active_pixels=n_sub, **kw)
-            model["evidence"]["interreflection"] = ev
-            if ev["selected"]:
-                model_work, base = with_interreflection(model_work), ev["loss_with"]
-                added.append("interreflection")
+    if inter_mode == "auto" and not interreflection_given(work) and len(scene.object_names) > 1:
+        ev = interreflection_evidence(model_work.with_params(x, where), where, x, target, sub, base=base,
+                                      environment=model_env, active_pixels=n_sub, **kw)
+        model["evidence"]["interreflection"] = ev
+        if ev["selected"]:
+            model_work, base = with_interreflection(model_work), ev["loss_with"]
+            added.append("interreflection")
     names = highlight_candidates(model_work) if highlights == "auto" else []
     if names:
         ev, shininess = highlight_evidence(model_work.with_params(x, where), names, where, x, target, sub,
