@@ -21,7 +21,15 @@ from .identifiability import identifiability as _identifiability
 from .identifiability import lit_pixel_counts
 from .products import product_bounds as _product_bounds
 from .products import products as _products
-from .protocol import LOSS_SPACES, PIXELS_PER_OBJECT, PROTOCOLS, budget, check_arguments, choose_method
+from .protocol import (
+    LOSS_SPACES,
+    PIXELS_PER_OBJECT,
+    PROTOCOLS,
+    budget,
+    check_arguments,
+    choose_method,
+    searched_paths,
+)
 from .result import FitResult, GenerationInfo, StageResult
 from .selection import (
     EXPLAINED,
@@ -180,7 +188,7 @@ def fit(
 #: +-REFIT_FRACTION of each range around it: the terms move the light by centimetres, the box by metres)
 #: with a smaller search (population, generations, polish).
 REFIT_FRACTION = 0.15
-REFIT_BUDGET = (10, 10, 200)
+REFIT_BUDGET = (8, 6, 120)
 
 
 def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, model: dict[str, Any], *,
@@ -244,10 +252,12 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
         return current
     # One refit with every selected term, in a box around the light found, with a smaller search.
     box = narrowed(model_work.with_params(x, where), where, REFIT_FRACTION)
-    b2 = budget(protocol, space, REFIT_BUDGET[0] if population is None else population,
-                REFIT_BUDGET[1] if generations is None else generations, f, cr)
+    # Scaled to the searched parameters as the protocol's own budget is (a freed shininess adds one).
+    k = max(1.0, len(box.param_names(searched_paths(box.fit_paths))) / PROTOCOLS["rtloop"]["per_dimensions"])
+    b2 = budget(protocol, space, round(REFIT_BUDGET[0] * k) if population is None else population,
+                round(REFIT_BUDGET[1] * k) if generations is None else generations, f, cr)
     choose_method(b2, box, box.fit_paths, population=b2.population, generations=b2.generations,
-                  optimizer=optimizer, polish=REFIT_BUDGET[2] if polish is None else polish)
+                  optimizer=optimizer, polish=round(REFIT_BUDGET[2] * k * k) if polish is None else polish)
     if b2.method != "projected":
         return current
     more = Stages(box, target, use, mask, b2, _identifiability(box, box.fit_paths), clip=clip, norm=norm,
