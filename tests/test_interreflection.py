@@ -102,3 +102,13 @@ def test_on_fits_the_bounce_without_testing_it():
     assert "interreflection" in r.model["terms"] and "interreflection" not in r.model["evidence"]
     assert r.scene.to_dict()["interreflection"] is True
     assert np.linalg.norm(np.subtract(r.scene.to_dict()["light"]["position"], truth["light"]["position"])) < 1e-3
+
+
+def test_same_result_on_any_thread_count():
+    """Every term's path (the tests, the bounce's fixed point, the refit) is deterministic for a seed."""
+    truth = _bounced(environment=[0.05, 0.06, 0.08], two=True, position=[1.5, 3.5, -2.0])
+    photo = _photo(truth)
+    fits = [rtloop.fit(_start(truth, _user_fit(truth)), photo, seed=4, threads=t, uncertainty=False) for t in (1, 2, 3)]
+    assert fits[0].model["terms"] == ["direct", "environment", "interreflection"]
+    for r in fits[1:]:
+        assert r.x == fits[0].x and r.model == fits[0].model
