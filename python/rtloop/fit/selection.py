@@ -1,11 +1,11 @@
-"""Which image terms a fit uses, decided from the photo (README: "Image terms").
+"""Which image terms a fit uses, decided from the photo (README: "Methods", image terms).
 
 The default fit starts from the model every photo needs (direct light) and adds a term only where the photo
 shows it: nested models compared at the fitted light, by the Bayesian information criterion of the fit's
-own loss and by the size of the improvement. Today's term is the occluded environment (a room's light
-from every direction, darkened under and between the objects; :mod:`rtloop` renders it with the sky view
-factor of ``render::environment``). A term costs nothing on a photo that does not select it: one extra
-evaluation decides.
+own loss and by the size of the improvement. The terms: the occluded environment (a room's light from
+every direction, darkened under and between the objects: ``render::environment``), one diffuse bounce
+between the objects (``render::bounce``), and a sphere's specular lobe. A photo the base model explains
+to its quantisation floor pays one sum; otherwise a few closed-form evaluations decide.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from .. import _native
+from .._srgb import decode, encode
 from ..errors import RtloopError
 from ..scene import Scene, scene_to_dict
 from .products import product_bounds
@@ -60,7 +61,7 @@ SHININESS_RANGE = (1.0, 2000.0)
 SHININESS_SPAN = 3.2
 
 #: A fit whose loss is within this many times the photo's 8-bit quantisation floor explains the photo:
-#: the terms are not tested (a clean photo of what the base model has leaves 1.9-2.6x, from the pixel
+#: the terms are not tested (a clean photo of what the base model has leaves 1.9-2.7x, from the pixel
 #: footprint at edges; every test photo with an environment, a bounce or gloss 3.7x and more).
 EXPLAINED = 3.0
 
@@ -78,9 +79,10 @@ def quantisation_floor(target: np.ndarray, pixels: np.ndarray | None) -> float:
     x = np.clip(np.asarray(target, np.float64).reshape(-1, 3), 0.0, 1.0)
     if pixels is not None:
         x = x[pixels]
-    e = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)  # sRGB code / 255
-    slope = np.where(e <= 0.04045, 1 / 12.92, 2.4 / 1.055 * np.power((e + 0.055) / 1.055, 1.4))
-    return float(np.sum(0.25 / 255 * slope))
+    e = encode(x)
+    half = 0.5 / 255  # half a code step, either side of the value's code
+    step = decode(np.minimum(e + half, 1.0)) - decode(np.maximum(e - half, 0.0))
+    return float(np.sum(0.25 * step))
 
 
 def check_environment(mode: Any) -> str:
