@@ -73,15 +73,9 @@ impl Kernel {
             .groups
             .iter()
             .map(|g| {
-                g.object.map(|obj| Run {
-                    g,
-                    light: &light,
-                    specular: proj.specular[obj].1 > 0.0,
-                    sky: proj.sky(obj, g),
-                    shininess: p.materials[obj].shininess,
-                    sat,
-                    top,
-                    norm: self.norm,
+                g.object.map(|obj| {
+                    let shininess = p.materials[obj].shininess;
+                    Run::of(g, obj, &light, proj, shininess, (sat, top), self.norm)
                 })
             })
             .collect();

@@ -141,16 +141,15 @@ impl Kernel {
                 }
                 continue;
             };
-            let run = Run {
+            let run = Run::of(
                 g,
-                light: &light,
-                specular: proj.specular[obj].1 > 0.0,
-                sky: proj.sky(obj, g),
-                shininess: p.materials[obj].shininess,
-                sat,
-                top,
-                norm: self.norm,
-            };
+                obj,
+                &light,
+                proj,
+                p.materials[obj].shininess,
+                (sat, top),
+                self.norm,
+            );
             // Pass 1: unit-light irradiance / pi (and the specular factor), and the normal equations.
             let mut sums = SolveSums::default();
             if parallel {
@@ -395,6 +394,29 @@ pub(crate) struct Run<'a> {
 }
 
 impl<'a> Run<'a> {
+    /// Object `obj`'s run (group `g`) under `light`: specular and sky as the projection says;
+    /// `(sat, top)` the saturation test and the clip.
+    pub(crate) fn of(
+        g: &'a Group,
+        obj: usize,
+        light: &'a Light,
+        proj: &'a Projection,
+        shininess: f32,
+        (sat, top): (f32, f32),
+        norm: Norm,
+    ) -> Run<'a> {
+        Run {
+            g,
+            light,
+            specular: proj.specular[obj].1 > 0.0,
+            sky: proj.sky(obj, g),
+            shininess,
+            sat,
+            top,
+            norm,
+        }
+    }
+
     pub(crate) fn group(&self) -> &'a Group {
         self.g
     }
