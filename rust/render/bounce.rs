@@ -197,16 +197,7 @@ mod tests {
     use super::*;
 
     fn ball_on_floor() -> [PShape; 2] {
-        [
-            PShape::Plane {
-                point: Vec3A::ZERO,
-                normal: Vec3A::Y,
-            },
-            PShape::Sphere {
-                center: Vec3A::new(0.0, 1.0, 0.0),
-                radius: 1.0,
-            },
-        ]
+        crate::render::shape::ball_over_floor(1.0, 1.0)
     }
 
     #[test]

@@ -168,16 +168,7 @@ mod tests {
 
     #[test]
     fn ball_on_floor_views() {
-        let shapes = [
-            PShape::Plane {
-                point: Vec3A::ZERO,
-                normal: Vec3A::Y,
-            },
-            PShape::Sphere {
-                center: Vec3A::new(0.0, 1.0, 0.0),
-                radius: 1.0,
-            },
-        ];
+        let shapes = crate::render::shape::ball_over_floor(1.0, 1.0);
         // The ball's top sees all the sky, its equator half, its bottom none.
         assert_eq!(
             sky_view(Vec3A::new(0.0, 2.0, 0.0), Vec3A::Y, 1, &shapes),

@@ -332,16 +332,7 @@ mod tests {
     #[test]
     fn sphere_shadows_the_floor_but_not_beside_it() {
         let p = params(0.0, 0.0);
-        let shapes = [
-            PShape::Plane {
-                point: Vec3A::ZERO,
-                normal: Vec3A::Y,
-            },
-            PShape::Sphere {
-                center: Vec3A::new(0.0, 1.0, 0.0),
-                radius: 0.5,
-            },
-        ];
+        let shapes = crate::render::shape::ball_over_floor(1.0, 0.5);
         // Light at y = 2 straight above a sphere centred at y = 1 with r = 0.5.
         assert_eq!(shade(&floor_point(0.0), &p, &shapes, true), Vec3A::ZERO);
         assert!(shade(&floor_point(3.0), &p, &shapes, true).x > 0.0);

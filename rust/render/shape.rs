@@ -160,6 +160,21 @@ pub fn segment_meets_sphere<const BOUNDED: bool>(a: f32, b: f32, c: f32) -> bool
     (disc >= 0.0) & far_positive & near_below_one
 }
 
+/// Test scenes' shapes: the floor y = 0 and a sphere of `radius` centred at height `y` above the origin.
+#[cfg(test)]
+pub(crate) fn ball_over_floor(y: f32, radius: f32) -> [PShape; 2] {
+    [
+        PShape::Plane {
+            point: Vec3A::ZERO,
+            normal: Vec3A::Y,
+        },
+        PShape::Sphere {
+            center: Vec3A::new(0.0, y, 0.0),
+            radius,
+        },
+    ]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
