@@ -585,10 +585,16 @@ def test_a_replace_killed_between_its_renames_is_recovered(inputs, tmp_path, cap
     assert (out / "result.json").is_file() and leftovers(tmp_path) == []
 
 
-@pytest.mark.parametrize(("where", "argv0", "code"), [("rtloop._native", "/usr/bin/rtloop-fit", 130),
-                                                      ("rtloop.cli.fit", "/usr/bin/rtloop-fit", 130),
-                                                      ("rtloop._native", "my_script.py", None)])
-def test_ctrl_c_while_importing(where, argv0, code):
+@pytest.mark.parametrize(("where", "argv0", "entry", "code"), [
+    ("rtloop._native", "/usr/bin/rtloop-fit", "rtloop.cli:main", 130),
+    ("rtloop.cli.fit", "/usr/bin/rtloop-fit", "rtloop.cli:main", 130),
+    ("rtloop._native", "my_script.py", "rtloop.cli:main", None),
+    ("cv2", "/usr/bin/rtloop-acquire", "rtloop.cli.acquire:acquire_main", 130),
+    ("rtloop.acquisition.calibration", "/usr/bin/rtloop-acquire", "rtloop.cli.acquire:acquire_main", 130),
+    ("rtloop.acquisition.response", "/usr/bin/rtloop-scene", "rtloop.cli.scene:scene_main", 130),
+    ("rtloop.acquisition.response", "my_script.py", "rtloop.cli.scene:scene_main", None),
+])
+def test_ctrl_c_while_importing(where, argv0, entry, code):
     """A Ctrl-C that lands while the console script imports (the event made certain here: an import hook
     raises it when ``where`` is imported) prints one line and exits 130; a library import re-raises it."""
     launch = ("import sys\n"
@@ -598,9 +604,10 @@ def test_ctrl_c_while_importing(where, argv0, code):
               f"        if name == {where!r}:\n"
               "            raise KeyboardInterrupt\n"
               "sys.meta_path.insert(0, Interrupt())\n"
-              "from rtloop.cli import main\n")
+              f"from {entry.split(':')[0]} import {entry.split(':')[1]}\n")
     proc = subprocess.run([sys.executable, "-c", launch], capture_output=True, text=True, check=False)
     if code == 130:
-        assert proc.returncode == 130 and proc.stderr == "rtloop-fit: interrupted\n", proc.stderr
+        script = argv0.rsplit("/", 1)[-1]
+        assert proc.returncode == 130 and proc.stderr == f"{script}: interrupted\n", proc.stderr
     else:  # not a console script: the interrupt propagates as usual
         assert proc.returncode != 0 and "KeyboardInterrupt" in proc.stderr

@@ -3,35 +3,41 @@
 
 from __future__ import annotations
 
-import argparse
-import io
-import math
-import textwrap
-from collections.abc import Sequence
-from pathlib import Path
+from .._interrupt import interrupted_at_import
 
-import numpy as np
-from PIL import Image
+try:
+    import argparse
+    import io
+    import math
+    import textwrap
+    from collections.abc import Sequence
+    from pathlib import Path
 
-from .._files import write_bytes
-from ..acquisition import capture as capture_module
-from ..acquisition._common import AcquisitionError, write_json, write_png16_srgb
-from ..acquisition.boards import DEFAULT_DICTIONARY, board_image, parse_board
-from ..acquisition.calibration import CameraIntrinsics, calibrate_camera, undistort_to_pinhole
-from ..acquisition.response import load_photo
-from .args import (
-    BOARD_HELP,
-    RESPONSE_HELP,
-    Parser,
-    formatter,
-    info,
-    length,
-    nonneg_int,
-    positive_float,
-    positive_int,
-    run_subcommands,
-    size,
-)
+    import numpy as np
+    from PIL import Image
+
+    from .._files import write_bytes
+    from ..acquisition import capture as capture_module
+    from ..acquisition._common import AcquisitionError, write_json, write_png16_srgb
+    from ..acquisition.boards import DEFAULT_DICTIONARY, board_image, parse_board
+    from ..acquisition.calibration import CameraIntrinsics, calibrate_camera, undistort_to_pinhole
+    from ..acquisition.response import load_photo
+    from .args import (
+        BOARD_HELP,
+        RESPONSE_HELP,
+        Parser,
+        formatter,
+        info,
+        length,
+        nonneg_int,
+        positive_float,
+        positive_int,
+        run_subcommands,
+        size,
+    )
+except KeyboardInterrupt:
+    interrupted_at_import()  # a console script starting: one line, exit 130
+    raise
 
 __all__ = ["DEFAULT_BOARD", "acquire_main"]
 

@@ -3,32 +3,38 @@
 
 from __future__ import annotations
 
-import argparse
-import os
-import shlex
-import shutil
-from collections.abc import Sequence
-from pathlib import Path
-from typing import Any
+from .._interrupt import interrupted_at_import
 
-from .._files import move_into_place, recover_leftovers, staging_dir
-from ..acquisition._common import AcquisitionError, write_json, write_png8, write_png16_srgb
-from ..acquisition.boards import parse_board
-from ..acquisition.calibration import CameraIntrinsics
-from ..acquisition.response import load_photo
-from .acquire import DEFAULT_BOARD
-from .args import (
-    BOARD_HELP,
-    RESPONSE_HELP,
-    Parser,
-    formatter,
-    info,
-    length,
-    positive_float,
-    positive_int,
-    run_subcommands,
-    triple,
-)
+try:
+    import argparse
+    import os
+    import shlex
+    import shutil
+    from collections.abc import Sequence
+    from pathlib import Path
+    from typing import Any
+
+    from .._files import move_into_place, recover_leftovers, staging_dir
+    from ..acquisition._common import AcquisitionError, write_json, write_png8, write_png16_srgb
+    from ..acquisition.boards import parse_board
+    from ..acquisition.calibration import CameraIntrinsics
+    from ..acquisition.response import load_photo
+    from .acquire import DEFAULT_BOARD
+    from .args import (
+        BOARD_HELP,
+        RESPONSE_HELP,
+        Parser,
+        formatter,
+        info,
+        length,
+        positive_float,
+        positive_int,
+        run_subcommands,
+        triple,
+    )
+except KeyboardInterrupt:
+    interrupted_at_import()  # a console script starting: one line, exit 130
+    raise
 
 __all__ = ["scene_main"]
 
