@@ -611,3 +611,24 @@ def test_ctrl_c_while_importing(where, argv0, entry, code):
         assert proc.returncode == 130 and proc.stderr == f"{script}: interrupted\n", proc.stderr
     else:  # not a console script: the interrupt propagates as usual
         assert proc.returncode != 0 and "KeyboardInterrupt" in proc.stderr
+
+
+@pytest.mark.parametrize("damage", ["truncated", "corrupt"])
+def test_a_damaged_png_gives_one_line_on_stderr(tmp_path, capfd, damage):
+    """libpng and OpenCV write their diagnostics straight to the process's stderr (fd 2); a damaged
+    photo must still give one line that names the file, with the decoder's reason in it."""
+    data = bytearray((EXAMPLE / "objective.png").read_bytes())
+    if damage == "truncated":
+        data = data[: len(data) // 2]
+    else:  # flip bits inside the first IDAT chunk's compressed stream
+        start = data.index(b"IDAT") + 40
+        for i in range(start, start + 200):
+            data[i] ^= 0x5A
+    photo = tmp_path / "photo.png"
+    photo.write_bytes(bytes(data))
+    capfd.readouterr()
+    code = cli.main([str(EXAMPLE / "scene_input.json"), str(photo), "--out", str(tmp_path / "out"), "-q"])
+    err = capfd.readouterr().err
+    assert code == 1
+    assert err.strip().splitlines() == [err.strip()], err
+    assert str(photo) in err and "not a readable image" in err

@@ -45,6 +45,7 @@ from typing import Protocol
 import numpy as np
 from PIL import Image
 
+from .._opencv import imdecode
 from .._srgb import decode
 from ..errors import AcquisitionError
 
@@ -190,15 +191,10 @@ def _decode(name: str) -> tuple[np.ndarray, int]:
 
     _check_pixel_count(name)
     orientation = _exif_orientation(name)
-    import cv2  # here, not at import: `import rtloop` loads no OpenCV
-
-    try:
-        decoded = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)  # keeps bit depth; no EXIF rotation
-    except cv2.error:
-        decoded = None
+    decoded, said = imdecode(data)  # keeps bit depth; no EXIF rotation
     if decoded is not None:
         return _from_opencv(decoded), orientation
-    return _decode_with_pillow(name), orientation
+    return _decode_with_pillow(name, said), orientation
 
 
 def _check_pixel_count(name: str) -> None:
@@ -231,7 +227,7 @@ def _from_opencv(image: np.ndarray) -> np.ndarray:
     raise _Fail(f"unsupported image with {channels} channels")
 
 
-def _decode_with_pillow(name: str) -> np.ndarray:
+def _decode_with_pillow(name: str, said: str = "") -> np.ndarray:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", Image.DecompressionBombWarning)
@@ -253,7 +249,8 @@ def _decode_with_pillow(name: str) -> np.ndarray:
     except _Fail:
         raise
     except Exception as exc:  # Pillow raises many types for bad files
-        raise _Fail("not a readable image (corrupt, truncated or unsupported format)") from exc
+        why = f": {said}" if said else ""
+        raise _Fail(f"not a readable image (corrupt, truncated or unsupported format{why})") from exc
     return np.array(array)
 
 

@@ -30,6 +30,7 @@ import cv2
 import numpy as np
 from PIL import Image
 
+from .._opencv import imdecode
 from .._srgb import decode
 from ._common import AcquisitionError
 from .objective import load_image
@@ -251,7 +252,7 @@ def photo_info(path: str | os.PathLike[str]) -> dict[str, Any]:
     if not os.path.isfile(name):
         raise AcquisitionError(f"{name}: no such file" if not os.path.exists(name) else f"{name}: not a file")
     data = np.fromfile(name, dtype=np.uint8)
-    decoded = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    decoded = imdecode(data)[0] if data.size else None  # load_image below says why a bad file is bad
     if decoded is not None:
         h, w = decoded.shape[:2]
         dtype = decoded.dtype
