@@ -9,9 +9,10 @@ import os
 
 import numpy as np
 import pytest
+from PIL import Image
 
 import rtloop
-from conftest import BALL_ON_FLOOR
+from conftest import BALL_ON_FLOOR, shared_case, shared_case_names
 from rtloop.fit.protocol import max_threads
 
 
@@ -189,6 +190,37 @@ def test_image_mostly_above_one_warns_in_python_and_in_the_report(ball_scene, ph
 def test_an_ordinary_image_gives_no_input_warning(ball_scene, photo):
     result = _fit(ball_scene, photo)
     assert not [w for w in result.warnings if w.startswith("image:")]
+
+
+@pytest.mark.parametrize("name", shared_case_names())
+def test_an_srgb_encoded_float_image_is_doubted_and_a_linear_one_is_not(name):
+    """Floats are taken as linear radiance; an sRGB encoding passed as floats (a PNG's codes / 255) is told
+    apart by the fit itself: its decoding fits markedly better. Checked on the independent reference scenes
+    (Mitsuba), whose linear objectives must raise no such doubt."""
+    case = shared_case(name)
+    scene = rtloop.load_scene(case / "scene_input.json")
+    linear = rtloop.load_image(case / "objective.png", scene)
+    encoded = np.asarray(Image.open(case / "objective.png").convert("RGB"), np.float32) / 255
+    assert not [w for w in rtloop.fit(scene, linear, uncertainty=False).warnings if "sRGB-encoded" in w]
+    with pytest.warns(rtloop.RtloopWarning, match=r"^image: it looks sRGB-encoded.*rtloop\.srgb_to_linear"):
+        result = rtloop.fit(scene, encoded, uncertainty=False)
+    assert result.model["encoding"]["suspect"]
+    assert any("sRGB-encoded" in w for w in result.report()["warnings"])
+
+
+def test_srgb_to_linear_matches_published_values():
+    """IEC 61966-2-1 anchors: codes 0 and 255 are 0 and 1; 8-bit 128 is 0.21586 (mid-grey 119 is 0.18447);
+    uint16 and [0, 1] floats read the same encoding."""
+    codes = np.array([[[0, 128, 255]], [[119, 10, 1]]], np.uint8)
+    out = rtloop.srgb_to_linear(codes)
+    assert out.dtype == np.float32
+    assert np.allclose(out[0, 0], [0.0, 0.215861, 1.0], atol=2e-6)
+    assert np.allclose(out[1, 0], [0.184475, 0.003035, 0.000304], atol=2e-6)
+    assert np.allclose(rtloop.srgb_to_linear(codes.astype(np.uint16) * 257), out, atol=1e-7)
+    assert np.allclose(rtloop.srgb_to_linear(codes / 255.0), out, atol=1e-7)
+    for bad in (np.array([1.5]), np.array([np.nan]), np.array([-0.1]), np.array([1 + 1j])):
+        with pytest.raises(rtloop.RtloopError, match="^srgb_to_linear: "):
+            rtloop.srgb_to_linear(bad)
 
 
 def test_fitted_values_at_their_bounds_warn(ball_scene, photo):

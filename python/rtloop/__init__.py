@@ -21,6 +21,7 @@ try:
 
     from . import _native
     from ._native import Scene, __version__
+    from ._srgb import srgb_to_linear
     from .acquisition.objective import load_image, load_mask
     from .batch import JobResult, fit_many
     from .errors import AcquisitionError, RtloopError, RtloopWarning, SceneError
@@ -55,6 +56,7 @@ __all__ = [
     "save_image",
     "save_scene",
     "scene_to_dict",
+    "srgb_to_linear",
 ]
 
 
