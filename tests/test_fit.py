@@ -360,21 +360,24 @@ def _fit_reference_case(case: str) -> dict:
 
 
 @pytest.mark.parametrize("case", shared_case_names())
-def test_reference_scenes_light_within_5cm(case):
-    """Scenes rendered by Mitsuba 3: the fit never saw scene.json."""
+def test_reference_scenes_light_within_2cm(case):
+    """Scenes rendered by Mitsuba 3: the fit never saw scene.json. Each light within 2 cm and every colour
+    product within 1 % (the noisy scene is the worst: about 13 mm and 0.7 %)."""
     s = _fit_reference_case(case)
-    assert s["light_err_m"] < 0.05, s
-    assert max(s["product_rel_err"].values()) < 0.05, s
+    assert s["light_err_m"] < 0.02, s
+    assert max(s["product_rel_err"].values()) < 0.01, s
 
 
 def test_reference_scenes_median_targets():
-    """Across the Mitsuba scenes: light within 1 cm (median) and colour products within 2 %."""
+    """The README's figure for the default over the Mitsuba scenes, 4.0 mm and 0.15 % (medians of the light
+    error and of each scene's worst product; benches/speed_vs_error.py over three seeds), held here on one
+    seed with half again as margin: 6 mm and 0.25 %."""
     names = shared_case_names()
     if not SHARED_SCENES.is_dir():
         missing(f"{SHARED_SCENES} not found: the reference scenes live in ../shared/scenes beside the repo")
     scores = [_fit_reference_case(n) for n in names]
-    assert np.median([s["light_err_m"] for s in scores]) < 0.01, scores
-    assert max(max(s["product_rel_err"].values()) for s in scores) < 0.02, scores
+    assert np.median([s["light_err_m"] for s in scores]) < 0.006, scores
+    assert np.median([max(s["product_rel_err"].values()) for s in scores]) < 0.0025, scores
 
 
 def test_mask_leaves_out_what_the_scene_does_not_model(ball_scene, tmp_path):

@@ -145,35 +145,37 @@ def test_partly_saturated_photo(ball_scene):
     assert _product_err(result, truth) < 0.002
 
 
-def test_strong_noise(ball_scene):
+@pytest.mark.parametrize("noise_seed", [5, 6, 7])
+def test_strong_noise(ball_scene, noise_seed):
     """Noise 2.5 times the shared noisy-blue case's, on the saturated photo, at the paper's 128x96: the
-    light to 5 cm, the colours to 4 %. Least squares alone got the ball's red 5-8 % low here (saturated
-    pixels that noise pulls below 1 fitted as unsaturated, unsaturated ones pushed to 1 dropped); the
-    reported products minimise the L1 loss with the clip kept exact (see Kernel::refine)."""
+    light to 5 cm, the colours to the README's 2 % (measured 0.9-2.0 % over these three noise draws, so
+    the bound is 2.5 %). Least squares alone got the ball's red 5-8 % low here (saturated pixels that noise
+    pulls below 1 fitted as unsaturated, unsaturated ones pushed to 1 dropped); the reported products
+    minimise the L1 loss with the clip kept exact (see Kernel::refine)."""
     truth = ball_scene
     truth["image"] = {"width": 128, "height": 96}
-    rng = np.random.default_rng(5)
+    rng = np.random.default_rng(noise_seed)
     photo = np.clip(_photo(truth) + rng.normal(0, 0.05, (96, 128, 3)), 0, 1).astype(np.float32)
     result = rtloop.fit(_start(truth), photo, seed=5)
     _check(result)
     assert _light_err(result, truth) < 0.05
-    assert _product_err(result, truth) < 0.04
+    assert _product_err(result, truth) < 0.025
 
 
 @pytest.mark.parametrize("space", ["linear", "srgb"])
 def test_jpeg_quality_50(ball_scene, tmp_path, space):
-    """JPEG at quality 50 subsamples chroma and quantises the dark blue channel hardest: light to 5 cm,
-    colours to 3 % (see test_strong_noise; least squares alone was 7-8 % off), in both loss spaces.
-    Measured (benches/loss_space.py, seeds 0-4): light 15-17 mm in either; products 1.1-1.2 % linear,
-    0.65-0.69 % sRGB, where JPEG's errors are uniform."""
+    """JPEG at quality 50 subsamples chroma and quantises the dark blue channel hardest: light to 3 cm,
+    colours to the README's 2 % (see test_strong_noise; least squares alone was 7-8 % off), in both loss
+    spaces. Measured (benches/loss_space.py, seeds 0-4): light 15-17 mm in either; products 1.1-1.2 %
+    linear, 0.65-0.69 % sRGB, where JPEG's errors are uniform."""
     truth = ball_scene
     truth["image"] = {"width": 128, "height": 96}
     scene = rtloop.load_scene(_start(truth))
     loaded = _load_bytes(_through_file(_photo(truth), "JPEG", scene, quality=50), ".jpg", scene, tmp_path)
     result = rtloop.fit(scene, loaded, seed=6, space=space)
     _check(result)
-    assert _light_err(result, truth) < 0.05
-    assert _product_err(result, truth) < 0.03
+    assert _light_err(result, truth) < 0.03
+    assert _product_err(result, truth) < 0.02
 
 
 def test_model_mismatch_interreflection_like_fill_light(ball_scene):
@@ -267,7 +269,9 @@ def test_directional_light_sun(ball_scene):
 
 def test_glossy_ball_with_free_specular_and_shininess(ball_scene):
     """A highlight the model knows about informs the fit instead of biasing it: intensity x specular joins
-    the closed-form solve, the shininess is searched with the light, and the fit is as exact as a matte one."""
+    the closed-form solve, the shininess is searched with the light, and the fit is as exact as a matte one:
+    the README's figures, light within 0.05 mm, products and intensity x specular within 1e-4, shininess
+    within 5e-4 (measured 0.008 mm, 2e-6, 3e-5 and 5e-5)."""
     truth = ball_scene
     truth["objects"][0]["material"].update(specular=0.3, shininess=30.0)
     truth["fit"]["objects.ball.specular"] = {"min": 0, "max": 1}
@@ -277,12 +281,12 @@ def test_glossy_ball_with_free_specular_and_shininess(ball_scene):
     result = rtloop.fit(start, _photo(truth), seed=1)
     _check(result)
     assert result.settings["method"] == "projected"
-    assert _light_err(result, truth) < 0.001
-    assert _product_err(result, truth) < 0.002
+    assert _light_err(result, truth) < 5e-5
+    assert _product_err(result, truth) < 1e-4
     fitted = result.scene.to_dict()
     ks = fitted["light"]["intensity"] * fitted["objects"][0]["material"]["specular"]
-    assert ks == pytest.approx(truth["light"]["intensity"] * 0.3, rel=0.002)
-    assert fitted["objects"][0]["material"]["shininess"] == pytest.approx(30.0, rel=0.01)
+    assert ks == pytest.approx(truth["light"]["intensity"] * 0.3, rel=1e-4)
+    assert fitted["objects"][0]["material"]["shininess"] == pytest.approx(30.0, rel=5e-4)
     assert "light.intensity*objects.ball.specular" in result.identifiability["determined"]
 
 
