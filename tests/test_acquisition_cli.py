@@ -392,3 +392,26 @@ def test_board_image_and_detection_agree() -> None:
     )
     expected = det.object_points[:, :2] / spec.square_m * 60 + 30 - 0.5
     assert np.abs(det.image_points - expected).max() < 0.2
+
+
+@pytest.mark.parametrize("where", ["on the ball", "on the empty floor"])
+def test_scene_command_ball_hint_is_where_the_ball_is_looked_for(tmp_path, capsys, photos, where) -> None:
+    """--ball X,Y,R (pixels) says where to look: at the ball's true image it is placed within 1 % of its
+    distance; on an empty stretch of floor nothing is found there, and the error says so (the hint is used,
+    not a fallback that the automatic search makes unnecessary)."""
+    cam = PinholeCamera.from_scene_camera(TRUE_SCENE["camera"], W, H)
+    centre = np.array(TRUE_SCENE["objects"][0]["center"])
+    uv = cam.project(centre[None])[0]
+    r = float(np.linalg.norm(cam.project((centre + 0.08 * cam.right)[None])[0] - uv))
+    if where != "on the ball":
+        uv = uv + np.array([-150.0, 60.0])
+    out = tmp_path / "scene"
+    code, _, err = run(scene_main, capsys, photos["photo"], "--board", BOARD, "--ball-radius", "80mm",
+                       "--vfov", "50", "--ball", f"{uv[0]:.0f},{uv[1]:.0f},{r:.0f}", "--out", out)
+    if where == "on the ball":
+        assert code == 0, err
+        ball = json.loads((out / "scene.json").read_text())["objects"][0]
+        distance = float(np.linalg.norm(np.array(TRUE_SCENE["camera"]["position"]) - centre))
+        assert np.linalg.norm(np.array(ball["center"]) - centre) <= 0.01 * distance
+    else:
+        assert code == 1 and "no ball of radius 0.08 m" in err and not out.exists()

@@ -632,3 +632,41 @@ def test_a_damaged_png_gives_one_line_on_stderr(tmp_path, capfd, damage):
     assert code == 1
     assert err.strip().splitlines() == [err.strip()], err
     assert str(photo) in err and "not a readable image" in err
+
+
+@pytest.mark.parametrize("norm", ["l2", "huber:0.05"])
+def test_norm_option_reaches_the_fit(inputs, tmp_path, capsys, norm):
+    """--norm is the fit's per-pixel penalty: the CLI's fit is the library's with the same norm (same light
+    to the last digit, and a different one from the L1 default's), and result.json records it."""
+    scene_path, image_path = inputs
+    out = tmp_path / "fit"
+    code, _, stderr = run(capsys, scene_path, image_path, "-o", out, "--norm", norm, "--seed", 4,
+                          "--snapshot-every", 0, "--final-scale", 1, "--final-spp", 1, "--quiet")
+    assert code == 0, stderr
+    saved = json.loads((out / "result.json").read_text(encoding="utf-8"))
+    assert saved["fit_report"]["settings"]["norm"] == norm
+    scene = rtloop.load_scene(scene_path)
+    photo = rtloop.load_image(image_path, scene)
+    same = rtloop.fit(scene, photo, seed=4, norm=norm, uncertainty=False).scene.to_dict()["light"]["position"]
+    l1 = rtloop.fit(scene, photo, seed=4, uncertainty=False).scene.to_dict()["light"]["position"]
+    fitted = saved["light"]["position"]  # result.json is the fitted scene plus its fit_report
+    assert fitted == same and fitted != l1
+
+
+def test_save_scene_round_trips_and_writes_whole_files(tmp_path):
+    """save_scene writes what load_scene reads back identically (floats to the last bit: serde_json's
+    float_roundtrip), from a Scene or a dict; a dict that is not valid JSON (NaN) is refused and leaves the
+    file that was there as it was."""
+    scene = rtloop.load_scene(scene_dict())
+    d = scene.to_dict()
+    d["light"]["position"] = [0.1, 1 / 3, 2.0000000000000004]  # decimals that need all 17 digits
+    path = tmp_path / "s.json"
+    rtloop.save_scene(rtloop.load_scene(d), path)
+    assert rtloop.load_scene(path).to_dict() == rtloop.load_scene(d).to_dict()
+    assert rtloop.load_scene(path).to_dict()["light"]["position"] == [0.1, 1 / 3, 2.0000000000000004]
+    rtloop.save_scene(d, tmp_path / "d.json")
+    assert json.loads((tmp_path / "d.json").read_text()) == d
+    before = path.read_bytes()
+    with pytest.raises(rtloop.SceneError, match=r"s\.json: the scene cannot be written as JSON .*nothing written"):
+        rtloop.save_scene({**d, "exposure": float("nan")}, path)
+    assert path.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["d.json", "s.json"]

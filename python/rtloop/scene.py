@@ -87,4 +87,8 @@ def scene_to_dict(scene: Scene) -> dict[str, Any]:
 def save_scene(scene: Scene | dict[str, Any], path: str | os.PathLike[str]) -> None:
     """Write a scene (or any JSON-able dict) to ``path`` atomically: a temporary file renamed into place."""
     data = scene_to_dict(scene) if isinstance(scene, Scene) else scene
-    write_text(path, json.dumps(data, indent=2, allow_nan=False) + "\n")
+    try:
+        text = json.dumps(data, indent=2, allow_nan=False) + "\n"
+    except (TypeError, ValueError) as e:  # NaN or infinity, or a value JSON has no form for
+        raise SceneError(f"{os.fspath(path)}: the scene cannot be written as JSON ({e}); nothing written") from None
+    write_text(path, text)
