@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import colour
 import numpy as np
 import pytest
 
@@ -120,3 +121,20 @@ def test_colorchecker_not_found_or_mcc_missing(monkeypatch) -> None:
 def test_identity() -> None:
     img = np.random.default_rng(1).uniform(0, 1, (10, 10, 3)).astype(np.float32)
     np.testing.assert_array_equal(ColourCorrection.identity().apply(img), img)
+
+
+def test_colorchecker_values_match_published_reference_data() -> None:
+    """rtloop's ColorChecker table (X-Rite's sRGB values, written into the module) against independent
+    published data: colour-science's "ColorChecker24 - After November 2014" (X-Rite's CIE xyY under D50),
+    compared in CIELAB with CIE Delta E 2000 after a Bradford adaptation. sRGB's 8-bit rounding and its
+    gamut (the yellow and cyan patches lie outside it) leave up to about 3; a swapped or mistyped patch
+    is well over 10."""
+    cc = colour.CCS_COLOURCHECKERS["ColorChecker24 - After November 2014"]
+    reference = colour.xyY_to_XYZ(np.array(list(cc.data.values())))
+    ours = colour.sRGB_to_XYZ(COLORCHECKER_SRGB8 / 255.0, illuminant=cc.illuminant,
+                              chromatic_adaptation_transform="Bradford")
+    de = colour.delta_E(colour.XYZ_to_Lab(ours, cc.illuminant), colour.XYZ_to_Lab(reference, cc.illuminant),
+                        method="CIE 2000")
+    assert de.shape == (24,)
+    assert de.max() < 4.0, np.round(de, 2)
+    assert np.median(de) < 2.0, np.round(de, 2)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import colour
 import cv2
 import numpy as np
 import pytest
@@ -25,12 +26,18 @@ def codes16() -> np.ndarray:
     return rng.integers(0, 65536, size=(6, 8, 3)).astype(np.uint16)
 
 
-def test_srgb_and_linear_are_load_image(tmp_path: Path, codes16) -> None:
+def test_srgb_and_linear_responses_against_colour_science(tmp_path: Path, codes16) -> None:
+    """The 16-bit codes decoded by rtloop against an independent implementation of IEC 61966-2-1
+    (colour-science's sRGB decoding) and against the plain ratio for "linear"; and load_image reads the
+    same file the same way."""
     path = write16(tmp_path / "a.png", codes16)
+    v = codes16 / 65535.0
+    np.testing.assert_allclose(load_photo(path, response="srgb"), colour.cctf_decoding(v, function="sRGB"),
+                               rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(load_photo(path, response="linear"), v, rtol=1e-6, atol=1e-8)
     for response in ("srgb", "linear"):
-        ours = load_photo(path, response=response)
-        theirs = rtloop.load_image(path, (8, 6), response=response)
-        np.testing.assert_array_equal(ours, theirs)
+        np.testing.assert_array_equal(load_photo(path, response=response),
+                                      rtloop.load_image(path, (8, 6), response=response))
 
 
 def test_gamma_response(tmp_path: Path, codes16) -> None:
