@@ -136,41 +136,36 @@ impl Kernel {
                     .collect()
             })
             .collect();
+        // The senders' own bounce, folded per receiving pixel: for a sphere sender k and each of its
+        // table's senders k', Σ form·(light on k's table from k') and Σ form·(sky of k's table from k') over
+        // the pixel's lookups. A round then costs per pixel and k', not per lookup.
+        let folded: Vec<Vec<Vec<Fold>>> = self
+            .groups
+            .iter()
+            .zip(&gathered)
+            .map(|(g, cgs)| {
+                g.gathers
+                    .iter()
+                    .zip(cgs)
+                    .map(|(gth, cg)| {
+                        Fold::of(cg, &self.tables[gth.sender], &table_light[gth.sender])
+                    })
+                    .collect()
+            })
+            .collect();
         // The fixed point: the bounce columns from the senders' products, the gauge, the products.
         // From the brightest lamp the bounds allow (the dimmest bounce): converges faster than from the
         // scene's own intensity.
         let mut u = gauge.u.0;
         let mut history: Vec<f64> = Vec::with_capacity(3);
         for round in 0..gauge.rounds {
-            // Per sphere and channel, the light bounced onto its table points (pixel units): R'.
-            let tables: Vec<[Vec<f32>; 3]> = self
-                .tables
-                .iter()
-                .zip(&table_light)
-                .map(|(gths, lights)| {
-                    std::array::from_fn(|c| {
-                        if gths.is_empty() {
-                            return Vec::new();
-                        }
-                        let mut r = vec![0.0f32; crate::render::bounce::TABLE];
-                        for (gth, cg) in gths.iter().zip(lights) {
-                            let pk = out.products[gth.sender][c] as f32;
-                            let ek = out.environment.get(gth.sender).map_or(0.0, |e| e[c] as f32);
-                            for (j, &t) in cg.pixels.iter().enumerate() {
-                                r[t as usize] += pk * cg.a[j] + ek * cg.s[j];
-                            }
-                        }
-                        r
-                    })
-                })
-                .collect();
             // B_o,c per pixel into a'_c (as B for now).
             for (gi, g) in self.groups.iter().enumerate() {
                 let (o0, n) = (offsets[gi], g.len());
                 for c in 0..3 {
                     let col = &mut ab_all[c * n_px + o0..][..n];
                     col.fill(0.0);
-                    for (gth, cg) in g.gathers.iter().zip(&gathered[gi]) {
+                    for ((gth, cg), folds) in g.gathers.iter().zip(&gathered[gi]).zip(&folded[gi]) {
                         let pk = out.products[gth.sender][c] as f32;
                         let ek = out.environment.get(gth.sender).map_or(0.0, |e| e[c] as f32);
                         for (j, &i) in cg.pixels.iter().enumerate() {
@@ -178,11 +173,15 @@ impl Kernel {
                         }
                         // The sender's own bounce: its albedo P_k·u/g_c times the light on its table.
                         let second = (u / w[c]) as f32 * pk;
-                        let table = &tables[gth.sender];
-                        if !table[c].is_empty() {
-                            for &(j, t, f) in &cg.table {
-                                col[cg.pixels[j as usize] as usize] +=
-                                    second * f * table[c][t as usize];
+                        for fold in folds {
+                            let pt = second * out.products[fold.sender][c] as f32;
+                            let et = second
+                                * out
+                                    .environment
+                                    .get(fold.sender)
+                                    .map_or(0.0, |e| e[c] as f32);
+                            for (j, &i) in cg.pixels.iter().enumerate() {
+                                col[i as usize] += pt * fold.a[j] + et * fold.s[j];
                             }
                         }
                     }
@@ -379,5 +378,51 @@ impl Compact {
             }
         }
         c
+    }
+}
+
+/// One receiving gather's lookups into a sphere sender's table, summed per receiving pixel for one of the
+/// table's own senders: Σ form·e and Σ form·S over the table points each pixel looks up.
+struct Fold {
+    sender: usize,
+    a: Vec<f32>,
+    s: Vec<f32>,
+}
+
+impl Fold {
+    /// Per table sender (`table_gathers[m]`, lit as `table_light[m]`), the folded lookups of `cg`; none
+    /// for a plane sender (no table) or a gather with no lookups.
+    fn of(
+        cg: &Compact,
+        table_gathers: &[super::pixels::Gather],
+        table_light: &[Compact],
+    ) -> Vec<Fold> {
+        if cg.table.is_empty() {
+            return Vec::new();
+        }
+        table_gathers
+            .iter()
+            .zip(table_light)
+            .map(|(gth, tl)| {
+                let (mut at, mut st) = (
+                    vec![0.0f32; crate::render::bounce::TABLE],
+                    vec![0.0f32; crate::render::bounce::TABLE],
+                );
+                for (j, &t) in tl.pixels.iter().enumerate() {
+                    at[t as usize] += tl.a[j];
+                    st[t as usize] += tl.s[j];
+                }
+                let mut fold = Fold {
+                    sender: gth.sender,
+                    a: vec![0.0; cg.pixels.len()],
+                    s: vec![0.0; cg.pixels.len()],
+                };
+                for &(j, t, f) in &cg.table {
+                    fold.a[j as usize] += f * at[t as usize];
+                    fold.s[j as usize] += f * st[t as usize];
+                }
+                fold
+            })
+            .collect()
     }
 }
