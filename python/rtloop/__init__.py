@@ -26,6 +26,7 @@ try:
     from .errors import AcquisitionError, RtloopError, RtloopWarning, SceneError
     from .fit import FitResult, StageResult, fit
     from .fit.protocol import whole
+    from .insert import Insertion, insert
     from .report import report
     from .scene import load_scene, save_scene, scene_to_dict
     from .uncertainty import estimate_uncertainty
@@ -36,6 +37,7 @@ except KeyboardInterrupt:
 __all__ = [
     "AcquisitionError",
     "FitResult",
+    "Insertion",
     "JobResult",
     "RtloopError",
     "RtloopWarning",
@@ -46,6 +48,7 @@ __all__ = [
     "estimate_uncertainty",
     "fit",
     "fit_many",
+    "insert",
     "load_image",
     "load_mask",
     "load_scene",
