@@ -84,3 +84,27 @@ def test_cli_writes_the_composite_matte_and_renders(tmp_path):
     assert insert_main([*argv, "--force"]) == 0
     assert insert_main([SCENE, str(tmp_path / "photo.png"), "--add", str(tmp_path / "none.json"),
                         "--out", str(tmp_path / "o2")]) == 1
+
+
+def test_inserted_ball_matches_mitsubas_photo_with_it():
+    # Fit the light on Mitsuba's photo without the blue ball, insert it, compare with Mitsuba's photo with it
+    # (tools/make_insert_photos.py), away from the silhouettes (2 px either side of any pixel the matte cuts).
+    from scipy import ndimage
+
+    from rtloop._srgb import encode
+
+    case = "tests/fixtures/photos/direct-side/"
+    scene = rtloop.load_scene(case + "scene_input.json")
+    photo = rtloop.load_image(case + "objective.png", scene)
+    fitted = rtloop.fit(scene, photo, seed=1).scene
+    r = rtloop.insert(fitted, photo, "tests/fixtures/insert/direct-side/objects.json", spp=16)
+    truth = rtloop.load_image("tests/fixtures/insert/direct-side/with.png", scene)
+    seen = r.matte > 0
+    away = ~(ndimage.binary_dilation(seen, iterations=2) ^ ndimage.binary_erosion(seen, iterations=2))
+    codes = np.abs(encode(r.composite) - encode(truth)) * 255
+    psnr = 10 * np.log10(1 / np.mean((codes[away] / 255) ** 2))
+    assert psnr > 40  # the photo without the ball: 17 dB
+    shadow = away & ~seen & ((r.with_objects - r.without).sum(axis=2) < -0.01)
+    assert shadow.sum() > 200
+    assert codes[shadow].mean() < 5  # the shadow left out: 115 codes
+    assert codes[away & (r.matte == 1)].mean() < 8  # the ball's own shading (its albedo is given, not fitted)
