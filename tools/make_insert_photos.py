@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import make_photos as mp  # noqa: E402
+import make_photos as mp
 
 OUT = mp.REPO / "tests" / "fixtures" / "insert"
 #: case -> the object added (make_photos.py's form: a bsdf, not a material)
