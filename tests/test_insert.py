@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,7 +11,9 @@ import pytest
 import rtloop
 from rtloop.cli.insert import insert_main
 
-SCENE = "examples/yellow-ball/scene.json"
+REPO = Path(__file__).resolve().parents[1]
+SCENE = str(REPO / "examples" / "yellow-ball" / "scene.json")
+INSERT = REPO / "tests" / "fixtures" / "insert" / "direct-side"
 BALL2 = {"name": "ball2", "shape": "sphere", "center": [1.8, 0.5, -1.0], "radius": 0.5,
          "material": {"albedo": [0.2, 0.3, 0.8], "specular": 0.0, "shininess": 0.0}}
 
@@ -93,12 +96,12 @@ def test_inserted_ball_matches_mitsubas_photo_with_it():
 
     from rtloop._srgb import encode
 
-    case = "tests/fixtures/photos/direct-side/"
-    scene = rtloop.load_scene(case + "scene_input.json")
-    photo = rtloop.load_image(case + "objective.png", scene)
+    case = REPO / "tests" / "fixtures" / "photos" / "direct-side"
+    scene = rtloop.load_scene(case / "scene_input.json")
+    photo = rtloop.load_image(case / "objective.png", scene)
     fitted = rtloop.fit(scene, photo, seed=1).scene
-    r = rtloop.insert(fitted, photo, "tests/fixtures/insert/direct-side/objects.json", spp=16)
-    truth = rtloop.load_image("tests/fixtures/insert/direct-side/with.png", scene)
+    r = rtloop.insert(fitted, photo, INSERT / "objects.json", spp=16)
+    truth = rtloop.load_image(INSERT / "with.png", scene)
     seen = r.matte > 0
     away = ~(ndimage.binary_dilation(seen, iterations=2) ^ ndimage.binary_erosion(seen, iterations=2))
     codes = np.abs(encode(r.composite) - encode(truth)) * 255
