@@ -111,3 +111,16 @@ def test_inserted_ball_matches_mitsubas_photo_with_it():
     assert shadow.sum() > 200
     assert codes[shadow].mean() < 5  # the shadow left out: 115 codes
     assert codes[away & (r.matte == 1)].mean() < 8  # the ball's own shading (its albedo is given, not fitted)
+
+
+def test_report_shows_the_photo_beside_the_composite(tmp_path):
+    scene = rtloop.load_scene(SCENE)
+    photo = rtloop.render(scene, spp=4)
+    result = rtloop.fit(scene, photo, seed=1, generations=2)
+    r = rtloop.insert(result.scene, photo, [BALL2], spp=4)
+    page = rtloop.report(result, tmp_path / "report.html", objective=photo, insertion=r)
+    html = page.path.read_text()
+    assert "<h2>Inserted objects</h2>" in html
+    composite = rtloop.load_image(tmp_path / "report" / "insert_composite.png", scene)
+    assert np.abs(composite - np.clip(r.composite, 0, 1)).max() < 0.01  # 8-bit sRGB of the composite
+    assert "Inserted objects" not in rtloop.report(result, tmp_path / "plain.html").path.read_text()

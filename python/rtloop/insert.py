@@ -22,6 +22,7 @@ class Insertion:
     """One insertion's images, all (H, W, ...) float32 at the photo's size: linear RGB except ``matte``
     (H, W) in [0, 1], the fraction of each pixel the added objects cover."""
 
+    photo: np.ndarray
     composite: np.ndarray
     matte: np.ndarray
     with_objects: np.ndarray
@@ -90,7 +91,7 @@ def insert(result: Any, photo: Any, objects: Any, *, spp: int = 16, response: st
     matte = _matte(scene_with, width, height, n_old, spp, object_ids)
     m = matte[..., None]
     composite = m * with_objects + (1.0 - m) * np.maximum(image + (with_objects - without), 0.0)
-    return Insertion(composite.astype(np.float32), matte, with_objects, without)
+    return Insertion(image, composite.astype(np.float32), matte, with_objects, without)
 
 
 def _matte(scene: Any, width: int, height: int, n_old: int, spp: int, object_ids: Any) -> np.ndarray:
