@@ -27,6 +27,7 @@ try:
     from .errors import AcquisitionError, RtloopError, RtloopWarning, SceneError
     from .fit import FitResult, StageResult, fit
     from .fit.protocol import whole
+    from .insert import Insertion, insert
     from .report import report
     from .scene import load_scene, save_scene, scene_to_dict
     from .uncertainty import estimate_uncertainty
@@ -37,6 +38,7 @@ except KeyboardInterrupt:
 __all__ = [
     "AcquisitionError",
     "FitResult",
+    "Insertion",
     "JobResult",
     "RtloopError",
     "RtloopWarning",
@@ -47,6 +49,7 @@ __all__ = [
     "estimate_uncertainty",
     "fit",
     "fit_many",
+    "insert",
     "load_image",
     "load_mask",
     "load_scene",

@@ -78,7 +78,7 @@ def _strip_frames(rows: Sequence[GenerationRow], every: int | None) -> list[int]
 
 
 _SAFE = re.compile(r"[^A-Za-z0-9_.+-]+")
-_OURS = re.compile(r"^(strip_\d+_.*|param_.*)\.png$")
+_OURS = re.compile(r"^(strip_\d+_.*|param_.*|insert_.*)\.png$")
 
 
 #: The two angles of a directional light in rtloop.uncertainty's sigma (radians).
@@ -196,6 +196,7 @@ def report(
     strip_every: int | None = None,
     title: str | None = None,
     speed_vs_error_png: str | os.PathLike[str] | None = None,
+    insertion: Any = None,
 ) -> Report:
     """Write the fit report of ``result`` (a :class:`FitResult`) to the HTML page ``path``.
 
@@ -208,7 +209,8 @@ def report(
     are rebuilt from ``result.stages[i].history`` (exact for the searched parameters only, see the page).
     ``speed_plot``: a PNG to include as the speed-against-error plot (e.g. the benchmark's
     benches/results/speed_vs_error.png; skipped if the file does not exist; ``speed_vs_error_png`` is its
-    older name). Nothing else is read from outside ``result``, ``objective`` and ``truth``.
+    older name). ``insertion``: an :class:`rtloop.Insertion` (from :func:`rtloop.insert`), shown as the
+    photo beside the composite. Nothing else is read from outside ``result``, ``objective`` and ``truth``.
     ``strip_every``: render every k-th generation in the strip (default: about ten frames).
 
     The PNGs go into a folder named after the page (``report.html`` -> ``report/``) beside it; they are
@@ -256,6 +258,8 @@ def report(
     _values_section(page, scene, terr)
     _fit_report_section(page, result, terr, ident)
     _speed_section(page, speed_plot if speed_plot is not None else speed_vs_error_png)
+    if insertion is not None:
+        _insertion_section(page, insertion)
 
     page.add(f'<p class="muted">rtloop {html.escape(_native.__version__)} · images also in '
              f"<code>{html.escape(folder.name)}/</code></p></body></html>\n")
@@ -443,6 +447,18 @@ def _fit_report_section(page: _Page, result: Any, terr: dict[str, Any] | None, i
         page.add(_table(["parameter", "sigma"], body))
         for w in (uncertainty.get("warnings", []) if isinstance(uncertainty, dict) else []):
             page.add(f"<p class='note'>{html.escape(str(w))}</p>")
+
+
+def _insertion_section(page: _Page, insertion: Any) -> None:
+    """The photo beside the composite with the inserted objects (rtloop.insert)."""
+    panels = [page.png(name, _png_of_array(_srgb8(np.asarray(image, np.float64))), alt)
+              for name, image, alt in (("insert_photo.png", insertion.photo, "the photo"),
+                                       ("insert_composite.png", insertion.composite,
+                                        "the photo with the inserted objects"))]
+    page.add("<h2>Inserted objects</h2>")
+    page.add('<div class="row three">' + "".join(panels) + "</div>")
+    page.add('<p class="muted">Differential rendering (Debevec 1998): the render of the objects where they '
+             "are seen, elsewhere the photo plus the difference they make.</p>")
 
 
 def _speed_section(page: _Page, speed_plot: str | os.PathLike[str] | None) -> None:

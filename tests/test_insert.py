@@ -1,0 +1,126 @@
+"""Virtual object insertion: the differential-rendering identities, the matte, the CLI's files and errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import rtloop
+from rtloop.cli.insert import insert_main
+
+REPO = Path(__file__).resolve().parents[1]
+SCENE = str(REPO / "examples" / "yellow-ball" / "scene.json")
+INSERT = REPO / "tests" / "fixtures" / "insert" / "direct-side"
+BALL2 = {"name": "ball2", "shape": "sphere", "center": [1.8, 0.5, -1.0], "radius": 0.5,
+         "material": {"albedo": [0.2, 0.3, 0.8], "specular": 0.0, "shininess": 0.0}}
+
+
+def test_photo_that_is_the_fitted_render_gives_the_render_with_the_objects():
+    # Photo = the scene without the object: photo + (with - without) must be the render with it everywhere.
+    photo = rtloop.render(SCENE, 128, 96, 4)
+    r = rtloop.insert(SCENE, photo, [BALL2], spp=4)
+    assert np.allclose(r.composite, r.with_objects, atol=1e-5)
+    assert np.array_equal(r.without, photo)
+
+
+def test_real_photo_is_kept_where_the_objects_change_nothing_and_replaced_where_they_are_seen():
+    base = rtloop.render(SCENE, 128, 96, 4)
+    photo = np.clip(base * 0.7 + 0.05, 0.0, None).astype(np.float32)  # a "real" photo unlike the model
+    r = rtloop.insert(SCENE, photo, {"objects": [BALL2]}, spp=4)
+    unchanged = (r.matte == 0) & (np.abs(r.with_objects - r.without).max(axis=2) == 0)
+    covered = r.matte == 1
+    assert unchanged.sum() > 1000 and covered.sum() > 100
+    assert np.array_equal(r.composite[unchanged], photo[unchanged])
+    assert np.array_equal(r.composite[covered], r.with_objects[covered])
+    # The new ball's shadow on the real floor darkens the photo there.
+    shadow = (r.matte == 0) & ((r.with_objects - r.without).sum(axis=2) < -0.01)
+    assert shadow.sum() > 20
+    assert (r.composite[shadow].sum(axis=1) < photo[shadow].sum(axis=1)).all()
+
+
+def test_matte_is_the_pixel_coverage_of_a_sphere():
+    # A sphere on the optical axis at distance d shows as a disc of radius f r / sqrt(d^2 - r^2) pixels
+    # (f the focal length in pixels): the matte sums to its area, within the pixel-grid error.
+    scene = rtloop.scene_to_dict(rtloop.load_scene(SCENE))
+    cam = np.array(scene["camera"]["position"])
+    axis = np.array(scene["camera"]["look_at"]) - cam
+    d = 3.0
+    centre = cam + d * axis / np.linalg.norm(axis)
+    radius = 0.3
+    f = 96 / 2 / np.tan(np.radians(scene["camera"]["vfov_deg"]) / 2)
+    expected = np.pi * (f * radius / np.sqrt(d * d - radius * radius)) ** 2
+    ball = {**BALL2, "center": centre.tolist(), "radius": radius}
+    r = rtloop.insert(SCENE, rtloop.render(SCENE, 128, 96), [ball], spp=16)
+    assert abs(r.matte.sum() - expected) < 0.01 * expected  # 735 px: the grid error is a few px
+
+
+@pytest.mark.parametrize("objects, message", [
+    ([{**BALL2, "radius": -1}], "added objects: objects[2].radius"),
+    ([], "non-empty list"),
+    ({"things": []}, "objects"),
+])
+def test_bad_objects_are_refused_naming_the_field(objects, message):
+    with pytest.raises(rtloop.RtloopError, match=message.replace("[", r"\[").replace("]", r"\]")):
+        rtloop.insert(SCENE, rtloop.render(SCENE, 128, 96), objects)
+
+
+def test_photo_of_another_aspect_is_refused():
+    with pytest.raises(rtloop.RtloopError, match="aspect ratio"):
+        rtloop.insert(SCENE, np.zeros((100, 100, 3), np.float32), [BALL2])
+
+
+def test_cli_writes_the_composite_matte_and_renders(tmp_path):
+    rtloop.save_image(tmp_path / "photo.png", rtloop.render(SCENE, 256, 192, 4))
+    (tmp_path / "objects.json").write_text(json.dumps({"objects": [BALL2]}))
+    out = tmp_path / "inserted"
+    argv = [SCENE, str(tmp_path / "photo.png"), "--add", str(tmp_path / "objects.json"), "--out", str(out),
+            "--spp", "4"]
+    assert insert_main(argv) == 0
+    names = {"composite.png", "composite_linear16.png", "matte.png", "with.png", "without.png"}
+    assert {p.name for p in out.iterdir()} == names
+    comp = rtloop.load_image(out / "composite_linear16.png", (256, 192), response="linear")
+    assert comp.shape == (192, 256, 3)
+    assert insert_main(argv) == 1  # DIR not empty without --force
+    assert insert_main([*argv, "--force"]) == 0
+    assert insert_main([SCENE, str(tmp_path / "photo.png"), "--add", str(tmp_path / "none.json"),
+                        "--out", str(tmp_path / "o2")]) == 1
+
+
+def test_inserted_ball_matches_mitsubas_photo_with_it():
+    # Fit the light on Mitsuba's photo without the blue ball, insert it, compare with Mitsuba's photo with it
+    # (tools/make_insert_photos.py), away from the silhouettes (2 px either side of any pixel the matte cuts).
+    from scipy import ndimage
+
+    from rtloop._srgb import encode
+
+    case = REPO / "tests" / "fixtures" / "photos" / "direct-side"
+    scene = rtloop.load_scene(case / "scene_input.json")
+    photo = rtloop.load_image(case / "objective.png", scene)
+    fitted = rtloop.fit(scene, photo, seed=1).scene
+    r = rtloop.insert(fitted, photo, INSERT / "objects.json", spp=16)
+    truth = rtloop.load_image(INSERT / "with.png", scene)
+    seen = r.matte > 0
+    away = ~(ndimage.binary_dilation(seen, iterations=2) ^ ndimage.binary_erosion(seen, iterations=2))
+    codes = np.abs(encode(r.composite) - encode(truth)) * 255
+    psnr = 10 * np.log10(1 / np.mean((codes[away] / 255) ** 2))
+    assert psnr > 40  # the photo without the ball: 17 dB
+    shadow = away & ~seen & ((r.with_objects - r.without).sum(axis=2) < -0.01)
+    assert shadow.sum() > 200
+    assert codes[shadow].mean() < 5  # the shadow left out: 115 codes
+    assert codes[away & (r.matte == 1)].mean() < 8  # the ball's own shading (its albedo is given, not fitted)
+
+
+def test_report_shows_the_photo_beside_the_composite(tmp_path):
+    scene = rtloop.load_scene(SCENE)
+    photo = rtloop.render(scene, spp=4)
+    result = rtloop.fit(scene, photo, seed=1, generations=2)
+    r = rtloop.insert(result.scene, photo, [BALL2], spp=4)
+    page = rtloop.report(result, tmp_path / "report.html", objective=photo, insertion=r)
+    html = page.path.read_text()
+    assert "<h2>Inserted objects</h2>" in html
+    composite = rtloop.load_image(tmp_path / "report" / "insert_composite.png", scene)
+    assert np.abs(composite - np.clip(r.composite, 0, 1)).max() < 0.01  # 8-bit sRGB of the composite
+    assert "Inserted objects" not in rtloop.report(result, tmp_path / "plain.html").path.read_text()
