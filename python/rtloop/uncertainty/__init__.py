@@ -22,7 +22,7 @@ from ..fit.products import albedo_derivative, unit_lobes
 from ..scene import Scene, load_scene, scene_to_dict
 from .linalg import _svd_scaled
 from .pixels import UsedPixels, used_pixels
-from .sandwich import block_sandwich
+from .sandwich import block_sandwich, block_side
 from .space import _products_blocker, _products_space, _scene_space, _Space
 
 __all__ = ["estimate_uncertainty"]
@@ -136,7 +136,8 @@ def estimate_uncertainty(
     if space.direction is not None:
         out["light_direction"] = _direction_cone(space, fit)
     s2 = rr / dof if dof > 0 else 0.0
-    robust, robust_fit = block_sandwich(Jt, r0, px.idx, scene.width, fit, s2, names)
+    robust, robust_fit = block_sandwich(Jt, r0, px.idx, scene.width, fit, s2, names,
+                                        block_side(scene.width, scene.height))
     if space.direction is not None:
         robust["light_direction_deg"] = (_direction_cone(space, robust_fit)["angle_deg"]
                                          if robust_fit is not None else None)

@@ -9,12 +9,18 @@ from typing import Any
 
 import numpy as np
 
-#: Side of the square image blocks (pixels) whose score contributions are summed.
+#: Smallest side of the square image blocks (pixels) whose score contributions are summed; the side is
+#: the larger of this and a sixth of the image's short side (model error is correlated on an object's scale).
 BLOCK_PX = 8
 
 
+def block_side(width: int, height: int) -> int:
+    """The block side for an image: max(BLOCK_PX, min(width, height) // 6)."""
+    return max(BLOCK_PX, min(width, height) // 6)
+
+
 def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, fit: Any, s2: float,
-                   names: list[str], block: int = BLOCK_PX) -> tuple[dict[str, Any], Any]:
+                   names: list[str], block: int) -> tuple[dict[str, Any], Any]:
     """A (Σ_b g_b g_bᵀ) A with A = (JᵀJ)⁺ and g_b = Σ_{i in block b} J_i r_i, with the small-sample factor
     B / (B - p) over the B blocks that hold used pixels. Each sigma is the larger of this and the
     Gauss-Newton one (the sandwich is the noisier estimate; with white residuals both agree).
