@@ -69,7 +69,7 @@ def run_case(name: str, cls: str, folder: Path, variant: str | None) -> dict[str
     fitted = np.array(result.scene.to_dict()["light"]["position"], float)
     err = fitted - np.array(truth["light"]["position"], float)
     row: dict[str, Any] = {"case": name, "class": cls, "light_err_mm": 1e3 * float(np.linalg.norm(err)),
-                           "cost_ms": (u.get("robust") or {}).get("cost_ms")}
+                           "cost_ms": 1e3 * (u.get("robust") or {}).get("seconds", float("nan"))}
     for key, sig in (("gn", u.get("sigma", {})), ("robust", (u.get("robust") or {}).get("sigma", {}))):
         s = np.array([sig.get(n) if sig.get(n) is not None else np.nan for n in LIGHT], float)
         row[f"z_{key}"] = (np.abs(err) / s).tolist()

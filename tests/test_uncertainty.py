@@ -431,7 +431,7 @@ def test_robust_sigma_holds_under_correlated_noise(ball_scene):
         result = rtloop.fit(start, photo, seed=k)
         u = estimate_uncertainty(result, photo)
         rb = u["robust"]
-        assert rb["method"] == "sandwich-blocks" and rb["cost_ms"] >= 0
+        assert rb["method"] == "sandwich-blocks" and rb["seconds"] >= 0
         assert rb["light_position_m"] >= max(rb["sigma"][n] for n in LIGHT)
         fitted.append([result.x[n] for n in LIGHT])
         gn.append([u["sigma"][n] for n in LIGHT])

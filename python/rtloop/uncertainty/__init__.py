@@ -65,7 +65,7 @@ def estimate_uncertainty(
     ``step`` and ``warnings``; for a directional light also ``light_direction`` (the frame u, v and two
     cone angles in degrees); ``robust``: the block sandwich's sigma (see :mod:`.sandwich`), which holds
     when neighbouring residuals are correlated, with the light as a whole (``light_position_m``, the
-    largest axis; ``light_direction_deg``) and its ``cost_ms``.
+    largest axis; ``light_direction_deg``) and its cost, ``seconds``.
     """
     scene: Scene = result.scene if hasattr(result, "scene") else load_scene(result)
     ident = getattr(result, "identifiability", None)
