@@ -258,6 +258,7 @@ def test_page_is_self_contained(projected, photo, tmp_path, speed_png):
     assert "Uncertainty" in page
     for name in result.uncertainty["sigma"]:
         assert name in page
+    assert "block sandwich" in page and "light position (whole, m)" in page
 
     # Written again with a coarser strip: stale strip frames go, nothing else is left behind.
     saved, result.uncertainty = result.uncertainty, {"light.position.x": 0.01}
@@ -350,8 +351,11 @@ def test_directional_light_uncertainty_is_one_line_in_degrees(projected, tmp_pat
     line = [r for r in rows if "light direction" in r]
     assert len(line) == 1, line
     cells = re.findall(r"<td[^>]*>(.*?)</td>", line[0])
+    robust = result.uncertainty["robust"]["light_direction_deg"]
+    assert robust >= cone["angle_deg"]  # here the correlated residuals widen it
     assert cells == ["light direction (angle, degrees)",
-                     f"{cone['angle_deg']:.3g}° along the worse axis, {cone['rms_angle_deg']:.3g}° rms"]
+                     f"{cone['angle_deg']:.3g}° along the worse axis, {cone['rms_angle_deg']:.3g}° rms",
+                     f"{robust:.3g}° along the worse axis"]
     first = re.findall(r"<tr><td[^>]*>(.*?)</td>", page)  # the first cell of every table row
     assert [n for n in first if n.startswith(("light.direction.u", "light.direction.v"))] == [
         "light.direction.u (rad)", "light.direction.v (rad)"]

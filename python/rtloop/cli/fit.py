@@ -463,10 +463,15 @@ def _summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None =
     width = max((len(n) for n in result.x), default=0)
     if truth is not None:
         lines.append(f"  {'':<{width}}  {'fitted':>12}  {'truth':>12}  {'error':>12}")
+    bars = ((result.uncertainty or {}).get("robust") or {}).get("sigma") or {}  # the block sandwich's
     for name, value in result.x.items():
         row = f"  {name:<{width}}  {value:12.6g}"
         if truth is not None and name in truth["values"]:
             row += f"  {truth['values'][name]:12.6g}  {truth['errors'][name]:+12.4g}"
+        if bars.get(name):
+            row += f"  +- {bars[name]:.3g}"
+            if truth is not None and name in truth["errors"]:
+                row += f" ({truth['errors'][name] / bars[name]:+.1f} sigma)"
         lines.append(row)
     if truth is not None:
         if "light_position_m" in truth:

@@ -366,9 +366,10 @@ def _values_section(page: _Page, scene: Scene, terr: dict[str, Any] | None) -> N
     bounds = scene.bounds()
     page.add("<h2>Fitted values</h2>")
     if terr is not None:
-        body = [[n, fitted[j], terr["values"][n], terr["errors"][n], f"{_fmt(lo, 4)} … {_fmt(hi, 4)}"]
+        zs = terr.get("sigmas", {})
+        body = [[n, fitted[j], terr["values"][n], terr["errors"][n], zs.get(n), f"{_fmt(lo, 4)} … {_fmt(hi, 4)}"]
                 for j, (n, (lo, hi)) in enumerate(zip(names, bounds))]
-        page.add(_table(["parameter", "fitted", "truth", "error", "bounds"], body))
+        page.add(_table(["parameter", "fitted", "truth", "error", "error / sigma", "bounds"], body))
         errs = []
         if "light_position_m" in terr:
             errs.append(["light position error (m)", terr["light_position_m"]])
@@ -434,17 +435,25 @@ def _fit_report_section(page: _Page, result: Any, terr: dict[str, Any] | None, i
     if uncertainty:
         page.add("<h3>Uncertainty (1 sigma, Gauss-Newton at the optimum, from the residual)</h3>")
         sigma = uncertainty.get("sigma", uncertainty) if isinstance(uncertainty, dict) else {}
-        body = [[f"{k} (rad)" if str(k) in _ANGLE_NAMES else str(k), "not determined" if v is None else _fmt(v)]
+        robust = uncertainty.get("robust") if isinstance(uncertainty, dict) else None
+        rsig = robust.get("sigma", {}) if isinstance(robust, dict) else {}
+        body = [[f"{k} (rad)" if str(k) in _ANGLE_NAMES else str(k), "not determined" if v is None else _fmt(v),
+                 "not determined" if rsig.get(k) is None else _fmt(rsig[k])]
                 for k, v in sigma.items()]
         cone = uncertainty.get("light_direction") if isinstance(uncertainty, dict) else None
         if isinstance(cone, dict):  # a directional light: its two angles (radians) as one cone, in degrees
-            line = ["light direction (angle, degrees)", "not determined"]
+            line = ["light direction (angle, degrees)", "not determined", "not determined"]
+            if isinstance(robust, dict) and robust.get("light_direction_deg") is not None:
+                line[2] = f"{_fmt(robust['light_direction_deg'], 3)}° along the worse axis"
             if cone.get("angle_deg") is not None and cone.get("rms_angle_deg") is not None:
                 line[1] = (f"{_fmt(cone['angle_deg'], 3)}° along the worse axis, "
                            f"{_fmt(cone['rms_angle_deg'], 3)}° rms")
             after = [i for i, row in enumerate(body) if row[0].startswith("light.direction.")]
             body.insert(after[-1] + 1 if after else len(body), line)
-        page.add(_table(["parameter", "sigma"], body))
+        if isinstance(robust, dict) and robust.get("light_position_m") is not None:
+            body.append(["light position (whole, m)", "", f"{_fmt(robust['light_position_m'], 3)} along the worse axis"])
+        page.add(_table(["parameter", "sigma (Gauss-Newton)", "sigma (block sandwich: correlated residuals)"],
+                        body))
         for w in (uncertainty.get("warnings", []) if isinstance(uncertainty, dict) else []):
             page.add(f"<p class='note'>{html.escape(str(w))}</p>")
 

@@ -27,7 +27,8 @@ def truth_values(scene: Scene, truth: Any) -> tuple[Scene, np.ndarray]:
 def truth_errors(result: Any, truth: Any) -> dict[str, Any]:
     """Compare a fit with the true scene: per-parameter values and errors, the light position error in
     metres (when the position was fitted) and each object's product relative error,
-    |P_fit - P_true| / |P_true| over R, G, B (products: exposure x intensity x colour x albedo)."""
+    |P_fit - P_true| / |P_true| over R, G, B (products: exposure x intensity x colour x albedo); ``sigmas``:
+    each error over the fit's block-sandwich sigma, where it has one."""
     scene = result.scene
     aligned, true = truth_values(scene, truth)
     names = scene.param_names()
@@ -36,6 +37,8 @@ def truth_errors(result: Any, truth: Any) -> dict[str, Any]:
         "values": {n: float(v) for n, v in zip(names, true)},
         "errors": {n: float(f - t) for n, f, t in zip(names, fitted, true)},
     }
+    bars = ((getattr(result, "uncertainty", None) or {}).get("robust") or {}).get("sigma") or {}
+    out["sigmas"] = {n: e / bars[n] for n, e in out["errors"].items() if bars.get(n)}  # error / sigma
     pos = [names.index(f"light.position.{c}") for c in "xyz" if f"light.position.{c}" in names]
     if len(pos) == 3:
         out["light_position_m"] = float(np.linalg.norm(fitted[pos] - true[pos]))

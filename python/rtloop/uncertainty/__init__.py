@@ -22,6 +22,7 @@ from ..fit.products import albedo_derivative, unit_lobes
 from ..scene import Scene, load_scene, scene_to_dict
 from .linalg import _svd_scaled
 from .pixels import UsedPixels, used_pixels
+from .sandwich import block_sandwich, block_side
 from .space import _products_blocker, _products_space, _scene_space, _Space
 
 __all__ = ["estimate_uncertainty"]
@@ -62,7 +63,9 @@ def estimate_uncertainty(
     channels left out of pixels otherwise used), ``dof``,
     ``condition`` (of the column-scaled Jacobian over the determined parameters), ``parametrization``,
     ``step`` and ``warnings``; for a directional light also ``light_direction`` (the frame u, v and two
-    cone angles in degrees).
+    cone angles in degrees); ``robust``: the block sandwich's sigma (see :mod:`.sandwich`), which holds
+    when neighbouring residuals are correlated, with the light as a whole (``light_position_m``, the
+    largest axis; ``light_direction_deg``) and its cost, ``seconds``.
     """
     scene: Scene = result.scene if hasattr(result, "scene") else load_scene(result)
     ident = getattr(result, "identifiability", None)
@@ -132,6 +135,13 @@ def estimate_uncertainty(
     }
     if space.direction is not None:
         out["light_direction"] = _direction_cone(space, fit)
+    s2 = rr / dof if dof > 0 else 0.0
+    robust, robust_fit = block_sandwich(Jt, r0, px.idx, scene.width, fit, s2, names,
+                                        block_side(scene.width, scene.height))
+    if space.direction is not None:
+        robust["light_direction_deg"] = (_direction_cone(space, robust_fit)["angle_deg"]
+                                         if robust_fit is not None else None)
+    out["robust"] = robust
     return out
 
 
