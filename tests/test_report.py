@@ -322,6 +322,9 @@ def test_truth_errors(projected):
         want = np.linalg.norm(p_fit - p_true) / np.linalg.norm(p_true)
         assert err["product_relative"][obj] == pytest.approx(want)
     assert err["values"]["light.intensity"] == 40.0
+    # Intensity and albedos are known only as products here: marked, the light position is not.
+    assert sorted(err["split_convention"]) == sorted(
+        ["light.intensity"] + [f"objects.{o}.albedo.{c}" for o in ("ball", "floor") for c in "rgb"])
     assert err["errors"]["light.position.x"] == pytest.approx(result.x["light.position.x"] - 2.0)
     other = truth_dict()
     other["objects"][0]["name"] = "sphere"
@@ -415,12 +418,19 @@ def test_cli_report_and_truth(tmp_path, capsys, speed_png):
     assert lines[-2] == f"results in {out}"
     assert re.fullmatch(r"product relative error: ball [\d.e+-]+%, floor [\d.e+-]+%", lines[-3]), lines[-3]
     assert re.fullmatch(r"light position error: [\d.e+-]+ m", lines[-4]), lines[-4]
+    # The photo fixes intensity x albedo only: those rows show "(split)", not an error, and say why.
+    assert lines[-5].startswith("  (split): the photo fixes only the products of these"), lines[-5]
     fitted = json.loads((out / "result.json").read_text(encoding="utf-8"))["fit_report"]["fitted"]
-    table = lines[-4 - len(fitted):-4]
+    table = lines[-5 - len(fitted):-5]
     for (name, value), line in zip(fitted.items(), table):
         parts = line.split()
         assert parts[0] == name and float(parts[1]) == pytest.approx(value, rel=1e-5, abs=1e-9)
-    assert table[0].split()[0] == "light.position.x" and "truth" in lines[-5 - len(fitted)]
+        split = name == "light.intensity" or ".albedo." in name
+        assert (parts[3] == "(split)") == split, line
+        if not split:
+            float(parts[3])  # an error in metres
+    assert table[0].split()[0] == "light.position.x" and "truth" in lines[-6 - len(fitted)]
+    assert html_text.count("<td>split convention</td>") == 7 and "Split convention:" in html_text
 
     # A truth that does not match the scene is one clear line, before any fitting.
     bad = truth_dict()

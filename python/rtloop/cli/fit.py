@@ -466,13 +466,18 @@ def _summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None =
     bars = ((result.uncertainty or {}).get("robust") or {}).get("sigma") or {}  # the block sandwich's
     for name, value in result.x.items():
         row = f"  {name:<{width}}  {value:12.6g}"
+        split = truth is not None and name in truth.get("split_convention", [])
         if truth is not None and name in truth["values"]:
-            row += f"  {truth['values'][name]:12.6g}  {truth['errors'][name]:+12.4g}"
+            error = f"{'(split)':>12}" if split else f"{truth['errors'][name]:+12.4g}"
+            row += f"  {truth['values'][name]:12.6g}  {error}"
         if bars.get(name):
             row += f"  +- {bars[name]:.3g}"
-            if truth is not None and name in truth["errors"]:
+            if truth is not None and name in truth["errors"] and not split:
                 row += f" ({truth['errors'][name] / bars[name]:+.1f} sigma)"
         lines.append(row)
+    if truth is not None and truth.get("split_convention"):
+        lines.append("  (split): the photo fixes only the products of these, not each one: their errors "
+                     "say how the fit split the products (see the product errors below)")
     if truth is not None:
         if "light_position_m" in truth:
             lines.append(f"light position error: {truth['light_position_m']:.4g} m")

@@ -366,10 +366,15 @@ def _values_section(page: _Page, scene: Scene, terr: dict[str, Any] | None) -> N
     bounds = scene.bounds()
     page.add("<h2>Fitted values</h2>")
     if terr is not None:
-        zs = terr.get("sigmas", {})
-        body = [[n, fitted[j], terr["values"][n], terr["errors"][n], zs.get(n), f"{_fmt(lo, 4)} … {_fmt(hi, 4)}"]
+        zs, split = terr.get("sigmas", {}), set(terr.get("split_convention", []))
+        body = [[n, fitted[j], terr["values"][n], "split convention" if n in split else terr["errors"][n],
+                 None if n in split else zs.get(n), f"{_fmt(lo, 4)} … {_fmt(hi, 4)}"]
                 for j, (n, (lo, hi)) in enumerate(zip(names, bounds))]
         page.add(_table(["parameter", "fitted", "truth", "error", "error / sigma", "bounds"], body))
+        if split:
+            page.add("<p>Split convention: the photo fixes only the products of these parameters (light intensity "
+                     "x colour x albedo x exposure), not each one; their truth and fitted values differ by how the "
+                     "fit split the products. The product errors below are what the photo determines.</p>")
         errs = []
         if "light_position_m" in terr:
             errs.append(["light position error (m)", terr["light_position_m"]])

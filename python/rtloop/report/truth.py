@@ -28,7 +28,9 @@ def truth_errors(result: Any, truth: Any) -> dict[str, Any]:
     """Compare a fit with the true scene: per-parameter values and errors, the light position error in
     metres (when the position was fitted) and each object's product relative error,
     |P_fit - P_true| / |P_true| over R, G, B (products: exposure x intensity x colour x albedo); ``sigmas``:
-    each error over the fit's block-sandwich sigma, where it has one."""
+    each error over the fit's block-sandwich sigma, where it has one; ``split_convention``: the parameters
+    the photo does not determine one by one (the factors of a determined product), whose errors say how the
+    fit split the product, not how well it fitted."""
     scene = result.scene
     aligned, true = truth_values(scene, truth)
     names = scene.param_names()
@@ -37,6 +39,11 @@ def truth_errors(result: Any, truth: Any) -> dict[str, Any]:
         "values": {n: float(v) for n, v in zip(names, true)},
         "errors": {n: float(f - t) for n, f, t in zip(names, fitted, true)},
     }
+    # Where the photo fixes only products, the factors' own errors depend on how the fit split them.
+    ident = getattr(result, "identifiability", None) or {}
+    factors = {p for term in ident.get("determined", []) if "*" in term for p in term.split("*")}
+    out["split_convention"] = ([n for n in names if any(n == p or n.startswith(p + ".") for p in factors)]
+                               if ident.get("degenerate") else [])
     bars = ((getattr(result, "uncertainty", None) or {}).get("robust") or {}).get("sigma") or {}
     out["sigmas"] = {n: e / bars[n] for n, e in out["errors"].items() if bars.get(n)}  # error / sigma
     pos = [names.index(f"light.position.{c}") for c in "xyz" if f"light.position.{c}" in names]
