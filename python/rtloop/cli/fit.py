@@ -418,6 +418,9 @@ class _Run:
         self.progress.end_line()
         for w in result.warnings:
             print(f"{PROG}: warning: {w}", file=sys.stderr)
+        good = result.goodness or {}
+        if good.get("ratio", 0.0) >= good.get("explained_below", float("inf")):
+            print(f"{PROG}: warning: {good['verdict']}", file=sys.stderr)
         self.check_stop()
 
         write_result(tmp, result, input_paths(args.scene, args.image, args.response, args.crop, args.mask))
@@ -447,6 +450,9 @@ def _summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None =
         + f"fit {_duration(result.seconds)}, wall time {_duration(wall)}"
     ]
     lines.extend(_model_lines(result.model or {}, dict(result.scene.to_dict())))
+    good = result.goodness or {}
+    if good.get("verdict"):
+        lines.append(f"goodness of fit: {good['ratio']:.2g}x the photo's noise floor: {good['verdict']}")
     ident = result.identifiability or {}
     if ident.get("degenerate"):
         lines.append("")

@@ -18,6 +18,7 @@ from .._srgb import decode
 from ..errors import RtloopError, RtloopWarning
 from ..scene import Scene, load_scene
 from .bounds import narrowed, restore_bounds
+from .goodness import goodness
 from .identifiability import identifiability as _identifiability
 from .identifiability import lit_pixel_counts
 from .products import product_bounds as _product_bounds
@@ -172,6 +173,7 @@ def fit(
         settings=settings,
         model=model,
     )
+    result.goodness = goodness(current, target, use, clip=clip)
     doubts += _at_bounds(current, all_paths)
     for d in doubts:
         warnings.warn(d, RtloopWarning, stacklevel=2)

@@ -75,6 +75,8 @@ class FitResult:
     #: The image terms the fit used and why: ``{"terms": [...], "evidence": {term: {...}}}`` (see
     #: :mod:`rtloop.fit.selection`).
     model: dict[str, Any] = field(default_factory=dict)
+    #: The residual against the photo's noise floor and a verdict (:mod:`rtloop.fit.goodness`).
+    goodness: dict[str, Any] = field(default_factory=dict)
 
     @property
     def fitness(self) -> float:
@@ -106,6 +108,7 @@ class FitResult:
             "products": self.products,
             "identifiability": self.identifiability,
             "model": self.model,
+            "goodness": self.goodness,
             "uncertainty": self.uncertainty,
             "message": self.message,
             "warnings": list(self.warnings),
