@@ -297,6 +297,44 @@ def test_scene_command_end_to_end(tmp_path, capsys, photos) -> None:
     assert code == 1 and "--force" in err
 
 
+def test_scene_from_one_photo_masks_the_board(tmp_path, capsys, photos) -> None:
+    """With no --objective the board photo is the one to fit: mask.png leaves out every pixel the board
+    and the grey card changed (found by comparing with the board-free render) and keeps the ball; the
+    scene names it and rtloop-fit uses it with no --mask."""
+    out = tmp_path / "scene"
+    code, _, err = run(
+        scene_main, capsys, photos["photo"], "--board", BOARD, "--ball-radius", "80mm", "--vfov", "50",
+        "--grey-card", ",".join(map(str, CARD)), "--board-margin", "0", "--width", "64", "--out", out,
+    )
+    assert code == 0, err
+    scene = json.loads((out / "scene.json").read_text())
+    assert scene["meta"]["acquisition"]["mask"] == "mask.png"
+    keep = cv2.imread(str(out / "mask.png"), cv2.IMREAD_GRAYSCALE) > 127
+    assert keep.shape == (H, W)
+    with_board = rtloop.load_image(photos["photo"], (W, H))
+    without = rtloop.load_image(photos["objective"], (W, H))
+    changed = np.abs(with_board - without).max(axis=2) > 0.005
+    assert changed.sum() > 0.05 * W * H  # the board is a good part of the photo
+    assert not (keep & changed).any()  # nothing the board or the card touched is fitted
+    assert (~keep).sum() <= 1.1 * changed.sum()  # and little else is dropped
+    uv = PinholeCamera.from_scene_camera(TRUE_SCENE["camera"], W, H).project(
+        np.array([TRUE_SCENE["objects"][0]["center"]])
+    )[0]
+    assert keep[int(uv[1]) - 20 : int(uv[1]) + 20, int(uv[0]) - 20 : int(uv[0]) + 20].all()  # the ball
+
+    code = fit_cli.main([str(out / "scene.json"), str(out / "objective.png"), "--out", str(tmp_path / "fit"),
+                         "--generations", "2", "--population", "8", "--snapshot-every", "0"])
+    capsys.readouterr()
+    assert code == 0
+    result = json.loads((tmp_path / "fit" / "result.json").read_text())
+    assert result["fit_report"]["inputs"]["mask"] == str((out / "mask.png").resolve())
+
+    (out / "mask.png").unlink()  # a scene naming a mask that is gone: one line naming it and the fix
+    code = fit_cli.main([str(out / "scene.json"), str(out / "objective.png"), "--out", str(tmp_path / "fit2")])
+    err = capsys.readouterr().err
+    assert code != 0 and "mask.png" in err and "--mask" in err
+
+
 def test_scene_command_with_a_calibration(tmp_path, capsys, photos) -> None:
     """A calibration file (here an ideal one) is used instead of --vfov."""
     f = (H / 2) / np.tan(np.radians(25))
