@@ -9,6 +9,7 @@ and the ball it was made with, and be accepted by rtloop-fit.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import cv2
@@ -430,3 +431,55 @@ def test_board_image_and_detection_agree() -> None:
     )
     expected = det.object_points[:, :2] / spec.square_m * 60 + 30 - 0.5
     assert np.abs(det.image_points - expected).max() < 0.2
+
+
+def _jpeg_with_exif(png: Path, path: Path, tags: dict[int, object]) -> Path:
+    """The photo as an 8-bit JPEG whose EXIF sub-IFD carries ``tags`` (written by Pillow)."""
+    rgb = cv2.cvtColor(cv2.imread(str(png), cv2.IMREAD_UNCHANGED), cv2.COLOR_BGR2RGB)
+    exif = Image.Exif()
+    exif.get_ifd(0x8769).update(tags)
+    Image.fromarray((rgb // 257).astype(np.uint8)).save(path, quality=97, exif=exif)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("tags", "focal_px"),
+    [
+        ({0xA405: 28}, 28 * math.hypot(W, H) / math.hypot(36, 24)),  # 35 mm-equivalent, whole mm
+        ({0x920A: 4.0, 0xA20E: 1600.0, 0xA210: 3}, 4.0 * 1600.0 / 10.0),  # focal length, pixels per cm
+    ],
+)
+def test_scene_field_of_view_from_exif(tmp_path, capsys, photos, tags, focal_px) -> None:
+    """With no --vfov/--camera the field of view is the EXIF focal length's (closed form)."""
+    jpeg = _jpeg_with_exif(photos["photo"], tmp_path / "photo.jpg", tags)
+    code, _, err = run(scene_main, capsys, jpeg, "--board", BOARD, "--ball-radius", "80mm",
+                       "--objective", photos["objective"], "--out", tmp_path / "o")
+    assert code == 0, err
+    acq = json.loads((tmp_path / "o" / "scene.json").read_text())
+    assert acq["meta"]["acquisition"]["camera_model"] == "exif"
+    assert acq["camera"]["vfov_deg"] == pytest.approx(math.degrees(2 * math.atan(H / 2 / focal_px)), abs=1e-6)
+
+
+def test_scene_without_exif_estimates_from_the_board_and_says_so(tmp_path, capsys, photos) -> None:
+    code, out, err = run(scene_main, capsys, photos["photo"], "--board", BOARD, "--ball-radius", "80mm",
+                         "--objective", photos["objective"], "--out", tmp_path / "o")
+    assert code == 0, err
+    assert "has no EXIF focal length" in out + err and "--vfov" in out + err
+    scene = json.loads((tmp_path / "o" / "scene.json").read_text())
+    assert scene["meta"]["acquisition"]["camera_model"] == "board"
+    assert scene["camera"]["vfov_deg"] == pytest.approx(50.0, abs=0.3)  # the true one
+
+
+@pytest.mark.parametrize("z", [0.0, 0.06, 0.12])  # tilt 0, 5 and 10 degrees
+def test_scene_refuses_a_head_on_board_without_a_field_of_view(tmp_path, capsys, z) -> None:
+    """Seen from straight above, one view of the board does not fix the focal length: one line naming the
+    cause and the fixes, not a wrong scene."""
+    spec = parse_board(BOARD)
+    cam = PinholeCamera.from_scene_camera(
+        {"position": [0.0, 0.7, z], "look_at": [0.0, 0.0, 0.0], "up": [0, 0, 1], "vfov_deg": 50}, W, H
+    )
+    path = tmp_path / "head-on.png"
+    write_png16_srgb(path, board_view(spec, cam, background=0.4))
+    code, _, err = run(scene_main, capsys, path, "--board", BOARD, "--ball-radius", "0.08", "--out", tmp_path / "o")
+    assert code == 1 and len(err.strip().splitlines()) == 1
+    assert "head-on" in err and "--vfov" in err and "EXIF" in err

@@ -36,6 +36,7 @@ from .boards import BoardSpec, parse_board
 from .calibration import CameraIntrinsics, PinholeRemap
 from .camera import focal_from_vfov
 from .colour import ColourCorrection, colorchecker_correction, grey_card_balance
+from .exif import ExifFocal
 from .pose import FloorPose, estimate_floor_pose
 
 __all__ = ["AcquiredScene", "build_scene", "draw_overlay", "fit_section"]
@@ -102,6 +103,7 @@ def build_scene(
     *,
     intrinsics: CameraIntrinsics | None = None,
     vfov_deg: float | None = None,
+    exif: ExifFocal | None = None,
     objective: np.ndarray | None = None,
     colour: str | tuple | ColourCorrection | None = None,
     ball_hint: tuple[float, float, float] | None = None,
@@ -121,7 +123,9 @@ def build_scene(
         board: the board (see ``boards.parse_board``).
         ball_radius: metres.
         intrinsics: a calibration of this camera (undistorts and re-centres); or ``vfov_deg``, the
-            full vertical field of view of an already distortion-free photo; neither: estimated.
+            full vertical field of view of an already distortion-free photo; else ``exif``, the focal
+            length the photo's EXIF gives (:func:`rtloop.acquisition.exif.exif_focal`); none: estimated
+            from the board, refused when the board is seen too nearly head-on for that.
         objective: the photo to fit, from the same camera position and settings (e.g. the same view
             with the board removed); default: ``photo``.
         colour: ``None``, ``"colorchecker"``, a grey-card rectangle ``(x, y, w, h)`` / ``"x,y,w,h"``
@@ -182,6 +186,8 @@ def build_scene(
                 f"vertical field of view must be between 1 and 170 degrees (got {vfov_deg})"
             )
         focal, focal_source = focal_from_vfov(vfov_deg, h), "given"
+    elif exif is not None:
+        focal, focal_source = exif.focal_px, "exif"
     else:
         focal, focal_source = None, "board"
 
@@ -190,8 +196,8 @@ def build_scene(
     camera = pose.camera
     if focal_source == "board":
         notes.append(
-            "the focal length was estimated from the board alone (vertical field of view "
-            f"{camera.vfov_deg:.1f} deg); "
+            f"{where} has no EXIF focal length: it was estimated from the board alone (vertical field of "
+            f"view {camera.vfov_deg:.1f} deg); "
             "a calibration (rtloop-acquire calibrate) or --vfov is more accurate"
         )
     if pose.reprojection_rms_px > 1.0:
@@ -294,6 +300,7 @@ def build_scene(
     report = {
         "photo_size": [w, h],
         "camera_model": focal_source,
+        **({"focal_from": exif.source} if focal_source == "exif" and exif is not None else {}),
         "colour": {k: v for k, v in correction.report().items() if k != "patch_corners_px"},
         "pose": pose.report(),
         "ball": {**silhouette.report(), **sphere.report()},

@@ -17,6 +17,7 @@ from .._files import move_into_place, recover_leftovers, staging_dir
 from ..acquisition._common import AcquisitionError, write_json, write_png8, write_png16_srgb
 from ..acquisition.boards import parse_board
 from ..acquisition.calibration import CameraIntrinsics
+from ..acquisition.exif import exif_focal
 from ..acquisition.response import load_photo
 from .acquire import DEFAULT_BOARD
 from .args import (
@@ -107,7 +108,8 @@ def _build_scene_parser() -> Parser:
         "--vfov",
         type=positive_float,
         metavar="DEG",
-        help="vertical field of view of a distortion-free photo, in degrees",
+        help="vertical field of view of a distortion-free photo, in degrees (default: from the photo's EXIF focal "
+        "length, else from the board when it is seen at enough of an angle)",
     )
     g = p.add_argument_group("photos")
     g.add_argument(
@@ -202,6 +204,9 @@ def _cmd_scene(args: argparse.Namespace) -> int:
     photo = load_photo(args.photo, **load)
     objective = load_photo(args.objective, **load) if args.objective else None
     intrinsics = CameraIntrinsics.load(args.camera) if args.camera else None
+    exif = None
+    if intrinsics is None and args.vfov is None:
+        exif = exif_focal(args.photo, photo.shape[1], photo.shape[0])
     mask = None
     if args.ball_mask:
         m = load_photo(args.ball_mask, response="linear")
@@ -213,6 +218,7 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         args.ball_radius,
         intrinsics=intrinsics,
         vfov_deg=args.vfov,
+        exif=exif,
         objective=objective,
         colour=colour,
         ball_hint=args.ball,
