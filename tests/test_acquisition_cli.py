@@ -9,6 +9,7 @@ and the ball it was made with, and be accepted by rtloop-fit.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import cv2
@@ -297,6 +298,44 @@ def test_scene_command_end_to_end(tmp_path, capsys, photos) -> None:
     assert code == 1 and "--force" in err
 
 
+def test_scene_from_one_photo_masks_the_board(tmp_path, capsys, photos) -> None:
+    """With no --objective the board photo is the one to fit: mask.png leaves out every pixel the board
+    and the grey card changed (found by comparing with the board-free render) and keeps the ball; the
+    scene names it and rtloop-fit uses it with no --mask."""
+    out = tmp_path / "scene"
+    code, _, err = run(
+        scene_main, capsys, photos["photo"], "--board", BOARD, "--ball-radius", "80mm", "--vfov", "50",
+        "--grey-card", ",".join(map(str, CARD)), "--board-margin", "0", "--width", "64", "--out", out,
+    )
+    assert code == 0, err
+    scene = json.loads((out / "scene.json").read_text())
+    assert scene["meta"]["acquisition"]["mask"] == "mask.png"
+    keep = cv2.imread(str(out / "mask.png"), cv2.IMREAD_GRAYSCALE) > 127
+    assert keep.shape == (H, W)
+    with_board = rtloop.load_image(photos["photo"], (W, H))
+    without = rtloop.load_image(photos["objective"], (W, H))
+    changed = np.abs(with_board - without).max(axis=2) > 0.005
+    assert changed.sum() > 0.05 * W * H  # the board is a good part of the photo
+    assert not (keep & changed).any()  # nothing the board or the card touched is fitted
+    assert (~keep).sum() <= 1.1 * changed.sum()  # and little else is dropped
+    uv = PinholeCamera.from_scene_camera(TRUE_SCENE["camera"], W, H).project(
+        np.array([TRUE_SCENE["objects"][0]["center"]])
+    )[0]
+    assert keep[int(uv[1]) - 20 : int(uv[1]) + 20, int(uv[0]) - 20 : int(uv[0]) + 20].all()  # the ball
+
+    code = fit_cli.main([str(out / "scene.json"), str(out / "objective.png"), "--out", str(tmp_path / "fit"),
+                         "--generations", "2", "--population", "8", "--snapshot-every", "0"])
+    capsys.readouterr()
+    assert code == 0
+    result = json.loads((tmp_path / "fit" / "result.json").read_text())
+    assert result["fit_report"]["inputs"]["mask"] == str((out / "mask.png").resolve())
+
+    (out / "mask.png").unlink()  # a scene naming a mask that is gone: one line naming it and the fix
+    code = fit_cli.main([str(out / "scene.json"), str(out / "objective.png"), "--out", str(tmp_path / "fit2")])
+    err = capsys.readouterr().err
+    assert code != 0 and "mask.png" in err and "--mask" in err
+
+
 def test_scene_command_with_a_calibration(tmp_path, capsys, photos) -> None:
     """A calibration file (here an ideal one) is used instead of --vfov."""
     f = (H / 2) / np.tan(np.radians(25))
@@ -415,3 +454,54 @@ def test_scene_command_ball_hint_is_where_the_ball_is_looked_for(tmp_path, capsy
         assert np.linalg.norm(np.array(ball["center"]) - centre) <= 0.01 * distance
     else:
         assert code == 1 and "no ball of radius 0.08 m" in err and not out.exists()
+
+def _jpeg_with_exif(png: Path, path: Path, tags: dict[int, object]) -> Path:
+    """The photo as an 8-bit JPEG whose EXIF sub-IFD carries ``tags`` (written by Pillow)."""
+    rgb = cv2.cvtColor(cv2.imread(str(png), cv2.IMREAD_UNCHANGED), cv2.COLOR_BGR2RGB)
+    exif = Image.Exif()
+    exif.get_ifd(0x8769).update(tags)
+    Image.fromarray((rgb // 257).astype(np.uint8)).save(path, quality=97, exif=exif)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("tags", "focal_px"),
+    [
+        ({0xA405: 28}, 28 * math.hypot(W, H) / math.hypot(36, 24)),  # 35 mm-equivalent, whole mm
+        ({0x920A: 4.0, 0xA20E: 1600.0, 0xA210: 3}, 4.0 * 1600.0 / 10.0),  # focal length, pixels per cm
+    ],
+)
+def test_scene_field_of_view_from_exif(tmp_path, capsys, photos, tags, focal_px) -> None:
+    """With no --vfov/--camera the field of view is the EXIF focal length's (closed form)."""
+    jpeg = _jpeg_with_exif(photos["photo"], tmp_path / "photo.jpg", tags)
+    code, _, err = run(scene_main, capsys, jpeg, "--board", BOARD, "--ball-radius", "80mm",
+                       "--objective", photos["objective"], "--out", tmp_path / "o")
+    assert code == 0, err
+    acq = json.loads((tmp_path / "o" / "scene.json").read_text())
+    assert acq["meta"]["acquisition"]["camera_model"] == "exif"
+    assert acq["camera"]["vfov_deg"] == pytest.approx(math.degrees(2 * math.atan(H / 2 / focal_px)), abs=1e-6)
+
+
+def test_scene_without_exif_estimates_from_the_board_and_says_so(tmp_path, capsys, photos) -> None:
+    code, out, err = run(scene_main, capsys, photos["photo"], "--board", BOARD, "--ball-radius", "80mm",
+                         "--objective", photos["objective"], "--out", tmp_path / "o")
+    assert code == 0, err
+    assert "has no EXIF focal length" in out + err and "--vfov" in out + err
+    scene = json.loads((tmp_path / "o" / "scene.json").read_text())
+    assert scene["meta"]["acquisition"]["camera_model"] == "board"
+    assert scene["camera"]["vfov_deg"] == pytest.approx(50.0, abs=0.3)  # the true one
+
+
+@pytest.mark.parametrize("z", [0.0, 0.06, 0.12])  # tilt 0, 5 and 10 degrees
+def test_scene_refuses_a_head_on_board_without_a_field_of_view(tmp_path, capsys, z) -> None:
+    """Seen from straight above, one view of the board does not fix the focal length: one line naming the
+    cause and the fixes, not a wrong scene."""
+    spec = parse_board(BOARD)
+    cam = PinholeCamera.from_scene_camera(
+        {"position": [0.0, 0.7, z], "look_at": [0.0, 0.0, 0.0], "up": [0, 0, 1], "vfov_deg": 50}, W, H
+    )
+    path = tmp_path / "head-on.png"
+    write_png16_srgb(path, board_view(spec, cam, background=0.4))
+    code, _, err = run(scene_main, capsys, path, "--board", BOARD, "--ball-radius", "0.08", "--out", tmp_path / "o")
+    assert code == 1 and len(err.strip().splitlines()) == 1
+    assert "head-on" in err and "--vfov" in err and "EXIF" in err

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import colour
@@ -124,3 +125,53 @@ def test_bad_responses_are_clear_errors(tmp_path: Path, spec: str, content: str 
 def test_missing_photo_is_a_clear_error(tmp_path: Path) -> None:
     with pytest.raises(AcquisitionError, match="no such file"):
         load_photo(tmp_path / "nope.png", response="gamma:2.2")
+
+
+def test_raw_without_rawpy_is_a_clear_error(tmp_path: Path, monkeypatch) -> None:
+    path = tmp_path / "IMG_0001.CR2"
+    path.write_bytes(b"not looked at")
+    monkeypatch.setitem(sys.modules, "rawpy", None)  # import rawpy raises ImportError
+    with pytest.raises(AcquisitionError, match=r"IMG_0001\.CR2: a camera RAW file.*rawpy.*rtloop\[raw\]"):
+        load_photo(path)
+
+
+def test_raw_file_libraw_cannot_read_is_a_clear_error(tmp_path: Path) -> None:
+    pytest.importorskip("rawpy")
+    path = tmp_path / "broken.nef"
+    path.write_bytes(b"\x00" * 64)
+    with pytest.raises(AcquisitionError, match=r"broken\.nef: LibRaw cannot read it"):
+        load_photo(path)
+
+
+def _flat_dng(path: Path, code: int, w: int = 64, h: int = 48, bits: int = 12) -> Path:
+    """A flat grey RGGB DNG (identity colour matrix, neutral as-shot white) written by pidng."""
+    core = pytest.importorskip("pidng.core")
+    defs = pytest.importorskip("pidng.defs")
+    t, tag = core.DNGTags(), core.Tag
+    for key, value in [
+        (tag.ImageWidth, w), (tag.ImageLength, h), (tag.TileWidth, w), (tag.TileLength, h),
+        (tag.Orientation, defs.Orientation.Horizontal),
+        (tag.PhotometricInterpretation, defs.PhotometricInterpretation.Color_Filter_Array),
+        (tag.SamplesPerPixel, 1), (tag.BitsPerSample, bits), (tag.CFARepeatPatternDim, [2, 2]),
+        (tag.CFAPattern, defs.CFAPattern.RGGB), (tag.BlackLevel, 0), (tag.WhiteLevel, (1 << bits) - 1),
+        (tag.ColorMatrix1, [[1, 1], [0, 1], [0, 1], [0, 1], [1, 1], [0, 1], [0, 1], [0, 1], [1, 1]]),
+        (tag.CalibrationIlluminant1, defs.CalibrationIlluminant.D65), (tag.AsShotNeutral, [[1, 1]] * 3),
+        (tag.Make, "rtloop"), (tag.Model, "test"), (tag.DNGVersion, defs.DNGVersion.V1_4),
+        (tag.DNGBackwardVersion, defs.DNGVersion.V1_2), (tag.PreviewColorSpace, defs.PreviewColorSpace.sRGB),
+    ]:
+        t.set(key, value)
+    r = core.RAW2DNG()
+    r.options(t, path="", compress=False)
+    r.convert(np.full((h, w), code, np.uint16), filename=str(path.with_suffix("")))
+    return path
+
+
+@pytest.mark.parametrize("code", [500, 1000, 2000])
+def test_dng_is_read_linear(tmp_path: Path, code: int) -> None:
+    """A DNG through rawpy: code / white level, no tone curve (the closed form), at any size asked."""
+    pytest.importorskip("rawpy")
+    path = _flat_dng(tmp_path / "flat.dng", code)
+    img = load_photo(path)
+    assert img.shape == (48, 64, 3)
+    assert np.allclose(img, code / 4095, atol=2e-4)
+    assert np.allclose(load_photo(path, (32, 24)), code / 4095, atol=2e-4)

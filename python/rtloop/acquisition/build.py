@@ -36,6 +36,7 @@ from .boards import BoardSpec, parse_board
 from .calibration import CameraIntrinsics, PinholeRemap
 from .camera import focal_from_vfov
 from .colour import ColourCorrection, colorchecker_correction, grey_card_balance
+from .exif import ExifFocal
 from .pose import FloorPose, estimate_floor_pose
 
 __all__ = ["AcquiredScene", "build_scene", "draw_overlay", "fit_section"]
@@ -66,6 +67,9 @@ class AcquiredScene:
     colour: ColourCorrection
     overlay: np.ndarray
     warnings: list[str] = field(default_factory=list)
+    #: bool (H, W) at the objective's size, True where the scene models the photo (False on the board
+    #: with its paper margin and on the colour target); None when the objective is another photo.
+    mask: np.ndarray | None = None
 
 
 def fit_section(
@@ -99,6 +103,7 @@ def build_scene(
     *,
     intrinsics: CameraIntrinsics | None = None,
     vfov_deg: float | None = None,
+    exif: ExifFocal | None = None,
     objective: np.ndarray | None = None,
     colour: str | tuple | ColourCorrection | None = None,
     ball_hint: tuple[float, float, float] | None = None,
@@ -107,6 +112,7 @@ def build_scene(
     width: int = 160,
     light_range: float = 2.0,
     names: tuple[str, str] = ("ball", "floor"),
+    board_margin: float | None = None,
     where: str = "photo",
     objective_where: str = "objective",
 ) -> AcquiredScene:
@@ -117,7 +123,9 @@ def build_scene(
         board: the board (see ``boards.parse_board``).
         ball_radius: metres.
         intrinsics: a calibration of this camera (undistorts and re-centres); or ``vfov_deg``, the
-            full vertical field of view of an already distortion-free photo; neither: estimated.
+            full vertical field of view of an already distortion-free photo; else ``exif``, the focal
+            length the photo's EXIF gives (:func:`rtloop.acquisition.exif.exif_focal`); none: estimated
+            from the board, refused when the board is seen too nearly head-on for that.
         objective: the photo to fit, from the same camera position and settings (e.g. the same view
             with the board removed); default: ``photo``.
         colour: ``None``, ``"colorchecker"``, a grey-card rectangle ``(x, y, w, h)`` / ``"x,y,w,h"``
@@ -127,6 +135,7 @@ def build_scene(
         width: the scene's working width in pixels (height follows the photo's aspect ratio).
         light_range: size of the light's search box in units of the scene's scale.
         names: the names of the sphere and the plane in the scene.
+        board_margin: the white paper around the board's squares, metres (default: one square).
 
     Raises:
         AcquisitionError: any step failed; the message says which and what to do.
@@ -177,6 +186,8 @@ def build_scene(
                 f"vertical field of view must be between 1 and 170 degrees (got {vfov_deg})"
             )
         focal, focal_source = focal_from_vfov(vfov_deg, h), "given"
+    elif exif is not None:
+        focal, focal_source = exif.focal_px, "exif"
     else:
         focal, focal_source = None, "board"
 
@@ -185,8 +196,8 @@ def build_scene(
     camera = pose.camera
     if focal_source == "board":
         notes.append(
-            "the focal length was estimated from the board alone (vertical field of view "
-            f"{camera.vfov_deg:.1f} deg); "
+            f"{where} has no EXIF focal length: it was estimated from the board alone (vertical field of "
+            f"view {camera.vfov_deg:.1f} deg); "
             "a calibration (rtloop-acquire calibrate) or --vfov is more accurate"
         )
     if pose.reprojection_rms_px > 1.0:
@@ -289,6 +300,7 @@ def build_scene(
     report = {
         "photo_size": [w, h],
         "camera_model": focal_source,
+        **({"focal_from": exif.source} if focal_source == "exif" and exif is not None else {}),
         "colour": {k: v for k, v in correction.report().items() if k != "patch_corners_px"},
         "pose": pose.report(),
         "ball": {**silhouette.report(), **sphere.report()},
@@ -311,7 +323,47 @@ def build_scene(
     scene["meta"] = {"acquisition": jsonable(report)}
     rtloop.load_scene(scene)  # validates: a failure here is a bug, not bad input
     overlay = draw_overlay(photo, scene, pose, silhouette)
-    return AcquiredScene(scene, objective, photo, pose, silhouette, sphere, correction, overlay, notes)
+    unmodelled = None
+    if same:  # the board is in the photo to fit: leave it (and the colour target) out of the fit
+        margin = spec.square_m if board_margin is None else float(board_margin)
+        if not (math.isfinite(margin) and margin >= 0):
+            raise AcquisitionError(f"board margin must be 0 or more metres (got {board_margin})")
+        unmodelled = unmodelled_mask(pose, margin, correction, remap, w, h)
+    return AcquiredScene(
+        scene, objective, photo, pose, silhouette, sphere, correction, overlay, notes, unmodelled
+    )
+
+
+def unmodelled_mask(
+    pose: FloorPose,
+    margin_m: float,
+    correction: ColourCorrection,
+    remap: PinholeRemap | None,
+    w: int,
+    h: int,
+) -> np.ndarray:
+    """True where the scene models the photo: False on the board grown by ``margin_m`` on each side
+    (its paper) and on the grey card's rectangle or the ColorChecker's box, grown by 2 px."""
+    bw, bh = pose.board.size_m
+    m = margin_m
+    paper = np.array([[-m, -m, 0], [bw + m, -m, 0], [bw + m, bh + m, 0], [-m, bh + m, 0]], dtype=float)
+    polygons = [pose.camera.project(pose.board_to_world(paper))]
+    details = correction.details
+    if "rect" in details:
+        x, y, rw, rh = details["rect"]
+        target = np.array([[x, y], [x + rw, y], [x + rw, y + rh], [x, y + rh]], dtype=float)
+    elif "chart_corners_px" in details:
+        target = np.asarray(details["chart_corners_px"], dtype=float).reshape(-1, 2)
+    else:
+        target = None
+    if target is not None:
+        polygons.append(target if remap is None else remap.points(target))
+    drop = np.zeros((h, w), np.uint8)
+    for poly in polygons:
+        if np.isfinite(poly).all():
+            cv2.fillPoly(drop, [np.round(poly * 16).astype(np.int32)], 1, cv2.LINE_8, shift=4)
+    drop = cv2.dilate(drop, np.ones((5, 5), np.uint8))
+    return drop == 0
 
 
 def _board_outline_px(pose: FloorPose) -> np.ndarray:

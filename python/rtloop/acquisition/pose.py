@@ -75,6 +75,25 @@ class FloorPose:
         }
 
 
+#: How well a ChArUco corner is located in a photo (pixels, 1 sigma), for the focal length's uncertainty.
+CORNER_NOISE_PX = 0.25
+#: The largest standard deviation of the board-estimated vertical field of view accepted (deg): refuses
+#: views within about 15 deg of head-on.
+MAX_VFOV_STD_DEG = 2.0
+
+
+def _focal_std(detection: BoardDetection, k: np.ndarray, rvec: np.ndarray, tvec: np.ndarray) -> float:
+    """The focal length's standard deviation (pixels) for corners located to CORNER_NOISE_PX, from the
+    Jacobian of the corners' projections in (rotation, translation, focal length)."""
+    _, jac = cv2.projectPoints(detection.object_points, rvec, tvec, k, np.zeros(5))
+    j = np.column_stack([jac[:, :6], jac[:, 6] + jac[:, 7]])  # one focal length (fixed aspect ratio)
+    try:
+        cov = np.linalg.inv(j.T @ j)
+    except np.linalg.LinAlgError:
+        return float("inf")
+    return CORNER_NOISE_PX * math.sqrt(max(float(cov[6, 6]), 0.0))
+
+
 def estimate_focal_from_board(detection: BoardDetection, width: int, height: int) -> float:
     """Focal length (pixels) of a centred, distortion-free camera from one view of a flat board.
 
@@ -95,17 +114,26 @@ def estimate_focal_from_board(detection: BoardDetection, width: int, height: int
         | cv2.CALIB_FIX_K6
     )
     try:
-        _, k, _, _, _ = cv2.calibrateCamera(
+        _, k, _, rvecs, tvecs = cv2.calibrateCamera(
             [detection.object_points], [detection.image_points], (width, height), k0, np.zeros(5), flags=flags
         )
         f = float(k[0, 0])
+        f_std = _focal_std(detection, k, rvecs[0], tvecs[0])
     except cv2.error:
-        f = float("nan")
+        f, f_std = float("nan"), float("inf")
     vfov = math.degrees(2 * math.atan(height / 2 / f)) if f > 0 else float("nan")
     if not (math.isfinite(f) and 3.0 <= vfov <= 150.0):
         raise AcquisitionError(
             "could not estimate the focal length from the board (it is probably seen nearly head-on); "
-            "calibrate the camera ('rtloop-acquire calibrate') or give the field of view (--vfov)"
+            "give --vfov or --camera ('rtloop-acquire calibrate'), or use a photo whose EXIF has the focal length"
+        )
+    # d vfov / d f = -h / (f^2 + h^2/4) radians per pixel
+    vfov_std = math.degrees(f_std * height / (f * f + height * height / 4))
+    if not vfov_std <= MAX_VFOV_STD_DEG:
+        raise AcquisitionError(
+            f"the board is seen too nearly head-on to fix the focal length (vertical field of view "
+            f"{vfov:.1f} +- {vfov_std:.1f} deg from its corners); give --vfov or --camera, use a photo "
+            "whose EXIF has the focal length, or photograph the board at more of an angle"
         )
     return f
 

@@ -34,6 +34,7 @@ from .._opencv import imdecode
 from .._srgb import decode
 from ._common import AcquisitionError
 from .objective import load_image
+from .raw import is_raw, load_raw
 
 __all__ = ["CameraResponse", "load_photo", "parse_response", "photo_info"]
 
@@ -306,7 +307,8 @@ def load_photo(
     """Load a photo as linear RGB float32, through any camera response.
 
     Args:
-        path: PNG, JPEG, BMP, TIFF (8 or 16 bit, or float), or whatever rtloop.load_image reads.
+        path: PNG, JPEG, BMP, TIFF (8 or 16 bit, or float), or whatever rtloop.load_image reads; a camera
+            RAW file (.dng, .cr2, .nef, .arw, ...) is read linear through rawpy (extra ``raw``).
         size: ``None`` keeps the photo's own size; else what rtloop.load_image accepts (a scene or
             ``(width, height)``): the photo is linearised at full size and then area-resized to it.
         response: see :func:`parse_response`. Float images are linear whatever this says (as in
@@ -320,6 +322,9 @@ def load_photo(
     """
     name = os.fspath(path)
     resp = parse_response(response)
+    if is_raw(name):  # linear from LibRaw: the response and levels do not apply
+        linear, _ = load_raw(name)
+        return linear if size is None else _resize_like_load_image(linear, size, crop, name)
     info = photo_info(name)
     levels = black_level != 0.0 or white_level is not None
     native = (info["width"], info["height"])

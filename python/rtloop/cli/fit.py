@@ -193,7 +193,8 @@ def _build_parser() -> Parser:
                    "'off': never")
     p.add_argument("--mask", type=Path, metavar="PNG",
                    help="an image of IMAGE's size (or the scene's): white where the scene models the photo, "
-                   "black where it does not (another object, a reflection); black pixels are left out of the fit")
+                   "black where it does not (another object, a reflection); black pixels are left out of the fit (default: the mask the scene names, "
+                   "which rtloop-scene writes to leave the board out)")
     p.add_argument("--snapshot-every", type=int_at_least(0, "a whole number >= 0"), default=5, metavar="N",
                    help="render the best individual every N generations of every stage into snapshots/ "
                    "(default 5; 0 disables)")
@@ -339,6 +340,25 @@ def _commit(tmp: Path, out: Path, replace: bool) -> None:
 _SAFE_NAME = re.compile(r"[^A-Za-z0-9_+-]+")
 
 
+def scene_mask(scene_path: Path) -> Path | None:
+    """The mask a scene names (``meta.acquisition.mask``, written by rtloop-scene), relative to the scene's
+    folder; None when it names none."""
+    import json
+
+    try:
+        meta = json.loads(Path(scene_path).read_text()).get("meta") or {}
+    except (OSError, ValueError, AttributeError):
+        return None  # load_scene has read it already: not a JSON object we can look into
+    name = (meta.get("acquisition") or {}).get("mask") if isinstance(meta, dict) else None
+    if not isinstance(name, str):
+        return None
+    path = Path(scene_path).parent / name
+    if not path.is_file():
+        raise _Failure(f"{scene_path}: meta.acquisition.mask names {name}, but {path} is not a file; "
+                       "put it back, or pass --mask")
+    return path
+
+
 class _Run:
     def __init__(self, args: argparse.Namespace, progress: _Progress, stop: threading.Event):
         self.args = args
@@ -354,6 +374,8 @@ class _Run:
         """Load, fit and write everything into ``tmp``; returns the FitResult."""
         args = self.args
         scene = rtloop.load_scene(args.scene)
+        if args.mask is None:
+            args.mask = scene_mask(args.scene)
         k = args.final_scale
         if max(scene.width, scene.height) * k > MAX_SIZE:
             raise _Failure(f"--final-scale {k}: final.png would be {scene.width * k}x{scene.height * k}, more "

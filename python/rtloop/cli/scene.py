@@ -14,10 +14,13 @@ try:
     from pathlib import Path
     from typing import Any
 
+    import numpy as np
+
     from .._files import move_into_place, recover_leftovers, staging_dir
     from ..acquisition._common import AcquisitionError, write_json, write_png8, write_png16_srgb
     from ..acquisition.boards import parse_board
     from ..acquisition.calibration import CameraIntrinsics
+    from ..acquisition.exif import exif_focal
     from ..acquisition.response import load_photo
     from .acquire import DEFAULT_BOARD
     from .args import (
@@ -111,7 +114,8 @@ def _build_scene_parser() -> Parser:
         "--vfov",
         type=positive_float,
         metavar="DEG",
-        help="vertical field of view of a distortion-free photo, in degrees",
+        help="vertical field of view of a distortion-free photo, in degrees (default: from the photo's EXIF focal "
+        "length, else from the board when it is seen at enough of an angle)",
     )
     g = p.add_argument_group("photos")
     g.add_argument(
@@ -159,6 +163,14 @@ def _build_scene_parser() -> Parser:
         action="store_true",
         help="do not assume the ball rests on the floor: fit its centre's height too (less precise)",
     )
+    g.add_argument(
+        "--board-margin",
+        type=float,
+        default=None,
+        metavar="M",
+        help="the white paper around the board's squares, metres (default one square); with no --objective "
+        "the board, this margin and the colour target are written to mask.png and left out of the fit",
+    )
     g.add_argument("--ball-name", default="ball", help="the sphere's name in the scene (default ball)")
     g.add_argument("--floor-name", default="floor", help="the plane's name in the scene (default floor)")
     g = p.add_argument_group("scene")
@@ -198,6 +210,9 @@ def _cmd_scene(args: argparse.Namespace) -> int:
     photo = load_photo(args.photo, **load)
     objective = load_photo(args.objective, **load) if args.objective else None
     intrinsics = CameraIntrinsics.load(args.camera) if args.camera else None
+    exif = None
+    if intrinsics is None and args.vfov is None:
+        exif = exif_focal(args.photo, photo.shape[1], photo.shape[0])
     mask = None
     if args.ball_mask:
         m = load_photo(args.ball_mask, response="linear")
@@ -209,6 +224,7 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         args.ball_radius,
         intrinsics=intrinsics,
         vfov_deg=args.vfov,
+        exif=exif,
         objective=objective,
         colour=colour,
         ball_hint=args.ball,
@@ -217,6 +233,7 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         width=args.width,
         light_range=args.light_range,
         names=(args.ball_name, args.floor_name),
+        board_margin=args.board_margin,
         where=args.photo,
         objective_where=args.objective or args.photo,
     )
@@ -227,6 +244,8 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         "board": parse_board(args.board).to_dict(),
         "response": args.response,
     }
+    if acq.mask is not None:  # rtloop-fit finds it beside scene.json and uses it unless given --mask
+        acq.scene["meta"]["acquisition"]["mask"] = "mask.png"
     recover_leftovers(out)  # what killed runs left beside OUT
     tmp = staging_dir(out, "rtloop-scene")
     try:
@@ -234,6 +253,8 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         write_png16_srgb(tmp / "objective.png", acq.objective)
         write_png16_srgb(tmp / "photo.png", acq.photo)
         write_png8(tmp / "overlay.png", acq.overlay)
+        if acq.mask is not None:
+            write_png8(tmp / "mask.png", np.where(acq.mask, 255, 0).astype(np.uint8))
         move_into_place(tmp, out, out.exists(), "rtloop-scene")
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -243,7 +264,9 @@ def _cmd_scene(args: argparse.Namespace) -> int:
     rep = acq.scene["meta"]["acquisition"]
     for note in acq.warnings:
         info(f"warning: {note}")
-    print(f"wrote {out}/scene.json, objective.png, overlay.png, photo.png")
+    print(f"wrote {out}/scene.json, objective.png, overlay.png, photo.png{', mask.png' if acq.mask is not None else ''}")
+    if acq.mask is not None:
+        print(f"  mask.png leaves the board and colour target ({1 - acq.mask.mean():.1%} of the photo) out of the fit")
     print(
         f"  camera at ({', '.join(f'{v:.3f}' for v in cam['position'])}) m, vertical field of view "
         f"{cam['vfov_deg']:.2f} deg ({rep['camera_model']}); board reprojection "
