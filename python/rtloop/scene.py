@@ -51,9 +51,13 @@ def load_scene(source: str | os.PathLike[str] | dict[str, Any] | Scene) -> Scene
     if isinstance(source, dict):
         try:
             text = json.dumps(source, allow_nan=False)
-        except (TypeError, ValueError) as e:
-            # Only now walk the dict (slow) to name the field holding a NaN or infinity.
-            bad = _first_non_finite(source)
+        except (TypeError, ValueError, RecursionError) as e:
+            # Only now walk the dict (slow) to name the field holding a NaN or infinity; a dict that
+            # contains itself (or nests past Python's recursion limit) is no JSON.
+            try:
+                bad = _first_non_finite(source)
+            except RecursionError:
+                bad = None
             if bad:
                 raise SceneError(f"{bad}: must be a finite number (got NaN or infinity)") from None
             raise SceneError(f"scene: cannot be written as JSON ({e})") from None

@@ -27,6 +27,7 @@ pub use loss::{Norm, Space, SrgbLut, SATURATED};
 pub use pixels::{interior, ActivePixels};
 pub use projected::{projection_blocker, Projection, Solved};
 pub use refine::{encoded_line_min, l1_line_min, EncodedTerm};
+pub use simd::{path as simd_path, scalar_paths};
 pub use solve::{closed_form, fallback_sums, solve_object, SolveSums};
 
 /// How a candidate's image is compared with the objective.

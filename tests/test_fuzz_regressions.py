@@ -1,0 +1,26 @@
+"""Defects benches/fuzz.py found, kept as regression cases."""
+
+import pytest
+
+import rtloop
+from test_scene_errors import valid_scene
+
+
+def test_a_scene_dict_that_contains_itself_is_a_scene_error():
+    # It raised RecursionError from the NaN search (fuzz seed 0: a list put inside itself).
+    scene = valid_scene()
+    loop: list = [1]
+    loop.append(loop)
+    scene["camera"]["position"] = loop
+    with pytest.raises(rtloop.SceneError, match="JSON"):
+        rtloop.load_scene(scene)
+
+
+def test_a_scene_dict_nested_past_the_recursion_limit_is_a_scene_error():
+    scene = valid_scene()
+    deep: list = []
+    for _ in range(100_000):
+        deep = [deep]
+    scene["ambient"] = deep
+    with pytest.raises(rtloop.SceneError):
+        rtloop.load_scene(scene)
