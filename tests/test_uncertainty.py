@@ -441,3 +441,26 @@ def test_robust_sigma_holds_under_correlated_noise(ball_scene):
     assert np.all(spread / gn > 1.5), dict(zip(LIGHT, (spread / gn).round(2)))
     ratio = spread / robust
     assert np.all((ratio > 0.5) & (ratio < 2.0)), dict(zip(LIGHT, ratio.round(2)))
+
+
+def test_a_mask_leaves_its_pixels_out_of_the_estimate(ball_scene):
+    """estimate_uncertainty(mask=): the pixels it drops count in no sum. A photo whose masked-out half is
+    garbage gives the same estimate as one whose masked-out half is clean (the garbage is not seen), and
+    with the mask the used pixels are only those of the kept half."""
+    truth = ball_scene
+    clean = rtloop.render(truth)
+    photo = _photo(clean, 0.01, noise_seed=8)
+    h, w = photo.shape[:2]
+    mask = np.zeros((h, w), bool)
+    mask[:, : w // 2] = True  # the left half, with part of the ball and its shadow
+    result = rtloop.fit(_start(truth), photo, seed=2, mask=mask, uncertainty=False)
+    spoiled = photo.copy()
+    spoiled[:, w // 2 :] = np.random.default_rng(9).uniform(0, 1, spoiled[:, w // 2 :].shape)
+    a = estimate_uncertainty(result, photo, mask=mask)
+    b = estimate_uncertainty(result, spoiled, mask=mask)
+    whole = estimate_uncertainty(result, spoiled)
+    assert a["pixels"] == b["pixels"] <= int(mask.sum()) < whole["pixels"]
+    assert a["residual_rms"] == pytest.approx(b["residual_rms"], rel=1e-9)
+    for name, s in a["sigma"].items():
+        assert b["sigma"][name] == pytest.approx(s, rel=1e-9), name
+    assert whole["residual_rms"] > 10 * a["residual_rms"]  # the garbage, when not masked, is seen
