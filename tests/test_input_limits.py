@@ -6,6 +6,7 @@ from __future__ import annotations
 import copy
 import math
 import os
+import time
 
 import numpy as np
 import pytest
@@ -367,3 +368,27 @@ def test_numbers_at_the_limits_fit_end_to_end_with_a_json_report(photo, edit, kw
         result = rtloop.fit(_extreme(edit), photo, **kw)
     json.dumps(result.report(), allow_nan=False)
     assert _inside(result) == []
+
+
+def _os_threads() -> int:
+    with open("/proc/self/status", encoding="ascii") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith("Threads:"))
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="counts threads through Linux's /proc")
+def test_worker_pools_are_not_kept_for_every_thread_count(ball_scene, photo):
+    """Fits on many thread counts keep only the few most recent pools (they used to stay, all of them:
+    fits on 1..64 threads left 2,085 OS threads); the dropped pools' threads end."""
+    from rtloop import _native
+
+    before = _os_threads()
+    for n in range(1, 13):
+        _fit(ball_scene, photo, threads=n)
+    kept = _native._kept_pools()
+    assert kept[-4:] == [9, 10, 11, 12] and len(kept) <= 4
+    # Without eviction 1 + 2 + ... + 12 = 78 threads would stay; the four kept pools have 42. Rayon ends a
+    # dropped pool's threads asynchronously: wait for them (an event, not a time bound on the code).
+    deadline = time.monotonic() + 60
+    while _os_threads() > before + 42 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert _os_threads() <= before + 42

@@ -77,6 +77,12 @@ fn projection_blocker(scene: &Bound<'_, PyScene>, paths: Vec<String>) -> Option<
     crate::fitness::projection_blocker(&scene.get().0, &paths)
 }
 
+/// The thread counts of the worker pools kept (least recently used first; None: all cores), for tests.
+#[pyfunction]
+fn _kept_pools() -> Vec<Option<usize>> {
+    pool::kept_pools()
+}
+
 /// Write a linear float (H, W, 3) image as 8-bit sRGB PNG or BMP, atomically.
 #[pyfunction]
 fn save_image(py: Python<'_>, path: PathBuf, image: PyReadonlyArray3<'_, f32>) -> PyResult<()> {
@@ -252,6 +258,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyScene>()?;
     m.add_class::<OptimizeResult>()?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add_function(wrap_pyfunction!(_kept_pools, m)?)?;
     m.add_function(wrap_pyfunction!(object_ids, m)?)?;
     m.add_function(wrap_pyfunction!(save_image, m)?)?;
     m.add_function(wrap_pyfunction!(projection_blocker, m)?)?;
