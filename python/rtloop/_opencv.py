@@ -1,5 +1,6 @@
 """OpenCV's image decoder without its native chatter: libpng's and OpenCV's own diagnostics, which C code
-writes straight to the process's stderr, are caught and handed back, so a bad file gives one line."""
+writes straight to the process's stderr, are caught and handed back, so a bad file gives one line (on the
+main thread, where the command lines read their photos)."""
 
 from __future__ import annotations
 
@@ -21,6 +22,13 @@ def imdecode(data: np.ndarray) -> tuple[np.ndarray | None, str]:
     decoders wrote to stderr meanwhile (empty for a good file), stripped of OpenCV's log prefixes."""
     import cv2  # here, not at import: `import rtloop` loads no OpenCV
 
+    if threading.current_thread() is not threading.main_thread():
+        # fd 2 is the whole process's: caught from a worker thread (a batch's), it would swallow what the
+        # main thread prints meanwhile (the progress line). Workers decode with the chatter left as it is.
+        try:
+            return cv2.imdecode(data, cv2.IMREAD_UNCHANGED), ""
+        except cv2.error:
+            return None, ""
     with _lock, tempfile.TemporaryFile() as sink:
         sys.stderr.flush()
         saved = os.dup(2)
