@@ -1,6 +1,5 @@
 """OpenCV's image decoder without its native chatter: libpng's and OpenCV's own diagnostics, which C code
-writes straight to the process's stderr, are caught and handed back, so a bad file gives one line (on the
-main thread, where the command lines read their photos)."""
+writes straight to the process's stderr, are caught and handed back, so a bad file gives one line."""
 
 from __future__ import annotations
 
@@ -12,9 +11,16 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["imdecode"]
+__all__ = ["imdecode", "leave_stderr_alone"]
 
 _lock = threading.Lock()  # fd 2 is process-wide: one decode at a time holds it
+_local = threading.local()
+
+
+def leave_stderr_alone() -> None:
+    """In this thread, decode without catching fd 2: a thread that decodes while another prints (a batch's
+    workers beside its progress line) must not swallow that output. A ThreadPoolExecutor initializer."""
+    _local.leave_stderr = True
 
 
 def imdecode(data: np.ndarray) -> tuple[np.ndarray | None, str]:
@@ -22,9 +28,7 @@ def imdecode(data: np.ndarray) -> tuple[np.ndarray | None, str]:
     decoders wrote to stderr meanwhile (empty for a good file), stripped of OpenCV's log prefixes."""
     import cv2  # here, not at import: `import rtloop` loads no OpenCV
 
-    if threading.current_thread() is not threading.main_thread():
-        # fd 2 is the whole process's: caught from a worker thread (a batch's), it would swallow what the
-        # main thread prints meanwhile (the progress line). Workers decode with the chatter left as it is.
+    if getattr(_local, "leave_stderr", False):
         try:
             return cv2.imdecode(data, cv2.IMREAD_UNCHANGED), ""
         except cv2.error:

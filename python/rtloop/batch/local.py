@@ -8,6 +8,7 @@ from collections.abc import Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from typing import Any
 
+from .._opencv import leave_stderr_alone
 from .jobs import Job, JobResult, run_job
 
 __all__ = ["cores", "plan", "run_local"]
@@ -47,7 +48,8 @@ def run_local(jobs: list[tuple[Job, str]], *, workers: int, threads: int, warm_s
                 warm = r.x
             yield r
         return
-    pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="rtloop-batch")
+    pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="rtloop-batch",
+                              initializer=leave_stderr_alone)  # the progress line shares fd 2
     try:
         pending: set[Future[JobResult]] = set()
         queue = iter(jobs)
