@@ -62,3 +62,12 @@ def test_cli_prints_the_verdict(tmp_path, capsys):
     assert code == 0, out.err
     assert "goodness of fit: " in out.out
     assert "rtloop-fit: warning: the residual is " in out.err
+
+
+def test_a_photo_saturated_everywhere_has_a_verdict_not_an_error():
+    """No unsaturated pixel: nothing to judge by, said so (ratio None), and the fit still returns."""
+    scene = rtloop.load_scene(PHOTOS / "direct-side" / "scene_input.json")
+    photo = np.full((scene.height, scene.width, 3), 2.0, np.float32)
+    with pytest.warns(rtloop.RtloopWarning):
+        g = rtloop.fit(scene, photo, uncertainty=False, population=4, generations=1).goodness
+    assert g["ratio"] is None and g["verdict"].startswith("no unsaturated pixel")

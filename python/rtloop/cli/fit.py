@@ -441,7 +441,7 @@ class _Run:
         for w in result.warnings:
             print(f"{PROG}: warning: {w}", file=sys.stderr)
         good = result.goodness or {}
-        if good.get("ratio", 0.0) >= good.get("explained_below", float("inf")):
+        if (good.get("ratio") or 0.0) >= good.get("explained_below", float("inf")):
             print(f"{PROG}: warning: {good['verdict']}", file=sys.stderr)
         self.check_stop()
 
@@ -473,8 +473,10 @@ def _summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None =
     ]
     lines.extend(_model_lines(result.model or {}, dict(result.scene.to_dict())))
     good = result.goodness or {}
-    if good.get("verdict"):
+    if good.get("ratio") is not None:
         lines.append(f"goodness of fit: {good['ratio']:.2g}x the photo's noise floor: {good['verdict']}")
+    elif good.get("verdict"):
+        lines.append(f"goodness of fit: {good['verdict']}")
     ident = result.identifiability or {}
     if ident.get("degenerate"):
         lines.append("")

@@ -69,7 +69,10 @@ def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool 
         v["share_of_excess"] = v["share_of_excess"] / excess if excess > 0 else 0.0
     out: dict[str, Any] = {"ratio": ratio, "loss": total, "floor": fl, "noise_sigma": [float(s) for s in sigma],
                            "pixels": int(keep.size), "per_object": per, "explained_below": EXPLAINED_RATIO}
-    if ratio < EXPLAINED_RATIO:
+    if not per or not math.isfinite(ratio):
+        out["ratio"] = None
+        out["verdict"] = "no unsaturated pixel to judge the fit by: every used pixel is at or above 1"
+    elif ratio < EXPLAINED_RATIO:
         out["verdict"] = "the model explains this photo to the noise level"
     else:
         worst = max(per, key=lambda n: per[n]["share_of_excess"])

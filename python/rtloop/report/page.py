@@ -256,8 +256,9 @@ def report(
     verdict = (getattr(result, "goodness", None) or {}).get("verdict")
     if verdict:
         g = result.goodness
-        page.add(f"<p><b>Goodness of fit:</b> {html.escape(verdict)} (residual {g['ratio']:.3g}x the floor of "
-                 "8-bit quantisation and the noise measured in the photo; the difference image shows where).</p>")
+        how = ("" if g.get("ratio") is None else f" (residual {g['ratio']:.3g}x the floor of 8-bit quantisation "
+               "and the noise measured in the photo; the difference image shows where)")
+        page.add(f"<p><b>Goodness of fit:</b> {html.escape(verdict)}{how}.</p>")
     strip = _strip_section(page, scene, rows, strip_every, notes)
     plots = _plots_section(page, scene, rows, true_vals, terr, ident)
     _values_section(page, scene, terr)
