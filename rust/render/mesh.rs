@@ -113,10 +113,11 @@ impl Mesh {
         self.scale
     }
 
-    fn bounds(&self, tris: &[Tri]) -> (Vec3A, Vec3A) {
+    /// The box of triangles `idx`, padded.
+    fn bounds(&self, idx: &[u32]) -> (Vec3A, Vec3A) {
         let mut lo = Vec3A::splat(f32::INFINITY);
         let mut hi = Vec3A::splat(f32::NEG_INFINITY);
-        for t in tris {
+        for t in idx.iter().map(|&i| &self.tris[i as usize]) {
             for v in [t.v0, t.v0 + t.e1, t.v0 + t.e2] {
                 lo = lo.min(v);
                 hi = hi.max(v);
@@ -133,7 +134,7 @@ impl Mesh {
         let mut order: Vec<u32> = (0..n as u32).collect();
         let centroid = |t: &Tri| t.v0 + (t.e1 + t.e2) / 3.0;
         let cents: Vec<Vec3A> = self.tris.iter().map(centroid).collect();
-        let (lo, hi) = self.bounds(&self.tris);
+        let (lo, hi) = self.bounds(&order);
         self.nodes.push(Node {
             lo,
             hi,
@@ -167,8 +168,7 @@ impl Mesh {
             });
             let first = self.nodes.len();
             for (s, e) in [(start, mid), (mid, end)] {
-                let tris: Vec<Tri> = order[s..e].iter().map(|&i| self.tris[i as usize]).collect();
-                let (lo, hi) = self.bounds(&tris);
+                let (lo, hi) = self.bounds(&order[s..e]);
                 self.nodes.push(Node {
                     lo,
                     hi,
