@@ -166,6 +166,7 @@ def test_a_concave_mesh_shadows_itself(tmp_path):
     ("v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", "vertex 2 is not finite"),
     ("# nothing\n", "no triangles"),
     ("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "degenerate"),
+    ("v 0 0 0\nv 1e30 0 0\nv 0 1 0\nf 1 2 3\n", r"triangle 1 lies beyond \+-1e8 m"),
 ])
 def test_bad_mesh_files_are_refused_naming_the_field_and_file(tmp_path, content, message):
     obj = tmp_path / "bad.obj"

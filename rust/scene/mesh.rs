@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use glam::DVec3;
 
-use super::V3;
+use super::{MAX_MAGNITUDE, V3};
 use crate::error::{Error, Result};
 use crate::render::mesh::Mesh;
 
@@ -83,6 +83,13 @@ pub fn load(field: &str, path: &Path, position: V3, scale: f64) -> Result<Arc<Me
     }
     if tris.is_empty() {
         return Err(err("the mesh has no triangles".into()));
+    }
+    let far = |v: &DVec3| v.abs().max_element() > MAX_MAGNITUDE;
+    if let Some(k) = tris.iter().position(|t| t.iter().any(far)) {
+        return Err(err(format!(
+            "triangle {} lies beyond +-{MAX_MAGNITUDE:e} m once placed (position + scale x vertex)",
+            k + 1
+        )));
     }
     let normals = smooth.then_some(normals.as_slice());
     let mesh = Mesh::new(&tris, normals).ok_or_else(|| {
