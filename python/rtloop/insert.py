@@ -30,9 +30,14 @@ class Insertion:
 
 
 def load_objects(source: Any) -> list[dict[str, Any]]:
-    """Added objects in the scene format: a list, ``{"objects": [...]}``, or a JSON file holding either."""
+    """Added objects in the scene format: a list, ``{"objects": [...]}``, or a JSON file holding either.
+
+    A mesh's relative ``file`` is read from the JSON file's folder (from the current directory for a list
+    or dict)."""
     where = "objects"
+    folder = None
     if isinstance(source, (str, os.PathLike)):
+        folder = Path(source).parent
         where = str(source)
         try:
             source = json.loads(Path(source).read_text(encoding="utf-8"))
@@ -46,6 +51,11 @@ def load_objects(source: Any) -> list[dict[str, Any]]:
         source = source["objects"]
     if not isinstance(source, list) or not source or not all(isinstance(o, dict) for o in source):
         raise RtloopError(f"{where}: expected a non-empty list of objects (each a JSON object)")
+    if folder is not None:
+        source = [
+            {**o, "file": str(folder / o["file"])} if o.get("shape") == "mesh" and isinstance(o.get("file"), str) else o
+            for o in source
+        ]
     return source
 
 

@@ -44,7 +44,8 @@ def load_scene(source: str | os.PathLike[str] | dict[str, Any] | Scene) -> Scene
     """Load and validate a scene from a JSON file path, a dict in the scene format, or a Scene (returned as is).
 
     Raises SceneError naming the field (``objects[0].radius: must be > 0 (got -1)``); for a file, the
-    message starts with the file name.
+    message starts with the file name. A mesh object's relative ``file`` is read from the scene file's
+    folder, or for a dict from the current directory.
     """
     if isinstance(source, Scene):
         return source
@@ -77,7 +78,7 @@ def load_scene(source: str | os.PathLike[str] | dict[str, Any] | Scene) -> Scene
         except (OSError, UnicodeDecodeError) as e:
             raise RtloopError(f"{path}: cannot read scene file ({e})") from None
         try:
-            return Scene(text)
+            return Scene(text, path.parent)
         except SceneError as e:
             raise SceneError(f"{path}: {e}") from None
     raise TypeError(f"load_scene expects a path, a dict or a Scene, not {type(source).__name__}")

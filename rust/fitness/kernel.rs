@@ -67,7 +67,7 @@ impl Kernel {
                         let idx: Vec<usize> = (0..at.len()).collect();
                         gathers(&at, &idx, k, shapes, shadows, environment)
                     }
-                    PShape::Plane { .. } => Vec::new(),
+                    PShape::Plane { .. } | PShape::Mesh(_) => Vec::new(),
                 })
                 .collect()
         } else {

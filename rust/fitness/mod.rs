@@ -150,6 +150,16 @@ impl Fitness {
                 target[k]
             )));
         }
+        if let Some(o) = scene
+            .objects
+            .iter()
+            .find(|o| matches!(o.shape, crate::scene::Shape::Mesh { .. }))
+        {
+            return Err(Error::Invalid(format!(
+                "object {:?} is a mesh: meshes can be rendered and inserted, not fitted",
+                o.name
+            )));
+        }
         let geometry = Geometry::new(scene);
         let gbuffer = GBuffer::new(&geometry, scene.width, scene.height);
         let all: Vec<u32>;

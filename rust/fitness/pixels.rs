@@ -200,7 +200,7 @@ pub(crate) fn gathers(
                         .map(|s| nearest_table(&at, s.normal) as u32)
                         .collect()
                 }
-                PShape::Plane { .. } => Vec::new(),
+                PShape::Plane { .. } | PShape::Mesh(_) => Vec::new(),
             };
             let mut g = group(&pts, &zeros, &solve, shapes, shadows, environment, false);
             Gather {
@@ -346,6 +346,7 @@ pub(crate) fn group(
                             .map(|&i| normal.dot(surfels[i].position - point))
                             .collect(),
                     }),
+                    PShape::Mesh(_) => {} // `Fitness::new` refuses meshes
                 }
             }
         }

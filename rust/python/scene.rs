@@ -14,9 +14,14 @@ pub struct PyScene(pub Scene);
 
 #[pymethods]
 impl PyScene {
+    /// `base_dir`: the folder relative mesh files are read from (the current directory when omitted).
     #[new]
-    fn new(json_text: &str) -> PyResult<Self> {
-        Ok(PyScene(Scene::from_json(json_text)?))
+    #[pyo3(signature = (json_text, base_dir=None))]
+    fn new(json_text: &str, base_dir: Option<std::path::PathBuf>) -> PyResult<Self> {
+        Ok(PyScene(Scene::from_json_in(
+            json_text,
+            base_dir.as_deref(),
+        )?))
     }
 
     #[getter]

@@ -93,14 +93,16 @@ pub fn closest_hit(shapes: &[PShape], origin: Vec3A, dir: Vec3A) -> Surfel {
 ///
 /// A sphere (convex) or a plane can never shadow its own lit side, so the surface the point lies on is
 /// not tested at all: no self-intersection and no offset that could leak light through thin occluders.
+/// Meshes (two-sided: their normal already faces the viewer) are.
 #[inline]
 pub fn occluded(s: &Surfel, to_light: Vec3A, dist: f32, shapes: &[PShape]) -> bool {
     let tmin = s.eps;
     let tmax = dist * (1.0 - 4.0 * f32::EPSILON);
-    shapes
-        .iter()
-        .enumerate()
-        .any(|(k, sh)| k as u32 != s.object && sh.hits_segment(s.position, to_light, tmin, tmax))
+    // A mesh need not be convex: it may shadow itself, so its own triangles are tested from `eps` on.
+    shapes.iter().enumerate().any(|(k, sh)| {
+        (k as u32 != s.object || matches!(sh, PShape::Mesh(_)))
+            && sh.hits_segment(s.position, to_light, tmin, tmax)
+    })
 }
 
 /// Camera-ray first hits at pixel centres for a `width` x `height` image, row-major.

@@ -12,6 +12,7 @@ pub mod environment;
 pub mod film;
 pub mod hit;
 pub mod light;
+pub mod mesh;
 pub mod shade;
 pub mod shape;
 

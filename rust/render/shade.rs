@@ -146,7 +146,7 @@ impl ShadeParams {
                         .collect();
                     (at, light)
                 }
-                PShape::Plane { .. } => (Vec::new(), Vec::new()),
+                PShape::Plane { .. } | PShape::Mesh(_) => (Vec::new(), Vec::new()),
             })
             .collect();
         self.tables = tables;

@@ -6,12 +6,15 @@
 //! `q = -b - sign(b)·√disc`, `t0 = c/q`, `t1 = q`. The hit point is returned relative to the centre as
 //! `f ∓ √disc·d`, so normals stay accurate even when `t` is large.
 
+use std::sync::Arc;
+
 use glam::Vec3A;
 
+use super::mesh::Mesh;
 use crate::scene::Shape;
 
 /// A shape in the renderer's working form.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub enum PShape {
     Sphere {
         center: Vec3A,
@@ -22,6 +25,8 @@ pub enum PShape {
         point: Vec3A,
         normal: Vec3A,
     },
+    /// A triangle mesh with its BVH (world space, two-sided).
+    Mesh(Arc<Mesh>),
 }
 
 /// A ray–shape hit: distance along the (unit) ray and the outward/geometric normal.
@@ -45,6 +50,7 @@ impl PShape {
                 point: glam::DVec3::from_array(*point).as_vec3a(),
                 normal: crate::scene::unit(*normal).as_vec3a(),
             },
+            Shape::Mesh { mesh, .. } => PShape::Mesh(Arc::clone(mesh)),
         }
     }
 
@@ -53,6 +59,7 @@ impl PShape {
         match self {
             PShape::Sphere { center, radius } => center.abs().max_element() + radius,
             PShape::Plane { point, .. } => point.abs().max_element(),
+            PShape::Mesh(m) => m.scale(),
         }
     }
 
@@ -60,6 +67,7 @@ impl PShape {
     #[inline]
     pub fn intersect(&self, origin: Vec3A, dir: Vec3A, tmin: f32, tmax: f32) -> Option<ShapeHit> {
         match *self {
+            PShape::Mesh(ref m) => m.intersect(origin, dir, tmin, tmax),
             PShape::Sphere { center, radius } => {
                 let oc = origin - center;
                 let b = oc.dot(dir);
@@ -133,6 +141,7 @@ impl PShape {
                 t1 > tmin && t0 < tmax
             }
             PShape::Plane { .. } => self.intersect(origin, dir, tmin, tmax).is_some(),
+            PShape::Mesh(ref m) => m.hits_segment(origin, dir, tmin, tmax),
         }
     }
 }

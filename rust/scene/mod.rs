@@ -9,8 +9,12 @@ use serde_json::{json, Map, Value};
 
 use crate::error::{Error, Result};
 
+mod mesh;
 mod target;
 pub use target::{Target, FITTABLE};
+
+use std::path::Path;
+use std::sync::Arc;
 
 pub type V3 = [f64; 3];
 
@@ -54,6 +58,14 @@ pub enum Shape {
     Plane {
         point: V3,
         normal: V3,
+    },
+    /// A triangle mesh from an OBJ file (two-sided), placed at `position` and scaled by `scale`.
+    Mesh {
+        /// The file, absolute (resolved against the scene file's folder when read from a file).
+        file: String,
+        position: V3,
+        scale: f64,
+        mesh: Arc<crate::render::mesh::Mesh>,
     },
 }
 
@@ -151,6 +163,9 @@ struct RawObject {
     radius: Option<f64>,
     point: Option<V3>,
     normal: Option<V3>,
+    file: Option<String>,
+    position: Option<V3>,
+    scale: Option<f64>,
     material: Option<RawMaterial>,
 }
 
@@ -259,8 +274,14 @@ fn cross(a: V3, b: V3) -> V3 {
 }
 
 impl Scene {
-    /// Parse and validate a scene from JSON text.
+    /// Parse and validate a scene from JSON text; mesh files are resolved against the current directory.
     pub fn from_json(text: &str) -> Result<Scene> {
+        Scene::from_json_in(text, None)
+    }
+
+    /// Parse and validate a scene from JSON text, resolving relative mesh files against `base` (the
+    /// scene file's folder; the current directory when `None`).
+    pub fn from_json_in(text: &str, base: Option<&Path>) -> Result<Scene> {
         let de = &mut serde_json::Deserializer::from_str(text);
         let raw: RawScene = serde_path_to_error::deserialize(de).map_err(|e| {
             let path = e.path().to_string();
@@ -271,10 +292,10 @@ impl Scene {
                 Error::scene(path, inner)
             }
         })?;
-        Scene::from_raw(raw)
+        Scene::from_raw(raw, base)
     }
 
-    fn from_raw(raw: RawScene) -> Result<Scene> {
+    fn from_raw(raw: RawScene, base: Option<&Path>) -> Result<Scene> {
         let width = raw.image.width;
         let height = raw.image.height;
         for (field, v) in [("image.width", width), ("image.height", height)] {
@@ -390,7 +411,7 @@ impl Scene {
         }
         let mut objects = Vec::with_capacity(raw.objects.len());
         for (i, o) in raw.objects.into_iter().enumerate() {
-            objects.push(parse_object(i, o, &objects)?);
+            objects.push(parse_object(i, o, &objects, base)?);
         }
 
         let mut scene = Scene {
@@ -443,6 +464,15 @@ impl Scene {
                     }
                     Shape::Plane { point, normal } => {
                         json!({"name": o.name, "shape": "plane", "point": point, "normal": normal})
+                    }
+                    Shape::Mesh {
+                        file,
+                        position,
+                        scale,
+                        ..
+                    } => {
+                        json!({"name": o.name, "shape": "mesh", "file": file, "position": position,
+                               "scale": scale})
                     }
                 };
                 v["material"] = json!({
@@ -543,13 +573,22 @@ impl Scene {
     }
 
     /// True when some object sits between a surface and the light for some light position: with one
-    /// object (a convex sphere or a plane) nothing can shadow anything.
+    /// object (a convex sphere or a plane) nothing can shadow anything; a mesh may shadow itself.
     pub fn can_occlude(&self) -> bool {
         self.objects.len() > 1
+            || self
+                .objects
+                .iter()
+                .any(|o| matches!(o.shape, Shape::Mesh { .. }))
     }
 }
 
-fn parse_object(i: usize, o: RawObject, previous: &[Object]) -> Result<Object> {
+fn parse_object(
+    i: usize,
+    o: RawObject,
+    previous: &[Object],
+    base: Option<&Path>,
+) -> Result<Object> {
     let name = o.name.unwrap_or_else(|| format!("object{i}"));
     let f = |field: &str| format!("objects[{i}].{field}");
     if name.is_empty() || name.contains('.') {
@@ -583,6 +622,11 @@ fn parse_object(i: usize, o: RawObject, previous: &[Object]) -> Result<Object> {
             Ok(())
         }
     };
+    if o.shape != "mesh" {
+        forbid(o.file.is_some(), "file")?;
+        forbid(o.position.is_some(), "position")?;
+        forbid(o.scale.is_some(), "scale")?;
+    }
     let shape = match o.shape.as_str() {
         "sphere" => {
             forbid(o.point.is_some(), "point")?;
@@ -611,10 +655,40 @@ fn parse_object(i: usize, o: RawObject, previous: &[Object]) -> Result<Object> {
             }
             Shape::Plane { point, normal }
         }
+        "mesh" => {
+            for (present, field) in [
+                (o.center.is_some(), "center"),
+                (o.radius.is_some(), "radius"),
+                (o.point.is_some(), "point"),
+                (o.normal.is_some(), "normal"),
+            ] {
+                forbid(present, field)?;
+            }
+            let file = o
+                .file
+                .as_deref()
+                .ok_or_else(|| Error::scene(f("file"), "missing field for a mesh (an OBJ file)"))?;
+            let position = finite3(&f("position"), o.position.unwrap_or([0.0; 3]))?;
+            let scale = finite(&f("scale"), o.scale.unwrap_or(1.0))?;
+            if scale <= 0.0 {
+                return Err(Error::scene(
+                    f("scale"),
+                    format!("must be > 0 (got {scale})"),
+                ));
+            }
+            let path = mesh::resolve(file, base);
+            let mesh = mesh::load(&f("file"), &path, position, scale)?;
+            Shape::Mesh {
+                file: path.to_string_lossy().into_owned(),
+                position,
+                scale,
+                mesh,
+            }
+        }
         other => {
             return Err(Error::scene(
                 f("shape"),
-                format!("unknown shape {other:?} (known shapes: \"sphere\", \"plane\")"),
+                format!("unknown shape {other:?} (known shapes: \"sphere\", \"plane\", \"mesh\")"),
             ))
         }
     };

@@ -111,6 +111,9 @@ def fit(
     """
     t0 = time.perf_counter()
     scene = load_scene(scene)
+    meshes = [o["name"] for o in scene.to_dict()["objects"] if o["shape"] == "mesh"]
+    if meshes:
+        raise RtloopError(f"fit: object {meshes[0]!r} is a mesh: meshes can be rendered and inserted, not fitted")
     b = budget(protocol, space, population, generations, f, cr)
     env_mode = check_environment(environment)
     check_highlights(highlights)
