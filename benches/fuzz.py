@@ -21,33 +21,19 @@ import numpy as np
 import rtloop
 from rtloop.cli import fit as cli_fit
 
-BASE = {
-    "image": {"width": 12, "height": 9},
-    "camera": {"position": [0, 1, -5], "look_at": [0, 0.5, 0], "vfov_deg": 40},
-    "light": {"position": [2, 4, -2], "intensity": 50},
-    "ambient": [0.02, 0.02, 0.02],
-    "exposure": 1.0,
-    "objects": [
-        {
-            "name": "ball",
-            "shape": "sphere",
-            "center": [0, 0.5, 0],
-            "radius": 0.5,
-            "material": {"albedo": [0.8, 0.3, 0.2]},
-        },
-        {
-            "name": "floor",
-            "shape": "plane",
-            "point": [0, 0, 0],
-            "normal": [0, 1, 0],
-            "material": {"albedo": [0.5, 0.5, 0.5]},
-        },
-    ],
-    "fit": {
-        "light.position": {"min": [-5, 0.5, -5], "max": [5, 8, 5]},
-        "objects.ball.albedo": {"min": 0, "max": 1},
-    },
-}
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _base() -> dict:
+    """The shipped example's scene at 12 x 9 pixels with a little ambient light: fits take milliseconds,
+    and the ambient sends them down the two-stage path as well as the closed form."""
+    d = json.loads((REPO / "examples" / "yellow-ball" / "scene_input.json").read_text())
+    d["image"] = {"width": 12, "height": 9}
+    d["ambient"] = [0.02, 0.02, 0.02]
+    return d
+
+
+BASE = _base()
 ODD = [
     None,
     True,
