@@ -94,6 +94,6 @@ def save_scene(scene: Scene | dict[str, Any], path: str | os.PathLike[str]) -> N
     data = scene_to_dict(scene) if isinstance(scene, Scene) else scene
     try:
         text = json.dumps(data, indent=2, allow_nan=False) + "\n"
-    except (TypeError, ValueError) as e:  # NaN or infinity, or a value JSON has no form for
+    except (TypeError, ValueError, RecursionError) as e:  # NaN, infinity, a value JSON has no form for, a loop
         raise SceneError(f"{os.fspath(path)}: the scene cannot be written as JSON ({e}); nothing written") from None
     write_text(path, text)
