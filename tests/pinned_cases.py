@@ -1,6 +1,6 @@
 """The cases whose fits are pinned bit for bit while the core is restructured (issue "One owner for every
 formula"): the four reference scenes with both protocols and synthetic scenes covering every path of the
-fit (matte, glossy, directional, ambient fallback, sRGB loss, other norms, mask, noise, callbacks).
+fit (matte, glossy, directional, ambient (closed form), the two-stage fallback, sRGB loss, other norms, mask, noise, callbacks).
 
 `python3 tests/pinned_cases.py` records `tests/fixtures/pinned_fits.json` from the code as it is;
 `tests/test_pinned_fits.py` compares a fresh run with it. The values are the project's own outputs, pinned
@@ -80,7 +80,7 @@ def synthetic_cases() -> list[dict]:
         {"id": "glossy-free", "truth": glossy, "kw": {}},
         {"id": "glossy-known-fallback", "truth": known_gloss, "kw": {}},
         {"id": "directional", "truth": directional, "kw": {}},
-        {"id": "ambient-fallback", "truth": ambient, "kw": {}},
+        {"id": "ambient", "truth": ambient, "kw": {}},
         {"id": "srgb-loss", "truth": _ball(), "kw": {"space": "srgb"}, "noise": 0.01},
         {"id": "l2-noise", "truth": _ball(), "kw": {"norm": "l2"}, "noise": 0.02},
         {"id": "huber", "truth": low, "kw": {"norm": "huber:0.05"}, "noise": 0.01},
@@ -90,7 +90,7 @@ def synthetic_cases() -> list[dict]:
         {"id": "paper", "truth": _ball(), "kw": {"protocol": "paper", "generations": 40}},
         {"id": "paper-srgb", "truth": low, "kw": {"protocol": "paper", "generations": 30, "space": "srgb"}},
         {"id": "callback", "truth": glossy, "kw": {"callback": True}},
-        {"id": "callback-fallback", "truth": ambient, "kw": {"callback": True, "generations": 10}},
+        {"id": "callback-fallback", "truth": known_gloss, "kw": {"callback": True, "generations": 10}},
     ]
 
 

@@ -19,9 +19,12 @@ def _python_blocker(scene: rtloop.Scene, paths: list[str]) -> str | None:
     d = scene.to_dict()
     if "light.position" not in paths and "light.direction" not in paths:
         return "neither light.position nor light.direction is free"
-    if any(v != 0 for v in d["ambient"]):
-        return "the scene has ambient light"
-    allowed = {"light.position", "light.direction", "light.intensity"}
+    ambient = any(v != 0 for v in d["ambient"]) or "ambient" in paths
+    if ambient and (any(v != 0 for v in d.get("environment", (0, 0, 0))) or "environment" in paths):
+        return "the scene has both ambient light and an environment"
+    if ambient and d.get("interreflection"):
+        return "the scene has ambient light and interreflection"
+    allowed = {"light.position", "light.direction", "light.intensity", "ambient", "environment"}
     for o in d["objects"]:
         allowed |= {f"objects.{o['name']}.{m}" for m in ("albedo", "specular", "shininess")}
     extra = [p for p in paths if p not in allowed]
@@ -43,9 +46,12 @@ def _python_blocker(scene: rtloop.Scene, paths: list[str]) -> str | None:
 LIGHT = ["light.position", "light.intensity", "objects.ball.albedo", "objects.floor.albedo"]
 
 
-def _scene(ambient=(0.0, 0.0, 0.0), ball_specular=0.0, floor_specular=0.0, directional=False):
+def _scene(ambient=(0.0, 0.0, 0.0), ball_specular=0.0, floor_specular=0.0, directional=False,
+           environment=(0.0, 0.0, 0.0), interreflection=False):
     d = copy.deepcopy(BALL_ON_FLOOR)
     d["ambient"] = list(ambient)
+    d["environment"] = list(environment)
+    d["interreflection"] = interreflection
     d["objects"][0]["material"].update(specular=ball_specular, shininess=20.0)
     d["objects"][1]["material"].update(specular=floor_specular, shininess=10.0)
     if directional:
@@ -61,8 +67,13 @@ CASES = [
     ("no light free", {}, ["light.intensity", "objects.ball.albedo"]),
     ("ambient", {"ambient": (0.05, 0.05, 0.05)}, LIGHT),
     ("ambient in one channel", {"ambient": (0.0, 0.0, 0.01)}, ["light.position"]),
+    ("ambient free", {}, [*LIGHT, "ambient"]),
+    ("ambient and environment", {"ambient": (0.05, 0.05, 0.05), "environment": (0.1, 0.1, 0.1)}, LIGHT),
+    ("ambient free, environment free", {}, [*LIGHT, "ambient", "environment"]),
+    ("ambient and interreflection", {"ambient": (0.05, 0.05, 0.05), "interreflection": True}, LIGHT),
+    ("environment free", {}, [*LIGHT, "environment"]),
     ("exposure free", {}, [*LIGHT, "exposure"]),
-    ("two extras", {}, ["light.position", "ambient", "light.color"]),
+    ("two extras", {}, ["light.position", "ambient", "light.color", "exposure"]),
     ("unknown object", {}, ["light.position", "objects.cube.albedo"]),
     ("glossy, specular fixed", {"ball_specular": 0.4}, LIGHT),
     ("glossy, specular free", {"ball_specular": 0.4}, [*LIGHT, "objects.ball.specular"]),
@@ -86,6 +97,7 @@ def test_native_blocker_equals_python(name, scene, paths):
 def test_cases_cover_every_answer():
     answers = {_python_blocker(_scene(**s), p) for _, s, p in CASES}
     assert None in answers
-    reasons = ["neither", "ambient", "cannot be solved", "highlight", "albedo of"]
+    reasons = ["neither", "ambient light and an environment", "ambient light and interreflection",
+               "cannot be solved", "highlight", "albedo of"]
     for r in reasons:
         assert any(a and r in a for a in answers), r

@@ -6,7 +6,9 @@
 use glam::Vec3A;
 
 use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut};
-use super::pixels::{blinn_phong, gathers, group, irradiance, shadow, Gather, Group, Light, BLOCK};
+use super::pixels::{
+    blinn_phong, gathers, group, irradiance, shadow, Gather, Group, Light, Sky, BLOCK,
+};
 use super::simd::{self, Simd};
 use crate::render::bounce::{table_points, TABLE};
 use crate::render::brdf::{lambert, specular_scale};
@@ -26,26 +28,18 @@ pub struct Kernel {
 
 impl Kernel {
     /// `surfels` and `targets` are the active pixels; `shapes` the scene's shapes.
-    /// `solve[i]` says whether pixel i may inform the closed-form products (see `projected`); with
-    /// `environment` the kernel models the occluded environment (each pixel's sky view factor is kept).
+    /// `solve[i]` says whether pixel i may inform the closed-form products (see `projected`); `sky` is
+    /// the constant-radiance term modelled (see [`Sky`]: each pixel's factor for it is kept).
     pub fn new(
         surfels: &[Surfel],
         targets: &[Vec3A],
         solve: &[bool],
         shapes: &[PShape],
         shadows: bool,
-        environment: bool,
+        sky: Sky,
         bounce: bool,
     ) -> Kernel {
-        let groups = group(
-            surfels,
-            targets,
-            solve,
-            shapes,
-            shadows,
-            environment,
-            bounce,
-        );
+        let groups = group(surfels, targets, solve, shapes, shadows, sky, bounce);
         let tables = if bounce {
             shapes
                 .iter()
@@ -65,7 +59,7 @@ impl Kernel {
                             })
                             .collect();
                         let idx: Vec<usize> = (0..at.len()).collect();
-                        gathers(&at, &idx, k, shapes, shadows, environment)
+                        gathers(&at, &idx, k, shapes, shadows, sky)
                     }
                     PShape::Plane { .. } | PShape::Mesh(_) => Vec::new(),
                 })

@@ -24,8 +24,9 @@ use crate::search::Objective;
 pub use kernel::{Candidate, Kernel};
 use loss::penalty_sums;
 pub use loss::{Norm, Space, SrgbLut, SATURATED};
+pub use pixels::Sky;
 pub use pixels::{interior, ActivePixels};
-pub use projected::{projection_blocker, Projection, Solved};
+pub use projected::{constant_term, projection_blocker, Projection, Solved};
 pub use refine::{encoded_line_min, l1_line_min, EncodedTerm};
 pub use simd::{path as simd_path, scalar_paths};
 pub use solve::{closed_form, fallback_sums, solve_object, SolveSums};
@@ -234,7 +235,16 @@ impl Fitness {
                 m.specular = 0.0;
             }
             base.any_specular = false;
-            base.environment = Vec3A::ZERO; // solved in closed form (Projection::environment)
+            // solved in closed form (Projection::environment): the environment, or else the ambient light
+            base.environment = Vec3A::ZERO;
+            base.ambient = Vec3A::ZERO;
+            if constant_term(scene) == Sky::Open && !proj.has_environment() {
+                return Err(Error::Invalid(
+                    "the scene has ambient light: the projected loss needs its column (product bounds with \
+                     rows for exposure x ambient x albedo)"
+                        .into(),
+                ));
+            }
             if scene.interreflection && scene.can_occlude() {
                 proj.gauge = Some(gauge_bounds(scene));
             }
@@ -259,11 +269,14 @@ impl Fitness {
             ActivePixels::select(&gbuffer, target, pixels, background, scene.objects.len());
         // The occluded environment costs a sky view factor per pixel only where the model has it.
         let environment = match &projection {
-            Some(proj) => proj.has_environment(),
-            None => {
-                scene.environment != [0.0; 3]
-                    || layout.entries.iter().any(|e| e.1 == Target::Environment)
+            Some(proj) if proj.has_environment() => constant_term(scene),
+            Some(_) => Sky::None,
+            None if scene.environment != [0.0; 3]
+                || layout.entries.iter().any(|e| e.1 == Target::Environment) =>
+            {
+                Sky::Occluded
             }
+            None => Sky::None,
         };
         Ok(Fitness {
             layout,

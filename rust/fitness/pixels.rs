@@ -164,7 +164,7 @@ pub(crate) fn gathers(
     own: usize,
     shapes: &[PShape],
     shadows: bool,
-    environment: bool,
+    sky: Sky,
 ) -> Vec<Gather> {
     let mut per_sender: Vec<(Vec<u32>, Vec<f32>, Vec<Surfel>)> =
         vec![Default::default(); shapes.len()];
@@ -202,7 +202,7 @@ pub(crate) fn gathers(
                 }
                 PShape::Plane { .. } | PShape::Mesh(_) => Vec::new(),
             };
-            let mut g = group(&pts, &zeros, &solve, shapes, shadows, environment, false);
+            let mut g = group(&pts, &zeros, &solve, shapes, shadows, sky, false);
             Gather {
                 sender: k,
                 pixel,
@@ -212,6 +212,15 @@ pub(crate) fn gathers(
             }
         })
         .collect()
+}
+
+/// The constant-radiance term whose coefficient a kernel's pixels carry: none, the occluded environment
+/// (each pixel's sky view factor, `render::environment::sky_view`), or ambient light (unoccluded: 1).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Sky {
+    None,
+    Occluded,
+    Open,
 }
 
 /// Per-candidate light terms shared by all groups.
@@ -226,15 +235,15 @@ pub(crate) struct Light {
 
 /// The active pixels grouped by object (background last), row-major inside a group, as structures of
 /// arrays with their occluders' light-independent terms (`shadows`: the scene can shadow at all).
-/// `solve[i]` says whether pixel i may inform the closed-form products; with `environment` each
-/// object's pixels carry their sky view factor, with `bounce` their gathers.
+/// `solve[i]` says whether pixel i may inform the closed-form products; each object's pixels carry the
+/// factor of `sky` (none, the sky view, or 1 for ambient light), with `bounce` their gathers.
 pub(crate) fn group(
     surfels: &[Surfel],
     targets: &[Vec3A],
     solve: &[bool],
     shapes: &[PShape],
     shadows: bool,
-    environment: bool,
+    sky: Sky,
     bounce: bool,
 ) -> Vec<Group> {
     // Pixels grouped by object (background last), row-major inside a group: a counting sort.
@@ -299,15 +308,16 @@ pub(crate) fn group(
             }),
             spheres: Vec::new(),
             planes: Vec::new(),
-            sky: match object {
-                Some(o) if environment => idx
+            sky: match (object, sky) {
+                (Some(o), Sky::Occluded) => idx
                     .iter()
                     .map(|&i| sky_view(surfels[i].position, surfels[i].normal, o, shapes))
                     .collect(),
+                (Some(_), Sky::Open) => vec![1.0; idx.len()],
                 _ => Vec::new(),
             },
             gathers: match object {
-                Some(o) if bounce => gathers(surfels, idx, o, shapes, shadows, environment),
+                Some(o) if bounce => gathers(surfels, idx, o, shapes, shadows, sky),
                 _ => Vec::new(),
             },
             blocks: idx

@@ -6,7 +6,7 @@ use rayon::prelude::*;
 use super::bounce::Gauge;
 use super::kernel::{Candidate, Kernel};
 use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, LANES, SATURATED};
-use super::pixels::{blinn_phong, irradiance, shadow, Group, Light, BLOCK};
+use super::pixels::{blinn_phong, irradiance, shadow, Group, Light, Sky, BLOCK};
 use super::simd::{self, Simd};
 use super::solve::{fallback_sums, solve_object, solve_object_env, SolveSums};
 use crate::render::brdf::{lambert, specular_per_lambert};
@@ -265,13 +265,17 @@ pub fn projection_blocker(scene: &Scene, paths: &[String]) -> Option<String> {
     if !free("light.position") && !free("light.direction") {
         return Some("neither light.position nor light.direction is free".into());
     }
-    if scene.ambient.iter().any(|&v| v != 0.0) {
-        return Some("the scene has ambient light".into());
+    let ambient = scene.ambient.iter().any(|&v| v != 0.0) || free("ambient");
+    if ambient && (scene.environment.iter().any(|&v| v != 0.0) || free("environment")) {
+        return Some("the scene has both ambient light and an environment".into());
+    }
+    if ambient && scene.interreflection {
+        return Some("the scene has ambient light and interreflection".into());
     }
     let allowed = |p: &str| {
         matches!(
             p,
-            "light.position" | "light.direction" | "light.intensity" | "environment"
+            "light.position" | "light.direction" | "light.intensity" | "environment" | "ambient"
         ) || scene.objects.iter().any(|o| {
             ["albedo", "specular", "shininess"]
                 .iter()
@@ -316,6 +320,20 @@ pub fn projection_blocker(scene: &Scene, paths: &[String]) -> Option<String> {
         }
     }
     None
+}
+
+/// The constant-radiance term the closed form's second column models for `scene`: its occluded
+/// environment, or else its ambient light (given or free; unoccluded), or none. The projected method
+/// solves one of them (`projection_blocker` refuses both at once).
+pub fn constant_term(scene: &Scene) -> Sky {
+    let free = |p: &str| scene.fit.iter().any(|f| f.path == p);
+    if scene.environment != [0.0; 3] || free("environment") {
+        Sky::Occluded
+    } else if scene.ambient != [0.0; 3] || free("ambient") {
+        Sky::Open
+    } else {
+        Sky::Occluded
+    }
 }
 
 /// What the closed-form solve may choose, per object: the bounds of its diffuse products

@@ -77,6 +77,16 @@ fn projection_blocker(scene: &Bound<'_, PyScene>, paths: Vec<String>) -> Option<
     crate::fitness::projection_blocker(&scene.get().0, &paths)
 }
 
+/// Which constant radiance the closed form's second column models for `scene`: "environment" (occluded)
+/// or "ambient" (unoccluded), as `fitness::constant_term` decides.
+#[pyfunction]
+fn constant_term(scene: &Bound<'_, PyScene>) -> &'static str {
+    match crate::fitness::constant_term(&scene.get().0) {
+        crate::fitness::Sky::Open => "ambient",
+        _ => "environment",
+    }
+}
+
 /// The thread counts of the worker pools kept (least recently used first; None: all cores), for tests.
 #[pyfunction]
 fn _kept_pools() -> Vec<Option<usize>> {
@@ -262,6 +272,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(object_ids, m)?)?;
     m.add_function(wrap_pyfunction!(save_image, m)?)?;
     m.add_function(wrap_pyfunction!(projection_blocker, m)?)?;
+    m.add_function(wrap_pyfunction!(constant_term, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     m.add_function(wrap_pyfunction!(optimize, m)?)?;
     m.add("RtloopError", m.py().get_type::<RtloopError>())?;

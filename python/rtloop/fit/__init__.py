@@ -18,9 +18,11 @@ from .._srgb import decode
 from ..errors import RtloopError, RtloopWarning
 from ..scene import Scene, load_scene
 from .bounds import narrowed, restore_bounds
+from .gauge import hold_gauges, release_gauges
 from .goodness import goodness
 from .identifiability import identifiability as _identifiability
 from .identifiability import lit_pixel_counts
+from .products import constant_term
 from .products import product_bounds as _product_bounds
 from .products import products as _products
 from .protocol import (
@@ -126,7 +128,13 @@ def fit(
     if not all_paths:
         raise RtloopError("fit: the scene's fit section names no free parameters")
     ident = _identifiability(scene, all_paths)
-    choose_method(b, scene, all_paths, population=population, generations=generations, optimizer=optimizer,
+    # The light's colour and the exposure, where they only rescale the albedos, are held for the closed form.
+    given = scene
+    if protocol != "paper":
+        scene, held = hold_gauges(scene, all_paths, target, use, bounce=interreflection == "on")
+    else:
+        held = {}
+    choose_method(b, scene, scene.fit_paths, population=population, generations=generations, optimizer=optimizer,
                   polish=polish)
     check_arguments(scene, seed=seed, threads=threads, polish=b.polish, pixels_per_object=pixels_per_object,
                     population=b.population)  # the scaled budget too
@@ -143,6 +151,8 @@ def fit(
                     pixels_per_object=pixels_per_object, rng=np.random.default_rng(seed), callback=callback)
     seeds = np.random.SeedSequence(seed).generate_state(4, dtype=np.uint64)
     model: dict[str, Any] = {"terms": ["direct"], "evidence": {}}
+    if held:
+        model["held"] = held
     if b.method == "projected":
         current = _select_terms(scene, work, stages, seeds, model, env_mode=env_mode, inter_mode=interreflection,
                                 highlights=highlights, target=target, use=use, mask=mask, protocol=protocol,
@@ -155,6 +165,7 @@ def fit(
         if interreflection_given(work):
             model["terms"].append("interreflection")
         current = stages.two_stage(seeds)
+    current, scene = release_gauges(current, given, held), given
     if model.get("encoding", {}).get("suspect"):
         doubts.append(model["encoding"]["doubt"])
     if "interreflection" in model["terms"] and ident.get("degenerate"):
@@ -209,11 +220,13 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
     in turn (environment, interreflection, a sphere's lobe) is tested at the light found, on top of those
     already selected, and one refit near that light has every selected term; it replaces the first fit
     only when its loss is lower. ``model`` receives the terms and the evidence."""
-    env = environment_given(scene) or env_mode == "on"
+    # Ambient light (given or free, no environment) takes the closed form's constant column instead.
+    ambient = constant_term(scene) == "ambient"
+    env = environment_given(scene) or env_mode == "on" or ambient
     current = stages.projected(int(seeds[0]), environment=env)
     first = stages.stages[-1]
     if env:
-        model["terms"].append("environment")
+        model["terms"].append("ambient" if ambient else "environment")
     if interreflection_given(work):
         model["terms"].append("interreflection")
     kw = {"clip": clip, "norm": norm, "space": space, "threads": threads}
@@ -244,14 +257,16 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
         if ev["selected"]:
             model_env, base = True, ev["loss_with"]
             added.append("environment")
-    if inter_mode == "auto" and not interreflection_given(work) and len(scene.object_names) > 1:
+    if inter_mode == "auto" and not interreflection_given(work) and len(scene.object_names) > 1 and not ambient \
+            and "light.color" not in model.get("held", {}):
         ev = interreflection_evidence(model_work.with_params(x, where), where, x, target, sub, base=base,
                                       environment=model_env, active_pixels=n_sub, **kw)
         model["evidence"]["interreflection"] = ev
         if ev["selected"]:
             model_work, base = with_interreflection(model_work), ev["loss_with"]
             added.append("interreflection")
-    names = highlight_candidates(model_work) if highlights == "auto" else []
+    # (a lobe's highlight has the light's own colour, which a held colour would get wrong)
+    names = highlight_candidates(model_work) if highlights == "auto" and "light.color" not in model.get("held", {}) else []
     if names:
         ev, shininess = highlight_evidence(model_work.with_params(x, where), names, where, x, target, sub,
                                            base=base, environment=model_env, active_pixels=n_sub, **kw)

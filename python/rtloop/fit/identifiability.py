@@ -18,7 +18,10 @@ def identifiability(scene: Scene, paths: list[str]) -> dict[str, Any]:
     albedo_paths = [p for p in paths if p.endswith(".albedo")]
     light_scale = [p for p in paths if p in ("light.intensity", "light.color", "exposure")]
     specular_paths = [p for p in paths if p.endswith(".specular")]
-    no_ambient = all(v == 0 for v in d["ambient"]) and "ambient" not in paths
+    # Known ambient light measures the intensity (albedo x ambient against albedo x intensity); a free one
+    # scales with the light like the intensity does.
+    ambient_free = "ambient" in paths
+    no_ambient = all(v == 0 for v in d["ambient"]) or ambient_free
     # A highlight of known strength (a fixed, non-zero specular) measures the light's intensity; a free
     # specular scales with the intensity like an albedo does.
     known_specular = any(
@@ -28,8 +31,11 @@ def identifiability(scene: Scene, paths: list[str]) -> dict[str, Any]:
     info: dict[str, Any] = {"degenerate": degenerate}
     if degenerate:
         info["determined"] = [f"{'*'.join(light_scale)}*{p}" for p in albedo_paths + specular_paths]
+        if ambient_free:
+            info["determined"] += [f"ambient*{p}" for p in albedo_paths]
         info["note"] = (
-            "no ambient light and no highlight of known strength: the image fixes only light intensity x "
+            ("a free ambient light (which scales with the light)" if ambient_free else "no ambient light")
+            + " and no highlight of known strength: the image fixes only light intensity x "
             "albedo per object and channel (see 'products'), and intensity x specular; the intensity is "
             "kept at the scene's value (the paper protocol: stage 1's value) unless an albedo or a specular "
             "would exceed its bounds, in which case the light is made just bright enough"

@@ -13,7 +13,7 @@ import numpy as np
 from .. import _native
 from ..scene import Scene, scene_to_dict
 
-__all__ = ["albedo_derivative", "fix_gauge", "product_bounds", "product_range", "products", "products_of", "specular_product", "specular_range",
+__all__ = ["albedo_derivative", "constant_term", "fix_gauge", "product_bounds", "product_range", "products", "products_of", "specular_product", "specular_range",
            "split_products", "unit_light", "unit_lobes"]
 
 
@@ -87,14 +87,22 @@ def unit_lobes(d: dict[str, Any], objects: set[int]) -> np.ndarray:
 AUTO_ENVIRONMENT_MAX = 1.0
 
 
+def constant_term(scene: Scene) -> str:
+    """The scene key of the constant radiance the closed form's second column models: "environment"
+    (occluded), or "ambient" (unoccluded) when the scene gives or frees ambient light and no environment."""
+    return _native.constant_term(scene)
+
+
 def environment_range(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
-    """Per channel (min, max) of the environment radiance a fit may choose: its fit bounds when
-    ``environment`` is free, its value when the scene gives one, else [0, AUTO_ENVIRONMENT_MAX / exposure]."""
+    """Per channel (min, max) of the constant radiance (:func:`constant_term`: the environment, or the
+    ambient light) a fit may choose: its fit bounds when free, its value when the scene gives one, else
+    [0, AUTO_ENVIRONMENT_MAX / exposure]."""
     d = scene_to_dict(scene)
-    if "environment" in scene.fit_paths:
-        b = np.array(scene.bounds(["environment"]), float)
+    key = constant_term(scene)
+    if key in scene.fit_paths:
+        b = np.array(scene.bounds([key]), float)
         return b[:, 0], b[:, 1]
-    env = np.asarray(d.get("environment", [0.0, 0.0, 0.0]), float)
+    env = np.asarray(d.get(key, [0.0, 0.0, 0.0]), float)
     if env.any():
         return env, env
     return np.zeros(3), np.full(3, AUTO_ENVIRONMENT_MAX / d["exposure"])
@@ -162,6 +170,9 @@ def split_products(fitted: Scene, rows: list[list[float]], original: Scene, gaug
                 khi = original.bounds([sp])[0][1]
                 need = max(need, float(Q[k] / khi) if khi > 0 else need)
         intensity = min(max(need, ilo), ihi)
+        measured = _intensity_from_ambient(d, original, arr)
+        if measured is not None:
+            intensity = min(max(measured, ilo), ihi)
         if gauge is not None and gauge > 0:
             intensity = min(max(1.0 / gauge, ilo), ihi)
         fitted = fitted.with_params([intensity], ["light.intensity"])
@@ -186,11 +197,25 @@ def split_products(fitted: Scene, rows: list[list[float]], original: Scene, gaug
         with np.errstate(divide="ignore", invalid="ignore"):
             env = np.where(den > 0, np.sum(E * rho, axis=0) / den, elo)
         env = [float(v) for v in np.clip(np.nan_to_num(env), elo, ehi)]
-        if "environment" in paths:
-            fitted = fitted.with_params(env, ["environment"])
+        key = constant_term(original)
+        if key in paths:
+            fitted = fitted.with_params(env, [key])
         else:  # the term the fit added itself (or the scene's fixed value): written in, not in the fit section
-            fitted = Scene(json.dumps({**scene_to_dict(fitted), "environment": env}, allow_nan=False))
+            fitted = Scene(json.dumps({**scene_to_dict(fitted), key: env}, allow_nan=False))
     return fitted
+
+
+def _intensity_from_ambient(d: dict[str, Any], original: Scene, arr: np.ndarray) -> float | None:
+    """With fixed, known ambient light a the photo measures the intensity: per object and channel
+    P / E = intensity x colour_c / a_c (P = exposure x intensity x colour x albedo, E = exposure x a x
+    albedo); the least-squares intensity over them. None without a fixed ambient column."""
+    if arr.shape[1] < 7 or constant_term(original) != "ambient" or "ambient" in original.fit_paths:
+        return None
+    a = np.asarray(scene_to_dict(original)["ambient"], float)
+    colour = np.asarray(d["light"]["color"], float)
+    w = np.where(a > 0, colour / np.where(a > 0, a, 1.0), 0.0) * arr[:, 4:7]  # P ~ intensity x w
+    den = float(np.sum(w * w))
+    return float(np.sum(w * arr[:, :3]) / den) if den > 0 else None
 
 
 def fix_gauge(fitted: Scene, albedo_paths: list[str], bounds_scene: Scene) -> Scene:
