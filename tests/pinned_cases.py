@@ -56,6 +56,8 @@ def synthetic_cases() -> list[dict]:
     glossy["fit"]["objects.ball.shininess"] = {"min": 2, "max": 200}
     known_gloss = _ball()
     known_gloss["objects"][0]["material"].update(specular=0.5, shininess=30.0)
+    known_floor = _ball()  # a free intensity over a fixed albedo: still the two-stage fallback
+    del known_floor["fit"]["objects.floor.albedo"]
     directional = _ball(light={"type": "directional", "direction": [0.4, 0.8, -0.3], "intensity": 3.0})
     directional["fit"] = {
         "light.direction": {"min": [-1, 0.05, -1], "max": [1, 1, 1]},
@@ -78,7 +80,8 @@ def synthetic_cases() -> list[dict]:
         {"id": "matte-saturated", "truth": bright, "kw": {}},
         {"id": "two-spheres", "truth": two, "kw": {}},
         {"id": "glossy-free", "truth": glossy, "kw": {}},
-        {"id": "glossy-known-fallback", "truth": known_gloss, "kw": {}},
+        {"id": "glossy-known", "truth": known_gloss, "kw": {}},
+        {"id": "known-floor-fallback", "truth": known_floor, "kw": {}},
         {"id": "directional", "truth": directional, "kw": {}},
         {"id": "ambient", "truth": ambient, "kw": {}},
         {"id": "srgb-loss", "truth": _ball(), "kw": {"space": "srgb"}, "noise": 0.01},
@@ -90,7 +93,7 @@ def synthetic_cases() -> list[dict]:
         {"id": "paper", "truth": _ball(), "kw": {"protocol": "paper", "generations": 40}},
         {"id": "paper-srgb", "truth": low, "kw": {"protocol": "paper", "generations": 30, "space": "srgb"}},
         {"id": "callback", "truth": glossy, "kw": {"callback": True}},
-        {"id": "callback-fallback", "truth": known_gloss, "kw": {"callback": True, "generations": 10}},
+        {"id": "callback-fallback", "truth": known_floor, "kw": {"callback": True, "generations": 10}},
     ]
 
 

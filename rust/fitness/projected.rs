@@ -303,15 +303,6 @@ pub fn projection_blocker(scene: &Scene, paths: &[String]) -> Option<String> {
                 .collect();
             v.join(", ")
         };
-        let known = names(&|o| {
-            o.material.specular != 0.0 && !free(&format!("objects.{}.specular", o.name))
-        });
-        if !known.is_empty() {
-            return Some(format!(
-                "light.intensity is free and the specular of {known} is fixed (the highlight then \
-                 measures the intensity, which the closed form does not model)"
-            ));
-        }
         let fixed = names(&|o| !free(&format!("objects.{}.albedo", o.name)));
         if !fixed.is_empty() {
             return Some(format!(

@@ -170,7 +170,7 @@ def split_products(fitted: Scene, rows: list[list[float]], original: Scene, gaug
                 khi = original.bounds([sp])[0][1]
                 need = max(need, float(Q[k] / khi) if khi > 0 else need)
         intensity = min(max(need, ilo), ihi)
-        measured = _intensity_from_ambient(d, original, arr)
+        measured = _intensity_from_known(d, original, arr)
         if measured is not None:
             intensity = min(max(measured, ilo), ihi)
         if gauge is not None and gauge > 0:
@@ -205,11 +205,37 @@ def split_products(fitted: Scene, rows: list[list[float]], original: Scene, gaug
     return fitted
 
 
-def _intensity_from_ambient(d: dict[str, Any], original: Scene, arr: np.ndarray) -> float | None:
-    """With fixed, known ambient light a the photo measures the intensity: per object and channel
-    P / E = intensity x colour_c / a_c (P = exposure x intensity x colour x albedo, E = exposure x a x
-    albedo); the least-squares intensity over them. None without a fixed ambient column."""
-    if arr.shape[1] < 7 or constant_term(original) != "ambient" or "ambient" in original.fit_paths:
+#: The least peak radiance (half an 8-bit code) of a known lobe that measures the light's intensity.
+HIGHLIGHT_SEEN = 0.5 / 255
+
+
+def _intensity_from_known(d: dict[str, Any], original: Scene, arr: np.ndarray) -> float | None:
+    """The intensity the photo measures against something of known strength, by least squares: a fixed,
+    non-zero specular k (its product Q = intensity x k), else fixed ambient light a (per object and
+    channel P / E = intensity x colour_c / a_c, P = exposure x intensity x colour x albedo, E = exposure x
+    a x albedo). None when neither is in the scene."""
+    paths = original.fit_paths
+    ks = np.array([o["material"].get("specular", 0.0) if f"objects.{o['name']}.specular" not in paths else 0.0
+                   for o in scene_to_dict(original)["objects"]], float)
+    if arr.shape[1] > 3 and (ks > 0).any():
+        # Each Q weighted by how much highlight its object shows (sum of its unit lobe squared at the fitted
+        # light); a lobe that shows less than half an 8-bit code, or whose Q sits at a bound of its range,
+        # measures nothing.
+        known = {k for k in range(len(ks)) if ks[k] > 0}
+        lobes = unit_lobes(d, known).max(axis=2).ravel()
+        ids = _native.object_ids(Scene(json.dumps({**d, "fit": {}}, allow_nan=False))).ravel()
+        ilo, ihi = original.bounds(["light.intensity"])[0]
+        peak_scale = d["exposure"] * max(d["light"]["color"])
+        w = np.zeros(len(ks))
+        for k in known:
+            q, mine = arr[k, 3], lobes[ids == k]
+            inside = ilo * ks[k] * (1 + 1e-9) < q < ihi * ks[k] * (1 - 1e-9)
+            if mine.size and inside and q * peak_scale * float(mine.max()) >= HIGHLIGHT_SEEN:
+                w[k] = float(np.sum(mine * mine))
+        den = float(np.sum(w * ks * ks))
+        if den > 0:
+            return float(np.sum(w * ks * arr[:, 3]) / den)
+    if arr.shape[1] < 7 or constant_term(original) != "ambient" or "ambient" in paths:
         return None
     a = np.asarray(scene_to_dict(original)["ambient"], float)
     colour = np.asarray(d["light"]["color"], float)
