@@ -27,6 +27,7 @@ try:
         BOARD_HELP,
         RESPONSE_HELP,
         Parser,
+        float_in,
         formatter,
         info,
         length,
@@ -81,6 +82,10 @@ files written into DIR:
                   the ball as rtloop renders the new scene (dashed magenta): check that
                   they line up
   photo.png       PHOTO after the same corrections (what the geometry was measured on)
+  mask.png        with no --objective: black on the board, its paper and the colour target
+                  (rtloop-fit leaves them out)
+  card.png        with --grey-card-reflectance: white inside the card (rtloop-fit measures
+                  the absolute albedos there)
 
 example:
   rtloop-scene scene.png --board board.json --camera camera.json --ball-radius 33.5mm \\
@@ -148,6 +153,14 @@ def _build_scene_parser() -> Parser:
         action="store_true",
         help="colour correction from a ColorChecker Classic in PHOTO (OpenCV contrib's cv2.mcc)",
     )
+    g.add_argument(
+        "--grey-card-reflectance",
+        type=float_in(0.0, 1.0, True, "a reflectance in (0, 1], e.g. 0.18"),
+        metavar="R",
+        help="the grey card's known reflectance (0.18 for an 18 %% card): with the card in the photo to fit, "
+        "rtloop-fit then reports absolute albedos and the light's intensity in W/sr (card.png, "
+        "meta.acquisition.grey_card)",
+    )
     g = p.add_argument_group("ball")
     g.add_argument(
         "--ball",
@@ -186,6 +199,13 @@ def _build_scene_parser() -> Parser:
         default=2.0,
         metavar="FACTOR",
         help="the light's search box, in units of the camera's distance to the ball (default 2)",
+    )
+    g.add_argument(
+        "--direct-only",
+        action="store_true",
+        help="a scene of direct light only; by default it also has what a room shows: a dim light from "
+        "every direction (the environment, free in the fit section) and light bouncing between the ball "
+        "and the floor (\"interreflection\": true)",
     )
     p.set_defaults(handler=_cmd_scene)
     return p
@@ -232,8 +252,10 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         resting=not args.ball_free,
         width=args.width,
         light_range=args.light_range,
+        room=not args.direct_only,
         names=(args.ball_name, args.floor_name),
         board_margin=args.board_margin,
+        card_reflectance=args.grey_card_reflectance,
         where=args.photo,
         objective_where=args.objective or args.photo,
     )
@@ -246,6 +268,8 @@ def _cmd_scene(args: argparse.Namespace) -> int:
     }
     if acq.mask is not None:  # rtloop-fit finds it beside scene.json and uses it unless given --mask
         acq.scene["meta"]["acquisition"]["mask"] = "mask.png"
+    if acq.card is not None:  # and the card's pixels, where it measures the absolute albedos
+        acq.scene["meta"]["acquisition"]["grey_card"]["mask"] = "card.png"
     recover_leftovers(out)  # what killed runs left beside OUT
     tmp = staging_dir(out, "rtloop-scene")
     try:
@@ -255,6 +279,8 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         write_png8(tmp / "overlay.png", acq.overlay)
         if acq.mask is not None:
             write_png8(tmp / "mask.png", np.where(acq.mask, 255, 0).astype(np.uint8))
+        if acq.card is not None:
+            write_png8(tmp / "card.png", np.where(acq.card, 255, 0).astype(np.uint8))
         move_into_place(tmp, out, out.exists(), "rtloop-scene")
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -264,7 +290,8 @@ def _cmd_scene(args: argparse.Namespace) -> int:
     rep = acq.scene["meta"]["acquisition"]
     for note in acq.warnings:
         info(f"warning: {note}")
-    print(f"wrote {out}/scene.json, objective.png, overlay.png, photo.png{', mask.png' if acq.mask is not None else ''}")
+    extra = (", mask.png" if acq.mask is not None else "") + (", card.png" if acq.card is not None else "")
+    print(f"wrote {out}/scene.json, objective.png, overlay.png, photo.png{extra}")
     if acq.mask is not None:
         print(f"  mask.png leaves the board and colour target ({1 - acq.mask.mean():.1%} of the photo) out of the fit")
     print(

@@ -32,6 +32,7 @@ from .protocol import (
     choose_method,
     searched_paths,
 )
+from .reference import pin_to_reference
 from .result import FitResult, GenerationInfo, StageResult
 from .selection import (
     EXPLAINED,
@@ -80,6 +81,7 @@ def fit(
     environment: str = "auto",
     interreflection: str = "auto",
     highlights: str = "auto",
+    reference: tuple[np.ndarray, float] | None = None,
 ) -> FitResult:
     """Fit the scene's free parameters (its ``fit`` section) to ``image``.
 
@@ -108,6 +110,10 @@ def fit(
     ``highlights``: "auto" (default) frees the specular lobe (specular and shininess) of every sphere the
     scene gives as matte when the photo shows a highlight the diffuse model cannot explain (the fitted
     scene's fit section then lists them; ``result.model`` says why); "off" never.
+    ``reference``: ``(card, reflectance)``, a surface of known reflectance lying on a plane of the scene
+    (a grey card; ``card`` bool (H, W), True on it, and left out of the fit by ``mask``): the fitted scene is
+    rescaled to absolute albedos and the light's intensity in W/sr (:mod:`rtloop.fit.reference`), recorded
+    in ``result.reference``.
     """
     t0 = time.perf_counter()
     scene = load_scene(scene)
@@ -162,6 +168,12 @@ def fit(
                  "note": "the bounce between the objects is as bright as their albedos themselves, so the photo "
                          "fixes the light's intensity and the albedos, not only their products (weakly where the "
                          "bounce is faint: see the uncertainty)"}
+    pinned = None
+    if reference is not None:
+        current, pinned = pin_to_reference(current, target, reference[0], reference[1])
+        ident = {**ident, "degenerate": False, "note": pinned["note"]}
+        if "warning" in pinned:
+            doubts.append(pinned["warning"])
     values = current.get_params(all_paths)
     result = FitResult(
         scene=current,
@@ -175,6 +187,7 @@ def fit(
         identifiability=ident,
         settings=settings,
         model=model,
+        reference=pinned,
     )
     result.goodness = goodness(current, target, use, clip=clip)
     doubts += _at_bounds(current, all_paths)
