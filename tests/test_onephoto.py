@@ -202,3 +202,27 @@ def test_without_exif_the_target_or_one_line(tmp_path, capsys, view):
         assert code == 1
         assert "does not fix the focal length" in err and "--vfov" in err and "EXIF" in err
         assert len(err.splitlines()) == 1
+
+
+def test_readme_one_photo_example(tmp_path, capsys):
+    """The README's "One photo, end to end" commands on examples/one-photo: each step prints its errors
+    against the truth, the report is written, and the numbers are the README's targets."""
+    ex = "examples/one-photo"
+    root = Path(__file__).parents[1]
+    out = tmp_path / "one-photo"
+    assert scene_main([str(root / ex / "photo.png"), "--board", "6x4,100mm,75mm,DICT_5X5_100", "--ball-radius",
+                       "0.1", "--grey-card", "405,301,40,36", "--grey-card-reflectance", "0.18", "--out", str(out),
+                       "--truth", str(root / ex / "scene.json")]) == 0
+    printed = capsys.readouterr().out
+    assert "field of view +0.000 deg" in printed and "% of its 1.73 m distance" in printed
+    assert fit_cli.main([str(out / "scene.json"), str(out / "objective.png"), "--out", str(out / "fit"),
+                         "--report", "--truth", str(root / ex / "scene.json")]) == 0
+    printed = capsys.readouterr().out
+    assert "light position error:" in printed and "absolute, from the grey card of reflectance 0.18" in printed
+    assert "(split)" not in printed  # the card fixes each albedo, not only the products
+    page = (out / "fit" / "report.html").read_text()
+    assert "Absolute, from the grey card" in page and "light intensity (W/sr)" in page
+    result = json.loads((out / "fit" / "result.json").read_text())
+    meta = _meta("oblique")
+    assert np.linalg.norm(np.subtract(result["light"]["position"], meta["light"]["position"])) < 0.05
+    assert abs(result["light"]["intensity"] / meta["light"]["intensity_w_sr"] - 1) < 0.03

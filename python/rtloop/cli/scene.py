@@ -7,6 +7,8 @@ from .._interrupt import interrupted_at_import
 
 try:
     import argparse
+    import json
+    import math
     import os
     import shlex
     import shutil
@@ -207,6 +209,12 @@ def _build_scene_parser() -> Parser:
         "every direction (the environment, free in the fit section) and light bouncing between the ball "
         "and the floor (\"interreflection\": true)",
     )
+    p.add_argument(
+        "--truth",
+        metavar="SCENE.json",
+        help="the true scene (a rendered example's scene.json): print the errors of the camera, the field "
+        "of view and the ball against it",
+    )
     p.set_defaults(handler=_cmd_scene)
     return p
 
@@ -305,9 +313,38 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         f"outline fit {rep['ball']['rms_px']:.2f} px RMS over {rep['ball']['edge_points']} edge points"
     )
     print(f"  colour: {rep['colour']['source']}")
+    if args.truth:
+        for line in truth_lines(acq.scene, args.truth):
+            print(f"  {line}")
     print("check overlay.png, then fit:")
     print(
         f"  rtloop-fit {shlex.quote(str(out / 'scene.json'))} {shlex.quote(str(out / 'objective.png'))} "
         f"--out {shlex.quote(str(out / 'fit'))}"
     )
     return 0
+
+
+def truth_lines(scene: dict[str, Any], truth_path: str) -> list[str]:
+    """The scene's errors against the true scene at ``truth_path``: camera position, viewing direction,
+    field of view, and each sphere's centre (also as a fraction of its distance from the camera)."""
+    try:
+        truth = json.loads(Path(truth_path).read_text())
+        cam_t = truth["camera"]
+        spheres_t = {o.get("name"): o for o in truth["objects"] if o.get("shape") == "sphere"}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
+        raise AcquisitionError(f"--truth {truth_path}: not a scene JSON with a camera and objects ({e})") from None
+    cam = scene["camera"]
+    pos, pos_t = np.array(cam["position"], float), np.array(cam_t["position"], float)
+    fwd = np.array(cam["look_at"], float) - pos
+    fwd_t = np.array(cam_t["look_at"], float) - pos_t
+    angle = math.degrees(math.acos(float(np.clip(fwd @ fwd_t / np.linalg.norm(fwd) / np.linalg.norm(fwd_t), -1, 1))))
+    head = (f"against {truth_path}: camera {1000 * np.linalg.norm(pos - pos_t):.1f} mm and {angle:.3f} deg off, "
+            f"field of view {cam['vfov_deg'] - cam_t['vfov_deg']:+.3f} deg")
+    lines = [head]
+    for o in scene["objects"]:
+        t = spheres_t.get(o["name"])
+        if o["shape"] == "sphere" and t is not None:
+            err = float(np.linalg.norm(np.subtract(o["center"], t["center"])))
+            dist = float(np.linalg.norm(np.subtract(t["center"], pos_t)))
+            lines.append(f"{o['name']} {1000 * err:.1f} mm off ({100 * err / dist:.2f} % of its {dist:.2f} m distance)")
+    return lines
