@@ -226,3 +226,26 @@ def test_readme_one_photo_example(tmp_path, capsys):
     meta = _meta("oblique")
     assert np.linalg.norm(np.subtract(result["light"]["position"], meta["light"]["position"])) < 0.05
     assert abs(result["light"]["intensity"] / meta["light"]["intensity_w_sr"] - 1) < 0.03
+
+
+def test_raw_photo_in_rtloop_fit(tmp_path, capsys):
+    """rtloop-fit reads a camera RAW (DNG) photo through rawpy: linear (a flat DNG of code c at 12 bits is
+    c / 4095 everywhere, the closed form), and result.json records the white balance LibRaw applied."""
+    pytest.importorskip("rawpy")
+    from test_acquisition_response import _flat_dng
+
+    dng = _flat_dng(tmp_path / "flat.dng", 1200, w=64, h=48)
+    scene = {"image": {"width": 32, "height": 24},
+             "camera": {"position": [0, 1, -4], "look_at": [0, 0.5, 0], "vfov_deg": 40},
+             "light": {"position": [1, 3, -1], "intensity": 20},
+             "objects": [{"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0]}],
+             "fit": {"objects.floor.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]}}}
+    assert np.allclose(rtloop.load_image(dng, (32, 24)), 1200 / 4095, atol=2e-4)
+    path = tmp_path / "scene.json"
+    path.write_text(json.dumps(scene))
+    assert fit_cli.main([str(path), str(dng), "--out", str(tmp_path / "fit"), "--snapshot-every", "0",
+                         "--final-scale", "1", "--final-spp", "1"]) == 0
+    inputs = json.loads((tmp_path / "fit" / "result.json").read_text())["fit_report"]["inputs"]
+    assert inputs["response"] == "raw" and len(inputs["raw"]["white_balance"]) == 4
+    assert inputs["raw"]["white_level"] == 4095
+    capsys.readouterr()
