@@ -155,6 +155,8 @@ def test_pin_to_reference_closed_form():
         pin_to_reference(true_scene, photo, ids == 0, 0.2)
     with pytest.raises(rtloop.RtloopError, match="reflectance must be in"):
         pin_to_reference(true_scene, photo, card, 1.5)
+    with pytest.raises(rtloop.RtloopError, match="the card's mask is 2x2, the scene"):  # before any fit
+        rtloop.fit(true_scene, photo, reference=(np.zeros((2, 2), bool), 0.18))
 
 
 def test_grey_card_reflectance_needs_the_card(tmp_path, capsys):
@@ -226,6 +228,11 @@ def test_readme_one_photo_example(tmp_path, capsys):
     meta = _meta("oblique")
     assert np.linalg.norm(np.subtract(result["light"]["position"], meta["light"]["position"])) < 0.05
     assert abs(result["light"]["intensity"] / meta["light"]["intensity_w_sr"] - 1) < 0.03
+
+    (out / "card.png").unlink()  # a scene naming a card mask that is gone: one line naming it
+    assert fit_cli.main([str(out / "scene.json"), str(out / "objective.png"), "--out", str(tmp_path / "f2")]) != 0
+    err = capsys.readouterr().err
+    assert "meta.acquisition.grey_card.mask names card.png" in err and len(err.strip().splitlines()) == 1
 
 
 def test_raw_photo_in_rtloop_fit(tmp_path, capsys):

@@ -57,8 +57,9 @@ bounds scaled to the scene.
 
 The camera: --camera (a calibration: the photo is undistorted and its principal point
 re-centred, since the scene's camera is an ideal pinhole) is best; --vfov (the vertical
-field of view of a photo without noticeable distortion) is next; with neither the focal
-length is estimated from the board (less accurate).
+field of view of a photo without noticeable distortion) is next; with neither, the
+photo's EXIF focal length, else the board's estimate (less accurate; refused with the
+fixes when the board's view does not fix it).
 
 Colour: --grey-card X,Y,W,H (a neutral card's rectangle in PHOTO) white-balances, and
 --colorchecker finds a ColorChecker Classic (needs OpenCV contrib's cv2.mcc) for a full
@@ -66,10 +67,16 @@ colour correction; either is measured in PHOTO and applied in linear light.
 
 Put the ball beside the board, not on it (the board's pattern is full of edges, and the
 ball is searched for off the board), lit so that its outline stands out from the floor;
-if it is not found, give --ball X,Y,R or --ball-mask. The board is part of the floor in
-the photo but not in the scene; for the fit, take a second photo with the board (and
-card) removed, camera and light untouched, and pass it as --objective. The fit does not
-move the sphere (centres are not fittable): check overlay.png that it lines up.
+if it is not found, give --ball X,Y,R or --ball-mask. The board (with its paper) and the
+card are part of the floor in the photo but not in the scene: with no --objective they
+are left out of the fit (mask.png), so one photo serves for both; or pass a second photo
+with them removed, camera and light untouched, as --objective. The fit does not move the
+sphere (centres are not fittable): check overlay.png that it lines up.
+
+With --grey-card-reflectance R (the card's known reflectance) rtloop-fit reports
+absolute albedos and the light's intensity in W/sr. The scene has a room's dim light
+from every direction (the environment, fitted) and the bounce between the ball and the
+floor (--direct-only: neither).
 """
 
 SCENE_EPILOG = """\

@@ -32,7 +32,7 @@ from .protocol import (
     choose_method,
     searched_paths,
 )
-from .reference import pin_to_reference
+from .reference import check_reference, pin_to_reference
 from .result import FitResult, GenerationInfo, StageResult
 from .selection import (
     EXPLAINED,
@@ -128,6 +128,8 @@ def fit(
                     population=b.population)
     doubts: list[str] = []
     target, use = _objective(scene, image, mask, doubts)
+    if reference is not None:
+        reference = (check_reference(scene, reference[0], reference[1]), reference[1])
     all_paths = scene.fit_paths
     if not all_paths:
         raise RtloopError("fit: the scene's fit section names no free parameters")

@@ -13,11 +13,24 @@ from .. import _native
 from ..errors import RtloopError
 from ..scene import Scene, scene_to_dict
 
-__all__ = ["pin_to_reference"]
+__all__ = ["check_reference", "pin_to_reference"]
 
 _LUMA = np.array([0.2126, 0.7152, 0.0722])
 #: Fewest card pixels (at the scene's size) the measurement accepts.
 MIN_CARD_PIXELS = 4
+
+
+def check_reference(scene: Scene, card: np.ndarray, reflectance: float, where: str = "grey card") -> np.ndarray:
+    """The card's mask as bool (H, W) at the scene's size, or an RtloopError naming what is wrong (checked
+    before a fit, so that a bad reference costs no fit)."""
+    if isinstance(reflectance, bool) or not (isinstance(reflectance, (int, float)) and math.isfinite(reflectance)
+                                             and 0 < reflectance <= 1):
+        raise RtloopError(f"{where}: reflectance must be in (0, 1] (got {reflectance!r}); 0.18 for a grey card")
+    card = np.asarray(card, bool)
+    if card.shape != (scene.height, scene.width):
+        raise RtloopError(f"{where}: the card's mask is {'x'.join(map(str, card.shape[::-1]))}, the scene "
+                          f"{scene.width}x{scene.height}")
+    return card
 
 
 def pin_to_reference(scene: Scene, image: np.ndarray, card: np.ndarray, reflectance: float,
@@ -34,12 +47,7 @@ def pin_to_reference(scene: Scene, image: np.ndarray, card: np.ndarray, reflecta
     albedos, is the one term this rescales (by k); with it the fit has measured the gauge already, and k
     near 1 is the check.
     """
-    if not (isinstance(reflectance, (int, float)) and math.isfinite(reflectance) and 0 < reflectance <= 1):
-        raise RtloopError(f"{where}: reflectance must be in (0, 1] (got {reflectance!r}); 0.18 for a grey card")
-    card = np.asarray(card, bool)
-    if card.shape != (scene.height, scene.width):
-        raise RtloopError(f"{where}: the card's mask is {card.shape[1]}x{card.shape[0]}, the scene "
-                          f"{scene.width}x{scene.height}")
+    card = check_reference(scene, card, reflectance, where)
     d = scene_to_dict(scene)
     ids = _native.object_ids(scene)
     on = ids[card]
