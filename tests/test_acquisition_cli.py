@@ -246,7 +246,9 @@ def test_scene_command_end_to_end(tmp_path, capsys, photos) -> None:
     }
     assert scene["image"] == {"width": 64, "height": 48}
     fit = scene["fit"]
-    assert set(fit) == {"light.position", "light.intensity", "objects.ball.albedo", "objects.floor.albedo"}
+    assert set(fit) == {"light.position", "light.intensity", "objects.ball.albedo", "objects.floor.albedo",
+                        "environment"}  # a room's light, and the bounce between the ball and the floor:
+    assert scene["interreflection"] is True and fit["environment"]["min"] == [0.0, 0.0, 0.0]
     lo, hi = np.array(fit["light.position"]["min"]), np.array(fit["light.position"]["max"])
     assert np.all(lo <= TRUE_SCENE["light"]["position"]) and np.all(TRUE_SCENE["light"]["position"] <= hi)
     assert scene["meta"]["acquisition"]["colour"]["source"] == "grey card"

@@ -70,6 +70,14 @@ class AcquiredScene:
     #: bool (H, W) at the objective's size, True where the scene models the photo (False on the board
     #: with its paper margin and on the colour target); None when the objective is another photo.
     mask: np.ndarray | None = None
+    #: bool (H, W) at the objective's size, True inside the grey card's rectangle, when its reflectance
+    #: is known (``card_reflectance``): what rtloop-fit measures the absolute albedos on.
+    card: np.ndarray | None = None
+
+
+#: The room light's (environment radiance's) upper bound with ``room``: the radiance that alone renders an
+#: unoccluded white floor at 1 (the top of the photo's range).
+ROOM_LIGHT_MAX = 1.0
 
 
 def fit_section(
@@ -113,6 +121,8 @@ def build_scene(
     light_range: float = 2.0,
     names: tuple[str, str] = ("ball", "floor"),
     board_margin: float | None = None,
+    card_reflectance: float | None = None,
+    room: bool = True,
     where: str = "photo",
     objective_where: str = "objective",
 ) -> AcquiredScene:
@@ -136,6 +146,14 @@ def build_scene(
         light_range: size of the light's search box in units of the scene's scale.
         names: the names of the sphere and the plane in the scene.
         board_margin: the white paper around the board's squares, metres (default: one square).
+        room: the scene has what a photo of a room shows besides the lamp: the environment (a dim light from
+            every direction, occluded by the objects) free in the fit section and one diffuse bounce between
+            the objects (``"interreflection": true``); False: direct light only (rtloop-fit then adds the
+            terms only where its screen finds them in the photo).
+        card_reflectance: the grey card's known reflectance (e.g. 0.18): recorded in the scene
+            (``meta.acquisition.grey_card``) with the card's pixels (``AcquiredScene.card``), so that the fit
+            reports absolute albedos and the light's intensity. Needs the grey-card ``colour`` and the card in
+            the photo to fit.
 
     Raises:
         AcquisitionError: any step failed; the message says which and what to do.
@@ -158,6 +176,20 @@ def build_scene(
         raise AcquisitionError(f"light range must be between 0.25 and 100 (got {light_range}); 2 is typical")
     spec = parse_board(board)
     notes: list[str] = []
+    if card_reflectance is not None:
+        if not (math.isfinite(card_reflectance) and 0 < card_reflectance <= 1):
+            raise AcquisitionError(
+                f"grey card reflectance must be in (0, 1] (got {card_reflectance}); 0.18 for an 18 % grey card"
+            )
+        if colour is None or isinstance(colour, ColourCorrection) or (
+            isinstance(colour, str) and colour.lower() in ("colorchecker", "colourchecker", "mcc")
+        ):
+            raise AcquisitionError("a grey card reflectance needs the card's rectangle: give --grey-card X,Y,W,H")
+        if objective is not photo:
+            raise AcquisitionError(
+                "a grey card reflectance needs the card in the photo to fit: leave out --objective (the board "
+                "and the card are masked out of the fit), or leave the card in the second photo and fit that"
+            )
 
     # 1. Colour, measured on the photo as given, applied in linear light.
     if colour is None:
@@ -297,6 +329,9 @@ def build_scene(
             camera.position, centre, ball_radius, intensity, light_range, ball_name, floor_name
         ),
     }
+    if room:
+        scene["interreflection"] = True
+        scene["fit"]["environment"] = {"min": [0.0, 0.0, 0.0], "max": [ROOM_LIGHT_MAX] * 3}
     report = {
         "photo_size": [w, h],
         "camera_model": focal_source,
@@ -328,10 +363,56 @@ def build_scene(
         margin = spec.square_m if board_margin is None else float(board_margin)
         if not (math.isfinite(margin) and margin >= 0):
             raise AcquisitionError(f"board margin must be 0 or more metres (got {board_margin})")
-        unmodelled = unmodelled_mask(pose, margin, correction, remap, w, h)
+        unmodelled = unmodelled_mask(pose, margin, correction, remap, w, h, photo)
+    card = None
+    if card_reflectance is not None:
+        card = card_pixels(correction.details["rect"], remap, w, h)
+        scene["meta"]["acquisition"]["grey_card"] = {
+            "reflectance": float(card_reflectance),
+            "rect_px": list(correction.details["rect"]),
+        }
     return AcquiredScene(
-        scene, objective, photo, pose, silhouette, sphere, correction, overlay, notes, unmodelled
+        scene, objective, photo, pose, silhouette, sphere, correction, overlay, notes, unmodelled, card
     )
+
+
+def card_pixels(rect: Any, remap: PinholeRemap | None, w: int, h: int) -> np.ndarray:
+    """True inside the grey card's rectangle (x, y, w, h in the photo as given), 1 px in from its edges, at
+    the objective's size."""
+    x, y, rw, rh = rect
+    corners = np.array([[x + 1, y + 1], [x + rw - 1, y + 1], [x + rw - 1, y + rh - 1], [x + 1, y + rh - 1]], float)
+    if remap is not None:
+        corners = remap.points(corners)
+    inside = np.zeros((h, w), np.uint8)
+    cv2.fillPoly(inside, [np.round((corners - 0.5) * 16).astype(np.int32)], 1, cv2.LINE_8, shift=4)
+    return inside.astype(bool)
+
+
+#: A pixel near the grey card's rectangle belongs to the card when its brightness is within this fraction of
+#: the card's (the card is uniform; the floor around it is not the same grey).
+CARD_TOLERANCE = 0.25
+
+
+def card_region(photo: np.ndarray, rect: Any) -> np.ndarray:
+    """bool (H, W): the grey card around its rectangle (x, y, w, h): the connected pixels within
+    CARD_TOLERANCE of the rectangle's median brightness, looked for within one rectangle size of it; just
+    the rectangle when that region reaches the search window's edge (a floor of the card's grey)."""
+    h, w = photo.shape[:2]
+    x, y, rw, rh = (int(v) for v in rect)
+    lum = photo @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
+    ref = float(np.median(lum[y : y + rh, x : x + rw]))
+    x0, y0, x1, y1 = max(0, x - rw), max(0, y - rh), min(w, x + 2 * rw), min(h, y + 2 * rh)
+    near = (np.abs(lum[y0:y1, x0:x1] / max(ref, 1e-6) - 1) < CARD_TOLERANCE).astype(np.uint8)
+    near[y - y0 : y - y0 + rh, x - x0 : x - x0 + rw] = 1
+    _, labels = cv2.connectedComponents(near, connectivity=4)
+    region = labels == labels[y - y0, x - x0]
+    out = np.zeros((h, w), bool)
+    edge = region[0].any() or region[-1].any() or region[:, 0].any() or region[:, -1].any()
+    if edge and (x0, y0, x1, y1) != (0, 0, w, h):
+        out[y : y + rh, x : x + rw] = True
+    else:
+        out[y0:y1, x0:x1] = region
+    return out
 
 
 def unmodelled_mask(
@@ -341,9 +422,11 @@ def unmodelled_mask(
     remap: PinholeRemap | None,
     w: int,
     h: int,
+    photo: np.ndarray | None = None,
 ) -> np.ndarray:
     """True where the scene models the photo: False on the board grown by ``margin_m`` on each side
-    (its paper) and on the grey card's rectangle or the ColorChecker's box, grown by 2 px."""
+    (its paper) and on the grey card (the rectangle, grown to the whole card in ``photo``, the corrected
+    board photo, by :func:`card_region`) or the ColorChecker's box, grown by 2 px."""
     bw, bh = pose.board.size_m
     m = margin_m
     paper = np.array([[-m, -m, 0], [bw + m, -m, 0], [bw + m, bh + m, 0], [-m, bh + m, 0]], dtype=float)
@@ -359,11 +442,22 @@ def unmodelled_mask(
     if target is not None:
         polygons.append(target if remap is None else remap.points(target))
     drop = np.zeros((h, w), np.uint8)
+    if "rect" in details and photo is not None:
+        drop[card_region(photo, details["rect"] if remap is None else _remapped_rect(details["rect"], remap))] = 1
     for poly in polygons:
         if np.isfinite(poly).all():
             cv2.fillPoly(drop, [np.round(poly * 16).astype(np.int32)], 1, cv2.LINE_8, shift=4)
     drop = cv2.dilate(drop, np.ones((5, 5), np.uint8))
     return drop == 0
+
+
+def _remapped_rect(rect: Any, remap: PinholeRemap) -> list[int]:
+    """The axis-aligned box, in the undistorted photo, of a rectangle of the photo as given."""
+    x, y, rw, rh = rect
+    p = remap.points(np.array([[x, y], [x + rw, y], [x + rw, y + rh], [x, y + rh]], float))
+    x0, y0 = np.floor(p.min(axis=0)).astype(int)
+    x1, y1 = np.ceil(p.max(axis=0)).astype(int)
+    return [int(x0), int(y0), int(x1 - x0), int(y1 - y0)]
 
 
 def _board_outline_px(pose: FloorPose) -> np.ndarray:

@@ -31,6 +31,9 @@ What :func:`load_image` does, in order:
    invents no detail. The photo and the scene must have the same aspect ratio (within 1%);
    otherwise pass ``crop=True`` or crop the photo yourself.
 
+A camera RAW file (.dng, .cr2, .nef, .arw, ...) is read by rawpy (LibRaw, extra ``raw``) instead of steps
+1, 2 and 4: linear, camera white balance, oriented; then cropped and resized the same way.
+
 Every failure raises :class:`~rtloop.errors.AcquisitionError` with a one-line message that
 starts with the file name.
 """
@@ -48,6 +51,7 @@ from PIL import Image
 from .._opencv import imdecode
 from .._srgb import decode
 from ..errors import AcquisitionError
+from .raw import is_raw, load_raw
 
 __all__ = ["RESPONSES", "load_image", "load_mask"]
 
@@ -129,13 +133,21 @@ def _load(name: str, scene: SceneLike, response: str, crop: bool) -> np.ndarray:
         raise _Fail(f"unknown response {response!r}; expected one of {', '.join(map(repr, RESPONSES))}")
     width, height = _scene_size(scene)
 
-    pixels, orientation = _decode(name)  # (h, w) grey or (h, w, 3) RGB, uint8/uint16/float
-    if pixels.shape[0] == 0 or pixels.shape[1] == 0:
-        raise _Fail(f"image has zero size ({pixels.shape[1]}x{pixels.shape[0]})")
-    pixels = _orient(pixels, orientation)
-    pixels = _fit_aspect(pixels, width, height, crop)
-
-    linear = _linearise(pixels, response)
+    if is_raw(name):  # camera RAW: linear and oriented by LibRaw; the response does not apply
+        if not os.path.isfile(name):
+            raise _Fail("no such file")
+        try:
+            linear, _ = load_raw(name)
+        except AcquisitionError as exc:
+            raise _Fail(str(exc).removeprefix(f"{name}: ")) from None
+        linear = _fit_aspect(linear, width, height, crop)
+    else:
+        pixels, orientation = _decode(name)  # (h, w) grey or (h, w, 3) RGB, uint8/uint16/float
+        if pixels.shape[0] == 0 or pixels.shape[1] == 0:
+            raise _Fail(f"image has zero size ({pixels.shape[1]}x{pixels.shape[0]})")
+        pixels = _orient(pixels, orientation)
+        pixels = _fit_aspect(pixels, width, height, crop)
+        linear = _linearise(pixels, response)
 
     h, w = linear.shape[:2]
     if (w, h) != (width, height):

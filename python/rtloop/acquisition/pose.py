@@ -131,9 +131,10 @@ def estimate_focal_from_board(detection: BoardDetection, width: int, height: int
     vfov_std = math.degrees(f_std * height / (f * f + height * height / 4))
     if not vfov_std <= MAX_VFOV_STD_DEG:
         raise AcquisitionError(
-            f"the board is seen too nearly head-on to fix the focal length (vertical field of view "
-            f"{vfov:.1f} +- {vfov_std:.1f} deg from its corners); give --vfov or --camera, use a photo "
-            "whose EXIF has the focal length, or photograph the board at more of an angle"
+            f"the board's view does not fix the focal length (vertical field of view {vfov:.1f} +- "
+            f"{vfov_std:.1f} deg from its corners: seen too nearly head-on, or too small and far for its "
+            "perspective to show); give --vfov or --camera, use a photo whose EXIF has the focal length, or "
+            "photograph the board closer and at more of an angle"
         )
     return f
 

@@ -9,9 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from ._common import AcquisitionError
+from ..errors import AcquisitionError
 
-__all__ = ["RAW_EXTENSIONS", "is_raw", "load_raw"]
+__all__ = ["RAW_EXTENSIONS", "is_raw", "load_raw", "raw_settings"]
 
 #: File extensions read as camera RAW (lower case, with the dot).
 RAW_EXTENSIONS = frozenset(
@@ -55,3 +55,23 @@ def load_raw(path: str | os.PathLike[str]) -> tuple[np.ndarray, dict[str, Any]]:
     except (rawpy.LibRawError, OSError) as exc:
         raise AcquisitionError(f"{name}: LibRaw cannot read it as a camera RAW file ({exc})") from None
     return (np.asarray(rgb, dtype=np.float32) / 65535.0), info
+
+
+def raw_settings(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """What :func:`load_raw` applies to a RAW file (white balance, black and white levels), read without
+    demosaicing; for the record of a fit's inputs."""
+    name = os.fspath(path)
+    try:
+        rawpy = importlib.import_module("rawpy")
+    except ImportError:
+        raise AcquisitionError(f"{name}: reading RAW needs rawpy: pip install 'rtloop[raw]'") from None
+    try:
+        with rawpy.imread(name) as raw:
+            return {
+                "reader": f"rawpy {rawpy.__version__} (LibRaw): linear, camera white balance, sRGB primaries",
+                "white_balance": [float(v) for v in raw.camera_whitebalance],
+                "black_level": [float(v) for v in raw.black_level_per_channel],
+                "white_level": float(raw.white_level),
+            }
+    except (rawpy.LibRawError, OSError) as exc:
+        raise AcquisitionError(f"{name}: LibRaw cannot read it as a camera RAW file ({exc})") from None

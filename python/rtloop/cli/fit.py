@@ -359,6 +359,27 @@ def scene_mask(scene_path: Path) -> Path | None:
     return path
 
 
+def scene_card(scene_path: Path) -> tuple[Path, float] | None:
+    """The grey card a scene names (``meta.acquisition.grey_card``: ``mask``, a PNG white inside the card,
+    relative to the scene's folder, and ``reflectance``), written by rtloop-scene --grey-card-reflectance."""
+    import json
+
+    try:
+        meta = json.loads(Path(scene_path).read_text()).get("meta") or {}
+        card = (meta.get("acquisition") or {}).get("grey_card") or {}
+        name, reflectance = card.get("mask"), card.get("reflectance")
+    except (OSError, ValueError, AttributeError):
+        return None
+    if not isinstance(name, str):
+        return None
+    if not isinstance(reflectance, (int, float)) or isinstance(reflectance, bool):
+        raise _Failure(f"{scene_path}: meta.acquisition.grey_card.reflectance must be a number (e.g. 0.18)")
+    path = Path(scene_path).parent / name
+    if not path.is_file():
+        raise _Failure(f"{scene_path}: meta.acquisition.grey_card.mask names {name}, but {path} is not a file")
+    return path, float(reflectance)
+
+
 class _Run:
     def __init__(self, args: argparse.Namespace, progress: _Progress, stop: threading.Event):
         self.args = args
@@ -385,6 +406,8 @@ class _Run:
             warnings.simplefilter("always")
             image = rtloop.load_image(args.image, scene, response=args.response, crop=args.crop)
             mask = None if args.mask is None else rtloop.load_mask(args.mask, scene, crop=args.crop)
+            card = scene_card(args.scene)
+            reference = None if card is None else (rtloop.load_mask(card[0], scene, crop=args.crop), card[1])
         for w in caught:
             print(f"{PROG}: warning: {' '.join(str(w.message).split())}", file=sys.stderr)
         self.check_stop()
@@ -435,7 +458,7 @@ class _Run:
                     generations=args.generations, f=args.f, cr=args.cr, threads=args.threads,
                     callback=callback, mask=mask, norm=args.norm, space=args.loss_space,
                     environment=args.environment, interreflection=args.interreflection,
-                    highlights=args.highlights,
+                    highlights=args.highlights, reference=reference,
                 )
         self.progress.end_line()
         for w in result.warnings:
@@ -488,6 +511,14 @@ def _summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None =
         if ident.get("note"):
             lines.extend(textwrap.wrap(f"note: {ident['note']}", 78, initial_indent="  ",
                                        subsequent_indent="  "))
+    ref = result.reference
+    if ref:
+        lines.append("")
+        lines.append(f"absolute, from the grey card of reflectance {ref['reflectance']:g} ({ref['pixels']} px): "
+                     f"light {ref['light_intensity_w_sr']:.4g} W/sr; albedos r g b:")
+        w = max(len(n) for n in ref["albedos"])
+        for obj, rgb in ref["albedos"].items():
+            lines.append(f"  {obj:<{w}}  " + "  ".join(f"{v:8.4f}" for v in rgb))
     lines.append("")
     lines.append(f"fitted parameters ({result.protocol} protocol, seed {result.seed}):")
     width = max((len(n) for n in result.x), default=0)

@@ -11,6 +11,7 @@ import numpy as np
 
 import rtloop
 from rtloop._files import write_json
+from rtloop.acquisition.raw import is_raw, raw_settings
 
 __all__ = ["input_paths", "result_json", "write_final", "write_result"]
 
@@ -40,10 +41,14 @@ def write_final(out: Path, result: Any, image: np.ndarray, scale: int, spp: int)
 
 def input_paths(scene: Any, image: Any, response: str, crop: bool, mask: Any) -> dict[str, Any]:
     """The ``inputs`` record of result.json: absolute paths and how the photo was read."""
-    return {
+    rec = {
         "scene": os.path.abspath(scene),
         "image": os.path.abspath(image),
         "response": response,
         "crop": bool(crop),
         "mask": None if mask is None else os.path.abspath(mask),
     }
+    if is_raw(image):  # read by LibRaw: the response does not apply; its white balance is recorded
+        rec["response"] = "raw"
+        rec["raw"] = raw_settings(image)
+    return rec

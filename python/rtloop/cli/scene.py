@@ -7,6 +7,8 @@ from .._interrupt import interrupted_at_import
 
 try:
     import argparse
+    import json
+    import math
     import os
     import shlex
     import shutil
@@ -27,6 +29,7 @@ try:
         BOARD_HELP,
         RESPONSE_HELP,
         Parser,
+        float_in,
         formatter,
         info,
         length,
@@ -54,8 +57,9 @@ bounds scaled to the scene.
 
 The camera: --camera (a calibration: the photo is undistorted and its principal point
 re-centred, since the scene's camera is an ideal pinhole) is best; --vfov (the vertical
-field of view of a photo without noticeable distortion) is next; with neither the focal
-length is estimated from the board (less accurate).
+field of view of a photo without noticeable distortion) is next; with neither, the
+photo's EXIF focal length, else the board's estimate (less accurate; refused with the
+fixes when the board's view does not fix it).
 
 Colour: --grey-card X,Y,W,H (a neutral card's rectangle in PHOTO) white-balances, and
 --colorchecker finds a ColorChecker Classic (needs OpenCV contrib's cv2.mcc) for a full
@@ -63,10 +67,16 @@ colour correction; either is measured in PHOTO and applied in linear light.
 
 Put the ball beside the board, not on it (the board's pattern is full of edges, and the
 ball is searched for off the board), lit so that its outline stands out from the floor;
-if it is not found, give --ball X,Y,R or --ball-mask. The board is part of the floor in
-the photo but not in the scene; for the fit, take a second photo with the board (and
-card) removed, camera and light untouched, and pass it as --objective. The fit does not
-move the sphere (centres are not fittable): check overlay.png that it lines up.
+if it is not found, give --ball X,Y,R or --ball-mask. The board (with its paper) and the
+card are part of the floor in the photo but not in the scene: with no --objective they
+are left out of the fit (mask.png), so one photo serves for both; or pass a second photo
+with them removed, camera and light untouched, as --objective. The fit does not move the
+sphere (centres are not fittable): check overlay.png that it lines up.
+
+With --grey-card-reflectance R (the card's known reflectance) rtloop-fit reports
+absolute albedos and the light's intensity in W/sr. The scene has a room's dim light
+from every direction (the environment, fitted) and the bounce between the ball and the
+floor (--direct-only: neither).
 """
 
 SCENE_EPILOG = """\
@@ -81,6 +91,10 @@ files written into DIR:
                   the ball as rtloop renders the new scene (dashed magenta): check that
                   they line up
   photo.png       PHOTO after the same corrections (what the geometry was measured on)
+  mask.png        with no --objective: black on the board, its paper and the colour target
+                  (rtloop-fit leaves them out)
+  card.png        with --grey-card-reflectance: white inside the card (rtloop-fit measures
+                  the absolute albedos there)
 
 example:
   rtloop-scene scene.png --board board.json --camera camera.json --ball-radius 33.5mm \\
@@ -148,6 +162,14 @@ def _build_scene_parser() -> Parser:
         action="store_true",
         help="colour correction from a ColorChecker Classic in PHOTO (OpenCV contrib's cv2.mcc)",
     )
+    g.add_argument(
+        "--grey-card-reflectance",
+        type=float_in(0.0, 1.0, True, "a reflectance in (0, 1], e.g. 0.18"),
+        metavar="R",
+        help="the grey card's known reflectance (0.18 for an 18 %% card): with the card in the photo to fit, "
+        "rtloop-fit then reports absolute albedos and the light's intensity in W/sr (card.png, "
+        "meta.acquisition.grey_card)",
+    )
     g = p.add_argument_group("ball")
     g.add_argument(
         "--ball",
@@ -186,6 +208,19 @@ def _build_scene_parser() -> Parser:
         default=2.0,
         metavar="FACTOR",
         help="the light's search box, in units of the camera's distance to the ball (default 2)",
+    )
+    g.add_argument(
+        "--direct-only",
+        action="store_true",
+        help="a scene of direct light only; by default it also has what a room shows: a dim light from "
+        "every direction (the environment, free in the fit section) and light bouncing between the ball "
+        "and the floor (\"interreflection\": true)",
+    )
+    p.add_argument(
+        "--truth",
+        metavar="SCENE.json",
+        help="the true scene (a rendered example's scene.json): print the errors of the camera, the field "
+        "of view and the ball against it",
     )
     p.set_defaults(handler=_cmd_scene)
     return p
@@ -232,8 +267,10 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         resting=not args.ball_free,
         width=args.width,
         light_range=args.light_range,
+        room=not args.direct_only,
         names=(args.ball_name, args.floor_name),
         board_margin=args.board_margin,
+        card_reflectance=args.grey_card_reflectance,
         where=args.photo,
         objective_where=args.objective or args.photo,
     )
@@ -246,6 +283,8 @@ def _cmd_scene(args: argparse.Namespace) -> int:
     }
     if acq.mask is not None:  # rtloop-fit finds it beside scene.json and uses it unless given --mask
         acq.scene["meta"]["acquisition"]["mask"] = "mask.png"
+    if acq.card is not None:  # and the card's pixels, where it measures the absolute albedos
+        acq.scene["meta"]["acquisition"]["grey_card"]["mask"] = "card.png"
     recover_leftovers(out)  # what killed runs left beside OUT
     tmp = staging_dir(out, "rtloop-scene")
     try:
@@ -255,6 +294,8 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         write_png8(tmp / "overlay.png", acq.overlay)
         if acq.mask is not None:
             write_png8(tmp / "mask.png", np.where(acq.mask, 255, 0).astype(np.uint8))
+        if acq.card is not None:
+            write_png8(tmp / "card.png", np.where(acq.card, 255, 0).astype(np.uint8))
         move_into_place(tmp, out, out.exists(), "rtloop-scene")
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -264,7 +305,8 @@ def _cmd_scene(args: argparse.Namespace) -> int:
     rep = acq.scene["meta"]["acquisition"]
     for note in acq.warnings:
         info(f"warning: {note}")
-    print(f"wrote {out}/scene.json, objective.png, overlay.png, photo.png{', mask.png' if acq.mask is not None else ''}")
+    extra = (", mask.png" if acq.mask is not None else "") + (", card.png" if acq.card is not None else "")
+    print(f"wrote {out}/scene.json, objective.png, overlay.png, photo.png{extra}")
     if acq.mask is not None:
         print(f"  mask.png leaves the board and colour target ({1 - acq.mask.mean():.1%} of the photo) out of the fit")
     print(
@@ -278,9 +320,38 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         f"outline fit {rep['ball']['rms_px']:.2f} px RMS over {rep['ball']['edge_points']} edge points"
     )
     print(f"  colour: {rep['colour']['source']}")
+    if args.truth:
+        for line in truth_lines(acq.scene, args.truth):
+            print(f"  {line}")
     print("check overlay.png, then fit:")
     print(
         f"  rtloop-fit {shlex.quote(str(out / 'scene.json'))} {shlex.quote(str(out / 'objective.png'))} "
         f"--out {shlex.quote(str(out / 'fit'))}"
     )
     return 0
+
+
+def truth_lines(scene: dict[str, Any], truth_path: str) -> list[str]:
+    """The scene's errors against the true scene at ``truth_path``: camera position, viewing direction,
+    field of view, and each sphere's centre (also as a fraction of its distance from the camera)."""
+    try:
+        truth = json.loads(Path(truth_path).read_text())
+        cam_t = truth["camera"]
+        spheres_t = {o.get("name"): o for o in truth["objects"] if o.get("shape") == "sphere"}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
+        raise AcquisitionError(f"--truth {truth_path}: not a scene JSON with a camera and objects ({e})") from None
+    cam = scene["camera"]
+    pos, pos_t = np.array(cam["position"], float), np.array(cam_t["position"], float)
+    fwd = np.array(cam["look_at"], float) - pos
+    fwd_t = np.array(cam_t["look_at"], float) - pos_t
+    angle = math.degrees(math.acos(float(np.clip(fwd @ fwd_t / np.linalg.norm(fwd) / np.linalg.norm(fwd_t), -1, 1))))
+    head = (f"against {truth_path}: camera {1000 * np.linalg.norm(pos - pos_t):.1f} mm and {angle:.3f} deg off, "
+            f"field of view {cam['vfov_deg'] - cam_t['vfov_deg']:+.3f} deg")
+    lines = [head]
+    for o in scene["objects"]:
+        t = spheres_t.get(o["name"])
+        if o["shape"] == "sphere" and t is not None:
+            err = float(np.linalg.norm(np.subtract(o["center"], t["center"])))
+            dist = float(np.linalg.norm(np.subtract(t["center"], pos_t)))
+            lines.append(f"{o['name']} {1000 * err:.1f} mm off ({100 * err / dist:.2f} % of its {dist:.2f} m distance)")
+    return lines

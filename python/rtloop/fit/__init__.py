@@ -34,6 +34,7 @@ from .protocol import (
     choose_method,
     searched_paths,
 )
+from .reference import check_reference, pin_to_reference
 from .result import FitResult, GenerationInfo, StageResult
 from .selection import (
     EXPLAINED,
@@ -82,6 +83,7 @@ def fit(
     environment: str = "auto",
     interreflection: str = "auto",
     highlights: str = "auto",
+    reference: tuple[np.ndarray, float] | None = None,
 ) -> FitResult:
     """Fit the scene's free parameters (its ``fit`` section) to ``image``.
 
@@ -110,6 +112,10 @@ def fit(
     ``highlights``: "auto" (default) frees the specular lobe (specular and shininess) of every sphere the
     scene gives as matte when the photo shows a highlight the diffuse model cannot explain (the fitted
     scene's fit section then lists them; ``result.model`` says why); "off" never.
+    ``reference``: ``(card, reflectance)``, a surface of known reflectance lying on a plane of the scene
+    (a grey card; ``card`` bool (H, W), True on it, and left out of the fit by ``mask``): the fitted scene is
+    rescaled to absolute albedos and the light's intensity in W/sr (:mod:`rtloop.fit.reference`), recorded
+    in ``result.reference``.
     """
     t0 = time.perf_counter()
     scene = load_scene(scene)
@@ -124,6 +130,8 @@ def fit(
                     population=b.population)
     doubts: list[str] = []
     target, use = _objective(scene, image, mask, doubts)
+    if reference is not None:
+        reference = (check_reference(scene, reference[0], reference[1]), reference[1])
     all_paths = scene.fit_paths
     if not all_paths:
         raise RtloopError("fit: the scene's fit section names no free parameters")
@@ -173,6 +181,12 @@ def fit(
                  "note": "the bounce between the objects is as bright as their albedos themselves, so the photo "
                          "fixes the light's intensity and the albedos, not only their products (weakly where the "
                          "bounce is faint: see the uncertainty)"}
+    pinned = None
+    if reference is not None:
+        current, pinned = pin_to_reference(current, target, reference[0], reference[1])
+        ident = {**ident, "degenerate": False, "note": pinned["note"]}
+        if "warning" in pinned:
+            doubts.append(pinned["warning"])
     values = current.get_params(all_paths)
     result = FitResult(
         scene=current,
@@ -186,6 +200,7 @@ def fit(
         identifiability=ident,
         settings=settings,
         model=model,
+        reference=pinned,
     )
     result.goodness = goodness(current, target, use, clip=clip)
     doubts += _at_bounds(current, all_paths)

@@ -77,6 +77,9 @@ class FitResult:
     model: dict[str, Any] = field(default_factory=dict)
     #: The residual against the photo's noise floor and a verdict (:mod:`rtloop.fit.goodness`).
     goodness: dict[str, Any] = field(default_factory=dict)
+    #: With a reference of known reflectance (a grey card): the gauge it fixed, the absolute albedos and
+    #: the light's intensity in W/sr (:mod:`rtloop.fit.reference`); None without one.
+    reference: dict[str, Any] | None = None
 
     @property
     def fitness(self) -> float:
@@ -112,4 +115,5 @@ class FitResult:
             "uncertainty": self.uncertainty,
             "message": self.message,
             "warnings": list(self.warnings),
+            **({"reference": self.reference} if self.reference is not None else {}),
         }

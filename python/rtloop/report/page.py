@@ -432,6 +432,16 @@ def _fit_report_section(page: _Page, result: Any, terr: dict[str, Any] | None, i
                 f"<code>{html.escape(str(d))}</code>" for d in ident["determined"]) + "</p>")
     else:
         page.add('<p class="muted">Every fitted parameter is determined by the image separately.</p>')
+    ref = rep.get("reference")
+    if ref:
+        page.add(f"<h3>Absolute, from the {html.escape(str(ref['source']))} of reflectance "
+                 f"{_fmt(ref['reflectance'])} ({ref['pixels']} px)</h3>")
+        body = [["light intensity (W/sr)", _fmt(ref["light_intensity_w_sr"])],
+                *[[f"albedo {name} (R, G, B)", _fmt(a)] for name, a in ref["albedos"].items()],
+                ["gauge applied (R, G, B)", _fmt(ref["gauge"])]]
+        page.add(_table(["quantity", "value"], body))
+        if ref.get("warning"):
+            page.add(f'<p class="note">{html.escape(str(ref["warning"]))}</p>')
     prods = rep.get("products") or {}
     if prods:
         page.add("<h3>Products (exposure × intensity × light colour × albedo), R, G, B</h3>")

