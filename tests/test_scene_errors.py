@@ -260,3 +260,12 @@ def test_minimal_scene_gets_defaults():
     assert again == d
     img = np.asarray(rtloop.render(sc))
     assert img.shape == (12, 16, 3) and np.all(np.isfinite(img))
+
+
+@pytest.mark.parametrize("bad", [42, None, [1, 2], 3.5, b"{}", object()])
+def test_a_scene_of_the_wrong_type_is_an_rtloop_error(bad):
+    """Not a path, dict, JSON text or Scene: an RtloopError (one line from the CLI) that is also a
+    TypeError, as Python expects of a wrong argument type."""
+    with pytest.raises(rtloop.SceneTypeError, match=rf"^scene: expected a path, a dict or a Scene, not {type(bad).__name__}$") as e:
+        rtloop.load_scene(bad)
+    assert isinstance(e.value, rtloop.RtloopError) and isinstance(e.value, TypeError)

@@ -24,7 +24,7 @@ try:
     from ._srgb import srgb_to_linear
     from .acquisition.objective import load_image, load_mask
     from .batch import JobResult, fit_many
-    from .errors import AcquisitionError, RtloopError, RtloopWarning, SceneError
+    from .errors import AcquisitionError, RtloopError, RtloopWarning, SceneError, SceneTypeError
     from .fit import FitResult, StageResult, fit
     from .fit.protocol import whole
     from .insert import Insertion, insert
@@ -44,6 +44,7 @@ __all__ = [
     "RtloopWarning",
     "Scene",
     "SceneError",
+    "SceneTypeError",
     "StageResult",
     "__version__",
     "estimate_uncertainty",

@@ -12,7 +12,7 @@ from typing import Any
 
 from ._files import write_text
 from ._native import Scene
-from .errors import RtloopError, SceneError
+from .errors import RtloopError, SceneError, SceneTypeError
 
 __all__ = ["MAX_INTENSITY", "MAX_MAGNITUDE", "Scene", "load_scene", "save_scene", "scene_to_dict"]
 
@@ -81,7 +81,7 @@ def load_scene(source: str | os.PathLike[str] | dict[str, Any] | Scene) -> Scene
             return Scene(text, path.parent)
         except SceneError as e:
             raise SceneError(f"{path}: {e}") from None
-    raise TypeError(f"load_scene expects a path, a dict or a Scene, not {type(source).__name__}")
+    raise SceneTypeError(f"scene: expected a path, a dict or a Scene, not {type(source).__name__}")
 
 
 def scene_to_dict(scene: Scene) -> dict[str, Any]:
