@@ -25,15 +25,34 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def _base() -> dict:
-    """The shipped example's scene at 12 x 9 pixels with a little ambient light: fits take milliseconds,
-    and the ambient sends them down the two-stage path as well as the closed form."""
+    """The shipped example's scene at 12 x 9 pixels with a little ambient light (the closed form's constant
+    column): fits take milliseconds."""
     d = json.loads((REPO / "examples" / "yellow-ball" / "scene_input.json").read_text())
     d["image"] = {"width": 12, "height": 9}
     d["ambient"] = [0.02, 0.02, 0.02]
     return d
 
 
+def _fit_scenes(base: dict) -> list[dict]:
+    """The base and variants that reach each way a fit goes: a fixed albedo under a free intensity (the
+    two-stage fallback), a free light colour and exposure (held for the closed form), a lit background
+    with a free exposure (measured from it), a known highlight (it measures the intensity)."""
+    objects = [o["name"] for o in base["objects"]]
+    fixed = copy.deepcopy(base)
+    fixed["fit"].pop(f"objects.{objects[-1]}.albedo", None)
+    gauges = copy.deepcopy(base)
+    gauges["fit"]["light.color"] = {"min": [0.2, 0.2, 0.2], "max": [1, 1, 1]}
+    gauges["fit"]["exposure"] = {"min": 0.3, "max": 3}
+    lit = copy.deepcopy(gauges)
+    lit["background"] = [0.3, 0.4, 0.5]
+    known = copy.deepcopy(base)
+    known["ambient"] = [0.0, 0.0, 0.0]
+    known["objects"][0]["material"].update(specular=0.3, shininess=20.0)
+    return [base, fixed, gauges, lit, known]
+
+
 BASE = _base()
+FIT_SCENES = _fit_scenes(BASE)
 ODD = [
     None,
     True,
@@ -132,8 +151,19 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict) -> None:
             "population": rng.choice([8, 0, -1, 10**9]) if rng.random() < 0.2 else 8,
             "generations": rng.choice([1, 2, 0, -3, (1, 1), "x"]) if rng.random() < 0.2 else 1,
         }
-        res = rtloop.fit(BASE, arr, protocol="rtloop", **opts)
-        check_fit(res, BASE, c)
+        scene = rng.choice(FIT_SCENES)
+        if rng.random() < 0.1:
+            scene = mutate(rng, scene)
+        elif shape == (9, 12, 3) and rng.random() < 0.4:
+            # a photo the model can explain: the scene under another light in its box, scaled, with noise
+            truth = copy.deepcopy(scene)
+            box = truth["fit"]["light.position"]
+            truth["light"]["position"] = [rng.uniform(lo, hi) for lo, hi in zip(box["min"], box["max"])]
+            truth["exposure"] = truth.get("exposure", 1.0) * rng.uniform(0.3, 3.0)
+            noise = np.random.default_rng(rng.randrange(2**32)).normal(0, rng.choice([0, 0.01, 0.05]), shape)
+            arr = np.minimum(rtloop.render(truth), 1.0) + noise.astype(np.float32)
+        res = rtloop.fit(scene, arr, protocol="rtloop", **opts)
+        check_fit(res, scene, c)
     else:  # CLI arguments via main()
         argv = [str(tmp / "scene.json"), str(tmp / "photo.png"), "--out", str(tmp / "out")]
         flags = ["--seed", "--population", "--generations", "--threads", "--norm", "--space", "--protocol"]
