@@ -164,3 +164,22 @@ def test_two_stage_fallback_accuracy(seed):
     assert "albedo of floor is fixed" in result.settings["projection_unavailable"]
     assert _light_err(result, truth) < 2e-3
     _check_products(result, truth, tol=2e-3)
+
+
+def test_held_values_start_outside_their_bounds():
+    """Found by benches/fuzz.py (seed 8): a scene whose light colour and exposure start outside their fit
+    bounds; held, they are brought inside them (they were reported at 660 and 918 for bounds [0.2, 1] and
+    [0.3, 3]), and the products stay right."""
+    truth = _truth(exposure=0.6)
+    truth["light"]["color"] = [1.0, 0.85, 0.6]
+    truth["fit"]["light.color"] = {"min": [0.2, 0.2, 0.2], "max": [1, 1, 1]}
+    truth["fit"]["exposure"] = {"min": 0.3, "max": 3}
+    start = _start(truth)
+    start["light"]["color"] = [1.0, 0.1, 660.0]
+    start["exposure"] = 918.0
+    result = rtloop.fit(start, _photo(truth), seed=5)
+    d = result.scene.to_dict()
+    assert d["light"]["color"] == [1.0, 0.2, 1.0]
+    assert d["exposure"] == 3.0
+    assert _light_err(result, truth) < 1e-4
+    _check_products(result, truth)

@@ -33,12 +33,12 @@ def hold_gauges(scene: Scene, paths: list[str], target: np.ndarray, use: np.ndar
              if o["material"].get("specular", 0) != 0 or f"objects.{o['name']}.specular" in paths]
     if "light.color" in paths and not lobes and not (bounce or d.get("interreflection")):
         holds["light.color"] = ("the albedos absorb it (each product is exposure x intensity x colour x albedo): "
-                                "held at the scene's value")
+                                "held at the scene's value (inside its bounds)")
     if "exposure" in paths:
         measured = _exposure_from_background(scene, d, target, use)
         if measured is None:
-            holds["exposure"] = ("no lit background shows it apart from the albedos: held at the scene's value, "
-                                 "which the products absorb")
+            holds["exposure"] = ("no lit background shows it apart from the albedos: held at the scene's value "
+                                 "(inside its bounds), which the products absorb")
         elif measured == "saturated":
             pass
         else:
@@ -48,6 +48,13 @@ def hold_gauges(scene: Scene, paths: list[str], target: np.ndarray, use: np.ndar
                                  "radiance, their weighted median) and held")
     if not holds:
         return scene, {}
+    # held inside their bounds (a scene may start outside them)
+    if "light.color" in holds:
+        d["light"]["color"] = [float(min(max(v, lo), hi))
+                               for v, (lo, hi) in zip(d["light"]["color"], scene.bounds(["light.color"]))]
+    if "exposure" in holds:
+        lo, hi = scene.bounds(["exposure"])[0]
+        d["exposure"] = float(min(max(d["exposure"], lo), hi))
     d["fit"] = {k: v for k, v in d["fit"].items() if k not in holds}
     reduced = Scene(json.dumps(d, allow_nan=False))
     if _native.projection_blocker(reduced, reduced.fit_paths) is not None:
