@@ -109,6 +109,8 @@ def finite(a) -> bool:
 
 
 def check_fit(res, scene_dict, c: Counts) -> None:
+    c.bump("fits")
+    c.bump(f"fits_{res.settings['method']}")
     for name, v in res.x.items():
         if not math.isfinite(v):
             c.bump("nan_or_inf")
@@ -209,6 +211,9 @@ def main() -> int:
     for k in [
         "inputs",
         "ok",
+        "fits",
+        "fits_projected",
+        "fits_two-stage",
         "rtloop_errors",
         "panics",
         "non_rtloop_exceptions",
