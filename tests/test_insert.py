@@ -21,9 +21,51 @@ BALL2 = {"name": "ball2", "shape": "sphere", "center": [1.8, 0.5, -1.0], "radius
 def test_photo_that_is_the_fitted_render_gives_the_render_with_the_objects():
     # Photo = the scene without the object: photo + (with - without) must be the render with it everywhere.
     photo = rtloop.render(SCENE, 128, 96, 4)
-    r = rtloop.insert(SCENE, photo, [BALL2], spp=4)
+    r = rtloop.insert(SCENE, photo, [BALL2], spp=4, adaptive=False)
     assert np.allclose(r.composite, r.with_objects, atol=1e-5)
     assert np.array_equal(r.without, photo)
+    scene = rtloop.scene_to_dict(rtloop.load_scene(SCENE))
+    with_ball = {**scene, "objects": [*scene["objects"], BALL2]}
+    assert np.array_equal(r.with_objects, rtloop.render(with_ball, 128, 96, 4))
+
+
+def test_adaptive_sampling_matches_every_pixel_supersampled():
+    # One sample per pixel except where a neighbour differs (silhouettes, shadow edges, the box's creases),
+    # against the same 4 x 4 grid in every pixel: no 8-bit sRGB value moves by half a code.
+    from rtloop._srgb import encode
+
+    box = {"name": "box", "shape": "mesh", "file": str(REPO / "tests/fixtures/insert/direct-side-box/box.obj"),
+           "position": [-1.5, 0, -1.2], "scale": 1.3,
+           "material": {"albedo": [0.7, 0.3, 0.2], "specular": 0.2, "shininess": 30.0}}
+    photo = rtloop.render(SCENE, 320, 240)
+    ref = rtloop.insert(SCENE, photo, [BALL2, box], spp=16, adaptive=False)
+    calls = []
+    r = rtloop.insert(SCENE, photo, [BALL2, box], spp=16, progress=lambda done, total: calls.append((done, total)))
+    for got, want in ((r.with_objects, ref.with_objects), (r.without, ref.without), (r.composite, ref.composite)):
+        codes = np.abs(encode(got) - encode(want)) * 255
+        assert codes.max() < 0.5 and codes.mean() < 0.01, (codes.max(), codes.mean())
+    assert np.array_equal(r.matte, ref.matte)  # the same samples where the matte is not 0 or 1
+    assert ((r.matte > 0) & (r.matte < 1)).sum() > 100
+    # Progress: tiles of 64 x 64, counted up to all 5 x 4 of them.
+    assert calls and calls[-1] == (20, 20)
+    assert [d for d, _ in calls] == sorted(d for d, _ in calls)
+
+
+def test_progress_that_raises_stops_the_render_and_interrupt_stops_it_too():
+    import _thread
+    import threading
+
+    def fail(done, total):
+        raise ValueError("stop here")
+
+    with pytest.raises(ValueError, match="stop here"):
+        rtloop.insert(SCENE, rtloop.render(SCENE, 128, 96), [BALL2], progress=fail)
+    # ^C while a 12 MP photo is rendered with every pixel supersampled (about a minute on 2 cores).
+    timer = threading.Timer(0.3, _thread.interrupt_main)
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        rtloop.insert(SCENE, np.zeros((3000, 4000, 3), np.float32), [BALL2], adaptive=False)
+    timer.join()
 
 
 def test_real_photo_is_kept_where_the_objects_change_nothing_and_replaced_where_they_are_seen():
