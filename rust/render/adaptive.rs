@@ -5,9 +5,10 @@
 //! in shadow and the other not, the surface normal turns by more than [`CREASE_COS`] (a mesh's edges), or
 //! the colour jumps by more than [`CONTRAST`]. Every pixel that disagrees with one of its 8 neighbours is
 //! supersampled in every scene, so scenes rendered together (an insertion's with and without) share their
-//! sample positions. A straight edge that crosses a pixel always separates its centre from a neighbour's,
-//! so only features thinner than a pixel between centres can be missed. A refined pixel is exactly the
-//! uniform render's (the same grid, summed in the same order); a smooth one is its centre sample.
+//! sample positions. A straight edge that crosses a pixel always separates its centre from a neighbour's
+//! (the pixels past the image's border are sampled too), so only features thinner than a pixel between
+//! centres can be missed. A refined pixel is exactly the uniform render's (the same grid, summed in the
+//! same order); a smooth one is its centre sample.
 
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
@@ -209,44 +210,38 @@ impl Job<'_> {
         rgb: &mut [&mut [f32]],
         cov: &mut [f32],
     ) -> usize {
-        let (w, h) = (self.width as usize, self.height as usize);
+        let w = self.width as usize;
         let n_layers = self.layers.len();
-        // Centre samples of the tile and a one-pixel halo (clipped to the image).
-        let (hx0, hx1) = (x0.saturating_sub(1), (x1 + 1).min(w));
-        let (hy0, hy1) = (y0.saturating_sub(1), (y1 + 1).min(h));
-        let hw = hx1 - hx0;
+        // Centre samples of the tile and a one-pixel halo, past the image's border too (the camera's rays
+        // go on beyond it), so an edge between a border pixel's centre and the border is seen.
+        let hw = x1 - x0 + 2;
         let mut centres = Vec::new();
         if self.adaptive {
-            centres.reserve(hw * (hy1 - hy0) * n_layers);
-            for y in hy0..hy1 {
-                for x in hx0..hx1 {
+            centres.reserve(hw * (y1 - y0 + 2) * n_layers);
+            for y in y0..y1 + 2 {
+                for x in x0..x1 + 2 {
                     for l in self.layers {
-                        centres.push(l.sample(
-                            x as f32 + 0.5,
-                            y as f32 + 0.5,
-                            self.width,
-                            self.height,
-                        ));
+                        // The centre of pixel (x - 1, y - 1).
+                        let (px, py) = (x as f32 - 0.5, y as f32 - 0.5);
+                        centres.push(l.sample(px, py, self.width, self.height));
                     }
                 }
             }
         }
-        let at =
-            |x: usize, y: usize, l: usize| &centres[((y - hy0) * hw + (x - hx0)) * n_layers + l];
+        // The centre sample of pixel (x - 1, y - 1).
+        let at = |x: usize, y: usize, l: usize| &centres[((y - y0) * hw + (x - x0)) * n_layers + l];
         let covered = |object: u32| object != u32::MAX && object >= self.cover_from;
         let mut refined = 0;
         let mut sums = vec![Vec3A::ZERO; n_layers];
         let inv = 1.0 / self.offsets.len() as f32;
         for y in y0..y1 {
             for x in x0..x1 {
-                let edge = !self.adaptive || {
-                    let (nx0, nx1) = (x.saturating_sub(1), (x + 1).min(w - 1));
-                    let (ny0, ny1) = (y.saturating_sub(1), (y + 1).min(h - 1));
-                    (ny0..=ny1).any(|ny| {
-                        (nx0..=nx1)
-                            .any(|nx| (0..n_layers).any(|l| differ(at(x, y, l), at(nx, ny, l))))
-                    })
-                };
+                let edge = !self.adaptive
+                    || (y..y + 3).any(|ny| {
+                        (x..x + 3).any(|nx| {
+                            (0..n_layers).any(|l| differ(at(x + 1, y + 1, l), at(nx, ny, l)))
+                        })
+                    });
                 let p = (y - y0) * w + x;
                 if edge {
                     refined += 1;
@@ -269,9 +264,9 @@ impl Job<'_> {
                     cov[p] = hits as f32 * inv;
                 } else {
                     for (l, out) in rgb.iter_mut().enumerate() {
-                        out[3 * p..3 * p + 3].copy_from_slice(&at(x, y, l).rgb.to_array());
+                        out[3 * p..3 * p + 3].copy_from_slice(&at(x + 1, y + 1, l).rgb.to_array());
                     }
-                    cov[p] = if covered(at(x, y, n_layers - 1).object) {
+                    cov[p] = if covered(at(x + 1, y + 1, n_layers - 1).object) {
                         1.0
                     } else {
                         0.0
