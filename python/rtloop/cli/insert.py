@@ -25,7 +25,7 @@ OBJECTS.json holds {"objects": [...]} (or a bare list) in the scene format, for 
   {"objects": [{"name": "ball2", "shape": "sphere", "center": [1.8, 0.5, -1.0], "radius": 0.5,
                 "material": {"albedo": [0.2, 0.3, 0.8], "specular": 0.0, "shininess": 0.0}}]}
 A triangle mesh is {"name": "bunny", "shape": "mesh", "file": "bunny.obj", "position": [x, y, z], "scale": s,
-"material": {...}}, its file relative to OBJECTS.json's folder.
+"material": {...}} (an OBJ or PLY file), its file relative to OBJECTS.json's folder.
 
 Writes into DIR: composite.png (8-bit sRGB), composite_linear16.png (16-bit linear), matte.png (the
 objects' pixel coverage), with.png and without.png (the two renders, 8-bit sRGB).
