@@ -189,46 +189,34 @@ def test_a_concave_mesh_shadows_itself(tmp_path):
     assert ((a > 0).all() and (b == 0).all()) or ((b > 0).all() and (a == 0).all())
 
 
-@pytest.mark.parametrize("content, message", [
-    (None, "cannot open the OBJ file"),
-    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "index out of"),
-    ("v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", "vertex 2 is not finite"),
-    ("# nothing\n", "no triangles"),
-    ("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "degenerate"),
-    ("v 0 0 0\nv 1e30 0 0\nv 0 1 0\nf 1 2 3\n", r"triangle 1 lies beyond \+-1e8 m"),
-])
-def test_bad_mesh_files_are_refused_naming_the_field_and_file(tmp_path, content, message):
-    obj = tmp_path / "bad.obj"
-    if content is not None:
-        obj.write_text(content)
-    scene = rtloop.scene_to_dict(rtloop.load_scene(SCENE))
-    scene["objects"].append({"name": "m", "shape": "mesh", "file": str(obj)})
-    with pytest.raises(rtloop.SceneError, match=r"objects\[2\]\.file: .*bad\.obj: .*" + message):
-        rtloop.load_scene(scene)
-
-
 PLY_HEAD = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
 PLY_FACE = "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
 
 
-@pytest.mark.parametrize("content, message", [
-    (None, "cannot open the PLY file"),
-    ("solid nothing\n", "not a valid PLY file"),
-    (PLY_HEAD + PLY_FACE + "0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n", "face 1: vertex index 9 is out of range"),
-    ("nan, binary", "vertex 2 is not finite"),  # an ASCII nan is not a PLY number
-    (PLY_HEAD + "end_header\n0 0 0\n1 0 0\n0 1 0\n", "no triangles"),
-    (PLY_HEAD + PLY_FACE + "0 0 0\n1 0 0\n2 0 0\n3 0 1 2\n", "degenerate"),
-    (PLY_HEAD.replace("property float z\n", "") + PLY_FACE + "0 0\n1 0\n0 1\n3 0 1 2\n", 'vertex 1 has no number "z"'),
+@pytest.mark.parametrize("ext, content, message", [
+    ("obj", None, "cannot open the OBJ file"),
+    ("obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "index out of"),
+    ("obj", "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", "vertex 2 is not finite"),
+    ("obj", "# nothing\n", "no triangles"),
+    ("obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "degenerate"),
+    ("obj", "v 0 0 0\nv 1e30 0 0\nv 0 1 0\nf 1 2 3\n", r"triangle 1 lies beyond \+-1e8 m"),
+    ("ply", None, "cannot open the PLY file"),
+    ("ply", "solid nothing\n", "not a valid PLY file"),
+    ("ply", PLY_HEAD + PLY_FACE + "0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n", "face 1: vertex index 9 is out of range"),
+    ("ply", "nan, binary", "vertex 2 is not finite"),  # an ASCII nan is not a PLY number
+    ("ply", PLY_HEAD + "end_header\n0 0 0\n1 0 0\n0 1 0\n", "no triangles"),
+    ("ply", PLY_HEAD + PLY_FACE + "0 0 0\n1 0 0\n2 0 0\n3 0 1 2\n", "degenerate"),
+    ("ply", PLY_HEAD.replace("property float z\n", "") + PLY_FACE + "0 0\n1 0\n0 1\n3 0 1 2\n", 'vertex 1 has no number "z"'),
 ])
-def test_bad_ply_files_are_refused_naming_the_field_and_file(tmp_path, content, message):
-    ply = tmp_path / "bad.ply"
+def test_bad_mesh_files_are_refused_naming_the_field_and_file(tmp_path, ext, content, message):
+    bad = tmp_path / f"bad.{ext}"
     if content == "nan, binary":
-        write_ply(ply, np.array([[0, 0, 0], [np.nan, 0, 0], [0, 1, 0]]), [[0, 1, 2]], False, True)
+        write_ply(bad, np.array([[0, 0, 0], [np.nan, 0, 0], [0, 1, 0]]), [[0, 1, 2]], False, True)
     elif content is not None:
-        ply.write_text(content)
+        bad.write_text(content)
     scene = rtloop.scene_to_dict(rtloop.load_scene(SCENE))
-    scene["objects"].append({"name": "m", "shape": "mesh", "file": str(ply)})
-    with pytest.raises(rtloop.SceneError, match=r"objects\[2\]\.file: .*bad\.ply: .*" + message):
+    scene["objects"].append({"name": "m", "shape": "mesh", "file": str(bad)})
+    with pytest.raises(rtloop.SceneError, match=rf"objects\[2\]\.file: .*bad\.{ext}: .*" + message):
         rtloop.load_scene(scene)
 
 
