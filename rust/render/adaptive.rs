@@ -137,7 +137,7 @@ pub fn render_layers(
     let band = TILE as usize * w;
     let mut images: Vec<Vec<f32>> = layers.iter().map(|_| vec![0.0f32; w * h * 3]).collect();
     let mut coverage = vec![0.0f32; w * h];
-    let mut bands: Vec<(usize, Vec<&mut [f32]>, &mut [f32])> = coverage
+    let mut bands: Vec<Band> = coverage
         .chunks_mut(band)
         .enumerate()
         .map(|(b, c)| (b, Vec::with_capacity(layers.len()), c))
@@ -186,6 +186,9 @@ pub fn render_layers(
         refined,
     }))
 }
+
+/// A band of [`TILE`] rows: its index, those rows of each image and of the coverage.
+type Band<'a> = (usize, Vec<&'a mut [f32]>, &'a mut [f32]);
 
 /// What every tile shares.
 struct Job<'a> {
