@@ -59,12 +59,21 @@ def test_progress_that_raises_stops_the_render_and_interrupt_stops_it_too():
 
     with pytest.raises(ValueError, match="stop here"):
         rtloop.insert(SCENE, rtloop.render(SCENE, 128, 96), [BALL2], progress=fail)
-    # ^C while a 12 MP photo is rendered with every pixel supersampled (about a minute on 2 cores).
-    timer = threading.Timer(0.3, _thread.interrupt_main)
-    timer.start()
+    # ^C while a 12 MP photo is rendered with every pixel supersampled (about 20 s on 2 cores): sent once the
+    # render reports progress, taken by the render's own polling (not inside the callback).
+    timers, calls = [], []
+
+    def interrupt_soon(done, total):
+        calls.append((done, total))
+        if not timers:
+            timers.append(threading.Timer(0.05, _thread.interrupt_main))
+            timers[0].start()
+
     with pytest.raises(KeyboardInterrupt):
-        rtloop.insert(SCENE, np.zeros((3000, 4000, 3), np.float32), [BALL2], adaptive=False)
-    timer.join()
+        rtloop.insert(SCENE, np.zeros((3000, 4000, 3), np.float32), [BALL2], adaptive=False,
+                      progress=interrupt_soon)
+    timers[0].join()
+    assert calls[-1][0] < calls[-1][1]  # stopped before the last tile
 
 
 def test_real_photo_is_kept_where_the_objects_change_nothing_and_replaced_where_they_are_seen():
