@@ -49,6 +49,11 @@ def render_layers(
 ) -> tuple[list[npt.NDArray[np.float32]], npt.NDArray[np.float32], int]:
     """The scenes rendered together, supersampled where any has an edge: (images, coverage of the last
     scene's objects from ``cover_from`` on, pixels supersampled)."""
+def composite(
+    photo: npt.NDArray[np.float32], with_objects: npt.NDArray[np.float32], without: npt.NDArray[np.float32],
+    matte: npt.NDArray[np.float32],
+) -> npt.NDArray[np.float32]:
+    """matte * with + (1 - matte) * max(photo + (with - without), 0), blended only where matte > 0."""
 def projection_blocker(scene: Scene, paths: list[str]) -> str | None: ...
 def evaluate(
     scene: Scene,

@@ -108,16 +108,5 @@ def insert(result: Any, photo: Any, objects: Any, *, spp: int = 16, response: st
         raise RtloopError(f"added objects: {e}") from None
     (without, with_objects), matte, _ = _native.render_layers(
         [base, scene_with], width, height, spp, bool(adaptive), n_old, progress)
-    return Insertion(image, _composite(image, with_objects, without, matte), matte, with_objects, without)
-
-
-def _composite(photo: np.ndarray, with_objects: np.ndarray, without: np.ndarray, matte: np.ndarray) -> np.ndarray:
-    """matte * with + (1 - matte) * max(photo + (with - without), 0), in place over full-size arrays and
-    blended only where the matte is not 0 (a broadcast (H, W, 1) product costs seconds at 12 MP)."""
-    out = with_objects - without
-    out += photo
-    np.maximum(out, 0.0, out=out)
-    seen = matte > 0
-    m = matte[seen][:, None]
-    out[seen] = m * with_objects[seen] + (1.0 - m) * out[seen]
-    return out
+    composite = _native.composite(np.ascontiguousarray(image), with_objects, without, matte)
+    return Insertion(image, composite, matte, with_objects, without)

@@ -151,6 +151,36 @@ fn render_layers<'py>(
     Ok((images, coverage, layers.refined))
 }
 
+/// The insertion composite of linear (H, W, 3) `photo`, `with` and `without` and the (H, W) `matte`
+/// (see `render::composite`), float32 (H, W, 3).
+#[pyfunction]
+fn composite<'py>(
+    py: Python<'py>,
+    photo: PyReadonlyArray3<'py, f32>,
+    with: PyReadonlyArray3<'py, f32>,
+    without: PyReadonlyArray3<'py, f32>,
+    matte: PyReadonlyArray2<'py, f32>,
+) -> PyResult<Bound<'py, PyArray3<f32>>> {
+    let shape = photo.shape().to_vec();
+    if with.shape() != shape || without.shape() != shape || matte.shape() != &shape[..2] {
+        return Err(Error::Value(format!(
+            "composite: photo {shape:?}, with {:?}, without {:?} and matte {:?} must agree",
+            with.shape(),
+            without.shape(),
+            matte.shape()
+        ))
+        .into());
+    }
+    let (p, w, o, m) = (
+        photo.as_slice()?,
+        with.as_slice()?,
+        without.as_slice()?,
+        matte.as_slice()?,
+    );
+    let out = py.detach(|| core_render::composite(p, w, o, m))?;
+    image_array(py, shape[0] as u32, shape[1] as u32, out)
+}
+
 /// None when the closed-form (projected) method applies to `scene` with the fit section `paths`, else why.
 #[pyfunction]
 fn projection_blocker(scene: &Bound<'_, PyScene>, paths: Vec<String>) -> Option<String> {
@@ -341,6 +371,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(_kept_pools, m)?)?;
     m.add_function(wrap_pyfunction!(object_ids, m)?)?;
     m.add_function(wrap_pyfunction!(render_layers, m)?)?;
+    m.add_function(wrap_pyfunction!(composite, m)?)?;
     m.add_function(wrap_pyfunction!(save_image, m)?)?;
     m.add_function(wrap_pyfunction!(projection_blocker, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
