@@ -13,7 +13,6 @@ from rtloop.cli.insert import insert_main
 
 REPO = Path(__file__).resolve().parents[1]
 SCENE = str(REPO / "examples" / "yellow-ball" / "scene.json")
-INSERT = REPO / "tests" / "fixtures" / "insert" / "direct-side"
 BALL2 = {"name": "ball2", "shape": "sphere", "center": [1.8, 0.5, -1.0], "radius": 0.5,
          "material": {"albedo": [0.2, 0.3, 0.8], "specular": 0.0, "shininess": 0.0}}
 
@@ -21,9 +20,60 @@ BALL2 = {"name": "ball2", "shape": "sphere", "center": [1.8, 0.5, -1.0], "radius
 def test_photo_that_is_the_fitted_render_gives_the_render_with_the_objects():
     # Photo = the scene without the object: photo + (with - without) must be the render with it everywhere.
     photo = rtloop.render(SCENE, 128, 96, 4)
-    r = rtloop.insert(SCENE, photo, [BALL2], spp=4)
+    r = rtloop.insert(SCENE, photo, [BALL2], spp=4, adaptive=False)
     assert np.allclose(r.composite, r.with_objects, atol=1e-5)
     assert np.array_equal(r.without, photo)
+    scene = rtloop.scene_to_dict(rtloop.load_scene(SCENE))
+    with_ball = {**scene, "objects": [*scene["objects"], BALL2]}
+    assert np.array_equal(r.with_objects, rtloop.render(with_ball, 128, 96, 4))
+
+
+def test_adaptive_sampling_matches_every_pixel_supersampled():
+    # One sample per pixel except where a neighbour differs (silhouettes, shadow edges, the box's creases),
+    # against the same 4 x 4 grid in every pixel: no 8-bit sRGB value moves by half a code.
+    from rtloop._srgb import encode
+
+    box = {"name": "box", "shape": "mesh", "file": str(REPO / "tests/fixtures/insert/direct-side-box/box.obj"),
+           "position": [-1.5, 0, -1.2], "scale": 1.3,
+           "material": {"albedo": [0.7, 0.3, 0.2], "specular": 0.2, "shininess": 30.0}}
+    photo = rtloop.render(SCENE, 320, 240)
+    ref = rtloop.insert(SCENE, photo, [BALL2, box], spp=16, adaptive=False)
+    calls = []
+    r = rtloop.insert(SCENE, photo, [BALL2, box], spp=16, progress=lambda done, total: calls.append((done, total)))
+    for got, want in ((r.with_objects, ref.with_objects), (r.without, ref.without), (r.composite, ref.composite)):
+        codes = np.abs(encode(got) - encode(want)) * 255
+        assert codes.max() < 0.5 and codes.mean() < 0.01, (codes.max(), codes.mean())
+    assert np.array_equal(r.matte, ref.matte)  # the same samples where the matte is not 0 or 1
+    assert ((r.matte > 0) & (r.matte < 1)).sum() > 100
+    # Progress: tiles of 64 x 64, counted up to all 5 x 4 of them.
+    assert calls and calls[-1] == (20, 20)
+    assert [d for d, _ in calls] == sorted(d for d, _ in calls)
+
+
+def test_progress_that_raises_stops_the_render_and_interrupt_stops_it_too():
+    import _thread
+    import threading
+
+    def fail(done, total):
+        raise ValueError("stop here")
+
+    with pytest.raises(ValueError, match="stop here"):
+        rtloop.insert(SCENE, rtloop.render(SCENE, 128, 96), [BALL2], progress=fail)
+    # ^C while a 12 MP photo is rendered with every pixel supersampled (about 20 s on 2 cores): sent once the
+    # render reports progress, taken by the render's own polling (not inside the callback).
+    timers, calls = [], []
+
+    def interrupt_soon(done, total):
+        calls.append((done, total))
+        if not timers:
+            timers.append(threading.Timer(0.05, _thread.interrupt_main))
+            timers[0].start()
+
+    with pytest.raises(KeyboardInterrupt):
+        rtloop.insert(SCENE, np.zeros((3000, 4000, 3), np.float32), [BALL2], adaptive=False,
+                      progress=interrupt_soon)
+    timers[0].join()
+    assert calls[-1][0] < calls[-1][1]  # stopped before the last tile
 
 
 def test_real_photo_is_kept_where_the_objects_change_nothing_and_replaced_where_they_are_seen():
@@ -89,28 +139,36 @@ def test_cli_writes_the_composite_matte_and_renders(tmp_path):
                         "--out", str(tmp_path / "o2")]) == 1
 
 
-def test_inserted_ball_matches_mitsubas_photo_with_it():
-    # Fit the light on Mitsuba's photo without the blue ball, insert it, compare with Mitsuba's photo with it
-    # (tools/make_insert_photos.py), away from the silhouettes (2 px either side of any pixel the matte cuts).
+@pytest.fixture(scope="module")
+def direct_side_fit():
+    """The light fitted on Mitsuba's direct-side photo (no added object): (input scene, photo, fitted)."""
+    case = REPO / "tests" / "fixtures" / "photos" / "direct-side"
+    scene = rtloop.load_scene(case / "scene_input.json")
+    photo = rtloop.load_image(case / "objective.png", scene)
+    return scene, photo, rtloop.fit(scene, photo, seed=1).scene
+
+
+@pytest.mark.parametrize("fixture, shadow_px", [("direct-side", 200), ("direct-side-box", 300)])
+def test_inserted_object_matches_mitsubas_photo_with_it(direct_side_fit, fixture, shadow_px):
+    # Fit the light on Mitsuba's photo without the blue ball (or the turned box mesh, box.obj), insert it,
+    # compare with Mitsuba's photo with it (tools/make_insert_photos.py), away from the silhouettes (2 px
+    # either side of any pixel the matte cuts).
     from scipy import ndimage
 
     from rtloop._srgb import encode
 
-    case = REPO / "tests" / "fixtures" / "photos" / "direct-side"
-    scene = rtloop.load_scene(case / "scene_input.json")
-    photo = rtloop.load_image(case / "objective.png", scene)
-    fitted = rtloop.fit(scene, photo, seed=1).scene
-    r = rtloop.insert(fitted, photo, INSERT / "objects.json", spp=16)
-    truth = rtloop.load_image(INSERT / "with.png", scene)
+    scene, photo, fitted = direct_side_fit
+    r = rtloop.insert(fitted, photo, REPO / "tests" / "fixtures" / "insert" / fixture / "objects.json", spp=16)
+    truth = rtloop.load_image(REPO / "tests" / "fixtures" / "insert" / fixture / "with.png", scene)
     seen = r.matte > 0
     away = ~(ndimage.binary_dilation(seen, iterations=2) ^ ndimage.binary_erosion(seen, iterations=2))
     codes = np.abs(encode(r.composite) - encode(truth)) * 255
     psnr = 10 * np.log10(1 / np.mean((codes[away] / 255) ** 2))
-    assert psnr > 40  # the photo without the ball: 17 dB
+    assert psnr > 40  # the photo without the object: 17 dB
     shadow = away & ~seen & ((r.with_objects - r.without).sum(axis=2) < -0.01)
-    assert shadow.sum() > 200
-    assert codes[shadow].mean() < 5  # the shadow left out: 115 codes
-    assert codes[away & (r.matte == 1)].mean() < 8  # the ball's own shading (its albedo is given, not fitted)
+    assert shadow.sum() > shadow_px
+    assert codes[shadow].mean() < 5  # the shadow left out: 115 codes (ball), 113 (box)
+    assert codes[away & (r.matte == 1)].mean() < 8  # the object's own shading (its albedo is given, not fitted)
 
 
 def test_report_shows_the_photo_beside_the_composite(tmp_path):

@@ -54,6 +54,32 @@ def write_obj(path: Path, v: np.ndarray, f: np.ndarray, normals: bool) -> Path:
     return path
 
 
+def write_ply(path: Path, v: np.ndarray, f: np.ndarray, normals: bool, binary: bool) -> Path:
+    """A PLY file written here (not by the crate rtloop reads it with): float vertices (and normals), faces
+    as uchar-counted int lists (any polygon), ASCII or binary little-endian."""
+    props = ["x", "y", "z"] + (["nx", "ny", "nz"] if normals else [])
+    head = ["ply", f"format {'binary_little_endian' if binary else 'ascii'} 1.0", f"element vertex {len(v)}"]
+    head += [f"property float {p}" for p in props]
+    head += [f"element face {len(f)}", "property list uchar int vertex_indices", "end_header"]
+    cols = np.hstack([v, v] if normals else [v]).astype("<f4")  # unit-sphere vertices are their normals
+    if binary:
+        body = b"".join(
+            [cols.tobytes()] + [bytes([len(face)]) + np.asarray(face, "<i4").tobytes() for face in f])
+        path.write_bytes(("\n".join(head) + "\n").encode() + body)
+    else:
+        lines = [" ".join(f"{x:.9g}" for x in row) for row in cols]
+        lines += [" ".join(str(i) for i in [len(face), *face]) for face in f]
+        path.write_text("\n".join(head + lines) + "\n")
+    return path
+
+
+@pytest.fixture(scope="module")
+def sphere_ply(tmp_path_factory):
+    v, f = icosphere(5)
+    d = tmp_path_factory.mktemp("ply")
+    return write_ply(d / "flat.ply", v, f, False, True), write_ply(d / "smooth.ply", v, f, True, False)
+
+
 @pytest.fixture(scope="module")
 def sphere_obj(tmp_path_factory):
     v, f = icosphere(5)  # 20480 triangles
@@ -83,9 +109,12 @@ def tessellation_bounds(v: np.ndarray, f: np.ndarray) -> tuple[float, float, flo
     return float(corner), float(edge), float(sagitta)
 
 
+@pytest.mark.parametrize("fmt", ["obj", "ply"])
 @pytest.mark.parametrize("smooth", [False, True])
-def test_tessellated_sphere_renders_like_the_analytic_sphere(sphere_obj, smooth):
+def test_tessellated_sphere_renders_like_the_analytic_sphere(sphere_obj, sphere_ply, smooth, fmt):
     v, f, flat, smooth_file = sphere_obj
+    if fmt == "ply":  # flat: binary, smooth: ASCII with normals
+        flat, smooth_file = sphere_ply
     scene = rtloop.scene_to_dict(rtloop.load_scene(SCENE))
     mesh = with_ball_as_mesh(smooth_file if smooth else flat)
     ref, got = rtloop.render(scene, W, H), rtloop.render(mesh, W, H)
@@ -160,22 +189,53 @@ def test_a_concave_mesh_shadows_itself(tmp_path):
     assert ((a > 0).all() and (b == 0).all()) or ((b > 0).all() and (a == 0).all())
 
 
-@pytest.mark.parametrize("content, message", [
-    (None, "cannot open the OBJ file"),
-    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "index out of"),
-    ("v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", "vertex 2 is not finite"),
-    ("# nothing\n", "no triangles"),
-    ("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "degenerate"),
-    ("v 0 0 0\nv 1e30 0 0\nv 0 1 0\nf 1 2 3\n", r"triangle 1 lies beyond \+-1e8 m"),
+PLY_HEAD = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+PLY_FACE = "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+
+
+@pytest.mark.parametrize("ext, content, message", [
+    ("obj", None, "cannot open the OBJ file"),
+    ("obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", "index out of"),
+    ("obj", "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", "vertex 2 is not finite"),
+    ("obj", "# nothing\n", "no triangles"),
+    ("obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "degenerate"),
+    ("obj", "v 0 0 0\nv 1e30 0 0\nv 0 1 0\nf 1 2 3\n", r"triangle 1 lies beyond \+-1e8 m"),
+    ("ply", None, "cannot open the PLY file"),
+    ("ply", "solid nothing\n", "not a valid PLY file"),
+    ("ply", PLY_HEAD + PLY_FACE + "0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n", "face 1: vertex index 9 is out of range"),
+    ("ply", "nan, binary", "vertex 2 is not finite"),  # an ASCII nan is not a PLY number
+    ("ply", PLY_HEAD + "end_header\n0 0 0\n1 0 0\n0 1 0\n", "no triangles"),
+    ("ply", PLY_HEAD + PLY_FACE + "0 0 0\n1 0 0\n2 0 0\n3 0 1 2\n", "degenerate"),
+    ("ply", PLY_HEAD.replace("property float z\n", "") + PLY_FACE + "0 0\n1 0\n0 1\n3 0 1 2\n", 'vertex 1 has no number "z"'),
 ])
-def test_bad_mesh_files_are_refused_naming_the_field_and_file(tmp_path, content, message):
-    obj = tmp_path / "bad.obj"
-    if content is not None:
-        obj.write_text(content)
+def test_bad_mesh_files_are_refused_naming_the_field_and_file(tmp_path, ext, content, message):
+    bad = tmp_path / f"bad.{ext}"
+    if content == "nan, binary":
+        write_ply(bad, np.array([[0, 0, 0], [np.nan, 0, 0], [0, 1, 0]]), [[0, 1, 2]], False, True)
+    elif content is not None:
+        bad.write_text(content)
     scene = rtloop.scene_to_dict(rtloop.load_scene(SCENE))
-    scene["objects"].append({"name": "m", "shape": "mesh", "file": str(obj)})
-    with pytest.raises(rtloop.SceneError, match=r"objects\[2\]\.file: .*bad\.obj: .*" + message):
+    scene["objects"].append({"name": "m", "shape": "mesh", "file": str(bad)})
+    with pytest.raises(rtloop.SceneError, match=rf"objects\[2\]\.file: .*bad\.{ext}: .*" + message):
         rtloop.load_scene(scene)
+
+
+def test_ply_polygons_render_as_the_same_obj(tmp_path):
+    # The insertion fixture's box: OBJ quads (split by tobj) against PLY quads (split by rtloop), both formats.
+    box = REPO / "tests" / "fixtures" / "insert" / "direct-side-box" / "box.obj"
+    lines = box.read_text().split("\n")
+    v = np.array([[float(x) for x in ln.split()[1:]] for ln in lines if ln.startswith("v ")])
+    f = [[int(i) - 1 for i in ln.split()[1:]] for ln in lines if ln.startswith("f ")]
+    assert len(f) == 6 and all(len(q) == 4 for q in f)
+    scene = rtloop.scene_to_dict(rtloop.load_scene(SCENE))
+    def render(file: Path) -> np.ndarray:
+        obj = {"name": "box", "shape": "mesh", "file": str(file), "position": [1.5, 0, -1.0],
+               "material": {"albedo": [0.7, 0.3, 0.2]}}
+        return rtloop.render({**scene, "objects": [*scene["objects"], obj]}, W, H)
+    want = render(box)
+    for binary in (False, True):
+        assert np.array_equal(render(write_ply(tmp_path / f"box{binary}.ply", v, f, False, binary)), want)
+    assert (want != rtloop.render(scene, W, H)).any()
 
 
 def test_bad_mesh_fields_are_refused(tmp_path):

@@ -451,6 +451,13 @@ def mitsuba_dict(case: Case, *, spp: int, seed: int, integrator: str | None = No
         if obj["shape"] == "sphere":
             scene[obj["name"]] = {"type": "sphere", "center": [float(c) for c in obj["center"]],
                                   "radius": float(obj["radius"]), "bsdf": bsdf}
+        elif obj["shape"] == "mesh":  # an OBJ, flat-shaded, two-sided as rtloop's
+            scene[obj["name"]] = {
+                "type": "obj", "filename": str(obj["file"]), "face_normals": True,
+                "to_world": mi.ScalarTransform4f().translate([float(c) for c in obj.get("position", [0, 0, 0])])
+                @ mi.ScalarTransform4f().scale(float(obj.get("scale", 1.0))),
+                "bsdf": {"type": "twosided", "bsdf": bsdf},
+            }
         else:
             p = np.array(obj["point"], float)
             n = _unit(np.array(obj["normal"], float))

@@ -43,6 +43,17 @@ def render(
 ) -> npt.NDArray[np.float32]: ...
 def object_ids(scene: Scene, width: int | None = None, height: int | None = None) -> npt.NDArray[np.int32]: ...
 def save_image(path: str | PathLike[str], image: npt.NDArray[np.float32]) -> None: ...
+def render_layers(
+    scenes: list[Scene], width: int, height: int, spp: int = 16, adaptive: bool = True, cover_from: int = 0,
+    progress: Callable[[int, int], object] | None = None,
+) -> tuple[list[npt.NDArray[np.float32]], npt.NDArray[np.float32], int]:
+    """The scenes rendered together, supersampled where any has an edge: (images, coverage of the last
+    scene's objects from ``cover_from`` on, pixels supersampled)."""
+def composite(
+    photo: npt.NDArray[np.float32], with_objects: npt.NDArray[np.float32], without: npt.NDArray[np.float32],
+    matte: npt.NDArray[np.float32],
+) -> npt.NDArray[np.float32]:
+    """matte * with + (1 - matte) * max(photo + (with - without), 0), blended only where matte > 0."""
 def projection_blocker(scene: Scene, paths: list[str]) -> str | None: ...
 def constant_term(scene: Scene) -> str:
     """"environment" or "ambient": the constant radiance the closed form's second column models."""

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -59,7 +60,8 @@ def load_objects(source: Any) -> list[dict[str, Any]]:
     return source
 
 
-def insert(result: Any, photo: Any, objects: Any, *, spp: int = 16, response: str = "srgb") -> Insertion:
+def insert(result: Any, photo: Any, objects: Any, *, spp: int = 16, response: str = "srgb",
+           adaptive: bool = True, progress: Callable[[int, int], object] | None = None) -> Insertion:
     """Insert ``objects`` into ``photo`` under the light fitted in ``result``.
 
     Args:
@@ -67,12 +69,18 @@ def insert(result: Any, photo: Any, objects: Any, *, spp: int = 16, response: st
         photo: The photo: a file path (loaded with ``response``) or a linear (H, W, 3) array. Renders are
             made at its size, keeping the scene's field of view (its aspect ratio must be the scene's).
         objects: What to add (see :func:`load_objects`); scene-format objects, validated with the scene.
-        spp: Samples per pixel of both renders (antialiasing); the matte uses the same grid.
+        spp: Samples per pixel (a stratified grid when square) where a pixel is supersampled; the matte
+            counts the same samples.
+        adaptive: Supersample only the pixels where a neighbour sees another object, the other side of a
+            shadow edge or of a crease, or another colour, in either render (one sample elsewhere); False
+            supersamples every pixel (each render then is ``render(scene, W, H, spp)``).
+        progress: Called as ``progress(tiles_done, tiles_total)`` while rendering, at most every 0.1 s.
     """
-    from . import load_image, object_ids, render, scene_to_dict
+    from . import _native, load_image, scene_to_dict
     from .scene import load_scene
 
-    base = scene_to_dict(load_scene(result))
+    base = load_scene(result)
+    base_dict = scene_to_dict(base)
     added = load_objects(objects)
     if isinstance(photo, (str, os.PathLike)):
         from PIL import Image
@@ -88,25 +96,17 @@ def insert(result: Any, photo: Any, objects: Any, *, spp: int = 16, response: st
         if image.ndim != 3 or image.shape[2] != 3 or not np.isfinite(image).all():
             raise RtloopError(f"photo: expected a finite (H, W, 3) linear image, got shape {image.shape}")
     height, width = image.shape[:2]
-    if abs(width / height - base["image"]["width"] / base["image"]["height"]) > 0.01 * width / height:
+    if abs(width / height - base_dict["image"]["width"] / base_dict["image"]["height"]) > 0.01 * width / height:
         raise RtloopError(f"photo: {width}x{height} does not have the scene's aspect ratio "
-                          f"({base['image']['width']}x{base['image']['height']})")
-    n_old = len(base["objects"])
+                          f"({base_dict['image']['width']}x{base_dict['image']['height']})")
+    if not (isinstance(spp, int) and 1 <= spp <= 4096):
+        raise RtloopError(f"spp: must be an integer 1..4096 (got {spp!r})")
+    n_old = len(base_dict["objects"])
     try:
-        scene_with = load_scene({**base, "objects": base["objects"] + added})
+        scene_with = load_scene({**base_dict, "objects": base_dict["objects"] + added})
     except RtloopError as e:
         raise RtloopError(f"added objects: {e}") from None
-    without = render(base, width, height, spp)
-    with_objects = render(scene_with, width, height, spp)
-    matte = _matte(scene_with, width, height, n_old, spp, object_ids)
-    m = matte[..., None]
-    composite = m * with_objects + (1.0 - m) * np.maximum(image + (with_objects - without), 0.0)
-    return Insertion(image, composite.astype(np.float32), matte, with_objects, without)
-
-
-def _matte(scene: Any, width: int, height: int, n_old: int, spp: int, object_ids: Any) -> np.ndarray:
-    """Coverage of the objects from index ``n_old`` on: their share of a k x k grid of pixel-centre ids
-    (k = the square root of ``spp``, rounded down, kept within the 16384-pixel size limit)."""
-    k = max(1, min(int(np.sqrt(spp)), 16384 // max(width, height)))
-    ids = object_ids(scene, width * k, height * k)
-    return (ids >= n_old).reshape(height, k, width, k).mean(axis=(1, 3)).astype(np.float32)
+    (without, with_objects), matte, _ = _native.render_layers(
+        [base, scene_with], width, height, spp, bool(adaptive), n_old, progress)
+    composite = _native.composite(np.ascontiguousarray(image), with_objects, without, matte)
+    return Insertion(image, composite, matte, with_objects, without)

@@ -71,6 +71,116 @@ fn object_ids<'py>(
     PyArray1::from_vec(py, ids).reshape([h as usize, w as usize])
 }
 
+/// Render `scenes` together at `width` x `height`, supersampling (`spp`) only where any of them has an
+/// edge unless `adaptive` is false (see `render::adaptive`): (images (H, W, 3) each, coverage (H, W) of
+/// the last scene's objects from `cover_from` on, pixels refined). `progress(done, total)` is called
+/// with tiles done, at most every 0.1 s, with the GIL; ^C (or an exception from `progress`) stops it.
+#[pyfunction]
+#[pyo3(signature = (scenes, width, height, spp=16, adaptive=true, cover_from=0, progress=None))]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn render_layers<'py>(
+    py: Python<'py>,
+    scenes: Vec<Bound<'py, PyScene>>,
+    width: u32,
+    height: u32,
+    spp: u32,
+    adaptive: bool,
+    cover_from: usize,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<(
+    Vec<Bound<'py, PyArray3<f32>>>,
+    Bound<'py, PyArray2<f32>>,
+    usize,
+)> {
+    let scenes: Vec<&crate::scene::Scene> = scenes.iter().map(|s| &s.get().0).collect();
+    let state = core_render::Progress::default();
+    let mut failure: Option<PyErr> = None;
+    let out = py.detach(|| {
+        let (done_tx, done_rx) = std::sync::mpsc::channel();
+        std::thread::scope(|scope| {
+            let job = scope.spawn(|| {
+                let out = core_render::render_layers(
+                    &scenes, cover_from, width, height, spp, adaptive, &state,
+                );
+                let _ = done_tx.send(());
+                out
+            });
+            let mut shown = usize::MAX;
+            let mut poll = |last: bool| {
+                if failure.is_some() {
+                    return;
+                }
+                Python::attach(|py| {
+                    let done = state.done.load(std::sync::atomic::Ordering::Relaxed);
+                    let total = state.total.load(std::sync::atomic::Ordering::Relaxed);
+                    let r = py.check_signals().and_then(|()| match &progress {
+                        Some(cb) if done != shown && (total > 0 || last) => {
+                            shown = done;
+                            cb.call1(py, (done, total)).map(drop)
+                        }
+                        _ => Ok(()),
+                    });
+                    if let Err(e) = r {
+                        failure.get_or_insert(e);
+                        state.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+                    }
+                })
+            };
+            // Wakes at the end, or every 0.1 s to show progress and take ^C.
+            while let Err(std::sync::mpsc::RecvTimeoutError::Timeout) =
+                done_rx.recv_timeout(std::time::Duration::from_millis(100))
+            {
+                poll(false);
+            }
+            let out = job.join().unwrap_or_else(|p| std::panic::resume_unwind(p));
+            poll(true);
+            out
+        })
+    });
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    let layers = out?.ok_or_else(|| Error::Invalid("render stopped".into()))?;
+    let images = layers
+        .images
+        .into_iter()
+        .map(|img| image_array(py, img.height, img.width, img.rgb))
+        .collect::<PyResult<Vec<_>>>()?;
+    let coverage =
+        PyArray1::from_vec(py, layers.coverage).reshape([height as usize, width as usize])?;
+    Ok((images, coverage, layers.refined))
+}
+
+/// The insertion composite of linear (H, W, 3) `photo`, `with` and `without` and the (H, W) `matte`
+/// (see `render::composite`), float32 (H, W, 3).
+#[pyfunction]
+fn composite<'py>(
+    py: Python<'py>,
+    photo: PyReadonlyArray3<'py, f32>,
+    with: PyReadonlyArray3<'py, f32>,
+    without: PyReadonlyArray3<'py, f32>,
+    matte: PyReadonlyArray2<'py, f32>,
+) -> PyResult<Bound<'py, PyArray3<f32>>> {
+    let shape = photo.shape().to_vec();
+    if with.shape() != shape || without.shape() != shape || matte.shape() != &shape[..2] {
+        return Err(Error::Value(format!(
+            "composite: photo {shape:?}, with {:?}, without {:?} and matte {:?} must agree",
+            with.shape(),
+            without.shape(),
+            matte.shape()
+        ))
+        .into());
+    }
+    let (p, w, o, m) = (
+        photo.as_slice()?,
+        with.as_slice()?,
+        without.as_slice()?,
+        matte.as_slice()?,
+    );
+    let out = py.detach(|| core_render::composite(p, w, o, m))?;
+    image_array(py, shape[0] as u32, shape[1] as u32, out)
+}
+
 /// None when the closed-form (projected) method applies to `scene` with the fit section `paths`, else why.
 #[pyfunction]
 fn projection_blocker(scene: &Bound<'_, PyScene>, paths: Vec<String>) -> Option<String> {
@@ -270,6 +380,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(_kept_pools, m)?)?;
     m.add_function(wrap_pyfunction!(object_ids, m)?)?;
+    m.add_function(wrap_pyfunction!(render_layers, m)?)?;
+    m.add_function(wrap_pyfunction!(composite, m)?)?;
     m.add_function(wrap_pyfunction!(save_image, m)?)?;
     m.add_function(wrap_pyfunction!(projection_blocker, m)?)?;
     m.add_function(wrap_pyfunction!(constant_term, m)?)?;

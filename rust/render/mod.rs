@@ -5,9 +5,11 @@
 //! with the `brdf` and `light` formulas. A fit does not call `render`: the fitness evaluates the same
 //! `brdf`/`light` formulas over precomputed first hits (see `crate::fitness`).
 
+pub mod adaptive;
 pub mod bounce;
 pub mod brdf;
 pub mod camera;
+pub mod composite;
 pub mod environment;
 pub mod film;
 pub mod hit;
@@ -21,10 +23,12 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::scene::Scene;
+pub use adaptive::{render_layers, Layers, Progress};
 pub use camera::{sample_offsets, CameraFrame};
+pub use composite::composite;
 pub use film::{linear_to_srgb, save_srgb8, to_srgb8, Image};
 pub use hit::{closest_hit, occluded, GBuffer, Geometry, Surfel};
-pub use shade::{shade, ShadeParams};
+pub use shade::{shade, shade_shadowed, ShadeParams};
 pub use shape::PShape;
 
 /// Render `scene` at `width` x `height` (the scene's own size when `None`) with `spp` samples per pixel.

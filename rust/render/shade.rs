@@ -216,8 +216,19 @@ pub fn sender_radiance(g: &GatherPoint, p: &ShadeParams, shapes: &[PShape]) -> V
 /// Exposure-scaled radiance towards the eye at surfel `s` (the background for a miss).
 #[inline]
 pub fn shade(s: &Surfel, p: &ShadeParams, shapes: &[PShape], shadows: bool) -> Vec3A {
+    shade_shadowed(s, p, shapes, shadows).0
+}
+
+/// [`shade`], and whether the light faces the point but a shadow ray found it blocked.
+#[inline(always)]
+pub fn shade_shadowed(
+    s: &Surfel,
+    p: &ShadeParams,
+    shapes: &[PShape],
+    shadows: bool,
+) -> (Vec3A, bool) {
     if s.object == u32::MAX {
-        return p.exposure * p.background;
+        return (p.exposure * p.background, false);
     }
     let m = &p.materials[s.object as usize];
     let mut l = m.albedo * p.ambient;
@@ -235,10 +246,11 @@ pub fn shade(s: &Surfel, p: &ShadeParams, shapes: &[PShape], shadows: bool) -> V
     }
     let Some((dir, dist, falloff)) = incidence(p.light_position, p.light_direction, s.position)
     else {
-        return (p.exposure * l).min(Vec3A::splat(f32::MAX));
+        return ((p.exposure * l).min(Vec3A::splat(f32::MAX)), false);
     };
     let ndotl = s.normal.dot(dir);
-    if ndotl > 0.0 && !(shadows && occluded(s, dir, dist, shapes)) {
+    let shadowed = ndotl > 0.0 && shadows && occluded(s, dir, dist, shapes);
+    if ndotl > 0.0 && !shadowed {
         let mut brdf = lambert(m.albedo);
         if p.any_specular && m.specular > 0.0 {
             let lobe = specular_scale(m.specular, m.shininess)
@@ -247,7 +259,7 @@ pub fn shade(s: &Surfel, p: &ShadeParams, shapes: &[PShape], shadows: bool) -> V
         }
         l += (p.light_rgb * brdf * irradiance(ndotl, falloff)).min(Vec3A::splat(f32::MAX));
     }
-    (p.exposure * l).min(Vec3A::splat(f32::MAX))
+    ((p.exposure * l).min(Vec3A::splat(f32::MAX)), shadowed)
 }
 
 #[cfg(test)]

@@ -1,5 +1,5 @@
-//! Reading a mesh object's OBJ file (via `tobj`, triangulated) into world-space triangles, validated:
-//! every error names the object's field and the file.
+//! Reading a mesh object's OBJ file (via `tobj`) or PLY file (via `ply-rs-bw`), triangulated, into
+//! world-space triangles, validated: every error names the object's field and the file.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -21,7 +21,76 @@ pub fn resolve(file: &str, base: Option<&Path>) -> PathBuf {
     std::path::absolute(&p).unwrap_or(p)
 }
 
-/// Load the OBJ at `path`, placed at `position` and scaled by `scale`.
+/// A PLY file's `vertex` (`x`, `y`, `z`, and `nx`, `ny`, `nz` when every vertex has them) and `face`
+/// (`vertex_indices` or `vertex_index`, polygons split into fans) elements in `tobj`'s form, so that
+/// both formats share one validation.
+fn read_ply(path: &Path) -> std::result::Result<Vec<tobj::Model>, String> {
+    use ply_rs_bw::ply::Property as P;
+    let file = std::fs::File::open(path).map_err(|_| "cannot open the PLY file".to_string())?;
+    let parser = ply_rs_bw::parser::Parser::<ply_rs_bw::ply::DefaultElement>::new();
+    let ply = parser
+        .read_ply(&mut std::io::BufReader::new(file))
+        .map_err(|e| format!("not a valid PLY file ({e})"))?;
+    let number = |p: Option<&P>| -> Option<f32> {
+        Some(match *p? {
+            P::Float(v) => v,
+            P::Double(v) => v as f32,
+            P::Char(v) => v as f32,
+            P::UChar(v) => v as f32,
+            P::Short(v) => v as f32,
+            P::UShort(v) => v as f32,
+            P::Int(v) => v as f32,
+            P::UInt(v) => v as f32,
+            _ => return None,
+        })
+    };
+    let vertices = ply.payload.get("vertex").map_or(&[][..], Vec::as_slice);
+    let mut mesh = tobj::Mesh::default();
+    for (k, v) in vertices.iter().enumerate() {
+        for axis in ["x", "y", "z"] {
+            let c = number(v.get(axis))
+                .ok_or_else(|| format!("vertex {} has no number {axis:?}", k + 1))?;
+            mesh.positions.push(c);
+        }
+        if let (Some(x), Some(y), Some(z)) = (
+            number(v.get("nx")),
+            number(v.get("ny")),
+            number(v.get("nz")),
+        ) {
+            mesh.normals.extend([x, y, z]);
+        }
+    }
+    if mesh.normals.len() != mesh.positions.len() {
+        mesh.normals.clear();
+    }
+    let faces = ply.payload.get("face").map_or(&[][..], Vec::as_slice);
+    for (k, f) in faces.iter().enumerate() {
+        let list = f.get("vertex_indices").or_else(|| f.get("vertex_index"));
+        let idx: Vec<i64> = match list {
+            Some(P::ListChar(l)) => l.iter().map(|&i| i as i64).collect(),
+            Some(P::ListUChar(l)) => l.iter().map(|&i| i as i64).collect(),
+            Some(P::ListShort(l)) => l.iter().map(|&i| i as i64).collect(),
+            Some(P::ListUShort(l)) => l.iter().map(|&i| i as i64).collect(),
+            Some(P::ListInt(l)) => l.iter().map(|&i| i as i64).collect(),
+            Some(P::ListUInt(l)) => l.iter().map(|&i| i as i64).collect(),
+            _ => return Err(format!("face {} has no integer list vertex_indices", k + 1)),
+        };
+        if let Some(&bad) = idx.iter().find(|&&i| i < 0 || i >= vertices.len() as i64) {
+            return Err(format!(
+                "face {}: vertex index {bad} is out of range ({} vertices)",
+                k + 1,
+                vertices.len()
+            ));
+        }
+        for j in 1..idx.len().saturating_sub(1) {
+            mesh.indices
+                .extend([idx[0] as u32, idx[j] as u32, idx[j + 1] as u32]);
+        }
+    }
+    Ok(vec![tobj::Model::new(mesh, String::new())])
+}
+
+/// Load the OBJ or PLY (by extension) at `path`, placed at `position` and scaled by `scale`.
 pub fn load(field: &str, path: &Path, position: V3, scale: f64) -> Result<Arc<Mesh>> {
     let shown = path.display();
     let err = |m: String| Error::scene(field, format!("{shown}: {m}"));
@@ -30,12 +99,21 @@ pub fn load(field: &str, path: &Path, position: V3, scale: f64) -> Result<Arc<Me
         single_index: true,
         ..Default::default()
     };
-    // Materials (.mtl) are not used: the scene gives the material.
-    let (models, _) = tobj::load_obj(path, &opts).map_err(|e| match e {
-        tobj::LoadError::OpenFileFailed => err("cannot open the OBJ file".into()),
-        tobj::LoadError::ReadError => err("cannot read the OBJ file".into()),
-        e => err(format!("not a valid OBJ file ({e})")),
-    })?;
+    let is_ply = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
+    let models = if is_ply {
+        read_ply(path).map_err(err)?
+    } else {
+        // Materials (.mtl) are not used: the scene gives the material.
+        tobj::load_obj(path, &opts)
+            .map_err(|e| match e {
+                tobj::LoadError::OpenFileFailed => err("cannot open the OBJ file".into()),
+                tobj::LoadError::ReadError => err("cannot read the OBJ file".into()),
+                e => err(format!("not a valid OBJ file ({e})")),
+            })?
+            .0
+    };
     let at = DVec3::from_array(position);
     let mut tris = Vec::new();
     let mut normals = Vec::new();

@@ -25,7 +25,7 @@ OBJECTS.json holds {"objects": [...]} (or a bare list) in the scene format, for 
   {"objects": [{"name": "ball2", "shape": "sphere", "center": [1.8, 0.5, -1.0], "radius": 0.5,
                 "material": {"albedo": [0.2, 0.3, 0.8], "specular": 0.0, "shininess": 0.0}}]}
 A triangle mesh is {"name": "bunny", "shape": "mesh", "file": "bunny.obj", "position": [x, y, z], "scale": s,
-"material": {...}}, its file relative to OBJECTS.json's folder.
+"material": {...}} (an OBJ or PLY file), its file relative to OBJECTS.json's folder.
 
 Writes into DIR: composite.png (8-bit sRGB), composite_linear16.png (16-bit linear), matte.png (the
 objects' pixel coverage), with.png and without.png (the two renders, 8-bit sRGB).
@@ -41,7 +41,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("photo", metavar="PHOTO", help="the photo the scene was fitted to, at any size of its aspect")
     p.add_argument("--add", metavar="OBJECTS.json", required=True, help="the objects to insert")
     p.add_argument("--out", metavar="DIR", required=True, help="output directory (replaced whole with --force)")
-    p.add_argument("--spp", type=int, default=16, help="samples per pixel of the renders (default 16)")
+    p.add_argument("--spp", type=int, default=16,
+                   help="samples per pixel where a pixel is supersampled (default 16, a 4 x 4 grid)")
+    p.add_argument("--uniform", action="store_true",
+                   help="supersample every pixel, not only those at an edge (object, shadow, crease or colour "
+                        "step in either render): the reference, about spp times slower")
     p.add_argument("--response", choices=("srgb", "linear"), default="srgb",
                    help="how the photo's values relate to light (default srgb)")
     p.add_argument("--force", action="store_true", help="replace DIR if it exists and is not empty")
@@ -57,6 +61,10 @@ def insert_main(argv: Sequence[str] | None = None) -> int:
         print(f"rtloop-insert: error: {e}", file=sys.stderr)
         return 1
     return 0
+
+
+def _show_progress(done: int, total: int) -> None:
+    print(f"\rrtloop-insert: tiles {done}/{total}", end="", file=sys.stderr, flush=True)
 
 
 def _png(image: np.ndarray) -> bytes:
@@ -75,8 +83,11 @@ def _run(args: argparse.Namespace) -> None:
         raise RtloopError(f"{out}: exists and is not a directory")
     if out.is_dir() and any(out.iterdir()) and not args.force:
         raise RtloopError(f"{out}: exists and is not empty; pass --force to replace it, or choose another --out")
-    print(f"rtloop-insert: rendering with and without the objects ({args.spp} spp)", file=sys.stderr)
-    r = insert(args.result, args.photo, args.add, spp=args.spp, response=args.response)
+    where = "every pixel" if args.uniform else "pixels at edges"
+    print(f"rtloop-insert: rendering with and without the objects ({args.spp} spp at {where})", file=sys.stderr)
+    r = insert(args.result, args.photo, args.add, spp=args.spp, response=args.response,
+               adaptive=not args.uniform, progress=_show_progress)
+    print(file=sys.stderr)
     recover_leftovers(out)
     tmp = staging_dir(out, "rtloop-insert")
     try:
