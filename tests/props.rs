@@ -1,10 +1,13 @@
-//! Property tests (proptest) in bounded time: scene parsing under random mutations of a valid scene, and
-//! ray–sphere / ray–plane intersection against a float64 reference. `PROPTEST_CASES` makes a longer run.
+//! Property tests (proptest) in bounded time: scene parsing under random mutations of a valid scene, fit
+//! parameters (set, get, bounds), and ray–sphere / ray–plane intersection against a float64 reference.
+//! `PROPTEST_CASES` makes a longer run.
 
 use glam::{DVec3, Vec3A};
 use proptest::prelude::*;
+use rtloop::params::Target;
 use rtloop::render::shape::PShape;
-use rtloop::Scene;
+use rtloop::search::Rng;
+use rtloop::{ParamLayout, Scene};
 use serde_json::Value;
 
 const SCENE: &str = r#"{"image": {"width": 16, "height": 12},
@@ -192,4 +195,306 @@ proptest! {
             }
         }
     }
+}
+
+// ---------------------------------------------------------------- fit parameters
+
+/// A random valid scene (1-3 spheres on a floor, a point or directional light) as JSON, its fit section
+/// holding every fittable path with random valid bounds (one number or one per component; min == max at
+/// times: a fixed parameter).
+fn random_params_scene(rng: &mut Rng) -> (String, Vec<String>) {
+    let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.uniform();
+    let spheres = 1 + (u(0.0, 3.0) as usize).min(2);
+    let directional = u(0.0, 1.0) < 0.5;
+    let mut objects = Vec::new();
+    let mut paths = vec![
+        if directional {
+            "light.direction"
+        } else {
+            "light.position"
+        }
+        .to_string(),
+        "light.intensity".into(),
+        "light.color".into(),
+        "ambient".into(),
+        "environment".into(),
+        "exposure".into(),
+    ];
+    for k in 0..=spheres {
+        let name = if k == spheres {
+            "floor".to_string()
+        } else {
+            format!("s{k}")
+        };
+        let material = format!(
+            r#"{{"albedo": [{}, {}, {}], "specular": {}, "shininess": {}}}"#,
+            u(0.0, 1.0),
+            u(0.0, 1.0),
+            u(0.0, 1.0),
+            u(0.0, 1.0),
+            u(0.0, 100.0)
+        );
+        objects.push(if k == spheres {
+            format!(r#"{{"name": "{name}", "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0], "material": {material}}}"#)
+        } else {
+            format!(
+                r#"{{"name": "{name}", "shape": "sphere", "center": [{}, 0.5, {}], "radius": {}, "material": {material}}}"#,
+                u(-2.0, 2.0),
+                u(-2.0, 2.0),
+                u(0.1, 1.0)
+            )
+        });
+        for m in ["albedo", "specular", "shininess"] {
+            paths.push(format!("objects.{name}.{m}"));
+        }
+    }
+    let light = if directional {
+        format!(
+            r#""type": "directional", "direction": [{}, {}, {}]"#,
+            u(-1.0, 1.0),
+            u(0.1, 1.0),
+            u(-1.0, 1.0)
+        )
+    } else {
+        format!(
+            r#""position": [{}, {}, {}]"#,
+            u(-5.0, 5.0),
+            u(1.0, 8.0),
+            u(-5.0, 5.0)
+        )
+    };
+    let mut fit = Vec::new();
+    for p in &paths {
+        let len = if p.ends_with("specular")
+            || p.ends_with("shininess")
+            || p == "light.intensity"
+            || p == "exposure"
+        {
+            1
+        } else {
+            3
+        };
+        let geometric = p.starts_with("light.position") || p.starts_with("light.direction");
+        let single = len == 1 || u(0.0, 1.0) < 0.3;
+        let mut one = || {
+            let lo = if geometric {
+                u(-10.0, 10.0)
+            } else if p == "exposure" {
+                u(1e-3, 2.0)
+            } else {
+                u(0.0, 2.0)
+            };
+            let hi = if u(0.0, 1.0) < 0.1 {
+                lo
+            } else {
+                lo + u(0.0, 10.0)
+            };
+            (lo, hi)
+        };
+        let (lo, hi): (Vec<f64>, Vec<f64>) = if single {
+            let (lo, hi) = one();
+            (vec![lo], vec![hi])
+        } else {
+            (0..len).map(|_| one()).unzip()
+        };
+        let side = |v: &[f64]| {
+            if v.len() == 1 {
+                format!("{}", v[0])
+            } else {
+                format!("{v:?}")
+            }
+        };
+        fit.push(format!(
+            r#""{p}": {{"min": {}, "max": {}}}"#,
+            side(&lo),
+            side(&hi)
+        ));
+    }
+    let text = format!(
+        r#"{{"image": {{"width": 8, "height": 6}},
+            "camera": {{"position": [0, 1, -5], "look_at": [0, 0.5, 0], "vfov_deg": 40}},
+            "light": {{{light}, "intensity": {}, "color": [{}, {}, {}]}},
+            "ambient": [{}, {}, {}], "environment": [{}, {}, {}], "exposure": {},
+            "objects": [{}], "fit": {{{}}}}}"#,
+        u(0.0, 100.0),
+        u(0.0, 1.0),
+        u(0.0, 1.0),
+        u(0.0, 1.0),
+        u(0.0, 0.2),
+        u(0.0, 0.2),
+        u(0.0, 0.2),
+        u(0.0, 0.2),
+        u(0.0, 0.2),
+        u(0.0, 0.2),
+        u(0.1, 3.0),
+        objects.join(","),
+        fit.join(",")
+    );
+    (text, paths)
+}
+
+/// The suffix of component `k`'s name for `target`, as `ParamLayout` names it.
+fn suffix(target: Target, k: usize) -> &'static str {
+    match target.len() {
+        1 => "",
+        _ if matches!(target, Target::LightPosition | Target::LightDirection) => {
+            [".x", ".y", ".z"][k]
+        }
+        _ => [".r", ".g", ".b"][k],
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: cases(256), ..ProptestConfig::default() })]
+
+    /// For a random subset of a random scene's fit paths (in any order): the layout's names, bounds and
+    /// entries agree with the fit section, in canonical order; writing values and reading them back gives
+    /// them bit for bit (values outside the bounds too: `apply` does no bounds check, the bounds are the
+    /// search's), except `light.direction`, which is documented to be stored normalised: it reads back as
+    /// the unit vector along what was written (to 4 ulps), `[0, 1, 0]` for a zero vector. Nothing else in
+    /// the scene changes; values within the bounds survive a JSON round trip (the direction to 4 ulps).
+    #[test]
+    fn params_set_then_get_gives_the_values_back(seed in any::<u64>(), pick in any::<u32>(),
+                                                 outside in 0u32..4) {
+        let mut rng = Rng::new(seed);
+        let (text, paths) = random_params_scene(&mut rng);
+        let scene = Scene::from_json(&text).unwrap();
+        let mut subset: Vec<String> = paths.iter().enumerate()
+            .filter(|(i, _)| pick >> (i % 32) & 1 == 1).map(|(_, p)| p.clone()).collect();
+        // any order: the layout sorts
+        for i in (1..subset.len()).rev() {
+            subset.swap(i, rng.below(i + 1));
+        }
+        let layout = ParamLayout::new(&scene, &subset).unwrap();
+        let dim: usize = layout.entries.iter().map(|e| e.1.len()).sum();
+        prop_assert_eq!(layout.dim(), dim);
+        prop_assert_eq!(layout.names.len(), dim);
+        prop_assert_eq!(layout.entries.len(), subset.len());
+        let mut next = 0;
+        for (w, (path, target, offset)) in layout.entries.iter().enumerate() {
+            prop_assert!(subset.contains(path));
+            prop_assert_eq!(*offset, next);
+            if w > 0 {
+                prop_assert!(layout.entries[w - 1].1.order_key() < target.order_key());
+            }
+            let f = scene.fit.iter().find(|f| &f.path == path).unwrap();
+            prop_assert_eq!(f.target, *target);
+            for k in 0..target.len() {
+                prop_assert_eq!(layout.bounds[offset + k], (f.min[k], f.max[k]));
+                prop_assert_eq!(&layout.names[offset + k], &format!("{path}{}", suffix(*target, k)));
+            }
+            next += target.len();
+        }
+        // Values: within the bounds (ends included), or with `outside` == 0 anywhere in +-1e6.
+        let x: Vec<f64> = layout.bounds.iter().map(|&(lo, hi)| match rng.below(8) {
+            0 => lo,
+            1 => hi,
+            2 if outside == 0 => (rng.uniform() - 0.5) * 2e6,
+            3 if outside == 0 => 0.0,
+            _ => lo + (hi - lo) * rng.uniform(),
+        }).collect();
+        let within = x.iter().zip(&layout.bounds).all(|(v, b)| b.0 <= *v && *v <= b.1);
+        let mut set = scene.clone();
+        layout.apply(&mut set, &x);
+        let got = layout.read(&set);
+        prop_assert_eq!(got.len(), dim);
+        let expected = |t: Target, v: &[f64]| -> Vec<f64> {
+            if t != Target::LightDirection {
+                return v.to_vec();
+            }
+            let d = DVec3::from_slice(v);
+            if d == DVec3::ZERO { vec![0.0, 1.0, 0.0] } else { d.normalize().to_array().to_vec() }
+        };
+        for (path, target, offset) in &layout.entries {
+            let (x, got) = (&x[*offset..][..target.len()], &got[*offset..][..target.len()]);
+            let want = expected(*target, x);
+            if *target == Target::LightDirection {
+                let len = DVec3::from_slice(got).length();
+                prop_assert!((len - 1.0).abs() <= 4.0 * f64::EPSILON, "{path}: |{got:?}| = {len}");
+                for k in 0..3 {
+                    prop_assert!((got[k] - want[k]).abs() <= 4.0 * f64::EPSILON, "{path}: {got:?} vs {want:?}");
+                }
+            } else {
+                let bits = |v: &[f64]| v.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                prop_assert_eq!(bits(got), bits(x), "{}", path);
+            }
+        }
+        // Nothing else changed: the other fittable values, the geometry, camera, fit section.
+        let all = ParamLayout::all(&scene);
+        let (before, after) = (all.read(&scene), all.read(&set));
+        for (path, target, offset) in &all.entries {
+            if !subset.contains(path) {
+                let r = *offset..*offset + target.len();
+                prop_assert_eq!(&before[r.clone()], &after[r], "{} changed", path);
+            }
+        }
+        prop_assert_eq!(&set.camera, &scene.camera);
+        prop_assert_eq!(&set.fit, &scene.fit);
+        for (a, b) in set.objects.iter().zip(&scene.objects) {
+            prop_assert_eq!(&a.shape, &b.shape);
+        }
+        // In bounds, the scene saves and loads with the same values.
+        let zero_direction = layout.entries.iter().any(|(_, t, o)| {
+            *t == Target::LightDirection && x[*o..*o + 3].iter().all(|v| *v == 0.0)
+        });
+        if within && !zero_direction {
+            let back = Scene::from_json(&set.to_value().to_string());
+            prop_assert!(back.is_ok(), "in-bounds values do not load back: {:?}", back.err());
+            let again = layout.read(&back.unwrap());
+            for (path, target, offset) in &layout.entries {
+                for k in *offset..*offset + target.len() {
+                    let tol = if *target == Target::LightDirection { 4.0 * f64::EPSILON } else { 0.0 };
+                    prop_assert!((again[k] - got[k]).abs() <= tol, "{path}: {} vs {}", again[k], got[k]);
+                }
+            }
+        }
+    }
+
+    /// A fit entry's bounds are accepted exactly when they are valid (finite, within the magnitude limit,
+    /// min <= max, min >= 0 for every path but the light's position and direction, min > 0 for exposure);
+    /// a refusal names the entry. A path outside the fit section is refused by `ParamLayout::new`, named.
+    #[test]
+    fn fit_bounds_are_accepted_exactly_when_valid(seed in any::<u64>(), which in any::<prop::sample::Index>(),
+                                                   lo in bound_value(), hi in bound_value()) {
+        let mut rng = Rng::new(seed);
+        let (text, paths) = random_params_scene(&mut rng);
+        let path = which.get(&paths).clone();
+        let mut v: Value = serde_json::from_str(&text).unwrap();
+        v["fit"][path.as_str()] = serde_json::json!({"min": lo, "max": hi});
+        let geometric = path == "light.position" || path == "light.direction";
+        let limit = if path == "light.intensity" { 1e20 } else { 1e8 };
+        let valid = lo <= hi && lo.abs() <= limit && hi.abs() <= limit
+            && (geometric || lo >= 0.0) && (path != "exposure" || lo > 0.0);
+        match Scene::from_json(&v.to_string()) {
+            Ok(s) => {
+                prop_assert!(valid, "{path}: accepted min {lo} max {hi}");
+                let f = s.fit.iter().find(|f| f.path == path).unwrap();
+                prop_assert!(f.min.iter().all(|m| *m == lo) && f.max.iter().all(|m| *m == hi));
+                let unknown = format!("{path}x");
+                let e = ParamLayout::new(&s, &[unknown.clone()]).unwrap_err().to_string();
+                prop_assert!(e.contains(&unknown), "{e}");
+            }
+            Err(e) => {
+                prop_assert!(!valid, "{path}: refused valid min {lo} max {hi}: {e}");
+                let field = format!("fit[{path:?}]");
+                prop_assert!(e.to_string().contains(&field), "{e}");
+            }
+        }
+    }
+}
+
+/// A fit bound: ordinary, at the edges of what is allowed, or beyond them.
+fn bound_value() -> impl Strategy<Value = f64> {
+    prop_oneof![
+        -20.0f64..20.0,
+        Just(0.0),
+        Just(-0.0),
+        Just(1e8),
+        Just(-1e8),
+        Just(1.5e8),
+        Just(1e20),
+        Just(2e20),
+        Just(-1e-300),
+        Just(1e-300),
+    ]
 }
