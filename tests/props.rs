@@ -1,13 +1,14 @@
 //! Property tests (proptest) in bounded time: scene parsing under random mutations of a valid scene, fit
-//! parameters (set, get, bounds), and ray–sphere / ray–plane intersection against a float64 reference.
+//! parameters (set, get, bounds), the fitness kernel against the renderer, and ray–sphere / ray–plane intersection against a float64 reference.
 //! `PROPTEST_CASES` makes a longer run.
 
 use glam::{DVec3, Vec3A};
 use proptest::prelude::*;
 use rtloop::params::Target;
 use rtloop::render::shape::PShape;
+use rtloop::search::Objective;
 use rtloop::search::Rng;
-use rtloop::{ParamLayout, Scene};
+use rtloop::{render, Fitness, GBuffer, LossKind, ParamLayout, Projection, Scene};
 use serde_json::Value;
 
 const SCENE: &str = r#"{"image": {"width": 16, "height": 12},
@@ -497,4 +498,270 @@ fn bound_value() -> impl Strategy<Value = f64> {
         Just(-1e-300),
         Just(1e-300),
     ]
+}
+
+// ---------------------------------------------------------------- the kernel against the plain path
+
+/// The constant term of a random kernel scene.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Sky {
+    None,
+    Ambient,
+    Environment,
+}
+
+/// A random 16x12 scene: 1-3 spheres on a slightly tilted floor, a random point light, albedo, specular
+/// and shininess (none with `matte`), ambient light or an occluded environment, exposure; its fit section
+/// holds every fittable path.
+fn random_kernel_scene(rng: &mut Rng, matte: bool, sky: Sky) -> (Scene, Vec<String>) {
+    let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.uniform();
+    let spheres = 1 + (u(0.0, 3.0) as usize).min(2);
+    let mut objects = Vec::new();
+    let mut paths = vec![
+        "light.position",
+        "light.intensity",
+        "light.color",
+        "exposure",
+    ]
+    .into_iter()
+    .map(String::from)
+    .collect::<Vec<_>>();
+    paths.push(
+        if sky == Sky::Environment {
+            "environment"
+        } else {
+            "ambient"
+        }
+        .into(),
+    );
+    for k in 0..=spheres {
+        let (ks, sh) = if matte {
+            (0.0, 0.0)
+        } else {
+            (u(0.0, 0.5), u(1.0, 60.0))
+        };
+        let material = format!(
+            r#"{{"albedo": [{}, {}, {}], "specular": {ks}, "shininess": {sh}}}"#,
+            u(0.05, 1.0),
+            u(0.05, 1.0),
+            u(0.05, 1.0)
+        );
+        let name = if k == spheres {
+            "floor".to_string()
+        } else {
+            format!("s{k}")
+        };
+        objects.push(if k == spheres {
+            format!(
+                r#"{{"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [{}, 1, {}], "material": {material}}}"#,
+                u(-0.05, 0.05),
+                u(-0.05, 0.05)
+            )
+        } else {
+            let r = u(0.3, 1.0);
+            format!(
+                r#"{{"name": "{name}", "shape": "sphere", "center": [{}, {r}, {}], "radius": {r}, "material": {material}}}"#,
+                u(-2.0, 2.0),
+                u(-1.5, 1.5)
+            )
+        });
+        paths.push(format!("objects.{name}.albedo"));
+        if !matte {
+            paths.push(format!("objects.{name}.specular"));
+            paths.push(format!("objects.{name}.shininess"));
+        }
+    }
+    let (amb, env) = match sky {
+        Sky::None => (0.0, 0.0),
+        Sky::Ambient => (u(0.01, 0.2), 0.0),
+        Sky::Environment => (0.0, u(0.01, 0.5)),
+    };
+    let bounds = |p: &str| match p {
+        "light.position" => r#"{"min": [-6, 0.5, -6], "max": [6, 8, 6]}"#,
+        "light.intensity" => r#"{"min": 1, "max": 200}"#,
+        "exposure" => r#"{"min": 0.5, "max": 2}"#,
+        _ if p.ends_with("shininess") => r#"{"min": 1, "max": 80}"#,
+        _ => r#"{"min": 0, "max": 1}"#,
+    };
+    let fit: Vec<String> = paths
+        .iter()
+        .map(|p| format!(r#""{p}": {}"#, bounds(p)))
+        .collect();
+    let text = format!(
+        r#"{{"image": {{"width": 16, "height": 12}},
+            "camera": {{"position": [{}, {}, -7], "look_at": [0, 0.7, 0], "vfov_deg": 40}},
+            "light": {{"position": [{}, {}, {}], "intensity": {}, "color": [{}, {}, {}]}},
+            "ambient": [{amb}, {amb}, {amb}], "environment": [{env}, {}, {env}], "exposure": {},
+            "objects": [{}], "fit": {{{}}}}}"#,
+        u(-1.0, 1.0),
+        u(1.0, 3.0),
+        u(-4.0, 4.0),
+        u(1.0, 6.0),
+        u(-4.0, 4.0),
+        u(20.0, 120.0),
+        u(0.5, 1.0),
+        u(0.5, 1.0),
+        u(0.5, 1.0),
+        env * 0.8,
+        u(0.7, 1.5),
+        objects.join(","),
+        fit.join(",")
+    );
+    (Scene::from_json(&text).unwrap(), paths)
+}
+
+/// The pixels whose shadow test is decided by a margin: for every other sphere the segment to `scene`'s
+/// light passes farther than 1e-4 (relative) from its surface, and the pixel and the light are farther
+/// than that from every other plane (in float64). The kernel's shadow test and the renderer's are
+/// different formulas; at a shadow's edge they may disagree by rounding, a whole pixel either way.
+fn decided_pixels(scene: &Scene) -> Vec<u32> {
+    let geometry = rtloop::render::Geometry::new(scene);
+    let g = GBuffer::new(&geometry, scene.width, scene.height);
+    let light = DVec3::from_array(scene.light.position);
+    let near = |x: f64, scale: f64| x.abs() <= 1e-4 * (1.0 + scale);
+    (0..g.surfels.len() as u32)
+        .filter(|&i| {
+            let s = &g.surfels[i as usize];
+            let p = f64v(s.position);
+            scene.objects.iter().enumerate().all(|(k, o)| {
+                if k as u32 == s.object || s.object == u32::MAX {
+                    return true;
+                }
+                match &o.shape {
+                    rtloop::scene::Shape::Sphere { center, radius } => {
+                        let (c, v) = (DVec3::from_array(*center), light - p);
+                        let t = ((c - p).dot(v) / v.length_squared()).clamp(0.0, 1.0);
+                        !near(
+                            (c - (p + t * v)).length() - radius,
+                            c.abs().max_element() + radius,
+                        )
+                    }
+                    rtloop::scene::Shape::Plane { point, normal } => {
+                        let (q, n) = (
+                            DVec3::from_array(*point),
+                            DVec3::from_array(*normal).normalize(),
+                        );
+                        let scale = q.abs().max_element()
+                            + p.abs().max_element()
+                            + light.abs().max_element();
+                        !near(n.dot(p - q), scale) && !near(n.dot(light - q), scale)
+                    }
+                    _ => true,
+                }
+            })
+        })
+        .collect()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: cases(64), ..ProptestConfig::default() })]
+
+    /// The fused kernel's whole-image L1 loss (`LossKind::L1`, over a random subset of the fit paths, at a
+    /// random candidate, clipped at 1 or not) equals the L1 distance between `render` of the candidate's
+    /// scene and the objective, summed here in f64 over the same pixels (those whose shadow test is
+    /// decided, see `decided_pixels`). Tolerance, from f32 rounding: each path computes a pixel value in
+    /// at most ~32 rounded f32 operations, and the lobe's power n.h^s multiplies n.h's relative error by
+    /// s, so one value differs by at most (64 + 4 s) eps |v|; the kernel then sums each 64-pixel block in
+    /// f32, at most 64 eps x the sum of |difference| <= |v| + |target|.
+    #[test]
+    fn kernel_l1_is_the_l1_of_the_render(seed in any::<u64>(), pick in any::<u32>(), matte in any::<bool>(),
+                                         sky in prop_oneof![Just(Sky::None), Just(Sky::Ambient), Just(Sky::Environment)],
+                                         clip in any::<bool>()) {
+        let mut rng = Rng::new(seed);
+        let (scene, paths) = random_kernel_scene(&mut rng, matte, sky);
+        let subset: Vec<String> = paths.iter().enumerate()
+            .filter(|(i, _)| pick >> (i % 32) & 1 == 1).map(|(_, p)| p.clone()).collect();
+        prop_assume!(!subset.is_empty());
+        let layout = ParamLayout::new(&scene, &subset).unwrap();
+        // The objective: the scene's own render, each value scaled by a random factor in [0.5, 1.5).
+        let target: Vec<f32> = render(&scene, None, None, 1).unwrap().rgb.iter()
+            .map(|v| v * (0.5 + rng.uniform()) as f32).collect();
+        let x: Vec<f64> = layout.bounds.iter().map(|&(lo, hi)| lo + (hi - lo) * rng.uniform()).collect();
+        let mut candidate = scene.clone();
+        layout.apply(&mut candidate, &x);
+        let pixels = decided_pixels(&candidate);
+        let f = Fitness::new(&scene, layout, &target, Some(&pixels), LossKind::L1, clip, None).unwrap();
+        let mut out = [0.0];
+        f.evaluate(&x, &mut out);
+        let image = render(&candidate, None, None, 1).unwrap().rgb;
+        let s_max = candidate.objects.iter().map(|o| o.material.shininess).fold(0.0, f64::max);
+        let (mut plain, mut tol) = (0.0f64, 0.0f64);
+        for &i in &pixels {
+            for c in 0..3 {
+                let k = 3 * i as usize + c;
+                let v = if clip { image[k].min(1.0) } else { image[k] } as f64;
+                let t = target[k] as f64;
+                plain += (v - t).abs();
+                tol += f32::EPSILON as f64 * ((64.0 + 4.0 * s_max) * v.abs() + 64.0 * (v.abs() + t.abs()));
+            }
+        }
+        prop_assert!((out[0] - plain).abs() <= tol,
+            "kernel {} vs render {plain} (tol {tol}, {} of {} pixels)", out[0], pixels.len(), image.len() / 3);
+    }
+
+    /// At the true light of a clean render of a matte scene (no constant term, ambient light, or an
+    /// occluded environment), the projected loss over the pixels off every silhouette (those that inform
+    /// the closed form) vanishes: the products fit the render's pixels up to the f32 rounding of both. A
+    /// value's relative rounding is at most rho = 64 eps + 8 eps / n.l (n.l's absolute rounding over n.l);
+    /// the box least squares (the truth inside the box) leaves a residual no larger in L2 than the true
+    /// products do, |rho t|_2, so the L1 loss is at most sqrt(values) x |rho t|_2. Without a constant term
+    /// the one-column solve P = sum(a t) / sum(a a) recovers P = exposure x intensity x colour x albedo of
+    /// every object lit in view to the largest rho of its pixels.
+    #[test]
+    fn projected_loss_vanishes_at_the_true_light(seed in any::<u64>(),
+                                                 sky in prop_oneof![Just(Sky::None), Just(Sky::Ambient), Just(Sky::Environment)]) {
+        let mut rng = Rng::new(seed);
+        let (scene, _) = random_kernel_scene(&mut rng, true, sky);
+        // Only the light is searched; the constant term's column comes from the scene's own values.
+        let bounds = serde_json::json!({"min": [-6, 0.5, -6], "max": [6, 8, 6]});
+        let scene = scene.without_fit().with_bounds(&[("light.position".to_string(), bounds)]).unwrap();
+        let layout = ParamLayout::new(&scene, &["light.position".to_string()]).unwrap();
+        let target = render(&scene, None, None, 1).unwrap().rgb;
+        let n = scene.objects.len();
+        let mut proj = Projection::matte(vec![[(0.0, 1e4); 3]; n]);
+        if sky != Sky::None {
+            proj.environment = vec![[(0.0, 1e4); 3]; n];
+        }
+        // Off the silhouettes only: every pixel of the loss then informs the closed form.
+        let g = GBuffer::new(&rtloop::render::Geometry::new(&scene), scene.width, scene.height);
+        let pixels: Vec<u32> = decided_pixels(&scene).into_iter()
+            .filter(|&i| rtloop::fitness::interior(&g, i as usize)).collect();
+        let f = Fitness::new(&scene, layout, &target, Some(&pixels), LossKind::L1Projected, false, Some(proj))
+            .unwrap();
+        let truth = scene.light.position;
+        let loss: f64 = f.channel_losses(&truth).iter().sum();
+        // Relative rounding of a pixel's value: 64 eps, plus n.l's absolute rounding (8 eps for unit
+        // vectors) relative to n.l itself, large at grazing light.
+        let light = DVec3::from_array(truth);
+        let rho = |i: u32| {
+            let s = &g.surfels[i as usize];
+            let (p, n) = (f64v(s.position), f64v(s.normal));
+            let cos = n.dot((light - p).normalize());
+            let eps = f32::EPSILON as f64;
+            if cos > 0.0 { 64.0 * eps + 8.0 * eps / cos } else { 64.0 * eps }
+        };
+        let r2: f64 = pixels.iter().flat_map(|&i| (0..3).map(move |c| (i, 3 * i as usize + c)))
+            .map(|(i, k)| (rho(i) * target[k] as f64).powi(2)).sum();
+        let tol = (3.0 * pixels.len() as f64).sqrt() * r2.sqrt();
+        prop_assert!(loss <= tol, "loss at the truth {loss} > {tol}");
+        if sky == Sky::None {
+            let solved = f.solved(&truth);
+            let ids = rtloop::render::object_ids(&scene, None, None);
+            for (k, o) in scene.objects.iter().enumerate() {
+                // its lit pixels (a shadowed one has no light to scale)
+                let lit: Vec<u32> = pixels.iter().copied()
+                    .filter(|&i| ids[i as usize] == k as i32 && target[3 * i as usize..][..3].iter().any(|v| *v > 0.0))
+                    .collect();
+                if lit.is_empty() {
+                    continue;
+                }
+                let rel = lit.iter().map(|&i| rho(i)).fold(0.0, f64::max);
+                for c in 0..3 {
+                    let p = scene.exposure * scene.light.intensity * scene.light.color[c] * o.material.albedo[c];
+                    let got = solved.products[k][c];
+                    prop_assert!((got - p).abs() <= rel * p, "{}: P[{c}] {got} vs {p} ({} px)", o.name, lit.len());
+                }
+            }
+        }
+    }
 }
