@@ -1,5 +1,6 @@
 //! Property tests (proptest) in bounded time: scene parsing under random mutations of a valid scene, fit
-//! parameters (set, get, bounds), the fitness kernel against the renderer, and ray–sphere / ray–plane intersection against a float64 reference.
+//! parameters (set, get, bounds), the fitness kernel against the renderer, and ray–sphere / ray–plane /
+//! ray–triangle intersection against a float64 reference.
 //! `PROPTEST_CASES` makes a longer run.
 
 use glam::{DVec3, Vec3A};
@@ -762,6 +763,133 @@ proptest! {
                     prop_assert!((got - p).abs() <= rel * p, "{}: P[{c}] {got} vs {p} ({} px)", o.name, lit.len());
                 }
             }
+        }
+    }
+}
+
+// ---------------------------------------------------------------- ray–mesh intersection
+
+/// A point of a cube of side `scale` around `offset`.
+fn point(scale: f64, offset: [f64; 3]) -> impl Strategy<Value = DVec3> {
+    [-1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0]
+        .prop_map(move |p| DVec3::from_array(offset) + scale * DVec3::from_array(p))
+}
+
+/// A triangle of a cube of random size (1e-2 to 1e3) and place, f32-representable vertices, and whether
+/// it is well shaped (twice its area at least 1e-3 x its longest edge squared, so it is far from
+/// degenerate).
+fn triangle3() -> impl Strategy<Value = [DVec3; 3]> {
+    (-2.0f64..3.0, [-1e3f64..1e3, -1e3f64..1e3, -1e3f64..1e3]).prop_flat_map(|(e, offset)| {
+        let scale = 10f64.powf(e);
+        [
+            point(scale, offset),
+            point(scale, offset),
+            point(scale, offset),
+        ]
+        .prop_map(|v| v.map(|p| p.as_vec3a().as_dvec3()))
+    })
+}
+
+fn well_shaped(v: &[DVec3; 3]) -> bool {
+    let edge = [v[1] - v[0], v[2] - v[1], v[0] - v[2]]
+        .iter()
+        .map(|e| e.length())
+        .fold(0.0, f64::max);
+    (v[1] - v[0]).cross(v[2] - v[0]).length() >= 1e-3 * edge * edge
+}
+
+fn mesh_of(tris: &[[DVec3; 3]]) -> Option<rtloop::render::mesh::Mesh> {
+    rtloop::render::mesh::Mesh::new(tris, None)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: cases(2000), max_global_rejects: cases(2000), ..ProptestConfig::default() })]
+
+    /// A ray from a random origin aimed at a random point inside a well-shaped triangle (barycentric
+    /// coordinates >= 1e-3) hits it at the float64 plane-equation t of the same f32 ray, to f32 rounding:
+    /// Möller–Trumbore's products carry 64 eps x (|o - v0| + |e1| + |e2|) over the cosine to the normal.
+    #[test]
+    fn a_ray_aimed_inside_a_triangle_hits_it(v in triangle3(), bary in (1e-3f64..1.0, 1e-3f64..1.0),
+                                             from in [-1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0], far in 0.1f64..10.0) {
+        prop_assume!(well_shaped(&v));
+        let (mut a, mut b) = bary;
+        if a + b > 1.0 - 1e-3 {
+            (a, b) = (1.0 - a, 1.0 - b); // reflect into the triangle
+        }
+        prop_assume!(a >= 1e-3 && b >= 1e-3 && a + b <= 1.0 - 1e-3);
+        let aim = v[0] + a * (v[1] - v[0]) + b * (v[2] - v[0]);
+        let size = (v[1] - v[0]).length().max((v[2] - v[0]).length());
+        let origin = (aim + far * size * DVec3::from_array(from)).as_vec3a();
+        let Some(dir) = unit((aim - origin.as_dvec3()).as_vec3a().to_array()) else { return Ok(()) };
+        let n = (v[1] - v[0]).cross(v[2] - v[0]).normalize();
+        let cos = n.dot(dir.as_dvec3()).abs();
+        prop_assume!(cos > 1e-2);
+        // float64 reference of the f32 ray: the plane equation.
+        let (o, d) = (origin.as_dvec3(), dir.as_dvec3());
+        let t_ref = n.dot(v[0] - o) / n.dot(d);
+        let e = f32::EPSILON as f64;
+        let tol = 64.0 * e * ((o - v[0]).length() + 2.0 * size) / cos;
+        let mesh = mesh_of(&[v]).expect("a well-shaped triangle is kept");
+        let hit = mesh.intersect(origin, dir, 0.0, f32::INFINITY);
+        prop_assert!(hit.is_some(), "missed: t_ref {t_ref}, cos {cos}");
+        let hit = hit.unwrap();
+        prop_assert!((hit.t as f64 - t_ref).abs() <= tol, "t {} vs {t_ref} (tol {tol})", hit.t);
+        prop_assert!((hit.normal.length() - 1.0).abs() < 1e-5 && hit.normal.dot(dir) <= 0.0);
+        prop_assert!(mesh.hits_segment(origin, dir, 0.0, (t_ref + tol) as f32));
+    }
+
+    /// A ray that stays on the far side of a plane bounding the triangle's box (by 1e-3 of its size)
+    /// misses it, both as a camera ray and as a shadow segment.
+    #[test]
+    fn a_ray_beside_the_box_misses(v in triangle3(), axis in 0usize..3, above in any::<bool>(),
+                                   o in [-1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0], d in v3()) {
+        let Some(mesh) = mesh_of(&[v]) else { return Ok(()) };
+        let (lo, hi) = (v[0].min(v[1]).min(v[2]), v[0].max(v[1]).max(v[2]));
+        let size = (hi - lo).max_element().max(1e-30);
+        let Some(dir) = unit(d) else { return Ok(()) };
+        let mut origin = (lo + hi) / 2.0 + size * DVec3::from_array(o);
+        let mut dir = dir.as_dvec3();
+        // Put the origin beyond the box on `axis` and point the ray away (or along) that face.
+        if above {
+            origin[axis] = hi[axis] + 1e-3 * size + origin[axis].abs() * 1e-6;
+            dir[axis] = dir[axis].abs();
+        } else {
+            origin[axis] = lo[axis] - 1e-3 * size - origin[axis].abs() * 1e-6;
+            dir[axis] = -dir[axis].abs();
+        }
+        let (origin, dir) = (origin.as_vec3a(), dir.normalize().as_vec3a());
+        let beyond = if above { origin[axis] as f64 > hi[axis] } else { (origin[axis] as f64) < lo[axis] };
+        prop_assume!(beyond);
+        prop_assert!(mesh.intersect(origin, dir, 0.0, f32::INFINITY).is_none());
+        prop_assert!(!mesh.hits_segment(origin, dir, 0.0, f32::MAX));
+    }
+
+    /// Degenerate triangles (a repeated vertex, or three collinear ones) are dropped and never hit: a
+    /// mesh of them alone is refused, and beside a good triangle a ray aimed at one hits only the good one
+    /// (where the float64 reference says it does).
+    #[test]
+    fn degenerate_triangles_are_never_hit(good in triangle3(), k in prop::sample::select(vec![-2.0f64, -1.0, -0.5, 0.5, 2.0, 4.0]), repeated in any::<bool>(),
+                                          along in 0.0f64..1.0, from in [-1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0]) {
+        prop_assume!(well_shaped(&good));
+        let [a, b, _] = good;
+        // Beside the good triangle: shifted by twice its size.
+        let size = (b - a).length().max((good[2] - a).length());
+        let shift = DVec3::new(2.0 * size, 0.0, 0.0);
+        let (a, b) = (a + shift, b + shift);
+        let (a, b) = (a.as_vec3a().as_dvec3(), b.as_vec3a().as_dvec3());
+        // Collinear exactly, in f64 and in f32: the third vertex a power of two along the first edge.
+        let c = if repeated { b } else { a + k * (b - a) };
+        let bad = [a, b, c];
+        prop_assert!(mesh_of(&[bad]).is_none());
+        let mesh = mesh_of(&[good, bad]).unwrap();
+        prop_assert_eq!(mesh.triangle_count(), 1);
+        let aim = bad[0] + along * (bad[1] - bad[0]);
+        let origin = (aim + size * DVec3::from_array(from)).as_vec3a();
+        let Some(dir) = unit((aim - origin.as_dvec3()).as_vec3a().to_array()) else { return Ok(()) };
+        if let Some(hit) = mesh.intersect(origin, dir, 0.0, f32::INFINITY) {
+            let n = (good[1] - good[0]).cross(good[2] - good[0]).normalize();
+            let off = n.dot(hit.position.as_dvec3() - good[0]);
+            prop_assert!(off.abs() <= 1e-4 * (size + good[0].abs().max_element()), "hit off the good triangle's plane by {off}");
         }
     }
 }
