@@ -6,6 +6,7 @@
 use glam::{DVec3, Vec3A};
 use proptest::prelude::*;
 use rtloop::params::Target;
+use rtloop::render::brdf::specular_scale;
 use rtloop::render::shape::PShape;
 use rtloop::search::Objective;
 use rtloop::search::Rng;
@@ -662,8 +663,9 @@ proptest! {
     /// scene and the objective, summed here in f64 over the same pixels (those whose shadow test is
     /// decided, see `decided_pixels`). Tolerance, from f32 rounding: each path computes a pixel value in
     /// at most ~32 rounded f32 operations, and the lobe's power n.h^s multiplies n.h's relative error by
-    /// s, so one value differs by at most (64 + 4 s) eps |v|; the kernel then sums each 64-pixel block in
-    /// f32, at most 64 eps x the sum of |difference| <= |v| + |target|.
+    /// s, so one value differs by at most (64 + 4 s) eps |v|, plus n.l's absolute rounding (8 eps) times
+    /// the light's term at n.l = 1 (a pixel lit at grazing light by one path, unlit by the other); the
+    /// kernel then sums each 64-pixel block in f32, at most 64 eps x the sum of |difference| <= |v| + |t|.
     #[test]
     fn kernel_l1_is_the_l1_of_the_render(seed in any::<u64>(), pick in any::<u32>(), matte in any::<bool>(),
                                          sky in prop_oneof![Just(Sky::None), Just(Sky::Ambient), Just(Sky::Environment)],
@@ -686,14 +688,29 @@ proptest! {
         f.evaluate(&x, &mut out);
         let image = render(&candidate, None, None, 1).unwrap().rgb;
         let s_max = candidate.objects.iter().map(|o| o.material.shininess).fold(0.0, f64::max);
+        let g = GBuffer::new(&rtloop::render::Geometry::new(&candidate), scene.width, scene.height);
+        let light = DVec3::from_array(candidate.light.position);
         let (mut plain, mut tol) = (0.0f64, 0.0f64);
         for &i in &pixels {
+            let s = &g.surfels[i as usize];
             for c in 0..3 {
                 let k = 3 * i as usize + c;
                 let v = if clip { image[k].min(1.0) } else { image[k] } as f64;
                 let t = target[k] as f64;
                 plain += (v - t).abs();
-                tol += f32::EPSILON as f64 * ((64.0 + 4.0 * s_max) * v.abs() + 64.0 * (v.abs() + t.abs()));
+                // The light's term at n.l = 1 (and n.h = 1): n.l's absolute rounding, 8 eps, scales it.
+                let unlit = match candidate.objects.get(s.object as usize) {
+                    Some(o) => {
+                        let m = &o.material;
+                        let d2 = (light - f64v(s.position)).length_squared();
+                        let scale = specular_scale(m.specular as f32, m.shininess as f32) as f64;
+                        candidate.exposure * candidate.light.intensity * candidate.light.color[c] / d2
+                            * (m.albedo[c] / std::f64::consts::PI + scale)
+                    }
+                    None => 0.0,
+                };
+                tol += f32::EPSILON as f64
+                    * ((64.0 + 4.0 * s_max) * v.abs() + 64.0 * (v.abs() + t.abs()) + 8.0 * unlit);
             }
         }
         prop_assert!((out[0] - plain).abs() <= tol,
@@ -807,7 +824,9 @@ proptest! {
 
     /// A ray from a random origin aimed at a random point inside a well-shaped triangle (barycentric
     /// coordinates >= 1e-3) hits it at the float64 plane-equation t of the same f32 ray, to f32 rounding:
-    /// Möller–Trumbore's products carry 64 eps x (|o - v0| + |e1| + |e2|) over the cosine to the normal.
+    /// Möller–Trumbore's products carry 64 eps x (|o - v0| + |e1| + |e2|), over the cosine to the normal
+    /// and over the sine of the angle between the edges (|e1||e2| / |e1 x e2|, a thin triangle's
+    /// determinant).
     #[test]
     fn a_ray_aimed_inside_a_triangle_hits_it(v in triangle3(), bary in (1e-3f64..1.0, 1e-3f64..1.0),
                                              from in [-1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0], far in 0.1f64..10.0) {
@@ -828,7 +847,9 @@ proptest! {
         let (o, d) = (origin.as_dvec3(), dir.as_dvec3());
         let t_ref = n.dot(v[0] - o) / n.dot(d);
         let e = f32::EPSILON as f64;
-        let tol = 64.0 * e * ((o - v[0]).length() + 2.0 * size) / cos;
+        // 1 / sin of the angle between the edges: Möller–Trumbore's determinant loses that much.
+        let thin = (v[1] - v[0]).length() * (v[2] - v[0]).length() / (v[1] - v[0]).cross(v[2] - v[0]).length();
+        let tol = 64.0 * e * ((o - v[0]).length() + 2.0 * size) * thin / cos;
         let mesh = mesh_of(&[v]).expect("a well-shaped triangle is kept");
         let hit = mesh.intersect(origin, dir, 0.0, f32::INFINITY);
         prop_assert!(hit.is_some(), "missed: t_ref {t_ref}, cos {cos}");
