@@ -585,30 +585,23 @@ fn random_kernel_scene(rng: &mut Rng, matte: bool, sky: Sky) -> (Scene, Vec<Stri
         _ if p.ends_with("shininess") => r#"{"min": 1, "max": 80}"#,
         _ => r#"{"min": 0, "max": 1}"#,
     };
-    let fit: Vec<String> = paths
+    let fit: serde_json::Map<String, Value> = paths
         .iter()
-        .map(|p| format!(r#""{p}": {}"#, bounds(p)))
+        .map(|p| (p.clone(), serde_json::from_str(bounds(p)).unwrap()))
         .collect();
-    let text = format!(
-        r#"{{"image": {{"width": 16, "height": 12}},
-            "camera": {{"position": [{}, {}, -7], "look_at": [0, 0.7, 0], "vfov_deg": 40}},
-            "light": {{"position": [{}, {}, {}], "intensity": {}, "color": [{}, {}, {}]}},
-            "ambient": [{amb}, {amb}, {amb}], "environment": [{env}, {}, {env}], "exposure": {},
-            "objects": [{}], "fit": {{{}}}}}"#,
-        u(-1.0, 1.0),
-        u(1.0, 3.0),
-        u(-4.0, 4.0),
-        u(1.0, 6.0),
-        u(-4.0, 4.0),
-        u(20.0, 120.0),
-        u(0.5, 1.0),
-        u(0.5, 1.0),
-        u(0.5, 1.0),
-        env * 0.8,
-        u(0.7, 1.5),
-        objects.join(","),
-        fit.join(",")
-    );
+    let objects: Vec<Value> = objects
+        .iter()
+        .map(|o| serde_json::from_str(o).unwrap())
+        .collect();
+    let text = serde_json::json!({
+        "image": {"width": 16, "height": 12},
+        "camera": {"position": [u(-1.0, 1.0), u(1.0, 3.0), -7], "look_at": [0, 0.7, 0], "vfov_deg": 40},
+        "light": {"position": [u(-4.0, 4.0), u(1.0, 6.0), u(-4.0, 4.0)], "intensity": u(20.0, 120.0),
+                  "color": [u(0.5, 1.0), u(0.5, 1.0), u(0.5, 1.0)]},
+        "ambient": [amb, amb, amb], "environment": [env, env * 0.8, env], "exposure": u(0.7, 1.5),
+        "objects": objects, "fit": fit,
+    })
+    .to_string();
     (Scene::from_json(&text).unwrap(), paths)
 }
 
