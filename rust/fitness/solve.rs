@@ -163,7 +163,8 @@ pub fn solve_object(
 /// Q) of y_c = P_c·a + E_c·v + Q·w_c·b over the informing pixels, within the bounds. Q from the Schur
 /// complement of the per-channel 2x2 blocks, then each channel's (P_c, E_c) as a box-constrained 2x2
 /// least squares given Q ([`box_ls2`]); if a bound was active, Q again given them and the channels once
-/// more. A channel with no informing pixel takes P_c from `fallback(c)` and E_c at its lower bound.
+/// more. A channel with no lit informing pixel takes P_c from `fallback(c)` and E_c = Σyv / Σvv within
+/// its bounds (its lower bound when no pixel informs at all).
 pub fn solve_object_env(
     s: &SolveSums,
     w: [f32; 3],
@@ -212,8 +213,15 @@ pub fn solve_object_env(
                 let (x, hit) = box_ls2(gram(c), r, pb[c], eb[c]);
                 (p[c], e[c], active) = (x[0], x[1], active || hit);
             } else {
+                // No lit informing pixel (a = 0 on all of them): E_c alone fits them, Σyv / Σvv.
                 let (a, b, sat_min) = fallback(c);
-                (p[c], e[c]) = (closed_form(a, b, sat_min, pb[c]), eb[c].0);
+                let ec = s.syv[c] / s.svv[c];
+                let ec = if ec.is_finite() {
+                    ec.clamp(eb[c].0, eb[c].1)
+                } else {
+                    eb[c].0
+                };
+                (p[c], e[c]) = (closed_form(a, b, sat_min, pb[c]), ec);
             }
         }
         (p, e, active)
@@ -435,5 +443,37 @@ mod tests {
         let eb = [(0.0, 0.01); 3];
         let (_, _, ek) = solve_object_env(&s, w, &wide, (0.0, 10.0), &eb, |_| (0.0, 0.0, 0.0));
         assert!(ek.iter().all(|&x| (x - 0.01).abs() < 1e-12), "{ek:?}");
+    }
+
+    #[test]
+    fn an_object_in_shadow_gets_its_environment_product() {
+        // Every informing pixel unlit (a = 0): y = E v determines E; P is the fallback's (was: E at 0).
+        let v: Vec<f32> = (0..6).map(|i| 0.4 + 0.1 * i as f32).collect();
+        let (a, e) = (vec![0.0f32; 6], [0.03, 0.05, 0.02]);
+        let mut s = SolveSums::default();
+        for c in 0..3 {
+            let y: Vec<f32> = v.iter().map(|&vi| (e[c] * vi as f64) as f32).collect();
+            s.add_environment(c, &a, None, &v, &y, f32::INFINITY);
+        }
+        let wide = [(0.0, 10.0); 3];
+        let (pk, _, ek) =
+            solve_object_env(&s, [1.0; 3], &wide, (0.0, 0.0), &wide, |_| (0.0, 0.0, 0.0));
+        for c in 0..3 {
+            assert!(
+                (ek[c] - e[c]).abs() < 1e-7 * e[c] && pk[c] == 0.0,
+                "{pk:?} {ek:?}"
+            );
+        }
+        // No informing pixel at all: E at its lower bound.
+        let lo = [(0.01, 10.0); 3];
+        let (_, _, ek) = solve_object_env(
+            &SolveSums::default(),
+            [1.0; 3],
+            &wide,
+            (0.0, 0.0),
+            &lo,
+            |_| (0.0, 0.0, 0.0),
+        );
+        assert_eq!(ek, [0.01; 3]);
     }
 }
