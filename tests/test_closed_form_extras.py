@@ -18,10 +18,7 @@ from rtloop.report import truth_errors
 
 
 def _truth(**edit) -> dict:
-    d = copy.deepcopy(BALL_ON_FLOOR)
-    for key, value in edit.items():
-        d[key] = value
-    return d
+    return copy.deepcopy({**BALL_ON_FLOOR, **edit})
 
 
 def _start(truth: dict) -> dict:
