@@ -9,6 +9,7 @@ from typing import Any
 
 from ..errors import RtloopError
 from .jobs import Job, JobResult, run_job
+from .local import blas_threads
 
 __all__ = ["RAY_HINT", "run_ray"]
 
@@ -16,8 +17,10 @@ RAY_HINT = "Ray is not installed: pip install 'rtloop[ray]' (or pip install 'ray
 
 
 def _task(job: dict[str, Any], digest: str, threads: int, kwargs: dict[str, Any]) -> JobResult:
-    """One job inside a Ray worker: plain inputs in, a plain JobResult out (no FitResult)."""
-    return run_job(Job(**job), threads=threads, hash=digest, keep_fit=False, **kwargs)
+    """One job inside a Ray worker: plain inputs in, a plain JobResult out (no FitResult); numpy's BLAS
+    on the task's ``threads`` (Ray sets OMP_NUM_THREADS only where the worker starts with it)."""
+    with blas_threads(threads):
+        return run_job(Job(**job), threads=threads, hash=digest, keep_fit=False, **kwargs)
 
 
 def _plain(job: Job) -> dict[str, Any]:

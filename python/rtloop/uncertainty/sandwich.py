@@ -45,8 +45,9 @@ def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, 
         out["seconds"] = time.perf_counter() - t0
         return out, None
     rows = np.repeat(bid, 3)
-    score = Jt[fit.idx_p] * r0  # per-residual score contributions, p x 3n
-    g = np.stack([np.bincount(rows, weights=score[k], minlength=nb) for k in range(p)])
+    # per-residual score contributions, one parameter at a time (no p x 3n temporary: its allocation cost
+    # more than the sums)
+    g = np.stack([np.bincount(rows, weights=Jt[k] * r0, minlength=nb) for k in fit.idx_p])
     meat = (g @ g.T) * (nb / (nb - p))
     a = fit.cov / s2
     cov = a @ meat @ a
