@@ -207,8 +207,12 @@ def test_batch_job_directory_holds_what_a_single_rtloop_fit_writes(photos, tmp_p
     capsys.readouterr()
 
     quick = tmp_path / "quick"
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    (quick / f".f1.rtloop-tmp-p{dead.pid}-x1").mkdir(parents=True)  # a killed run's staging
     assert batch_cli.main(["--batch", str(jobs_file), "--out", str(quick), "--no-images", "-q"]) == 0
     assert sorted(p.name for p in (quick / "f1").iterdir()) == ["result.json"]
+    assert sorted(p.name for p in quick.iterdir()) == ["f0", "f1", "results.jsonl"]
     assert records(quick)[0]["x"] == next(r for r in records(out) if r["id"] == records(quick)[0]["id"])["x"]
 
 

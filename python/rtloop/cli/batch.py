@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 import rtloop
+from rtloop._files import recover_leftovers_in
 from rtloop.batch import fit_many, load_jobs
 from rtloop.batch.on_ray import RAY_HINT
 from rtloop.fit import PROTOCOLS
@@ -247,6 +248,7 @@ def _main(argv: list[str] | None) -> int:
     try:
         jobs = load_jobs(args.batch)
         out.mkdir(parents=True, exist_ok=True)
+        recover_leftovers_in(out)  # the staged DIR/<id>/ of jobs a killed run had in flight
         results = Results(out / "results.jsonl")
     except rtloop.RtloopError as e:
         _error(e)
