@@ -44,6 +44,22 @@ def render(
 def object_ids(scene: Scene, width: int | None = None, height: int | None = None) -> npt.NDArray[np.int32]: ...
 def save_image(path: str | PathLike[str], image: npt.NDArray[np.float32]) -> None: ...
 def projection_blocker(scene: Scene, paths: list[str]) -> str | None: ...
+def fd_column(
+    up: Scene | None,
+    down: Scene | None,
+    f0: npt.NDArray[np.float32],
+    idx: npt.NDArray[np.uint32],
+    clipped0: npt.NDArray[np.bool_],
+    free: npt.NDArray[np.bool_],
+    clip: bool,
+    denom: float,
+    kink: npt.NDArray[np.bool_],
+    out: npt.NDArray[np.float64],
+) -> None: ...
+def block_scores(
+    jt: npt.NDArray[np.float64], rows: list[int], r: npt.NDArray[np.float64], block_of: npt.NDArray[np.int64],
+    blocks: int,
+) -> npt.NDArray[np.float64]: ...
 def evaluate(
     scene: Scene,
     paths: list[str],

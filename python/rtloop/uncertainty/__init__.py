@@ -187,6 +187,7 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
         return g.ravel()
 
     f0 = clipped(raw0_img)
+    idx_u32, clipped0_flat, free_flat = idx.astype(np.uint32), clipped0.ravel(), free_u.ravel()
     ids_u = np.take(px.ids.ravel(), idx)
     unit_u = np.take(px.unit.ravel(), idx).astype(np.float64)
     lobe_u = None
@@ -231,11 +232,9 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
                 slope = np.where(was, 0.0, slope)  # clipped at the optimum and on both sides: flat
             if moved:
                 Jt[k].reshape(-1, 3)[on, chans] = slope
-        else:
-            fp = clipped(raw(tp)) if tp[k] != theta0[k] else f0
-            fm = clipped(raw(tm)) if tm[k] != theta0[k] else f0
-            np.subtract(fp, fm, out=Jt[k], dtype=np.float64)  # float32 values, exact difference in float64
-            Jt[k] /= denom
+        else:  # both renders, the clip and the difference (float32 values, exact in float64) in the core
+            up, down = (work.with_params(space.native(t), paths) if t[k] != theta0[k] else None for t in (tp, tm))
+            _native.fd_column(up, down, f0, idx_u32, clipped0_flat, free_flat, clip, float(denom), kink, Jt[k])
         if theta0[k] <= space.lo[k] or theta0[k] >= space.hi[k]:
             warnings.append(
                 f"{names[k]}: at its bound ({theta0[k]:.6g}); the Gauss-Newton sigma assumes an interior optimum"

@@ -9,6 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from .. import _native
+
 #: Smallest side of the square image blocks (pixels) whose score contributions are summed; the side is
 #: the larger of this and a sixth of the image's short side (model error is correlated on an object's scale).
 BLOCK_PX = 8
@@ -45,10 +47,8 @@ def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, 
     if nb <= p:
         out["seconds"] = time.perf_counter() - t0
         return out, None
-    rows = np.repeat(bid, 3)
-    # per-residual score contributions, one parameter at a time (no p x 3n temporary: its allocation cost
-    # more than the sums)
-    g = np.stack([np.bincount(rows, weights=Jt[k] * r0, minlength=nb) for k in fit.idx_p])
+    # the per-residual score contributions summed per block, in the core (as np.bincount would)
+    g = _native.block_scores(Jt, fit.idx_p.tolist(), r0, bid.astype(np.int64, copy=False), nb)
     meat = (g @ g.T) * (nb / (nb - p))
     a = fit.cov / s2
     cov = a @ meat @ a
