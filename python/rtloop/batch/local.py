@@ -56,7 +56,7 @@ def run_local(jobs: list[tuple[Job, str]], *, workers: int, threads: int, warm_s
     another in order, each starting from the previous ok job's light. Leaving the iterator early (or
     Ctrl-C) cancels the jobs not yet started and waits for the running ones. numpy's BLAS runs on
     ``threads`` threads meanwhile (process-wide): its idle threads spin, and with a fit per core the spin
-    took a quarter of the batch's CPU time (README "Many photos")."""
+    cost up to a fifth of the batch's CPU time (README "Many photos")."""
     with blas_threads(threads):
         yield from _run(jobs, workers=workers, threads=threads, warm_start=warm_start, **kwargs)
 
