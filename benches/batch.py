@@ -5,7 +5,8 @@
 
 The photos are rendered by rtloop from the yellow-ball example scene (128x96) with its true light
 moved along a slow path (2 cm a frame), so every fit has a known answer. Measured:
-  1. in-process ``rtloop.fit_many`` with 2 fits x 1 thread and 1 fit x 2 threads (the default method);
+  1. in-process ``rtloop.fit_many`` with 2 fits x 1 thread, 3 x 1 and 1 fit x 2 threads (the default
+     method), fits/s and the process's CPU time per fit;
   2. ``rtloop-fit --batch ... --no-images`` end to end (start-up included);
   3. the same on a local Ray (``ray.init(num_cpus=...)``; the start of Ray reported apart), if installed;
   4. a shell loop of ``rtloop-fit SCENE PHOTO --out DIR`` on 10 of the jobs, extrapolated per job;
@@ -74,7 +75,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=REPO / "benches" / "results")
     ap.add_argument("--no-ray", action="store_true")
     args = ap.parse_args()
-    from rtloop.batch.local import cores
+    from rtloop.batch.local import cores, plan
 
     ncores = cores()
     rows: list[tuple[str, str]] = []
@@ -87,21 +88,27 @@ def main() -> None:
         jobs = jobs_for(scene, photos)
         list(rtloop.fit_many(jobs[:4]))  # warm up: pools, caches
 
-        def local(workers: int, threads: int) -> tuple[float, list]:
-            return timed(lambda: list(rtloop.fit_many(jobs, workers=workers, threads=threads)))
+        def local(workers: int, threads: int, **kw: object) -> tuple[float, float, list]:
+            cpu = time.process_time()
+            dt, res = timed(lambda: list(rtloop.fit_many(jobs, workers=workers, threads=threads, **kw)))
+            return dt, (time.process_time() - cpu) / len(res), res
 
         per_fit = {}
-        for w, t in ((ncores, 1), (1, ncores)) if ncores > 1 else ((1, 1),):
-            dt, res = local(w, t)
+        loads = [os.getloadavg()[0]]
+        configs = ((ncores, 1), (ncores + 1, 1), (1, ncores)) if ncores > 1 else ((1, 1),)
+        for w, t in configs:
+            dt, cpu, res = local(w, t)
             assert all(r.ok for r in res), [r.error for r in res if not r.ok][:3]
             per_fit[(w, t)] = dt / len(res)
-            rows.append((f"in-process fit_many, {w} fit{'s' if w > 1 else ''} x {t} thread{'s' if t > 1 else ''}",
-                         f"{len(res) / dt:.1f}"))
-            errs = position_errors(res, lights)
-        dt, res = timed(lambda: list(rtloop.fit_many(jobs, workers=ncores, threads=1,
-                                                     options={"uncertainty": False})))
+            rows.append((f"in-process fit_many, {w} fit{'s' if w > 1 else ''} x {t} thread{'s' if t > 1 else ''}"
+                         + (" (the default)" if (w, t) == plan(None, None) else ""),
+                         f"{len(res) / dt:.1f}", f"{cpu * 1000:.1f}"))
+            if (w, t) == plan(None, None):
+                errs = position_errors(res, lights)
+        dt, cpu, res = local(ncores, 1, options={"uncertainty": False})
         rows.append((f"in-process fit_many, {ncores} x 1, uncertainty off (no Gauss-Newton sigma)",
-                     f"{len(res) / dt:.1f}"))
+                     f"{len(res) / dt:.1f}", f"{cpu * 1000:.1f}"))
+        loads.append(os.getloadavg()[0])
         bad = sum(e > 0.05 for e in errs)
         notes.append(f"light position error (in-process): median {statistics.median(errs) * 1000:.2f} mm, "
                      f"max {max(errs) * 1000:.2f} mm over {len(errs)} fits ({bad} beyond 5 cm: a wrong basin)")
@@ -114,7 +121,7 @@ def main() -> None:
              "-q"], env=env, check=False))
         assert proc.returncode == 0
         batch_cli = args.jobs / dt
-        rows.append(("rtloop-fit --batch --no-images (start-up included)", f"{batch_cli:.1f}"))
+        rows.append(("rtloop-fit --batch --no-images (start-up included)", f"{batch_cli:.1f}", ""))
 
         ray_rate = None
         if not args.no_ray:
@@ -130,7 +137,7 @@ def main() -> None:
                 dt, res = timed(lambda: list(rtloop.fit_many(jobs, "ray")))
                 assert all(r.ok for r in res)
                 ray_rate = len(res) / dt
-                rows.append((f"local Ray, {ncores} CPUs, 1 task per job (num_cpus=1)", f"{ray_rate:.1f}"))
+                rows.append((f"local Ray, {ncores} CPUs, 1 task per job (num_cpus=1)", f"{ray_rate:.1f}", ""))
                 notes.append(f"Ray: ray.init took {t_init:.1f} s and the first tasks (workers starting) are "
                              "left out of the rate")
                 ray.shutdown()
@@ -145,7 +152,7 @@ def main() -> None:
         dt, _ = timed(shell_loop)
         loop_rate = len(loop) / dt
         rows.append((f"shell loop of rtloop-fit (all outputs; {len(loop)} jobs, extrapolated per job)",
-                     f"{loop_rate:.2f}"))
+                     f"{loop_rate:.2f}", ""))
 
         # warm starts over the sequence (in order, one fit at a time on all cores)
         warm_rows = []
@@ -168,9 +175,13 @@ def main() -> None:
          "rendered by rtloop with the light moved 2 cm a frame; the default method (rtloop protocol); "
          f"{platform.processor() or platform.machine()}, {ncores} cores, Python {platform.python_version()}."),
         "",
-        "| how | fits/s |",
-        "|---|---:|",
-        *(f"| {a} | {b} |" for a, b in rows),
+        "| how | fits/s | CPU ms per fit (all threads) |",
+        "|---|---:|---:|",
+        *(f"| {a} | {b} | {c} |" for a, b, c in rows),
+        "",
+        (f"The machine's load average (1 min) was {loads[0]:.1f} before the in-process rows and "
+         f"{loads[1]:.1f} after (other work shares the {ncores} cores: the CPU time per fit is the steadier "
+         "figure)."),
         "",
         f"In-process (best: {best_local[0]} x {best_local[1]}) is {1 / per_fit[best_local] / loop_rate:.0f}x "
         f"the shell loop; `rtloop-fit --batch` end to end {batch_cli / loop_rate:.0f}x"

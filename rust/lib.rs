@@ -9,6 +9,7 @@ pub mod render;
 pub mod scene;
 pub mod search;
 pub mod stage;
+pub mod uncertainty;
 
 #[cfg(feature = "python")]
 mod python;

@@ -186,6 +186,36 @@ def test_batch_cli_outputs_and_resume(photos, tmp_path, capsys):
     assert (out / "f1" / "final.png").is_file() and (out / "f1" / "objective.png").is_file()
 
 
+def test_batch_job_directory_holds_what_a_single_rtloop_fit_writes(photos, tmp_path, capsys):
+    """DIR/<id>/ gets rtloop-fit's files: the same per-generation CSV and snapshots, byte for byte, as a
+    single rtloop-fit with the same seed; --no-images leaves result.json alone."""
+    scene, paths = photos
+    jobs_file = write_jobs(tmp_path / "jobs.jsonl", jobs_of(scene, paths[:2]))
+    out = tmp_path / "out"
+    assert batch_cli.main(["--batch", str(jobs_file), "--out", str(out), "--snapshot-every", "3", "-q"]) == 0
+    assert rtloop.cli.main([str(scene), str(paths[1]), "--out", str(tmp_path / "one"), "--seed", "11",
+                            "--snapshot-every", "3", "-q"]) == 0
+    one, job = tmp_path / "one", out / "f1"
+    names = sorted(p.relative_to(one).as_posix() for p in one.rglob("*"))
+    assert sorted(p.relative_to(job).as_posix() for p in job.rglob("*")) == names
+    shots = [n for n in names if n.startswith("snapshots/") and n.endswith(".bmp")]
+    assert shots and "best_per_generation.csv" in names
+    for name in ["best_per_generation.csv", "objective.png", "final.png", *shots]:
+        assert (job / name).read_bytes() == (one / name).read_bytes(), name
+    rows = (job / "best_per_generation.csv").read_text(encoding="utf-8").splitlines()
+    assert rows[0].split(",")[:4] == ["stage", "generation", "evaluations", "fitness"] and len(rows) > 10
+    capsys.readouterr()
+
+    quick = tmp_path / "quick"
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    (quick / f".f1.rtloop-tmp-p{dead.pid}-x1").mkdir(parents=True)  # a killed run's staging
+    assert batch_cli.main(["--batch", str(jobs_file), "--out", str(quick), "--no-images", "-q"]) == 0
+    assert sorted(p.name for p in (quick / "f1").iterdir()) == ["result.json"]
+    assert sorted(p.name for p in quick.iterdir()) == ["f0", "f1", "results.jsonl"]
+    assert records(quick)[0]["x"] == next(r for r in records(out) if r["id"] == records(quick)[0]["id"])["x"]
+
+
 def test_batch_cli_without_uncertainty_fits_the_same(photos, tmp_path, capsys):
     scene, paths = photos
     jobs_file = write_jobs(tmp_path / "jobs.jsonl", jobs_of(scene, paths[:1]))

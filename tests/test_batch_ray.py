@@ -1,10 +1,15 @@
 """The Ray engine on a local Ray (``ray.init(num_cpus=2)``): equality with single fits, a failing job,
-a worker killed mid-batch, resume through the command line. Skipped when Ray is not installed."""
+a worker killed mid-batch, resume through the command line, a real run killed and interrupted in a
+subprocess and resumed. Skipped when Ray is not installed."""
 
 from __future__ import annotations
 
 import json
 import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -90,4 +95,61 @@ def test_ray_cli_resumes(photos, tmp_path, capsys):
     recs = records(out)
     assert [r["id"] for r in recs[:1]] == ["f0"] and sorted(r["id"] for r in recs[1:]) == ["f1", "f2"]
     for r in recs[1:]:
+        assert json.loads((out / r["id"] / "result.json").read_text(encoding="utf-8"))["light"] == r["light"]
+
+
+def _wait_for_lines(path: Path, n: int, proc: subprocess.Popen) -> None:
+    """Until ``path`` holds ``n`` lines, or the process has ended (a safety limit only: the test waits on
+    the file, not on a clock)."""
+    limit = time.monotonic() + 300
+    while time.monotonic() < limit and proc.poll() is None:
+        if path.exists() and path.read_bytes().count(b"\n") >= n:
+            return
+        time.sleep(0.02)
+
+
+def test_a_ray_batch_killed_then_interrupted_resumes_each_job_exactly_once(photos, tmp_path):
+    """``rtloop-fit --batch --ray ADDRESS`` in a subprocess on this test's local Ray: SIGKILL once some
+    lines are in results.jsonl, then a re-run stopped by Ctrl-C (exit 130), then a re-run to the end.
+    Every job is in results.jsonl exactly once, equal to a single fit with its seed, its
+    DIR/<id>/result.json matches its line, and no staging directory of the killed run is left."""
+    scene, paths = photos
+    n = 240
+    batch = [{"id": f"r{i}", "scene": str(scene), "photo": str(paths[i % 3]), "seed": i % 2} for i in range(n)]
+    jobs_file = write_jobs(tmp_path / "jobs.jsonl", batch)
+    out = tmp_path / "out"
+    lines = out / "results.jsonl"
+    address = ray.get_runtime_context().gcs_address
+    launch = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+              "from rtloop.cli import main; sys.exit(main())")  # Ctrl-C as a terminal delivers it
+    cmd = [sys.executable, "-c", launch, "--batch", str(jobs_file), "--out", str(out), "--ray", address,
+           "--no-images", "-q"]
+
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _wait_for_lines(lines, 5, proc)
+    proc.send_signal(signal.SIGKILL)  # the driver dies without a word: its tasks in flight are lost
+    proc.wait()
+    proc.stderr.close()
+    killed = records(out)
+    assert 5 <= len(killed) < n, "the batch ended before it could be killed"
+
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _wait_for_lines(lines, len(killed) + 5, proc)
+    proc.send_signal(signal.SIGINT)
+    assert proc.wait(timeout=120) == 130, proc.stderr.read().decode()
+    proc.stderr.close()
+    interrupted = records(out)
+    assert len(killed) < len(interrupted) < n
+
+    done = subprocess.run(cmd, check=False, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    recs = records(out)
+    ids = [r["id"] for r in recs]
+    assert sorted(ids) == sorted(j["id"] for j in batch) and len(set(ids)) == n  # each once
+    assert recs[: len(interrupted)] == interrupted  # earlier lines untouched
+    assert not [p.name for p in out.iterdir() if p.name.startswith(".")]  # the killed run's staging, tidied
+    want = {(k, s): single(scene, paths[k], s) for k in range(3) for s in range(2)}
+    for r in recs:
+        i = int(r["id"][1:])
+        assert r["status"] == "ok" and r["x"] == want[(i % 3, i % 2)].x, r["id"]
         assert json.loads((out / r["id"] / "result.json").read_text(encoding="utf-8"))["light"] == r["light"]

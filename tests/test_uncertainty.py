@@ -258,6 +258,23 @@ def test_bad_input_is_rejected(ball_scene):
         estimate_uncertainty(result, photo, params="magic")
     with pytest.raises(rtloop.RtloopError, match="step"):
         estimate_uncertainty(result, photo, step={"light.position.w": 0.01})
+    with pytest.raises(rtloop.RtloopError, match="render: shape"):
+        estimate_uncertainty(result, photo, render=photo[:-1])
+
+
+def test_the_fits_render_at_the_optimum_serves_the_estimate(ball_scene):
+    """The fit hands its goodness-of-fit render (of the fitted scene) to the estimate, which would otherwise
+    render the products' reparametrised scene: the same image to float32 rounding, so on a noisy photo the
+    same sigma to 1e-5 relative (the robust sandwich, whose block sums cancel at the optimum, to 1e-3)."""
+    photo = _photo(rtloop.render(ball_scene), 0.01, noise_seed=7)
+    result = rtloop.fit(_start(ball_scene), photo, seed=0, uncertainty=False)
+    assert result.identifiability["degenerate"]  # the products' scene: a reparametrised render
+    own = estimate_uncertainty(result, photo)
+    shared = estimate_uncertainty(result, photo, render=rtloop.render(result.scene))
+    assert own["parametrization"] == shared["parametrization"] == "products"
+    for name, s in own["sigma"].items():
+        assert shared["sigma"][name] == pytest.approx(s, rel=1e-5), name
+        assert shared["robust"]["sigma"][name] == pytest.approx(own["robust"]["sigma"][name], rel=1e-3), name
 
 
 def _sun(truth: dict) -> tuple[dict, dict]:

@@ -122,6 +122,16 @@ def recover_leftovers(out: Path) -> list[str]:
     return done
 
 
+def recover_leftovers_in(directory: Path) -> list[str]:
+    """:func:`recover_leftovers` for every output in ``directory`` that killed runs left something beside
+    (a batch's DIR/<id>/ of the jobs in flight when it was killed)."""
+    try:
+        names = {m["name"] for p in directory.iterdir() if (m := _LEFTOVER.fullmatch(p.name))}
+    except OSError:
+        return []
+    return [line for name in sorted(names) for line in recover_leftovers(directory / name)]
+
+
 #: A staging or set-aside directory's name: ``.OUT.TAG-pPID-XXXX`` or ``.OUT.TAG-old-pPID-XXXX``.
 _LEFTOVER = re.compile(r"\.(?P<name>.+)\.[A-Za-z0-9-]+?(?P<old>-old)?-p(?P<pid>[0-9]{1,10})-[A-Za-z0-9_]+")
 

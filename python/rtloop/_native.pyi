@@ -57,6 +57,22 @@ def composite(
 def projection_blocker(scene: Scene, paths: list[str]) -> str | None: ...
 def constant_term(scene: Scene) -> str:
     """"environment" or "ambient": the constant radiance the closed form's second column models."""
+def fd_column(
+    up: Scene | None,
+    down: Scene | None,
+    f0: npt.NDArray[np.float32],
+    idx: npt.NDArray[np.uint32],
+    clipped0: npt.NDArray[np.bool_],
+    free: npt.NDArray[np.bool_],
+    clip: bool,
+    denom: float,
+    kink: npt.NDArray[np.bool_],
+    out: npt.NDArray[np.float64],
+) -> None: ...
+def block_scores(
+    jt: npt.NDArray[np.float64], rows: list[int], r: npt.NDArray[np.float64], block_of: npt.NDArray[np.int64],
+    blocks: int,
+) -> npt.NDArray[np.float64]: ...
 def evaluate(
     scene: Scene,
     paths: list[str],

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use numpy::{
     PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
-    PyReadonlyArray3, PyUntypedArrayMethods,
+    PyReadonlyArray3, PyReadwriteArray1, PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 
@@ -13,6 +13,7 @@ use crate::error::Error;
 use crate::render as core_render;
 use crate::search::{Budget, Method, Objective};
 use crate::stage::run_stage;
+use crate::uncertainty::{self as core_uncertainty, Side};
 
 mod errors;
 mod fitness;
@@ -179,6 +180,69 @@ fn composite<'py>(
     );
     let out = py.detach(|| core_render::composite(p, w, o, m))?;
     image_array(py, shape[0] as u32, shape[1] as u32, out)
+}
+
+/// One finite-difference column of the uncertainty's Jacobian over the used pixels `idx`: renders `up`
+/// and `down` (None: the optimum's used values `f0`), writes (f(up) - f(down)) / `denom` (f64 from the
+/// f32 values, min(value, 1) with `clip`) into `out` and marks in `kink` the pixels whose value crosses 1
+/// (against `clipped0`) in a `free` channel; the GIL released throughout.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn fd_column<'py>(
+    py: Python<'py>,
+    up: Option<Bound<'py, PyScene>>,
+    down: Option<Bound<'py, PyScene>>,
+    f0: PyReadonlyArray1<'py, f32>,
+    idx: PyReadonlyArray1<'py, u32>,
+    clipped0: PyReadonlyArray1<'py, bool>,
+    free: PyReadonlyArray1<'py, bool>,
+    clip: bool,
+    denom: f64,
+    mut kink: PyReadwriteArray1<'py, bool>,
+    mut out: PyReadwriteArray1<'py, f64>,
+) -> PyResult<()> {
+    fn side<'a>(s: &'a Option<Bound<'_, PyScene>>) -> Side<'a> {
+        match s {
+            Some(b) => Side::Render(&b.get().0), // frozen + Sync: no borrow flag
+            None => Side::Optimum,
+        }
+    }
+    let (up_s, down_s) = (side(&up), side(&down));
+    let (f0, idx, clipped0, free) = (
+        f0.as_slice()?,
+        idx.as_slice()?,
+        clipped0.as_slice()?,
+        free.as_slice()?,
+    );
+    let (kink, out) = (kink.as_slice_mut()?, out.as_slice_mut()?);
+    py.detach(|| {
+        core_uncertainty::fd_column(
+            up_s, down_s, f0, idx, clipped0, free, clip, denom, kink, out,
+        )
+    })?;
+    Ok(())
+}
+
+/// The sandwich's block sums: (len(rows), blocks) float64, g[a, b] = sum of jt[rows[a], i] * r[i] over the
+/// residuals i whose pixel is in block b (`block_of`, one per pixel, three residuals each), in order.
+#[pyfunction]
+fn block_scores<'py>(
+    py: Python<'py>,
+    jt: PyReadonlyArray2<'py, f64>,
+    rows: Vec<usize>,
+    r: PyReadonlyArray1<'py, f64>,
+    block_of: PyReadonlyArray1<'py, i64>,
+    blocks: usize,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let (jt, r) = (jt.as_slice()?, r.as_slice()?);
+    let block_of: Vec<usize> = block_of
+        .as_slice()?
+        .iter()
+        .map(|&b| b.max(0) as usize)
+        .collect();
+    let p = rows.len();
+    let g = py.detach(|| core_uncertainty::block_scores(jt, &rows, r, &block_of, blocks))?;
+    PyArray1::from_vec(py, g).reshape([p, blocks])
 }
 
 /// None when the closed-form (projected) method applies to `scene` with the fit section `paths`, else why.
@@ -387,6 +451,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(constant_term, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     m.add_function(wrap_pyfunction!(optimize, m)?)?;
+    m.add_function(wrap_pyfunction!(fd_column, m)?)?;
+    m.add_function(wrap_pyfunction!(block_scores, m)?)?;
     m.add("RtloopError", m.py().get_type::<RtloopError>())?;
     m.add("SceneError", m.py().get_type::<SceneError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

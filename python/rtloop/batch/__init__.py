@@ -24,6 +24,7 @@ def fit_many(
     images: bool = True,
     final_scale: int = 4,
     final_spp: int = 16,
+    snapshot_every: int = 5,
     skip: Mapping[str, str] | None = None,
     warm_start: bool = False,
     warm_fraction: float = 0.1,
@@ -42,12 +43,15 @@ def fit_many(
     fit, one fit per core). ``engine="ray"``: one Ray task per job with ``num_cpus=threads`` (default 1)
     on the cluster at ``address`` (None: a running one if any, else a local Ray), retried up to
     ``max_retries`` times if its worker dies. ``out``: write each job's result.json (and, with
-    ``images``, objective.png and final.png) into ``out``/<id>/. ``skip``: ``{id: hash}`` of jobs already
+    ``images``, objective.png, final.png, best_per_generation.csv and snapshots/ every
+    ``snapshot_every`` generations, as ``rtloop-fit`` does) into ``out``/<id>/. ``skip``: ``{id: hash}`` of jobs already
     done (see :func:`job_hash`), left out. ``warm_start`` (local only): the jobs run in order (frames of
     a video), each light search in bounds narrowed to +-``warm_fraction`` around the previous light.
     """
     if engine not in ("local", "ray"):
         raise RtloopError(f"fit_many: engine must be 'local' or 'ray', got {engine!r}")
+    if isinstance(snapshot_every, bool) or not isinstance(snapshot_every, int) or snapshot_every < 0:
+        raise RtloopError(f"fit_many: snapshot_every must be a whole number >= 0, got {snapshot_every!r}")
     for name, v in (("workers", workers), ("threads", threads)):
         if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
             raise RtloopError(f"fit_many: {name} must be a whole number >= 1, got {v!r}")
@@ -62,7 +66,7 @@ def fit_many(
             continue
         todo.append((job, digest))
     kwargs = {"options": common, "out": out, "images": images, "final_scale": final_scale,
-              "final_spp": final_spp}
+              "final_spp": final_spp, "snapshot_every": snapshot_every}
     if engine == "ray":
         if warm_start:
             raise RtloopError("fit_many: warm_start runs the jobs in order, in-process: use engine='local'")

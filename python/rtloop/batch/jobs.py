@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .._files import staging_dir
 from ..errors import RtloopError
 
 __all__ = ["FIT_OPTIONS", "Job", "JobResult", "as_job", "job_hash", "load_jobs", "run_job"]
@@ -182,10 +183,13 @@ def _light(scene: Any) -> dict[str, Any]:
 
 def run_job(job: Job, *, threads: int | None = None, options: dict[str, Any] | None = None,
             out: str | os.PathLike[str] | None = None, images: bool = True, final_scale: int = 4,
-            final_spp: int = 16, keep_fit: bool = True, hash: str | None = None,
+            final_spp: int = 16, snapshot_every: int = 5, keep_fit: bool = True, hash: str | None = None,
             warm: dict[str, float] | None = None, warm_fraction: float = 0.1) -> JobResult:
     """Load and fit one job (``options`` under the job's own) on ``threads`` threads; with ``out``, write
-    its outputs into ``out``/<id>/ (staged, moved into place whole; ``images`` False skips the PNGs).
+    its outputs into ``out``/<id>/ as ``rtloop-fit`` does (staged, moved into place whole): result.json
+    and, with ``images``, objective.png, final.png, best_per_generation.csv and a snapshot every
+    ``snapshot_every`` generations (the last two need a callback per generation: ``images`` False keeps
+    the search free of the GIL).
     ``warm`` (fit values by name, e.g. the previous frame's) starts the search for the light's position (or
     direction) in bounds narrowed to +-``warm_fraction`` of their range around it. A failure (RtloopError,
     an unreadable file, a bad option) becomes a result with status "error"; other exceptions propagate."""
@@ -204,13 +208,24 @@ def run_job(job: Job, *, threads: int | None = None, options: dict[str, Any] | N
             mask = None if job.mask is None else rtloop.load_mask(job.mask, scene, crop=read.get("crop", False))
         if warm:
             scene = _warm_scene(scene, warm, warm_fraction)
-        result = rtloop.fit(scene, image, seed=job.seed, threads=threads, mask=mask, **opts)
+        log = None
+        if out is not None:
+            from ..cli.outputs import GenerationLog
+
+            staged = staging_dir(Path(out) / job.id, "rtloop-tmp")
+            if images:
+                log = GenerationLog(staged, scene, snapshot_every)
+        try:
+            result = rtloop.fit(scene, image, seed=job.seed, threads=threads, mask=mask, callback=log, **opts)
+        finally:
+            if log is not None:
+                log.close()
         if warm:
             from ..fit.bounds import restore_bounds
 
             result.scene = restore_bounds(result.scene, rtloop.load_scene(job.scene))
-        if out is not None:
-            staged = _write_outputs(Path(out), job, result, image, read, images, final_scale, final_spp)
+        if staged is not None:
+            _write_outputs(staged, Path(out), job, result, image, read, images, final_scale, final_spp)  # type: ignore[arg-type]
         return JobResult(job.id, "ok", digest, job.seed, light=_light(result.scene), products=result.products,
                          x=result.x, fitness=result.fitness, evaluations=result.evaluations,
                          seconds=time.perf_counter() - t0, fit=result if keep_fit else None)
@@ -248,21 +263,19 @@ def _warm_scene(scene: Any, warm: dict[str, float], fraction: float) -> Any:
     return narrowed(scene.with_params(values, paths), paths, fraction)
 
 
-def _write_outputs(out: Path, job: Job, result: Any, image: Any, read: dict[str, Any], images: bool,
-                   scale: int, spp: int) -> Path:
-    """``out``/<id>/ with result.json (and objective.png, final.png), staged and moved into place whole
-    (replacing an older one); returns the staging directory (gone once moved)."""
-    from .._files import move_into_place, staging_dir
+def _write_outputs(tmp: Path, out: Path, job: Job, result: Any, image: Any, read: dict[str, Any],
+                   images: bool, scale: int, spp: int) -> None:
+    """Complete the staged ``tmp`` with result.json (and objective.png, final.png) and move it into place
+    as ``out``/<id>/ (replacing an older one)."""
+    from .._files import move_into_place
     from ..cli.outputs import input_paths, write_final, write_result
 
     target = out / job.id
-    tmp = staging_dir(target, "rtloop-tmp")
     write_result(tmp, result, input_paths(job.scene, job.photo, read.get("response", "srgb"),
                                           read.get("crop", False), job.mask))
     if images:
         write_final(tmp, result, image, scale, spp)
     move_into_place(tmp, target, os.path.lexists(target), "rtloop")
-    return tmp
 
 
 def jobs_from(items: Iterable[Any]) -> list[Job]:

@@ -4,11 +4,13 @@ worker dies retried ``max_retries`` times."""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Iterator
 from typing import Any
 
 from ..errors import RtloopError
 from .jobs import Job, JobResult, run_job
+from .local import blas_threads
 
 __all__ = ["RAY_HINT", "run_ray"]
 
@@ -16,12 +18,17 @@ RAY_HINT = "Ray is not installed: pip install 'rtloop[ray]' (or pip install 'ray
 
 
 def _task(job: dict[str, Any], digest: str, threads: int, kwargs: dict[str, Any]) -> JobResult:
-    """One job inside a Ray worker: plain inputs in, a plain JobResult out (no FitResult)."""
-    return run_job(Job(**job), threads=threads, hash=digest, keep_fit=False, **kwargs)
+    """One job inside a Ray worker: plain inputs in, a plain JobResult out (no FitResult); numpy's BLAS
+    on the task's ``threads`` (Ray sets OMP_NUM_THREADS only where the worker starts with it)."""
+    with blas_threads(threads):
+        return run_job(Job(**job), threads=threads, hash=digest, keep_fit=False, **kwargs)
 
 
 def _plain(job: Job) -> dict[str, Any]:
-    return {"id": job.id, "scene": job.scene, "photo": job.photo, "seed": job.seed, "mask": job.mask,
+    """The job's fields for a task, its paths made absolute here (a worker's working directory is not the
+    driver's)."""
+    return {"id": job.id, "scene": os.path.abspath(job.scene), "photo": os.path.abspath(job.photo),
+            "seed": job.seed, "mask": None if job.mask is None else os.path.abspath(job.mask),
             "options": dict(job.options)}
 
 
@@ -40,6 +47,8 @@ def run_ray(jobs: list[tuple[Job, str]], *, address: str | None, threads: int, m
             ray.init(address=address or None, logging_level="warning", log_to_driver=False)
         except ConnectionError as e:
             raise RtloopError(f"ray: cannot connect to the cluster at {address!r}: {e}") from None
+    if kwargs.get("out") is not None:
+        kwargs = {**kwargs, "out": os.path.abspath(kwargs["out"])}
     remote = ray.remote(task).options(num_cpus=threads, max_retries=max_retries, retry_exceptions=False)
     return _collect(ray, remote, jobs, threads, kwargs)
 

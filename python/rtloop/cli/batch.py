@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 import rtloop
+from rtloop._files import recover_leftovers_in
 from rtloop.batch import fit_many, load_jobs
 from rtloop.batch.on_ray import RAY_HINT
 from rtloop.fit import PROTOCOLS
@@ -40,8 +41,11 @@ files written into DIR:
                     light (as in result.json), products, x (the fitted
                     values), fitness, evaluations, error, seconds; each line is
                     appended whole (written, flushed and fsynced)
-  <id>/result.json  as rtloop-fit writes it; with <id>/objective.png and
-                    <id>/final.png unless --no-images
+  <id>/result.json  as rtloop-fit writes it; unless --no-images also as
+                    rtloop-fit: <id>/objective.png, <id>/final.png,
+                    <id>/best_per_generation.csv and <id>/snapshots/ (the last
+                    two from a callback per generation: --no-images is the
+                    fast path)
 
 A re-run with the same DIR skips every job whose id and hash are already in
 results.jsonl (a failed one too, unless --retry-failed), so an interrupted
@@ -63,7 +67,11 @@ def _build_parser() -> Parser:
     p.add_argument("--batch", metavar="JOBS", type=Path, required=True, help="the jobs (JSON lines)")
     p.add_argument("--out", "-o", metavar="DIR", type=Path, required=True,
                    help="output directory (created; an existing one is resumed)")
-    p.add_argument("--no-images", action="store_true", help="skip objective.png and final.png per job")
+    p.add_argument("--no-images", action="store_true", help="per job, write result.json only (no objective.png, "
+                   "final.png, best_per_generation.csv, snapshots/)")
+    p.add_argument("--snapshot-every", type=int_at_least(0, "a whole number >= 0"), default=5, metavar="N",
+                   help="render each job's best individual every N generations into <id>/snapshots/ (0: none; "
+                   "default 5)")
     p.add_argument("--workers", type=int_at_least(1, "a whole number >= 1"), metavar="N",
                    help="concurrent fits in-process (default: cores / threads)")
     p.add_argument("--threads", type=int_at_least(1, "a whole number >= 1"), metavar="N",
@@ -240,6 +248,7 @@ def _main(argv: list[str] | None) -> int:
     try:
         jobs = load_jobs(args.batch)
         out.mkdir(parents=True, exist_ok=True)
+        recover_leftovers_in(out)  # the staged DIR/<id>/ of jobs a killed run had in flight
         results = Results(out / "results.jsonl")
     except rtloop.RtloopError as e:
         _error(e)
@@ -253,7 +262,7 @@ def _main(argv: list[str] | None) -> int:
         engine = "ray" if args.ray is not None else "local"
         run = fit_many(jobs, engine, workers=args.workers, threads=args.threads, options=_options(args),
                        out=out, images=not args.no_images, final_scale=args.final_scale,
-                       final_spp=args.final_spp, skip=skip, warm_start=args.warm_start,
+                       final_spp=args.final_spp, snapshot_every=args.snapshot_every, skip=skip, warm_start=args.warm_start,
                        address=args.ray or None, max_retries=args.max_retries)
         total = _count_todo(jobs, skip, _options(args)) if skip else len(jobs)
         progress = Progress(sys.stderr, not args.quiet, total, len(jobs) - total)

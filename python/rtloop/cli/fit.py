@@ -10,9 +10,7 @@ directory untouched. See ``rtloop-fit --help`` for the options and the files wri
 from __future__ import annotations
 
 import argparse
-import csv
 import os
-import re
 import shutil
 import signal
 import sys
@@ -32,7 +30,7 @@ from rtloop.fit.protocol import LIMITS, max_threads
 from rtloop.report import truth_errors, truth_values
 
 from .args import Parser, UsageError, float_in, generations, int_at_least, int_in, norm
-from .outputs import input_paths, write_result
+from .outputs import GenerationLog, input_paths, write_result
 
 __all__ = ["main"]
 
@@ -337,9 +335,6 @@ def _commit(tmp: Path, out: Path, replace: bool) -> None:
 # --- the run ---------------------------------------------------------------------------------------------
 
 
-_SAFE_NAME = re.compile(r"[^A-Za-z0-9_+-]+")
-
-
 def scene_mask(scene_path: Path) -> Path | None:
     """The mask a scene names (``meta.acquisition.mask``, written by rtloop-scene), relative to the scene's
     folder; None when it names none."""
@@ -429,26 +424,15 @@ class _Run:
         )
 
         rtloop.save_image(tmp / "objective.png", image)
-        snapshots = tmp / "snapshots"
-        snapshots.mkdir()
-        every = args.snapshot_every
         rows: list[tuple[str, int, float, np.ndarray]] = []
 
-        with open(tmp / "best_per_generation.csv", "w", newline="", encoding="utf-8") as fh:
-            writer = csv.writer(fh)
-            writer.writerow(["stage", "generation", "evaluations", "fitness", *names])
+        with GenerationLog(tmp, scene, args.snapshot_every) as log:
 
             def callback(info: Any) -> None:
                 if self.stop.is_set():
                     raise _Interrupted()
-                params = np.asarray(info.params, dtype=np.float64)
-                writer.writerow([info.stage, info.generation, info.evaluations, repr(float(info.fitness)),
-                                 *(repr(float(v)) for v in params)])
+                params = log(info)
                 rows.append((info.stage, info.generation, float(info.fitness), params))
-                if every and info.generation % every == 0:
-                    shot = rtloop.render(scene.with_params(params.tolist()), spp=1)
-                    stage = _SAFE_NAME.sub("_", info.stage)
-                    rtloop.save_image(snapshots / f"{stage}_gen{info.generation:04d}.bmp", shot)
                 self.progress.generation(info)
 
             with warnings.catch_warnings():

@@ -1,11 +1,13 @@
-"""The files one fit leaves in its output directory (result.json, objective.png, final.png), written by
-``rtloop-fit`` and by every job of a batch (``rtloop-fit --batch``)."""
+"""The files one fit leaves in its output directory (result.json, best_per_generation.csv, snapshots/,
+objective.png, final.png), written by ``rtloop-fit`` and by every job of a batch (``rtloop-fit --batch``)."""
 
 from __future__ import annotations
 
+import csv
 import os
+import re
 from pathlib import Path
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 
@@ -13,7 +15,9 @@ import rtloop
 from rtloop._files import write_json
 from rtloop.acquisition.raw import is_raw, raw_settings
 
-__all__ = ["input_paths", "result_json", "write_final", "write_result"]
+__all__ = ["GenerationLog", "input_paths", "result_json", "write_final", "write_result"]
+
+_SAFE_NAME = re.compile(r"[^A-Za-z0-9_+-]+")
 
 
 def result_json(result: Any, inputs: dict[str, Any]) -> dict[str, Any]:
@@ -52,3 +56,37 @@ def input_paths(scene: Any, image: Any, response: str, crop: bool, mask: Any) ->
         rec["response"] = "raw"
         rec["raw"] = raw_settings(image)
     return rec
+
+
+class GenerationLog:
+    """A fit's callback writing ``out``/best_per_generation.csv (one row per generation of every stage:
+    stage, generation, evaluations, fitness, every fit parameter's value in the best individual) and,
+    every ``every`` generations (0: never), the best individual rendered into ``out``/snapshots/."""
+
+    def __init__(self, out: Path, scene: Any, every: int):
+        self.scene, self.every = scene, every
+        self.snapshots = out / "snapshots"
+        self.snapshots.mkdir()
+        self._fh = open(out / "best_per_generation.csv", "w", newline="", encoding="utf-8")  # noqa: SIM115 (closed by close / the with)
+        self._csv = csv.writer(self._fh)
+        self._csv.writerow(["stage", "generation", "evaluations", "fitness", *scene.param_names()])
+
+    def __call__(self, info: Any) -> np.ndarray:
+        """Log one generation; returns its parameters as float64."""
+        params = np.asarray(info.params, dtype=np.float64)
+        self._csv.writerow([info.stage, info.generation, info.evaluations, repr(float(info.fitness)),
+                            *(repr(float(v)) for v in params)])
+        if self.every and info.generation % self.every == 0:
+            shot = rtloop.render(self.scene.with_params(params.tolist()), spp=1)
+            stage = _SAFE_NAME.sub("_", info.stage)
+            rtloop.save_image(self.snapshots / f"{stage}_gen{info.generation:04d}.bmp", shot)
+        return params
+
+    def close(self) -> None:
+        self._fh.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

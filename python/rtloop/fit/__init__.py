@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import _native
 from .._srgb import decode
 from ..errors import RtloopError, RtloopWarning
 from ..scene import Scene, load_scene
@@ -202,7 +203,9 @@ def fit(
         model=model,
         reference=pinned,
     )
-    result.goodness = goodness(current, target, use, clip=clip)
+    # One render at the optimum for the goodness of fit and the uncertainty.
+    at_optimum = _native.render(current, current.width, current.height, 1)
+    result.goodness = goodness(current, target, use, clip=clip, render=at_optimum)
     doubts += _at_bounds(current, all_paths)
     for d in doubts:
         warnings.warn(d, RtloopWarning, stacklevel=2)
@@ -211,7 +214,7 @@ def fit(
         from ..uncertainty import estimate_uncertainty
 
         try:
-            result.uncertainty = estimate_uncertainty(result, target, clip=clip, mask=mask)
+            result.uncertainty = estimate_uncertainty(result, target, clip=clip, mask=mask, render=at_optimum)
         except RtloopError as e:
             result.uncertainty = {"method": "gauss-newton", "sigma": {}, "warnings": [str(e)]}
     result.seconds = time.perf_counter() - t0

@@ -36,12 +36,15 @@ def noise_sigma(image: np.ndarray) -> np.ndarray:
     return np.median(np.abs(acc).reshape(-1, 3), axis=0).astype(np.float64) / (0.6745 * 6.0)
 
 
-def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool = True) -> dict[str, Any]:
+def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool = True,
+             render: np.ndarray | None = None) -> dict[str, Any]:
     """The residual of ``scene``'s render against ``target`` (L1 over the used, unsaturated pixels) over
     its floor: per pixel and channel the larger of the 8-bit quantisation's mean error (a quarter code
     step) and the measured noise's (sigma x sqrt(2/pi)). With a verdict, and where the model falls short of
-    the floor, per object its share of the excess (``per_object``, empty otherwise)."""
-    render = _native.render(scene, scene.width, scene.height, 1)
+    the floor, per object its share of the excess (``per_object``, empty otherwise). ``render``: the
+    scene's render (spp 1) when the caller has it."""
+    if render is None:
+        render = _native.render(scene, scene.width, scene.height, 1)
     model = np.minimum(render, np.float32(1.0)) if clip else render
     # float32 throughout: the floor is a quarter code step, far above float32's resolution.
     t = np.asarray(target, np.float32).reshape(-1, 3)

@@ -46,6 +46,7 @@ def estimate_uncertainty(
     step: float | dict[str, float] | None = None,
     params: str = "auto",
     mask: np.ndarray | None = None,
+    render: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """Per-parameter standard deviations and correlations of a fit (Gauss-Newton at the optimum).
 
@@ -55,6 +56,8 @@ def estimate_uncertainty(
     parameter's scale (its bound range, 1 rad for a direction angle; default 1e-3), or
     ``{name: absolute step}`` for some parameters. ``params``: ``"auto"`` (products where the scene
     determines only products, else the scene's fit parameters), ``"products"`` or ``"scene"``.
+    ``render``: the scene's render at the optimum (float32 (H, W, 3), spp 1) when the caller has it
+    (:func:`rtloop.fit` shares its goodness-of-fit render), saving one render.
 
     Returns a JSON-able dict: ``method`` ("gauss-newton"), ``names``, ``values`` (the parameters at the
     optimum; 0 for the direction angles), ``sigma`` ({name: float or None}), ``correlation`` (rows and
@@ -92,7 +95,9 @@ def estimate_uncertainty(
     warnings: list[str] = []
     px = used_pixels(space.work, wd, target, mask)
     steps = _steps(names, space.scale, step)
-    Jt, f0, kink = _jacobian(space, wd, px, steps, clip, warnings)
+    if render is not None and np.shape(render) != target.shape:
+        raise RtloopError(f"render: shape {np.shape(render)} does not match the scene's {target.shape}")
+    Jt, f0, kink = _jacobian(space, wd, px, steps, clip, warnings, render)
     r0 = np.subtract(f0, np.take(target.reshape(-1, 3), px.idx, axis=0).ravel(), dtype=np.float64)
     n_kink = int(kink.sum())
     drop = px.sat_u | kink[:, None]  # residuals left out
@@ -146,9 +151,10 @@ def estimate_uncertainty(
 
 
 def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarray, clip: bool,
-              warnings: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+              warnings: list[str], at_optimum: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The Jacobian's transpose over the used pixels' channels, the render there at the optimum (flat,
-    min(render, 1) with ``clip``) and which used pixels sit on the clip's kink.
+    min(render, 1) with ``clip``; ``at_optimum`` when given, else rendered) and which used pixels sit on
+    the clip's kink.
 
     Central differences (one-sided where a step would cross a bound). With ``clip``, a pixel whose render
     crosses 1 inside a step in a channel that is not saturated sits on the clip's kink and is left out.
@@ -162,7 +168,8 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
 
     n = idx.size
     free_u = ~px.sat_u
-    raw0_img = raw(theta0)
+    # The products' work scene renders the fitted image (to float32 rounding): the fit's own render serves.
+    raw0_img = raw(theta0) if at_optimum is None else np.asarray(at_optimum, np.float32)
     raw0 = np.take(raw0_img.reshape(-1, 3), idx, axis=0)
     clipped0 = raw0 >= 1.0
     P = len(names)
@@ -180,6 +187,7 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
         return g.ravel()
 
     f0 = clipped(raw0_img)
+    idx_u32, clipped0_flat, free_flat = idx.astype(np.uint32), clipped0.ravel(), free_u.ravel()
     ids_u = np.take(px.ids.ravel(), idx)
     unit_u = np.take(px.unit.ravel(), idx).astype(np.float64)
     lobe_u = None
@@ -224,11 +232,9 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
                 slope = np.where(was, 0.0, slope)  # clipped at the optimum and on both sides: flat
             if moved:
                 Jt[k].reshape(-1, 3)[on, chans] = slope
-        else:
-            fp = clipped(raw(tp)) if tp[k] != theta0[k] else f0
-            fm = clipped(raw(tm)) if tm[k] != theta0[k] else f0
-            np.subtract(fp, fm, out=Jt[k], dtype=np.float64)  # float32 values, exact difference in float64
-            Jt[k] /= denom
+        else:  # both renders, the clip and the difference (float32 values, exact in float64) in the core
+            up, down = (work.with_params(space.native(t), paths) if t[k] != theta0[k] else None for t in (tp, tm))
+            _native.fd_column(up, down, f0, idx_u32, clipped0_flat, free_flat, clip, float(denom), kink, Jt[k])
         if theta0[k] <= space.lo[k] or theta0[k] >= space.hi[k]:
             warnings.append(
                 f"{names[k]}: at its bound ({theta0[k]:.6g}); the Gauss-Newton sigma assumes an interior optimum"

@@ -9,6 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from .. import _native
+
 #: Smallest side of the square image blocks (pixels) whose score contributions are summed; the side is
 #: the larger of this and a sixth of the image's short side (model error is correlated on an object's scale).
 BLOCK_PX = 8
@@ -38,15 +40,15 @@ def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, 
     y, x = np.divmod(idx, width)
     nbx = -(-width // block)
     bid = (y // block) * nbx + x // block
-    used, bid = np.unique(bid, return_inverse=True)
-    nb = used.size
+    present = np.bincount(bid) > 0
+    bid = (np.cumsum(present) - 1)[bid]  # the blocks that hold used pixels, numbered in order (no sort)
+    nb = int(present.sum())
     out["blocks"] = int(nb)
     if nb <= p:
         out["seconds"] = time.perf_counter() - t0
         return out, None
-    rows = np.repeat(bid, 3)
-    score = Jt[fit.idx_p] * r0  # per-residual score contributions, p x 3n
-    g = np.stack([np.bincount(rows, weights=score[k], minlength=nb) for k in range(p)])
+    # the per-residual score contributions summed per block, in the core (as np.bincount would)
+    g = _native.block_scores(Jt, fit.idx_p.tolist(), r0, bid.astype(np.int64, copy=False), nb)
     meat = (g @ g.T) * (nb / (nb - p))
     a = fit.cov / s2
     cov = a @ meat @ a
