@@ -26,12 +26,14 @@ pub struct Kernel {
 
 impl Kernel {
     /// `surfels` and `targets` are the active pixels; `shapes` the scene's shapes.
-    /// `solve[i]` says whether pixel i may inform the closed-form products (see `projected`); with
+    /// `solve[i]` says whether pixel i may inform the closed-form products (see `projected`);
+    /// `footprint[i]` its footprint axes (empty: shadow edges at pixel centres); with
     /// `environment` the kernel models the occluded environment (each pixel's sky view factor is kept).
     pub fn new(
         surfels: &[Surfel],
         targets: &[Vec3A],
         solve: &[bool],
+        footprint: &[[Vec3A; 2]],
         shapes: &[PShape],
         shadows: bool,
         environment: bool,
@@ -41,6 +43,7 @@ impl Kernel {
             surfels,
             targets,
             solve,
+            footprint,
             shapes,
             shadows,
             environment,

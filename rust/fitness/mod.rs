@@ -125,6 +125,10 @@ impl Fitness {
     /// `target` is the objective in linear RGB at the scene's size (row-major, 3 floats per pixel).
     /// `pixels` restricts the loss to those pixel indices (all pixels when `None`). With `clip`, rendered
     /// values are clamped to [0, 1] before comparison, as a camera or an 8/16-bit file would.
+    ///
+    /// Pixels are integrated over their area where a shadow edge or a sphere's terminator crosses them
+    /// (`render::footprint`), as a camera integrates them; [`Fitness::centre_sampled`] shades pixel
+    /// centres only.
     pub fn new(
         scene: &Scene,
         layout: ParamLayout,
@@ -133,6 +137,33 @@ impl Fitness {
         kind: LossKind,
         clip: bool,
         projection: Option<Projection>,
+    ) -> Result<Fitness> {
+        Fitness::with_footprint(scene, layout, target, pixels, kind, clip, projection, true)
+    }
+
+    /// [`Fitness::new`] with every pixel shaded at its centre, as `render` shades one sample per pixel.
+    pub fn centre_sampled(
+        scene: &Scene,
+        layout: ParamLayout,
+        target: &[f32],
+        pixels: Option<&[u32]>,
+        kind: LossKind,
+        clip: bool,
+        projection: Option<Projection>,
+    ) -> Result<Fitness> {
+        Fitness::with_footprint(scene, layout, target, pixels, kind, clip, projection, false)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn with_footprint(
+        scene: &Scene,
+        layout: ParamLayout,
+        target: &[f32],
+        pixels: Option<&[u32]>,
+        kind: LossKind,
+        clip: bool,
+        projection: Option<Projection>,
+        footprint: bool,
     ) -> Result<Fitness> {
         let n = (scene.width * scene.height) as usize;
         if target.len() != 3 * n {
@@ -255,8 +286,16 @@ impl Fitness {
                 m
             }
         });
-        let active =
-            ActivePixels::select(&gbuffer, target, pixels, background, scene.objects.len());
+        // Shadow edges are integrated over each pixel's footprint wherever the scene can shadow.
+        let camera = (footprint && scene.can_occlude()).then_some(&geometry.camera);
+        let active = ActivePixels::select(
+            &gbuffer,
+            target,
+            pixels,
+            background,
+            scene.objects.len(),
+            camera,
+        );
         // The occluded environment costs a sky view factor per pixel only where the model has it.
         let environment = match &projection {
             Some(proj) => proj.has_environment(),
@@ -273,6 +312,7 @@ impl Fitness {
                 &active.surfels,
                 &active.targets,
                 &active.solve,
+                &active.footprint,
                 &geometry.shapes,
                 scene.can_occlude(),
                 environment,

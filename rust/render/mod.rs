@@ -10,6 +10,7 @@ pub mod brdf;
 pub mod camera;
 pub mod environment;
 pub mod film;
+pub mod footprint;
 pub mod hit;
 pub mod light;
 pub mod mesh;

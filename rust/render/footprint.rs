@@ -1,0 +1,196 @@
+//! The pixel footprint: a pixel's area on the surface it sees (`axes`), and the box filter a camera
+//! applies over it: the lit fraction at a straight shadow edge (`box_edge`) and the mean of a clamped
+//! cosine across a sphere's terminator (`box_ramp`).
+
+use glam::Vec3A;
+
+use super::camera::CameraFrame;
+use super::hit::Surfel;
+
+/// The world vectors spanned by one pixel step in x and in y on the tangent plane of `s`, the first hit
+/// at the centre of pixel (`i`, `j`) of a `width` x `height` image; zero where a pixel edge's ray misses
+/// that plane (grazing or behind the camera).
+pub fn axes(
+    camera: &CameraFrame,
+    s: &Surfel,
+    i: u32,
+    j: u32,
+    width: u32,
+    height: u32,
+) -> [Vec3A; 2] {
+    // The ray differentials of the pixel-centre ray d(px, py) (before normalising) on that plane:
+    // x = o + t d with t = n·(p - o) / n·d, so dx = t (dd - d (n·dd) / (n·d)) per pixel step.
+    let (w, h) = (width as f32, height as f32);
+    let (x, y) = (
+        (2.0 * (i as f32 + 0.5) / w - 1.0) * camera.tan_half * (w / h),
+        (1.0 - 2.0 * (j as f32 + 0.5) / h) * camera.tan_half,
+    );
+    let d = camera.forward + x * camera.right + y * camera.true_up;
+    let nd = s.normal.dot(d);
+    let t = s.normal.dot(s.position - camera.origin) / nd;
+    if !(t.is_finite() && t > 0.0 && nd.abs() > 1e-6 * d.length()) {
+        return [Vec3A::ZERO; 2];
+    }
+    let step = |dd: Vec3A| {
+        let v = t * (dd - d * (s.normal.dot(dd) / nd));
+        if v.is_finite() {
+            v
+        } else {
+            Vec3A::ZERO
+        }
+    };
+    [
+        step(camera.right * (2.0 * camera.tan_half / h)),
+        step(camera.true_up * (-2.0 * camera.tan_half / h)),
+    ]
+}
+
+/// The fraction of the unit pixel square, (u, v) in [-1/2, 1/2]², where `alpha` u + `beta` v < `s`: the
+/// lit part of a pixel crossed by a straight shadow edge (`s` the signed distance of the pixel centre
+/// from the edge, lit side positive, `alpha`/`beta` its change per pixel step). It is the distribution
+/// function of the sum of two uniform variables, (x₊² - (x-a)₊² - (x-b)₊² + (x-a-b)₊²) / 2ab at
+/// x = s + (a+b)/2; branch-free, so the fitness kernel's lanes share it.
+#[inline(always)]
+pub fn box_edge(s: f32, alpha: f32, beta: f32) -> f32 {
+    let (a, b) = widths(alpha, beta);
+    let x = s + 0.5 * (a + b);
+    let q = |y: f32| {
+        let y = y.max(0.0);
+        y * y
+    };
+    let f = (q(x) - q(x - a) - q(x - b) + q(x - a - b)) / (2.0 * a * b);
+    // Outside the box the value is exact (no rounding of the differences above).
+    if x <= 0.0 {
+        0.0
+    } else if x >= a + b {
+        1.0
+    } else {
+        f.clamp(0.0, 1.0)
+    }
+}
+
+/// The mean over the unit pixel square, (u, v) in [-1/2, 1/2]², of max(0, `c` + `alpha` u + `beta` v):
+/// the pixel average of a clamped cosine max(0, n·l) that changes by `alpha`/`beta` per pixel step, as at
+/// a sphere's terminator. The integral of `box_edge`: c + (z₊³ - (z-a)₊³ - (z-b)₊³ + (z-a-b)₊³) / 6ab at
+/// z = (a+b)/2 - c; branch-free.
+#[inline(always)]
+pub fn box_ramp(c: f32, alpha: f32, beta: f32) -> f32 {
+    let (a, b) = widths(alpha, beta);
+    let z = 0.5 * (a + b) - c;
+    let q = |y: f32| {
+        let y = y.max(0.0);
+        y * y * y
+    };
+    let f = c + (q(z) - q(z - a) - q(z - b) + q(z - a - b)) / (6.0 * a * b);
+    if z <= 0.0 {
+        c
+    } else if z >= a + b {
+        0.0
+    } else {
+        f.max(0.0)
+    }
+}
+
+/// The two widths |alpha| >= |beta| of the box, each at least 1/64 of the larger and above zero: the
+/// closed forms divide by their product (a sliver as thin as that changes them by under 1 %).
+#[inline(always)]
+fn widths(alpha: f32, beta: f32) -> (f32, f32) {
+    let a = alpha.abs().max(beta.abs()).max(1e-12);
+    let b = alpha.abs().min(beta.abs()).max(a / 64.0);
+    (a, b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Camera;
+
+    /// The fraction of an n x n grid of sub-pixel points where alpha u + beta v < s.
+    fn counted(s: f32, alpha: f32, beta: f32, n: usize) -> f32 {
+        let mut lit = 0;
+        for i in 0..n {
+            for j in 0..n {
+                let u = (i as f32 + 0.5) / n as f32 - 0.5;
+                let v = (j as f32 + 0.5) / n as f32 - 0.5;
+                lit += usize::from(alpha * u + beta * v < s);
+            }
+        }
+        lit as f32 / (n * n) as f32
+    }
+
+    #[test]
+    fn box_edge_matches_counting_sub_pixels() {
+        for &(alpha, beta) in &[
+            (1.0, 0.0),
+            (0.3, 0.7),
+            (-0.9, 0.2),
+            (0.5, -0.5),
+            (2.0, 1e-9),
+        ] {
+            for k in -12..=12 {
+                let s = k as f32 * 0.07;
+                let (f, c) = (box_edge(s, alpha, beta), counted(s, alpha, beta, 800));
+                assert!(
+                    (f - c).abs() < 4e-3,
+                    "s {s} alpha {alpha} beta {beta}: {f} vs {c}"
+                );
+            }
+        }
+        assert_eq!(box_edge(0.1, 0.0, 0.0), 1.0);
+        assert_eq!(box_edge(-0.1, 0.0, 0.0), 0.0);
+    }
+
+    #[test]
+    fn box_ramp_matches_averaging_sub_pixels() {
+        for &(alpha, beta) in &[
+            (1.0, 0.0),
+            (0.3, 0.7),
+            (-0.9, 0.2),
+            (0.5, -0.5),
+            (2.0, 1e-9),
+        ] {
+            for k in -12..=12 {
+                let c = k as f32 * 0.07;
+                let n = 600;
+                let mut sum = 0.0f64;
+                for i in 0..n {
+                    for j in 0..n {
+                        let u = (i as f32 + 0.5) / n as f32 - 0.5;
+                        let v = (j as f32 + 0.5) / n as f32 - 0.5;
+                        sum += (c + alpha * u + beta * v).max(0.0) as f64;
+                    }
+                }
+                let mean = (sum / (n * n) as f64) as f32;
+                let f = box_ramp(c, alpha, beta);
+                assert!(
+                    (f - mean).abs() < 1e-4,
+                    "c {c} alpha {alpha} beta {beta}: {f} vs {mean}"
+                );
+            }
+        }
+        assert_eq!(box_ramp(0.3, 0.0, 0.0), 0.3);
+        assert_eq!(box_ramp(-0.3, 0.0, 0.0), 0.0);
+    }
+
+    #[test]
+    fn axes_span_the_pixel_on_a_floor_seen_from_above() {
+        // A camera straight above the floor y = 0 at height 2 with a 90 deg vertical field of view on a
+        // 100 x 100 image: the floor it sees is 4 m wide, so a pixel step is 4 cm.
+        let cam = CameraFrame::new(&Camera {
+            position: [0.0, 2.0, 0.0],
+            look_at: [0.0, 0.0, 0.0],
+            up: [0.0, 0.0, 1.0],
+            vfov_deg: 90.0,
+        });
+        let s = Surfel {
+            position: Vec3A::ZERO,
+            normal: Vec3A::Y,
+            view: Vec3A::Y,
+            object: 0,
+            eps: 0.0,
+        };
+        let [du, dv] = axes(&cam, &s, 49, 49, 100, 100);
+        assert!((du.length() - 0.04).abs() < 1e-4 && (dv.length() - 0.04).abs() < 1e-4);
+        assert!(du.dot(dv).abs() < 1e-6 && du.y.abs() < 1e-6);
+    }
+}
