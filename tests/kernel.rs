@@ -73,10 +73,10 @@ fn fitness(
     kind: LossKind,
     clip: bool,
 ) -> Fitness {
-    Fitness::centre_sampled(scene, layout.clone(), target, None, kind, clip, None).unwrap()
+    Fitness::new(scene, layout.clone(), target, None, kind, clip, None).unwrap()
 }
 
-/// The scene's render, clipped at 1 as a photo saturates.
+/// The scene's render as the fitness models pixels (the footprint), clipped at 1 as a photo saturates.
 fn clipped_render(scene: &Scene) -> Vec<f32> {
     render(scene, None, None, 1)
         .unwrap()
@@ -94,7 +94,7 @@ fn projected(
     proj: Projection,
     clip: bool,
 ) -> Fitness {
-    Fitness::centre_sampled(
+    Fitness::new(
         scene,
         layout,
         target,
@@ -1386,9 +1386,9 @@ fn pixel_footprint_matches_a_supersampled_render_at_shadow_edges_and_terminators
         let err = |f: Fitness| f.channel_losses(&x).iter().sum::<f64>() / (3 * edges.len()) as f64;
         let make = |footprint: bool| {
             let ctor = if footprint {
-                Fitness::new
+                Fitness::with_pixel_footprint
             } else {
-                Fitness::centre_sampled
+                Fitness::new
             };
             ctor(
                 &scene,

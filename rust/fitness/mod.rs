@@ -125,10 +125,6 @@ impl Fitness {
     /// `target` is the objective in linear RGB at the scene's size (row-major, 3 floats per pixel).
     /// `pixels` restricts the loss to those pixel indices (all pixels when `None`). With `clip`, rendered
     /// values are clamped to [0, 1] before comparison, as a camera or an 8/16-bit file would.
-    ///
-    /// Pixels are integrated over their area where a shadow edge or a sphere's terminator crosses them
-    /// (`render::footprint`), as a camera integrates them; [`Fitness::centre_sampled`] shades pixel
-    /// centres only.
     pub fn new(
         scene: &Scene,
         layout: ParamLayout,
@@ -138,11 +134,13 @@ impl Fitness {
         clip: bool,
         projection: Option<Projection>,
     ) -> Result<Fitness> {
-        Fitness::with_footprint(scene, layout, target, pixels, kind, clip, projection, true)
+        Fitness::with_footprint(scene, layout, target, pixels, kind, clip, projection, false)
     }
 
-    /// [`Fitness::new`] with every pixel shaded at its centre, as `render` shades one sample per pixel.
-    pub fn centre_sampled(
+    /// [`Fitness::new`] with each pixel integrated over its area where a sphere's shadow edge or its
+    /// terminator crosses it (`render::footprint`), as a camera integrates it (`render_with` renders the
+    /// same model).
+    pub fn with_pixel_footprint(
         scene: &Scene,
         layout: ParamLayout,
         target: &[f32],
@@ -151,7 +149,7 @@ impl Fitness {
         clip: bool,
         projection: Option<Projection>,
     ) -> Result<Fitness> {
-        Fitness::with_footprint(scene, layout, target, pixels, kind, clip, projection, false)
+        Fitness::with_footprint(scene, layout, target, pixels, kind, clip, projection, true)
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -287,7 +285,8 @@ impl Fitness {
             }
         });
         // Shadow edges are integrated over each pixel's footprint wherever the scene can shadow.
-        let camera = (footprint && scene.can_occlude()).then_some(&geometry.camera);
+        let camera =
+            (footprint && scene.can_occlude()).then_some((&geometry.camera, &geometry.shapes[..]));
         let active = ActivePixels::select(
             &gbuffer,
             target,

@@ -6,7 +6,7 @@ use glam::Vec3A;
 
 use crate::render::bounce::{gather, nearest_table, table_points};
 use crate::render::environment::sky_view;
-use crate::render::footprint::{self, box_edge, box_ramp};
+use crate::render::footprint::{self, sphere_edge_lit, terminator_cos};
 use crate::render::light::{self, directional_irradiance, point_irradiance};
 use crate::render::shape::{segment_meets_sphere, sphere_power};
 use crate::render::{brdf, CameraFrame, GBuffer, PShape, Surfel};
@@ -29,14 +29,14 @@ pub struct ActivePixels {
 impl ActivePixels {
     /// Split `pixels` of `gbuffer` (objective `target`, H x W x 3) into active pixels and, where
     /// `background` is the fixed (clipped) background value, the background's fixed pairs.
-    /// With `camera`, each active pixel's footprint too.
+    /// With `camera` (and the scene's shapes), each active pixel's footprint too.
     pub fn select(
         gbuffer: &GBuffer,
         target: &[f32],
         pixels: &[u32],
         background: Option<Vec3A>,
         objects: usize,
-        camera: Option<&CameraFrame>,
+        camera: Option<(&CameraFrame, &[PShape])>,
     ) -> ActivePixels {
         let mut a = ActivePixels::default();
         let (w, h) = (gbuffer.width, gbuffer.height);
@@ -49,11 +49,12 @@ impl ActivePixels {
                     a.surfels.push(s);
                     a.solve.push(interior(gbuffer, i as usize));
                     a.targets.push(t);
-                    if let Some(cam) = camera {
+                    if let Some((cam, shapes)) = camera {
                         a.footprint.push(if s.object == u32::MAX {
                             [Vec3A::ZERO; 2]
                         } else {
-                            footprint::axes(cam, &s, i % w, i / w, w, h)
+                            let shape = &shapes[s.object as usize];
+                            footprint::axes(cam, &s, shape, (i % w, i / w), (w, h))
                         });
                     }
                 }
@@ -366,24 +367,12 @@ pub(crate) fn group(
             own_radius: None,
         };
         if !footprint.is_empty() && shadows && object.is_some() {
-            // On a sphere the tangent plane stands for the surface only while the footprint is small
-            // against the radius: at the limb (grazing rays) each axis is cut to a quarter of it.
-            let cap = match object.map(|o| &shapes[o]) {
-                Some(PShape::Sphere { radius, .. }) => 0.25 * radius,
-                _ => f32::INFINITY,
-            };
-            let capped = |v: Vec3A| {
-                let l = v.length();
-                (if l > cap { v * (cap / l) } else { v }, l.min(cap))
-            };
-            let (mut du, mut dv) = (Vec::with_capacity(idx.len()), Vec::with_capacity(idx.len()));
-            g.spread = Vec::with_capacity(idx.len());
-            for &i in idx {
-                let ((u, lu), (v, lv)) = (capped(footprint[i][0]), capped(footprint[i][1]));
-                du.push(u);
-                dv.push(v);
-                g.spread.push(0.5 * (lu + lv));
-            }
+            let du: Vec<Vec3A> = idx.iter().map(|&i| footprint[i][0]).collect();
+            let dv: Vec<Vec3A> = idx.iter().map(|&i| footprint[i][1]).collect();
+            g.spread = idx
+                .iter()
+                .map(|&i| footprint::spread(&footprint[i]))
+                .collect();
             g.du = std::array::from_fn(|c| du.iter().map(|u| u[c]).collect());
             g.dv = std::array::from_fn(|c| dv.iter().map(|v| v[c]).collect());
             g.block_spread = g
@@ -524,11 +513,8 @@ fn terminator_pixels<'a>(
         let inv = 1.0 / d2.sqrt().max(f32::MIN_POSITIVE);
         let fall = if point > 0.0 { inv * inv } else { 1.0 };
         let u = [d[0] * inv, d[1] * inv, d[2] * inv];
-        // Across the pixel the normal turns by x / radius (x a tangent step), so n·l by l·x / radius.
-        let c = nx[i] * u[0] + ny[i] * u[1] + nz[i] * u[2];
-        let alpha = (u[0] * ux[i] + u[1] * uy[i] + u[2] * uz[i]) / radius;
-        let beta = (u[0] * vx[i] + u[1] * vy[i] + u[2] * vz[i]) / radius;
-        let m = box_ramp(c, alpha, beta) * fall;
+        let axes = [[ux[i], uy[i], uz[i]], [vx[i], vy[i], vz[i]]];
+        let m = terminator_cos([nx[i], ny[i], nz[i]], u, axes, radius) * fall;
         e[i] = if near[i] != 0 && d2 > f32::MIN_POSITIVE {
             m
         } else {
@@ -695,30 +681,10 @@ fn soft_edge<'a, const BOUNDED: bool>(
     let (ux, uy, uz) = (col(&g.du, 0), col(&g.du, 1), col(&g.du, 2));
     let (vx, vy, vz) = (col(&g.dv, 0), col(&g.dv, 1), col(&g.dv, 2));
     let (e, near) = (&mut e[..n], &near[..n]);
-    let [cx, cy, cz] = s.center;
     let point = if BOUNDED { 1.0 } else { 0.0 };
     for i in 0..n {
-        // d = L - p (a ray: the direction); t the line's closest approach to the centre.
-        let d = [
-            to[0] - point * px[i],
-            to[1] - point * py[i],
-            to[2] - point * pz[i],
-        ];
-        let pc = [px[i] - cx, py[i] - cy, pz[i] - cz];
-        let a = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-        let t = -(pc[0] * d[0] + pc[1] * d[1] + pc[2] * d[2]) / a;
-        // w: from the closest point to the centre, length h. Moving the pixel's point by x moves the
-        // closest point by (1 - t) x (a ray: by x), so h by -(1 - t) w·x / h.
-        let w = [
-            -(pc[0] + t * d[0]),
-            -(pc[1] + t * d[1]),
-            -(pc[2] + t * d[2]),
-        ];
-        let h = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
-        let k = if BOUNDED { 1.0 - t } else { 1.0 } / h.max(f32::MIN_POSITIVE);
-        let alpha = k * (w[0] * ux[i] + w[1] * uy[i] + w[2] * uz[i]);
-        let beta = k * (w[0] * vx[i] + w[1] * vy[i] + w[2] * vz[i]);
-        let lit = box_edge(h - s.radius, alpha, beta);
+        let axes = [[ux[i], uy[i], uz[i]], [vx[i], vy[i], vz[i]]];
+        let lit = sphere_edge_lit([px[i], py[i], pz[i]], axes, to, point, s.center, s.radius);
         e[i] = if near[i] != 0 { e[i] * lit } else { e[i] };
     }
 }

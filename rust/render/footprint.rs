@@ -6,17 +6,18 @@ use glam::Vec3A;
 
 use super::camera::CameraFrame;
 use super::hit::Surfel;
+use super::shape::PShape;
 
 /// The world vectors spanned by one pixel step in x and in y on the tangent plane of `s`, the first hit
-/// at the centre of pixel (`i`, `j`) of a `width` x `height` image; zero where a pixel edge's ray misses
-/// that plane (grazing or behind the camera).
+/// at the centre of pixel (`i`, `j`) of a `width` x `height` image; zero where the plane is seen edge-on
+/// or behind the camera. On a sphere (`shape`) the tangent plane stands for the surface only while the
+/// footprint is small against the radius: at the limb each vector is cut to a quarter of it.
 pub fn axes(
     camera: &CameraFrame,
     s: &Surfel,
-    i: u32,
-    j: u32,
-    width: u32,
-    height: u32,
+    shape: &PShape,
+    (i, j): (u32, u32),
+    (width, height): (u32, u32),
 ) -> [Vec3A; 2] {
     // The ray differentials of the pixel-centre ray d(px, py) (before normalising) on that plane:
     // x = o + t d with t = n·(p - o) / n·d, so dx = t (dd - d (n·dd) / (n·d)) per pixel step.
@@ -31,18 +32,76 @@ pub fn axes(
     if !(t.is_finite() && t > 0.0 && nd.abs() > 1e-6 * d.length()) {
         return [Vec3A::ZERO; 2];
     }
+    let cap = match shape {
+        PShape::Sphere { radius, .. } => 0.25 * radius,
+        _ => f32::INFINITY,
+    };
     let step = |dd: Vec3A| {
         let v = t * (dd - d * (s.normal.dot(dd) / nd));
-        if v.is_finite() {
-            v
-        } else {
+        let l = v.length();
+        if !l.is_finite() {
             Vec3A::ZERO
+        } else if l > cap {
+            v * (cap / l)
+        } else {
+            v
         }
     };
     [
         step(camera.right * (2.0 * camera.tan_half / h)),
         step(camera.true_up * (-2.0 * camera.tan_half / h)),
     ]
+}
+
+/// Half of |du| + |dv|: no point of the pixel's footprint is farther from its centre.
+#[inline]
+pub fn spread([du, dv]: &[Vec3A; 2]) -> f32 {
+    0.5 * (du.length() + dv.length())
+}
+
+/// The lit fraction of a pixel at `p` (footprint `du`, `dv`) next to the shadow of the sphere (`c`,
+/// `radius`), the edge taken straight across the pixel: `point` 1 for a point light at `to` (the
+/// segment to it), 0 for a directional light towards the unit `to` (a ray). Meaningful where the line's
+/// closest approach to the centre lies between the point and the light (t in (0, 1); a ray: t > 0).
+#[inline(always)]
+pub fn sphere_edge_lit(
+    p: [f32; 3],
+    [du, dv]: [[f32; 3]; 2],
+    to: [f32; 3],
+    point: f32,
+    c: [f32; 3],
+    radius: f32,
+) -> f32 {
+    let d = [
+        to[0] - point * p[0],
+        to[1] - point * p[1],
+        to[2] - point * p[2],
+    ];
+    let pc = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
+    let a = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+    let t = -(pc[0] * d[0] + pc[1] * d[1] + pc[2] * d[2]) / a;
+    // w: from the closest point to the centre, length h. Moving the pixel's point by x moves the closest
+    // point by (1 - t) x (a ray: by x), so h by -(1 - t) w·x / h.
+    let w = [
+        -(pc[0] + t * d[0]),
+        -(pc[1] + t * d[1]),
+        -(pc[2] + t * d[2]),
+    ];
+    let h = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
+    let k = (1.0 - point * t) / h.max(f32::MIN_POSITIVE);
+    let alpha = k * (w[0] * du[0] + w[1] * du[1] + w[2] * du[2]);
+    let beta = k * (w[0] * dv[0] + w[1] * dv[1] + w[2] * dv[2]);
+    box_edge(h - radius, alpha, beta)
+}
+
+/// The pixel mean of max(0, n·l) on a sphere of `radius` (unit `n`, unit `l` towards the light,
+/// footprint `du`, `dv`): across the pixel the normal turns by x / radius, so n·l by l·x / radius.
+#[inline(always)]
+pub fn terminator_cos(n: [f32; 3], l: [f32; 3], [du, dv]: [[f32; 3]; 2], radius: f32) -> f32 {
+    let c = n[0] * l[0] + n[1] * l[1] + n[2] * l[2];
+    let alpha = (l[0] * du[0] + l[1] * du[1] + l[2] * du[2]) / radius;
+    let beta = (l[0] * dv[0] + l[1] * dv[1] + l[2] * dv[2]) / radius;
+    box_ramp(c, alpha, beta)
 }
 
 /// The fraction of the unit pixel square, (u, v) in [-1/2, 1/2]², where `alpha` u + `beta` v < `s`: the
@@ -189,7 +248,11 @@ mod tests {
             object: 0,
             eps: 0.0,
         };
-        let [du, dv] = axes(&cam, &s, 49, 49, 100, 100);
+        let floor = PShape::Plane {
+            point: Vec3A::ZERO,
+            normal: Vec3A::Y,
+        };
+        let [du, dv] = axes(&cam, &s, &floor, (49, 49), (100, 100));
         assert!((du.length() - 0.04).abs() < 1e-4 && (dv.length() - 0.04).abs() < 1e-4);
         assert!(du.dot(dv).abs() < 1e-6 && du.y.abs() < 1e-6);
     }

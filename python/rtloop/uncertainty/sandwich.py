@@ -48,7 +48,8 @@ def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, 
     score = Jt[fit.idx_p] * r0  # per-residual score contributions, p x 3n
     g = np.stack([np.bincount(rows, weights=score[k], minlength=nb) for k in range(p)])
     meat = (g @ g.T) * (nb / (nb - p))
-    a = fit.cov / s2
+    # A photo the model explains exactly (zero residual): no spread at all, the Gauss-Newton zero.
+    a = fit.cov / s2 if s2 > 0 else np.zeros_like(fit.cov)
     cov = a @ meat @ a
     cov = 0.5 * (cov + cov.T)
     var = np.maximum(np.diag(cov), np.diag(fit.cov))  # never below Gauss-Newton
