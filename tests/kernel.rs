@@ -1416,3 +1416,40 @@ fn pixel_footprint_matches_a_supersampled_render_at_shadow_edges_and_terminators
         );
     }
 }
+
+#[test]
+fn footprint_render_is_what_the_footprint_fitness_models() {
+    // The renderer (`shade_pixel`, pixel by pixel) and the kernel (blocked, with its cheap edge bound)
+    // call the same footprint formulas: at the true scene the loss against the footprint render vanishes.
+    for (light, sun) in [([2.5, 2.2, 0.8], false), ([0.7, 0.5, 0.2], true)] {
+        let scene = edge_scene(light, sun);
+        let target = rtloop::render::render_with(&scene, None, None, 1, true)
+            .unwrap()
+            .rgb;
+        let path = if sun {
+            "light.direction"
+        } else {
+            "light.position"
+        };
+        let layout = ParamLayout::new(&scene, &[path.to_string()]).unwrap();
+        let x = if sun {
+            light.to_vec()
+        } else {
+            scene.light.position.to_vec()
+        };
+        let f =
+            Fitness::with_pixel_footprint(&scene, layout, &target, None, LossKind::L1, false, None)
+                .unwrap();
+        let loss: f64 = f.channel_losses(&x).iter().sum();
+        let total: f64 = target.iter().map(|&v| v as f64).sum();
+        assert!(loss < 1e-5 * total, "{light:?}: {loss} against {total}");
+        // ... and differs from the centre render there.
+        let centre = render(&scene, None, None, 1).unwrap().rgb;
+        let moved: f64 = centre
+            .iter()
+            .zip(&target)
+            .map(|(a, b)| (a - b).abs() as f64)
+            .sum();
+        assert!(moved > 100.0 * loss.max(1e-9), "{light:?}: {moved}");
+    }
+}

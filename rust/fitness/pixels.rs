@@ -258,6 +258,27 @@ pub(crate) struct Light {
     pub(crate) rgb: [f32; 3],
 }
 
+impl Light {
+    /// (position, 1) for a point light, (direction, 0) for a directional one: see [`offset`].
+    #[inline(always)]
+    pub(crate) fn target(&self) -> ([f32; 3], f32) {
+        match self.dir {
+            Some(d) => (d, 0.0),
+            None => (self.pos, 1.0),
+        }
+    }
+}
+
+/// From `p` towards the light given as [`Light::target`]: L - p, or the direction itself.
+#[inline(always)]
+fn offset(l: [f32; 3], point: f32, p: [f32; 3]) -> [f32; 3] {
+    [
+        l[0] - point * p[0],
+        l[1] - point * p[1],
+        l[2] - point * p[2],
+    ]
+}
+
 /// The active pixels grouped by object (background last), row-major inside a group, as structures of
 /// arrays with their occluders' light-independent terms (`shadows`: the scene can shadow at all).
 /// `solve[i]` says whether pixel i may inform the closed-form products; `footprint[i]` (all pixels, or
@@ -445,7 +466,7 @@ fn soft_terminator(
     let n = e.len();
     let spread = &g.spread[r.start..][..n];
     let mut near = [0u32; BLOCK];
-    let (mut lo, mut hi) = (u32::MAX, 0u32);
+    let mut span = (u32::MAX, 0u32);
     fn col(v: &[Vec<f32>; 3], start: usize, n: usize) -> [&[f32]; 3] {
         [
             &v[0][start..][..n],
@@ -455,28 +476,20 @@ fn soft_terminator(
     }
     let ([px, py, pz], [nx, ny, nz]) = (col(&g.p, r.start, n), col(&g.n, r.start, n));
     let inv_r2 = 1.0 / (radius * radius);
-    let (l, point) = match light.dir {
-        Some(l) => (l, 0.0),
-        None => (light.pos, 1.0),
-    };
+    let (l, point) = light.target();
     for i in 0..n {
-        // d = L - p for a point light, the direction itself for a directional one.
-        let d = [
-            l[0] - point * px[i],
-            l[1] - point * py[i],
-            l[2] - point * pz[i],
-        ];
+        let d = offset(l, point, [px[i], py[i], pz[i]]);
         let nd = nx[i] * d[0] + ny[i] * d[1] + nz[i] * d[2];
         let d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-        near[i] = u32::from(nd * nd < spread[i] * spread[i] * inv_r2 * d2);
-        let m = near[i] != 0;
-        lo = lo.min(if m { i as u32 } else { u32::MAX });
-        hi = hi.max(if m { i as u32 + 1 } else { 0 });
+        mark(
+            nd * nd < spread[i] * spread[i] * inv_r2 * d2,
+            i,
+            &mut near,
+            &mut span,
+        );
     }
-    if hi > lo {
-        let (lo, hi) = (lo as usize, hi as usize);
-        let part = r.start + lo..r.start + hi;
-        terminator_pixels(g, part, light, radius, &near[lo..hi], &mut e[lo..hi]);
+    if let Some((r, lo, hi)) = marked(r.start, span) {
+        terminator_pixels(g, r, light, radius, &near[lo..hi], &mut e[lo..hi]);
     }
 }
 
@@ -498,16 +511,9 @@ fn terminator_pixels<'a>(
     let (ux, uy, uz) = (col(&g.du, 0), col(&g.du, 1), col(&g.du, 2));
     let (vx, vy, vz) = (col(&g.dv, 0), col(&g.dv, 1), col(&g.dv, 2));
     let (e, near) = (&mut e[..n], &near[..n]);
-    let (l, point) = match light.dir {
-        Some(l) => (l, 0.0),
-        None => (light.pos, 1.0),
-    };
+    let (l, point) = light.target();
     for i in 0..n {
-        let d = [
-            l[0] - point * px[i],
-            l[1] - point * py[i],
-            l[2] - point * pz[i],
-        ];
+        let d = offset(l, point, [px[i], py[i], pz[i]]);
         let d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
         // Unit l, and the fall-off 1/d² (none for a directional light).
         let inv = 1.0 / d2.sqrt().max(f32::MIN_POSITIVE);
@@ -627,7 +633,7 @@ pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mu
         // |h² - r²| = |b² - ac| / a < 2rw + w² (w bounds the line's move, (1 - t) x footprint).
         let spread = &g.spread[r.start..][..n];
         let mut near = [0u32; BLOCK];
-        let (mut lo, mut hi) = (u32::MAX, 0u32);
+        let mut span = (u32::MAX, 0u32);
         let rad = s.radius;
         for i in 0..n {
             let dx = lx - px[i];
@@ -639,17 +645,10 @@ pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mu
             let w = spread[i];
             let close = (b * b - a * cc[i]).abs() < a * w * (2.0 * rad + w);
             let edge = close & (b < 0.0) & (a + b > 0.0) & (e[i] > 0.0);
-            near[i] = u32::from(edge);
-            let m = near[i] != 0;
-            lo = lo.min(if m { i as u32 } else { u32::MAX });
-            hi = hi.max(if m { i as u32 + 1 } else { 0 });
+            mark(edge, i, &mut near, &mut span);
             e[i] = if hit & !edge { 0.0 } else { e[i] };
         }
-        if hi > lo {
-            let (lo, hi) = (lo as usize, hi as usize);
-            let part = r.start + lo..r.start + hi;
-            soft_edge::<true>(g, part, s, light.pos, &near[lo..hi], &mut e[lo..hi]);
-        }
+        soft_edge::<true>(g, r.start, span, s, light.pos, &near, e);
     }
     for pl in &g.planes {
         let side_l = pl.normal[0] * (lx - pl.point[0])
@@ -669,12 +668,17 @@ pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mu
 #[inline(always)]
 fn soft_edge<'a, const BOUNDED: bool>(
     g: &'a Group,
-    r: std::ops::Range<usize>,
+    start: usize,
+    span: (u32, u32),
     s: &SphereOccluder,
     to: [f32; 3],
-    near: &[u32],
+    near: &[u32; BLOCK],
     e: &mut [f32],
 ) {
+    let Some((r, lo, hi)) = marked(start, span) else {
+        return;
+    };
+    let (near, e) = (&near[lo..hi], &mut e[lo..hi]);
     let n = e.len();
     let col = |v: &'a [Vec<f32>; 3], c: usize| -> &'a [f32] { &v[c][r.start..][..n] };
     let (px, py, pz) = (col(&g.p, 0), col(&g.p, 1), col(&g.p, 2));
@@ -687,6 +691,22 @@ fn soft_edge<'a, const BOUNDED: bool>(
         let lit = sphere_edge_lit([px[i], py[i], pz[i]], axes, to, point, s.center, s.radius);
         e[i] = if near[i] != 0 { e[i] * lit } else { e[i] };
     }
+}
+
+/// Mark pixel `i` of a block as `edge` (or not) and widen `span`, the marked pixels' [first, last + 1).
+#[inline(always)]
+fn mark(edge: bool, i: usize, near: &mut [u32; BLOCK], span: &mut (u32, u32)) {
+    near[i] = u32::from(edge);
+    span.0 = span.0.min(if edge { i as u32 } else { u32::MAX });
+    span.1 = span.1.max(if edge { i as u32 + 1 } else { 0 });
+}
+
+/// The group's range of a block's marked `span` (the block starting at `start`) and the span within the
+/// block; `None` when nothing is marked.
+#[inline(always)]
+fn marked(start: usize, (lo, hi): (u32, u32)) -> Option<(std::ops::Range<usize>, usize, usize)> {
+    let (lo, hi) = (lo as usize, hi as usize);
+    (hi > lo).then(|| (start + lo..start + hi, lo, hi))
 }
 
 /// `shadow` for a directional light: rays p + t·d, t in (0, inf), d the unit direction to the light.
@@ -702,7 +722,7 @@ pub(crate) fn shadow_directional(g: &Group, r: std::ops::Range<usize>, d: [f32; 
         let cc = &s.c[r.start..][..n];
         let [cx, cy, cz] = s.center;
         let mut near = [0u32; BLOCK];
-        let (mut lo, mut hi) = (u32::MAX, 0u32);
+        let mut span = (u32::MAX, 0u32);
         let footprint = !g.spread.is_empty();
         for i in 0..n {
             // |d| = 1: blocked when the far root of t² + 2bt + c = 0 is positive.
@@ -713,17 +733,10 @@ pub(crate) fn shadow_directional(g: &Group, r: std::ops::Range<usize>, d: [f32; 
                 let w = g.spread[r.start + i];
                 ((b * b - cc[i]).abs() < w * (2.0 * s.radius + w)) & (b < 0.0) & (e[i] > 0.0)
             };
-            near[i] = u32::from(edge);
-            let m = near[i] != 0;
-            lo = lo.min(if m { i as u32 } else { u32::MAX });
-            hi = hi.max(if m { i as u32 + 1 } else { 0 });
+            mark(edge, i, &mut near, &mut span);
             e[i] = if hit & !edge { 0.0 } else { e[i] };
         }
-        if hi > lo {
-            let (lo, hi) = (lo as usize, hi as usize);
-            let part = r.start + lo..r.start + hi;
-            soft_edge::<false>(g, part, s, d, &near[lo..hi], &mut e[lo..hi]);
-        }
+        soft_edge::<false>(g, r.start, span, s, d, &near, e);
     }
     for pl in &g.planes {
         // The ray heads towards the plane's other side when n·d and the pixel's side differ in sign.
