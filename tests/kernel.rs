@@ -76,7 +76,7 @@ fn fitness(
     Fitness::new(scene, layout.clone(), target, None, kind, clip, None).unwrap()
 }
 
-/// The scene's render, clipped at 1 as a photo saturates.
+/// The scene's render as the fitness models pixels (the footprint), clipped at 1 as a photo saturates.
 fn clipped_render(scene: &Scene) -> Vec<f32> {
     render(scene, None, None, 1)
         .unwrap()
@@ -1333,5 +1333,167 @@ fn is_avx2_fma() -> bool {
     #[cfg(not(target_arch = "x86_64"))]
     {
         false
+    }
+}
+
+/// A ball resting on the floor with a second, smaller ball in its shadow, under `light` (a point light's
+/// position, or a directional light's direction with `sun`).
+fn edge_scene(light: [f64; 3], sun: bool) -> Scene {
+    let light = if sun {
+        format!(
+            r#""type": "directional", "direction": [{}, {}, {}], "intensity": 3"#,
+            light[0], light[1], light[2]
+        )
+    } else {
+        format!(
+            r#""position": [{}, {}, {}], "intensity": 40"#,
+            light[0], light[1], light[2]
+        )
+    };
+    Scene::from_json(&format!(
+        r#"{{"image": {{"width": 96, "height": 72}},
+            "camera": {{"position": [0.3, 2.2, -5.5], "look_at": [0, 0.4, 0], "vfov_deg": 38}},
+            "light": {{{light}}},
+            "objects": [
+              {{"name": "big", "shape": "sphere", "center": [0, 0.6, 0], "radius": 0.6,
+                "material": {{"albedo": [0.8, 0.5, 0.3]}}}},
+              {{"name": "small", "shape": "sphere", "center": [-1.0, 0.3, 0.4], "radius": 0.3,
+                "material": {{"albedo": [0.3, 0.6, 0.8]}}}},
+              {{"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0],
+                "material": {{"albedo": [0.6, 0.6, 0.6]}}}}],
+            "fit": {{"{}": {{"min": -9, "max": 9}}}}}}"#,
+        if sun {
+            "light.direction"
+        } else {
+            "light.position"
+        }
+    ))
+    .unwrap()
+}
+
+#[test]
+fn pixel_footprint_matches_a_supersampled_render_at_shadow_edges_and_terminators() {
+    // The reference integrates every pixel by brute force (a 32 x 32 grid of camera rays, the renderer's
+    // own shading per ray); the footprint kernel integrates only where an edge crosses a pixel, in
+    // closed form. Compared on the pixels where the two differ from the pixel-centre render by more than
+    // 1 %, away from silhouettes (which the footprint does not integrate).
+    for (light, sun) in [
+        ([2.5, 2.2, 0.8], false),
+        ([1.8, 4.0, -1.5], false),
+        ([0.7, 0.5, 0.2], true),
+    ] {
+        let scene = edge_scene(light, sun);
+        let (w, h) = (scene.width as usize, scene.height as usize);
+        let fine = render(&scene, None, None, 1024).unwrap().rgb;
+        let centre = render(&scene, None, None, 1).unwrap().rgb;
+        let ids = rtloop::render::object_ids(&scene, None, None);
+        let near_silhouette = |i: usize| {
+            let (x, y) = ((i % w) as i64, (i / w) as i64);
+            (-1..=1).any(|dy| {
+                (-1..=1).any(|dx| {
+                    let (u, v) = (x + dx, y + dy);
+                    u >= 0
+                        && v >= 0
+                        && (u as usize) < w
+                        && (v as usize) < h
+                        && ids[v as usize * w + u as usize] != ids[i]
+                })
+            })
+        };
+        let edges: Vec<u32> = (0..w * h)
+            .filter(|&i| {
+                let d = (0..3)
+                    .map(|c| (fine[3 * i + c] - centre[3 * i + c]).abs())
+                    .fold(0.0f32, f32::max);
+                ids[i] >= 0
+                    && !near_silhouette(i)
+                    && d > 0.01 * fine[3 * i..3 * i + 3].iter().sum::<f32>() / 3.0 + 1e-4
+            })
+            .map(|i| i as u32)
+            .collect();
+        assert!(
+            edges.len() > 40,
+            "{light:?}: only {} edge pixels",
+            edges.len()
+        );
+        let path = if sun {
+            "light.direction"
+        } else {
+            "light.position"
+        };
+        let layout = ParamLayout::new(&scene, &[path.to_string()]).unwrap();
+        let x = if sun {
+            light.to_vec()
+        } else {
+            scene.light.position.to_vec()
+        };
+        let err = |f: Fitness| f.channel_losses(&x).iter().sum::<f64>() / (3 * edges.len()) as f64;
+        let make = |footprint: bool| {
+            let ctor = if footprint {
+                Fitness::with_pixel_footprint
+            } else {
+                Fitness::new
+            };
+            ctor(
+                &scene,
+                layout.clone(),
+                &fine,
+                Some(&edges),
+                LossKind::L1,
+                false,
+                None,
+            )
+            .unwrap()
+        };
+        let (with, without) = (err(make(true)), err(make(false)));
+        let mean: f64 = edges
+            .iter()
+            .map(|&i| fine[3 * i as usize..3 * i as usize + 3].iter().sum::<f32>() as f64 / 3.0)
+            .sum::<f64>()
+            / edges.len() as f64;
+        eprintln!(
+            "{light:?}: footprint {with:.5}, pixel centres {without:.5}, mean edge pixel {mean:.4}"
+        );
+        assert!(
+            with < 0.1 * without,
+            "{light:?}: footprint error {with:.5}, pixel centres {without:.5}, mean edge pixel {mean:.4}"
+        );
+    }
+}
+
+#[test]
+fn footprint_render_is_what_the_footprint_fitness_models() {
+    // The renderer (`shade_pixel`, pixel by pixel) and the kernel (blocked, with its cheap edge bound)
+    // call the same footprint formulas: at the true scene the loss against the footprint render vanishes.
+    for (light, sun) in [([2.5, 2.2, 0.8], false), ([0.7, 0.5, 0.2], true)] {
+        let scene = edge_scene(light, sun);
+        let target = rtloop::render::render_with(&scene, None, None, 1, true)
+            .unwrap()
+            .rgb;
+        let path = if sun {
+            "light.direction"
+        } else {
+            "light.position"
+        };
+        let layout = ParamLayout::new(&scene, &[path.to_string()]).unwrap();
+        let x = if sun {
+            light.to_vec()
+        } else {
+            scene.light.position.to_vec()
+        };
+        let f =
+            Fitness::with_pixel_footprint(&scene, layout, &target, None, LossKind::L1, false, None)
+                .unwrap();
+        let loss: f64 = f.channel_losses(&x).iter().sum();
+        let total: f64 = target.iter().map(|&v| v as f64).sum();
+        assert!(loss < 1e-5 * total, "{light:?}: {loss} against {total}");
+        // ... and differs from the centre render there.
+        let centre = render(&scene, None, None, 1).unwrap().rgb;
+        let moved: f64 = centre
+            .iter()
+            .zip(&target)
+            .map(|(a, b)| (a - b).abs() as f64)
+            .sum();
+        assert!(moved > 100.0 * loss.max(1e-9), "{light:?}: {moved}");
     }
 }

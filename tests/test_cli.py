@@ -166,6 +166,18 @@ def test_loss_space_option(inputs, tmp_path, capsys):
     assert "--loss-space {linear,srgb}" in stdout
 
 
+def test_footprint_option(inputs, tmp_path, capsys):
+    scene_path, image_path = inputs
+    out = tmp_path / "footprint"
+    code, _, stderr = run(capsys, scene_path, image_path, "-o", out, "--footprint", "--population", 8,
+                          "--generations", 3, "--snapshot-every", 0, "--final-scale", 1, "--final-spp", 1, "--quiet")
+    assert code == 0, stderr
+    settings = json.loads((out / "result.json").read_text(encoding="utf-8"))["fit_report"]["settings"]
+    assert settings["footprint"] is True
+    code, stdout, _ = run(capsys, "--help")
+    assert "--footprint" in stdout
+
+
 def test_snapshots_disabled(inputs, tmp_path, capsys):
     scene_path, image_path = inputs
     out = tmp_path / "out"

@@ -64,16 +64,24 @@ __all__ = [
 ]
 
 
-def render(scene: Any, width: int | None = None, height: int | None = None, spp: int = 1) -> np.ndarray:
+def render(scene: Any, width: int | None = None, height: int | None = None, spp: int = 1, *,
+           footprint: bool = False) -> np.ndarray:
     """Render ``scene`` (a Scene, dict or path) to a float32 (H, W, 3) linear-RGB array.
 
     ``width``/``height`` default to the scene's image size and keep the field of view; ``spp`` > 1
     supersamples each pixel (stratified grid when it is a square number) and averages in linear light.
-    Values are radiance times exposure, not clipped.
+    ``footprint`` (one sample per pixel) integrates sphere shadow edges and terminators over each pixel
+    in closed form: the image ``fit(..., footprint=True)`` compares with a photo. Values are radiance
+    times exposure, not clipped.
     """
     scene = load_scene(scene)
     width, height = _size(width, height)
-    return _native.render(scene, width, height, whole("spp", spp, 1, MAX_SPP))
+    spp = whole("spp", spp, 1, MAX_SPP)
+    if not isinstance(footprint, bool):
+        raise RtloopError(f"footprint: must be True or False (got {footprint!r})")
+    if footprint and spp != 1:
+        raise RtloopError(f"footprint: takes one sample per pixel (got spp={spp})")
+    return _native.render(scene, width, height, spp, footprint)
 
 
 def object_ids(scene: Any, width: int | None = None, height: int | None = None) -> np.ndarray:

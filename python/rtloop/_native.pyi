@@ -39,7 +39,7 @@ class Scene:
     def to_dict(self) -> dict[str, Any]: ...
 
 def render(
-    scene: Scene, width: int | None = None, height: int | None = None, spp: int = 1
+    scene: Scene, width: int | None = None, height: int | None = None, spp: int = 1, footprint: bool = False
 ) -> npt.NDArray[np.float32]: ...
 def object_ids(scene: Scene, width: int | None = None, height: int | None = None) -> npt.NDArray[np.int32]: ...
 def save_image(path: str | PathLike[str], image: npt.NDArray[np.float32]) -> None: ...
@@ -85,6 +85,7 @@ def evaluate(
     product_bounds: npt.NDArray[np.float64] | None = None,
     norm: str = "l1",
     space: str = "linear",
+    footprint: bool = False,
 ) -> npt.NDArray[np.float64]: ...
 def optimize(
     scene: Scene,
@@ -110,6 +111,7 @@ def optimize(
     with_products: bool = True,
     space: str = "linear",
     polish_tol: float | None = None,
+    footprint: bool = False,
 ) -> OptimizeResult:
     """polish_tol: the polish stops once every simplex vertex is within this fraction of each range of
     the best (default 1e-13). product_bounds: (objects, 3, 2), or (objects, 4, 2) whose row 4 bounds

@@ -28,18 +28,22 @@ pub struct Kernel {
 
 impl Kernel {
     /// `surfels` and `targets` are the active pixels; `shapes` the scene's shapes.
-    /// `solve[i]` says whether pixel i may inform the closed-form products (see `projected`); `sky` is
-    /// the constant-radiance term modelled (see [`Sky`]: each pixel's factor for it is kept).
+    /// `solve[i]` says whether pixel i may inform the closed-form products (see `projected`);
+    /// `footprint[i]` its footprint axes (empty: shadow edges at pixel centres); `sky` is the
+    /// constant-radiance term modelled (see [`Sky`]: each pixel's factor for it is kept).
     pub fn new(
         surfels: &[Surfel],
         targets: &[Vec3A],
         solve: &[bool],
+        footprint: &[[Vec3A; 2]],
         shapes: &[PShape],
         shadows: bool,
         sky: Sky,
         bounce: bool,
     ) -> Kernel {
-        let groups = group(surfels, targets, solve, shapes, shadows, sky, bounce);
+        let groups = group(
+            surfels, targets, solve, footprint, shapes, shadows, sky, bounce,
+        );
         let tables = if bounce {
             shapes
                 .iter()

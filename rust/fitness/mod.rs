@@ -135,6 +135,35 @@ impl Fitness {
         clip: bool,
         projection: Option<Projection>,
     ) -> Result<Fitness> {
+        Fitness::with_footprint(scene, layout, target, pixels, kind, clip, projection, false)
+    }
+
+    /// [`Fitness::new`] with each pixel integrated over its area where a sphere's shadow edge or its
+    /// terminator crosses it (`render::footprint`), as a camera integrates it (`render_with` renders the
+    /// same model).
+    pub fn with_pixel_footprint(
+        scene: &Scene,
+        layout: ParamLayout,
+        target: &[f32],
+        pixels: Option<&[u32]>,
+        kind: LossKind,
+        clip: bool,
+        projection: Option<Projection>,
+    ) -> Result<Fitness> {
+        Fitness::with_footprint(scene, layout, target, pixels, kind, clip, projection, true)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn with_footprint(
+        scene: &Scene,
+        layout: ParamLayout,
+        target: &[f32],
+        pixels: Option<&[u32]>,
+        kind: LossKind,
+        clip: bool,
+        projection: Option<Projection>,
+        footprint: bool,
+    ) -> Result<Fitness> {
         let n = (scene.width * scene.height) as usize;
         if target.len() != 3 * n {
             return Err(Error::Invalid(format!(
@@ -265,8 +294,17 @@ impl Fitness {
                 m
             }
         });
-        let active =
-            ActivePixels::select(&gbuffer, target, pixels, background, scene.objects.len());
+        // Shadow edges are integrated over each pixel's footprint wherever the scene can shadow.
+        let camera =
+            (footprint && scene.can_occlude()).then_some((&geometry.camera, &geometry.shapes[..]));
+        let active = ActivePixels::select(
+            &gbuffer,
+            target,
+            pixels,
+            background,
+            scene.objects.len(),
+            camera,
+        );
         // The occluded environment costs a sky view factor per pixel only where the model has it.
         let environment = match &projection {
             Some(proj) if proj.has_environment() => constant_term(scene),
@@ -286,6 +324,7 @@ impl Fitness {
                 &active.surfels,
                 &active.targets,
                 &active.solve,
+                &active.footprint,
                 &geometry.shapes,
                 scene.can_occlude(),
                 environment,

@@ -6,9 +6,10 @@ use glam::Vec3A;
 
 use crate::render::bounce::{gather, nearest_table, table_points};
 use crate::render::environment::sky_view;
+use crate::render::footprint::{self, sphere_edge_lit, terminator_cos};
 use crate::render::light::{self, directional_irradiance, point_irradiance};
 use crate::render::shape::{segment_meets_sphere, sphere_power};
-use crate::render::{brdf, GBuffer, PShape, Surfel};
+use crate::render::{brdf, CameraFrame, GBuffer, PShape, Surfel};
 
 /// The pixels one fit shades, and the (clipped model, objective) of those no free parameter changes.
 #[derive(Clone, Debug, Default)]
@@ -20,19 +21,25 @@ pub struct ActivePixels {
     pub solve: Vec<bool>,
     /// (clipped model, objective) of the pixels left out: background under a fixed background.
     pub fixed: Vec<(Vec3A, Vec3A)>,
+    /// Per active pixel: its footprint on the surface it sees (`render::footprint::axes`), for shadow
+    /// edges integrated over the pixel's area; empty when not asked for.
+    pub footprint: Vec<[Vec3A; 2]>,
 }
 
 impl ActivePixels {
     /// Split `pixels` of `gbuffer` (objective `target`, H x W x 3) into active pixels and, where
     /// `background` is the fixed (clipped) background value, the background's fixed pairs.
+    /// With `camera` (and the scene's shapes), each active pixel's footprint too.
     pub fn select(
         gbuffer: &GBuffer,
         target: &[f32],
         pixels: &[u32],
         background: Option<Vec3A>,
         objects: usize,
+        camera: Option<(&CameraFrame, &[PShape])>,
     ) -> ActivePixels {
         let mut a = ActivePixels::default();
+        let (w, h) = (gbuffer.width, gbuffer.height);
         for &i in pixels {
             let s = gbuffer.surfels[i as usize];
             let t = Vec3A::from_slice(&target[3 * i as usize..3 * i as usize + 3]);
@@ -42,6 +49,14 @@ impl ActivePixels {
                     a.surfels.push(s);
                     a.solve.push(interior(gbuffer, i as usize));
                     a.targets.push(t);
+                    if let Some((cam, shapes)) = camera {
+                        a.footprint.push(if s.object == u32::MAX {
+                            [Vec3A::ZERO; 2]
+                        } else {
+                            let shape = &shapes[s.object as usize];
+                            footprint::axes(cam, &s, shape, (i % w, i / w), (w, h))
+                        });
+                    }
                 }
             }
         }
@@ -116,6 +131,16 @@ pub(crate) struct Group {
     pub(crate) gathers: Vec<Gather>,
     /// Bounding sphere (centre, radius) of each run of `BLOCK` pixels, for culling shadow tests.
     pub(crate) blocks: Vec<([f32; 3], f32)>,
+    /// Each pixel's footprint axes on its surface (x: `du`, y: `dv`), so that a sphere's shadow edge is
+    /// integrated over the pixel's area; empty when the group has none (see `shadow`).
+    pub(crate) du: [Vec<f32>; 3],
+    pub(crate) dv: [Vec<f32>; 3],
+    /// Per pixel, half the footprint's |du| + |dv| (no point of the pixel is farther from its centre);
+    /// per block the largest.
+    pub(crate) spread: Vec<f32>,
+    pub(crate) block_spread: Vec<f32>,
+    /// With a footprint, the radius of the group's sphere (its own terminator is integrated too).
+    pub(crate) own_radius: Option<f32>,
 }
 
 impl Group {
@@ -202,7 +227,7 @@ pub(crate) fn gathers(
                 }
                 PShape::Plane { .. } | PShape::Mesh(_) => Vec::new(),
             };
-            let mut g = group(&pts, &zeros, &solve, shapes, shadows, sky, false);
+            let mut g = group(&pts, &zeros, &solve, &[], shapes, shadows, sky, false);
             Gather {
                 sender: k,
                 pixel,
@@ -233,14 +258,38 @@ pub(crate) struct Light {
     pub(crate) rgb: [f32; 3],
 }
 
+impl Light {
+    /// (position, 1) for a point light, (direction, 0) for a directional one: see [`offset`].
+    #[inline(always)]
+    pub(crate) fn target(&self) -> ([f32; 3], f32) {
+        match self.dir {
+            Some(d) => (d, 0.0),
+            None => (self.pos, 1.0),
+        }
+    }
+}
+
+/// From `p` towards the light given as [`Light::target`]: L - p, or the direction itself.
+#[inline(always)]
+fn offset(l: [f32; 3], point: f32, p: [f32; 3]) -> [f32; 3] {
+    [
+        l[0] - point * p[0],
+        l[1] - point * p[1],
+        l[2] - point * p[2],
+    ]
+}
+
 /// The active pixels grouped by object (background last), row-major inside a group, as structures of
 /// arrays with their occluders' light-independent terms (`shadows`: the scene can shadow at all).
-/// `solve[i]` says whether pixel i may inform the closed-form products; each object's pixels carry the
-/// factor of `sky` (none, the sky view, or 1 for ambient light), with `bounce` their gathers.
+/// `solve[i]` says whether pixel i may inform the closed-form products; `footprint[i]` (all pixels, or
+/// none) its footprint axes; each object's pixels carry the factor of `sky` (none, the sky view, or 1
+/// for ambient light), with `bounce` their gathers.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn group(
     surfels: &[Surfel],
     targets: &[Vec3A],
     solve: &[bool],
+    footprint: &[[Vec3A; 2]],
     shapes: &[PShape],
     shadows: bool,
     sky: Sky,
@@ -333,7 +382,30 @@ pub(crate) fn group(
                     (centre.to_array(), radius)
                 })
                 .collect(),
+            du: Default::default(),
+            dv: Default::default(),
+            spread: Vec::new(),
+            block_spread: Vec::new(),
+            own_radius: None,
         };
+        if !footprint.is_empty() && shadows && object.is_some() {
+            let du: Vec<Vec3A> = idx.iter().map(|&i| footprint[i][0]).collect();
+            let dv: Vec<Vec3A> = idx.iter().map(|&i| footprint[i][1]).collect();
+            g.spread = idx
+                .iter()
+                .map(|&i| footprint::spread(&footprint[i]))
+                .collect();
+            g.du = std::array::from_fn(|c| du.iter().map(|u| u[c]).collect());
+            g.dv = std::array::from_fn(|c| dv.iter().map(|v| v[c]).collect());
+            g.block_spread = g
+                .spread
+                .chunks(BLOCK)
+                .map(|c| c.iter().copied().fold(0.0, f32::max))
+                .collect();
+            if let Some(PShape::Sphere { radius, .. }) = object.map(|o| &shapes[o]) {
+                g.own_radius = Some(*radius);
+            }
+        }
         if shadows && object.is_some() {
             for (k, shape) in shapes.iter().enumerate() {
                 if Some(k) == object {
@@ -366,9 +438,101 @@ pub(crate) fn group(
     groups
 }
 
-/// e = max(0, n·l) / d² (unit light), written into `e`; 0 for a light on the surface.
+/// e = max(0, n·l) / d² (unit light), written into `e`; 0 for a light on the surface. On a sphere with
+/// a footprint, max(0, n·l) is its mean over the pixel where the terminator crosses it.
 #[inline(always)]
 pub(crate) fn irradiance<const AVX2: bool>(
+    g: &Group,
+    r: std::ops::Range<usize>,
+    light: &Light,
+    e: &mut [f32],
+) {
+    irradiance_centre::<AVX2>(g, r.clone(), light, e);
+    if let Some(radius) = g.own_radius {
+        soft_terminator(g, r, light, radius, e);
+    }
+}
+
+/// Where a sphere's terminator crosses a pixel of the block `r` (n·l within the normal's change over
+/// the footprint, |x| / radius, of 0), `e` becomes the pixel mean of max(0, n·l) (`box_ramp`, n·l
+/// linear across the pixel) over d².
+#[inline(always)]
+fn soft_terminator(
+    g: &Group,
+    r: std::ops::Range<usize>,
+    light: &Light,
+    radius: f32,
+    e: &mut [f32],
+) {
+    let n = e.len();
+    let spread = &g.spread[r.start..][..n];
+    let mut near = [0u32; BLOCK];
+    let mut span = (u32::MAX, 0u32);
+    fn col(v: &[Vec<f32>; 3], start: usize, n: usize) -> [&[f32]; 3] {
+        [
+            &v[0][start..][..n],
+            &v[1][start..][..n],
+            &v[2][start..][..n],
+        ]
+    }
+    let ([px, py, pz], [nx, ny, nz]) = (col(&g.p, r.start, n), col(&g.n, r.start, n));
+    let inv_r2 = 1.0 / (radius * radius);
+    let (l, point) = light.target();
+    for i in 0..n {
+        let d = offset(l, point, [px[i], py[i], pz[i]]);
+        let nd = nx[i] * d[0] + ny[i] * d[1] + nz[i] * d[2];
+        let d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        mark(
+            nd * nd < spread[i] * spread[i] * inv_r2 * d2,
+            i,
+            &mut near,
+            &mut span,
+        );
+    }
+    if let Some((r, lo, hi)) = marked(r.start, span) {
+        terminator_pixels(g, r, light, radius, &near[lo..hi], &mut e[lo..hi]);
+    }
+}
+
+/// `soft_terminator`'s pixels marked `near`: their pixel mean of max(0, n·l) over d² (the whole block
+/// in lanes, applied where marked).
+#[inline(always)]
+fn terminator_pixels<'a>(
+    g: &'a Group,
+    r: std::ops::Range<usize>,
+    light: &Light,
+    radius: f32,
+    near: &[u32],
+    e: &mut [f32],
+) {
+    let n = e.len();
+    let col = |v: &'a [Vec<f32>; 3], c: usize| -> &'a [f32] { &v[c][r.start..][..n] };
+    let (px, py, pz) = (col(&g.p, 0), col(&g.p, 1), col(&g.p, 2));
+    let (nx, ny, nz) = (col(&g.n, 0), col(&g.n, 1), col(&g.n, 2));
+    let (ux, uy, uz) = (col(&g.du, 0), col(&g.du, 1), col(&g.du, 2));
+    let (vx, vy, vz) = (col(&g.dv, 0), col(&g.dv, 1), col(&g.dv, 2));
+    let (e, near) = (&mut e[..n], &near[..n]);
+    let (l, point) = light.target();
+    for i in 0..n {
+        let d = offset(l, point, [px[i], py[i], pz[i]]);
+        let d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        // Unit l, and the fall-off 1/d² (none for a directional light).
+        let inv = 1.0 / d2.sqrt().max(f32::MIN_POSITIVE);
+        let fall = if point > 0.0 { inv * inv } else { 1.0 };
+        let u = [d[0] * inv, d[1] * inv, d[2] * inv];
+        let axes = [[ux[i], uy[i], uz[i]], [vx[i], vy[i], vz[i]]];
+        let m = terminator_cos([nx[i], ny[i], nz[i]], u, axes, radius) * fall;
+        e[i] = if near[i] != 0 && d2 > f32::MIN_POSITIVE {
+            m
+        } else {
+            e[i]
+        };
+    }
+}
+
+/// `irradiance` at the pixel centres.
+#[inline(always)]
+fn irradiance_centre<const AVX2: bool>(
     g: &Group,
     r: std::ops::Range<usize>,
     light: &Light,
@@ -444,21 +608,48 @@ pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mu
             0.0
         };
         let gap = (c - (b + t * v)).length();
-        if gap > (s.radius + reach) * (1.0 + 1e-4) + 1e-6 * (c.abs().max_element() + s.radius) {
+        let spread = g.block_spread.get(r.start / BLOCK).copied().unwrap_or(0.0);
+        if gap
+            > (s.radius + reach + spread) * (1.0 + 1e-4) + 1e-6 * (c.abs().max_element() + s.radius)
+        {
             continue;
         }
         let cc = &s.c[r.start..][..n];
         let [cx, cy, cz] = s.center;
+        if g.spread.is_empty() {
+            for i in 0..n {
+                // Segment x(t) = p + t·d, t in [0, 1], d = L - p; sphere |x - c|² = r².
+                let dx = lx - px[i];
+                let dy = ly - py[i];
+                let dz = lz - pz[i];
+                let a = dx * dx + dy * dy + dz * dz;
+                let b = (px[i] - cx) * dx + (py[i] - cy) * dy + (pz[i] - cz) * dz;
+                let hit = segment_meets_sphere::<true>(a, b, cc[i]);
+                e[i] = if hit { 0.0 } else { e[i] };
+            }
+            continue;
+        }
+        // With a footprint, a pixel the edge may cross keeps its light here and gets its lit fraction
+        // below: the line's distance h from the centre within the footprint's reach w of the radius,
+        // |h² - r²| = |b² - ac| / a < 2rw + w² (w bounds the line's move, (1 - t) x footprint).
+        let spread = &g.spread[r.start..][..n];
+        let mut near = [0u32; BLOCK];
+        let mut span = (u32::MAX, 0u32);
+        let rad = s.radius;
         for i in 0..n {
-            // Segment x(t) = p + t·d, t in [0, 1], d = L - p; sphere |x - c|² = r².
             let dx = lx - px[i];
             let dy = ly - py[i];
             let dz = lz - pz[i];
             let a = dx * dx + dy * dy + dz * dz;
             let b = (px[i] - cx) * dx + (py[i] - cy) * dy + (pz[i] - cz) * dz;
             let hit = segment_meets_sphere::<true>(a, b, cc[i]);
-            e[i] = if hit { 0.0 } else { e[i] };
+            let w = spread[i];
+            let close = (b * b - a * cc[i]).abs() < a * w * (2.0 * rad + w);
+            let edge = close & (b < 0.0) & (a + b > 0.0) & (e[i] > 0.0);
+            mark(edge, i, &mut near, &mut span);
+            e[i] = if hit & !edge { 0.0 } else { e[i] };
         }
+        soft_edge::<true>(g, r.start, span, s, light.pos, &near, e);
     }
     for pl in &g.planes {
         let side_l = pl.normal[0] * (lx - pl.point[0])
@@ -469,6 +660,54 @@ pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mu
             e[i] = if side[i] * side_l < 0.0 { 0.0 } else { e[i] };
         }
     }
+}
+
+/// The pixel footprint at sphere `s`'s shadow edge: each pixel of the block `r` marked `near` (its light
+/// still unshadowed in `e`) gets its lit fraction, the edge taken straight across the pixel
+/// (`render::footprint::box_edge`). `BOUNDED`: a point light at `to` (the segment to it), else a
+/// directional light towards the unit `to` (a ray). The whole block in lanes, applied where marked.
+#[inline(always)]
+fn soft_edge<'a, const BOUNDED: bool>(
+    g: &'a Group,
+    start: usize,
+    span: (u32, u32),
+    s: &SphereOccluder,
+    to: [f32; 3],
+    near: &[u32; BLOCK],
+    e: &mut [f32],
+) {
+    let Some((r, lo, hi)) = marked(start, span) else {
+        return;
+    };
+    let (near, e) = (&near[lo..hi], &mut e[lo..hi]);
+    let n = e.len();
+    let col = |v: &'a [Vec<f32>; 3], c: usize| -> &'a [f32] { &v[c][r.start..][..n] };
+    let (px, py, pz) = (col(&g.p, 0), col(&g.p, 1), col(&g.p, 2));
+    let (ux, uy, uz) = (col(&g.du, 0), col(&g.du, 1), col(&g.du, 2));
+    let (vx, vy, vz) = (col(&g.dv, 0), col(&g.dv, 1), col(&g.dv, 2));
+    let (e, near) = (&mut e[..n], &near[..n]);
+    let point = if BOUNDED { 1.0 } else { 0.0 };
+    for i in 0..n {
+        let axes = [[ux[i], uy[i], uz[i]], [vx[i], vy[i], vz[i]]];
+        let lit = sphere_edge_lit([px[i], py[i], pz[i]], axes, to, point, s.center, s.radius);
+        e[i] = if near[i] != 0 { e[i] * lit } else { e[i] };
+    }
+}
+
+/// Mark pixel `i` of a block as `edge` (or not) and widen `span`, the marked pixels' [first, last + 1).
+#[inline(always)]
+fn mark(edge: bool, i: usize, near: &mut [u32; BLOCK], span: &mut (u32, u32)) {
+    near[i] = u32::from(edge);
+    span.0 = span.0.min(if edge { i as u32 } else { u32::MAX });
+    span.1 = span.1.max(if edge { i as u32 + 1 } else { 0 });
+}
+
+/// The group's range of a block's marked `span` (the block starting at `start`) and the span within the
+/// block; `None` when nothing is marked.
+#[inline(always)]
+fn marked(start: usize, (lo, hi): (u32, u32)) -> Option<(std::ops::Range<usize>, usize, usize)> {
+    let (lo, hi) = (lo as usize, hi as usize);
+    (hi > lo).then(|| (start + lo..start + hi, lo, hi))
 }
 
 /// `shadow` for a directional light: rays p + t·d, t in (0, inf), d the unit direction to the light.
@@ -483,12 +722,22 @@ pub(crate) fn shadow_directional(g: &Group, r: std::ops::Range<usize>, d: [f32; 
     for s in &g.spheres {
         let cc = &s.c[r.start..][..n];
         let [cx, cy, cz] = s.center;
+        let mut near = [0u32; BLOCK];
+        let mut span = (u32::MAX, 0u32);
+        let footprint = !g.spread.is_empty();
         for i in 0..n {
             // |d| = 1: blocked when the far root of t² + 2bt + c = 0 is positive.
             let b = (px[i] - cx) * d[0] + (py[i] - cy) * d[1] + (pz[i] - cz) * d[2];
             let hit = segment_meets_sphere::<false>(1.0, b, cc[i]);
-            e[i] = if hit { 0.0 } else { e[i] };
+            // As for a point light (`shadow`), with a = 1 and the ray's whole move.
+            let edge = footprint && {
+                let w = g.spread[r.start + i];
+                ((b * b - cc[i]).abs() < w * (2.0 * s.radius + w)) & (b < 0.0) & (e[i] > 0.0)
+            };
+            mark(edge, i, &mut near, &mut span);
+            e[i] = if hit & !edge { 0.0 } else { e[i] };
         }
+        soft_edge::<false>(g, r.start, span, s, d, &near, e);
     }
     for pl in &g.planes {
         // The ray heads towards the plane's other side when n·d and the pixel's side differ in sign.

@@ -34,6 +34,7 @@ pub(crate) fn make_fitness(
     product_bounds: Option<PyReadonlyArray3<'_, f64>>,
     norm: &str,
     space: &str,
+    footprint: bool,
 ) -> PyResult<(Fitness, Vec<(f64, f64)>)> {
     let space = Space::parse(space).map_err(Error::Invalid)?;
     let layout = ParamLayout::new(scene, paths)?;
@@ -77,7 +78,12 @@ pub(crate) fn make_fitness(
         None => None,
     };
     let kind = LossKind::parse(loss)?;
-    let mut fitness = Fitness::new(
+    let make = if footprint {
+        Fitness::with_pixel_footprint
+    } else {
+        Fitness::new
+    };
+    let mut fitness = make(
         scene,
         layout,
         &target,

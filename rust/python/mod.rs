@@ -36,18 +36,20 @@ fn image_array<'py>(
     PyArray1::from_vec(py, rgb).reshape([h as usize, w as usize, 3])
 }
 
-/// Render `scene` to a float32 (H, W, 3) linear RGB array.
+/// Render `scene` to a float32 (H, W, 3) linear RGB array (`footprint`: as the fitness with the
+/// footprint models pixels).
 #[pyfunction]
-#[pyo3(signature = (scene, width=None, height=None, spp=1))]
+#[pyo3(signature = (scene, width=None, height=None, spp=1, footprint=false))]
 fn render<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyScene>,
     width: Option<u32>,
     height: Option<u32>,
     spp: u32,
+    footprint: bool,
 ) -> PyResult<Bound<'py, PyArray3<f32>>> {
     let scene = &scene.get().0;
-    let img = py.detach(|| core_render::render(scene, width, height, spp))?;
+    let img = py.detach(|| core_render::render_with(scene, width, height, spp, footprint))?;
     image_array(py, img.height, img.width, img.rgb)
 }
 
@@ -286,7 +288,7 @@ fn save_image(py: Python<'_>, path: PathBuf, image: PyReadonlyArray3<'_, f32>) -
 /// "srgb": the sRGB encodings of the clipped model and of the objective).
 #[pyfunction]
 #[pyo3(signature = (scene, paths, target, population, pixels=None, loss="l1", clip=true, threads=None,
-                    product_bounds=None, norm="l1", space="linear"))]
+                    product_bounds=None, norm="l1", space="linear", footprint=false))]
 #[allow(clippy::too_many_arguments)]
 fn evaluate<'py>(
     py: Python<'py>,
@@ -301,6 +303,7 @@ fn evaluate<'py>(
     product_bounds: Option<PyReadonlyArray3<'py, f64>>,
     norm: &str,
     space: &str,
+    footprint: bool,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     use rayon::prelude::*;
     let scene = &scene.get().0;
@@ -314,6 +317,7 @@ fn evaluate<'py>(
         product_bounds,
         norm,
         space,
+        footprint,
     )?;
     let pop = population.as_array();
     if pop.ncols() != bounds.len() {
@@ -350,7 +354,7 @@ fn evaluate<'py>(
 #[pyo3(signature = (scene, paths, target, *, pixels=None, loss="l1", clip=true, population=60,
                     generations=200, f=0.6, cr=0.8, seed=0, threads=None, callback=None,
                     product_bounds=None, method="de", max_evaluations=None, polish=0, norm="l1",
-                    with_products=true, space="linear", polish_tol=None))]
+                    with_products=true, space="linear", polish_tol=None, footprint=false))]
 #[allow(clippy::too_many_arguments)]
 fn optimize<'py>(
     py: Python<'py>,
@@ -375,6 +379,7 @@ fn optimize<'py>(
     with_products: bool,
     space: &str,
     polish_tol: Option<f64>,
+    footprint: bool,
 ) -> PyResult<OptimizeResult> {
     let scene = &scene.get().0;
     let (fitness, bounds) = make_fitness(
@@ -387,6 +392,7 @@ fn optimize<'py>(
         product_bounds,
         norm,
         space,
+        footprint,
     )?;
     let budget = Budget {
         population,

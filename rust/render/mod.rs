@@ -12,6 +12,7 @@ pub mod camera;
 pub mod composite;
 pub mod environment;
 pub mod film;
+pub mod footprint;
 pub mod hit;
 pub mod light;
 pub mod mesh;
@@ -28,11 +29,24 @@ pub use camera::{sample_offsets, CameraFrame};
 pub use composite::composite;
 pub use film::{linear_to_srgb, save_srgb8, to_srgb8, Image};
 pub use hit::{closest_hit, occluded, GBuffer, Geometry, Surfel};
-pub use shade::{shade, shade_shadowed, ShadeParams};
+pub use shade::{shade, shade_pixel, shade_shadowed, ShadeParams};
 pub use shape::PShape;
 
-/// Render `scene` at `width` x `height` (the scene's own size when `None`) with `spp` samples per pixel.
+/// Render `scene` at `width` x `height` (the scene's own size when `None`) with `spp` samples per pixel
+/// (one: the pixel centre).
 pub fn render(scene: &Scene, width: Option<u32>, height: Option<u32>, spp: u32) -> Result<Image> {
+    render_with(scene, width, height, spp, false)
+}
+
+/// [`render`], with `footprint` (one sample per pixel): sphere shadow edges and terminators integrated
+/// over each pixel's footprint in closed form, as the fitness with the footprint models a photo.
+pub fn render_with(
+    scene: &Scene,
+    width: Option<u32>,
+    height: Option<u32>,
+    spp: u32,
+    footprint: bool,
+) -> Result<Image> {
     let width = width.unwrap_or(scene.width);
     let height = height.unwrap_or(scene.height);
     if width == 0 || height == 0 || width > 16384 || height > 16384 {
@@ -48,6 +62,14 @@ pub fn render(scene: &Scene, width: Option<u32>, height: Option<u32>, spp: u32) 
     params.prepare_bounce(&geometry.shapes);
     let shadows = scene.can_occlude();
     let offsets = sample_offsets(spp); // spp = 1: the pixel centre
+                                       // The footprint (meshes aside, as the fitness refuses them) where the scene can shadow at all.
+    if footprint && spp != 1 {
+        return Err(Error::Invalid(format!(
+            "the footprint render takes one sample per pixel (got spp {spp})"
+        )));
+    }
+    let footprint =
+        footprint && shadows && !geometry.shapes.iter().any(|s| matches!(s, PShape::Mesh(_)));
     let inv = 1.0 / offsets.len() as f32;
     let mut rgb = vec![0.0f32; (width * height * 3) as usize];
     rgb.par_chunks_mut(3 * width as usize)
@@ -57,7 +79,12 @@ pub fn render(scene: &Scene, width: Option<u32>, height: Option<u32>, spp: u32) 
                 let mut sum = Vec3A::ZERO;
                 for &(dx, dy) in &offsets {
                     let s = geometry.primary(i as f32 + dx, j as f32 + dy, width, height);
-                    sum += shade(&s, &params, &geometry.shapes, shadows);
+                    let axes = (footprint && s.object != u32::MAX).then(|| {
+                        let shape = &geometry.shapes[s.object as usize];
+                        let at = (i as u32, j as u32);
+                        footprint::axes(&geometry.camera, &s, shape, at, (width, height))
+                    });
+                    sum += shade_pixel(&s, axes.as_ref(), &params, &geometry.shapes, shadows);
                 }
                 let v = (sum * inv).min(Vec3A::splat(f32::MAX));
                 px.copy_from_slice(&v.to_array());

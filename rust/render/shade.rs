@@ -10,6 +10,7 @@ use glam::Vec3A;
 use super::bounce::{gather, nearest_table, table_points, GatherPoint};
 use super::brdf::{blinn_phong, lambert, specular_scale};
 use super::environment::sky_view;
+use super::footprint::{sphere_edge_lit, terminator_cos};
 use super::hit::{occluded, Surfel};
 use super::light::{incidence, irradiance};
 use super::shape::PShape;
@@ -216,13 +217,39 @@ pub fn sender_radiance(g: &GatherPoint, p: &ShadeParams, shapes: &[PShape]) -> V
 /// Exposure-scaled radiance towards the eye at surfel `s` (the background for a miss).
 #[inline]
 pub fn shade(s: &Surfel, p: &ShadeParams, shapes: &[PShape], shadows: bool) -> Vec3A {
-    shade_shadowed(s, p, shapes, shadows).0
+    shade_full(s, None, p, shapes, shadows).0
 }
 
 /// [`shade`], and whether the light faces the point but a shadow ray found it blocked.
 #[inline(always)]
 pub fn shade_shadowed(
     s: &Surfel,
+    p: &ShadeParams,
+    shapes: &[PShape],
+    shadows: bool,
+) -> (Vec3A, bool) {
+    shade_full(s, None, p, shapes, shadows)
+}
+
+/// [`shade`] with the pixel's `footprint` on the surface (`footprint::axes`): a sphere's shadow edge and
+/// a sphere's own terminator are averaged over the pixel (`footprint::sphere_edge_lit`,
+/// `footprint::terminator_cos`), as the fitness does.
+#[inline]
+pub fn shade_pixel(
+    s: &Surfel,
+    footprint: Option<&[Vec3A; 2]>,
+    p: &ShadeParams,
+    shapes: &[PShape],
+    shadows: bool,
+) -> Vec3A {
+    shade_full(s, footprint, p, shapes, shadows).0
+}
+
+/// [`shade_pixel`], and whether the light faces the point but is (partly) blocked.
+#[inline(always)]
+fn shade_full(
+    s: &Surfel,
+    footprint: Option<&[Vec3A; 2]>,
     p: &ShadeParams,
     shapes: &[PShape],
     shadows: bool,
@@ -248,18 +275,69 @@ pub fn shade_shadowed(
     else {
         return ((p.exposure * l).min(Vec3A::splat(f32::MAX)), false);
     };
-    let ndotl = s.normal.dot(dir);
-    let shadowed = ndotl > 0.0 && shadows && occluded(s, dir, dist, shapes);
-    if ndotl > 0.0 && !shadowed {
+    let mut ndotl = s.normal.dot(dir);
+    let axes = footprint.map(|f| [f[0].to_array(), f[1].to_array()]);
+    if let Some(axes) = axes {
+        if let Some(PShape::Sphere { radius, .. }) = shapes.get(s.object as usize) {
+            ndotl = terminator_cos(s.normal.to_array(), dir.to_array(), axes, *radius);
+        }
+    }
+    let visible = match (shadows, axes) {
+        (false, _) => 1.0,
+        (true, _) if ndotl <= 0.0 => 1.0, // unlit anyway: no shadow ray
+        (true, None) => f32::from(u8::from(!occluded(s, dir, dist, shapes))),
+        (true, Some(axes)) => visible_fraction(s, axes, p, dir, dist, shapes),
+    };
+    let shadowed = ndotl > 0.0 && visible < 1.0;
+    if ndotl > 0.0 && visible > 0.0 {
         let mut brdf = lambert(m.albedo);
         if p.any_specular && m.specular > 0.0 {
             let lobe = specular_scale(m.specular, m.shininess)
                 * blinn_phong(s.normal, dir, s.view, m.shininess);
             brdf += Vec3A::splat(lobe);
         }
-        l += (p.light_rgb * brdf * irradiance(ndotl, falloff)).min(Vec3A::splat(f32::MAX));
+        l +=
+            (p.light_rgb * brdf * irradiance(ndotl, falloff) * visible).min(Vec3A::splat(f32::MAX));
     }
     ((p.exposure * l).min(Vec3A::splat(f32::MAX)), shadowed)
+}
+
+/// The fraction of the pixel at `s` (footprint `axes`) the light reaches: each other sphere's shadow
+/// edge straight across the pixel where the line to the light passes it between the two, any other
+/// occluder as `occluded` tests it.
+fn visible_fraction(
+    s: &Surfel,
+    axes: [[f32; 3]; 2],
+    p: &ShadeParams,
+    dir: Vec3A,
+    dist: f32,
+    shapes: &[PShape],
+) -> f32 {
+    let (to, point) = match p.light_direction {
+        Some(d) => (d, 0.0),
+        None => (p.light_position, 1.0),
+    };
+    let (tmin, tmax) = (s.eps, dist * (1.0 - 4.0 * f32::EPSILON));
+    let mut lit = 1.0;
+    for (k, sh) in shapes.iter().enumerate() {
+        if k as u32 == s.object && !matches!(sh, PShape::Mesh(_)) {
+            continue;
+        }
+        if let PShape::Sphere { center, radius } = *sh {
+            // Where the closest approach of the line to the centre lies between point and light.
+            let d = to - point * s.position;
+            let t = -(s.position - center).dot(d) / d.length_squared();
+            if t > 0.0 && (point == 0.0 || t < 1.0) {
+                let (pa, ta, ca) = (s.position.to_array(), to.to_array(), center.to_array());
+                lit *= sphere_edge_lit(pa, axes, ta, point, ca, radius);
+                continue;
+            }
+        }
+        if sh.hits_segment(s.position, dir, tmin, tmax) {
+            return 0.0;
+        }
+    }
+    lit
 }
 
 #[cfg(test)]

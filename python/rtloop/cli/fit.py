@@ -185,6 +185,10 @@ def _build_parser() -> Parser:
                    help="one diffuse bounce between the objects (the floor lighting a ball's underside, a red ball "
                    "tinting the floor): 'auto' (default) adds it when the photo shows it, 'on', 'off'; with it the "
                    "fit also estimates the light's absolute intensity (a bounce is as bright as the albedos are)")
+    p.add_argument("--footprint", action="store_true",
+                   help="integrate each pixel over its area where a sphere's shadow edge or terminator crosses "
+                   "it, as a camera does, instead of shading pixel centres (more accurate on clean photos: "
+                   "median light error 1.8 mm against 2.8 mm on the Mitsuba test photos; 1.2-1.9x the time)")
     p.add_argument("--highlights", choices=("auto", "off"), default="auto",
                    help="'auto' (default): a sphere the scene gives as matte gets a fitted specular lobe "
                    "(specular and shininess) when the photo shows a highlight the diffuse model cannot explain; "
@@ -442,7 +446,7 @@ class _Run:
                     generations=args.generations, f=args.f, cr=args.cr, threads=args.threads,
                     callback=callback, mask=mask, norm=args.norm, space=args.loss_space,
                     environment=args.environment, interreflection=args.interreflection,
-                    highlights=args.highlights, reference=reference,
+                    highlights=args.highlights, reference=reference, footprint=args.footprint,
                 )
         self.progress.end_line()
         for w in result.warnings:

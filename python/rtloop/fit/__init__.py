@@ -85,6 +85,7 @@ def fit(
     interreflection: str = "auto",
     highlights: str = "auto",
     reference: tuple[np.ndarray, float] | None = None,
+    footprint: bool = False,
 ) -> FitResult:
     """Fit the scene's free parameters (its ``fit`` section) to ``image``.
 
@@ -117,12 +118,17 @@ def fit(
     (a grey card; ``card`` bool (H, W), True on it, and left out of the fit by ``mask``): the fitted scene is
     rescaled to absolute albedos and the light's intensity in W/sr (:mod:`rtloop.fit.reference`), recorded
     in ``result.reference``.
+    ``footprint``: compare the photo with pixels integrated over their area where a sphere's shadow edge
+    or terminator crosses them (as a camera integrates them; ``render(..., footprint=True)`` renders that
+    model) instead of pixel centres, in the searches (the term tests stay at pixel centres).
     """
     t0 = time.perf_counter()
     scene = load_scene(scene)
     meshes = [o["name"] for o in scene.to_dict()["objects"] if o["shape"] == "mesh"]
     if meshes:
         raise RtloopError(f"fit: object {meshes[0]!r} is a mesh: meshes can be rendered and inserted, not fitted")
+    if not isinstance(footprint, bool):
+        raise RtloopError(f"footprint: must be True or False (got {footprint!r})")
     b = budget(protocol, space, population, generations, f, cr)
     env_mode = check_environment(environment)
     check_highlights(highlights)
@@ -154,10 +160,13 @@ def fit(
                 "interreflection": interreflection, "highlights": highlights}
     if b.projection_unavailable is not None:
         settings["projection_unavailable"] = b.projection_unavailable
+    if footprint:
+        settings["footprint"] = True
     # The scene as fitted: with the interreflection term when asked for ("on"), else as given.
     work = with_interreflection(scene) if interreflection == "on" else scene
     stages = Stages(work, target, use, mask, b, ident, clip=clip, norm=norm, space=space, threads=threads,
-                    pixels_per_object=pixels_per_object, rng=np.random.default_rng(seed), callback=callback)
+                    pixels_per_object=pixels_per_object, rng=np.random.default_rng(seed), callback=callback,
+                    footprint=footprint)
     seeds = np.random.SeedSequence(seed).generate_state(4, dtype=np.uint64)
     model: dict[str, Any] = {"terms": ["direct"], "evidence": {}}
     if held:
@@ -306,7 +315,7 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
         return current
     more = Stages(box, target, use, mask, b2, _identifiability(box, box.fit_paths), clip=clip, norm=norm,
                   space=space, threads=threads, pixels_per_object=pixels_per_object,
-                  rng=np.random.default_rng(seed), callback=callback)
+                  rng=np.random.default_rng(seed), callback=callback, footprint=stages.footprint)
     candidate = more.projected(int(seeds[1]), environment=model_env,
                                name="+".join(["light", "colour", *model["terms"][1:], *added]))
     stages.stages += more.stages
@@ -336,7 +345,7 @@ def _encoding_check(work: Scene, stages: Stages, seed: int, target: np.ndarray, 
     decoded = np.ascontiguousarray(decode(target), dtype=np.float32)
     check = Stages(work, decoded, sub, None, stages.budget, stages.ident, clip=stages.clip, norm=stages.norm,
                    space="linear", threads=stages.threads, pixels_per_object=stages.pixels_per_object,
-                   rng=np.random.default_rng(seed), callback=None)
+                   rng=np.random.default_rng(seed), callback=None, footprint=stages.footprint)
     check.projected(seed)
     floor = quantisation_floor(decoded, sub)
     decoded_ratio = sum(check.stages[-1].objectives) / floor if floor > 0 else float("inf")

@@ -47,11 +47,12 @@ class Stages:
     def __init__(self, scene: Scene, target: np.ndarray, use: np.ndarray | None, mask: np.ndarray | None,
                  budget: Budget, ident: dict[str, Any], *, clip: bool, norm: str, space: str,
                  threads: int | None, pixels_per_object: int, rng: np.random.Generator,
-                 callback: Callable[[GenerationInfo], Any] | None):
+                 callback: Callable[[GenerationInfo], Any] | None, footprint: bool = False):
         self.scene, self.target, self.use, self.mask = scene, target, use, mask
         self.budget, self.ident = budget, ident
         self.clip, self.norm, self.space, self.threads = clip, norm, space, threads
         self.pixels_per_object, self.rng, self.callback = pixels_per_object, rng, callback
+        self.footprint = footprint
         self.all_paths = scene.fit_paths
         self.all_names = scene.param_names()
         self.light_paths = [p for p in self.all_paths if p.startswith("light.")]
@@ -88,7 +89,7 @@ class Stages:
             generations=generations, f=b.f, cr=b.cr, seed=stage_seed, threads=self.threads,
             callback=None if callback is None else on_generation, product_bounds=product_bounds,
             method=method, polish=polish, norm=self.norm, space=self.space, with_products=callback is not None,
-            polish_tol=polish_tol,
+            polish_tol=polish_tol, footprint=self.footprint,
         )
         history = [(gen, float(sum(objectives)), list(objectives), np.array(best))
                    for gen, best, objectives, _ in out.history]

@@ -50,7 +50,8 @@ def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, 
     # the per-residual score contributions summed per block, in the core (as np.bincount would)
     g = _native.block_scores(Jt, fit.idx_p.tolist(), r0, bid.astype(np.int64, copy=False), nb)
     meat = (g @ g.T) * (nb / (nb - p))
-    a = fit.cov / s2
+    # A photo the model explains exactly (zero residual): no spread at all, the Gauss-Newton zero.
+    a = fit.cov / s2 if s2 > 0 else np.zeros_like(fit.cov)
     cov = a @ meat @ a
     cov = 0.5 * (cov + cov.T)
     var = np.maximum(np.diag(cov), np.diag(fit.cov))  # never below Gauss-Newton
