@@ -11,7 +11,10 @@ ms) and the coverage summary per class.
 
 Usage (from the repository root, with the extension built)::
 
-    python benches/coverage.py
+    python benches/coverage.py [--footprint]
+
+``--footprint`` fits with ``footprint=True`` (pixels integrated over their area at shadow edges and
+terminators).
 """
 
 from __future__ import annotations
@@ -60,11 +63,11 @@ def photo_of(folder: Path, scene: Any, variant: str | None) -> np.ndarray:
     return photo
 
 
-def run_case(name: str, cls: str, folder: Path, variant: str | None) -> dict[str, Any]:
+def run_case(name: str, cls: str, folder: Path, variant: str | None, footprint: bool = False) -> dict[str, Any]:
     truth = json.loads((folder / "scene.json").read_text())
     scene = rtloop.load_scene(folder / "scene_input.json")
     photo = photo_of(folder, scene, variant)
-    result = rtloop.fit(scene, photo)
+    result = rtloop.fit(scene, photo, footprint=footprint)
     u = result.uncertainty or {}
     fitted = np.array(result.scene.to_dict()["light"]["position"], float)
     err = fitted - np.array(truth["light"]["position"], float)
@@ -98,7 +101,7 @@ def main() -> int:
     print("| case | class | light error (mm) | max z (GN) | max z (sandwich) | sandwich (ms) |")
     print("|---|---|---|---|---|---|")
     for c in cases():
-        r = run_case(*c)
+        r = run_case(*c, footprint="--footprint" in sys.argv[1:])
         rows.append(r)
         print(f"| {r['case']} | {r['class']} | {r['light_err_mm']:.1f} | {np.nanmax(r['z_gn']):.1f} | "
               f"{np.nanmax(r['z_robust']):.1f} | {r['cost_ms'] or float('nan'):.1f} |", flush=True)
