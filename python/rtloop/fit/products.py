@@ -223,7 +223,7 @@ def _intensity_from_known(d: dict[str, Any], original: Scene, arr: np.ndarray) -
         # measures nothing.
         known = {k for k in range(len(ks)) if ks[k] > 0}
         lobes = unit_lobes(d, known).max(axis=2).ravel()
-        ids = _native.object_ids(Scene(json.dumps({**d, "fit": {}}, allow_nan=False))).ravel()
+        ids = _native.object_ids(original).ravel()  # the geometry is not fitted here
         ilo, ihi = original.bounds(["light.intensity"])[0]
         peak_scale = d["exposure"] * max(d["light"]["color"])
         w = np.zeros(len(ks))
