@@ -57,9 +57,12 @@ pub struct StageResult {
 
 /// Search `fitness` within `bounds` with `method`. `callback` runs after the initial population and
 /// after every generation (returning `false` stops); with `with_products` its report carries the
-/// closed-form products of the best, for the projected loss.
+/// closed-form products of the best, for the projected loss. With `polish`, the method's final polish,
+/// the refined products and the reported loss are `polish`'s (the same loss with a finer image model,
+/// the pixel footprint): the search finds the basin, the polish the last digits.
 pub fn run_stage<C>(
     fitness: &Fitness,
+    polish: Option<&Fitness>,
     bounds: &[(f64, f64)],
     method: &Method,
     with_products: bool,
@@ -70,19 +73,20 @@ where
 {
     let active_pixels = fitness.active_pixels();
     let products_wanted = with_products && fitness.kind() == LossKind::L1Projected;
-    let found = search::run(method, fitness, bounds, |rep: &GenerationReport| {
-        let products = products_wanted.then(|| product_rows(&fitness.solved(rep.best)));
-        callback(&StageReport {
-            generation: rep.generation,
-            best: rep.best,
-            best_objectives: rep.best_objectives,
-            evaluations: rep.evaluations,
-            products,
-        })
-    })?;
+    let found =
+        search::run_polishing(method, fitness, polish, bounds, |rep: &GenerationReport| {
+            let products = products_wanted.then(|| product_rows(&fitness.solved(rep.best)));
+            callback(&StageReport {
+                generation: rep.generation,
+                best: rep.best,
+                best_objectives: rep.best_objectives,
+                evaluations: rep.evaluations,
+                products,
+            })
+        })?;
     // The search ranks lights by least-squares products; the result carries the products that minimise
     // the loss itself (saturated pixels one-sided), and that loss.
-    let refined = fitness.refined(&found.best);
+    let refined = polish.unwrap_or(fitness).refined(&found.best);
     let mut out = StageResult {
         x: found.best,
         objectives: found.best_objectives,

@@ -8,7 +8,7 @@
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use rtloop::search::lshade::minimize;
+use rtloop::search::lshade::{minimize, minimize_polishing};
 use rtloop::search::{
     nelder_mead, normalized_spread, rand1bin, DeConfig, GenerationReport, Init, LshadeConfig,
     LshadeResult, Objective, Rng, StopReason, Variant,
@@ -830,4 +830,50 @@ fn bad_configuration_is_an_error_not_a_panic() {
         (res.stop, res.best_objectives[0]),
         (StopReason::Converged, 5.0)
     );
+}
+
+#[test]
+fn a_polish_objective_of_its_own_ends_at_its_minimum() {
+    // The search's objective has its minimum at t; the polish's (a finer model of the same loss) at t
+    // moved by 1 % of the range. A short search finds t's basin and the polish moves to the polish
+    // objective's own minimum, the value reported is the polish objective's, and the evaluation count
+    // holds the polish's re-evaluation of the search's best. Without a polish objective: `minimize`.
+    let bounds = [(-1.0, 1.0); 3];
+    let t = [0.3, -0.2, 0.5];
+    let moved = [0.32, -0.18, 0.52];
+    let coarse = move |x: &[f64]| x.iter().zip(&t).map(|(v, c)| (v - c).powi(2)).sum::<f64>();
+    let fine = move |x: &[f64]| {
+        0.25 + x
+            .iter()
+            .zip(&moved)
+            .map(|(v, c)| (v - c).powi(2))
+            .sum::<f64>()
+    };
+    for seed in [1, 2, 3] {
+        let c = LshadeConfig {
+            polish_evaluations: 400,
+            polish_x_tol: 1e-9,
+            ..cfg(300, seed)
+        };
+        let plain = run(&coarse, &bounds, &c);
+        let same =
+            minimize_polishing(&coarse, None::<&fn(&[f64]) -> f64>, &bounds, &c, |_| true).unwrap();
+        assert_eq!(same.search.best, plain.best);
+        let res = minimize_polishing(&coarse, Some(&fine), &bounds, &c, |_| true).unwrap();
+        for k in 0..3 {
+            assert!(
+                (res.search.best[k] - moved[k]).abs() < 1e-4,
+                "seed {seed}: {:?}",
+                res.search.best
+            );
+            assert!((plain.best[k] - t[k]).abs() < 1e-4, "{:?}", plain.best);
+        }
+        assert!((res.search.best_objectives[0] - fine(&res.search.best)).abs() < 1e-15);
+        let polish = res.search.polish.as_ref().unwrap();
+        assert!(polish.f_before >= 0.25 && polish.f_after < polish.f_before);
+        assert_eq!(
+            res.search.evaluations,
+            plain.evaluations - plain.polish.as_ref().unwrap().evaluations + polish.evaluations + 1
+        );
+    }
 }

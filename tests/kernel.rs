@@ -1261,8 +1261,8 @@ fn ambient_is_the_closed_forms_constant_column() {
 
 /// The scalar paths (`rtloop::fitness::scalar_paths`, as `RTLOOP_SIMD=scalar` forces everywhere) against
 /// the AVX2 ones this CPU picks: direct and closed-form losses, linear and sRGB, every norm. They differ
-/// only in the intrinsics loops (1/d³ from rsqrt plus one Newton step, about 1e-7 relative per pixel,
-/// and fused multiply-adds in the normal equations), so the sums over ~7000 pixels agree to 1e-5 relative;
+/// only in the intrinsics loops (fused multiply-adds in the dot products and the normal equations), so
+/// the sums over ~7000 pixels agree to 1e-5 relative;
 /// the shadow tests and everything else compile to the same arithmetic (Rust never contracts to FMA).
 #[test]
 fn scalar_and_avx2_paths_agree() {
@@ -1495,5 +1495,71 @@ fn footprint_render_is_what_the_footprint_fitness_models() {
             .map(|(a, b)| (a - b).abs() as f64)
             .sum();
         assert!(moved > 100.0 * loss.max(1e-9), "{light:?}: {moved}");
+    }
+}
+
+#[test]
+fn a_footprint_fitness_at_pixel_centres_is_the_plain_fitness_bit_for_bit() {
+    // The default fit searches with `at_pixel_centres()` of the fitness its polish takes (one set-up for
+    // both models): it must be the fitness `new` builds, on every loss the fit uses, point and
+    // directional light, with the closed-form products. The footprint fitness itself differs (the test
+    // can fail both ways).
+    let mut rng = Rng::new(17);
+    for sun in [false, true] {
+        let scene = edge_scene(
+            if sun {
+                [0.7, 0.5, 0.2]
+            } else {
+                [2.5, 2.2, 0.8]
+            },
+            sun,
+        );
+        let path = if sun {
+            "light.direction"
+        } else {
+            "light.position"
+        };
+        let layout = ParamLayout::new(&scene, &[path.to_string()]).unwrap();
+        let target = clipped_render(&edge_scene(
+            if sun {
+                [0.6, 0.55, 0.25]
+            } else {
+                [2.2, 2.5, 0.6]
+            },
+            sun,
+        ));
+        let proj = Projection::matte(vec![[(0.0, 50.0); 3]; scene.objects.len()]);
+        for (kind, proj) in [(LossKind::L1, None), (LossKind::L1Projected, Some(proj))] {
+            let make = |footprint: bool| {
+                let ctor = if footprint {
+                    Fitness::with_pixel_footprint
+                } else {
+                    Fitness::new
+                };
+                ctor(
+                    &scene,
+                    layout.clone(),
+                    &target,
+                    None,
+                    kind,
+                    true,
+                    proj.clone(),
+                )
+                .unwrap()
+            };
+            let (plain, fine) = (make(false), make(true));
+            let centres = fine.at_pixel_centres();
+            let mut differs = false;
+            for _ in 0..20 {
+                let x = random_candidate(&mut rng, &layout);
+                let (mut a, mut b, mut c) = ([0.0], [0.0], [0.0]);
+                plain.evaluate(&x, &mut a);
+                centres.evaluate(&x, &mut b);
+                fine.evaluate(&x, &mut c);
+                assert_eq!(a[0].to_bits(), b[0].to_bits(), "{kind:?} sun {sun}: {x:?}");
+                differs |= a[0] != c[0];
+            }
+            assert!(differs, "{kind:?} sun {sun}: the footprint changed no loss");
+        }
     }
 }

@@ -45,7 +45,7 @@ def inputs(tmp_path: Path) -> tuple[Path, Path]:
     truth["objects"][0]["material"]["albedo"] = [0.8, 0.7, 0.1]
     truth["objects"][1]["material"]["albedo"] = [0.4, 0.5, 0.6]
     image_path = tmp_path / "objective.png"
-    rtloop.save_image(image_path, rtloop.render(rtloop.load_scene(truth)))
+    rtloop.save_image(image_path, rtloop.render(rtloop.load_scene(truth), footprint=True))
     return scene_path, image_path
 
 
@@ -99,7 +99,8 @@ def test_outputs(inputs, tmp_path, capsys):
     # DE runs exactly --generations; L-SHADE (the default method) spends population x (generations + 1)
     # evaluations over more, shrinking generations.
     assert stages and all(g >= 6 for _, g in stages)
-    assert report["evaluations"] <= 12 * 7 + report["settings"]["polish"]
+    # (plus one: the polish re-evaluates the search's best with the pixel footprint)
+    assert report["evaluations"] <= 12 * 7 + report["settings"]["polish"] + 1
 
     # best_per_generation.csv: one row per generation (0..N) of every stage, in order.
     with open(out / "best_per_generation.csv", newline="", encoding="utf-8") as fh:
@@ -173,9 +174,15 @@ def test_footprint_option(inputs, tmp_path, capsys):
                           "--generations", 3, "--snapshot-every", 0, "--final-scale", 1, "--final-spp", 1, "--quiet")
     assert code == 0, stderr
     settings = json.loads((out / "result.json").read_text(encoding="utf-8"))["fit_report"]["settings"]
-    assert settings["footprint"] is True
+    assert settings["footprint"] == "on"
+    code, _, stderr = run(capsys, scene_path, image_path, "-o", tmp_path / "off", "--footprint", "off",
+                          "--population", 8, "--generations", 3, "--snapshot-every", 0, "--final-scale", 1,
+                          "--final-spp", 1, "--quiet")
+    assert code == 0, stderr
+    settings = json.loads((tmp_path / "off" / "result.json").read_text(encoding="utf-8"))["fit_report"]["settings"]
+    assert settings["footprint"] == "off"
     code, stdout, _ = run(capsys, "--help")
-    assert "--footprint" in stdout
+    assert "--footprint [{auto,on,off}]" in stdout
 
 
 def test_snapshots_disabled(inputs, tmp_path, capsys):

@@ -36,7 +36,9 @@ def _start(truth: dict) -> dict:
 
 
 def _photo(truth: dict) -> np.ndarray:
-    return np.minimum(rtloop.render(truth), 1.0)
+    """rtloop's render of ``truth`` as the default fit models a camera's pixels (the pixel footprint),
+    clipped at 1."""
+    return np.minimum(rtloop.render(truth, footprint=True), 1.0)
 
 
 def _light_err(result, truth) -> float:

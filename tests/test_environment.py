@@ -45,9 +45,10 @@ def _user_fit(d: dict) -> dict:
     return fit
 
 
-def _photo(truth: dict) -> np.ndarray:
-    """rtloop's render of ``truth`` as a camera stores it: clipped at 1."""
-    return np.minimum(_native.render(rtloop.Scene(json.dumps(truth))), 1.0)
+def _photo(truth: dict, footprint: bool = True) -> np.ndarray:
+    """rtloop's render of ``truth`` as a camera stores it: clipped at 1; with ``footprint`` (as the default
+    fit models pixels) or at pixel centres (as the fitness evaluates with its default)."""
+    return np.minimum(_native.render(rtloop.Scene(json.dumps(truth)), None, None, 1, footprint), 1.0)
 
 
 def _start(truth: dict, fit: dict) -> rtloop.Scene:
@@ -103,7 +104,7 @@ def test_kernel_and_closed_form_reproduce_the_render(two):
     truth = _scene(environment=[0.05, 0.06, 0.08], two=two)
     truth["fit"] = {"light.position": {"min": [-8, 0.5, -8], "max": [8, 8, 8]}}
     scene = rtloop.Scene(json.dumps(truth))
-    photo = _photo(truth)
+    photo = _photo(truth, footprint=False)
     x = np.array([truth["light"]["position"]], float)
     direct = _native.evaluate(scene, ["light.position"], photo, x, loss="l1")[0, 0]
     assert direct < 1e-4 * photo.sum()
@@ -142,7 +143,7 @@ def test_auto_adds_the_environment_and_finds_the_truth(two):
         np.testing.assert_allclose(np.array(o_fit["material"]["albedo"]) * d["environment"],
                                    np.array(o_true["material"]["albedo"]) * truth["environment"], rtol=2e-3,
                                    atol=1e-6)
-    np.testing.assert_allclose(np.minimum(_native.render(r.scene), 1), photo, atol=2e-3)
+    np.testing.assert_allclose(np.minimum(_native.render(r.scene, None, None, 1, True), 1), photo, atol=2e-3)
 
 
 def test_auto_leaves_a_direct_photo_alone():

@@ -32,8 +32,9 @@ def _products(d: dict) -> dict[str, np.ndarray]:
 
 
 def _photo(truth: dict) -> np.ndarray:
-    """What a camera would record of the scene: rtloop's render, saturated at 1."""
-    return np.minimum(rtloop.render(truth), 1.0)
+    """What a camera would record of the scene: rtloop's render as the default fit models pixels (the
+    pixel footprint), saturated at 1."""
+    return np.minimum(rtloop.render(truth, footprint=True), 1.0)
 
 
 def _wrong_start(truth: dict) -> dict:
@@ -229,9 +230,9 @@ def test_srgb_space_recovers_a_self_rendered_scene(ball_scene):
     for name in want:
         rel = np.max(np.abs(got[name] - want[name])) / np.max(want[name])
         assert rel < 0.002, f"{name}: product error {rel:.5f}"
-    # The paper's two stages take the space too.
+    # The paper's two stages take the space too (and, asked for, the footprint the photo was rendered with).
     paper = rtloop.fit(_wrong_start(truth), _photo(truth), protocol="paper", seed=1, generations=(60, 60),
-                       space="srgb")
+                       space="srgb", footprint="on")
     assert [s.loss for s in paper.stages] == ["l1", "l1_rgb"] and paper.settings["space"] == "srgb"
     err = np.linalg.norm(np.array(paper.scene.to_dict()["light"]["position"]) - truth["light"]["position"])
     assert err < 0.05

@@ -51,7 +51,7 @@ def test_kernel_and_closed_form_reproduce_the_render(two, env):
     truth = _bounced(environment=env, two=two)
     truth["fit"] = {"light.position": {"min": [-8, 0.5, -8], "max": [8, 8, 8]}}
     scene = rtloop.Scene(json.dumps(truth))
-    photo = _photo(truth)
+    photo = _photo(truth, footprint=False)
     x = np.array([truth["light"]["position"]], float)
     direct = _native.evaluate(scene, ["light.position"], photo, x, loss="l1")[0, 0]
     closed = _native.evaluate(scene, ["light.position"], photo, x, loss="l1_projected",

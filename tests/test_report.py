@@ -51,7 +51,7 @@ def speed_png(tmp_path) -> Path:
 
 @pytest.fixture(scope="module")
 def photo() -> np.ndarray:
-    return np.minimum(rtloop.render(truth_dict()), 1.0)
+    return np.minimum(rtloop.render(truth_dict(), footprint=True), 1.0)
 
 
 @pytest.fixture(scope="module")
@@ -282,7 +282,7 @@ def test_speed_plot_only_when_given(projected, tmp_path, monkeypatch, capsys):
     assert "Speed against error" not in rep.path.read_text(encoding="utf-8")
     scene_path, image_path, out = tmp_path / "scene.json", tmp_path / "objective.png", tmp_path / "fit"
     scene_path.write_text(json.dumps(scene_dict()), encoding="utf-8")
-    rtloop.save_image(image_path, rtloop.render(truth_dict()))
+    rtloop.save_image(image_path, rtloop.render(truth_dict(), footprint=True))
     code = cli.main([str(scene_path), str(image_path), "--out", str(out), "--population", "8", "--generations",
                      "3", "--final-scale", "1", "--final-spp", "1", "--snapshot-every", "0", "--report", "-q"])
     assert code == 0, capsys.readouterr().err
@@ -392,7 +392,7 @@ def test_cli_report_and_truth(tmp_path, capsys, speed_png):
     truth_path = tmp_path / "truth.json"
     truth_path.write_text(json.dumps(truth_dict()), encoding="utf-8")
     image_path = tmp_path / "objective.png"
-    rtloop.save_image(image_path, rtloop.render(truth_dict()))
+    rtloop.save_image(image_path, rtloop.render(truth_dict(), footprint=True))
     out = tmp_path / "fit"
     code = cli.main([str(scene_path), str(image_path), "--out", str(out), "--population", "8",
                      "--generations", "5", "--final-scale", "1", "--final-spp", "1", "--report",

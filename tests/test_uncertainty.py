@@ -226,7 +226,7 @@ def test_seed_spread_is_the_optimiser_not_the_data(ball_scene):
       error; sigma is the number to report (test_sigma_matches_...: it matches the noise spread).
     """
     truth = ball_scene
-    clean = rtloop.render(truth)
+    clean = rtloop.render(truth, footprint=True)  # as the default fit models pixels
     start = _start(truth)
     for level in (0.0, 0.01):
         photo = _photo(clean, level, noise_seed=7)
@@ -318,7 +318,10 @@ def test_directional_light_sigma_matches_the_spread_over_noise_realisations(ball
     angles, products, sigmas, rms_angle = [], [], [], []
     for k in range(20):
         photo = _photo(clean, 0.01, noise_seed=100 + k)
-        result = rtloop.fit(start, photo, seed=k)
+        # At pixel centres, the model Gauss-Newton differentiates: it leaves the shadow edges out, which
+        # the default fit's pixel footprint makes smooth and informative, so there the fitted direction
+        # spreads only 0.36-0.43x sigma (conservative; measured when the footprint became the default).
+        result = rtloop.fit(start, photo, seed=k, footprint="off")
         u = result.uncertainty
         assert u["method"] == "gauss-newton" and u["parametrization"] == "products"
         assert u["names"] == ANGLES + PRODUCTS and u["values"][:2] == [0.0, 0.0]

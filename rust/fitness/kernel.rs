@@ -80,6 +80,18 @@ impl Kernel {
         }
     }
 
+    /// This kernel with every pixel shaded at its centre: the kernel `new` builds without a footprint,
+    /// without redoing its geometry.
+    pub fn at_pixel_centres(&self) -> Kernel {
+        Kernel {
+            norm: self.norm,
+            space: self.space,
+            groups: self.groups.iter().map(Group::at_pixel_centres).collect(),
+            pixels: self.pixels,
+            tables: self.tables.clone(),
+        }
+    }
+
     pub fn pixels(&self) -> usize {
         self.pixels
     }

@@ -153,6 +153,28 @@ impl Fitness {
         Fitness::with_footprint(scene, layout, target, pixels, kind, clip, projection, true)
     }
 
+    /// This fitness with pixels shaded at their centres, as [`Fitness::new`] builds it, from one built
+    /// [`Fitness::with_pixel_footprint`] without redoing its geometry: a search and its polish can then
+    /// take the two models for the price of one set-up.
+    pub fn at_pixel_centres(&self) -> Fitness {
+        Fitness {
+            layout: self.layout.clone(),
+            early_exit: self.early_exit,
+            kernel: self.kernel.at_pixel_centres(),
+            base: self.base.clone(),
+            shapes: self.shapes.clone(),
+            active: ActivePixels {
+                footprint: Vec::new(),
+                ..self.active.clone()
+            },
+            kind: self.kind,
+            clip: self.clip,
+            shadows: self.shadows,
+            constant: self.constant,
+            projection: self.projection.clone(),
+        }
+    }
+
     #[allow(clippy::too_many_arguments)]
     fn with_footprint(
         scene: &Scene,

@@ -95,6 +95,7 @@ pub fn interior(gbuffer: &GBuffer, i: usize) -> bool {
 /// Pixels per block: the working set of one block stays in L1.
 pub const BLOCK: usize = 64;
 
+#[derive(Clone)]
 pub(crate) struct SphereOccluder {
     pub(crate) center: [f32; 3],
     pub(crate) radius: f32,
@@ -102,6 +103,7 @@ pub(crate) struct SphereOccluder {
     pub(crate) c: Vec<f32>,
 }
 
+#[derive(Clone)]
 pub(crate) struct PlaneOccluder {
     pub(crate) normal: [f32; 3],
     pub(crate) point: [f32; 3],
@@ -110,6 +112,7 @@ pub(crate) struct PlaneOccluder {
 }
 
 /// The pixels of one object (or of the background, `object == None`).
+#[derive(Clone)]
 pub(crate) struct Group {
     pub(crate) object: Option<usize>,
     pub(crate) p: [Vec<f32>; 3],
@@ -147,11 +150,24 @@ impl Group {
     pub(crate) fn len(&self) -> usize {
         self.t[0].len()
     }
+
+    /// This group with its pixels shaded at their centres: no footprint, as `group` builds it without one.
+    pub(crate) fn at_pixel_centres(&self) -> Group {
+        Group {
+            du: Default::default(),
+            dv: Default::default(),
+            spread: Vec::new(),
+            block_spread: Vec::new(),
+            own_radius: None,
+            ..self.clone()
+        }
+    }
 }
 
 /// One sender's representative points for the pixels of a receiving group (light-independent): the
 /// receiving pixels, their configuration factors, and the points as a group of the sender (its
 /// occluders and sky view factors), whose light an evaluation computes like a pixel's.
+#[derive(Clone)]
 pub(crate) struct Gather {
     pub(crate) sender: usize,
     pub(crate) pixel: Vec<u32>,

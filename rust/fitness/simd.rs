@@ -106,7 +106,6 @@ pub(crate) unsafe fn irradiance_avx2(
         _mm256_set1_ps(light.pos[1]),
         _mm256_set1_ps(light.pos[2]),
     );
-    let (half, three_halves) = (_mm256_set1_ps(0.5), _mm256_set1_ps(1.5));
     let (tiny, big, zero) = (
         _mm256_set1_ps(f32::MIN_POSITIVE),
         _mm256_set1_ps(f32::MAX),
@@ -125,14 +124,12 @@ pub(crate) unsafe fn irradiance_avx2(
             _mm256_fmadd_ps(ld(&g.n[1]), dy, _mm256_mul_ps(ld(&g.n[0]), dx)),
         );
         let nl = _mm256_max_ps(nl, zero);
-        // y ~ 1/sqrt(d2), one Newton step: y (1.5 - 0.5 d2 y²).
-        let y = _mm256_rsqrt_ps(d2);
-        let y = _mm256_mul_ps(
-            y,
-            _mm256_fnmadd_ps(_mm256_mul_ps(half, d2), _mm256_mul_ps(y, y), three_halves),
+        // nl / (d2 sqrt(d2)), as `point_irradiance`: correctly rounded sqrt and division, the same bits
+        // on every x86-64 CPU (an rsqrt estimate differs between vendors, and so would every fit).
+        let v = _mm256_min_ps(
+            _mm256_div_ps(nl, _mm256_mul_ps(d2, _mm256_sqrt_ps(d2))),
+            big,
         );
-        let inv3 = _mm256_mul_ps(_mm256_mul_ps(y, y), y);
-        let v = _mm256_min_ps(_mm256_mul_ps(nl, inv3), big);
         let ok = _mm256_cmp_ps::<_CMP_GT_OQ>(d2, tiny);
         _mm256_storeu_ps(e.as_mut_ptr().add(i), _mm256_and_ps(v, ok));
         i += 8;

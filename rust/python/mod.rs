@@ -349,12 +349,15 @@ fn evaluate<'py>(
 /// (objects, 4, 2) with row 4 bounding Q for objects with a specular term. `norm` and `space` as for
 /// `evaluate`; in "srgb" the closed-form products stay least squares in linear space, and the reported
 /// `products` minimise the sRGB-space loss. `polish_tol`: the polish stops once its simplex spans less
-/// than this fraction of every range (default 1e-13). Returns an `OptimizeResult`.
+/// than this fraction of every range (default 1e-13). `footprint`: the pixel footprint in the whole
+/// search; `polish_footprint`: in the polish (and the products and loss reported) only. Returns an
+/// `OptimizeResult`.
 #[pyfunction]
 #[pyo3(signature = (scene, paths, target, *, pixels=None, loss="l1", clip=true, population=60,
                     generations=200, f=0.6, cr=0.8, seed=0, threads=None, callback=None,
                     product_bounds=None, method="de", max_evaluations=None, polish=0, norm="l1",
-                    with_products=true, space="linear", polish_tol=None, footprint=false))]
+                    with_products=true, space="linear", polish_tol=None, footprint=false,
+                    polish_footprint=false))]
 #[allow(clippy::too_many_arguments)]
 fn optimize<'py>(
     py: Python<'py>,
@@ -380,9 +383,13 @@ fn optimize<'py>(
     space: &str,
     polish_tol: Option<f64>,
     footprint: bool,
+    polish_footprint: bool,
 ) -> PyResult<OptimizeResult> {
     let scene = &scene.get().0;
-    let (fitness, bounds) = make_fitness(
+    // Where only the polish takes the pixel footprint, the search's fitness is the polish's at pixel
+    // centres (one set-up for both).
+    let only_polish = polish_footprint && !footprint;
+    let (built, bounds) = make_fitness(
         scene,
         &paths,
         &target,
@@ -392,8 +399,13 @@ fn optimize<'py>(
         product_bounds,
         norm,
         space,
-        footprint,
+        footprint || only_polish,
     )?;
+    let (fitness, finer) = if only_polish {
+        (built.at_pixel_centres(), Some(built))
+    } else {
+        (built, None)
+    };
     let budget = Budget {
         population,
         generations,
@@ -409,33 +421,40 @@ fn optimize<'py>(
     let result = detach_in_pool(py, threads, || {
         let method = Method::named(method, &budget)?;
         let with_products = with_products && callback.is_some();
-        run_stage(&fitness, &bounds, &method, with_products, |rep| {
-            history.push(Generation {
-                generation: rep.generation,
-                best: rep.best.to_vec(),
-                objectives: rep.best_objectives.to_vec(),
-                evaluations: rep.evaluations,
-            });
-            let Some(cb) = &callback else { return true };
-            let products: Option<Vec<Vec<f64>>> = rep
-                .products
-                .as_ref()
-                .map(|rows| rows.iter().map(|r| r.to_vec()).collect());
-            Python::attach(|py| {
-                let best = PyArray1::from_slice(py, rep.best);
-                let objectives = rep.best_objectives.to_vec();
-                match cb.call1(
-                    py,
-                    (rep.generation, best, objectives, rep.evaluations, products),
-                ) {
-                    Ok(v) => !v.bind(py).is(&*pyo3::types::PyBool::new(py, false)),
-                    Err(e) => {
-                        error = Some(e);
-                        false
+        run_stage(
+            &fitness,
+            finer.as_ref(),
+            &bounds,
+            &method,
+            with_products,
+            |rep| {
+                history.push(Generation {
+                    generation: rep.generation,
+                    best: rep.best.to_vec(),
+                    objectives: rep.best_objectives.to_vec(),
+                    evaluations: rep.evaluations,
+                });
+                let Some(cb) = &callback else { return true };
+                let products: Option<Vec<Vec<f64>>> = rep
+                    .products
+                    .as_ref()
+                    .map(|rows| rows.iter().map(|r| r.to_vec()).collect());
+                Python::attach(|py| {
+                    let best = PyArray1::from_slice(py, rep.best);
+                    let objectives = rep.best_objectives.to_vec();
+                    match cb.call1(
+                        py,
+                        (rep.generation, best, objectives, rep.evaluations, products),
+                    ) {
+                        Ok(v) => !v.bind(py).is(&*pyo3::types::PyBool::new(py, false)),
+                        Err(e) => {
+                            error = Some(e);
+                            false
+                        }
                     }
-                }
-            })
-        })
+                })
+            },
+        )
     })??;
     if let Some(e) = error {
         return Err(e);

@@ -320,13 +320,34 @@ pub fn minimize<O, C>(
     obj: &O,
     bounds: &[(f64, f64)],
     cfg: &LshadeConfig,
-    mut callback: C,
+    callback: C,
 ) -> Result<LshadeResult>
 where
     O: Objective + ?Sized,
     C: FnMut(&GenerationReport) -> bool,
 {
+    minimize_polishing(obj, None::<&O>, bounds, cfg, callback)
+}
+
+/// [`minimize`], with the final polish on `polish_obj` where given: a finer model of the same loss (the
+/// pixel footprint) that only the last digits need. The polish starts from the search's best, re-evaluated
+/// on `polish_obj`; the result's value is `polish_obj`'s.
+pub fn minimize_polishing<O, P, C>(
+    obj: &O,
+    polish_obj: Option<&P>,
+    bounds: &[(f64, f64)],
+    cfg: &LshadeConfig,
+    mut callback: C,
+) -> Result<LshadeResult>
+where
+    O: Objective + ?Sized,
+    P: Objective + ?Sized,
+    C: FnMut(&GenerationReport) -> bool,
+{
     check_single_objective(obj, bounds)?;
+    if let Some(p) = polish_obj {
+        check_single_objective(p, bounds)?;
+    }
     let dim = bounds.len();
     let free = bounds.iter().filter(|(lo, hi)| lo < hi).count();
     let n_init = cfg.initial_population(free);
@@ -557,15 +578,32 @@ where
             .into_iter()
             .map(|s| s.clamp(1e-8, 0.1))
             .collect();
-        let nm = nelder_mead(
-            obj,
-            bounds,
-            &best,
-            best_f,
-            &step,
-            cfg.polish_evaluations,
-            cfg.polish_x_tol,
-        )?;
+        let nm = match polish_obj {
+            None => nelder_mead(
+                obj,
+                bounds,
+                &best,
+                best_f,
+                &step,
+                cfg.polish_evaluations,
+                cfg.polish_x_tol,
+            )?,
+            Some(p) => {
+                let mut o = [0.0];
+                p.evaluate_alone(&best, &mut o);
+                best_f = if o[0].is_nan() { f64::INFINITY } else { o[0] };
+                evaluations += 1;
+                nelder_mead(
+                    p,
+                    bounds,
+                    &best,
+                    best_f,
+                    &step,
+                    cfg.polish_evaluations,
+                    cfg.polish_x_tol,
+                )?
+            }
+        };
         evaluations += nm.evaluations;
         let f_before = best_f;
         if nm.f < best_f {

@@ -199,9 +199,28 @@ where
     O: Objective + ?Sized,
     C: FnMut(&GenerationReport) -> bool,
 {
+    run_polishing(method, obj, None::<&O>, bounds, callback)
+}
+
+/// [`run`], with a method's final polish on `polish_obj` where given (see
+/// [`lshade::minimize_polishing`]; DE/rand/1/bin has no polish and ignores it).
+pub fn run_polishing<O, P, C>(
+    method: &Method,
+    obj: &O,
+    polish_obj: Option<&P>,
+    bounds: &[(f64, f64)],
+    callback: C,
+) -> Result<SearchResult>
+where
+    O: Objective + ?Sized,
+    P: Objective + ?Sized,
+    C: FnMut(&GenerationReport) -> bool,
+{
     match method {
         Method::RandOneBin(cfg) => rand1bin::minimize(obj, bounds, cfg, callback),
-        Method::Lshade(cfg) => lshade::minimize(obj, bounds, cfg, callback).map(|r| r.search),
+        Method::Lshade(cfg) => {
+            lshade::minimize_polishing(obj, polish_obj, bounds, cfg, callback).map(|r| r.search)
+        }
     }
 }
 

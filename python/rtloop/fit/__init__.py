@@ -85,7 +85,7 @@ def fit(
     interreflection: str = "auto",
     highlights: str = "auto",
     reference: tuple[np.ndarray, float] | None = None,
-    footprint: bool = False,
+    footprint: str | bool = "auto",
 ) -> FitResult:
     """Fit the scene's free parameters (its ``fit`` section) to ``image``.
 
@@ -119,16 +119,18 @@ def fit(
     rescaled to absolute albedos and the light's intensity in W/sr (:mod:`rtloop.fit.reference`), recorded
     in ``result.reference``.
     ``footprint``: compare the photo with pixels integrated over their area where a sphere's shadow edge
-    or terminator crosses them (as a camera integrates them; ``render(..., footprint=True)`` renders that
-    model) instead of pixel centres, in the searches (the term tests stay at pixel centres).
+    or terminator crosses them, as a camera integrates them (``render(..., footprint=True)`` renders that
+    model), instead of pixel centres. "auto" (default): the closed-form method's search finds the basin at
+    pixel centres and its polish, products and loss take the footprint (the two-stage fallback stays at
+    pixel centres); "on" (or True): every search takes it too; "off" (or False): pixel centres only. The
+    term tests stay at pixel centres.
     """
     t0 = time.perf_counter()
     scene = load_scene(scene)
     meshes = [o["name"] for o in scene.to_dict()["objects"] if o["shape"] == "mesh"]
     if meshes:
         raise RtloopError(f"fit: object {meshes[0]!r} is a mesh: meshes can be rendered and inserted, not fitted")
-    if not isinstance(footprint, bool):
-        raise RtloopError(f"footprint: must be True or False (got {footprint!r})")
+    footprint = check_footprint(footprint)
     b = budget(protocol, space, population, generations, f, cr)
     env_mode = check_environment(environment)
     check_highlights(highlights)
@@ -160,8 +162,9 @@ def fit(
                 "interreflection": interreflection, "highlights": highlights}
     if b.projection_unavailable is not None:
         settings["projection_unavailable"] = b.projection_unavailable
-    if footprint:
-        settings["footprint"] = True
+    # Where the fit takes the pixel footprint: "off", "polish" (the closed-form polish) or "on" (everywhere).
+    settings["footprint"] = footprint = ("polish" if b.method == "projected" else "off") if footprint == "auto" \
+        else footprint
     # The scene as fitted: with the interreflection term when asked for ("on"), else as given.
     work = with_interreflection(scene) if interreflection == "on" else scene
     stages = Stages(work, target, use, mask, b, ident, clip=clip, norm=norm, space=space, threads=threads,
@@ -212,9 +215,12 @@ def fit(
         model=model,
         reference=pinned,
     )
-    # One render at the optimum for the goodness of fit and the uncertainty.
+    # One render at the optimum for the uncertainty (pixel centres: its finite differences are), and the
+    # model the fit compared with the photo for the goodness of fit.
     at_optimum = _native.render(current, current.width, current.height, 1)
-    result.goodness = goodness(current, target, use, clip=clip, render=at_optimum)
+    as_compared = at_optimum if footprint == "off" else _native.render(current, current.width, current.height, 1,
+                                                                       True)
+    result.goodness = goodness(current, target, use, clip=clip, render=as_compared)
     doubts += _at_bounds(current, all_paths)
     for d in doubts:
         warnings.warn(d, RtloopWarning, stacklevel=2)
@@ -223,7 +229,8 @@ def fit(
         from ..uncertainty import estimate_uncertainty
 
         try:
-            result.uncertainty = estimate_uncertainty(result, target, clip=clip, mask=mask, render=at_optimum)
+            result.uncertainty = estimate_uncertainty(result, target, clip=clip, mask=mask, render=at_optimum,
+                                                      compared=as_compared)
         except RtloopError as e:
             result.uncertainty = {"method": "gauss-newton", "sigma": {}, "warnings": [str(e)]}
     result.seconds = time.perf_counter() - t0
@@ -272,7 +279,7 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
     sub = grid.ravel() if use is None else np.intersect1d(grid.ravel(), use).astype(np.uint32)
     # An encoding is within [0, 1]: an image beyond it is radiance, not sRGB codes.
     if space == "linear" and float(target.min()) >= 0.0 and float(target.max()) <= 1.0:
-        model["encoding"] = _encoding_check(work, stages, int(seeds[0]), target, sub, ratio)
+        model["encoding"] = _encoding_check(work, stages, int(seeds[0]), target, sub, ratio, environment=env)
     where, x = first.paths, list(first.x)
     n_sub = first.pixels // 4
     model_work, model_env, added = work, env, []
@@ -337,16 +344,16 @@ ENCODED_GAIN = 1.5
 
 
 def _encoding_check(work: Scene, stages: Stages, seed: int, target: np.ndarray, sub: np.ndarray,
-                    ratio: float) -> dict[str, Any]:
+                    ratio: float, environment: bool = False) -> dict[str, Any]:
     """Whether ``target`` looks sRGB-encoded rather than linear: the base model fitted once more, on every
     other pixel in each direction, to the target decoded from sRGB; the two losses against their
     quantisation floors (``ratio``: the fit as given). Run only for photos in [0, 1] that the first fit does
-    not explain."""
+    not explain; ``environment``: the base model has the environment's (or ambient light's) column."""
     decoded = np.ascontiguousarray(decode(target), dtype=np.float32)
     check = Stages(work, decoded, sub, None, stages.budget, stages.ident, clip=stages.clip, norm=stages.norm,
                    space="linear", threads=stages.threads, pixels_per_object=stages.pixels_per_object,
                    rng=np.random.default_rng(seed), callback=None, footprint=stages.footprint)
-    check.projected(seed)
+    check.projected(seed, environment=environment)
     floor = quantisation_floor(decoded, sub)
     decoded_ratio = sum(check.stages[-1].objectives) / floor if floor > 0 else float("inf")
     out: dict[str, Any] = {"ratio_as_given": ratio, "ratio_decoded": decoded_ratio,
@@ -363,6 +370,19 @@ def _encoding_check(work: Scene, stages: Stages, seed: int, target: np.ndarray, 
 AT_BOUND = 1e-6
 #: An image with at least this fraction of its pixels above 1 in some channel is doubted (0..255 or not linear).
 MOSTLY_ABOVE_ONE = 0.9
+
+
+#: The ``footprint`` argument's values, with True and False for "on" and "off".
+FOOTPRINT_MODES = ("auto", "on", "off")
+
+
+def check_footprint(footprint: Any) -> str:
+    """``footprint`` as one of :data:`FOOTPRINT_MODES`, else an RtloopError naming the argument."""
+    if isinstance(footprint, (bool, np.bool_)):
+        return "on" if footprint else "off"
+    if isinstance(footprint, str) and footprint in FOOTPRINT_MODES:
+        return footprint
+    raise RtloopError(f"footprint: must be 'auto', 'on' or 'off' (or True / False) (got {footprint!r})")
 
 
 def _at_bounds(scene: Scene, paths: list[str]) -> list[str]:

@@ -47,11 +47,12 @@ class Stages:
     def __init__(self, scene: Scene, target: np.ndarray, use: np.ndarray | None, mask: np.ndarray | None,
                  budget: Budget, ident: dict[str, Any], *, clip: bool, norm: str, space: str,
                  threads: int | None, pixels_per_object: int, rng: np.random.Generator,
-                 callback: Callable[[GenerationInfo], Any] | None, footprint: bool = False):
+                 callback: Callable[[GenerationInfo], Any] | None, footprint: str = "off"):
         self.scene, self.target, self.use, self.mask = scene, target, use, mask
         self.budget, self.ident = budget, ident
         self.clip, self.norm, self.space, self.threads = clip, norm, space, threads
         self.pixels_per_object, self.rng, self.callback = pixels_per_object, rng, callback
+        #: "off", "polish" (the closed-form polish, its products and loss) or "on" (every search too).
         self.footprint = footprint
         self.all_paths = scene.fit_paths
         self.all_names = scene.param_names()
@@ -89,7 +90,8 @@ class Stages:
             generations=generations, f=b.f, cr=b.cr, seed=stage_seed, threads=self.threads,
             callback=None if callback is None else on_generation, product_bounds=product_bounds,
             method=method, polish=polish, norm=self.norm, space=self.space, with_products=callback is not None,
-            polish_tol=polish_tol, footprint=self.footprint,
+            polish_tol=polish_tol, footprint=self.footprint == "on",
+            polish_footprint=self.footprint == "polish" and method == "lshade" and polish > 0,
         )
         history = [(gen, float(sum(objectives)), list(objectives), np.array(best))
                    for gen, best, objectives, _ in out.history]

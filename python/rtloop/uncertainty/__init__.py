@@ -47,6 +47,7 @@ def estimate_uncertainty(
     params: str = "auto",
     mask: np.ndarray | None = None,
     render: np.ndarray | None = None,
+    compared: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """Per-parameter standard deviations and correlations of a fit (Gauss-Newton at the optimum).
 
@@ -57,7 +58,11 @@ def estimate_uncertainty(
     ``{name: absolute step}`` for some parameters. ``params``: ``"auto"`` (products where the scene
     determines only products, else the scene's fit parameters), ``"products"`` or ``"scene"``.
     ``render``: the scene's render at the optimum (float32 (H, W, 3), spp 1) when the caller has it
-    (:func:`rtloop.fit` shares its goodness-of-fit render), saving one render.
+    (:func:`rtloop.fit` shares its goodness-of-fit render), saving one render. ``compared``: the model
+    image the fit compared with the photo, whose residual sigma scales (default: for a fit that took the
+    pixel footprint, ``result.settings["footprint"]``, the footprint render; else the render at the
+    optimum). The Jacobian's columns stay pixel-centre differences: the footprint changes only pixels at
+    shadow edges and terminators, which the Gauss-Newton model leaves out.
 
     Returns a JSON-able dict: ``method`` ("gauss-newton"), ``names``, ``values`` (the parameters at the
     optimum; 0 for the direction angles), ``sigma`` ({name: float or None}), ``correlation`` (rows and
@@ -98,6 +103,13 @@ def estimate_uncertainty(
     if render is not None and np.shape(render) != target.shape:
         raise RtloopError(f"render: shape {np.shape(render)} does not match the scene's {target.shape}")
     Jt, f0, kink = _jacobian(space, wd, px, steps, clip, warnings, render)
+    if compared is None and getattr(result, "settings", {}).get("footprint", "off") != "off":
+        compared = _native.render(scene, scene.width, scene.height, 1, True)
+    if compared is not None:
+        if np.shape(compared) != target.shape:
+            raise RtloopError(f"compared: shape {np.shape(compared)} does not match the scene's {target.shape}")
+        f0 = np.take(np.asarray(compared, np.float32).reshape(-1, 3), px.idx, axis=0)
+        f0 = (np.minimum(f0, np.float32(1.0)) if clip else f0).ravel()
     r0 = np.subtract(f0, np.take(target.reshape(-1, 3), px.idx, axis=0).ravel(), dtype=np.float64)
     n_kink = int(kink.sum())
     drop = px.sat_u | kink[:, None]  # residuals left out
