@@ -172,6 +172,62 @@ def test_hint_and_mask(photos) -> None:
     assert np.linalg.norm(sphere.centre - centre) <= 0.01 * distance
 
 
+# --- the ball's own shadow beside it, seen from above ---------------------------------------------------
+
+#: Cameras nearly straight down on a ball resting on the floor, the lamp high on the far side of the ball: the
+#: camera sees the ball's dark side and its crisp shadow beside it on a stronger edge than the ball's own.
+TOP_DOWN = [
+    {"position": [0.62, 1.6, -0.42], "look_at": [0.28, 0.0, -0.06], "up": [0, 0, 1], "vfov_deg": 46},
+    {"position": [0.2, 1.6, -0.45], "look_at": [0.14, 0.0, -0.1], "up": [0, 0, 1], "vfov_deg": 46},
+]
+TOP_DOWN_BALL = [0.56, 0.1, 0.04]
+
+
+def _top_down(camera: dict, light: list[float]) -> dict:
+    return {
+        "image": {"width": W, "height": H},
+        "camera": camera,
+        "light": {"position": light, "intensity": 6.0},
+        "ambient": [0.02] * 3,
+        "objects": [
+            {"name": "ball", "shape": "sphere", "center": TOP_DOWN_BALL, "radius": 0.1,
+             "material": {"albedo": [0.72, 0.28, 0.14]}},
+            {"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0],
+             "material": {"albedo": [0.46, 0.42, 0.36]}},
+        ],
+    }
+
+
+@pytest.mark.parametrize("camera", TOP_DOWN)
+@pytest.mark.parametrize("light", [[1.0, 2.0, 1.6], [1.2, 2.3, -1.6], [-0.6, 2.3, -1.2]])
+def test_ball_not_its_shadow_from_above(camera, light) -> None:
+    """Seen from above with its shadow beside it the ball is found, not the shadow (an outline of the same
+    size on edges too; before the inside was compared, the first case was placed 138 mm off on it)."""
+    scene = _top_down(camera, light)
+    cam, centre, r = truth(scene)
+    _, sphere = locate_ball(rtloop.render(scene, spp=9), cam, r)
+    assert np.linalg.norm(sphere.centre - centre) <= 0.01 * float(np.linalg.norm(centre - cam.position))
+
+
+def test_sphere_likeness_closed_form() -> None:
+    """An image that is exactly a quadratic function of a sphere's normals inside its outline (a shaded ball)
+    and a quadratic of the pixel position outside (the floor): inside the true outline the sphere explains it to rounding, so the
+    likeness is far above 1; an outline moved half a radius, or on the floor alone, is no sphere (<= 1)."""
+    from rtloop.acquisition.ball.shading import sphere_likeness, sphere_pixels
+
+    cam = PinholeCamera.from_scene_camera(TOP_DOWN[0], W, H)
+    centre, r = np.array(TOP_DOWN_BALL), 0.1
+    v, u = np.mgrid[0:H, 0:W] / W
+    image = np.repeat((0.05 + 0.02 * u + 0.01 * v * v)[:, :, None], 3, axis=2)  # floor: smooth in the image
+    uv, n = sphere_pixels(cam, centre, r, inset_px=0.0)
+    shade = 0.3 + 0.5 * n @ np.array([0.3, 0.8, -0.5]) + 0.1 * n[:, 0] * n[:, 2]
+    image[uv[:, 1], uv[:, 0]] = shade[:, None] * np.array([0.7, 0.3, 0.15])
+    assert sphere_likeness(image, cam, centre, r) > 1e3
+    assert sphere_likeness(image, cam, centre + [0.05, 0, 0], r) < 1.0
+    assert sphere_likeness(image, cam, centre + [0.6, 0, 0.3], r) < 1e-3  # floor alone: fitted exactly as floor
+    assert sphere_likeness(image, cam, centre + [50, 0, 0], r) == 0.0  # out of the photo
+
+
 # --- failures -----------------------------------------------------------------------------------------
 
 

@@ -484,14 +484,37 @@ def test_scene_field_of_view_from_exif(tmp_path, capsys, photos, tags, focal_px)
     assert acq["camera"]["vfov_deg"] == pytest.approx(math.degrees(2 * math.atan(H / 2 / focal_px)), abs=1e-6)
 
 
-def test_scene_without_exif_estimates_from_the_board_and_says_so(tmp_path, capsys, photos) -> None:
-    code, out, err = run(scene_main, capsys, photos["photo"], "--board", BOARD, "--ball-radius", "80mm",
-                         "--objective", photos["objective"], "--out", tmp_path / "o")
+#: A nearer, steeper view of the same scene: the board's perspective fixes the focal length to +-0.16 deg.
+STEEP_CAMERA = {"position": [0.55, 0.5, -0.45], "look_at": [0.12, 0.0, 0.06], "up": [0, 1, 0], "vfov_deg": 50}
+
+
+def test_scene_without_exif_estimates_from_the_board_and_says_so(tmp_path, capsys) -> None:
+    """No EXIF, no --vfov: seen at an angle from nearby the board's own estimate is within the 0.3 deg target
+    (its standard deviation too), and the notes say where it came from."""
+    scene = {**TRUE_SCENE, "camera": STEEP_CAMERA}
+    cam = PinholeCamera.from_scene_camera(STEEP_CAMERA, W, H)
+    render = rtloop.render(scene, spp=9)
+    write_png16_srgb(tmp_path / "photo.png", paste_board_on_floor(
+        render, rtloop.object_ids(scene) == 1, 0.45, parse_board(BOARD), cam))
+    write_png16_srgb(tmp_path / "objective.png", render)
+    code, out, err = run(scene_main, capsys, tmp_path / "photo.png", "--board", BOARD, "--ball-radius", "80mm",
+                         "--objective", tmp_path / "objective.png", "--out", tmp_path / "o")
     assert code == 0, err
     assert "has no EXIF focal length" in out + err and "--vfov" in out + err
-    scene = json.loads((tmp_path / "o" / "scene.json").read_text())
-    assert scene["meta"]["acquisition"]["camera_model"] == "board"
-    assert scene["camera"]["vfov_deg"] == pytest.approx(50.0, abs=0.3)  # the true one
+    written = json.loads((tmp_path / "o" / "scene.json").read_text())
+    assert written["meta"]["acquisition"]["camera_model"] == "board"
+    assert written["camera"]["vfov_deg"] == pytest.approx(50.0, abs=0.3)  # the true one
+    assert written["meta"]["acquisition"]["pose"]["vfov_std_deg"] <= 0.3
+
+
+def test_scene_without_exif_refuses_a_board_looser_than_the_target(tmp_path, capsys, photos) -> None:
+    """The end-to-end view from further off: the board's 13 corners fix the field of view only to +-0.45 deg,
+    more than the 0.3 deg target: one line with the numbers, the cause and the fixes, not a scene."""
+    code, _, err = run(scene_main, capsys, photos["photo"], "--board", BOARD, "--ball-radius", "80mm",
+                       "--objective", photos["objective"], "--out", tmp_path / "o")
+    assert code == 1 and len(err.strip().splitlines()) == 1, err
+    assert "does not fix the focal length" in err and "0.3 deg needed" in err
+    assert "--vfov" in err and "EXIF" in err and not (tmp_path / "o").exists()
 
 
 @pytest.mark.parametrize("z", [0.0, 0.06, 0.12])  # tilt 0, 5 and 10 degrees

@@ -23,13 +23,6 @@ FIXTURES = Path(__file__).parent / "fixtures" / "onephoto"
 EXAMPLE = Path(__file__).parents[1] / "examples" / "one-photo"  # the README's example: the oblique view
 FOLDERS = {p.name: p for p in FIXTURES.iterdir() if (p / "photo.png").exists()} | {"oblique": EXAMPLE}
 VIEWS = sorted(FOLDERS)
-#: Seen from nearly straight above, the ball's shadow is an outline of the ball's size beside it, on a stronger
-#: edge (dark against the floor): the ball finder places the ball on it, 46 mm off. Known, not yet fixed.
-SHADOW_TAKEN_FOR_BALL = pytest.mark.xfail(strict=True, reason="top-down view: the ball finder fits the shadow")
-
-
-def _views_but_frontal() -> list:
-    return [pytest.param(v, marks=SHADOW_TAKEN_FOR_BALL) if v == "frontal" else v for v in VIEWS]
 
 
 def _meta(view: str) -> dict:
@@ -59,7 +52,7 @@ def _errors(scene: dict, meta: dict) -> tuple[float, float, float]:
             float(np.linalg.norm(np.subtract(ball["center"], meta["ball"]["centre"]))))
 
 
-@pytest.mark.parametrize("view", _views_but_frontal())
+@pytest.mark.parametrize("view", VIEWS)
 def test_scene_from_one_photo_with_exif(built, view):
     """The photo's EXIF focal length gives the field of view; the board the camera; the ball is within 1 %
     of its distance (the issue's target), the camera within 1 % of its distance to the board."""
@@ -92,9 +85,9 @@ def fits(built, tmp_path_factory) -> dict[str, dict]:
     return out
 
 
-@pytest.mark.parametrize("view", _views_but_frontal())
+@pytest.mark.parametrize("view", VIEWS)
 def test_light_from_one_photo(fits, view):
-    """The light, about 2.7 m from the ball, within 5 cm (the issue's target), from the photo with the board
+    """The light, 2.5-2.8 m from the ball, within 5 cm (the issue's target), from the photo with the board
     and the card in it (masked) and the room light and the bounce in the scene rtloop-scene wrote."""
     meta = _meta(view)
     result = fits[view]
@@ -102,7 +95,7 @@ def test_light_from_one_photo(fits, view):
     assert err < 0.05, f"{view}: light {1000 * err:.1f} mm off"
 
 
-@pytest.mark.parametrize("view", _views_but_frontal())
+@pytest.mark.parametrize("view", VIEWS)
 def test_grey_card_gives_absolute_albedos(fits, view):
     """With the card's reflectance known, result.json holds absolute albedos (within 3 % of Mitsuba's, the
     issue's target) and the light's intensity in W/sr (within 3 %)."""
@@ -178,32 +171,53 @@ def _without_exif(view: str, folder: Path) -> Path:
     return path
 
 
-#: Without EXIF the board alone is accepted when its field of view's sigma (for 0.25 px corners) is under
-#: 2 deg; on the side view (15 corners) that is 1.0 deg, and the field of view is 0.6 deg off. Known.
-BOARD_ALONE_TOO_LOOSE = pytest.mark.xfail(strict=True, reason="side view: the board alone is 0.6 deg off")
-
-
-@pytest.mark.parametrize("view", [pytest.param(v, marks=BOARD_ALONE_TOO_LOOSE) if v == "side" else v
-                                  for v in VIEWS])
-def test_without_exif_the_target_or_one_line(tmp_path, capsys, view):
+def test_without_exif_the_target_or_one_line(tmp_path, capsys):
     """With no EXIF, every view the detector accepts: the field of view within 0.3 deg and the ball within 1 %
-    of its distance (the issue's target), or one line naming the cause and the fixes. The views at an angle
-    from nearby (oblique, side) are accepted; the board seen head-on (frontal) or small and far through a
-    long lens (low) is refused."""
-    photo = _without_exif(view, tmp_path)
-    code = scene_main(_scene_args(view, photo, tmp_path / "s"))
-    err = capsys.readouterr().err.strip()
-    if view in ("oblique", "side"):
-        assert code == 0, err
-        scene = json.loads((tmp_path / "s" / "scene.json").read_text())
-        assert scene["meta"]["acquisition"]["camera_model"] == "board"
-        fov, _, ball = _errors(scene, _meta(view))
-        assert fov < 0.3, fov
-        assert ball < 0.01 * _meta(view)["ball"]["distance_from_camera_m"], ball
-    else:
-        assert code == 1
-        assert "does not fix the focal length" in err and "--vfov" in err and "EXIF" in err
-        assert len(err.splitlines()) == 1
+    of its distance (the issue's target), or one line naming the cause and the fixes. On each of these views
+    the board's 15 corners (of a 6x4 board) fix the field of view no better than +-0.7 deg: each is refused."""
+    for view in VIEWS:
+        photo = _without_exif(view, tmp_path)
+        code = scene_main(_scene_args(view, photo, tmp_path / view))
+        err = capsys.readouterr().err.strip()
+        if code == 0:
+            scene = json.loads((tmp_path / view / "scene.json").read_text())
+            assert scene["meta"]["acquisition"]["camera_model"] == "board"
+            fov, _, ball = _errors(scene, _meta(view))
+            assert fov < 0.3, (view, fov)
+            assert ball < 0.01 * _meta(view)["ball"]["distance_from_camera_m"], (view, ball)
+        else:
+            assert code == 1 and len(err.splitlines()) == 1, (view, err)
+            assert "focal length" in err and "--vfov" in err and "EXIF" in err, (view, err)
+            assert not (tmp_path / view).exists()
+
+
+def test_board_alone_uncertainty_covers_its_error(monkeypatch):
+    """The refusals are warranted: with the 0.3 deg gate lifted, the board's own standard deviation of the
+    field of view (from the calibration's covariance and reprojection residual) exceeds the target on every
+    view, and where it is under 2 deg the estimate is off by less than 3 of them. Independent truth: the
+    Mitsuba renders' cameras."""
+    from rtloop.acquisition import pose as pose_module
+    from rtloop.acquisition._common import to_detection_grey
+    from rtloop.acquisition.boards import detect_board, parse_board
+    from rtloop.acquisition.response import load_photo
+
+    target = pose_module.VFOV_TARGET_DEG
+    monkeypatch.setattr(pose_module, "VFOV_TARGET_DEG", 90.0)
+    estimated = 0
+    for view in VIEWS:
+        photo = load_photo(FOLDERS[view] / "photo.png", response="srgb")
+        h, w = photo.shape[:2]
+        detection = detect_board(to_detection_grey(photo), parse_board(_meta(view)["board"]["spec"]))
+        try:
+            f, std = pose_module.estimate_focal_from_board(detection, w, h)
+        except rtloop.RtloopError:
+            continue  # seen straight down: no estimate at all
+        assert std > target, (view, std)
+        if std < 2.0:  # nearer degenerate (overhead: 5 deg) the linearised spread is only an order of size
+            estimated += 1
+            vfov = math.degrees(2 * math.atan(h / 2 / f))
+            assert abs(vfov - _meta(view)["camera"]["vfov_deg"]) <= 3 * std, (view, vfov, std)
+    assert estimated >= 5
 
 
 def test_readme_one_photo_example(tmp_path, capsys):

@@ -71,7 +71,20 @@ VIEWS: list[dict[str, Any]] = [
     {"name": "frontal", "description": "nearly straight down (12 deg from the vertical): the board alone "
      "cannot fix the focal length",
      "position": [0.2, 1.6, -0.45], "look_at": [0.14, 0.0, -0.1], "up": [0.0, 0.0, 1.0], "vfov_deg": 46.0},
+    {"name": "overhead", "description": "straight down (3 deg from the vertical) beside the board, a lower light "
+     "from the back left: the ball's shadow long, on the floor away from the board",
+     "position": [0.36, 1.7, 0.0], "look_at": [0.3, 0.0, -0.04], "up": [0.0, 0.0, 1.0], "vfov_deg": 44.0,
+     "light": [-0.8, 1.7, 1.4]},
+    {"name": "above", "description": "nearly straight down (12 deg) from the ball's front, the light high behind "
+     "the camera: the ball's shadow peeks out behind it",
+     "position": [0.62, 1.6, -0.42], "look_at": [0.28, 0.0, -0.06], "up": [0.0, 0.0, 1.0], "vfov_deg": 46.0,
+     "light": [1.2, 2.3, -1.6]},
 ]
+
+
+def _light(view: dict[str, Any]) -> list[float]:
+    """The view's point light: LIGHT_POSITION unless the view moves it."""
+    return list(view.get("light", LIGHT_POSITION))
 
 
 def _mi():
@@ -124,7 +137,7 @@ def scene_dict(view: dict[str, Any], spp: int, seed: int) -> dict[str, Any]:
                      "rfilter": {"type": "box"}},
             "sampler": {"type": "stratified", "sample_count": spp, "seed": seed, "jitter": True},
         },
-        "light": {"type": "point", "position": LIGHT_POSITION, "intensity": _rgb([LIGHT_INTENSITY] * 3)},
+        "light": {"type": "point", "position": _light(view), "intensity": _rgb([LIGHT_INTENSITY] * 3)},
         "environment": {"type": "constant", "radiance": _rgb(ENVIRONMENT)},
         "ball": {"type": "sphere", "center": BALL_CENTRE, "radius": BALL_RADIUS,
                  "bsdf": {"type": "diffuse", "reflectance": _rgb(BALL_ALBEDO)}},
@@ -185,7 +198,7 @@ def truth_scene(view: dict[str, Any]) -> dict[str, Any]:
     return {
         "image": {"width": WORK_WIDTH, "height": WORK_WIDTH * HEIGHT // WIDTH},
         "camera": camera,
-        "light": {"position": LIGHT_POSITION, "intensity": LIGHT_INTENSITY, "color": [1.0, 1.0, 1.0]},
+        "light": {"position": _light(view), "intensity": LIGHT_INTENSITY, "color": [1.0, 1.0, 1.0]},
         "ambient": [0.0, 0.0, 0.0], "environment": ENVIRONMENT, "background": ENVIRONMENT, "exposure": 1.0,
         "objects": [
             {"name": "ball", "shape": "sphere", "center": BALL_CENTRE, "radius": BALL_RADIUS,
@@ -235,8 +248,8 @@ def make_view(view: dict[str, Any], out: Path, spp: int, seed: int) -> dict[str,
         "ball": {"centre": BALL_CENTRE, "radius": BALL_RADIUS, "albedo": BALL_ALBEDO,
                  "centre_px": [round(float(v), 2) for v in ball_px],
                  "distance_from_camera_m": round(float(np.linalg.norm(np.subtract(BALL_CENTRE, view["position"]))), 4)},
-        "light": {"type": "point", "position": LIGHT_POSITION, "intensity_w_sr": LIGHT_INTENSITY,
-                  "distance_to_ball_m": round(float(np.linalg.norm(np.subtract(LIGHT_POSITION, BALL_CENTRE))), 3)},
+        "light": {"type": "point", "position": _light(view), "intensity_w_sr": LIGHT_INTENSITY,
+                  "distance_to_ball_m": round(float(np.linalg.norm(np.subtract(_light(view), BALL_CENTRE))), 3)},
         "environment_radiance": ENVIRONMENT,
         "floor_albedo": FLOOR_ALBEDO,
         "board": {**BOARD, "spec": BOARD_SPEC, "paper_margin_m": BOARD["square_m"], "paper_reflectance": PAPER,

@@ -229,7 +229,7 @@ def build_scene(
     if focal_source == "board":
         notes.append(
             f"{where} has no EXIF focal length: it was estimated from the board alone (vertical field of "
-            f"view {camera.vfov_deg:.1f} deg); "
+            f"view {camera.vfov_deg:.2f} +- {pose.vfov_std_deg:.2f} deg); "
             "a calibration (rtloop-acquire calibrate) or --vfov is more accurate"
         )
     if pose.reprojection_rms_px > 1.0:

@@ -43,6 +43,7 @@ class FloorPose:
         rvec, tvec: OpenCV's board -> camera pose.
         reprojection_rms_px: RMS distance between the corners found and the board reprojected.
         focal_source: where the focal length came from ("calibration", "given", "board").
+        vfov_std_deg: with ``focal_source`` "board", the vertical field of view's standard deviation (deg).
     """
 
     camera: PinholeCamera
@@ -52,6 +53,7 @@ class FloorPose:
     tvec: np.ndarray
     reprojection_rms_px: float
     focal_source: str
+    vfov_std_deg: float | None = None
 
     @property
     def floor_plane(self) -> dict[str, Any]:
@@ -70,35 +72,40 @@ class FloorPose:
             "reprojection_rms_px": self.reprojection_rms_px,
             "focal_px": cam.focal_px,
             "focal_source": self.focal_source,
+            **({"vfov_std_deg": self.vfov_std_deg} if self.vfov_std_deg is not None else {}),
             "camera_distance_m": float(np.linalg.norm(cam.position)),
             "camera_height_m": float(cam.position[1]),
         }
 
 
-#: How well a ChArUco corner is located in a photo (pixels, 1 sigma), for the focal length's uncertainty.
-CORNER_NOISE_PX = 0.25
-#: The largest standard deviation of the board-estimated vertical field of view accepted (deg): refuses
-#: views within about 15 deg of head-on.
-MAX_VFOV_STD_DEG = 2.0
+#: The field of view the issue asks for without EXIF (deg): the board's own estimate is used only when its
+#: standard deviation is within this; else one line says why and what to give instead.
+VFOV_TARGET_DEG = 0.3
 
 
-def _focal_std(detection: BoardDetection, k: np.ndarray, rvec: np.ndarray, tvec: np.ndarray) -> float:
-    """The focal length's standard deviation (pixels) for corners located to CORNER_NOISE_PX, from the
-    Jacobian of the corners' projections in (rotation, translation, focal length)."""
+def _focal_std(
+    detection: BoardDetection, k: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, noise_px: float
+) -> float:
+    """The focal length's standard deviation (pixels) for corners located to ``noise_px`` (1 sigma per
+    coordinate), from the Jacobian of the corners' projections in (rotation, translation, focal length)."""
     _, jac = cv2.projectPoints(detection.object_points, rvec, tvec, k, np.zeros(5))
     j = np.column_stack([jac[:, :6], jac[:, 6] + jac[:, 7]])  # one focal length (fixed aspect ratio)
     try:
         cov = np.linalg.inv(j.T @ j)
     except np.linalg.LinAlgError:
         return float("inf")
-    return CORNER_NOISE_PX * math.sqrt(max(float(cov[6, 6]), 0.0))
+    return noise_px * math.sqrt(max(float(cov[6, 6]), 0.0))
 
 
-def estimate_focal_from_board(detection: BoardDetection, width: int, height: int) -> float:
-    """Focal length (pixels) of a centred, distortion-free camera from one view of a flat board.
+def estimate_focal_from_board(detection: BoardDetection, width: int, height: int) -> tuple[float, float]:
+    """Focal length (pixels) of a centred, distortion-free camera from one view of a flat board, and the
+    standard deviation of the vertical field of view it gives (deg).
 
     A single view of a plane fixes the focal length once the principal point is known (Zhang), if
-    the board is seen at an angle; seen head-on it does not, and this fails.
+    the board is seen at an angle; seen head-on it does not. The uncertainty is the calibration's own: the
+    covariance of (pose, focal length) for corners located as well as the fit's reprojection residual says
+    (its RMS over the 2N - 7 degrees of freedom). Refused, in one line naming the cause and the fixes, when
+    that standard deviation exceeds :data:`VFOV_TARGET_DEG`.
     """
     k0 = centred_camera_matrix(float(max(width, height)), width, height)
     flags = (
@@ -113,12 +120,15 @@ def estimate_focal_from_board(detection: BoardDetection, width: int, height: int
         | cv2.CALIB_FIX_K5
         | cv2.CALIB_FIX_K6
     )
+    n = len(detection.object_points)
+    noise = float("nan")
     try:
-        _, k, _, rvecs, tvecs = cv2.calibrateCamera(
+        rms, k, _, rvecs, tvecs = cv2.calibrateCamera(
             [detection.object_points], [detection.image_points], (width, height), k0, np.zeros(5), flags=flags
         )
         f = float(k[0, 0])
-        f_std = _focal_std(detection, k, rvecs[0], tvecs[0])
+        noise = float(rms) * math.sqrt(2 * n / max(2 * n - 7, 1))
+        f_std = _focal_std(detection, k, rvecs[0], tvecs[0], noise)
     except cv2.error:
         f, f_std = float("nan"), float("inf")
     vfov = math.degrees(2 * math.atan(height / 2 / f)) if f > 0 else float("nan")
@@ -129,14 +139,15 @@ def estimate_focal_from_board(detection: BoardDetection, width: int, height: int
         )
     # d vfov / d f = -h / (f^2 + h^2/4) radians per pixel
     vfov_std = math.degrees(f_std * height / (f * f + height * height / 4))
-    if not vfov_std <= MAX_VFOV_STD_DEG:
+    if not vfov_std <= VFOV_TARGET_DEG:
         raise AcquisitionError(
             f"the board's view does not fix the focal length (vertical field of view {vfov:.1f} +- "
-            f"{vfov_std:.1f} deg from its corners: seen too nearly head-on, or too small and far for its "
-            "perspective to show); give --vfov or --camera, use a photo whose EXIF has the focal length, or "
-            "photograph the board closer and at more of an angle"
+            f"{vfov_std:.2f} deg from its {n} corners, reprojected to {noise:.2f} px; {VFOV_TARGET_DEG:g} deg "
+            "needed): seen too nearly head-on, or too small, far or few-cornered for its perspective to show; "
+            "give --vfov or --camera, use a photo whose EXIF has the focal length, or photograph a larger board "
+            "closer and at more of an angle"
         )
-    return f
+    return f, vfov_std
 
 
 def estimate_floor_pose(
@@ -168,9 +179,10 @@ def estimate_floor_pose(
             "named when part of it is hidden, and its orientation is ambiguous)"
         )
     h, w = image.shape[:2]
+    vfov_std = None
     detection = detect_board(to_detection_grey(image), spec, where=where)
     if focal_px is None:
-        focal_px = estimate_focal_from_board(detection, w, h)
+        focal_px, vfov_std = estimate_focal_from_board(detection, w, h)
         focal_source = "board"
     elif not (math.isfinite(focal_px) and focal_px > 0):
         raise AcquisitionError(f"{where}: focal length must be > 0 pixels (got {focal_px})")
@@ -199,4 +211,5 @@ def estimate_floor_pose(
         np.asarray(tvec).reshape(3),
         rms,
         focal_source or "given",
+        vfov_std,
     )

@@ -15,6 +15,7 @@ from ..camera import PinholeCamera
 from .cone import BallSilhouette, _cone_points, _gauss_newton, _project_cam, _rays_cam
 from .edges import MIN_EDGE_POINTS, _edge_image, _edges_across, _OutlineScore, _refine
 from .search import _NO_BALL_HELP, _pattern_search, _seeds
+from .shading import sphere_likeness
 
 #: Least outline score (mean edge support along the predicted outline, 0..1) for a ball to be accepted.
 MIN_OUTLINE_SCORE = 0.4
@@ -142,10 +143,13 @@ def locate_ball(
 
     Every candidate (Hough circles, or the hint, or the mask's outline) only seeds a search over the
     ball's position on the floor: for each position the outline is predicted exactly (its size follows
-    from the distance) and scored by how well it lies on colour edges of the photo. This tells the ball
-    from its own shadow (also a crisp ellipse, but not the outline of a resting ball of this radius) and
-    from shading inside the ball. The best position is then refined by least squares on the edge
-    points along the outline. With ``resting=False`` a last fit frees the centre's height.
+    from the distance) and scored by how well it lies on colour edges of the photo; each seed gives an
+    outline from a coarse-to-fine search and one from a fine search alone. Of the outlines on enough edges
+    (``MIN_OUTLINE_SCORE``), the ball is the one whose inside is best explained as a shaded sphere rather
+    than floor (:func:`rtloop.acquisition.ball.shading.sphere_likeness`): its own shadow is a crisp,
+    ball-sized outline too, seen from above on a stronger edge, but holds floor. The chosen position is then
+    refined by least squares on the edge points along the outline. With ``resting=False`` a last fit frees
+    the centre's height.
 
     Args:
         hint, mask: as for :func:`find_ball` (seed the search there instead of Hough circles).
@@ -214,27 +218,39 @@ def locate_ball(
         pred_r = math.sqrt(abs(cv2.contourArea(poly.astype(np.float32))) / math.pi)
         ranked.append((value(p0, max(2.0, 0.25 * pred_r)), p0, pred_r, src))
     ranked.sort(key=lambda item: -item[0])
-    best = None
+    hypotheses = []  # (outline score, floor position, source)
     for _, p0, pred_r, src in ranked[:4]:
         metres_per_px = float(np.linalg.norm(centre_of(p0) - camera.position)) / f
-        p = p0
-        for tol_px, step_px in ((0.25 * pred_r, 0.25 * pred_r), (0.08 * pred_r, 0.06 * pred_r), (1.0, 0.5)):
-            tol_px = max(tol_px, 1.0)
-            p, v = _pattern_search(
-                lambda q, t=tol_px: value(q, t), p, max(step_px, 0.25) * metres_per_px, 0.1 * metres_per_px
-            )
-        # Last, uncapped: among outlines on edges everywhere, the one on the strongest (the true outline
-        # rather than shading just inside it).
-        p, _ = _pattern_search(lambda q: value(q, 1.0, 100.0), p, 0.5 * metres_per_px, 0.05 * metres_per_px)
-        if best is None or v > best[0]:
-            best = (v, p, src)
-    if best is None or best[0] < MIN_OUTLINE_SCORE:
+        # (tolerance, step) in pixels
+        coarse_to_fine = ((0.25 * pred_r, 0.25 * pred_r), (0.08 * pred_r, 0.06 * pred_r), (1.0, 0.5))
+        # From each seed twice: coarse to fine (a seed off the ball), and fine only (a seed on the ball,
+        # which the coarse stages can carry onto the stronger edge of its shadow beside it).
+        for stages in (coarse_to_fine, coarse_to_fine[-1:]):
+            p = p0
+            for tol_px, step_px in stages:
+                tol_px = max(tol_px, 1.0)
+                p, v = _pattern_search(
+                    lambda q, t=tol_px: value(q, t), p, max(step_px, 0.25) * metres_per_px, 0.1 * metres_per_px
+                )
+            # Last, uncapped: among outlines on edges everywhere, the one on the strongest (the true outline
+            # rather than shading just inside it).
+            p, _ = _pattern_search(lambda q: value(q, 1.0, 100.0), p, 0.5 * metres_per_px, 0.05 * metres_per_px)
+            hypotheses.append((v, p, src))
+    # Of the outlines that lie on edges, the ball is the one whose inside looks most like a shaded sphere
+    # rather than floor: its own shadow is an outline on edges too (seen from above, on a stronger one), but
+    # holds flat floor, or floor with the ball's outline across it.
+    accepted = []
+    for v, p, src in hypotheses:
+        if v >= MIN_OUTLINE_SCORE and not any(np.linalg.norm(p - q) < 0.05 * radius for _, _, q, _ in accepted):
+            accepted.append((sphere_likeness(image, camera, centre_of(p), radius), v, p, src))
+    if not accepted:
+        best_v = max((v for v, _, _ in hypotheses), default=0.0)
         raise AcquisitionError(
             f"{where}: no ball of radius {radius:g} m resting on the floor found (best outline matched "
-            f"{0 if best is None else best[0]:.0%} of edges); check --ball-radius (metres) and "
+            f"{best_v:.0%} of edges); check --ball-radius (metres) and "
             f"{_NO_BALL_HELP}"
         )
-    _, p, source = best
+    likeness, outline_score, p, source = max(accepted, key=lambda item: item[0])
     # Edge points across the found outline, then least squares on those near it (the exact fit).
     centre = centre_of(p)
     axis, alpha = _cone_of_centre(camera, centre, radius)
@@ -255,7 +271,8 @@ def locate_ball(
     res = (np.arccos(np.clip(edges.rays[chosen] @ axis, -1, 1)) - alpha) * f
     rms = float(np.sqrt(np.mean(res**2)))
     final = BallSilhouette(
-        axis, alpha, f, w, h, points, rms, len(chosen) / edges.k, source, {"outline_score": best[0]}
+        axis, alpha, f, w, h, points, rms, len(chosen) / edges.k, source,
+        {"outline_score": outline_score, "sphere_likeness": likeness, "hypotheses": len(accepted)},
     )
     placement = SpherePlacement(centre, float(radius), resting, rms, float(centre[1] - floor_height))
     return final, placement
