@@ -192,7 +192,7 @@ def _build_parser() -> Parser:
     p.add_argument("--uncertainty", choices=("default", "bootstrap", "off"), default="default",
                    help="error bars: 'default' (Gauss-Newton and the block sandwich, a few ms), 'bootstrap' "
                    "(also a spatial block bootstrap: 30 closed-form refits on resampled image blocks, seeded by "
-                   "--seed; about 0.5 s on a 128x96 direct-light photo, tens of seconds with interreflection; "
+                   "--seed; about 1 s on a 128x96 direct-light photo, a minute or two with interreflection; "
                    "its sigma is printed), 'off' (none)")
     p.add_argument("--highlights", choices=("auto", "off"), default="auto",
                    help="'auto' (default): a sphere the scene gives as matte gets a fitted specular lobe "
