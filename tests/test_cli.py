@@ -185,6 +185,27 @@ def test_footprint_option(inputs, tmp_path, capsys):
     assert "--footprint [{auto,on,off}]" in stdout
 
 
+def test_uncertainty_option(inputs, tmp_path, capsys):
+    """--uncertainty bootstrap adds the block bootstrap to result.json (method, cost, seed) and prints its
+    sigma with the method; off leaves the uncertainty out; a value outside the choices is refused."""
+    scene_path, image_path = inputs
+    common = ("--population", 8, "--generations", 3, "--snapshot-every", 0, "--final-scale", 1, "--final-spp", 1)
+    out = tmp_path / "boot"
+    code, stdout, stderr = run(capsys, scene_path, image_path, "-o", out, "--uncertainty", "bootstrap", *common)
+    assert code == 0, stderr
+    u = json.loads((out / "result.json").read_text(encoding="utf-8"))["fit_report"]["uncertainty"]
+    boot = u["bootstrap"]
+    assert boot["method"] == "block-bootstrap" and boot["ms"] > 0 and boot["seed"] == 0
+    assert all(boot["sigma"][f"light.position.{c}"] > 0 for c in "xyz")
+    assert "block bootstrap" in stdout
+    out = tmp_path / "off"
+    code, _, stderr = run(capsys, scene_path, image_path, "-o", out, "--uncertainty", "off", *common)
+    assert code == 0, stderr
+    assert json.loads((out / "result.json").read_text(encoding="utf-8"))["fit_report"]["uncertainty"] is None
+    code, _, stderr = run(capsys, scene_path, image_path, "--uncertainty", "thorough")
+    assert code != 0 and "--uncertainty" in stderr
+
+
 def test_snapshots_disabled(inputs, tmp_path, capsys):
     scene_path, image_path = inputs
     out = tmp_path / "out"

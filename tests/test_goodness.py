@@ -71,3 +71,70 @@ def test_a_photo_saturated_everywhere_has_a_verdict_not_an_error():
     with pytest.warns(rtloop.RtloopWarning):
         g = rtloop.fit(scene, photo, uncertainty=False, population=4, generations=1).goodness
     assert g["ratio"] is None and g["verdict"].startswith("no unsaturated pixel")
+
+
+# JPEG blocking. direct-side's JPEGs set JPEG_ERROR_OVER_BLOCKING; these are other clean photos.
+JPEG_CASES = ["direct-overhead", "direct-three-balls", "direct-near-small"]
+
+
+def _jpeg(codes: np.ndarray, quality: int | None) -> np.ndarray:
+    """``codes`` (uint8 RGB) through Pillow's JPEG at ``quality`` (None: as they are)."""
+    if quality is None:
+        return codes
+    import io
+
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(codes).save(buf, "JPEG", quality=quality)
+    return np.asarray(Image.open(buf).convert("RGB"))
+
+
+def _png_codes(case: str) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.open(PHOTOS / case / "objective.png").convert("RGB"))
+
+
+@pytest.mark.parametrize("case", JPEG_CASES)
+def test_jpeg_blocking_estimates_the_jpegs_own_error(case):
+    """The 8x8 grid's jumps measure the JPEG's error: on the PNG nothing is detected (the grid is arbitrary
+    there); on the same photo saved as JPEG at qualities 85, 50 and 30 it is, and the estimated RMS error
+    per channel is within a factor of 2 of the actual one (JPEG codes minus PNG codes)."""
+    from rtloop._srgb import decode
+    from rtloop.fit.goodness import jpeg_blocking
+
+    png = _png_codes(case)
+    none = jpeg_blocking(decode(png / 255.0))
+    assert not none["detected"] and none["error_codes"] == [0.0, 0.0, 0.0], none
+    for q in (85, 50, 30):
+        codes = _jpeg(png, q)
+        b = jpeg_blocking(decode(codes / 255.0))
+        actual = np.sqrt(((codes.astype(float) - png) ** 2).reshape(-1, 3).mean(axis=0))
+        ratio = np.array(b["error_codes"]) / actual
+        assert b["detected"], (q, b)
+        assert np.all((ratio > 0.5) & (ratio < 2.0)), (q, ratio.round(2))
+
+
+@pytest.mark.parametrize("case", JPEG_CASES)
+def test_a_jpeg_of_a_clean_photo_is_explained_to_the_noise_level(case, monkeypatch):
+    """The truth's render against the photo saved as JPEG (qualities 85, 50, 30): with the blocking in the
+    floor the verdict is "explained", the ratio no higher than the PNG's (measured 0.7-1.0 against 1.8-2.5);
+    without it (the factor set to 0) the JPEG's error looks like 4-14x the floor, a model error."""
+    import importlib
+
+    from rtloop._srgb import decode
+
+    gm = importlib.import_module("rtloop.fit.goodness")
+    truth = rtloop.Scene((PHOTOS / case / "scene.json").read_text())
+    png = _png_codes(case)
+    base = gm.goodness(truth, decode(png / 255.0).astype(np.float32), None)
+    for q in (85, 50, 30):
+        photo = decode(_jpeg(png, q) / 255.0).astype(np.float32)
+        g = gm.goodness(truth, photo, None)
+        assert g["jpeg_blocking"]["detected"]
+        assert g["ratio"] < EXPLAINED_RATIO and g["ratio"] <= 1.2 * base["ratio"], (q, g["ratio"], base["ratio"])
+        assert g["verdict"].startswith("the model explains")
+    monkeypatch.setattr(gm, "JPEG_ERROR_OVER_BLOCKING", 0.0)
+    blind = gm.goodness(truth, decode(_jpeg(png, 50) / 255.0).astype(np.float32), None)
+    assert blind["ratio"] > EXPLAINED_RATIO

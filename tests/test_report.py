@@ -453,3 +453,18 @@ def test_cli_report_and_truth(tmp_path, capsys, speed_png):
         captured = capsys.readouterr()
         assert (code, captured.out, captured.err.strip()) == (status, "", message)
         assert not (tmp_path / "x").exists()
+
+
+def test_the_bootstrap_column_when_the_fit_ran_it(photo, tmp_path):
+    """A fit with uncertainty="bootstrap": the uncertainty table gets a third sigma column naming the
+    refits and their cost, with the bootstrap's value for the light coordinates; without it, no column."""
+    result = rtloop.fit(scene_dict(), photo, seed=1, population=8, generations=6, uncertainty="bootstrap")
+    boot = result.uncertainty["bootstrap"]
+    page = rtloop.report(result, tmp_path / "r.html").path.read_text(encoding="utf-8")
+    assert f"block bootstrap: {boot['replicates']} refits" in page
+    section = page[page.index("<h3>Uncertainty"):]
+    row = re.search(r"<tr><td>light\.position\.x</td>(.*?)</tr>", section)
+    assert row is not None and f"{boot['sigma']['light.position.x']:.6g}" in row.group(1), row
+    del result.uncertainty["bootstrap"]
+    page = rtloop.report(result, tmp_path / "s.html").path.read_text(encoding="utf-8")
+    assert "block bootstrap" not in page

@@ -77,7 +77,7 @@ def fit(
     callback: Callable[[GenerationInfo], Any] | None = None,
     optimizer: str | None = None,
     polish: int | None = None,
-    uncertainty: bool = True,
+    uncertainty: bool | str = True,
     mask: np.ndarray | None = None,
     norm: str = "l1",
     space: str = "linear",
@@ -95,7 +95,10 @@ def fit(
     override it. ``seed`` makes the result reproducible on any number of ``threads``. ``clip`` compares
     min(render, 1) with the objective, as an 8/16-bit photo saturates. ``callback(GenerationInfo)`` runs
     after every generation; returning False stops the current stage. ``uncertainty`` adds per-parameter
-    1-sigma estimates (Gauss-Newton at the optimum, scaled by the residual) to the result. ``optimizer``
+    1-sigma estimates (Gauss-Newton at the optimum, scaled by the residual, and the block sandwich) to the
+    result: ``True`` or ``"default"`` (a few ms), ``"bootstrap"`` also the spatial block bootstrap (tens of
+    closed-form refits on resampled image blocks, seeded by ``seed``; ``result.uncertainty["bootstrap"]``,
+    see :mod:`rtloop.uncertainty.bootstrap`), ``False`` or ``"off"`` none. ``optimizer``
     ("de" or "lshade") and ``polish`` (Nelder-Mead evaluations) override the protocol's search for the
     closed-form method. ``mask`` (bool (H, W), True = use) leaves out pixels the scene does not model
     (another object, a reflection, the photographer's shadow): they count in no loss and no solve.
@@ -131,6 +134,8 @@ def fit(
     if meshes:
         raise RtloopError(f"fit: object {meshes[0]!r} is a mesh: meshes can be rendered and inserted, not fitted")
     footprint = check_footprint(footprint)
+    if not (isinstance(uncertainty, bool) or isinstance(uncertainty, str) and uncertainty in ("default", "bootstrap", "off")):
+        raise RtloopError(f"uncertainty: must be True, False, 'default', 'bootstrap' or 'off' (got {uncertainty!r})")
     b = budget(protocol, space, population, generations, f, cr)
     env_mode = check_environment(environment)
     check_highlights(highlights)
@@ -225,7 +230,7 @@ def fit(
     for d in doubts:
         warnings.warn(d, RtloopWarning, stacklevel=2)
     result.warnings = doubts
-    if uncertainty:
+    if uncertainty not in (False, "off"):
         from ..uncertainty import estimate_uncertainty
 
         try:
@@ -233,6 +238,13 @@ def fit(
                                                       compared=as_compared)
         except RtloopError as e:
             result.uncertainty = {"method": "gauss-newton", "sigma": {}, "warnings": [str(e)]}
+        if uncertainty == "bootstrap":
+            from ..uncertainty.bootstrap import block_bootstrap
+
+            try:
+                result.uncertainty["bootstrap"] = block_bootstrap(result, target, use, seed=seed, threads=threads)
+            except RtloopError as e:
+                result.uncertainty["bootstrap"] = {"method": "block-bootstrap", "sigma": {}, "warnings": [str(e)]}
     result.seconds = time.perf_counter() - t0
     return result
 

@@ -473,8 +473,18 @@ def _fit_report_section(page: _Page, result: Any, terr: dict[str, Any] | None, i
             body.insert(after[-1] + 1 if after else len(body), line)
         if isinstance(robust, dict) and robust.get("light_position_m") is not None:
             body.append(["light position (whole, m)", "", f"{_fmt(robust['light_position_m'], 3)} along the worse axis"])
-        page.add(_table(["parameter", "sigma (Gauss-Newton)", "sigma (block sandwich: correlated residuals)"],
-                        body))
+        heads = ["parameter", "sigma (Gauss-Newton)", "sigma (block sandwich: correlated residuals)"]
+        boot = uncertainty.get("bootstrap") if isinstance(uncertainty, dict) else None
+        if isinstance(boot, dict) and boot.get("sigma"):  # the thorough mode: one more column
+            bsig = boot["sigma"]
+            for row in body:
+                name = row[0]
+                row.append(_fmt(bsig[name]) if bsig.get(name) is not None else
+                           (f"{_fmt(boot['light_position_m'], 3)} along the worse axis"
+                            if name.startswith("light position (whole") and boot.get("light_position_m") is not None
+                            else ""))
+            heads.append(f"sigma (block bootstrap: {boot.get('replicates')} refits, {_fmt(boot.get('ms'), 3)} ms)")
+        page.add(_table(heads, body))
         for w in (uncertainty.get("warnings", []) if isinstance(uncertainty, dict) else []):
             page.add(f"<p class='note'>{html.escape(str(w))}</p>")
 

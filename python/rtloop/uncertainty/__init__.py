@@ -73,7 +73,10 @@ def estimate_uncertainty(
     ``step`` and ``warnings``; for a directional light also ``light_direction`` (the frame u, v and two
     cone angles in degrees); ``robust``: the block sandwich's sigma (see :mod:`.sandwich`), which holds
     when neighbouring residuals are correlated, with the light as a whole (``light_position_m``, the
-    largest axis; ``light_direction_deg``) and its cost, ``seconds``.
+    largest axis; ``light_direction_deg``) and its cost, ``seconds``. ``product_sigma`` (and
+    ``robust["product_sigma"]``): the sigma of every diffuse product ``products.<object>.<r|g|b>``
+    (exposure x intensity x colour x albedo) in either parametrization, propagated from the scene parameters'
+    covariance where those are the parameters.
     """
     scene: Scene = result.scene if hasattr(result, "scene") else load_scene(result)
     ident = getattr(result, "identifiability", None)
@@ -158,7 +161,50 @@ def estimate_uncertainty(
     if space.direction is not None:
         robust["light_direction_deg"] = (_direction_cone(space, robust_fit)["angle_deg"]
                                          if robust_fit is not None else None)
+    out["product_sigma"] = _product_sigma(space, wd, fit, use_products)
+    robust["product_sigma"] = _product_sigma(space, wd, robust_fit, use_products)
     out["robust"] = robust
+    return out
+
+
+def _product_sigma(space: _Space, wd: dict[str, Any], fit: _Covariance | None, use_products: bool
+                   ) -> dict[str, float | None]:
+    """The sigma of every diffuse product exposure x intensity x colour_c x albedo_c (``products.<object>.<c>``)
+    from a covariance: the parameter's own where the products are the parameters, else propagated to first
+    order (the gradient of the product over exposure, intensity, colour and albedo through the covariance,
+    correlations with the light's position and between the factors included). None where a factor the product
+    depends on is free but not determined."""
+    names = space.names
+    out: dict[str, float | None] = {}
+    objects = [o["name"] for o in wd["objects"]]
+    if fit is None or fit.cov is None:
+        return {f"products.{o}.{c}": None for o in objects for c in "rgb"}
+    where = {int(k): a for a, k in enumerate(fit.idx_p)}
+    if use_products:
+        for o in objects:
+            for c in "rgb":
+                n = f"products.{o}.{c}"
+                k = names.index(n) if n in names else None
+                out[n] = (float(np.sqrt(max(fit.cov[where[k], where[k]], 0.0)))
+                          if k is not None and fit.determined[k] and k in where else None)
+        return out
+    light, e = wd["light"], float(wd["exposure"])
+    for oi, o in enumerate(wd["objects"]):
+        for ci, c in enumerate("rgb"):
+            factors = {"exposure": e, "light.intensity": float(light["intensity"]),
+                       f"light.color.{c}": float(light["color"][ci]),
+                       f"objects.{o['name']}.albedo.{c}": float(o["material"]["albedo"][ci])}
+            grad = np.zeros(fit.idx_p.size)
+            ok = True
+            for n in factors:
+                if n not in names:
+                    continue
+                k = names.index(n)
+                if not fit.determined[k] or k not in where:
+                    ok = False
+                    break
+                grad[where[k]] = float(np.prod([w for m, w in factors.items() if m != n])) / space.factor[k]
+            out[f"products.{o['name']}.{c}"] = float(np.sqrt(max(grad @ fit.cov @ grad, 0.0))) if ok else None
     return out
 
 
