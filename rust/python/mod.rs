@@ -428,15 +428,24 @@ fn optimize<'py>(
         let with_products = with_products && callback.is_some();
         let (mut done, mut generations) = (0, 0);
         let mut last: Option<crate::stage::StageResult> = None;
+        let mut box_ = bounds.clone();
         for _ in 0..passes {
             if let Some(prev) = &last {
                 // the bounce held again, at the light the previous pass found
                 fitness.freeze_bounce(Some(&prev.x));
                 done += prev.evaluations;
                 generations += prev.generations + 1;
+                box_ = box_
+                    .iter()
+                    .zip(&prev.x)
+                    .map(|(&(lo, hi), &x)| {
+                        let h = 0.5 * REPASS_BOX * (hi - lo);
+                        ((x - h).max(lo), (x + h).min(hi))
+                    })
+                    .collect();
             }
             let (done, generations) = (done, generations);
-            let stage = run_stage(&fitness, &bounds, &method, with_products, |rep| {
+            let stage = run_stage(&fitness, &box_, &method, with_products, |rep| {
                 history.push(Generation {
                     generation: generations + rep.generation,
                     best: rep.best.to_vec(),
@@ -485,6 +494,11 @@ fn optimize<'py>(
     }
     Ok(OptimizeResult { result, history })
 }
+
+/// `optimize(frozen_bounce=N)`: each pass after the first searches this fraction of the previous pass's
+/// box (per dimension, centred on its light, inside it), with the same budget: a pass moves the light by
+/// the change in the held bounce, centimetres where the box spans metres.
+const REPASS_BOX: f64 = 0.1;
 
 #[pymodule(gil_used = false)]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
