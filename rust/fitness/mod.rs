@@ -384,7 +384,8 @@ impl Fitness {
 
     /// With interreflection (the projected loss): hold the bounce at candidate `x` (`None`: the scene's own
     /// values; the products and gauge solved there, [`bounce::FINAL_ROUNDS`]) while candidates are
-    /// ranked ([`bounce::Frozen`]): each then costs a direct fit's evaluation. [`Fitness::refined`], what
+    /// ranked ([`bounce::Frozen`]): each then costs a direct candidate's factors and one solve of its
+    /// products (0.18-0.26 ms on one core against 3.5 ms for the full bounce). [`Fitness::refined`], what
     /// a stage reports, still solves the full bounce at its light. Returns whether there is a bounce to
     /// hold (false: the fitness is unchanged).
     pub fn freeze_bounce(&mut self, x: Option<&[f64]>) -> bool {
