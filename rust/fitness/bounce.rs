@@ -24,6 +24,22 @@ pub struct Gauge {
     /// Fixed-point rounds of (gauge, products) after the bounce-free solve: [`SEARCH_ROUNDS`] while the
     /// search ranks lights, [`FINAL_ROUNDS`] for the reported products.
     pub rounds: usize,
+    /// The bounce held while the search ranks lights ([`Frozen`]); `None`: solved per candidate.
+    pub frozen: Option<std::sync::Arc<Frozen>>,
+}
+
+/// The bounce solved once, at a reference candidate (the full fixed point, [`FINAL_ROUNDS`]), and held:
+/// per pixel and channel the term (u/g_c)·B_c that [`Kernel::projected_bounce`] adds to the diffuse factor
+/// a, so that a candidate costs a direct one's factors and one solve of its products given a + that term.
+/// Near the reference the bounce changes far less than the direct light (it is a few per cent of a
+/// pixel, and its light comes from the whole floor): a search from a bounce-free fit's light ranks
+/// lights by this, and the result's products (and loss) are the full bounce's at the found light.
+#[derive(Clone, Debug)]
+pub struct Frozen {
+    /// (u/g_c)·B_c at pixel i (in the kernel's pixel order): `bounce[c * pixels + i]`.
+    pub bounce: Vec<f32>,
+    /// The gauge solved at the reference.
+    pub u: f64,
 }
 
 /// The gauge converges linearly (the products first absorb part of the bounce); every third round
@@ -91,7 +107,9 @@ impl Kernel {
                 &mut b_all[offset..offset + n],
             );
             offset += n;
-            gathered.push(
+            gathered.push(if gauge.frozen.is_some() {
+                Vec::new()
+            } else {
                 g.gathers
                     .iter()
                     .map(|gth| {
@@ -99,8 +117,8 @@ impl Kernel {
                         gth.light::<AVX2>(&light, &mut e);
                         Compact::new(gth, &e)
                     })
-                    .collect(),
-            );
+                    .collect()
+            });
             let (Some(run), Some(obj)) = (run, g.object) else {
                 continue;
             };
@@ -123,8 +141,12 @@ impl Kernel {
             );
         }
         // Each sphere's table points: their senders' light (unit light), for the second bounce.
-        let table_light: Vec<Vec<Compact>> = self
-            .tables
+        let frozen_tables: &[Vec<super::pixels::Gather>] = if gauge.frozen.is_some() {
+            &[]
+        } else {
+            &self.tables
+        };
+        let table_light: Vec<Vec<Compact>> = frozen_tables
             .iter()
             .map(|gths| {
                 gths.iter()
@@ -158,7 +180,12 @@ impl Kernel {
         // scene's own intensity.
         let mut u = gauge.u.0;
         let mut history: Vec<f64> = Vec::with_capacity(3);
-        for round in 0..gauge.rounds {
+        let rounds = if gauge.frozen.is_some() {
+            0
+        } else {
+            gauge.rounds
+        };
+        for round in 0..rounds {
             // B_o,c per pixel into a'_c (as B for now).
             for (gi, g) in self.groups.iter().enumerate() {
                 let (o0, n) = (offsets[gi], g.len());
@@ -261,6 +288,43 @@ impl Kernel {
                     let ac = &ab_all[c * n_px + o0..][..n];
                     let b = run.is_specular().then_some(&b_all[o0..o0 + n]);
                     sums.add_environment(c, ac, b, v, &g.ts[c], sat);
+                }
+                self.solve_into(run, obj, &sums, proj, out, &a_all[o0..o0 + n], sat);
+            }
+        }
+        if let Some(f) = &gauge.frozen {
+            // The held bounce: a'_c = a + (u/g_c)·B_c from the reference, and the products given it.
+            u = f.u;
+            for (gi, g) in self.groups.iter().enumerate() {
+                let (o0, n) = (offsets[gi], g.len());
+                for c in 0..3 {
+                    let held = &f.bounce[c * n_px + o0..][..n];
+                    let col = &mut ab_all[c * n_px + o0..][..n];
+                    for i in 0..n {
+                        col[i] = a_all[o0 + i] + held[i];
+                    }
+                }
+                let (Some(run), Some(obj)) = (&runs[gi], g.object) else {
+                    continue;
+                };
+                let mut sums = SolveSums::default();
+                let b = run.is_specular().then_some(&b_all[o0..o0 + n]);
+                for c in 0..3 {
+                    let ac = &ab_all[c * n_px + o0..][..n];
+                    match (run.sky(), b) {
+                        (None, None) => sums.add_matte(c, ac, &g.ts[c], sat),
+                        (v, b) => {
+                            let zeros;
+                            let v = match v {
+                                Some(v) => v,
+                                None => {
+                                    zeros = vec![0.0f32; n];
+                                    &zeros
+                                }
+                            };
+                            sums.add_environment(c, ac, b, v, &g.ts[c], sat)
+                        }
+                    }
                 }
                 self.solve_into(run, obj, &sums, proj, out, &a_all[o0..o0 + n], sat);
             }

@@ -285,10 +285,13 @@ fn save_image(py: Python<'_>, path: PathBuf, image: PyReadonlyArray3<'_, f32>) -
 
 /// Objective values of each row of `population` (N, D): float64 (N, n_objectives). `norm` is the
 /// per-pixel penalty ("l1", "l2", "huber", "huber:H"), `space` where it compares values ("linear" or
-/// "srgb": the sRGB encodings of the clipped model and of the objective).
+/// "srgb": the sRGB encodings of the clipped model and of the objective). `frozen_bounce`: with
+/// interreflection and the projected loss, the bounce held at the scene's own values
+/// (`Fitness::freeze_bounce`), as `optimize`'s first pass ranks lights.
 #[pyfunction]
 #[pyo3(signature = (scene, paths, target, population, pixels=None, loss="l1", clip=true, threads=None,
-                    product_bounds=None, norm="l1", space="linear", footprint=false))]
+                    product_bounds=None, norm="l1", space="linear", footprint=false,
+                    frozen_bounce=false))]
 #[allow(clippy::too_many_arguments)]
 fn evaluate<'py>(
     py: Python<'py>,
@@ -304,10 +307,11 @@ fn evaluate<'py>(
     norm: &str,
     space: &str,
     footprint: bool,
+    frozen_bounce: bool,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     use rayon::prelude::*;
     let scene = &scene.get().0;
-    let (fitness, bounds) = make_fitness(
+    let (mut fitness, bounds) = make_fitness(
         scene,
         &paths,
         &target,
@@ -319,6 +323,9 @@ fn evaluate<'py>(
         space,
         footprint,
     )?;
+    if frozen_bounce {
+        py.detach(|| fitness.freeze_bounce(None));
+    }
     let pop = population.as_array();
     if pop.ncols() != bounds.len() {
         return Err(Error::Value(format!(
@@ -350,14 +357,17 @@ fn evaluate<'py>(
 /// `evaluate`; in "srgb" the closed-form products stay least squares in linear space, and the reported
 /// `products` minimise the sRGB-space loss. `polish_tol`: the polish stops once its simplex spans less
 /// than this fraction of every range (default 1e-13). `footprint`: the pixel footprint in the whole
-/// search; `polish_footprint`: in the polish (and the products and loss reported) only. Returns an
-/// `OptimizeResult`.
+/// search; `polish_footprint`: in the polish (and the products and loss reported) only. `frozen_bounce`:
+/// with interreflection, the search
+/// ranks lights with the bounce held at the scene's own values (`Fitness::freeze_bounce`; each evaluation
+/// then costs a direct one's), the result's products and loss are the full bounce's at the found light.
+/// Returns an `OptimizeResult`.
 #[pyfunction]
 #[pyo3(signature = (scene, paths, target, *, pixels=None, loss="l1", clip=true, population=60,
                     generations=200, f=0.6, cr=0.8, seed=0, threads=None, callback=None,
                     product_bounds=None, method="de", max_evaluations=None, polish=0, norm="l1",
                     with_products=true, space="linear", polish_tol=None, footprint=false,
-                    polish_footprint=false))]
+                    polish_footprint=false, frozen_bounce=0))]
 #[allow(clippy::too_many_arguments)]
 fn optimize<'py>(
     py: Python<'py>,
@@ -384,6 +394,7 @@ fn optimize<'py>(
     polish_tol: Option<f64>,
     footprint: bool,
     polish_footprint: bool,
+    frozen_bounce: usize,
 ) -> PyResult<OptimizeResult> {
     let scene = &scene.get().0;
     // Where only the polish takes the pixel footprint, the search's fitness is the polish's at pixel
@@ -401,10 +412,28 @@ fn optimize<'py>(
         space,
         footprint || only_polish,
     )?;
-    let (fitness, finer) = if only_polish {
+    let (mut fitness, mut finer) = if only_polish {
         (built.at_pixel_centres(), Some(built))
     } else {
         (built, None)
+    };
+    // The bounce held for the search and the polish alike (a polish on the full bounce would cost the
+    // full fixed point per evaluation).
+    fn freeze(
+        fitness: &mut crate::Fitness,
+        finer: &mut Option<crate::Fitness>,
+        at: Option<&[f64]>,
+    ) -> bool {
+        let held = fitness.freeze_bounce(at);
+        if let Some(f) = finer.as_mut() {
+            f.freeze_bounce(at);
+        }
+        held
+    }
+    let passes = if frozen_bounce > 0 && py.detach(|| freeze(&mut fitness, &mut finer, None)) {
+        frozen_bounce
+    } else {
+        1
     };
     let budget = Budget {
         population,
@@ -421,46 +450,86 @@ fn optimize<'py>(
     let result = detach_in_pool(py, threads, || {
         let method = Method::named(method, &budget)?;
         let with_products = with_products && callback.is_some();
-        run_stage(
-            &fitness,
-            finer.as_ref(),
-            &bounds,
-            &method,
-            with_products,
-            |rep| {
-                history.push(Generation {
-                    generation: rep.generation,
-                    best: rep.best.to_vec(),
-                    objectives: rep.best_objectives.to_vec(),
-                    evaluations: rep.evaluations,
-                });
-                let Some(cb) = &callback else { return true };
-                let products: Option<Vec<Vec<f64>>> = rep
-                    .products
-                    .as_ref()
-                    .map(|rows| rows.iter().map(|r| r.to_vec()).collect());
-                Python::attach(|py| {
-                    let best = PyArray1::from_slice(py, rep.best);
-                    let objectives = rep.best_objectives.to_vec();
-                    match cb.call1(
-                        py,
-                        (rep.generation, best, objectives, rep.evaluations, products),
-                    ) {
-                        Ok(v) => !v.bind(py).is(&*pyo3::types::PyBool::new(py, false)),
-                        Err(e) => {
-                            error = Some(e);
-                            false
+        let (mut done, mut generations) = (0, 0);
+        let mut last: Option<crate::stage::StageResult> = None;
+        let mut box_ = bounds.clone();
+        for _ in 0..passes {
+            if let Some(prev) = &last {
+                // the bounce held again, at the light the previous pass found
+                freeze(&mut fitness, &mut finer, Some(&prev.x));
+                done += prev.evaluations;
+                generations += prev.generations + 1;
+                box_ = box_
+                    .iter()
+                    .zip(&prev.x)
+                    .map(|(&(lo, hi), &x)| {
+                        let h = 0.5 * REPASS_BOX * (hi - lo);
+                        ((x - h).max(lo), (x + h).min(hi))
+                    })
+                    .collect();
+            }
+            let (done, generations) = (done, generations);
+            let stage = run_stage(
+                &fitness,
+                finer.as_ref(),
+                &box_,
+                &method,
+                with_products,
+                |rep| {
+                    history.push(Generation {
+                        generation: generations + rep.generation,
+                        best: rep.best.to_vec(),
+                        objectives: rep.best_objectives.to_vec(),
+                        evaluations: done + rep.evaluations,
+                    });
+                    let Some(cb) = &callback else { return true };
+                    let products: Option<Vec<Vec<f64>>> = rep
+                        .products
+                        .as_ref()
+                        .map(|rows| rows.iter().map(|r| r.to_vec()).collect());
+                    Python::attach(|py| {
+                        let best = PyArray1::from_slice(py, rep.best);
+                        let objectives = rep.best_objectives.to_vec();
+                        match cb.call1(
+                            py,
+                            (
+                                generations + rep.generation,
+                                best,
+                                objectives,
+                                done + rep.evaluations,
+                                products,
+                            ),
+                        ) {
+                            Ok(v) => !v.bind(py).is(&*pyo3::types::PyBool::new(py, false)),
+                            Err(e) => {
+                                error = Some(e);
+                                false
+                            }
                         }
-                    }
-                })
-            },
-        )
+                    })
+                },
+            )?;
+            let stopped = stage.stop == crate::search::StopReason::Callback;
+            last = Some(stage);
+            if stopped {
+                break;
+            }
+        }
+        let mut result = last.expect("at least one pass");
+        result.evaluations += done;
+        result.generations += generations;
+        Ok::<_, crate::error::Error>(result)
     })??;
     if let Some(e) = error {
         return Err(e);
     }
     Ok(OptimizeResult { result, history })
 }
+
+/// `optimize(frozen_bounce=N)`: each pass after the first searches this fraction of the previous pass's
+/// box (per dimension, centred on its light, inside it), with the same budget: a pass moves the light by
+/// the change in the held bounce, centimetres where the box spans metres.
+const REPASS_BOX: f64 = 0.1;
 
 #[pymodule(gil_used = false)]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {

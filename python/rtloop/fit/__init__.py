@@ -38,6 +38,7 @@ from .protocol import (
 from .reference import check_reference, pin_to_reference
 from .result import FitResult, GenerationInfo, StageResult
 from .selection import (
+    BOUNCE_PASSES,
     EXPLAINED,
     check_environment,
     check_highlights,
@@ -335,6 +336,8 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
     more = Stages(box, target, use, mask, b2, _identifiability(box, box.fit_paths), clip=clip, norm=norm,
                   space=space, threads=threads, pixels_per_object=pixels_per_object,
                   rng=np.random.default_rng(seed), callback=callback, footprint=stages.footprint)
+    if "interreflection" in added or interreflection_given(work):
+        more.frozen_bounce = BOUNCE_PASSES  # the bounce held, from the light found without it
     candidate = more.projected(int(seeds[1]), environment=model_env,
                                name="+".join(["light", "colour", *model["terms"][1:], *added]))
     stages.stages += more.stages

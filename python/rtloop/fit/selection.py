@@ -23,6 +23,7 @@ from ..scene import Scene, scene_to_dict
 from .products import product_bounds
 
 __all__ = [
+    "BOUNCE_PASSES",
     "ENVIRONMENT_MODES",
     "EXPLAINED",
     "HIGHLIGHT_MODES",
@@ -148,6 +149,14 @@ def check_interreflection(mode: Any) -> str:
     if mode not in ENVIRONMENT_MODES:
         raise RtloopError(f"interreflection: must be one of {', '.join(ENVIRONMENT_MODES)} (got {mode!r})")
     return str(mode)
+
+
+#: The refit with the bounce ranks lights with the bounce held at a reference light (``_native.optimize``'s
+#: ``frozen_bounce``: a candidate then costs a direct one's factors and one solve, not the bounce's fixed
+#: point): first at the light found without the bounce, then, for each further pass, at the light the
+#: previous pass found (a search in a tenth of the box around it); each pass's result carries the full
+#: bounce's products, gauge and loss at its light.
+BOUNCE_PASSES = 2
 
 
 def interreflection_given(scene: Scene) -> bool:

@@ -60,6 +60,9 @@ class Stages:
         self.other_paths = [p for p in self.all_paths if not p.startswith("light.")]
         self.stages: list[StageResult] = []
         self.evaluations = 0
+        #: With interreflection: the searches' passes holding the bounce (``_native.optimize``'s
+        #: ``frozen_bounce``; 0: none; the refit with the bounce sets ``selection.BOUNCE_PASSES``).
+        self.frozen_bounce = 0
 
     def run(self, name: str, stage_scene: Scene, paths: list[str], loss: str, pixels: np.ndarray | None,
             generations: int, stage_seed: int, product_bounds: np.ndarray | None = None,
@@ -92,6 +95,7 @@ class Stages:
             method=method, polish=polish, norm=self.norm, space=self.space, with_products=callback is not None,
             polish_tol=polish_tol, footprint=self.footprint == "on",
             polish_footprint=self.footprint == "polish" and method == "lshade" and polish > 0,
+            frozen_bounce=self.frozen_bounce,
         )
         history = [(gen, float(sum(objectives)), list(objectives), np.array(best))
                    for gen, best, objectives, _ in out.history]
