@@ -482,6 +482,20 @@ def test_scene_field_of_view_from_exif(tmp_path, capsys, photos, tags, focal_px)
     acq = json.loads((tmp_path / "o" / "scene.json").read_text())
     assert acq["meta"]["acquisition"]["camera_model"] == "exif"
     assert acq["camera"]["vfov_deg"] == pytest.approx(math.degrees(2 * math.atan(H / 2 / focal_px)), abs=1e-6)
+    assert acq["meta"]["acquisition"]["inputs"]["exposure"] is None  # none in these tags
+
+
+def test_scene_records_the_exif_exposure(tmp_path, capsys, photos) -> None:
+    """ExposureTime, FNumber and ISOSpeedRatings (written by Pillow) are recorded, with the exposure value at
+    ISO 100: 1/125 s at f/8, ISO 400 is log2(64 x 125) - 2 = 10.97."""
+    tags = {0xA405: 28, 0x829A: 1 / 125, 0x829D: 8.0, 0x8827: 400}
+    jpeg = _jpeg_with_exif(photos["photo"], tmp_path / "photo.jpg", tags)
+    code, _, err = run(scene_main, capsys, jpeg, "--board", BOARD, "--ball-radius", "80mm",
+                       "--objective", photos["objective"], "--out", tmp_path / "o")
+    assert code == 0, err
+    got = json.loads((tmp_path / "o" / "scene.json").read_text())["meta"]["acquisition"]["inputs"]["exposure"]
+    assert got["exposure_time_s"] == pytest.approx(1 / 125) and got["f_number"] == 8.0 and got["iso"] == 400
+    assert got["ev100"] == pytest.approx(math.log2(64 * 125) - 2, abs=1e-9)
 
 
 #: A nearer, steeper view of the same scene: the board's perspective fixes the focal length to +-0.16 deg.

@@ -22,7 +22,7 @@ try:
     from ..acquisition._common import AcquisitionError, write_json, write_png8, write_png16_srgb
     from ..acquisition.boards import parse_board
     from ..acquisition.calibration import CameraIntrinsics
-    from ..acquisition.exif import exif_focal
+    from ..acquisition.exif import exif_exposure, exif_focal
     from ..acquisition.response import load_photo
     from .acquire import DEFAULT_BOARD
     from .args import (
@@ -280,6 +280,8 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         "camera": os.path.abspath(args.camera) if args.camera else None,
         "board": parse_board(args.board).to_dict(),
         "response": args.response,
+        # the photo's EXIF exposure (time, f-number, ISO, EV at ISO 100), to compare photos' linear values
+        "exposure": exif_exposure(args.photo),
     }
     if acq.mask is not None:  # rtloop-fit finds it beside scene.json and uses it unless given --mask
         acq.scene["meta"]["acquisition"]["mask"] = "mask.png"
