@@ -1338,6 +1338,26 @@ fn is_avx2_fma() -> bool {
 
 /// A ball resting on the floor with a second, smaller ball in its shadow, under `light` (a point light's
 /// position, or a directional light's direction with `sun`).
+/// `Fitness::with_pixel_footprint` or `Fitness::new`, as `footprint` says.
+#[allow(clippy::too_many_arguments)]
+fn with_or_without_footprint(
+    footprint: bool,
+    scene: &Scene,
+    layout: &ParamLayout,
+    target: &[f32],
+    pixels: Option<&[u32]>,
+    kind: LossKind,
+    clip: bool,
+    proj: Option<Projection>,
+) -> Fitness {
+    let ctor = if footprint {
+        Fitness::with_pixel_footprint
+    } else {
+        Fitness::new
+    };
+    ctor(scene, layout.clone(), target, pixels, kind, clip, proj).unwrap()
+}
+
 fn edge_scene(light: [f64; 3], sun: bool) -> Scene {
     let light = if sun {
         format!(
@@ -1429,21 +1449,16 @@ fn pixel_footprint_matches_a_supersampled_render_at_shadow_edges_and_terminators
         };
         let err = |f: Fitness| f.channel_losses(&x).iter().sum::<f64>() / (3 * edges.len()) as f64;
         let make = |footprint: bool| {
-            let ctor = if footprint {
-                Fitness::with_pixel_footprint
-            } else {
-                Fitness::new
-            };
-            ctor(
+            with_or_without_footprint(
+                footprint,
                 &scene,
-                layout.clone(),
+                &layout,
                 &fine,
                 Some(&edges),
                 LossKind::L1,
                 false,
                 None,
             )
-            .unwrap()
         };
         let (with, without) = (err(make(true)), err(make(false)));
         let mean: f64 = edges
@@ -1531,21 +1546,16 @@ fn a_footprint_fitness_at_pixel_centres_is_the_plain_fitness_bit_for_bit() {
         let proj = Projection::matte(vec![[(0.0, 50.0); 3]; scene.objects.len()]);
         for (kind, proj) in [(LossKind::L1, None), (LossKind::L1Projected, Some(proj))] {
             let make = |footprint: bool| {
-                let ctor = if footprint {
-                    Fitness::with_pixel_footprint
-                } else {
-                    Fitness::new
-                };
-                ctor(
+                with_or_without_footprint(
+                    footprint,
                     &scene,
-                    layout.clone(),
+                    &layout,
                     &target,
                     None,
                     kind,
                     true,
                     proj.clone(),
                 )
-                .unwrap()
             };
             let (plain, fine) = (make(false), make(true));
             let centres = fine.at_pixel_centres();

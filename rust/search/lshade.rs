@@ -578,30 +578,33 @@ where
             .into_iter()
             .map(|s| s.clamp(1e-8, 0.1))
             .collect();
-        let nm = match polish_obj {
-            None => nelder_mead(
-                obj,
+        // The polish on `polish_obj` starts from its own value at the search's best (one evaluation).
+        fn polish_on<Q: Objective + ?Sized>(
+            q: &Q,
+            bounds: &[(f64, f64)],
+            x0: &[f64],
+            f0: f64,
+            step: &[f64],
+            cfg: &LshadeConfig,
+        ) -> Result<super::nelder_mead::NelderMeadResult> {
+            nelder_mead(
+                q,
                 bounds,
-                &best,
-                best_f,
-                &step,
+                x0,
+                f0,
+                step,
                 cfg.polish_evaluations,
                 cfg.polish_x_tol,
-            )?,
+            )
+        }
+        let nm = match polish_obj {
+            None => polish_on(obj, bounds, &best, best_f, &step, cfg)?,
             Some(p) => {
                 let mut o = [0.0];
                 p.evaluate_alone(&best, &mut o);
                 best_f = if o[0].is_nan() { f64::INFINITY } else { o[0] };
                 evaluations += 1;
-                nelder_mead(
-                    p,
-                    bounds,
-                    &best,
-                    best_f,
-                    &step,
-                    cfg.polish_evaluations,
-                    cfg.polish_x_tol,
-                )?
+                polish_on(p, bounds, &best, best_f, &step, cfg)?
             }
         };
         evaluations += nm.evaluations;
