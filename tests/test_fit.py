@@ -31,10 +31,11 @@ def _products(d: dict) -> dict[str, np.ndarray]:
     return {o["name"]: light * np.array(o["material"]["albedo"]) for o in d["objects"]}
 
 
-def _photo(truth: dict) -> np.ndarray:
+def _photo(truth: dict, footprint: bool = True) -> np.ndarray:
     """What a camera would record of the scene: rtloop's render as the default fit models pixels (the
-    pixel footprint), saturated at 1."""
-    return np.minimum(rtloop.render(truth, footprint=True), 1.0)
+    pixel footprint; ``footprint=False``: at pixel centres, as the fitness evaluates by default), saturated
+    at 1."""
+    return np.minimum(rtloop.render(truth, footprint=footprint), 1.0)
 
 
 def _wrong_start(truth: dict) -> dict:
@@ -249,7 +250,7 @@ def test_srgb_space_recovers_a_self_rendered_scene(ball_scene):
 def test_projected_fitness_equals_l1_at_the_solved_products(ball_scene):
     """Variable projection: the closed-form loss is the plain L1 loss of the scene with the solved products."""
     truth = ball_scene
-    photo = _photo(truth)
+    photo = _photo(truth, footprint=False)
     scene = rtloop.load_scene(_wrong_start(truth))
     from rtloop.fit import _product_bounds
     pb = _product_bounds(scene)

@@ -221,17 +221,18 @@ def fit(
         model=model,
         reference=pinned,
     )
-    # One render at the optimum for the uncertainty (pixel centres: its finite differences are), and the
-    # model the fit compared with the photo for the goodness of fit.
-    at_optimum = _native.render(current, current.width, current.height, 1)
-    as_compared = at_optimum if footprint == "off" else _native.render(current, current.width, current.height, 1,
-                                                                       True)
+    # The model the fit compared with the photo, for the goodness of fit and the uncertainty's residual, and
+    # (the same where the fit took no footprint) the pixel-centre render its finite differences start from.
+    as_compared = _native.render(current, current.width, current.height, 1, footprint != "off")
+    with_sigma = uncertainty not in (False, "off")
+    at_optimum = as_compared if footprint == "off" or not with_sigma else _native.render(
+        current, current.width, current.height, 1)
     result.goodness = goodness(current, target, use, clip=clip, render=as_compared)
     doubts += _at_bounds(current, all_paths)
     for d in doubts:
         warnings.warn(d, RtloopWarning, stacklevel=2)
     result.warnings = doubts
-    if uncertainty not in (False, "off"):
+    if with_sigma:
         from ..uncertainty import estimate_uncertainty
 
         try:
