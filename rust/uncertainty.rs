@@ -5,6 +5,7 @@
 use crate::error::{Error, Result};
 use crate::render::render;
 use crate::scene::Scene;
+use rayon::prelude::*;
 
 /// What one side of a difference is: a scene to render, or the optimum's used values `f0`.
 pub enum Side<'a> {
@@ -41,9 +42,31 @@ fn used_values(
     }
 }
 
+/// The least jump, as a fraction of a pixel's value, that [`one_sided_disagree`] counts: a smooth f's two
+/// sides differ by |f''| h^2, about (h / d)^2 ~ 1e-6 of f at steps of 1e-3 of the range (d the light's
+/// distance), a thousand times below; a jump of this size makes a central difference jump / 2h, about
+/// half a smooth derivative's 2 f / d, and a larger one more.
+pub const JUMP_FRACTION: f64 = 1e-3;
+
+/// Whether a step's two sides disagree like a jump, not like a smooth function: the forward change
+/// `up - at` and the backward `at - down` (values, f64 from f32) differ by more than half their sizes
+/// together and by more than [`JUMP_FRACTION`] of the largest of the three values. A shadow edge or the
+/// terminator crossing the pixel inside one side makes that side's change the pixel's direct light and
+/// the other's a smooth one's, and the central difference there a jump / 2h that the Gauss-Newton model
+/// cannot represent. A smooth f's sides differ by f'' h^2 against |f'| h each: not a jump, also where f'
+/// vanishes (a floor under a sun the step turns about its symmetry axis), by the second condition.
+pub fn one_sided_disagree(up: f64, at: f64, down: f64) -> bool {
+    let (forward, backward) = (up - at, at - down);
+    let gap = (forward - backward).abs();
+    gap > 0.5 * (forward.abs() + backward.abs())
+        && gap > JUMP_FRACTION * up.abs().max(at.abs()).max(down.abs())
+}
+
 /// d f / d theta_k over the used pixels' channels: (f(up) - f(down)) / `denom` in f64 from the f32
 /// values, a side at the optimum taken from `f0`. Renders at spp 1 and the scene's size; pixels whose
-/// value crosses 1 inside the step (with `clip`) are marked in `kink`.
+/// value crosses 1 inside the step (with `clip`) are marked in `kink`. With both sides rendered, a pixel
+/// whose forward and backward changes in a `free` channel disagree like a jump
+/// ([`one_sided_disagree`]: a shadow edge or the terminator crossed inside the step) is marked in `jump`.
 #[allow(clippy::too_many_arguments)]
 pub fn fd_column(
     up: Side<'_>,
@@ -55,6 +78,7 @@ pub fn fd_column(
     clip: bool,
     denom: f64,
     kink: &mut [bool],
+    jump: &mut [bool],
     out: &mut [f64],
 ) -> Result<()> {
     let n = 3 * idx.len();
@@ -63,13 +87,15 @@ pub fn fd_column(
         || free.len() != n
         || out.len() != n
         || kink.len() != idx.len()
+        || jump.len() != idx.len()
     {
         return Err(Error::Invalid(format!(
-            "fd_column: {} used pixels need f0, clipped0, free and out of {n} values and kink of {} \
-             (got {}, {}, {}, {}, {})",
-            idx.len(), idx.len(), f0.len(), clipped0.len(), free.len(), out.len(), kink.len()
+            "fd_column: {} used pixels need f0, clipped0, free and out of {n} values and kink and jump of \
+             {} (got {}, {}, {}, {}, {}, {})",
+            idx.len(), idx.len(), f0.len(), clipped0.len(), free.len(), out.len(), kink.len(), jump.len()
         )));
     }
+    let both = matches!((&up, &down), (Side::Render(_), Side::Render(_)));
     let values = |side: Side<'_>, kink: &mut [bool]| -> Result<Vec<f32>> {
         Ok(match side {
             Side::Optimum => f0.to_vec(),
@@ -91,6 +117,13 @@ pub fn fd_column(
     let fm = values(down, kink)?;
     for j in 0..n {
         out[j] = (f64::from(fp[j]) - f64::from(fm[j])) / denom;
+    }
+    if both {
+        for (i, hit) in jump.iter_mut().enumerate() {
+            *hit |= (3 * i..3 * i + 3).any(|j| {
+                free[j] && one_sided_disagree(f64::from(fp[j]), f64::from(f0[j]), f64::from(fm[j]))
+            });
+        }
     }
     Ok(())
 }
@@ -115,13 +148,18 @@ pub fn block_scores(
         )));
     }
     let mut g = vec![0f64; rows.len() * blocks];
-    for (a, &k) in rows.iter().enumerate() {
-        let row = &jt[k * m..(k + 1) * m];
-        let acc = &mut g[a * blocks..(a + 1) * blocks];
-        for i in 0..m {
-            acc[block_of[i / 3]] += row[i] * r[i];
-        }
+    if blocks == 0 {
+        return Ok(g);
     }
+    // one row per task: each row's sums keep their order, so the values do not depend on the threads
+    g.par_chunks_mut(blocks)
+        .zip(rows.par_iter())
+        .for_each(|(acc, &k)| {
+            let row = &jt[k * m..(k + 1) * m];
+            for (i, (&j, &ri)) in row.iter().zip(r).enumerate() {
+                acc[block_of[i / 3]] += j * ri;
+            }
+        });
     Ok(g)
 }
 
@@ -143,7 +181,7 @@ mod tests {
     #[test]
     fn fd_column_of_the_optimum_on_both_sides_is_zero_and_checks_lengths() {
         let f0 = [0.5f32, 0.25, 1.0];
-        let (mut kink, mut out) = (vec![false], vec![9.0; 3]);
+        let (mut kink, mut jump, mut out) = (vec![false], vec![false], vec![9.0; 3]);
         fd_column(
             Side::Optimum,
             Side::Optimum,
@@ -154,11 +192,12 @@ mod tests {
             true,
             2.0,
             &mut kink,
+            &mut jump,
             &mut out,
         )
         .unwrap();
         assert_eq!(out, vec![0.0; 3]);
-        assert!(!kink[0]);
+        assert!(!kink[0] && !jump[0]);
         assert!(fd_column(
             Side::Optimum,
             Side::Optimum,
@@ -169,8 +208,31 @@ mod tests {
             true,
             1.0,
             &mut kink,
+            &mut jump,
             &mut out
         )
         .is_err());
+    }
+
+    #[test]
+    fn a_jump_on_one_side_disagrees_and_a_smooth_step_does_not() {
+        // a lit pixel (0.4) that a shadow edge reaches inside the forward step: 0.0 there
+        assert!(one_sided_disagree(0.0, 0.4, 0.401));
+        assert!(one_sided_disagree(0.4, 0.0, 0.0)); // the shadow leaves it inside the forward step
+                                                    // smooth: 1/d^2 at d = 2.99, 3, 3.01 (curvature h f'' = 1 % of the change)
+        let f = |d: f64| 1.0 / (d * d);
+        assert!(!one_sided_disagree(f(3.01), f(3.0), f(2.99)));
+        // linear, and a pixel the step does not change, float32 rounding aside
+        assert!(!one_sided_disagree(0.3, 0.2, 0.1));
+        let v = 0.3f32;
+        assert!(!one_sided_disagree(
+            f64::from(v),
+            f64::from(v + f32::EPSILON / 4.0),
+            f64::from(v)
+        ));
+        // a stationary smooth pixel: cos of an angle the step turns by 1e-3 rad either side of 0
+        assert!(!one_sided_disagree(1e-3f64.cos(), 1.0, 1e-3f64.cos()));
+        // a small jump still counts: 1 % of the value on one side
+        assert!(one_sided_disagree(0.396, 0.4, 0.4));
     }
 }

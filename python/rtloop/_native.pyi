@@ -67,6 +67,7 @@ def fd_column(
     clip: bool,
     denom: float,
     kink: npt.NDArray[np.bool_],
+    jump: npt.NDArray[np.bool_],
     out: npt.NDArray[np.float64],
 ) -> None: ...
 def block_scores(

@@ -187,7 +187,9 @@ fn composite<'py>(
 /// One finite-difference column of the uncertainty's Jacobian over the used pixels `idx`: renders `up`
 /// and `down` (None: the optimum's used values `f0`), writes (f(up) - f(down)) / `denom` (f64 from the
 /// f32 values, min(value, 1) with `clip`) into `out` and marks in `kink` the pixels whose value crosses 1
-/// (against `clipped0`) in a `free` channel; the GIL released throughout.
+/// (against `clipped0`) in a `free` channel, and in `jump` (both sides rendered) those whose forward and
+/// backward changes disagree like a jump (a shadow edge or the terminator crossed inside the step); the
+/// GIL released throughout.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
 fn fd_column<'py>(
@@ -201,6 +203,7 @@ fn fd_column<'py>(
     clip: bool,
     denom: f64,
     mut kink: PyReadwriteArray1<'py, bool>,
+    mut jump: PyReadwriteArray1<'py, bool>,
     mut out: PyReadwriteArray1<'py, f64>,
 ) -> PyResult<()> {
     fn side<'a>(s: &'a Option<Bound<'_, PyScene>>) -> Side<'a> {
@@ -216,10 +219,14 @@ fn fd_column<'py>(
         clipped0.as_slice()?,
         free.as_slice()?,
     );
-    let (kink, out) = (kink.as_slice_mut()?, out.as_slice_mut()?);
+    let (kink, jump, out) = (
+        kink.as_slice_mut()?,
+        jump.as_slice_mut()?,
+        out.as_slice_mut()?,
+    );
     py.detach(|| {
         core_uncertainty::fd_column(
-            up_s, down_s, f0, idx, clipped0, free, clip, denom, kink, out,
+            up_s, down_s, f0, idx, clipped0, free, clip, denom, kink, jump, out,
         )
     })?;
     Ok(())

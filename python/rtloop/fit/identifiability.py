@@ -60,8 +60,10 @@ def keep_undetermined(fitted: Scene, original: Scene, paths: list[str], ident: d
     """An object the fitted light leaves unlit in every visible pixel says nothing about its albedo (a
     sphere lit only from behind, one hidden by another): report it and keep the scene's own value.
     ``counts``: lit pixels per object when the search already knows them (else rendered here)."""
-    if "ambient" in paths or any(v != 0 for v in scene_to_dict(fitted)["ambient"]):
-        return fitted  # ambient light still shows the albedo
+    fd = scene_to_dict(fitted)
+    if ("ambient" in paths or any(v != 0 for v in fd["ambient"]) or any(fd.get("environment", [0.0] * 3))
+            or fd.get("interreflection", False)):
+        return fitted  # ambient or environment light, or the bounce, still shows the albedo
     if counts is None:
         counts = lit_pixel_counts(fitted)
     undetermined = []

@@ -14,7 +14,7 @@ from .. import _native
 from ..scene import Scene, scene_to_dict
 
 __all__ = ["albedo_derivative", "constant_term", "fix_gauge", "product_bounds", "product_range", "products", "products_of", "specular_product", "specular_range",
-           "split_products", "unit_light", "unit_lobes"]
+           "split_products", "unit_environment", "unit_light", "unit_lobes"]
 
 
 def products_of(d: dict[str, Any]) -> dict[str, np.ndarray]:
@@ -44,13 +44,16 @@ def specular_range(ilo: float, ihi: float, klo: float, khi: float) -> tuple[floa
     return ilo * klo, ihi * khi
 
 
-def unit_light(d: dict[str, Any]) -> np.ndarray:
-    """The render of scene dict ``d`` per unit product (red channel): unit light, albedo 1, no ambient, no
-    specular, exposure 1, black background. > 0 where the light reaches the surface a pixel shows."""
+def _unit_render(d: dict[str, Any], intensity: float, environment: float) -> np.ndarray:
+    """The red channel of scene dict ``d`` rendered with a white light of ``intensity``, a grey
+    environment of radiance ``environment``, every albedo 1, no specular, no ambient light, no
+    interreflection, exposure 1, a black background."""
     unit = {
         **d,
-        "light": {**d["light"], "intensity": 1.0, "color": [1.0, 1.0, 1.0]},
+        "light": {**d["light"], "intensity": intensity, "color": [1.0, 1.0, 1.0]},
         "ambient": [0.0, 0.0, 0.0],
+        "environment": [environment] * 3,
+        "interreflection": False,
         "exposure": 1.0,
         "background": [0.0, 0.0, 0.0],
         "objects": [{**o, "material": {"albedo": [1.0, 1.0, 1.0]}} for o in d["objects"]],
@@ -59,11 +62,34 @@ def unit_light(d: dict[str, Any]) -> np.ndarray:
     return _native.render(Scene(json.dumps(unit, allow_nan=False)))[..., 0]
 
 
-def albedo_derivative(d: dict[str, Any], c: int, unit: np.ndarray) -> np.ndarray:
-    """d render / d albedo in channel ``c`` of scene dict ``d``: exposure x (ambient + intensity x colour x
-    the unit-light render ``unit``)."""
+def unit_light(d: dict[str, Any]) -> np.ndarray:
+    """The render of scene dict ``d`` per unit product (red channel): the direct light alone, of unit
+    intensity, albedo 1, no ambient or environment light, no interreflection, no specular, exposure 1,
+    black background. > 0 exactly where the light reaches the surface a pixel shows."""
+    return _unit_render(d, 1.0, 0.0)
+
+
+def unit_environment(d: dict[str, Any]) -> np.ndarray:
+    """The scene's environment term per unit radiance (red channel): a grey environment of radiance 1
+    seen by surfaces of albedo 1 (occluded by the scene's own spheres and planes), no light, no
+    interreflection, exposure 1."""
+    return _unit_render(d, 0.0, 1.0)
+
+
+def albedo_derivative(d: dict[str, Any], c: int, unit: np.ndarray, unit_env: np.ndarray | None = None
+                      ) -> np.ndarray:
+    """d render / d albedo in channel ``c`` of scene dict ``d`` without interreflection (which makes the
+    render depend on the other objects' albedos too): exposure x (ambient + intensity x colour x the
+    unit-light render ``unit`` + environment x ``unit_env``, the unit-environment render, where the scene
+    has an environment)."""
     light_rgb = np.array(d["light"]["color"], float) * d["light"]["intensity"]
-    return d["exposure"] * (d["ambient"][c] + light_rgb[c] * unit)
+    out = d["ambient"][c] + light_rgb[c] * unit
+    env = d.get("environment", [0.0, 0.0, 0.0])[c]
+    if env:
+        if unit_env is None:
+            raise ValueError("albedo_derivative: the scene has an environment: pass unit_env")
+        out = out + env * unit_env
+    return d["exposure"] * out
 
 
 def unit_lobes(d: dict[str, Any], objects: set[int]) -> np.ndarray:

@@ -18,7 +18,7 @@ import numpy as np
 
 from .. import _native
 from ..errors import RtloopError
-from ..fit.products import albedo_derivative, unit_lobes
+from ..fit.products import albedo_derivative, unit_environment, unit_lobes
 from ..scene import Scene, load_scene, scene_to_dict
 from .linalg import _svd_scaled
 from .pixels import UsedPixels, used_pixels
@@ -67,7 +67,7 @@ def estimate_uncertainty(
     Returns a JSON-able dict: ``method`` ("gauss-newton"), ``names``, ``values`` (the parameters at the
     optimum; 0 for the direction angles), ``sigma`` ({name: float or None}), ``correlation`` (rows and
     columns in ``names`` order, None where a parameter is not determined), ``residual_rms``, ``pixels``
-    (used), ``excluded`` (saturated / silhouette / shadow-edge / clip-kink pixel counts, and saturated
+    (used), ``excluded`` (saturated / silhouette / shadow-edge / clip-kink / jump pixel counts, and saturated
     channels left out of pixels otherwise used), ``dof``,
     ``condition`` (of the column-scaled Jacobian over the determined parameters), ``parametrization``,
     ``step`` and ``warnings``; for a directional light also ``light_direction`` (the frame u, v and two
@@ -105,7 +105,7 @@ def estimate_uncertainty(
     steps = _steps(names, space.scale, step)
     if render is not None and np.shape(render) != target.shape:
         raise RtloopError(f"render: shape {np.shape(render)} does not match the scene's {target.shape}")
-    Jt, f0, kink = _jacobian(space, wd, px, steps, clip, warnings, render)
+    Jt, f0, kink, jump = _jacobian(space, wd, px, steps, clip, warnings, render)
     if compared is None and getattr(result, "settings", {}).get("footprint", "off") != "off":
         compared = _native.render(scene, scene.width, scene.height, 1, True)
     if compared is not None:
@@ -115,6 +115,7 @@ def estimate_uncertainty(
         f0 = (np.minimum(f0, np.float32(1.0)) if clip else f0).ravel()
     r0 = np.subtract(f0, np.take(target.reshape(-1, 3), px.idx, axis=0).ravel(), dtype=np.float64)
     n_kink = int(kink.sum())
+    kink = kink | jump  # left out alike
     drop = px.sat_u | kink[:, None]  # residuals left out
     if drop.any():  # zero rows: the same JᵀJ, QR and |r|² as without them
         rows = drop.ravel()
@@ -126,8 +127,9 @@ def estimate_uncertainty(
         "silhouette": int((px.silhouette & ~px.saturated).sum()),
         "shadow_edge": int((px.shadow_edge & ~px.saturated).sum()),
         "clip_kink": n_kink,
+        "jump": int(jump.sum()),
     }
-    n_pix = px.idx.size - n_kink
+    n_pix = px.idx.size - int(kink.sum())
     n_res = 3 * n_pix - excluded["saturated_channels"]
     rr = float(np.einsum("i,i->", r0, r0))  # not r0 @ r0: a threaded BLAS dot waits on the render's threads
     fit = _covariance(Jt, space, rr, n_res, warnings)
@@ -209,13 +211,18 @@ def _product_sigma(space: _Space, wd: dict[str, Any], fit: _Covariance | None, u
 
 
 def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarray, clip: bool,
-              warnings: list[str], at_optimum: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+              warnings: list[str], at_optimum: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The Jacobian's transpose over the used pixels' channels, the render there at the optimum (flat,
-    min(render, 1) with ``clip``; ``at_optimum`` when given, else rendered) and which used pixels sit on
-    the clip's kink.
+    min(render, 1) with ``clip``; ``at_optimum`` when given, else rendered), which used pixels sit on
+    the clip's kink and which on a jump.
 
     Central differences (one-sided where a step would cross a bound). With ``clip``, a pixel whose render
     crosses 1 inside a step in a channel that is not saturated sits on the clip's kink and is left out.
+    A pixel whose forward and backward changes of a rendered column disagree like a jump rather than a
+    smooth function's (a shadow edge or the terminator crossing it inside the step: the shadow-edge mask
+    holds the pixels on the edge at the optimum, a step moves a long shadow's edge further) is left out
+    too: its central difference would be the jump / 2h (``fd_column``).
     The image is linear in an albedo and in a specular: their columns are the exact derivatives (the
     unit-light render, scaled; the lobe alone), and a pixel is on the kink where that line crosses 1.
     """
@@ -232,6 +239,7 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
     clipped0 = raw0 >= 1.0
     P = len(names)
     kink = np.zeros(n, dtype=bool)
+    jump = np.zeros(n, dtype=bool)
     Jt = np.zeros((P, 3 * n))  # the Jacobian's transpose: one contiguous row per parameter
 
     def clipped(img: np.ndarray) -> np.ndarray:
@@ -248,8 +256,14 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
     idx_u32, clipped0_flat, free_flat = idx.astype(np.uint32), clipped0.ravel(), free_u.ravel()
     ids_u = np.take(px.ids.ravel(), idx)
     unit_u = np.take(px.unit.ravel(), idx).astype(np.float64)
+    # Interreflection makes an object's pixels depend on the other objects' albedos (and its own
+    # nonlinearly): its albedo and specular columns are rendered.
+    exact = EXACT_ALBEDO and not wd.get("interreflection", False)
+    env_u = None
+    if exact and space.albedo and any(wd.get("environment", [0.0, 0.0, 0.0])):
+        env_u = np.take(unit_environment(wd).ravel(), idx).astype(np.float64)
     lobe_u = None
-    if EXACT_ALBEDO and space.specular:
+    if exact and space.specular:
         lobe_u = np.take(unit_lobes(wd, set(space.specular.values())).reshape(-1, 3), idx, axis=0).astype(np.float64)
     pixels_of: dict[int, tuple[np.ndarray, ...]] = {}
     for k in range(P):
@@ -266,7 +280,7 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
         else:
             tm[k] -= h
             denom = h
-        if EXACT_ALBEDO and (k in space.albedo or k in space.specular):
+        if exact and (k in space.albedo or k in space.specular):
             if k in space.albedo:
                 o, c = space.albedo[k]
                 chans = slice(c, c + 1)
@@ -278,7 +292,7 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
             on, base, was, free = pixels_of[o]
             base, was, free = base[:, chans], was[:, chans], free[:, chans]  # views
             if k in space.albedo:
-                slope = albedo_derivative(wd, c, unit_u[on])[:, None]
+                slope = albedo_derivative(wd, c, unit_u[on], None if env_u is None else env_u[on])[:, None]
             else:  # d render / d specular: the lobe alone (albedo 0, specular 1)
                 slope = lobe_u[on]
             slope = slope * space.factor[k]  # per unit of the parameter
@@ -290,14 +304,23 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
                 slope = np.where(was, 0.0, slope)  # clipped at the optimum and on both sides: flat
             if moved:
                 Jt[k].reshape(-1, 3)[on, chans] = slope
-        else:  # both renders, the clip and the difference (float32 values, exact in float64) in the core
+        else:  # the renders, the clip and the difference (float32 values, exact in float64) in the core
+            if wd.get("interreflection", False) and (k in space.albedo or k in space.specular) and (up_ok or down_ok):
+                # An albedo or a specular moves no edge and the bounce makes the image a low-degree polynomial in
+                # it (the sender's albedo times the receiver's): one side, against the optimum's render, errs by
+                # h f'' / 2f' relative, under 1e-3, at half the renders (the clip's kink checked on that side).
+                if up_ok:
+                    tm, denom = theta0.copy(), h
+                else:
+                    tp, denom = theta0.copy(), h
             up, down = (work.with_params(space.native(t), paths) if t[k] != theta0[k] else None for t in (tp, tm))
-            _native.fd_column(up, down, f0, idx_u32, clipped0_flat, free_flat, clip, float(denom), kink, Jt[k])
+            _native.fd_column(up, down, f0, idx_u32, clipped0_flat, free_flat, clip, float(denom), kink, jump,
+                              Jt[k])
         if theta0[k] <= space.lo[k] or theta0[k] >= space.hi[k]:
             warnings.append(
                 f"{names[k]}: at its bound ({theta0[k]:.6g}); the Gauss-Newton sigma assumes an interior optimum"
             )
-    return Jt, f0, kink
+    return Jt, f0, kink, jump & ~kink
 
 
 @dataclass
