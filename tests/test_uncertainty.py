@@ -684,3 +684,29 @@ def test_the_sandwich_follows_the_fits_norm(ball_scene):
             ratios.append([rb["sigma"][n] / u["sigma"][n] for n in LIGHT])
         mean = np.array(ratios).mean(axis=0)
         assert np.all((mean >= 1.0) & (mean <= top)), (norm, mean.round(2))
+
+
+def test_l1_sandwich_falls_back_where_no_residual_is_near_zero():
+    """Where no residual within the bandwidth falls on the pixels a parameter acts on, the median regression's
+    bread cannot be formed (its curvature along that parameter is unresolved): the least-squares form serves,
+    said in ``norm``, with finite sigma and no NaN."""
+    from rtloop.uncertainty import _Covariance
+    from rtloop.uncertainty.sandwich import block_sandwich
+
+    w, h = 48, 36
+    n = w * h
+    rng = np.random.default_rng(3)
+    region = np.zeros(n, bool)
+    region[: n // 4] = True  # the top quarter
+    jt = np.stack([np.ones(3 * n), np.repeat(region, 3).astype(float)])
+    r0 = 0.01 * rng.normal(size=3 * n)
+    r0[np.repeat(region, 3)] = 5.0 * np.sign(rng.normal(size=3 * n // 4))  # far from zero, both signs
+    s2 = float(r0 @ r0) / (r0.size - 2)
+    fit = _Covariance({}, [], None, 2, s2 * np.linalg.inv(jt @ jt.T), np.ones(2, bool), np.arange(2))
+    out, robust = block_sandwich(jt, r0, np.arange(n), w, fit, s2, ["a", "b"], 8, norm="l1")
+    assert out["norm"] == "l2" and out["bandwidth"] is None
+    assert all(np.isfinite(out["sigma"][k]) and out["sigma"][k] > 0 for k in "ab")
+    assert np.isfinite(robust.cov).all()
+    r0[np.repeat(region, 3)] = 0.01 * rng.normal(size=3 * n // 4)  # the region near zero too: the L1 form
+    out, _ = block_sandwich(jt, r0, np.arange(n), w, fit, s2, ["a", "b"], 8, norm="l1")
+    assert out["norm"] == "l1" and out["bandwidth"] > 0
