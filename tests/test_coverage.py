@@ -1,7 +1,8 @@
-"""The error bars against the truth of the Mitsuba test photos (benches/coverage.py): the block sandwich
-covers the true light and the true colour products on photos the model does not describe exactly
-(environment, bounce, gloss, lamp, noise, JPEG), and, with the default fit's pixel footprint, the true light on
-the clean direct photos without inflating the bars."""
+"""The error bars against the truth of the Mitsuba test photos (benches/coverage.py): the block sandwich (of
+the fit's L1 norm, the median regression's) covers the true light and the true colour products on photos the
+model does not describe exactly (environment, bounce, gloss, lamp, noise, JPEG), and, with the default fit's
+pixel footprint, the true light and the colour products on the clean direct photos without inflating the
+bars."""
 
 from __future__ import annotations
 
@@ -40,18 +41,21 @@ def test_mismatch_photos_are_covered_within_one_sigma(rows):
     """32 mismatch photos (10 Mitsuba renders with terms or lights the model lacks, 22 direct photos with
     2 % noise or JPEG 40), 96 light coordinates: the true value within 1 sandwich sigma for 40-90 % (about
     68 % for a calibrated normal: not hugely inflated). Gauss-Newton, which treats pixels as independent,
-    covers far fewer within 3: the test can fail. Measured with the footprint default: sandwich 64 % within 1
-    sigma; Gauss-Newton 49 % within 3."""
+    covers far fewer within 3: the test can fail. Measured with the footprint default: sandwich 69 % within 1
+    sigma (64 % with the least-squares form of the sandwich); Gauss-Newton 49 % within 3."""
     assert sum(r["class"] == "mismatch" for r in rows) == 32
     assert 0.40 <= _within(rows, "mismatch", "robust", 1) <= 0.90
     assert _within(rows, "mismatch", "gn", 3) < 0.6
 
 
 def test_mismatch_photos_are_covered_within_three_sigma(rows):
-    """The same 96 light coordinates within 3 sandwich sigma for >= 85 % of them (measured 97 %, 81 % within
-    1 sigma). It was 83 % while the environment and bounce photos' shadow edges went unfound (their unit
-    render lit every pixel) and the pixels a shadow edge crosses within a step entered the Jacobian with a
-    jump / 2h (env-overhead z 6.0, now 2.1; benches/results/coverage.md)."""
+    """The same 96 light coordinates within 3 sandwich sigma for >= 85 % of them (the issue's target).
+    Two changes made it: the uncertainty finds the environment and bounce photos' shadow edges (their unit
+    render lit every pixel) and leaves out the pixels a shadow edge crosses within a step (they entered the
+    Jacobian with a jump / 2h: env-overhead z 6.0); and the sandwich follows the fit's L1 norm (median
+    regression: the model error leaves large residuals of one sign over regions, which an L1 fit weighs by
+    their density at zero, not their size). Before both: 83 %; each alone: 97 % and 91 %
+    (benches/results/coverage.md)."""
     assert _within(rows, "mismatch", "robust", 3) >= 0.85
 
 
@@ -60,7 +64,7 @@ def test_mismatch_colour_products_are_covered_within_three_sigma(rows):
     against the truth's; 231 of them), with the sandwich's ``product_sigma`` (the light's uncertainty
     propagated: the products parameters' own where those are fitted, through the intensity and albedos'
     covariance where interreflection fixes the intensity): >= 85 % within 3 sigma, 40-90 % within 1.
-    Measured with the footprint default: 95 % and 56 %; Gauss-Newton 52 % and 29 %."""
+    Measured with the footprint default: 94 % and 61 %; Gauss-Newton 52 % and 29 %."""
     assert _within(rows, "mismatch", "robust", 3, products=True) >= 0.85
     assert 0.40 <= _within(rows, "mismatch", "robust", 1, products=True) <= 0.90
     assert _within(rows, "mismatch", "gn", 3, products=True) < 0.6
@@ -69,10 +73,8 @@ def test_mismatch_colour_products_are_covered_within_three_sigma(rows):
 def test_clean_photos_are_covered_and_not_inflated(bench, rows):
     """The 11 clean direct photos (33 light coordinates) with the default fit (its polish takes the pixel
     footprint): the true light within 3 sandwich sigma for >= 95 % of the coordinates, and the median sigma
-    at most 3x the median actual error (not inflated; measured 97 % and 0.96). Fitted at pixel centres
-    (``footprint="off"``) the
-    renderers' footprint difference is an error the residual of a noise-free photo hardly shows (82 %,
-    median ratio 0.48; benches/results/coverage.md); Gauss-Newton's sigma covers far fewer here too."""
+    at most 3x the median actual error (not inflated; measured 97 % and 1.20, 52 % within 1 sigma).
+    Gauss-Newton's sigma covers far fewer here (45 %)."""
     clean = [r for r in rows if r["class"] == "clean"]
     assert len(clean) == 11
     assert _within(clean, "clean", "robust", 3) >= 0.95
@@ -81,12 +83,21 @@ def test_clean_photos_are_covered_and_not_inflated(bench, rows):
     assert _within(clean, "clean", "gn", 3) < 0.8
 
 
+def test_clean_colour_products_are_covered_within_three_sigma(rows):
+    """The clean photos' 84 colour products within 3 sandwich sigma for >= 85 % (the issue's target for
+    photos with known truth; the light's 95 % on clean photos is not reached): measured 87 % (75 % with the
+    least-squares form), 32 % within 1 sigma, median sigma 0.65x the median error: the renderers' shading
+    difference spread evenly over a ball (README) is still partly unseen. Gauss-Newton: 42 %."""
+    assert _within(rows, "clean", "robust", 3, products=True) >= 0.85
+    assert _within(rows, "clean", "gn", 3, products=True) < 0.6
+
+
 def test_the_bootstrap_covers_the_clean_photos(bench):
     """The thorough mode (``uncertainty="bootstrap"``) on the 11 clean direct photos fitted at pixel centres
-    (``footprint="off"``, where the sandwich covers 82 % of the light coordinates and 60 % of the products): the
-    true light within 3 bootstrap sigma for >= 95 % of the 33 coordinates, the median sigma at most 3x the
-    median error (not inflated), and the 84 products within 3 sigma for >= 85 % (the issue's 95 % is not
-    reached: measured 97 %, 0.84 and 92 %)."""
+    (``footprint="off"``, where the sandwich covers 91 % of the light coordinates, 82 % with its least-squares
+    form): the true light within 3 bootstrap sigma for >= 95 % of the 33 coordinates and more than the
+    sandwich, the median sigma at most 3x the median error (not inflated), and the 84 products within 3 sigma
+    for >= 85 % (the issue's 95 % is not reached: measured 97 %, 0.84 and 92 %)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         rows = [bench.run_case(*c, footprint="off", bootstrap=True) for c in bench.cases() if c[1] == "clean"]
@@ -94,4 +105,5 @@ def test_the_bootstrap_covers_the_clean_photos(bench):
     _, _, _, ratio = bench._stats(rows, "z_boot", "sigma_boot_mm")
     assert ratio <= 3.0
     assert _within(rows, "clean", "boot", 3, products=True) >= 0.85
-    assert _within(rows, "clean", "robust", 3) < 0.9  # the same fits' sandwich: the bootstrap adds coverage
+    # the same fits' sandwich covers fewer: the bootstrap adds coverage
+    assert _within(rows, "clean", "robust", 3) < _within(rows, "clean", "boot", 3)

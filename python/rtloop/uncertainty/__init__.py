@@ -22,7 +22,7 @@ from ..fit.products import albedo_derivative, unit_environment, unit_lobes
 from ..scene import Scene, load_scene, scene_to_dict
 from .linalg import _svd_scaled
 from .pixels import UsedPixels, used_pixels
-from .sandwich import block_sandwich, block_side
+from .sandwich import block_sandwich, block_side, sandwich_norm
 from .space import _products_blocker, _products_space, _scene_space, _Space
 
 __all__ = ["estimate_uncertainty"]
@@ -71,8 +71,9 @@ def estimate_uncertainty(
     channels left out of pixels otherwise used), ``dof``,
     ``condition`` (of the column-scaled Jacobian over the determined parameters), ``parametrization``,
     ``step`` and ``warnings``; for a directional light also ``light_direction`` (the frame u, v and two
-    cone angles in degrees); ``robust``: the block sandwich's sigma (see :mod:`.sandwich`), which holds
-    when neighbouring residuals are correlated, with the light as a whole (``light_position_m``, the
+    cone angles in degrees); ``robust``: the block sandwich's sigma (see :mod:`.sandwich`: for an L1 fit
+    the median regression's, ``norm`` "l1" with its density ``bandwidth``), which holds when neighbouring
+    residuals are correlated, with the light as a whole (``light_position_m``, the
     largest axis; ``light_direction_deg``) and its cost, ``seconds``. ``product_sigma`` (and
     ``robust["product_sigma"]``): the sigma of every diffuse product ``products.<object>.<r|g|b>``
     (exposure x intensity x colour x albedo) in either parametrization, propagated from the scene parameters'
@@ -159,7 +160,8 @@ def estimate_uncertainty(
         out["light_direction"] = _direction_cone(space, fit)
     s2 = rr / dof if dof > 0 else 0.0
     robust, robust_fit = block_sandwich(Jt, r0, px.idx, scene.width, fit, s2, names,
-                                        block_side(scene.width, scene.height))
+                                        block_side(scene.width, scene.height),
+                                        norm=sandwich_norm(getattr(result, "settings", {})))
     if space.direction is not None:
         robust["light_direction_deg"] = (_direction_cone(space, robust_fit)["angle_deg"]
                                          if robust_fit is not None else None)

@@ -1,10 +1,22 @@
 """The block sandwich covariance: error bars that hold when neighbouring residuals are correlated (blur,
-JPEG, demosaicing, a model that misses a smooth term), from the score contributions summed over image blocks."""
+JPEG, demosaicing, a model that misses a smooth term), from the score contributions summed over image blocks.
+
+For a fit that minimised least squares the scores are J_i r_i and the bread (JᵀJ)⁺. A fit that minimised
+the L1 norm (the default) is a median regression: its scores are J_i sign(r_i) and its bread the inverse of
+H = 2 Σ_i f_i(0) J_i J_iᵀ, f_i(0) the density of pixel i's residual at zero, from Powell's kernel
+estimate Σ_{|r_i| <= h} J_i J_iᵀ / (2h) of Σ_i f_i(0) J_i J_iᵀ, with the Hall-Sheather bandwidth h (the cluster-robust quantile
+regression covariance: J. L. Powell 1991; J. A. F. Machado, P. M. D. C. Parente and J. M. C. Santos Silva,
+"Quantile regression with clustered data", J. Econometric Methods 2016; R. Koenker, "Quantile Regression",
+2005, 3.4). It describes the estimator the fit used: under a model error the residuals of a region are large
+and of one sign, so their density at zero is small and their signs are correlated over the region, both of
+which the least-squares form, weighting each residual by its size, does not see."""
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import replace
+from statistics import NormalDist
 from typing import Any
 
 import numpy as np
@@ -14,6 +26,9 @@ from .. import _native
 #: Smallest side of the square image blocks (pixels) whose score contributions are summed; the side is
 #: the larger of this and a sixth of the image's short side (model error is correlated on an object's scale).
 BLOCK_PX = 8
+#: The L1 bread's density-weighted Gram matrix (unit diagonal) counts as singular below this ratio of its
+#: eigenvalues: the Gauss-Newton decomposition's RCOND (1e-4 on singular values), squared.
+RCOND_L1 = 1e-8
 
 
 def block_side(width: int, height: int) -> int:
@@ -21,17 +36,44 @@ def block_side(width: int, height: int) -> int:
     return max(BLOCK_PX, min(width, height) // 6)
 
 
-def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, fit: Any, s2: float,
-                   names: list[str], block: int) -> tuple[dict[str, Any], Any]:
-    """A (Σ_b g_b g_bᵀ) A with A = (JᵀJ)⁺ and g_b = Σ_{i in block b} J_i r_i, with the small-sample factor
-    B / (B - p) over the B blocks that hold used pixels. Each sigma is the larger of this and the
-    Gauss-Newton one (the sandwich is the noisier estimate; with white residuals both agree).
+def hall_sheather(r: np.ndarray, alpha: float = 0.05) -> float:
+    """The Hall-Sheather bandwidth for the density of residuals ``r`` at their median (as R's quantreg
+    ``summary.rq``): in quantiles h_q = n^(-1/3) z_(1-alpha/2)^(2/3) (1.5 phi(0)^2)^(1/3), in residual units
+    h = kappa (Phi^-1(0.5 + h_q) - Phi^-1(0.5 - h_q)), kappa = min(sd, IQR / 1.34). 0 when it cannot be formed."""
+    n = r.size
+    if n < 2:
+        return 0.0
+    nd = NormalDist()
+    hq = n ** (-1.0 / 3.0) * nd.inv_cdf(1 - alpha / 2) ** (2.0 / 3.0) * (1.5 * nd.pdf(0.0) ** 2) ** (1.0 / 3.0)
+    hq = min(hq, 0.49)
+    lo, hi = (n - 1) // 4, (3 * (n - 1)) // 4  # the quartiles to one order statistic: a selection, no sort
+    q = np.partition(r, (lo, hi))
+    kappa = min(float(np.sqrt(np.einsum("i,i->", r, r) / n - (r.sum() / n) ** 2)), float(q[hi] - q[lo]) / 1.34)
+    return float(kappa * (nd.inv_cdf(0.5 + hq) - nd.inv_cdf(0.5 - hq))) if kappa > 0 and math.isfinite(kappa) else 0.0
 
-    Returns the JSON-able block and a copy of ``fit`` carrying the robust covariance (None where it cannot
-    be formed: too few blocks for the parameters)."""
+
+def sandwich_norm(settings: dict[str, Any]) -> str:
+    """The sandwich's form for a fit's ``settings``: "l1" for an L1 fit compared in linear space (the
+    default), else "l2" (least squares; also for an sRGB comparison, whose L1 scores would carry the
+    encoding's slope, and for other norms, which the least-squares form approximates)."""
+    return "l1" if settings.get("norm") == "l1" and settings.get("space", "linear") == "linear" else "l2"
+
+
+def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, fit: Any, s2: float,
+                   names: list[str], block: int, norm: str = "l2") -> tuple[dict[str, Any], Any]:
+    """A (Σ_b g_b g_bᵀ) A over the B blocks that hold used pixels, with the small-sample factor B / (B - p).
+    ``norm`` "l2" (least squares): A = (JᵀJ)⁺, g_b = Σ_{i in block b} J_i r_i. ``norm`` "l1" (the fit's
+    default; see the module): A = H⁺, H = Σ_{|r_i| <= h} J_i J_iᵀ / h (twice Powell's), g_b = Σ_{i in b} J_i sign(r_i),
+    h the Hall-Sheather bandwidth of the used residuals; where H cannot be formed (no residual within h, or
+    H singular where JᵀJ is not) the least-squares form. Each sigma is the larger of this and the
+    Gauss-Newton one (the sandwich is the noisier estimate).
+
+    Residual rows left out are zero in ``Jt`` and ``r0`` (they count in no sum). Returns the JSON-able
+    block and a copy of ``fit`` carrying the robust covariance (None where it cannot be formed: too few
+    blocks for the parameters)."""
     t0 = time.perf_counter()
-    out: dict[str, Any] = {"method": "sandwich-blocks", "block_px": int(block), "blocks": 0,
-                           "sigma": {n: None for n in names}, "inflation": {n: None for n in names},
+    out: dict[str, Any] = {"method": "sandwich-blocks", "norm": "l2", "bandwidth": None, "block_px": int(block),
+                           "blocks": 0, "sigma": {n: None for n in names}, "inflation": {n: None for n in names},
                            "light_position_m": None}
     if fit.cov is None:
         out["seconds"] = time.perf_counter() - t0
@@ -47,11 +89,16 @@ def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, 
     if nb <= p:
         out["seconds"] = time.perf_counter() - t0
         return out, None
+    bid = bid.astype(np.int64, copy=False)
+    a = _l1_bread(Jt, r0, fit, out) if norm == "l1" else None
     # the per-residual score contributions summed per block, in the core (as np.bincount would)
-    g = _native.block_scores(Jt, fit.idx_p.tolist(), r0, bid.astype(np.int64, copy=False), nb)
+    if a is not None:
+        g = _native.block_scores(Jt, fit.idx_p.tolist(), np.sign(r0), bid, nb)
+    else:
+        g = _native.block_scores(Jt, fit.idx_p.tolist(), r0, bid, nb)
+        # A photo the model explains exactly (zero residual): no spread at all, the Gauss-Newton zero.
+        a = fit.cov / s2 if s2 > 0 else np.zeros_like(fit.cov)
     meat = (g @ g.T) * (nb / (nb - p))
-    # A photo the model explains exactly (zero residual): no spread at all, the Gauss-Newton zero.
-    a = fit.cov / s2 if s2 > 0 else np.zeros_like(fit.cov)
     cov = a @ meat @ a
     cov = 0.5 * (cov + cov.T)
     var = np.maximum(np.diag(cov), np.diag(fit.cov))  # never below Gauss-Newton
@@ -69,3 +116,37 @@ def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, 
         out["light_position_m"] = float(np.sqrt(max(np.linalg.eigvalsh(cov[np.ix_(at, at)])[-1], 0.0)))
     out["seconds"] = time.perf_counter() - t0
     return out, replace(fit, cov=cov)
+
+
+def _l1_bread(Jt: np.ndarray, r0: np.ndarray, fit: Any, out: dict[str, Any]) -> np.ndarray | None:
+    """H⁺ for the median regression, H = Σ_{|r_i| <= h} J_i J_iᵀ / h over the determined parameters
+    (Powell's kernel estimate of the density-weighted Gram matrix, h the Hall-Sheather bandwidth of the
+    used residuals); None where it cannot be formed: then the least-squares bread serves. Notes the norm
+    and the bandwidth in ``out``."""
+    used = r0[r0 != 0.0]  # rows left out are exactly 0 (a used residual of exactly 0 counts in no sum either)
+    h = hall_sheather(used)
+    p = fit.idx_p.size
+    if not h > 0:
+        return None
+    small = np.flatnonzero((np.abs(r0) <= h) & (r0 != 0.0))
+    if small.size < p:
+        return None
+    js = Jt[:, small]  # the few columns first, then the determined rows: no copy of all of Jt
+    if fit.idx_p.size < Jt.shape[0]:
+        js = js[fit.idx_p]
+    hess = (js @ js.T) / h  # 2 x Powell's estimate of Σ f_i(0) J_i J_iᵀ: the scores are signs, not 1/2 - 1{r < 0}
+    # H is a weighted JᵀJ: singular only in the directions JᵀJ is (which the determined set excludes)
+    # unless no residual near zero falls where a parameter acts. Then the L1 objective is flat along it
+    # to this resolution, and the least-squares form is the safer estimate.
+    d = np.sqrt(np.diag(hess))
+    if not (np.isfinite(d).all() and (d > 0).all()):
+        return None
+    try:  # on unit-diagonal scaling, as the Gauss-Newton decomposition: the parameters' units differ
+        w, v = np.linalg.eigh(hess / np.outer(d, d))
+    except np.linalg.LinAlgError:
+        return None
+    if not (np.isfinite(w).all() and w[0] > RCOND_L1 * w[-1]):
+        return None
+    out["norm"] = "l1"
+    out["bandwidth"] = float(h)
+    return ((v / w) @ v.T) / np.outer(d, d)
