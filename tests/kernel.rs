@@ -1573,3 +1573,51 @@ fn a_footprint_fitness_at_pixel_centres_is_the_plain_fitness_bit_for_bit() {
         }
     }
 }
+
+/// With interreflection the search ranks lights with the bounce held (`Fitness::freeze_bounce`): a polish's
+/// lone candidate spreads its pixels over the pool, and must give the population path's value bit for bit
+/// on any number of threads; a bound below the value may stop the serial sum (above the bound), a bound
+/// above it may not change it.
+#[test]
+fn held_bounce_alone_gives_the_serial_value_on_any_thread_count() {
+    let mut rng = Rng::new(23);
+    for spheres in [1, 2] {
+        let mut scene = random_scene(&mut rng, spheres, false, false);
+        scene.interreflection = true;
+        let target = clipped_render(&scene);
+        let layout = ParamLayout::new(&scene, &["light.position".to_string()]).unwrap();
+        let bounds = vec![[(0.0, 200.0); 3]; scene.objects.len()];
+        let mut f = projected(
+            &scene,
+            layout.clone(),
+            &target,
+            Projection::matte(bounds),
+            true,
+        );
+        assert!(f.freeze_bounce(None), "a bounce to hold");
+        let mut xs: Vec<Vec<f64>> = (0..4)
+            .map(|_| random_candidate(&mut rng, &layout))
+            .collect();
+        xs.push(scene.light.position.to_vec());
+        for x in &xs {
+            let mut serial = [0.0];
+            f.evaluate(x, &mut serial);
+            assert!(serial[0].is_finite() && serial[0] >= 0.0);
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let mut alone = [0.0];
+                pool.install(|| f.evaluate_alone(x, &mut alone));
+                assert_eq!(serial[0].to_bits(), alone[0].to_bits(), "threads={threads}");
+            }
+            let mut above = [0.0];
+            f.evaluate_bounded(x, &mut above, serial[0] * 1.5 + 1.0);
+            assert_eq!(above[0].to_bits(), serial[0].to_bits());
+            let mut below = [0.0];
+            f.evaluate_bounded(x, &mut below, serial[0] * 0.5);
+            assert!(below[0] > serial[0] * 0.5 && below[0] <= serial[0] * (1.0 + 1e-12));
+        }
+    }
+}

@@ -7,13 +7,17 @@
 //! bounce is as bright as the albedos are, not only their products with the light). The solve is a fixed
 //! point: the products without the bounce, then twice the gauge u (least squares given the products, inside
 //! the intensity's and the albedos' bounds) and the products given u. Pass 2 is the loss at the result.
-//! Serial and without early exit: a fit uses it only for photos that select the term.
+//! The full fixed point is serial and without early exit (a fit solves it only where a pass starts and
+//! ends); the search's candidates, with the bounce held ([`Frozen`]), are spread over the pool for a lone
+//! candidate and stop early above their bound, as direct candidates do.
 
 use super::kernel::{Candidate, Kernel};
-use super::loss::{Encoding, SATURATED};
+use super::loss::{Encoding, Norm, LANES, SATURATED};
 use super::pixels::{Light, BLOCK};
-use super::projected::{Projection, Run, Solved};
+use super::projected::{Projection, Run, Solved, CHUNK};
+use super::simd::{self, Simd};
 use super::solve::{fallback_sums, solve_object, solve_object_env, SolveSums};
+use rayon::prelude::*;
 
 /// The gauge's bounds for the bounce: u = 1/intensity from the intensity's range, and each object's
 /// largest albedo per channel (ρ = P·u/g_c may not exceed it).
@@ -52,7 +56,7 @@ impl Kernel {
     /// [`Kernel::projected`] with the bounce (`proj.gauge` set). `scratch` ends as
     /// [a | b | a'_r | a'_g | a'_b] per pixel: unit-light diffuse and specular factors, and the diffuse
     /// columns with the bounce folded in, which [`Kernel::refine`] uses.
-    pub(crate) fn projected_bounce<const AVX2: bool, E: Encoding>(
+    pub(crate) fn projected_bounce<const AVX2: bool, E: Encoding + Send + Sync>(
         &self,
         c: Candidate,
         proj: &Projection,
@@ -95,6 +99,9 @@ impl Kernel {
                 })
             })
             .collect();
+        if let Some(f) = &gauge.frozen {
+            return self.projected_held::<AVX2, E>(c, proj, f, &runs, out, scratch, enc);
+        }
         // Pass 1: factors and the bounce-free products, and each sender's light at its points.
         let mut offsets = Vec::with_capacity(self.groups.len());
         let mut offset = 0;
@@ -107,9 +114,7 @@ impl Kernel {
                 &mut b_all[offset..offset + n],
             );
             offset += n;
-            gathered.push(if gauge.frozen.is_some() {
-                Vec::new()
-            } else {
+            gathered.push(
                 g.gathers
                     .iter()
                     .map(|gth| {
@@ -117,8 +122,8 @@ impl Kernel {
                         gth.light::<AVX2>(&light, &mut e);
                         Compact::new(gth, &e)
                     })
-                    .collect()
-            });
+                    .collect(),
+            );
             let (Some(run), Some(obj)) = (run, g.object) else {
                 continue;
             };
@@ -141,12 +146,8 @@ impl Kernel {
             );
         }
         // Each sphere's table points: their senders' light (unit light), for the second bounce.
-        let frozen_tables: &[Vec<super::pixels::Gather>] = if gauge.frozen.is_some() {
-            &[]
-        } else {
-            &self.tables
-        };
-        let table_light: Vec<Vec<Compact>> = frozen_tables
+        let table_light: Vec<Vec<Compact>> = self
+            .tables
             .iter()
             .map(|gths| {
                 gths.iter()
@@ -180,12 +181,7 @@ impl Kernel {
         // scene's own intensity.
         let mut u = gauge.u.0;
         let mut history: Vec<f64> = Vec::with_capacity(3);
-        let rounds = if gauge.frozen.is_some() {
-            0
-        } else {
-            gauge.rounds
-        };
-        for round in 0..rounds {
+        for round in 0..gauge.rounds {
             // B_o,c per pixel into a'_c (as B for now).
             for (gi, g) in self.groups.iter().enumerate() {
                 let (o0, n) = (offsets[gi], g.len());
@@ -292,43 +288,6 @@ impl Kernel {
                 self.solve_into(run, obj, &sums, proj, out, &a_all[o0..o0 + n], sat);
             }
         }
-        if let Some(f) = &gauge.frozen {
-            // The held bounce: a'_c = a + (u/g_c)·B_c from the reference, and the products given it.
-            u = f.u;
-            for (gi, g) in self.groups.iter().enumerate() {
-                let (o0, n) = (offsets[gi], g.len());
-                for c in 0..3 {
-                    let held = &f.bounce[c * n_px + o0..][..n];
-                    let col = &mut ab_all[c * n_px + o0..][..n];
-                    for i in 0..n {
-                        col[i] = a_all[o0 + i] + held[i];
-                    }
-                }
-                let (Some(run), Some(obj)) = (&runs[gi], g.object) else {
-                    continue;
-                };
-                let mut sums = SolveSums::default();
-                let b = run.is_specular().then_some(&b_all[o0..o0 + n]);
-                for c in 0..3 {
-                    let ac = &ab_all[c * n_px + o0..][..n];
-                    match (run.sky(), b) {
-                        (None, None) => sums.add_matte(c, ac, &g.ts[c], sat),
-                        (v, b) => {
-                            let zeros;
-                            let v = match v {
-                                Some(v) => v,
-                                None => {
-                                    zeros = vec![0.0f32; n];
-                                    &zeros
-                                }
-                            };
-                            sums.add_environment(c, ac, b, v, &g.ts[c], sat)
-                        }
-                    }
-                }
-                self.solve_into(run, obj, &sums, proj, out, &a_all[o0..o0 + n], sat);
-            }
-        }
         out.gauge = Some(u);
         // Pass 2: the loss at the products.
         let mut acc = [0.0f64; 3];
@@ -358,6 +317,155 @@ impl Kernel {
                     sum += self.norm.penalty(enc.any(v.min(top)) - gt[c][i]);
                 }
                 acc[c] += sum as f64;
+            }
+        }
+        acc
+    }
+
+    /// [`Kernel::projected_bounce`] with the bounce held ([`Frozen`]): per object, its unit-light factors,
+    /// a'_c = a + the held (u/g_c)·B_c, the products given a'_c and the loss at them. The sums are taken
+    /// per run of [`CHUNK`] pixels and added in order, so the value is the same serial or spread over the
+    /// pool (`c.parallel`, a polish's lone candidate) on any number of threads; serially the sum stops
+    /// once it exceeds `c.bound` (as the direct kernel's).
+    #[allow(clippy::too_many_arguments)]
+    fn projected_held<const AVX2: bool, E: Encoding + Send + Sync>(
+        &self,
+        c: Candidate,
+        proj: &Projection,
+        frozen: &Frozen,
+        runs: &[Option<Run>],
+        out: &mut Solved,
+        scratch: &mut [f32],
+        enc: E,
+    ) -> [f64; 3] {
+        let n_px = self.pixels;
+        let sat = if c.clip { SATURATED } else { f32::INFINITY };
+        let top = if c.clip { 1.0 } else { f32::INFINITY };
+        let w: [f64; 3] = std::array::from_fn(|c| proj.weight[c] as f64);
+        let (a_all, rest) = scratch.split_at_mut(n_px);
+        let (b_all, rest) = rest.split_at_mut(n_px);
+        let (ar_all, rest) = rest.split_at_mut(n_px);
+        let (ag_all, ab_all) = rest.split_at_mut(n_px);
+        out.gauge = Some(frozen.u);
+        let mut acc = [0.0f64; 3];
+        let mut o0 = 0;
+        for (g, run) in self.groups.iter().zip(runs) {
+            let n = g.len();
+            let range = o0..o0 + n;
+            o0 += n;
+            let gt = if E::ENCODES { &g.te } else { &g.t };
+            let (Some(run), Some(obj)) = (run, g.object) else {
+                for s in 0..n {
+                    for c in 0..3 {
+                        acc[c] += self.norm.penalty(gt[c][s]) as f64;
+                    }
+                }
+                continue;
+            };
+            let held: [&[f32]; 3] =
+                std::array::from_fn(|ch| &frozen.bounce[ch * n_px + range.start..][..n]);
+            let sky = run.sky();
+            let specular = run.is_specular();
+            // Pass 1, one run: the factors, a'_c, and the normal equations given a'_c.
+            let pass1 = |k: usize, a: &mut [f32], b: &mut [f32], ap: [&mut [f32]; 3]| {
+                let start = k * CHUNK;
+                let len = a.len();
+                simd::dispatch(
+                    HeldRun {
+                        run,
+                        start,
+                        e: a,
+                        b,
+                        held: std::array::from_fn(|ch| &held[ch][start..start + len]),
+                        cols: ap,
+                        ts: std::array::from_fn(|ch| &g.ts[ch][start..start + len]),
+                        sky: sky.map(|v| &v[start..start + len]),
+                        specular,
+                        sat,
+                    },
+                    AVX2,
+                )
+            };
+            let (a, b) = (&mut a_all[range.clone()], &mut b_all[range.clone()]);
+            let (ar, ag, ab) = (
+                &mut ar_all[range.clone()],
+                &mut ag_all[range.clone()],
+                &mut ab_all[range.clone()],
+            );
+            let parts: Vec<SolveSums> = if c.parallel {
+                a.par_chunks_mut(CHUNK)
+                    .zip(b.par_chunks_mut(CHUNK))
+                    .zip(ar.par_chunks_mut(CHUNK))
+                    .zip(ag.par_chunks_mut(CHUNK))
+                    .zip(ab.par_chunks_mut(CHUNK))
+                    .enumerate()
+                    .map(|(k, ((((a, b), r), gg), bb))| pass1(k, a, b, [r, gg, bb]))
+                    .collect()
+            } else {
+                a.chunks_mut(CHUNK)
+                    .zip(b.chunks_mut(CHUNK))
+                    .zip(ar.chunks_mut(CHUNK))
+                    .zip(ag.chunks_mut(CHUNK))
+                    .zip(ab.chunks_mut(CHUNK))
+                    .enumerate()
+                    .map(|(k, ((((a, b), r), gg), bb))| pass1(k, a, b, [r, gg, bb]))
+                    .collect()
+            };
+            let mut sums = SolveSums::default();
+            for part in &parts {
+                sums.add(part);
+            }
+            self.solve_into(run, obj, &sums, proj, out, &a_all[range.clone()], sat);
+            // Pass 2, one run: the loss at the products.
+            let pc: [f32; 3] = std::array::from_fn(|ch| out.products[obj][ch] as f32);
+            let ec: [f32; 3] =
+                std::array::from_fn(|ch| out.environment.get(obj).map_or(0.0, |e| e[ch]) as f32);
+            let qw: [f32; 3] = std::array::from_fn(|ch| (out.specular[obj] * w[ch]) as f32);
+            let sky = proj.sky(obj, g);
+            let (b, cols) = (
+                &b_all[range.clone()],
+                [
+                    &ar_all[range.clone()],
+                    &ag_all[range.clone()],
+                    &ab_all[range.clone()],
+                ],
+            );
+            let pass2 = |k: usize| {
+                let r = k * CHUNK..((k + 1) * CHUNK).min(n);
+                simd::dispatch(
+                    HeldLoss {
+                        cols: std::array::from_fn(|ch| &cols[ch][r.clone()]),
+                        b: &b[r.clone()],
+                        sky: sky.map(|v| &v[r.clone()]),
+                        t: std::array::from_fn(|ch| &gt[ch][r.clone()]),
+                        pc,
+                        qw,
+                        ec,
+                        top,
+                        norm: self.norm,
+                        enc,
+                    },
+                    AVX2,
+                )
+            };
+            let runs_n = n.div_ceil(CHUNK);
+            if c.parallel {
+                let parts: Vec<[f64; 3]> = (0..runs_n).into_par_iter().map(pass2).collect();
+                for part in &parts {
+                    for ch in 0..3 {
+                        acc[ch] += part[ch];
+                    }
+                }
+            } else {
+                for k in 0..runs_n {
+                    let part = pass2(k);
+                    for ch in 0..3 {
+                        acc[ch] += part[ch];
+                    }
+                    if acc[0] + acc[1] + acc[2] > c.bound {
+                        return acc;
+                    }
+                }
             }
         }
         acc
@@ -398,6 +506,186 @@ impl Kernel {
             let (pk, q) = solve_object(sums, proj.weight, &proj.diffuse[obj], qb, fallback);
             out.products[obj] = pk;
             out.specular[obj] = q;
+        }
+    }
+}
+
+/// Pass 1 of [`Kernel::projected_held`] over one run, for [`simd::dispatch`]: the unit-light factors
+/// (`e`, `b`), the diffuse columns a'_c = e + held_c (`cols`) and the normal-equation sums given them,
+/// taken in `SUM_LANES` partial sums.
+struct HeldRun<'a, 'r> {
+    run: &'a Run<'r>,
+    start: usize,
+    e: &'a mut [f32],
+    b: &'a mut [f32],
+    held: [&'a [f32]; 3],
+    cols: [&'a mut [f32]; 3],
+    ts: [&'a [f32]; 3],
+    sky: Option<&'a [f32]>,
+    specular: bool,
+    sat: f32,
+}
+
+/// The partial sums of a run's normal equations (f64 each).
+const SUM_LANES: usize = 4;
+
+impl Simd for HeldRun<'_, '_> {
+    type Output = SolveSums;
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) -> SolveSums {
+        let HeldRun {
+            run,
+            start,
+            e,
+            b,
+            held,
+            cols,
+            ts,
+            sky,
+            specular,
+            sat,
+        } = self;
+        run.factors::<AVX2>(start, e, b);
+        let n = e.len();
+        let full = n - n % SUM_LANES;
+        let zeros = [0.0f32; CHUNK];
+        let mut sums = SolveSums::default();
+        for (ch, col) in cols.into_iter().enumerate() {
+            let (h, t) = (&held[ch][..n], &ts[ch][..n]);
+            for i in 0..n {
+                col[i] = e[i] + h[i];
+            }
+            let col = &col[..n];
+            if sky.is_none() && !specular {
+                // Σ a'², Σ y·a' over the informing pixels (t < sat), SUM_LANES at a time.
+                let (mut aa, mut ya) = ([0.0f64; SUM_LANES], [0.0f64; SUM_LANES]);
+                let mut i = 0;
+                while i < full {
+                    for l in 0..SUM_LANES {
+                        let on = t[i + l] < sat;
+                        let a = if on { col[i + l] as f64 } else { 0.0 };
+                        let y = if on { t[i + l] as f64 } else { 0.0 };
+                        aa[l] += a * a;
+                        ya[l] += y * a;
+                    }
+                    i += SUM_LANES;
+                }
+                for (l, i) in (full..n).enumerate() {
+                    let on = t[i] < sat;
+                    let a = if on { col[i] as f64 } else { 0.0 };
+                    let y = if on { t[i] as f64 } else { 0.0 };
+                    aa[l] += a * a;
+                    ya[l] += y * a;
+                }
+                sums.saa[ch] += (aa[0] + aa[1]) + (aa[2] + aa[3]);
+                sums.sya[ch] += (ya[0] + ya[1]) + (ya[2] + ya[3]);
+            } else {
+                let v = sky.map_or(&zeros[..n], |v| &v[..n]);
+                let bb: &[f32] = if specular { &b[..n] } else { &zeros[..n] };
+                // the nine sums of `SolveSums::add_environment`, SUM_LANES at a time
+                let mut s = [[0.0f64; SUM_LANES]; 9];
+                let mut add = |l: usize, i: usize| {
+                    let on = t[i] < sat;
+                    let a = if on { col[i] as f64 } else { 0.0 };
+                    let y = if on { t[i] as f64 } else { 0.0 };
+                    let vi = if on { v[i] as f64 } else { 0.0 };
+                    let bi = if on { bb[i] as f64 } else { 0.0 };
+                    s[0][l] += a * a;
+                    s[1][l] += a * bi;
+                    s[2][l] += bi * bi;
+                    s[3][l] += y * a;
+                    s[4][l] += y * bi;
+                    s[5][l] += a * vi;
+                    s[6][l] += vi * vi;
+                    s[7][l] += y * vi;
+                    s[8][l] += vi * bi;
+                };
+                let mut i = 0;
+                while i < full {
+                    for l in 0..SUM_LANES {
+                        add(l, i + l);
+                    }
+                    i += SUM_LANES;
+                }
+                for (l, i) in (full..n).enumerate() {
+                    add(l, i);
+                }
+                let f = |k: usize| (s[k][0] + s[k][1]) + (s[k][2] + s[k][3]);
+                sums.saa[ch] += f(0);
+                sums.sab[ch] += f(1);
+                sums.sbb[ch] += f(2);
+                sums.sya[ch] += f(3);
+                sums.syb[ch] += f(4);
+                sums.sav[ch] += f(5);
+                sums.svv[ch] += f(6);
+                sums.syv[ch] += f(7);
+                sums.svb[ch] += f(8);
+            }
+        }
+        sums
+    }
+}
+
+/// Pass 2 of [`Kernel::projected_held`] over one run, for [`simd::dispatch`]: per channel
+/// Σ penalty(enc(min(P_c·a'_c + Q·w_c·b + E_c·v, top)) - t_c), in `LANES` partial sums.
+struct HeldLoss<'a, E> {
+    cols: [&'a [f32]; 3],
+    b: &'a [f32],
+    sky: Option<&'a [f32]>,
+    t: [&'a [f32]; 3],
+    pc: [f32; 3],
+    qw: [f32; 3],
+    ec: [f32; 3],
+    top: f32,
+    norm: Norm,
+    enc: E,
+}
+
+impl<E: Encoding> HeldLoss<'_, E> {
+    #[inline(always)]
+    fn sum(&self, f: impl Fn(f32) -> f32) -> [f64; 3] {
+        let (b, top, enc) = (self.b, self.top, self.enc);
+        let n = b.len();
+        let zeros = [0.0f32; CHUNK];
+        // no sky: E_c·0 adds +0 to a value >= +0 (products and factors are non-negative): the same value
+        let v = self.sky.map_or(&zeros[..n], |v| &v[..n]);
+        let full = if !E::ENCODES || top <= 1.0 {
+            n - n % LANES
+        } else {
+            0
+        };
+        let mut out = [0.0f64; 3];
+        for ch in 0..3 {
+            let (col, t) = (&self.cols[ch][..n], &self.t[ch][..n]);
+            let (pc, qw, ec) = (self.pc[ch], self.qw[ch], self.ec[ch]);
+            let mut lanes = [0.0f32; LANES];
+            let mut i = 0;
+            while i < full {
+                for l in 0..LANES {
+                    let m = pc * col[i + l] + qw * b[i + l] + ec * v[i + l];
+                    lanes[l] += f(enc.unit(m.min(top)) - t[i + l]);
+                }
+                i += LANES;
+            }
+            for (j, i) in (full..n).enumerate() {
+                let m = pc * col[i] + qw * b[i] + ec * v[i];
+                lanes[j % LANES] += f(enc.any(m.min(top)) - t[i]);
+            }
+            out[ch] = lanes.iter().sum::<f32>() as f64;
+        }
+        out
+    }
+}
+
+impl<E: Encoding> Simd for HeldLoss<'_, E> {
+    type Output = [f64; 3];
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) -> [f64; 3] {
+        match self.norm {
+            // one closure per norm with the norm a constant, so each loop vectorises on its own
+            Norm::L1 => self.sum(|d| Norm::L1.penalty(d)),
+            Norm::L2 => self.sum(|d| Norm::L2.penalty(d)),
+            Norm::Huber(h) => self.sum(move |d| Norm::Huber(h).penalty(d)),
         }
     }
 }

@@ -450,6 +450,21 @@ impl Fitness {
         true
     }
 
+    /// The bounce [`Fitness::freeze_bounce`] holds, if any.
+    pub fn frozen_bounce(&self) -> Option<std::sync::Arc<bounce::Frozen>> {
+        self.projection.as_ref()?.gauge.as_ref()?.frozen.clone()
+    }
+
+    /// Hold `frozen` (another fitness's [`Fitness::frozen_bounce`] over the same pixels, e.g. the
+    /// footprint fitness's for the pixel-centre one of the same set-up) while candidates are ranked.
+    pub fn hold_bounce(&mut self, frozen: std::sync::Arc<bounce::Frozen>) {
+        if let Some(live) = self.projection.as_mut().and_then(|p| p.gauge.as_mut()) {
+            if frozen.bounce.len() == 3 * self.kernel.pixels() {
+                live.frozen = Some(frozen);
+            }
+        }
+    }
+
     /// Penalise pixel differences with `norm` (L1 by default) in every loss of this fitness.
     pub fn set_norm(&mut self, norm: Norm) {
         self.kernel.norm = norm;

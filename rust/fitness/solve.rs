@@ -54,22 +54,6 @@ impl SolveSums {
         }
     }
 
-    /// The sums of channel `c` of a matte object without an environment column (Σaa, Σya: all that
-    /// [`solve_object`] reads then), as [`SolveSums::add_environment`] with no `b` and `v` = 0.
-    #[inline(always)]
-    pub(crate) fn add_matte(&mut self, c: usize, a: &[f32], t: &[f32], sat: f32) {
-        let (mut aa, mut ya) = (0.0f64, 0.0f64);
-        for (&ai, &yi) in a.iter().zip(t) {
-            if yi < sat {
-                let (ai, yi) = (ai as f64, yi as f64);
-                aa += ai * ai;
-                ya += yi * ai;
-            }
-        }
-        self.saa[c] += aa;
-        self.sya[c] += ya;
-    }
-
     /// Every sum of channel `c` over one run with an environment column: factors `a`, `b` (zero for a
     /// matte object), sky view `v`, objective `t` (pixels at or above `sat` left out).
     #[inline(always)]

@@ -431,11 +431,18 @@ fn optimize<'py>(
         finer: &mut Option<crate::Fitness>,
         at: Option<&[f64]>,
     ) -> bool {
-        let held = fitness.freeze_bounce(at);
-        if let Some(f) = finer.as_mut() {
-            f.freeze_bounce(at);
+        // One fixed point for both: the footprint fitness's bounce, held for the pixel-centre search as
+        // well (the same pixels; the bounce differs between the two only through their products).
+        match finer.as_mut() {
+            Some(f) => {
+                let held = f.freeze_bounce(at);
+                if let Some(frozen) = f.frozen_bounce() {
+                    fitness.hold_bounce(frozen);
+                }
+                held
+            }
+            None => fitness.freeze_bounce(at),
         }
-        held
     }
     let passes = if frozen_bounce > 0 && py.detach(|| freeze(&mut fitness, &mut finer, None)) {
         frozen_bounce

@@ -193,6 +193,152 @@ pub fn gather(p: Vec3A, n: Vec3A, own: usize, shapes: &[PShape], out: &mut Vec<G
     }
 }
 
+/// One gather point as a render keeps it: the point, its sender's table point (`u32::MAX` for a plane
+/// sender, which has no table) and, where the cache was built for a scene with environment light, the
+/// point's sky view (NaN otherwise): everything of a sender's radiance that does not depend on the light
+/// or the materials.
+#[derive(Clone, Copy, Debug)]
+pub struct CachedPoint {
+    pub point: GatherPoint,
+    pub table: u32,
+    pub sky: f32,
+}
+
+/// The light-independent part of one bounce render (`render::render_with`, one sample per pixel): per
+/// pixel centre its gather points, and per sphere the gather points of its table points (see
+/// [`TABLE`]). Every render with the same camera, image size and shapes gathers from the same points (a
+/// fit's uncertainty renders the scene eight times with the light moved), so the last one built is kept
+/// ([`Gathered::for_render`]) and a render with interreflection costs its shadow rays and shading, not
+/// the geometry again: the same values, bit for bit.
+#[derive(Debug)]
+pub struct Gathered {
+    key: Vec<u32>,
+    /// Pixel i's points are `points[offsets[i]..offsets[i + 1]]`.
+    offsets: Vec<u32>,
+    points: Vec<CachedPoint>,
+    /// Per shape: for a sphere, per table point, its points as `table_points[..]` ranges; empty otherwise.
+    tables: Vec<Vec<Vec<CachedPoint>>>,
+}
+
+/// The last [`Gathered`] built (one: a fit renders one geometry many times; another geometry replaces it).
+static LAST: std::sync::Mutex<Option<std::sync::Arc<Gathered>>> = std::sync::Mutex::new(None);
+
+impl Gathered {
+    /// Pixel `i`'s gather points.
+    #[inline]
+    pub fn pixel(&self, i: usize) -> &[CachedPoint] {
+        &self.points[self.offsets[i] as usize..self.offsets[i + 1] as usize]
+    }
+
+    /// Shape `k`'s table: per table point its gather points (empty for a plane).
+    pub fn table(&self, k: usize) -> &[Vec<CachedPoint>] {
+        self.tables.get(k).map_or(&[], |t| &t[..])
+    }
+
+    /// The gathers of a render of `width` x `height` pixel centres through `camera` (its scene's camera
+    /// settings, `camera_key`) over `shapes`, with the sky views when `sky`: the last one built if its
+    /// geometry is the same (bit for bit), else built (in parallel) and kept. `None` with a mesh.
+    pub fn for_render(
+        geometry: &super::hit::Geometry,
+        camera_key: [f64; 10],
+        (width, height): (u32, u32),
+        sky: bool,
+    ) -> Option<std::sync::Arc<Gathered>> {
+        use rayon::prelude::*;
+        let shapes = &geometry.shapes[..];
+        let mut key = vec![width, height, u32::from(sky)];
+        for v in camera_key {
+            let b = v.to_bits();
+            key.extend([b as u32, (b >> 32) as u32]);
+        }
+        for s in shapes {
+            match *s {
+                PShape::Sphere { center, radius } => {
+                    key.push(0);
+                    key.extend(center.to_array().map(f32::to_bits));
+                    key.push(radius.to_bits());
+                }
+                PShape::Plane { point, normal } => {
+                    key.push(1);
+                    key.extend(point.to_array().map(f32::to_bits));
+                    key.extend(normal.to_array().map(f32::to_bits));
+                }
+                PShape::Mesh(_) => return None,
+            }
+        }
+        if let Some(last) = LAST.lock().ok().and_then(|g| g.clone()) {
+            if last.key == key {
+                return Some(last);
+            }
+        }
+        let at: Vec<Vec<(Vec3A, Vec3A)>> = shapes
+            .iter()
+            .map(|s| match *s {
+                PShape::Sphere { center, radius } => table_points(center, radius),
+                _ => Vec::new(),
+            })
+            .collect();
+        let keep =
+            |own: usize, p: Vec3A, n: Vec3A, out: &mut Vec<GatherPoint>| -> Vec<CachedPoint> {
+                gather(p, n, own, shapes, out);
+                out.iter()
+                    .map(|g| CachedPoint {
+                        point: *g,
+                        table: if at[g.sender].is_empty() {
+                            u32::MAX
+                        } else {
+                            nearest_table(&at[g.sender], g.normal) as u32
+                        },
+                        sky: if sky {
+                            super::environment::sky_view(g.position, g.normal, g.sender, shapes)
+                        } else {
+                            f32::NAN
+                        },
+                    })
+                    .collect()
+            };
+        let rows: Vec<Vec<Vec<CachedPoint>>> = (0..height)
+            .into_par_iter()
+            .map(|j| {
+                let mut out = Vec::new();
+                (0..width)
+                    .map(|i| {
+                        let s = geometry.primary(i as f32 + 0.5, j as f32 + 0.5, width, height);
+                        if s.object == u32::MAX {
+                            Vec::new()
+                        } else {
+                            keep(s.object as usize, s.position, s.normal, &mut out)
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        let mut offsets = Vec::with_capacity((width * height) as usize + 1);
+        let mut points = Vec::new();
+        offsets.push(0u32);
+        for px in rows.into_iter().flatten() {
+            points.extend_from_slice(&px);
+            offsets.push(points.len() as u32);
+        }
+        let mut out = Vec::new();
+        let tables = at
+            .iter()
+            .enumerate()
+            .map(|(k, pts)| pts.iter().map(|&(y, n)| keep(k, y, n, &mut out)).collect())
+            .collect();
+        let built = std::sync::Arc::new(Gathered {
+            key,
+            offsets,
+            points,
+            tables,
+        });
+        if let Ok(mut g) = LAST.lock() {
+            *g = Some(built.clone());
+        }
+        Some(built)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -7,7 +7,7 @@
 
 use glam::Vec3A;
 
-use super::bounce::{gather, nearest_table, table_points, GatherPoint};
+use super::bounce::{gather, nearest_table, table_points, CachedPoint, GatherPoint, Gathered};
 use super::brdf::{blinn_phong, lambert, specular_scale};
 use super::environment::sky_view;
 use super::footprint::{sphere_edge_lit, terminator_cos};
@@ -153,6 +153,37 @@ impl ShadeParams {
         self.tables = tables;
     }
 
+    /// [`ShadeParams::prepare_bounce`] from a render's cached gathers (`bounce::Gathered`, built for
+    /// `shapes`): the same tables.
+    pub fn prepare_bounce_cached(&mut self, shapes: &[PShape], cache: &Gathered) {
+        self.tables.clear();
+        if !self.interreflection {
+            return;
+        }
+        let tables: Vec<_> = shapes
+            .iter()
+            .enumerate()
+            .map(|(k, shape)| match *shape {
+                PShape::Sphere { center, radius } => {
+                    let at = table_points(center, radius);
+                    let light = cache
+                        .table(k)
+                        .iter()
+                        .map(|points| {
+                            points
+                                .iter()
+                                .map(|c| c.point.form * sender_radiance_cached(c, self, shapes))
+                                .fold(Vec3A::ZERO, |a, b| a + b)
+                        })
+                        .collect();
+                    (at, light)
+                }
+                PShape::Plane { .. } | PShape::Mesh(_) => (Vec::new(), Vec::new()),
+            })
+            .collect();
+        self.tables = tables;
+    }
+
     fn update_flags(&mut self) {
         self.any_specular = self.materials.iter().any(|m| m.specular != 0.0);
     }
@@ -186,10 +217,36 @@ thread_local! {
 /// The radiance (before exposure) that the sender of `g` leaves at its representative point: its direct
 /// light (shadowed), environment and ambient, diffusely; not its own bounce.
 pub fn sender_radiance(g: &GatherPoint, p: &ShadeParams, shapes: &[PShape]) -> Vec3A {
+    sender_radiance_with(
+        g,
+        || sky_view(g.position, g.normal, g.sender, shapes),
+        |at| nearest_table(at, g.normal),
+        p,
+        shapes,
+    )
+}
+
+/// [`sender_radiance`] from a render's cached gather point (`bounce::Gathered`): its sky view and table
+/// point as kept, the same value.
+#[inline]
+pub fn sender_radiance_cached(c: &CachedPoint, p: &ShadeParams, shapes: &[PShape]) -> Vec3A {
+    sender_radiance_with(&c.point, || c.sky, |_| c.table as usize, p, shapes)
+}
+
+/// [`sender_radiance`] with the point's sky view (`sky`, called only with environment light) and its
+/// sender's nearest table point (`table`, called only for a sphere sender once tables are prepared).
+#[inline(always)]
+fn sender_radiance_with(
+    g: &GatherPoint,
+    sky: impl Fn() -> f32,
+    table: impl Fn(&[(Vec3A, Vec3A)]) -> usize,
+    p: &ShadeParams,
+    shapes: &[PShape],
+) -> Vec3A {
     let m = &p.materials[g.sender];
     let mut l = m.albedo * p.ambient;
     if p.environment != Vec3A::ZERO {
-        l += m.albedo * p.environment * sky_view(g.position, g.normal, g.sender, shapes);
+        l += m.albedo * p.environment * sky();
     }
     if let Some((dir, dist, falloff)) = incidence(p.light_position, p.light_direction, g.position) {
         let ndotl = g.normal.dot(dir);
@@ -208,7 +265,7 @@ pub fn sender_radiance(g: &GatherPoint, p: &ShadeParams, shapes: &[PShape]) -> V
     // A sphere sender's own bounce (the second bounce), from its table once prepared.
     if let Some((at, light)) = p.tables.get(g.sender) {
         if !at.is_empty() {
-            l += m.albedo * light[nearest_table(at, g.normal)];
+            l += m.albedo * light[table(at)];
         }
     }
     l
@@ -217,7 +274,7 @@ pub fn sender_radiance(g: &GatherPoint, p: &ShadeParams, shapes: &[PShape]) -> V
 /// Exposure-scaled radiance towards the eye at surfel `s` (the background for a miss).
 #[inline]
 pub fn shade(s: &Surfel, p: &ShadeParams, shapes: &[PShape], shadows: bool) -> Vec3A {
-    shade_full(s, None, p, shapes, shadows).0
+    shade_full(s, None, p, shapes, shadows, None).0
 }
 
 /// [`shade`], and whether the light faces the point but a shadow ray found it blocked.
@@ -228,7 +285,7 @@ pub fn shade_shadowed(
     shapes: &[PShape],
     shadows: bool,
 ) -> (Vec3A, bool) {
-    shade_full(s, None, p, shapes, shadows)
+    shade_full(s, None, p, shapes, shadows, None)
 }
 
 /// [`shade`] with the pixel's `footprint` on the surface (`footprint::axes`): a sphere's shadow edge and
@@ -242,7 +299,21 @@ pub fn shade_pixel(
     shapes: &[PShape],
     shadows: bool,
 ) -> Vec3A {
-    shade_full(s, footprint, p, shapes, shadows).0
+    shade_full(s, footprint, p, shapes, shadows, None).0
+}
+
+/// [`shade_pixel`] with the pixel's gather points from a render's cache (`bounce::Gathered::pixel`),
+/// `None` to gather them: the same value.
+#[inline]
+pub fn shade_pixel_cached(
+    s: &Surfel,
+    footprint: Option<&[Vec3A; 2]>,
+    p: &ShadeParams,
+    shapes: &[PShape],
+    shadows: bool,
+    gathered: Option<&[CachedPoint]>,
+) -> Vec3A {
+    shade_full(s, footprint, p, shapes, shadows, gathered).0
 }
 
 /// [`shade_pixel`], and whether the light faces the point but is (partly) blocked.
@@ -253,6 +324,7 @@ fn shade_full(
     p: &ShadeParams,
     shapes: &[PShape],
     shadows: bool,
+    gathered: Option<&[CachedPoint]>,
 ) -> (Vec3A, bool) {
     if s.object == u32::MAX {
         return (p.exposure * p.background, false);
@@ -263,7 +335,11 @@ fn shade_full(
         let sky = sky_view(s.position, s.normal, s.object as usize, shapes);
         l += m.albedo * p.environment * sky;
     }
-    if p.interreflection {
+    if let (true, Some(points)) = (p.interreflection, gathered) {
+        for c in points {
+            l += m.albedo * c.point.form * sender_radiance_cached(c, p, shapes);
+        }
+    } else if p.interreflection {
         GATHER.with_borrow_mut(|points| {
             gather(s.position, s.normal, s.object as usize, shapes, points);
             for g in points.iter() {
