@@ -10,7 +10,7 @@
 //! Serial and without early exit: a fit uses it only for photos that select the term.
 
 use super::kernel::{Candidate, Kernel};
-use super::loss::{Encoding, SATURATED};
+use super::loss::Encoding;
 use super::pixels::{Light, BLOCK};
 use super::projected::{Projection, Run, Solved};
 use super::solve::{fallback_sums, solve_object, solve_object_env, SolveSums};
@@ -71,7 +71,11 @@ impl Kernel {
         scratch.resize(5 * n_px, 0.0);
         let (a_all, rest) = scratch.split_at_mut(n_px);
         let (b_all, ab_all) = rest.split_at_mut(n_px);
-        let sat = if c.clip { SATURATED } else { f32::INFINITY };
+        let sat = if c.clip {
+            self.saturated
+        } else {
+            f32::INFINITY
+        };
         let top = if c.clip { 1.0 } else { f32::INFINITY };
         out.products = proj
             .diffuse
