@@ -480,6 +480,10 @@ impl Fitness {
         self.kernel.set_saturated(level);
     }
 
+    pub fn saturated(&self) -> f32 {
+        self.kernel.saturated()
+    }
+
     pub fn kind(&self) -> LossKind {
         self.kind
     }
