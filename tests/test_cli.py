@@ -164,7 +164,7 @@ def test_loss_space_option(inputs, tmp_path, capsys):
     settings = json.loads((out / "result.json").read_text(encoding="utf-8"))["fit_report"]["settings"]
     assert settings["space"] == "srgb" and settings["norm"] == "l1"
     code, stdout, _ = run(capsys, "--help")
-    assert "--loss-space {linear,srgb}" in stdout
+    assert "--loss-space {auto,linear,srgb}" in stdout
 
 
 def test_footprint_option(inputs, tmp_path, capsys):

@@ -87,6 +87,8 @@ def evaluate(
     norm: str = "l1",
     space: str = "linear",
     footprint: bool = False,
+    frozen_bounce: bool = False,
+    saturated: float | None = None,
 ) -> npt.NDArray[np.float64]: ...
 def optimize(
     scene: Scene,
@@ -113,11 +115,16 @@ def optimize(
     space: str = "linear",
     polish_tol: float | None = None,
     footprint: bool = False,
+    polish_footprint: bool = False,
+    frozen_bounce: int = 0,
+    saturated: float | None = None,
 ) -> OptimizeResult:
     """polish_tol: the polish stops once every simplex vertex is within this fraction of each range of
     the best (default 1e-13). product_bounds: (objects, 3, 2), or (objects, 4, 2) whose row 4 bounds
     Q = intensity x specular. space: "linear" or "srgb" (the loss compares the sRGB encodings of the
-    clipped render and of target; the least-squares products stay linear)."""
+    clipped render and of target; the least-squares products stay linear). saturated: objective values
+    at or above it (capped at 0.999) may be clipped: the least-squares solve leaves them out and the
+    refine counts them one-sidedly (default 0.999; rtloop.fit passes goodness.clip_level)."""
 
 class OptimizeResult:
     """What ``optimize`` found (immutable). For the projected loss ``products`` (per object

@@ -12,7 +12,7 @@
 //! candidate and stop early above their bound, as direct candidates do.
 
 use super::kernel::{Candidate, Kernel};
-use super::loss::{Encoding, Norm, LANES, SATURATED};
+use super::loss::{Encoding, Norm, LANES};
 use super::pixels::{Light, BLOCK};
 use super::projected::{Projection, Run, Solved, CHUNK};
 use super::simd::{self, Simd};
@@ -75,7 +75,11 @@ impl Kernel {
         scratch.resize(5 * n_px, 0.0);
         let (a_all, rest) = scratch.split_at_mut(n_px);
         let (b_all, ab_all) = rest.split_at_mut(n_px);
-        let sat = if c.clip { SATURATED } else { f32::INFINITY };
+        let sat = if c.clip {
+            self.saturated
+        } else {
+            f32::INFINITY
+        };
         let top = if c.clip { 1.0 } else { f32::INFINITY };
         out.products = proj
             .diffuse
@@ -339,7 +343,11 @@ impl Kernel {
         enc: E,
     ) -> [f64; 3] {
         let n_px = self.pixels;
-        let sat = if c.clip { SATURATED } else { f32::INFINITY };
+        let sat = if c.clip {
+            self.saturated
+        } else {
+            f32::INFINITY
+        };
         let top = if c.clip { 1.0 } else { f32::INFINITY };
         let w: [f64; 3] = std::array::from_fn(|c| proj.weight[c] as f64);
         let (a_all, rest) = scratch.split_at_mut(n_px);

@@ -5,7 +5,7 @@
 
 use glam::Vec3A;
 
-use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut};
+use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, SATURATED};
 use super::pixels::{
     blinn_phong, gathers, group, irradiance, shadow, Gather, Group, Light, Sky, BLOCK,
 };
@@ -24,6 +24,10 @@ pub struct Kernel {
     /// With interreflection, per object: for a sphere the gathers of its table points (the light the
     /// others bounce onto it, `render::bounce::TABLE`); empty otherwise.
     pub(crate) tables: Vec<Vec<Gather>>,
+    /// Objective values at or above this may be clipped (with `clip`): the closed-form solve leaves them
+    /// out and the refine counts them one-sidedly. [`SATURATED`] unless the photo's noise puts a clipped
+    /// pixel's value further below 1 ([`Kernel::set_saturated`]).
+    pub(crate) saturated: f32,
 }
 
 impl Kernel {
@@ -77,6 +81,7 @@ impl Kernel {
             space: Space::Linear,
             groups,
             pixels: surfels.len(),
+            saturated: SATURATED,
         }
     }
 
@@ -89,7 +94,23 @@ impl Kernel {
             groups: self.groups.iter().map(Group::at_pixel_centres).collect(),
             pixels: self.pixels,
             tables: self.tables.clone(),
+            saturated: self.saturated,
         }
+    }
+
+    /// Treat objective values at or above `level` (at most [`SATURATED`]) as possibly clipped: a noisy or
+    /// JPEG photo's clipped pixels scatter below 1 by its error, and taken as measurements they pull the
+    /// least-squares products down (their model is far above 1).
+    pub fn set_saturated(&mut self, level: f32) {
+        self.saturated = if level.is_nan() {
+            SATURATED
+        } else {
+            level.min(SATURATED)
+        };
+    }
+
+    pub fn saturated(&self) -> f32 {
+        self.saturated
     }
 
     pub fn pixels(&self) -> usize {

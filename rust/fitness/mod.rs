@@ -489,6 +489,16 @@ impl Fitness {
         self.kernel.space()
     }
 
+    /// Objective values at or above `level` (capped at [`SATURATED`]) count as possibly clipped (see
+    /// [`Kernel::set_saturated`]).
+    pub fn set_saturated(&mut self, level: f32) {
+        self.kernel.set_saturated(level);
+    }
+
+    pub fn saturated(&self) -> f32 {
+        self.kernel.saturated()
+    }
+
     pub fn kind(&self) -> LossKind {
         self.kind
     }

@@ -5,7 +5,7 @@ use rayon::prelude::*;
 
 use super::bounce::Gauge;
 use super::kernel::{Candidate, Kernel};
-use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, LANES, SATURATED};
+use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, LANES};
 use super::pixels::{blinn_phong, irradiance, shadow, Group, Light, Sky, BLOCK};
 use super::simd::{self, Simd};
 use super::solve::{fallback_sums, solve_object, solve_object_env, SolveSums};
@@ -122,7 +122,7 @@ impl Kernel {
         out.environment.clear();
         out.environment
             .extend(proj.environment.iter().map(|b| [b[0].0, b[1].0, b[2].0]));
-        let sat = if clip { SATURATED } else { f32::INFINITY };
+        let sat = if clip { self.saturated } else { f32::INFINITY };
         let top = if clip { 1.0 } else { f32::INFINITY };
         let mut acc = [0.0f64; 3];
         let mut offset = 0;

@@ -4,7 +4,7 @@
 use rayon::prelude::*;
 
 use super::kernel::Kernel;
-use super::loss::{Norm, Space, SrgbLut, SATURATED};
+use super::loss::{Norm, Space, SrgbLut};
 use super::pixels::Group;
 use super::projected::{Projection, Solved};
 
@@ -25,7 +25,7 @@ impl Kernel {
         let b_all = &rest[..self.pixels];
         // With the bounce the diffuse column differs per channel (a'_c, after b in the scratch).
         let bounced = proj.gauge.is_some() && rest.len() >= 4 * self.pixels;
-        let sat = if clip { SATURATED } else { f32::INFINITY };
+        let sat = if clip { self.saturated } else { f32::INFINITY };
         let top = if clip { 1.0f64 } else { f64::INFINITY };
         let srgb = self.space == Space::Srgb;
         out.lit.clear();

@@ -35,6 +35,7 @@ pub(crate) fn make_fitness(
     norm: &str,
     space: &str,
     footprint: bool,
+    saturated: Option<f32>,
 ) -> PyResult<(Fitness, Vec<(f64, f64)>)> {
     let space = Space::parse(space).map_err(Error::Invalid)?;
     let layout = ParamLayout::new(scene, paths)?;
@@ -94,6 +95,15 @@ pub(crate) fn make_fitness(
     )?;
     fitness.set_norm(Norm::parse(norm).map_err(Error::Invalid)?);
     fitness.set_space(space);
+    if let Some(level) = saturated {
+        if !level.is_finite() || level <= 0.0 {
+            return Err(Error::Value(format!(
+                "saturated must be a number in (0, 1] (got {level})"
+            ))
+            .into());
+        }
+        fitness.set_saturated(level);
+    }
     Ok((fitness, bounds))
 }
 

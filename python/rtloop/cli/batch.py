@@ -92,7 +92,7 @@ def _build_parser() -> Parser:
     p.add_argument("--population", type=int_at_least(4, "a whole number >= 4"), metavar="N")
     p.add_argument("--generations", type=generations, metavar="N|N1,N2")
     p.add_argument("--norm", metavar="NORM", help="l1 (default), l2, huber or huber:H")
-    p.add_argument("--loss-space", choices=("linear", "srgb"))
+    p.add_argument("--loss-space", choices=("auto", "linear", "srgb"))
     p.add_argument("--environment", choices=("auto", "on", "off"), help="the occluded environment term "
                    "(default auto: added when the photo shows it)")
     p.add_argument("--interreflection", choices=("auto", "on", "off"), help="one diffuse bounce between the "

@@ -173,10 +173,10 @@ def _build_parser() -> Parser:
     p.add_argument("--norm", type=norm, default="l1", metavar="NORM",
                    help="per-pixel penalty of the loss: l1 (the paper's, default), l2 (Gaussian noise), "
                    "huber or huber:H (quadratic within H, linear beyond; robust to unmodelled pixels)")
-    p.add_argument("--loss-space", choices=("linear", "srgb"), default="linear",
-                   help="where --norm compares render and IMAGE: 'linear' (default, radiance) or 'srgb' (both "
-                   "sRGB-encoded, as an 8-bit file stores them: an error in the shadows counts as the file and "
-                   "the eye resolve it; for dark or JPEG-compressed photos)")
+    p.add_argument("--loss-space", choices=("auto", "linear", "srgb"), default="auto",
+                   help="where --norm compares render and IMAGE: 'auto' (default: linear, and a JPEG that direct "
+                   "light explains refitted in sRGB), 'linear' (radiance) or 'srgb' (both sRGB-encoded, as an "
+                   "8-bit file stores them: an error in the shadows counts as the file and the eye resolve it)")
     p.add_argument("--environment", choices=("auto", "on", "off"), default="auto",
                    help="the occluded environment term (a room's light from every direction, darker under and "
                    "between the objects): 'auto' (default) adds it when the photo shows it and says why in "

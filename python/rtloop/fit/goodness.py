@@ -12,7 +12,7 @@ from .. import _native
 from .._pixels import SATURATED
 from .._srgb import decode, encode
 
-__all__ = ["EXPLAINED_RATIO", "goodness", "jpeg_blocking", "noise_sigma"]
+__all__ = ["CLIPPED_SIGMAS", "EXPLAINED_RATIO", "clip_level", "goodness", "jpeg_blocking", "noise_sigma"]
 
 #: A residual within this many times the noise floor is explained to the noise level (the same factor as
 #: the term selection's screen, :data:`rtloop.fit.selection.EXPLAINED`).
@@ -86,14 +86,35 @@ def jpeg_blocking(image: np.ndarray) -> dict[str, Any]:
     return out
 
 
+#: A pixel within this many of the photo's per-pixel errors (noise and JPEG) below 1 may be a clipped one
+#: that the error scattered down: the fit treats it as saturated (:func:`clip_level`).
+CLIPPED_SIGMAS = 3.0
+
+
+def clip_level(sigma: Any, blocking: dict[str, Any]) -> float:
+    """The objective value from which a pixel may be clipped, given the photo's noise ``sigma`` (per
+    channel, linear, :func:`noise_sigma`) and its JPEG ``blocking`` (:func:`jpeg_blocking`): 1 less
+    CLIPPED_SIGMAS times the largest channel's error at 1 (the noise and the JPEG's RMS error in codes
+    times the top code step, in quadrature), at most SATURATED. A clipped pixel (a sensor's full well, an
+    8-bit file's 255) that noise is added to, or that a JPEG's blocks ring around, lies up to a few errors
+    below 1; read as a measurement, it pulls the closed-form products down (its model is far above 1),
+    and on a low, grazing light that moved the fitted light by half a metre."""
+    step = float(decode(np.float64(1.0)) - decode(np.float64(254 / 255)))
+    jpeg = np.asarray(blocking.get("error_codes", [0.0, 0.0, 0.0]), np.float64) * step
+    err = np.sqrt(np.asarray(sigma, np.float64) ** 2 + jpeg ** 2)
+    return float(min(SATURATED, 1.0 - CLIPPED_SIGMAS * float(err.max())))
+
+
 def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool = True,
-             render: np.ndarray | None = None) -> dict[str, Any]:
+             render: np.ndarray | None = None, sigma: np.ndarray | None = None,
+             blocking: dict[str, Any] | None = None) -> dict[str, Any]:
     """The residual of ``scene``'s render against ``target`` (L1 over the used, unsaturated pixels) over
     its floor: per pixel and channel the larger of the 8-bit quantisation's mean error (a quarter code
     step) and the mean error of the measured noise (sigma x sqrt(2/pi)) and of a JPEG's blocks
     (:func:`jpeg_blocking`, its RMS error in codes times the code step there x sqrt(2/pi)), added in quadrature. With a verdict, and where the model falls short of
     the floor, per object its share of the excess (``per_object``, empty otherwise). ``render``: the
-    scene's render (spp 1) when the caller has it."""
+    scene's render (spp 1) when the caller has it; ``sigma`` and ``blocking``: ``target``'s
+    :func:`noise_sigma` and :func:`jpeg_blocking` when the caller has them."""
     if render is None:
         render = _native.render(scene, scene.width, scene.height, 1)
     model = np.minimum(render, np.float32(1.0)) if clip else render
@@ -107,8 +128,8 @@ def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool 
     e = encode(tk, np.float32)
     half = np.float32(0.5 / 255)
     quant = np.float32(0.25) * (decode(np.minimum(e + half, np.float32(1))) - decode(np.maximum(e - half, np.float32(0))))
-    sigma = noise_sigma(target)
-    blocking = jpeg_blocking(target)
+    sigma = noise_sigma(target) if sigma is None else np.asarray(sigma, np.float64)
+    blocking = jpeg_blocking(target) if blocking is None else blocking
     # The JPEG's error per pixel in linear units: its RMS in codes times the code step there (4 quarter steps).
     jpeg = np.float32(4.0) * quant * np.asarray(blocking["error_codes"], np.float32)[None, :]
     noise = (sigma * math.sqrt(2.0 / math.pi)).astype(np.float32)[None, :]

@@ -127,7 +127,8 @@ def with_highlights(scene: Scene, names: list[str], shininess: float) -> Scene:
 
 def highlight_evidence(scene: Scene, names: list[str], paths: list[str], x: list[float], target: np.ndarray,
                        pixels: np.ndarray | None, *, base: float, environment: bool, clip: bool, norm: str,
-                       space: str, threads: int | None, active_pixels: int) -> tuple[dict[str, Any], float]:
+                       space: str, threads: int | None, active_pixels: int,
+                       saturated: float | None = None) -> tuple[dict[str, Any], float]:
     """Whether a specular lobe on the spheres ``names`` explains the photo better at the light ``x`` found
     without it: the closed-form loss without, and with the lobe at each of SHININESS_TRIALS (its strength
     solved in closed form); the best trial, the gain, the change in BIC (k = 2 per sphere: strength and
@@ -136,7 +137,7 @@ def highlight_evidence(scene: Scene, names: list[str], paths: list[str], x: list
     gpaths = paths + [f"objects.{n}.shininess" for n in names]
     rows = [list(x) + [s] * len(names) for s in SHININESS_TRIALS]
     with_lobe = closed_form_loss(glossy, gpaths, rows, target, pixels, environment=environment, clip=clip,
-                                 norm=norm, space=space, threads=threads)
+                                 norm=norm, space=space, threads=threads, saturated=saturated)
     k = int(np.argmin(with_lobe))
     ev = _verdict(base, float(with_lobe[k]), active_pixels, 2 * len(names), norm)
     ev["shininess_tried"] = list(SHININESS_TRIALS)
@@ -171,12 +172,13 @@ def with_interreflection(scene: Scene) -> Scene:
 
 def interreflection_evidence(scene: Scene, paths: list[str], x: list[float], target: np.ndarray,
                              pixels: np.ndarray | None, *, base: float, environment: bool, clip: bool, norm: str,
-                             space: str, threads: int | None, active_pixels: int) -> dict[str, Any]:
+                             space: str, threads: int | None, active_pixels: int,
+                       saturated: float | None = None) -> dict[str, Any]:
     """Whether one bounce between the objects explains the photo better at the light ``x`` found without
     it: the closed-form loss without (``base``) and with it (its one extra unknown is the gauge, 1 /
     intensity: k = 1), as :func:`environment_evidence`."""
     l1 = closed_form_loss(with_interreflection(scene), paths, [x], target, pixels, environment=environment,
-                          clip=clip, norm=norm, space=space, threads=threads)[0]
+                          clip=clip, norm=norm, space=space, threads=threads, saturated=saturated)[0]
     return _verdict(base, l1, active_pixels, 1, norm)
 
 
@@ -187,25 +189,27 @@ def environment_given(scene: Scene) -> bool:
 
 def environment_evidence(scene: Scene, paths: list[str], x: list[float], target: np.ndarray,
                          pixels: np.ndarray | None, *, base: float, clip: bool, norm: str, space: str,
-                         threads: int | None, active_pixels: int) -> dict[str, Any]:
+                         threads: int | None, active_pixels: int, saturated: float | None = None) -> dict[str, Any]:
     """Whether the occluded environment explains the photo better at the light ``x`` (of ``paths``) found
     without it: the closed-form loss without (``base``, :func:`closed_form_loss`) and with each object's
     environment column, the relative gain,
     the change in BIC (for the L1 and Huber norms, a Laplace likelihood: 2 n ln(L0/L1); for L2, Gaussian:
     n ln(L0/L1); minus k ln n for the k = 3 x objects added products), and the verdict."""
     l1 = closed_form_loss(scene, paths, [x], target, pixels, environment=True, clip=clip, norm=norm, space=space,
-                          threads=threads)[0]
+                          threads=threads, saturated=saturated)[0]
     return _verdict(base, l1, active_pixels, 3 * len(scene.object_names), norm)
 
 
 def closed_form_loss(scene: Scene, paths: list[str], rows: list[list[float]], target: np.ndarray,
                      pixels: np.ndarray | None, *, environment: bool, clip: bool, norm: str, space: str,
-                     threads: int | None) -> np.ndarray:
+                     threads: int | None, saturated: float | None = None) -> np.ndarray:
     """The closed-form (least-squares products) loss of ``scene`` at each row of values of ``paths``, with
-    or without the environment column: the measure every test of a term compares."""
+    or without the environment column: the measure every test of a term compares. ``saturated``: where
+    clipping may start (``_native.evaluate``'s; None: SATURATED)."""
     v = _native.evaluate(scene, paths, target, np.asarray(rows, dtype=np.float64), pixels=pixels,
                          loss="l1_projected", clip=clip, threads=threads,
-                         product_bounds=product_bounds(scene, environment), norm=norm, space=space)
+                         product_bounds=product_bounds(scene, environment), norm=norm, space=space,
+                         saturated=saturated)
     return v[:, 0]
 
 

@@ -63,6 +63,9 @@ class Stages:
         #: With interreflection: the searches' passes holding the bounce (``_native.optimize``'s
         #: ``frozen_bounce``; 0: none; the refit with the bounce sets ``selection.BOUNCE_PASSES``).
         self.frozen_bounce = 0
+        #: Objective values from which a pixel may be clipped (``_native.optimize``'s ``saturated``; None:
+        #: SATURATED; ``goodness.clip_level`` for a noisy or JPEG photo).
+        self.saturated: float | None = None
 
     def run(self, name: str, stage_scene: Scene, paths: list[str], loss: str, pixels: np.ndarray | None,
             generations: int, stage_seed: int, product_bounds: np.ndarray | None = None,
@@ -95,7 +98,7 @@ class Stages:
             method=method, polish=polish, norm=self.norm, space=self.space, with_products=callback is not None,
             polish_tol=polish_tol, footprint=self.footprint == "on",
             polish_footprint=self.footprint == "polish" and method == "lshade" and polish > 0,
-            frozen_bounce=self.frozen_bounce,
+            frozen_bounce=self.frozen_bounce, saturated=self.saturated,
         )
         history = [(gen, float(sum(objectives)), list(objectives), np.array(best))
                    for gen, best, objectives, _ in out.history]
