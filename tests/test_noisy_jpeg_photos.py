@@ -8,36 +8,33 @@ weighed by the linear loss where they are largest). Against the truth the fit ne
 
 from __future__ import annotations
 
-import io
+import importlib.util
 import json
-import tempfile
 import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
-from PIL import Image
 
 import rtloop
 from rtloop._pixels import SATURATED
 from rtloop.fit.goodness import CLIPPED_SIGMAS, clip_level, jpeg_blocking, noise_sigma
 
 PHOTOS = Path(__file__).parent / "fixtures" / "photos"
+BENCH = Path(__file__).resolve().parents[1] / "benches" / "coverage.py"
 DIRECT = sorted(p.name for p in PHOTOS.iterdir() if p.name.startswith("direct-") and (p / "objective.png").exists())
 
 
+def _coverage_bench():
+    """benches/coverage.py, whose ``photo_of`` makes the variants (one copy of how they are made)."""
+    spec = importlib.util.spec_from_file_location("coverage_bench", BENCH)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def _variant(name: str, scene: rtloop.Scene, kind: str) -> np.ndarray:
-    folder = PHOTOS / name
-    if kind == "jpeg":
-        buf = io.BytesIO()
-        Image.open(folder / "objective.png").convert("RGB").save(buf, "JPEG", quality=40)
-        with tempfile.NamedTemporaryFile(suffix=".jpg") as f:
-            f.write(buf.getvalue())
-            f.flush()
-            return np.asarray(rtloop.load_image(f.name, scene), np.float32)
-    photo = np.asarray(rtloop.load_image(folder / "objective.png", scene), np.float32)
-    noise = np.random.default_rng(0).normal(0.0, 0.02, photo.shape)
-    return np.clip(photo + noise, 0.0, 1.0).astype(np.float32)
+    return np.asarray(_coverage_bench().photo_of(PHOTOS / name, scene, kind), np.float32)
 
 
 def _light_error(name: str, result: rtloop.FitResult) -> float:
