@@ -84,5 +84,9 @@ def _collect(ray: Any, remote: Any, jobs: list[tuple[Job, str]], threads: int,
                     yield JobResult(job.id, "error", digest, job.seed, error=f"ray: {first}")
                 submit()
     finally:
-        for ref in which:
-            ray.cancel(ref, force=True)
+        # Closed early (Ctrl-C, a consumer that stops): the tasks in flight (at most ``limit``) are left to
+        # finish or to end with the driver, which Ray does for a driver that exits. They are not cancelled:
+        # ray.cancel racing a task's completion aborts the driver inside Ray ("Tried to complete task that
+        # was not pending", ray-project/ray#54738), and a task finishing late only writes a complete
+        # DIR/<id>/ that results.jsonl does not list, which a resumed batch fits again.
+        which.clear()
