@@ -20,7 +20,7 @@ from ..errors import RtloopError, RtloopWarning
 from ..scene import Scene, load_scene
 from .bounds import narrowed, restore_bounds
 from .gauge import hold_gauges, release_gauges
-from .goodness import clip_level, goodness, jpeg_blocking, noise_sigma
+from .goodness import clip_level, encoded, goodness, jpeg_blocking, noise_sigma
 from .identifiability import identifiability as _identifiability
 from .identifiability import lit_pixel_counts
 from .products import constant_term
@@ -184,7 +184,9 @@ def fit(
                     pixels_per_object=pixels_per_object, rng=np.random.default_rng(seed), callback=callback,
                     footprint=footprint)
     # Where a pixel may be clipped: below 1 by the photo's own noise and JPEG error (goodness.clip_level).
-    sigma, blocking = noise_sigma(target), jpeg_blocking(target)
+    # (the photo's sRGB encoding once, for the JPEG blocking here and the goodness of fit at the end)
+    encoding = encoded(target)
+    sigma, blocking = noise_sigma(target), jpeg_blocking(target, encoding)
     settings["saturated"] = stages.saturated = clip_level(sigma, blocking) if clip else None
     seeds = np.random.SeedSequence(seed).generate_state(4, dtype=np.uint64)
     model: dict[str, Any] = {"terms": ["direct"], "evidence": {}}
@@ -240,7 +242,8 @@ def fit(
     with_sigma = uncertainty not in (False, "off")
     at_optimum = as_compared if footprint == "off" or not with_sigma else _native.render(
         current, current.width, current.height, 1)
-    result.goodness = goodness(current, target, use, clip=clip, render=as_compared, sigma=sigma, blocking=blocking)
+    result.goodness = goodness(current, target, use, clip=clip, render=as_compared, sigma=sigma, blocking=blocking,
+                               encoding=encoding)
     doubts += _at_bounds(current, all_paths)
     for d in doubts:
         warnings.warn(d, RtloopWarning, stacklevel=2)
@@ -519,7 +522,7 @@ def _objective(scene: Scene, image: Any, mask: Any, doubts: list[str]) -> tuple[
     if (target < 0).any():
         doubts.append(f"image: {np.mean(target < 0):.2%} of the values are negative (min {float(target.min()):.4g}): "
                       "linear radiance is >= 0 (zero-mean noise is fine, an offset or a wrong encoding is not)")
-    if np.mean(target.max(axis=2) > 1.0) >= MOSTLY_ABOVE_ONE:
+    if float(target.max()) > 1.0 and np.mean(target.max(axis=2) > 1.0) >= MOSTLY_ABOVE_ONE:
         doubts.append(f"image: {np.mean(target.max(axis=2) > 1.0):.0%} of the pixels are above 1: is it 0..255 "
                       "code values or not linear? (rtloop.load_image gives linear 0..1)")
     if mask is None:

@@ -12,7 +12,7 @@ from .. import _native
 from .._pixels import SATURATED
 from .._srgb import decode, encode
 
-__all__ = ["CLIPPED_SIGMAS", "EXPLAINED_RATIO", "clip_level", "goodness", "jpeg_blocking", "noise_sigma"]
+__all__ = ["CLIPPED_SIGMAS", "EXPLAINED_RATIO", "clip_level", "encoded", "goodness", "jpeg_blocking", "noise_sigma"]
 
 #: A residual within this many times the noise floor is explained to the noise level (the same factor as
 #: the term selection's screen, :data:`rtloop.fit.selection.EXPLAINED`).
@@ -49,7 +49,13 @@ JPEG_DETECT_SD = 4.0
 JPEG_ERROR_OVER_BLOCKING = 2.0
 
 
-def jpeg_blocking(image: np.ndarray) -> dict[str, Any]:
+def encoded(image: np.ndarray) -> np.ndarray:
+    """The photo's sRGB encoding in [0, 1] (clipped), float32 as ``image`` in float32: what
+    :func:`jpeg_blocking` and :func:`goodness` take from it, computed once where a caller needs both."""
+    return encode(np.asarray(image, np.float32), np.float32)
+
+
+def jpeg_blocking(image: np.ndarray, encoding: np.ndarray | None = None) -> dict[str, Any]:
     """JPEG blocking in a photo, measured on its 8-bit sRGB codes: along rows and columns the second
     difference across each pixel pair, d_j - (d_{j-1} + d_{j+1}) / 2 (d the first difference: a smooth
     gradient cancels), squared and clipped at an edge's (JPEG_EDGE_CODES), averaged per phase of the 8-pixel
@@ -57,22 +63,18 @@ def jpeg_blocking(image: np.ndarray) -> dict[str, Any]:
     the pairs of phases 1-5 (whose neighbours are inside a block too), which are the photo's own (the grid is
     arbitrary for any other photo). Where that
     excess is significant (JPEG_DETECT_SD), the blocks' offset amplitude is sqrt(excess / 2) codes per
-    channel, and the JPEG's RMS error ``error_codes`` JPEG_ERROR_OVER_BLOCKING times it; else 0."""
+    channel, and the JPEG's RMS error ``error_codes`` JPEG_ERROR_OVER_BLOCKING times it; else 0.
+    ``encoding``: the image's :func:`encoded` when the caller has it."""
     x = np.asarray(image, np.float32)
     h, w = x.shape[:2]
     out: dict[str, Any] = {"detected": False, "error_codes": [0.0, 0.0, 0.0], "jump_grid": None,
                            "jump_inside": None, "significance_sd": None}
     if h < 3 * JPEG_BLOCK or w < 3 * JPEG_BLOCK:
         return out
-    codes = encode(np.clip(x, 0.0, 1.0), np.float32) * np.float32(255.0)
+    codes = (encoded(x) if encoding is None else encoding) * np.float32(255.0)
     phases = np.zeros((JPEG_BLOCK, 3))
-    for c in (codes, codes.transpose(1, 0, 2)):
-        d = np.diff(c, axis=1)  # d[:, j] = c[:, j + 1] - c[:, j]: the pair (j, j + 1)
-        jump = d[:, 1:-1] - 0.5 * (d[:, :-2] + d[:, 2:])  # pairs j = 1 .. n - 3
-        sq = np.minimum(jump * jump, np.float32(JPEG_EDGE_CODES ** 2))
-        phase = np.arange(1, d.shape[1] - 1) % JPEG_BLOCK
-        for k in range(JPEG_BLOCK):
-            phases[k] += sq[:, phase == k].reshape(-1, 3).mean(axis=0, dtype=np.float64) / 2
+    for c in (codes, np.ascontiguousarray(codes.transpose(1, 0, 2))):
+        phases += _phase_means(c) / 2
     # phases 0 and 6 have a grid line's pair as a neighbour (in d_{j-1} or d_{j+1}): not the photo's own
     grid, others = phases[JPEG_BLOCK - 1], phases[1 : JPEG_BLOCK - 2]
     inside = np.median(others, axis=0)
@@ -84,6 +86,28 @@ def jpeg_blocking(image: np.ndarray) -> dict[str, Any]:
         out["detected"] = True
         out["error_codes"] = [float(JPEG_ERROR_OVER_BLOCKING * np.sqrt(max(v, 0.0) / 2)) for v in excess]
     return out
+
+
+def _phase_means(c: np.ndarray) -> np.ndarray:
+    """Per phase of the 8-pixel grid (JPEG_BLOCK, 3): the mean over the rows of ``c`` (rows, n, 3) of the
+    clipped squared second difference across each pixel pair (j, j + 1) along a row, j = 1 .. n - 3, whose
+    phase is j mod 8. Each phase's sum runs row by row, along a row by j, in float64 (as ``mean(axis=0,
+    dtype=np.float64)`` of the phase's pairs in that order sums them): the rows are laid out in one buffer
+    of whole 8-pixel blocks (pair j at column j, the columns of no pair 0, which leaves a sum of squares as
+    it is), so one reduction takes every phase."""
+    rows, n = c.shape[0], c.shape[1]
+    d = np.diff(c, axis=1)  # d[:, j] = c[:, j + 1] - c[:, j]: the pair (j, j + 1)
+    blocks = -(-(n - 2) // JPEG_BLOCK)  # pairs j = 1 .. n - 3 at columns 1 .. n - 3
+    sq = np.zeros((rows, blocks * JPEG_BLOCK, 3), np.float32)
+    jump = sq[:, 1 : n - 2]
+    np.add(d[:, :-2], d[:, 2:], out=jump)
+    np.multiply(jump, 0.5, out=jump)
+    np.subtract(d[:, 1:-1], jump, out=jump)
+    np.multiply(jump, jump, out=jump)
+    np.minimum(jump, np.float32(JPEG_EDGE_CODES ** 2), out=jump)
+    sums = sq.reshape(rows * blocks, JPEG_BLOCK * 3).sum(axis=0, dtype=np.float64).reshape(JPEG_BLOCK, 3)
+    counts = rows * np.bincount(np.arange(1, n - 2) % JPEG_BLOCK, minlength=JPEG_BLOCK)
+    return sums / counts[:, None]
 
 
 #: A pixel within this many of the photo's per-pixel errors (noise and JPEG) below 1 may be a clipped one
@@ -107,14 +131,14 @@ def clip_level(sigma: Any, blocking: dict[str, Any]) -> float:
 
 def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool = True,
              render: np.ndarray | None = None, sigma: np.ndarray | None = None,
-             blocking: dict[str, Any] | None = None) -> dict[str, Any]:
+             blocking: dict[str, Any] | None = None, encoding: np.ndarray | None = None) -> dict[str, Any]:
     """The residual of ``scene``'s render against ``target`` (L1 over the used, unsaturated pixels) over
     its floor: per pixel and channel the larger of the 8-bit quantisation's mean error (a quarter code
     step) and the mean error of the measured noise (sigma x sqrt(2/pi)) and of a JPEG's blocks
     (:func:`jpeg_blocking`, its RMS error in codes times the code step there x sqrt(2/pi)), added in quadrature. With a verdict, and where the model falls short of
     the floor, per object its share of the excess (``per_object``, empty otherwise). ``render``: the
     scene's render (spp 1) when the caller has it; ``sigma`` and ``blocking``: ``target``'s
-    :func:`noise_sigma` and :func:`jpeg_blocking` when the caller has them."""
+    :func:`noise_sigma`, :func:`jpeg_blocking` and :func:`encoded` when the caller has them."""
     if render is None:
         render = _native.render(scene, scene.width, scene.height, 1)
     model = np.minimum(render, np.float32(1.0)) if clip else render
@@ -124,17 +148,28 @@ def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool 
     keep = (t[:, 0] < SATURATED) & (t[:, 1] < SATURATED) & (t[:, 2] < SATURATED)
     if use is not None:
         keep &= np.isin(np.arange(t.shape[0]), np.asarray(use))
-    tk = t[keep]
-    e = encode(tk, np.float32)
+    # Every pixel kept (no mask, none saturated): the arrays themselves, else their kept rows.
+    everywhere = bool(keep.all())
+    tk = t if everywhere else np.compress(keep, t, axis=0)
+    if encoding is None:
+        e = encode(tk, np.float32)
+    else:
+        e = np.asarray(encoding, np.float32).reshape(-1, 3)
+        e = e if everywhere else np.compress(keep, e, axis=0)
     half = np.float32(0.5 / 255)
     quant = np.float32(0.25) * (decode(np.minimum(e + half, np.float32(1))) - decode(np.maximum(e - half, np.float32(0))))
     sigma = noise_sigma(target) if sigma is None else np.asarray(sigma, np.float64)
     blocking = jpeg_blocking(target) if blocking is None else blocking
     # The JPEG's error per pixel in linear units: its RMS in codes times the code step there (4 quarter steps).
-    jpeg = np.float32(4.0) * quant * np.asarray(blocking["error_codes"], np.float32)[None, :]
+    codes = np.asarray(blocking["error_codes"], np.float32)[None, :]
     noise = (sigma * math.sqrt(2.0 / math.pi)).astype(np.float32)[None, :]
-    floor = np.maximum(quant, np.sqrt(noise * noise + np.float32(2.0 / math.pi) * jpeg * jpeg))
-    resid = np.abs(m[keep] - tk)
+    if codes.any():
+        jpeg = np.float32(4.0) * quant * codes
+        floor = np.maximum(quant, np.sqrt(noise * noise + np.float32(2.0 / math.pi) * jpeg * jpeg))
+    else:  # no JPEG: its term is 0, and noise^2 + 0 is noise^2 itself, per channel
+        floor = np.maximum(quant, np.sqrt(noise * noise))
+    resid = (m if everywhere else np.compress(keep, m, axis=0)) - tk
+    np.abs(resid, out=resid)
     total, fl = float(resid.sum(dtype=np.float64)), float(floor.sum(dtype=np.float64))
     ratio = total / fl if fl > 0 else float("inf")
     per: dict[str, Any] = {}
