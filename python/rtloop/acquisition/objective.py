@@ -49,7 +49,7 @@ import numpy as np
 from PIL import Image
 
 from .._opencv import imdecode
-from .._srgb import decode
+from .._srgb import code_values
 from ..errors import AcquisitionError
 from .raw import is_raw, load_raw
 
@@ -349,12 +349,9 @@ def _fit_aspect(image: np.ndarray, width: int, height: int, crop: bool) -> np.nd
 @functools.cache
 def _lookup_table(levels: int, response: str) -> np.ndarray:
     """Linear value (float32) of each integer code 0..levels-1 under the given response."""
-    encoded = np.arange(levels, dtype=np.float64) / (levels - 1)
-    if response == "linear":
-        linear = encoded
-    else:  # inverse of the sRGB transfer function (IEC 61966-2-1)
-        linear = decode(encoded)
-    table = linear.astype(np.float32)
+    if response != "linear":  # inverse of the sRGB transfer function (IEC 61966-2-1)
+        return code_values(levels)
+    table = (np.arange(levels, dtype=np.float64) / (levels - 1)).astype(np.float32)
     table.flags.writeable = False
     return table
 

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from .. import _native
-from .._srgb import decode
+from .._srgb import codes8, decode
 from ..errors import RtloopError, RtloopWarning
 from ..scene import Scene, load_scene
 from .bounds import narrowed, restore_bounds
@@ -184,8 +184,11 @@ def fit(
                     pixels_per_object=pixels_per_object, rng=np.random.default_rng(seed), callback=callback,
                     footprint=footprint)
     # Where a pixel may be clipped: below 1 by the photo's own noise and JPEG error (goodness.clip_level).
-    # (the photo's sRGB encoding once, for the JPEG blocking here and the goodness of fit at the end)
-    encoding = encoded(target)
+    # The photo's 8-bit codes where it has them (a PNG or JPEG as load_image decodes it: the sRGB transfer
+    # functions of its values then come from a table of the 256, the same numbers), and its sRGB encoding
+    # once, for the JPEG blocking here and the goodness of fit at the end.
+    codes = codes8(target)
+    encoding = encoded(target, codes)
     sigma, blocking = noise_sigma(target), jpeg_blocking(target, encoding)
     settings["saturated"] = stages.saturated = clip_level(sigma, blocking) if clip else None
     seeds = np.random.SeedSequence(seed).generate_state(4, dtype=np.uint64)
@@ -198,7 +201,7 @@ def fit(
                                 space=space, population=population, generations=generations, f=f, cr=cr,
                                 optimizer=optimizer, polish=polish, clip=clip, norm=norm, threads=threads,
                                 pixels_per_object=pixels_per_object, seed=seed, callback=callback,
-                                blocking=blocking, space_mode=space_mode)
+                                blocking=blocking, space_mode=space_mode, codes=codes)
         if model.get("space", {}).get("used") == "srgb":
             settings["space"] = "srgb"
     else:
@@ -243,7 +246,7 @@ def fit(
     at_optimum = as_compared if footprint == "off" or not with_sigma else _native.render(
         current, current.width, current.height, 1)
     result.goodness = goodness(current, target, use, clip=clip, render=as_compared, sigma=sigma, blocking=blocking,
-                               encoding=encoding)
+                               encoding=encoding, codes=codes)
     doubts += _at_bounds(current, all_paths)
     for d in doubts:
         warnings.warn(d, RtloopWarning, stacklevel=2)
@@ -278,12 +281,14 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
                   env_mode: str, inter_mode: str, highlights: str, target: np.ndarray, use: np.ndarray | None,
                   mask: Any, protocol: str, space: str, population: Any, generations: Any, f: Any, cr: Any,
                   optimizer: Any, polish: Any, clip: bool, norm: str, threads: Any, pixels_per_object: int,
-                  seed: int, callback: Any, blocking: dict[str, Any], space_mode: str) -> Scene:
+                  seed: int, callback: Any, blocking: dict[str, Any], space_mode: str,
+                  codes: np.ndarray | None = None) -> Scene:
     """The closed-form fit with the image terms the photo needs (:mod:`.selection`): fitted with the terms
     given or forced on; then, unless that fit explains the photo to its quantisation floor, each auto term
     in turn (environment, interreflection, a sphere's lobe) is tested at the light found, on top of those
     already selected, and one refit near that light has every selected term; it replaces the first fit
-    only when its loss is lower. ``model`` receives the terms and the evidence."""
+    only when its loss is lower. ``model`` receives the terms and the evidence. ``codes``: ``target``'s
+    8-bit codes where it has them (:func:`rtloop._srgb.codes8`)."""
     # Ambient light (given or free, no environment) takes the closed form's constant column instead.
     ambient = constant_term(scene) == "ambient"
     env = environment_given(scene) or env_mode == "on" or ambient
@@ -313,7 +318,7 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
         return more
 
     # A fit at the photo's noise level needs no more terms: the tests are skipped (one sum, no evaluation).
-    floor = quantisation_floor(target, use)
+    floor = quantisation_floor(target, use, codes)
     ratio = sum(first.objectives) / floor if floor > 0 else float("inf")
     model["residual"] = {"loss": float(sum(first.objectives)), "quantisation_floor": floor, "ratio": ratio,
                          "explained_below": EXPLAINED}

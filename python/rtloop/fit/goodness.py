@@ -10,7 +10,7 @@ import numpy as np
 
 from .. import _native
 from .._pixels import SATURATED
-from .._srgb import decode, encode
+from .._srgb import decode, encode, per_code
 
 __all__ = ["CLIPPED_SIGMAS", "EXPLAINED_RATIO", "clip_level", "encoded", "goodness", "jpeg_blocking", "noise_sigma"]
 
@@ -49,10 +49,30 @@ JPEG_DETECT_SD = 4.0
 JPEG_ERROR_OVER_BLOCKING = 2.0
 
 
-def encoded(image: np.ndarray) -> np.ndarray:
+def encoded(image: np.ndarray, codes: np.ndarray | None = None) -> np.ndarray:
     """The photo's sRGB encoding in [0, 1] (clipped), float32 as ``image`` in float32: what
-    :func:`jpeg_blocking` and :func:`goodness` take from it, computed once where a caller needs both."""
-    return encode(np.asarray(image, np.float32), np.float32)
+    :func:`jpeg_blocking` and :func:`goodness` take from it, computed once where a caller needs both.
+    ``codes``: the image's 8-bit codes (:func:`rtloop._srgb.codes8`) where it has them (looked up, the
+    same numbers)."""
+    if codes is not None:
+        return per_code(_encode32, codes)
+    return _encode32(np.asarray(image, np.float32))
+
+
+def _encode32(x: np.ndarray) -> np.ndarray:
+    return encode(x, np.float32)
+
+
+def _quarter_step(e: np.ndarray) -> np.ndarray:
+    """A quarter of the 8-bit code step (the mean absolute error of rounding to a code) in linear units at
+    the float32 sRGB encodings ``e``."""
+    half = np.float32(0.5 / 255)
+    return np.float32(0.25) * (decode(np.minimum(e + half, np.float32(1))) - decode(np.maximum(e - half, np.float32(0))))
+
+
+def _quarter_step_at(x: np.ndarray) -> np.ndarray:
+    """:func:`_quarter_step` at the float32 linear values ``x``."""
+    return _quarter_step(_encode32(x))
 
 
 def jpeg_blocking(image: np.ndarray, encoding: np.ndarray | None = None) -> dict[str, Any]:
@@ -131,14 +151,16 @@ def clip_level(sigma: Any, blocking: dict[str, Any]) -> float:
 
 def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool = True,
              render: np.ndarray | None = None, sigma: np.ndarray | None = None,
-             blocking: dict[str, Any] | None = None, encoding: np.ndarray | None = None) -> dict[str, Any]:
+             blocking: dict[str, Any] | None = None, encoding: np.ndarray | None = None,
+             codes: np.ndarray | None = None) -> dict[str, Any]:
     """The residual of ``scene``'s render against ``target`` (L1 over the used, unsaturated pixels) over
     its floor: per pixel and channel the larger of the 8-bit quantisation's mean error (a quarter code
     step) and the mean error of the measured noise (sigma x sqrt(2/pi)) and of a JPEG's blocks
     (:func:`jpeg_blocking`, its RMS error in codes times the code step there x sqrt(2/pi)), added in quadrature. With a verdict, and where the model falls short of
     the floor, per object its share of the excess (``per_object``, empty otherwise). ``render``: the
     scene's render (spp 1) when the caller has it; ``sigma`` and ``blocking``: ``target``'s
-    :func:`noise_sigma`, :func:`jpeg_blocking` and :func:`encoded` when the caller has them."""
+    :func:`noise_sigma`, :func:`jpeg_blocking` and :func:`encoded` when the caller has them, ``codes`` its
+    8-bit codes (:func:`rtloop._srgb.codes8`) where it has them (the same numbers, looked up)."""
     if render is None:
         render = _native.render(scene, scene.width, scene.height, 1)
     model = np.minimum(render, np.float32(1.0)) if clip else render
@@ -151,13 +173,14 @@ def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool 
     # Every pixel kept (no mask, none saturated): the arrays themselves, else their kept rows.
     everywhere = bool(keep.all())
     tk = t if everywhere else np.compress(keep, t, axis=0)
-    if encoding is None:
-        e = encode(tk, np.float32)
-    else:
+    if codes is not None:
+        c = np.asarray(codes).reshape(-1, 3)
+        quant = per_code(_quarter_step_at, c if everywhere else np.compress(keep, c, axis=0))
+    elif encoding is not None:
         e = np.asarray(encoding, np.float32).reshape(-1, 3)
-        e = e if everywhere else np.compress(keep, e, axis=0)
-    half = np.float32(0.5 / 255)
-    quant = np.float32(0.25) * (decode(np.minimum(e + half, np.float32(1))) - decode(np.maximum(e - half, np.float32(0))))
+        quant = _quarter_step(e if everywhere else np.compress(keep, e, axis=0))
+    else:
+        quant = _quarter_step_at(tk)
     sigma = noise_sigma(target) if sigma is None else np.asarray(sigma, np.float64)
     blocking = jpeg_blocking(target) if blocking is None else blocking
     # The JPEG's error per pixel in linear units: its RMS in codes times the code step there (4 quarter steps).

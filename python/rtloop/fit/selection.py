@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from .. import _native
-from .._srgb import decode, encode
+from .._srgb import decode, encode, per_code
 from ..errors import RtloopError
 from ..scene import Scene, scene_to_dict
 from .products import product_bounds
@@ -73,17 +73,29 @@ EXPLAINED = 3.0
 MIN_GAIN = 0.05
 
 
-def quantisation_floor(target: np.ndarray, pixels: np.ndarray | None) -> float:
+def quantisation_floor(target: np.ndarray, pixels: np.ndarray | None, codes: np.ndarray | None = None) -> float:
     """The L1 loss an exact model would leave on the photo from 8-bit sRGB quantisation alone: per pixel and
     channel, a quarter of a code step (the mean absolute error of rounding) in linear units, summed over
-    ``pixels`` (all when None)."""
+    ``pixels`` (all when None). ``codes``: ``target``'s 8-bit codes (:func:`rtloop._srgb.codes8`) where it
+    has them (each pixel's quarter step looked up: the same numbers)."""
+    if codes is not None:
+        c = np.asarray(codes).reshape(-1, 3)
+        return float(np.sum(per_code(_quarter_step_at, c if pixels is None else c[pixels])))
     x = np.clip(np.asarray(target, np.float64).reshape(-1, 3), 0.0, 1.0)
-    if pixels is not None:
-        x = x[pixels]
+    return float(np.sum(_quarter_step(x if pixels is None else x[pixels])))
+
+
+def _quarter_step(x: np.ndarray) -> np.ndarray:
+    """A quarter of the 8-bit code step in linear units at the linear values ``x`` (float64, in [0, 1])."""
     e = encode(x)
     half = 0.5 / 255  # half a code step, either side of the value's code
     step = decode(np.minimum(e + half, 1.0)) - decode(np.maximum(e - half, 0.0))
-    return float(np.sum(0.25 * step))
+    return 0.25 * step
+
+
+def _quarter_step_at(x: np.ndarray) -> np.ndarray:
+    """:func:`_quarter_step` at the values ``x`` (any dtype) in float64, clipped to [0, 1]."""
+    return _quarter_step(np.clip(np.asarray(x, np.float64), 0.0, 1.0))
 
 
 def check_environment(mode: Any) -> str:
