@@ -112,9 +112,10 @@ impl PyScene {
         serde_json::to_string_pretty(&self.0.to_value()).expect("a scene always serialises")
     }
 
-    /// The scene as a plain dict in the public format (defaults written out).
+    /// The scene as a plain dict in the public format (defaults written out): what `json.loads` makes of
+    /// `to_json()`, built without the text.
     fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        py.import("json")?.call_method1("loads", (self.to_json(),))
+        json_to_python(py, &self.0.to_value())
     }
 
     fn __repr__(&self) -> String {
@@ -126,6 +127,38 @@ impl PyScene {
             ParamLayout::all(&self.0).dim()
         )
     }
+}
+
+/// `value` as the Python object `json.loads` makes of its JSON text, the same to the last bit: objects
+/// as dicts in the text's key order, arrays as lists, integers as int, other numbers as float (the text
+/// is their shortest round-trip form, so `json.loads` reads back the very f64), null as None.
+fn json_to_python<'py>(py: Python<'py>, value: &serde_json::Value) -> PyResult<Bound<'py, PyAny>> {
+    use pyo3::types::{PyBool, PyFloat, PyList, PyString};
+    use serde_json::Value;
+    Ok(match value {
+        Value::Null => py.None().into_bound(py),
+        Value::Bool(b) => PyBool::new(py, *b).to_owned().into_any(),
+        Value::Number(n) => match (n.as_i64(), n.as_u64()) {
+            (Some(i), _) => i.into_pyobject(py)?.into_any(),
+            (None, Some(u)) => u.into_pyobject(py)?.into_any(),
+            (None, None) => PyFloat::new(py, n.as_f64().unwrap_or(f64::NAN)).into_any(),
+        },
+        Value::String(s) => PyString::new(py, s).into_any(),
+        Value::Array(items) => {
+            let list = PyList::empty(py);
+            for item in items {
+                list.append(json_to_python(py, item)?)?;
+            }
+            list.into_any()
+        }
+        Value::Object(map) => {
+            let dict = PyDict::new(py);
+            for (k, v) in map {
+                dict.set_item(k, json_to_python(py, v)?)?;
+            }
+            dict.into_any()
+        }
+    })
 }
 
 /// One side of a bound pair: one number or one per component.
