@@ -138,3 +138,65 @@ def test_a_jpeg_of_a_clean_photo_is_explained_to_the_noise_level(case, monkeypat
     monkeypatch.setattr(gm, "JPEG_ERROR_OVER_BLOCKING", 0.0)
     blind = gm.goodness(truth, decode(_jpeg(png, 50) / 255.0).astype(np.float32), None)
     assert blind["ratio"] > EXPLAINED_RATIO
+
+
+def _jpeg_blocking_phases_by_loop(image: np.ndarray) -> np.ndarray:
+    """The blocking's per-phase means as first written: per phase, the mean of its pairs' clipped squared
+    jumps, gathered by a mask (the reference for the one-reduction ``_phase_means``)."""
+    from rtloop._srgb import encode
+    from rtloop.fit.goodness import JPEG_BLOCK, JPEG_EDGE_CODES
+
+    codes = encode(np.clip(np.asarray(image, np.float32), 0.0, 1.0), np.float32) * np.float32(255.0)
+    phases = np.zeros((JPEG_BLOCK, 3))
+    for c in (codes, codes.transpose(1, 0, 2)):
+        d = np.diff(c, axis=1)
+        jump = d[:, 1:-1] - 0.5 * (d[:, :-2] + d[:, 2:])
+        sq = np.minimum(jump * jump, np.float32(JPEG_EDGE_CODES ** 2))
+        phase = np.arange(1, d.shape[1] - 1) % JPEG_BLOCK
+        for k in range(JPEG_BLOCK):
+            phases[k] += sq[:, phase == k].reshape(-1, 3).mean(axis=0, dtype=np.float64) / 2
+    return phases
+
+
+def test_jpeg_blocking_phases_are_the_per_phase_means_bit_for_bit():
+    """The grid phases' means from one reduction are those of the per-phase loop to the last bit, on
+    images of every size modulo the 8-pixel grid, noisy, flat and out of [0, 1]."""
+    import importlib
+
+    gm = importlib.import_module("rtloop.fit.goodness")  # (the module: rtloop.fit.goodness is the function)
+    rng = np.random.default_rng(4)
+    for h, w in [(24, 24), (25, 31), (33, 40), (96, 128), (47, 61), (71, 24)]:
+        for img in (rng.random((h, w, 3)), np.round(rng.random((h, w, 3)) * 4) / 4, 1.2 * rng.random((h, w, 3)) - 0.1):
+            img = img.astype(np.float32)
+            codes = gm.encoded(img) * np.float32(255.0)
+            got = np.zeros((gm.JPEG_BLOCK, 3))
+            for c in (codes, np.ascontiguousarray(codes.transpose(1, 0, 2))):
+                got += gm._phase_means(c) / 2
+            assert np.array_equal(got, _jpeg_blocking_phases_by_loop(img)), (h, w)
+
+
+@pytest.mark.parametrize("case", ["direct-side", "direct-low-left", "direct-three-balls"])
+def test_the_8_bit_codes_give_the_same_numbers(case):
+    """Where the photo is 8-bit codes (a PNG, a JPEG as load_image decodes them), the goodness, the JPEG
+    blocking and the quantisation floor from the codes' tables are those computed from the values, bit for
+    bit (masked too)."""
+    import importlib
+
+    from rtloop._srgb import code_values, codes8
+    from rtloop.fit.selection import quantisation_floor
+
+    gm = importlib.import_module("rtloop.fit.goodness")
+    truth = rtloop.Scene((PHOTOS / case / "scene.json").read_text())
+    png = _png_codes(case)
+    use = np.arange(0, truth.width * truth.height, 3, dtype=np.uint32)
+    for codes in (png, _jpeg(png, 50)):
+        photo = rtloop.load_image(PHOTOS / case / "objective.png", truth) if codes is png else \
+            code_values()[codes]
+        c = codes8(photo)
+        assert c is not None and np.array_equal(c, codes)
+        enc = gm.encoded(photo, c)
+        assert np.array_equal(enc.view(np.uint32), gm.encoded(photo).view(np.uint32))
+        assert gm.jpeg_blocking(photo, enc) == gm.jpeg_blocking(photo)
+        for pixels in (None, use):
+            assert quantisation_floor(photo, pixels, c) == quantisation_floor(photo, pixels)
+            assert gm.goodness(truth, photo, pixels, codes=c, encoding=enc) == gm.goodness(truth, photo, pixels)

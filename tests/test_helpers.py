@@ -93,3 +93,56 @@ def test_products_split_back_and_bounds():
         assert split.get_params(["light.intensity"]) == [intensity]
         got = products_module.products(split)
         assert got["ball"] == pytest.approx(rows[0], rel=1e-15) and got["floor"] == pytest.approx(rows[1], rel=1e-15)
+
+
+def test_code_values_are_the_formula_at_every_8_bit_code():
+    """The 256 linear values an 8-bit photo can hold: the exact formula's, as load_image decodes a file."""
+    from rtloop.acquisition.objective import _lookup_table
+
+    want = _srgb.decode(np.arange(256, dtype=np.float64) / 255).astype(np.float32)
+    assert np.array_equal(_srgb.code_values().view(np.uint32), want.view(np.uint32))
+    assert np.array_equal(_lookup_table(256, "srgb").view(np.uint32), want.view(np.uint32))
+    assert not _srgb.code_values().flags.writeable
+
+
+def test_codes8_finds_the_codes_of_exactly_those_values():
+    """codes8: the codes of an image of code values (any shape, any strides); None as soon as one value is
+    not bit for bit a code's: either float32 neighbour of every code's value, a negative zero, a negative,
+    values above 1, NaN, infinity, a subnormal, another dtype."""
+    rng = np.random.default_rng(0)
+    codes = rng.integers(0, 256, (24, 32, 3)).astype(np.uint8)
+    x = _srgb.code_values()[codes]
+    assert np.array_equal(_srgb.codes8(x), codes) and _srgb.codes8(x).dtype == np.uint8
+    assert np.array_equal(_srgb.codes8(x[:, ::3]), codes[:, ::3])
+    assert np.array_equal(_srgb.codes8(_srgb.code_values()), np.arange(256))
+    for direction in (-np.inf, np.inf):
+        near = np.nextafter(_srgb.code_values(), np.float32(direction))
+        for v in near:
+            y = x.copy()
+            y[3, 4, 1] = v
+            assert _srgb.codes8(y) is None, v
+    for v in (-0.0, -_srgb.code_values()[9], 1.5, np.nan, np.inf, 1e-40):
+        y = x.copy()
+        y[0, 0, 0] = v
+        assert _srgb.codes8(y) is None, v
+    assert _srgb.codes8(x.astype(np.float64)) is None
+    assert _srgb.codes8(np.zeros((0, 3), np.float32)) is None
+
+
+def test_per_code_is_the_function_of_the_values_bit_for_bit():
+    """per_code(fn, codes) is fn(values) itself (computed once per code), for each precision's transfer
+    functions."""
+    rng = np.random.default_rng(1)
+    codes = rng.integers(0, 256, (40, 50, 3)).astype(np.uint8)
+    x = _srgb.code_values()[codes]
+    for fn in (_encode32, _encode64_decode):
+        got, want = _srgb.per_code(fn, codes), fn(x)
+        assert got.dtype == want.dtype and np.array_equal(got.view(np.uint8), want.view(np.uint8)), fn
+
+
+def _encode32(x):
+    return _srgb.encode(x, np.float32)
+
+
+def _encode64_decode(x):
+    return _srgb.decode(_srgb.encode(x, np.float64) * 0.5)
