@@ -1,6 +1,7 @@
 """What the default uncertainty adds to a fit, and what its sigma is: per photo the work ``rtloop.fit`` does
-for ``uncertainty=True`` beyond ``uncertainty=False`` (the pixel-centre render at the optimum and
-``estimate_uncertainty`` with the fit's compared render: Gauss-Newton and the block sandwich), timed alone.
+for ``uncertainty=True`` beyond ``uncertainty=False`` (``estimate_uncertainty`` with the fit's compared
+render, as ``rtloop.fit`` calls it: the pixel-centre values at the optimum, Gauss-Newton and the block
+sandwich), timed alone.
 
 Cases: the Mitsuba photos of ``tests/fixtures/photos`` without interreflection (the direct ones, environment,
 gloss; the bounce's renders are issue 12's). Each is fitted once (default fit); then its uncertainty is
@@ -58,11 +59,12 @@ def worker(runs: int) -> dict[str, dict[str, object]]:
         photo = rtloop.load_image(case / "objective.png", scene)
         result = rtloop.fit(scene, photo, uncertainty=False)
         s = result.scene
-        compared = _native.render(s, s.width, s.height, 1, True)  # the fit has it: its goodness render
+        footprint = result.settings.get("footprint", "off") != "off"
+        compared = _native.render(s, s.width, s.height, 1, footprint)  # the fit has it: its goodness render
+        at_optimum = None if footprint else compared  # as rtloop.fit passes them
         cpu, wall, u = [], [], {}
         for _ in range(runs):
             c0, w0 = time.process_time(), time.perf_counter()
-            at_optimum = _native.render(s, s.width, s.height, 1)
             u = estimate_uncertainty(result, np.asarray(photo, np.float64), render=at_optimum, compared=compared)
             wall.append(time.perf_counter() - w0)
             cpu.append(time.process_time() - c0)

@@ -3,37 +3,31 @@
 //! Each repeats, operation for operation, the numpy it replaces (the same numbers to the last bit).
 
 use crate::error::{Error, Result};
-use crate::render::render;
+use crate::render::{render_pixels, render_pixels_many};
 use crate::scene::Scene;
 use rayon::prelude::*;
 
-/// What one side of a difference is: a scene to render, or the optimum's used values `f0`.
+/// What one side of a difference is: a scene to render, its used pixels' values already rendered, or the
+/// optimum's used values `f0`.
 pub enum Side<'a> {
     Render(&'a Scene),
+    Rendered(&'a [f32]),
     Optimum,
 }
 
-/// The used pixels' values of `img` (flat H x W x 3) in `out` (3 per used pixel), min(value, 1) with
-/// `clip`; a pixel crossing 1 (against `clipped0`) in a `free` channel is marked in `kink`.
-fn used_values(
-    img: &[f32],
-    idx: &[u32],
-    clipped0: &[bool],
-    free: &[bool],
-    clip: bool,
-    kink: &mut [bool],
-    out: &mut [f32],
-) {
-    for (i, &p) in idx.iter().enumerate() {
+/// The used pixels' rendered values `v` (3 per used pixel) made min(value, 1) in place with `clip`; a
+/// pixel crossing 1 (against `clipped0`) in a `free` channel is marked in `kink`.
+fn clip_used(v: &mut [f32], clipped0: &[bool], free: &[bool], clip: bool, kink: &mut [bool]) {
+    if !clip {
+        return;
+    }
+    for (i, px) in v.chunks_exact_mut(3).enumerate() {
         let mut crossed = false;
-        for c in 0..3 {
-            let g = img[3 * p as usize + c];
+        for (c, g) in px.iter_mut().enumerate() {
             let j = 3 * i + c;
-            if clip {
-                crossed |= ((g >= 1.0) != clipped0[j]) && free[j];
-                out[j] = if g > 1.0 { 1.0 } else { g }; // np.minimum(g, 1): NaN stays NaN
-            } else {
-                out[j] = g;
+            crossed |= ((*g >= 1.0) != clipped0[j]) && free[j];
+            if *g > 1.0 {
+                *g = 1.0; // np.minimum(g, 1): NaN stays NaN
             }
         }
         if crossed {
@@ -63,7 +57,7 @@ pub fn one_sided_disagree(up: f64, at: f64, down: f64) -> bool {
 }
 
 /// d f / d theta_k over the used pixels' channels: (f(up) - f(down)) / `denom` in f64 from the f32
-/// values, a side at the optimum taken from `f0`. Renders at spp 1 and the scene's size; pixels whose
+/// values, a side at the optimum taken from `f0`. Renders the used pixels alone, at spp 1; pixels whose
 /// value crosses 1 inside the step (with `clip`) are marked in `kink`. With both sides rendered, a pixel
 /// whose forward and backward changes in a `free` channel disagree like a jump
 /// ([`one_sided_disagree`]: a shadow edge or the terminator crossed inside the step) is marked in `jump`.
@@ -95,20 +89,26 @@ pub fn fd_column(
             idx.len(), idx.len(), f0.len(), clipped0.len(), free.len(), out.len(), kink.len(), jump.len()
         )));
     }
-    let both = matches!((&up, &down), (Side::Render(_), Side::Render(_)));
+    let rendered = |s: &Side<'_>| !matches!(s, Side::Optimum);
+    let both = rendered(&up) && rendered(&down);
     let values = |side: Side<'_>, kink: &mut [bool]| -> Result<Vec<f32>> {
         Ok(match side {
             Side::Optimum => f0.to_vec(),
             Side::Render(scene) => {
-                let img = render(scene, None, None, 1)?;
-                let pixels = img.rgb.len() / 3;
-                if let Some(&p) = idx.iter().find(|&&p| p as usize >= pixels) {
+                // the used pixels alone: the same values as theirs in a whole render
+                let mut v = render_pixels(scene, idx)?;
+                clip_used(&mut v, clipped0, free, clip, kink);
+                v
+            }
+            Side::Rendered(values) => {
+                if values.len() != n {
                     return Err(Error::Invalid(format!(
-                        "fd_column: pixel {p} is outside the {pixels} rendered"
+                        "fd_column: {} rendered values for {n}",
+                        values.len()
                     )));
                 }
-                let mut v = vec![0f32; n];
-                used_values(&img.rgb, idx, clipped0, free, clip, kink, &mut v);
+                let mut v = values.to_vec();
+                clip_used(&mut v, clipped0, free, clip, kink);
                 v
             }
         })
@@ -124,6 +124,55 @@ pub fn fd_column(
                 free[j] && one_sided_disagree(f64::from(fp[j]), f64::from(f0[j]), f64::from(fm[j]))
             });
         }
+    }
+    Ok(())
+}
+
+/// One rendered column of [`fd_columns`]: its two sides (None: the optimum) and the difference's divisor.
+pub struct Column<'a> {
+    pub up: Option<&'a Scene>,
+    pub down: Option<&'a Scene>,
+    pub denom: f64,
+}
+
+/// [`fd_column`] of each of `columns` into `out[k]`, the sides of all rendered in one pass
+/// ([`render_pixels_many`]: scenes with the same first hits find them once); the same values bit for bit
+/// as the columns one by one.
+#[allow(clippy::too_many_arguments)]
+pub fn fd_columns(
+    columns: &[Column<'_>],
+    f0: &[f32],
+    idx: &[u32],
+    clipped0: &[bool],
+    free: &[bool],
+    clip: bool,
+    kink: &mut [bool],
+    jump: &mut [bool],
+    out: &mut [&mut [f64]],
+) -> Result<()> {
+    if out.len() != columns.len() {
+        return Err(Error::Invalid(format!(
+            "fd_columns: {} columns need as many rows (got {})",
+            columns.len(),
+            out.len()
+        )));
+    }
+    let scenes: Vec<&Scene> = columns
+        .iter()
+        .flat_map(|c| [c.up, c.down])
+        .flatten()
+        .collect();
+    let values = render_pixels_many(&scenes, idx)?;
+    let mut next = values.iter();
+    for (c, row) in columns.iter().zip(out.iter_mut()) {
+        let mut side = |s: Option<&Scene>| match s {
+            Some(_) => next.next().map_or(Side::Optimum, |v| Side::Rendered(v)),
+            None => Side::Optimum,
+        };
+        let (up, down) = (side(c.up), side(c.down));
+        fd_column(
+            up, down, f0, idx, clipped0, free, clip, c.denom, kink, jump, row,
+        )?;
     }
     Ok(())
 }
@@ -156,8 +205,12 @@ pub fn block_scores(
         .zip(rows.par_iter())
         .for_each(|(acc, &k)| {
             let row = &jt[k * m..(k + 1) * m];
-            for (i, (&j, &ri)) in row.iter().zip(r).enumerate() {
-                acc[block_of[i / 3]] += j * ri;
+            // a pixel's three residuals in turn: the order of i, one block lookup per pixel
+            for ((jp, rp), &b) in row.chunks_exact(3).zip(r.chunks_exact(3)).zip(block_of) {
+                let a = &mut acc[b];
+                *a += jp[0] * rp[0];
+                *a += jp[1] * rp[1];
+                *a += jp[2] * rp[2];
             }
         });
     Ok(g)

@@ -1,6 +1,6 @@
 """Pinned results of a refactor (issue "One owner for every formula"): every fit in tests/pinned_cases.py
-gives the same numbers to the last bit as recorded in tests/fixtures/pinned_fits.json before the core was
-restructured. These golden values are the project's own outputs, allowed here only because they pin a
+gives the same numbers to the last bit (but for the CPU-dependent parts, CPU_DEPENDENT) as recorded in
+tests/fixtures/pinned_fits.json before the core was restructured. These golden values are the project's own outputs, allowed here only because they pin a
 refactor; accuracy is tested against ground truth elsewhere. A change meant to alter results re-records
 them (`python3 tests/pinned_cases.py`) and says so in its commit."""
 
@@ -14,6 +14,21 @@ from conftest import shared_case
 from pinned_cases import FIXTURE, REFERENCE, run_reference, run_synthetic, synthetic_cases
 
 PINNED = json.loads(FIXTURE.read_text())
+
+#: The parts of a fit's report that numpy computes with CPU-dispatched float routines, compared to a relative
+#: tolerance; everything else (the core's numbers: the fit, its products, renders, histories) stays exact.
+#: The same code gives other last bits on an AVX-512 machine than on an AVX2 one: numpy's vectorised
+#: float32 power (the sRGB curve behind the goodness of fit and the encoding check) and BLAS / pairwise
+#: sums whose order follows the vector width (the uncertainty, the model's residual). Measured on an AMD
+#: EPYC with AVX-512 against the fixture (recorded without it): goodness up to 1.2e-5 relative (a jump
+#: ratio of float32 sRGB codes), the encoding check 8e-8, the uncertainty 1.2e-11, the residual 8e-15.
+#: With numpy's AVX-512 paths switched off (NPY_DISABLE_CPU_FEATURES) the goodness matches exactly.
+CPU_DEPENDENT = ((".report.goodness.", 1e-4), (".report.model.encoding", 1e-4),
+                 (".report.uncertainty.", 1e-9), (".report.model.residual", 1e-9))
+
+
+def _tolerance(path: str) -> float:
+    return next((tol for part, tol in CPU_DEPENDENT if part in path), 0.0)
 
 
 def _first_difference(got, want, path="") -> str | None:
@@ -33,6 +48,10 @@ def _first_difference(got, want, path="") -> str | None:
             if d:
                 return d
         return None
+    if isinstance(want, float) and isinstance(got, float) and got != want:
+        tol = _tolerance(path)
+        if tol and abs(got - want) <= tol * max(abs(want), abs(got)):
+            return None
     if got != want or type(got) is not type(want):
         return f"{path}: {got!r} != {want!r}"
     return None

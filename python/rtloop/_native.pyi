@@ -42,6 +42,8 @@ def render(
     scene: Scene, width: int | None = None, height: int | None = None, spp: int = 1, footprint: bool = False
 ) -> npt.NDArray[np.float32]: ...
 def object_ids(scene: Scene, width: int | None = None, height: int | None = None) -> npt.NDArray[np.int32]: ...
+def render_pixels(scene: Scene, idx: npt.NDArray[np.uint32]) -> npt.NDArray[np.float32]:
+    """The pixels ``idx`` (flat, of the scene's own size) of ``render(scene)``, bit for bit: (len(idx), 3)."""
 def save_image(path: str | PathLike[str], image: npt.NDArray[np.float32]) -> None: ...
 def render_layers(
     scenes: list[Scene], width: int, height: int, spp: int = 16, adaptive: bool = True, cover_from: int = 0,
@@ -57,6 +59,21 @@ def composite(
 def projection_blocker(scene: Scene, paths: list[str]) -> str | None: ...
 def constant_term(scene: Scene) -> str:
     """"environment" or "ambient": the constant radiance the closed form's second column models."""
+def fd_columns(
+    ups: list[Scene | None],
+    downs: list[Scene | None],
+    denoms: list[float],
+    rows: list[int],
+    f0: npt.NDArray[np.float32],
+    idx: npt.NDArray[np.uint32],
+    clipped0: npt.NDArray[np.bool_],
+    free: npt.NDArray[np.bool_],
+    clip: bool,
+    kink: npt.NDArray[np.bool_],
+    jump: npt.NDArray[np.bool_],
+    jt: npt.NDArray[np.float64],
+) -> None:
+    """``fd_column`` of several parameters into the rows ``rows`` of ``jt``, their scenes rendered in one pass."""
 def fd_column(
     up: Scene | None,
     down: Scene | None,

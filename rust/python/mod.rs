@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use numpy::{
     PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
-    PyReadonlyArray3, PyReadwriteArray1, PyUntypedArrayMethods,
+    PyReadonlyArray3, PyReadwriteArray1, PyReadwriteArray2, PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 
@@ -51,6 +51,21 @@ fn render<'py>(
     let scene = &scene.get().0;
     let img = py.detach(|| core_render::render_with(scene, width, height, spp, footprint))?;
     image_array(py, img.height, img.width, img.rgb)
+}
+
+/// The pixels `idx` (flat indices of the scene's own size) of the one-sample render, float32 (len(idx), 3):
+/// those pixels' values of `render(scene)` bit for bit, for their cost alone.
+#[pyfunction]
+fn render_pixels<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyScene>,
+    idx: PyReadonlyArray1<'py, u32>,
+) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    let scene = &scene.get().0;
+    let idx = idx.as_slice()?;
+    let n = idx.len();
+    let rgb = py.detach(|| core_render::render_pixels(scene, idx))?;
+    Ok(PyArray1::from_vec(py, rgb).reshape([n, 3])?)
 }
 
 /// Object index per pixel centre, int32 (H, W), -1 for background.
@@ -227,6 +242,83 @@ fn fd_column<'py>(
     py.detach(|| {
         core_uncertainty::fd_column(
             up_s, down_s, f0, idx, clipped0, free, clip, denom, kink, jump, out,
+        )
+    })?;
+    Ok(())
+}
+
+/// `fd_column` of several parameters at once into the rows `rows` of `jt` (P, 3 x used, float64,
+/// C-contiguous): column k's sides `ups[k]`, `downs[k]` (None: the optimum), divisor `denoms[k]`; the
+/// scenes rendered in one pass over the used pixels (scenes with the same first hits find them once).
+/// The same values as `fd_column` one by one.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn fd_columns<'py>(
+    py: Python<'py>,
+    ups: Vec<Option<Bound<'py, PyScene>>>,
+    downs: Vec<Option<Bound<'py, PyScene>>>,
+    denoms: Vec<f64>,
+    rows: Vec<usize>,
+    f0: PyReadonlyArray1<'py, f32>,
+    idx: PyReadonlyArray1<'py, u32>,
+    clipped0: PyReadonlyArray1<'py, bool>,
+    free: PyReadonlyArray1<'py, bool>,
+    clip: bool,
+    mut kink: PyReadwriteArray1<'py, bool>,
+    mut jump: PyReadwriteArray1<'py, bool>,
+    mut jt: PyReadwriteArray2<'py, f64>,
+) -> PyResult<()> {
+    let k = rows.len();
+    if ups.len() != k || downs.len() != k || denoms.len() != k {
+        return Err(Error::Invalid(format!(
+            "fd_columns: {k} rows need as many ups, downs and denoms (got {}, {}, {})",
+            ups.len(),
+            downs.len(),
+            denoms.len()
+        ))
+        .into());
+    }
+    let m = jt.shape()[1];
+    let p = jt.shape()[0];
+    if let Some(&r) = rows.iter().find(|&&r| r >= p) {
+        return Err(Error::Invalid(format!("fd_columns: row {r} of {p}")).into());
+    }
+    let mut seen = vec![false; p];
+    for &r in &rows {
+        if std::mem::replace(&mut seen[r], true) {
+            return Err(Error::Invalid(format!("fd_columns: row {r} given twice")).into());
+        }
+    }
+    fn scene<'a>(s: &'a Option<Bound<'_, PyScene>>) -> Option<&'a crate::scene::Scene> {
+        s.as_ref().map(|b| &b.get().0) // frozen + Sync: no borrow flag
+    }
+    let columns: Vec<core_uncertainty::Column<'_>> = (0..k)
+        .map(|c| core_uncertainty::Column {
+            up: scene(&ups[c]),
+            down: scene(&downs[c]),
+            denom: denoms[c],
+        })
+        .collect();
+    let (f0, idx, clipped0, free) = (
+        f0.as_slice()?,
+        idx.as_slice()?,
+        clipped0.as_slice()?,
+        free.as_slice()?,
+    );
+    let (kink, jump, jt) = (
+        kink.as_slice_mut()?,
+        jump.as_slice_mut()?,
+        jt.as_slice_mut()?,
+    );
+    // the rows asked for, in the order of `rows`
+    let mut by_row: Vec<Option<&mut [f64]>> = jt.chunks_mut(m.max(1)).map(Some).collect();
+    let mut out: Vec<&mut [f64]> = rows
+        .iter()
+        .map(|&r| by_row[r].take().unwrap_or_default())
+        .collect();
+    py.detach(|| {
+        core_uncertainty::fd_columns(
+            &columns, f0, idx, clipped0, free, clip, kink, jump, &mut out,
         )
     })?;
     Ok(())
@@ -556,6 +648,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(_kept_pools, m)?)?;
     m.add_function(wrap_pyfunction!(object_ids, m)?)?;
+    m.add_function(wrap_pyfunction!(render_pixels, m)?)?;
     m.add_function(wrap_pyfunction!(render_layers, m)?)?;
     m.add_function(wrap_pyfunction!(composite, m)?)?;
     m.add_function(wrap_pyfunction!(save_image, m)?)?;
@@ -564,6 +657,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     m.add_function(wrap_pyfunction!(optimize, m)?)?;
     m.add_function(wrap_pyfunction!(fd_column, m)?)?;
+    m.add_function(wrap_pyfunction!(fd_columns, m)?)?;
     m.add_function(wrap_pyfunction!(block_scores, m)?)?;
     m.add("RtloopError", m.py().get_type::<RtloopError>())?;
     m.add("SceneError", m.py().get_type::<SceneError>())?;

@@ -223,6 +223,37 @@ pub struct Gathered {
 /// The last [`Gathered`] built (one: a fit renders one geometry many times; another geometry replaces it).
 static LAST: std::sync::Mutex<Option<std::sync::Arc<Gathered>>> = std::sync::Mutex::new(None);
 
+/// The bits of what a render's first hits depend on: the image size, the camera settings (`camera_key`) and
+/// the spheres and planes of `geometry`; `None` with a mesh (not compared). Two renders with the same key
+/// see the same surfaces at every pixel.
+pub(crate) fn geometry_key(
+    geometry: &super::hit::Geometry,
+    camera_key: [f64; 10],
+    (width, height): (u32, u32),
+) -> Option<Vec<u32>> {
+    let mut key = vec![width, height];
+    for v in camera_key {
+        let b = v.to_bits();
+        key.extend([b as u32, (b >> 32) as u32]);
+    }
+    for s in &geometry.shapes {
+        match *s {
+            PShape::Sphere { center, radius } => {
+                key.push(0);
+                key.extend(center.to_array().map(f32::to_bits));
+                key.push(radius.to_bits());
+            }
+            PShape::Plane { point, normal } => {
+                key.push(1);
+                key.extend(point.to_array().map(f32::to_bits));
+                key.extend(normal.to_array().map(f32::to_bits));
+            }
+            PShape::Mesh(_) => return None,
+        }
+    }
+    Some(key)
+}
+
 impl Gathered {
     /// Pixel `i`'s gather points.
     #[inline]
@@ -246,26 +277,8 @@ impl Gathered {
     ) -> Option<std::sync::Arc<Gathered>> {
         use rayon::prelude::*;
         let shapes = &geometry.shapes[..];
-        let mut key = vec![width, height, u32::from(sky)];
-        for v in camera_key {
-            let b = v.to_bits();
-            key.extend([b as u32, (b >> 32) as u32]);
-        }
-        for s in shapes {
-            match *s {
-                PShape::Sphere { center, radius } => {
-                    key.push(0);
-                    key.extend(center.to_array().map(f32::to_bits));
-                    key.push(radius.to_bits());
-                }
-                PShape::Plane { point, normal } => {
-                    key.push(1);
-                    key.extend(point.to_array().map(f32::to_bits));
-                    key.extend(normal.to_array().map(f32::to_bits));
-                }
-                PShape::Mesh(_) => return None,
-            }
-        }
+        let mut key = geometry_key(geometry, camera_key, (width, height))?;
+        key.push(u32::from(sky));
         if let Some(last) = LAST.lock().ok().and_then(|g| g.clone()) {
             if last.key == key {
                 return Some(last);

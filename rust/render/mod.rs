@@ -47,82 +47,210 @@ pub fn render_with(
     spp: u32,
     footprint: bool,
 ) -> Result<Image> {
-    let width = width.unwrap_or(scene.width);
-    let height = height.unwrap_or(scene.height);
-    if width == 0 || height == 0 || width > 16384 || height > 16384 {
-        return Err(Error::Invalid(format!(
-            "image size must be 1..16384 pixels per side (got {width}x{height})"
-        )));
-    }
-    if spp == 0 || spp > 4096 {
-        return Err(Error::Invalid(format!("spp must be 1..4096 (got {spp})")));
-    }
-    let geometry = Geometry::new(scene);
-    let mut params = ShadeParams::new(scene);
-    // With the bounce, one sample per pixel: the light-independent gathers kept from the last render of
-    // this geometry (`bounce::Gathered`; a fit's uncertainty renders it with the light moved).
-    let c = &scene.camera;
-    let camera_key = [
-        c.position[0],
-        c.position[1],
-        c.position[2],
-        c.look_at[0],
-        c.look_at[1],
-        c.look_at[2],
-        c.up[0],
-        c.up[1],
-        c.up[2],
-        c.vfov_deg,
-    ];
-    let cache = (params.interreflection && spp == 1)
-        .then(|| {
-            let sky = params.environment != Vec3A::ZERO;
-            bounce::Gathered::for_render(&geometry, camera_key, (width, height), sky)
-        })
-        .flatten();
-    match &cache {
-        Some(cache) => params.prepare_bounce_cached(&geometry.shapes, cache),
-        None => params.prepare_bounce(&geometry.shapes),
-    }
-    let shadows = scene.can_occlude();
-    let offsets = sample_offsets(spp); // spp = 1: the pixel centre
-                                       // The footprint (meshes aside, as the fitness refuses them) where the scene can shadow at all.
-    if footprint && spp != 1 {
-        return Err(Error::Invalid(format!(
-            "the footprint render takes one sample per pixel (got spp {spp})"
-        )));
-    }
-    let footprint =
-        footprint && shadows && !geometry.shapes.iter().any(|s| matches!(s, PShape::Mesh(_)));
-    let inv = 1.0 / offsets.len() as f32;
+    let frame = Frame::new(scene, width, height, spp, footprint)?;
+    let (width, height) = (frame.width, frame.height);
     let mut rgb = vec![0.0f32; (width * height * 3) as usize];
     rgb.par_chunks_mut(3 * width as usize)
         .enumerate()
         .for_each(|(j, row)| {
             for (i, px) in row.chunks_exact_mut(3).enumerate() {
-                let mut sum = Vec3A::ZERO;
-                for &(dx, dy) in &offsets {
-                    let s = geometry.primary(i as f32 + dx, j as f32 + dy, width, height);
-                    let axes = (footprint && s.object != u32::MAX).then(|| {
-                        let shape = &geometry.shapes[s.object as usize];
-                        let at = (i as u32, j as u32);
-                        footprint::axes(&geometry.camera, &s, shape, at, (width, height))
-                    });
-                    let gathered = cache.as_ref().map(|c| c.pixel(j * width as usize + i));
-                    sum += shade::shade_pixel_cached(
-                        &s,
-                        axes.as_ref(),
-                        &params,
-                        &geometry.shapes,
-                        shadows,
-                        gathered,
-                    );
-                }
-                let v = (sum * inv).min(Vec3A::splat(f32::MAX));
-                px.copy_from_slice(&v.to_array());
+                px.copy_from_slice(&frame.pixel(i as u32, j as u32).to_array());
             }
         });
     Ok(Image { width, height, rgb })
+}
+
+/// The pixels `idx` (flat indices `j * width + i` of the scene's own size) of [`render`] at one sample
+/// per pixel, three values each in `idx`'s order: the same values bit for bit as those pixels of the
+/// whole render, for the cost of these pixels alone (a Jacobian column over the used pixels).
+pub fn render_pixels(scene: &Scene, idx: &[u32]) -> Result<Vec<f32>> {
+    Ok(render_pixels_many(&[scene], idx)?.pop().unwrap_or_default())
+}
+
+/// [`render_pixels`] of each of `scenes`, in one pass: scenes that see the same surfaces (the same
+/// camera, image size, spheres and planes: only the light, the materials or the environment differ, as
+/// the finite differences of a light's position) find each pixel's first hit once and shade it under
+/// each scene. The values are each scene's own [`render_pixels`] bit for bit.
+pub fn render_pixels_many(scenes: &[&Scene], idx: &[u32]) -> Result<Vec<Vec<f32>>> {
+    let frames = scenes
+        .iter()
+        .map(|s| Frame::new(s, None, None, 1, false))
+        .collect::<Result<Vec<_>>>()?;
+    for f in &frames {
+        let pixels = u64::from(f.width) * u64::from(f.height);
+        if let Some(&p) = idx.iter().find(|&&p| u64::from(p) >= pixels) {
+            return Err(Error::Invalid(format!(
+                "render_pixels: pixel {p} is outside the {pixels} of a {}x{} image",
+                f.width, f.height
+            )));
+        }
+    }
+    // each scene's leader: the first scene with the same first hits (itself where none is)
+    let keys: Vec<_> = frames.iter().map(|f| f.key.clone()).collect();
+    let leader: Vec<usize> = (0..frames.len())
+        .map(|k| match &keys[k] {
+            Some(key) => (0..k).find(|&j| keys[j].as_ref() == Some(key)).unwrap_or(k),
+            None => k,
+        })
+        .collect();
+    let n = idx.len();
+    const CHUNK: usize = 64; // fixed: each value is computed the same way however the work is split
+    let mut out = vec![vec![0.0f32; 3 * n]; frames.len()];
+    let parts: Vec<Vec<f32>> = idx
+        .par_chunks(CHUNK)
+        .map(|at| {
+            let mut part = vec![0.0f32; 3 * at.len() * frames.len()];
+            for (q, &p) in at.iter().enumerate() {
+                for (k, f) in frames.iter().enumerate() {
+                    if leader[k] != k {
+                        continue;
+                    }
+                    let (i, j) = (p % f.width, p / f.width); // a scene's followers share its size
+                    let (dx, dy) = f.offsets[0];
+                    let s = f
+                        .geometry
+                        .primary(i as f32 + dx, j as f32 + dy, f.width, f.height);
+                    for (m, g) in frames.iter().enumerate().filter(|&(m, _)| leader[m] == k) {
+                        let mut sum = Vec3A::ZERO;
+                        sum += g.sample(&s, i, j);
+                        let v = g.mean(sum).to_array();
+                        let at = 3 * (m * at.len() + q);
+                        part[at..at + 3].copy_from_slice(&v);
+                    }
+                }
+            }
+            part
+        })
+        .collect();
+    for (c, part) in parts.iter().enumerate() {
+        let len = part.len() / frames.len().max(1);
+        for (k, o) in out.iter_mut().enumerate() {
+            o[3 * CHUNK * c..3 * CHUNK * c + len].copy_from_slice(&part[k * len..(k + 1) * len]);
+        }
+    }
+    Ok(out)
+}
+
+/// What every pixel of one render shares: the scene's geometry and shading set-up (the bounce's kept
+/// gathers with it), the samples, and whether shadows and the footprint apply.
+struct Frame {
+    geometry: Geometry,
+    key: Option<Vec<u32>>, // bounce::geometry_key: frames with the same key see the same first hits
+    params: ShadeParams,
+    cache: Option<std::sync::Arc<bounce::Gathered>>,
+    shadows: bool,
+    footprint: bool,
+    offsets: Vec<(f32, f32)>,
+    width: u32,
+    height: u32,
+}
+
+impl Frame {
+    fn new(
+        scene: &Scene,
+        width: Option<u32>,
+        height: Option<u32>,
+        spp: u32,
+        footprint: bool,
+    ) -> Result<Self> {
+        let width = width.unwrap_or(scene.width);
+        let height = height.unwrap_or(scene.height);
+        if width == 0 || height == 0 || width > 16384 || height > 16384 {
+            return Err(Error::Invalid(format!(
+                "image size must be 1..16384 pixels per side (got {width}x{height})"
+            )));
+        }
+        if spp == 0 || spp > 4096 {
+            return Err(Error::Invalid(format!("spp must be 1..4096 (got {spp})")));
+        }
+        let geometry = Geometry::new(scene);
+        let mut params = ShadeParams::new(scene);
+        // With the bounce, one sample per pixel: the light-independent gathers kept from the last render of
+        // this geometry (`bounce::Gathered`; a fit's uncertainty renders it with the light moved).
+        let c = &scene.camera;
+        let camera_key = [
+            c.position[0],
+            c.position[1],
+            c.position[2],
+            c.look_at[0],
+            c.look_at[1],
+            c.look_at[2],
+            c.up[0],
+            c.up[1],
+            c.up[2],
+            c.vfov_deg,
+        ];
+        let cache = (params.interreflection && spp == 1)
+            .then(|| {
+                let sky = params.environment != Vec3A::ZERO;
+                bounce::Gathered::for_render(&geometry, camera_key, (width, height), sky)
+            })
+            .flatten();
+        match &cache {
+            Some(cache) => params.prepare_bounce_cached(&geometry.shapes, cache),
+            None => params.prepare_bounce(&geometry.shapes),
+        }
+        let shadows = scene.can_occlude();
+        let offsets = sample_offsets(spp); // spp = 1: the pixel centre
+                                           // The footprint (meshes aside, as the fitness refuses them) where the scene can shadow at all.
+        if footprint && spp != 1 {
+            return Err(Error::Invalid(format!(
+                "the footprint render takes one sample per pixel (got spp {spp})"
+            )));
+        }
+        let footprint =
+            footprint && shadows && !geometry.shapes.iter().any(|s| matches!(s, PShape::Mesh(_)));
+        let key = bounce::geometry_key(&geometry, camera_key, (width, height));
+        Ok(Frame {
+            geometry,
+            key,
+            params,
+            cache,
+            shadows,
+            footprint,
+            offsets,
+            width,
+            height,
+        })
+    }
+
+    /// Pixel (i, j): the mean of its samples, finite.
+    fn pixel(&self, i: u32, j: u32) -> Vec3A {
+        let mut sum = Vec3A::ZERO;
+        for &(dx, dy) in &self.offsets {
+            let s = self
+                .geometry
+                .primary(i as f32 + dx, j as f32 + dy, self.width, self.height);
+            sum += self.sample(&s, i, j);
+        }
+        self.mean(sum)
+    }
+
+    /// The radiance of one sample of pixel (i, j) whose first hit is `s`.
+    fn sample(&self, s: &Surfel, i: u32, j: u32) -> Vec3A {
+        let (width, height) = (self.width, self.height);
+        let axes = (self.footprint && s.object != u32::MAX).then(|| {
+            let shape = &self.geometry.shapes[s.object as usize];
+            footprint::axes(&self.geometry.camera, s, shape, (i, j), (width, height))
+        });
+        let gathered = self
+            .cache
+            .as_ref()
+            .map(|c| c.pixel(j as usize * width as usize + i as usize));
+        shade::shade_pixel_cached(
+            s,
+            axes.as_ref(),
+            &self.params,
+            &self.geometry.shapes,
+            self.shadows,
+            gathered,
+        )
+    }
+
+    /// A pixel's value from the sum of its samples' radiance: their mean, finite.
+    fn mean(&self, sum: Vec3A) -> Vec3A {
+        (sum * (1.0 / self.offsets.len() as f32)).min(Vec3A::splat(f32::MAX))
+    }
 }
 
 /// Object index per pixel centre (-1 for background).
@@ -176,6 +304,57 @@ mod tests {
             }
         }
         out
+    }
+
+    /// `render_pixels` gives the listed pixels of the whole render bit for bit, in the list's order, with
+    /// and without the bounce, and refuses a pixel outside the image.
+    #[test]
+    fn render_pixels_are_the_renders_pixels() {
+        for env in [0.0, 0.3] {
+            let mut scene = bounce_scene(1.5, 0.6, env);
+            for interreflection in [false, true] {
+                scene.interreflection = interreflection;
+                let whole = render(&scene, None, None, 1).unwrap();
+                let n = scene.width * scene.height;
+                let idx: Vec<u32> = (0..n).rev().step_by(7).chain([0, n - 1, 5]).collect();
+                let got = render_pixels(&scene, &idx).unwrap();
+                assert_eq!(got.len(), 3 * idx.len());
+                for (k, &p) in idx.iter().enumerate() {
+                    for c in 0..3 {
+                        assert_eq!(
+                            got[3 * k + c].to_bits(),
+                            whole.rgb[3 * p as usize + c].to_bits()
+                        );
+                    }
+                }
+                assert!(render_pixels(&scene, &[n]).is_err());
+            }
+        }
+        // several scenes at once: the light moved, the environment on, the bounce on (the same first hits,
+        // shaded each their own way) and the ball moved (other first hits): each its own render's pixels
+        let mut scenes = vec![
+            bounce_scene(1.5, 0.6, 0.0),
+            bounce_scene(-1.0, 0.6, 0.0),
+            bounce_scene(1.5, 0.6, 0.3),
+            bounce_scene(1.5, 0.65, 0.0),
+        ];
+        scenes[0].interreflection = false;
+        scenes[2].interreflection = false;
+        let n = scenes[0].width * scenes[0].height;
+        let idx: Vec<u32> = (0..n).step_by(3).collect();
+        let refs: Vec<&Scene> = scenes.iter().collect();
+        let many = render_pixels_many(&refs, &idx).unwrap();
+        for (scene, got) in scenes.iter().zip(&many) {
+            let whole = render(scene, None, None, 1).unwrap();
+            for (k, &p) in idx.iter().enumerate() {
+                for c in 0..3 {
+                    assert_eq!(
+                        got[3 * k + c].to_bits(),
+                        whole.rgb[3 * p as usize + c].to_bits()
+                    );
+                }
+            }
+        }
     }
 
     /// A render with interreflection keeps the light-independent gathers of its geometry

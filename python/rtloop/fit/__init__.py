@@ -240,11 +240,11 @@ def fit(
         reference=pinned,
     )
     # The model the fit compared with the photo, for the goodness of fit and the uncertainty's residual, and
-    # (the same where the fit took no footprint) the pixel-centre render its finite differences start from.
+    # (the same where the fit took no footprint) the pixel-centre render its finite differences start from;
+    # with the footprint the uncertainty renders the pixel centres it uses itself.
     as_compared = _native.render(current, current.width, current.height, 1, footprint != "off")
     with_sigma = uncertainty not in (False, "off")
-    at_optimum = as_compared if footprint == "off" or not with_sigma else _native.render(
-        current, current.width, current.height, 1)
+    at_optimum = as_compared if footprint == "off" else None
     result.goodness = goodness(current, target, use, clip=clip, render=as_compared, sigma=sigma, blocking=blocking,
                                encoding=encoding, codes=codes)
     doubts += _at_bounds(current, all_paths)

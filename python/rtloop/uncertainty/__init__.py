@@ -58,7 +58,7 @@ def estimate_uncertainty(
     ``{name: absolute step}`` for some parameters. ``params``: ``"auto"`` (products where the scene
     determines only products, else the scene's fit parameters), ``"products"`` or ``"scene"``.
     ``render``: the scene's render at the optimum (float32 (H, W, 3), spp 1) when the caller has it
-    (:func:`rtloop.fit` shares its goodness-of-fit render), saving one render. ``compared``: the model
+    (:func:`rtloop.fit` shares its goodness-of-fit render); else the pixels used are rendered alone. ``compared``: the model
     image the fit compared with the photo, whose residual sigma scales (default: for a fit that took the
     pixel footprint, ``result.settings["footprint"]``, the footprint render; else the render at the
     optimum). The Jacobian's columns stay pixel-centre differences: the footprint changes only pixels at
@@ -106,7 +106,11 @@ def estimate_uncertainty(
     steps = _steps(names, space.scale, step)
     if render is not None and np.shape(render) != target.shape:
         raise RtloopError(f"render: shape {np.shape(render)} does not match the scene's {target.shape}")
-    Jt, f0, kink, jump = _jacobian(space, wd, px, steps, clip, warnings, render)
+    if render is None:  # the fitted scene's render at the used pixels alone (the same values)
+        raw0 = _native.render_pixels(scene, px.idx.astype(np.uint32))
+    else:
+        raw0 = np.take(np.asarray(render, np.float32).reshape(-1, 3), px.idx, axis=0)
+    Jt, f0, kink, jump = _jacobian(space, wd, px, steps, clip, warnings, raw0)
     if compared is None and getattr(result, "settings", {}).get("footprint", "off") != "off":
         compared = _native.render(scene, scene.width, scene.height, 1, True)
     if compared is not None:
@@ -213,11 +217,11 @@ def _product_sigma(space: _Space, wd: dict[str, Any], fit: _Covariance | None, u
 
 
 def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarray, clip: bool,
-              warnings: list[str], at_optimum: np.ndarray | None = None
+              warnings: list[str], raw0: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The Jacobian's transpose over the used pixels' channels, the render there at the optimum (flat,
-    min(render, 1) with ``clip``; ``at_optimum`` when given, else rendered), which used pixels sit on
-    the clip's kink and which on a jump.
+    min(render, 1) with ``clip``, from ``raw0``: the fitted scene's render at the used pixels, float32
+    (used, 3)), which used pixels sit on the clip's kink and which on a jump.
 
     Central differences (one-sided where a step would cross a bound). With ``clip``, a pixel whose render
     crosses 1 inside a step in a channel that is not saturated sits on the clip's kink and is left out.
@@ -229,24 +233,18 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
     unit-light render, scaled; the lobe alone), and a pixel is on the kink where that line crosses 1.
     """
     work, paths, names, theta0, idx = space.work, space.paths, space.names, space.theta0, px.idx
-
-    def raw(theta: np.ndarray) -> np.ndarray:
-        return _native.render(work.with_params(space.native(theta), paths))
-
     n = idx.size
     free_u = ~px.sat_u
     # The products' work scene renders the fitted image (to float32 rounding): the fit's own render serves.
-    raw0_img = raw(theta0) if at_optimum is None else np.asarray(at_optimum, np.float32)
-    raw0 = np.take(raw0_img.reshape(-1, 3), idx, axis=0)
     clipped0 = raw0 >= 1.0
     P = len(names)
     kink = np.zeros(n, dtype=bool)
     jump = np.zeros(n, dtype=bool)
     Jt = np.zeros((P, 3 * n))  # the Jacobian's transpose: one contiguous row per parameter
 
-    def clipped(img: np.ndarray) -> np.ndarray:
-        """The used pixels of ``img`` (float32, flat), min(img, 1) with ``clip``, noting kink pixels."""
-        g = np.take(img.reshape(-1, 3), idx, axis=0)
+    def clipped(g: np.ndarray) -> np.ndarray:
+        """The used pixels' values ``g`` (float32, (used, 3)), min(g, 1) with ``clip``, flat, noting kink
+        pixels."""
         if clip:
             cross = (g >= 1.0) != clipped0
             if cross.any():
@@ -254,7 +252,7 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
             g = np.minimum(g, np.float32(1.0))
         return g.ravel()
 
-    f0 = clipped(raw0_img)
+    f0 = clipped(raw0)
     idx_u32, clipped0_flat, free_flat = idx.astype(np.uint32), clipped0.ravel(), free_u.ravel()
     ids_u = np.take(px.ids.ravel(), idx)
     unit_u = np.take(px.unit.ravel(), idx).astype(np.float64)
@@ -268,6 +266,7 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
     if exact and space.specular:
         lobe_u = np.take(unit_lobes(wd, set(space.specular.values())).reshape(-1, 3), idx, axis=0).astype(np.float64)
     pixels_of: dict[int, tuple[np.ndarray, ...]] = {}
+    rendered: list[tuple[Any, Any, float, int]] = []  # (up, down, denom, row) of the rendered columns
     for k in range(P):
         h = steps[k]
         up_ok, down_ok = theta0[k] + h <= space.hi[k], theta0[k] - h >= space.lo[k]
@@ -316,12 +315,14 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
                 else:
                     tp, denom = theta0.copy(), h
             up, down = (work.with_params(space.native(t), paths) if t[k] != theta0[k] else None for t in (tp, tm))
-            _native.fd_column(up, down, f0, idx_u32, clipped0_flat, free_flat, clip, float(denom), kink, jump,
-                              Jt[k])
+            rendered.append((up, down, float(denom), k))
         if theta0[k] <= space.lo[k] or theta0[k] >= space.hi[k]:
             warnings.append(
                 f"{names[k]}: at its bound ({theta0[k]:.6g}); the Gauss-Newton sigma assumes an interior optimum"
             )
+    if rendered:  # all their renders in one pass over the used pixels (the first hits found once)
+        ups, downs, denoms, rows = (list(v) for v in zip(*rendered))
+        _native.fd_columns(ups, downs, denoms, rows, f0, idx_u32, clipped0_flat, free_flat, clip, kink, jump, Jt)
     return Jt, f0, kink, jump & ~kink
 
 
