@@ -5,6 +5,7 @@
 pub mod error;
 pub mod fitness;
 pub mod params;
+pub mod photo;
 pub mod render;
 pub mod scene;
 pub mod search;

@@ -141,8 +141,8 @@ def test_a_jpeg_of_a_clean_photo_is_explained_to_the_noise_level(case, monkeypat
 
 
 def _jpeg_blocking_phases_by_loop(image: np.ndarray) -> np.ndarray:
-    """The blocking's per-phase means as first written: per phase, the mean of its pairs' clipped squared
-    jumps, gathered by a mask (the reference for the one-reduction ``_phase_means``)."""
+    """The blocking's per-phase means as numpy did them: per phase, the mean of its pairs' clipped squared
+    jumps, gathered by a mask (the reference for the core's loop, ``_native.jpeg_phases``)."""
     from rtloop._srgb import encode
     from rtloop.fit.goodness import JPEG_BLOCK, JPEG_EDGE_CODES
 
@@ -158,21 +158,47 @@ def _jpeg_blocking_phases_by_loop(image: np.ndarray) -> np.ndarray:
     return phases
 
 
-def test_jpeg_blocking_phases_are_the_per_phase_means_bit_for_bit():
-    """The grid phases' means from one reduction are those of the per-phase loop to the last bit, on
-    images of every size modulo the 8-pixel grid, noisy, flat and out of [0, 1]."""
+def _noise_medians_by_numpy(image: np.ndarray) -> np.ndarray:
+    """Immerkaer's median absolute response as numpy did it (the reference for ``_native.noise_medians``)."""
+    x = np.asarray(image, np.float32)
+    dx = x[:, :-2] - 2 * x[:, 1:-1] + x[:, 2:]
+    acc = dx[:-2] - 2 * dx[1:-1] + dx[2:]
+    return np.median(np.abs(acc).reshape(-1, 3), axis=0)
+
+
+def _odd_images():
+    """Images of every size modulo the 8-pixel grid (odd and even pixel counts), noisy, flat in steps, out of
+    [0, 1], and as 8-bit codes."""
+    rng = np.random.default_rng(4)
+    for h, w in [(24, 24), (25, 31), (33, 40), (96, 128), (47, 61), (71, 24), (24, 97)]:
+        for img in (rng.random((h, w, 3)), np.round(rng.random((h, w, 3)) * 4) / 4,
+                    1.2 * rng.random((h, w, 3)) - 0.1, rng.integers(0, 256, (h, w, 3)) / 255.0):
+            yield img.astype(np.float32)
+
+
+def test_the_core_blocking_phases_are_numpys_bit_for_bit():
+    """The core's per-phase loop gives numpy's per-phase means to the last bit."""
     import importlib
 
+    from rtloop import _native
+
     gm = importlib.import_module("rtloop.fit.goodness")  # (the module: rtloop.fit.goodness is the function)
-    rng = np.random.default_rng(4)
-    for h, w in [(24, 24), (25, 31), (33, 40), (96, 128), (47, 61), (71, 24)]:
-        for img in (rng.random((h, w, 3)), np.round(rng.random((h, w, 3)) * 4) / 4, 1.2 * rng.random((h, w, 3)) - 0.1):
-            img = img.astype(np.float32)
-            codes = gm.encoded(img) * np.float32(255.0)
-            got = np.zeros((gm.JPEG_BLOCK, 3))
-            for c in (codes, np.ascontiguousarray(codes.transpose(1, 0, 2))):
-                got += gm._phase_means(c) / 2
-            assert np.array_equal(got, _jpeg_blocking_phases_by_loop(img)), (h, w)
+    for img in _odd_images():
+        codes = gm.encoded(img) * np.float32(255.0)
+        got = _native.jpeg_phases(codes, gm.JPEG_BLOCK, np.float32(gm.JPEG_EDGE_CODES ** 2))
+        assert np.array_equal(got, _jpeg_blocking_phases_by_loop(img)), img.shape
+
+
+def test_the_core_noise_medians_are_numpys_bit_for_bit():
+    """The core's Immerkaer loop and median give numpy's to the last bit (even and odd counts, ties, a NaN)."""
+    from rtloop import _native
+
+    for img in _odd_images():
+        assert np.array_equal(_native.noise_medians(img), _noise_medians_by_numpy(img)), img.shape
+    img = np.full((5, 6, 3), 0.5, np.float32)
+    img[2, 3, 1] = np.nan
+    got = _native.noise_medians(img)
+    assert got[0] == 0.0 and np.isnan(got[1]) and got[2] == 0.0
 
 
 @pytest.mark.parametrize("case", ["direct-side", "direct-low-left", "direct-three-balls"])

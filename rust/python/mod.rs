@@ -169,6 +169,41 @@ fn render_layers<'py>(
     Ok((images, coverage, layers.refined))
 }
 
+/// Per channel, the median absolute response of Immerkaer's kernel over the interior of float32 (H, W, 3)
+/// `image` (C-contiguous, H and W >= 3; see `photo::noise_medians`), float32 (3,).
+#[pyfunction]
+fn noise_medians<'py>(py: Python<'py>, image: PyReadonlyArray3<'py, f32>) -> PyResult<Bound<'py, PyArray1<f32>>> {
+    let shape = image.shape().to_vec();
+    if shape[0] < 3 || shape[1] < 3 || shape[2] != 3 {
+        return Err(Error::Value(format!("noise_medians: an (H, W, 3) image, H and W >= 3 (got {shape:?})")).into());
+    }
+    let rgb = image.as_slice()?;
+    let m = py.detach(|| crate::photo::noise_medians(rgb, shape[0], shape[1]));
+    Ok(PyArray1::from_vec(py, m.to_vec()))
+}
+
+/// The JPEG blocking's mean clipped squared jump per phase of the `block`-pixel grid, float64 (block, 3),
+/// of the float32 (H, W, 3) sRGB `codes` (C-contiguous, H and W >= 4; see `photo::jpeg_phases`).
+#[pyfunction]
+fn jpeg_phases<'py>(
+    py: Python<'py>,
+    codes: PyReadonlyArray3<'py, f32>,
+    block: usize,
+    edge_sq: f32,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let shape = codes.shape().to_vec();
+    if shape[0] < 4 || shape[1] < 4 || shape[2] != 3 || block == 0 {
+        return Err(Error::Value(format!(
+            "jpeg_phases: an (H, W, 3) image, H and W >= 4, and a block > 0 (got {shape:?}, {block})"
+        ))
+        .into());
+    }
+    let c = codes.as_slice()?;
+    let phases = py.detach(|| crate::photo::jpeg_phases(c, shape[0], shape[1], block, edge_sq));
+    let flat: Vec<f64> = phases.iter().flatten().copied().collect();
+    PyArray1::from_vec(py, flat).reshape([block, 3])
+}
+
 /// The insertion composite of linear (H, W, 3) `photo`, `with` and `without` and the (H, W) `matte`
 /// (see `render::composite`), float32 (H, W, 3).
 #[pyfunction]
@@ -659,6 +694,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fd_column, m)?)?;
     m.add_function(wrap_pyfunction!(fd_columns, m)?)?;
     m.add_function(wrap_pyfunction!(block_scores, m)?)?;
+    m.add_function(wrap_pyfunction!(noise_medians, m)?)?;
+    m.add_function(wrap_pyfunction!(jpeg_phases, m)?)?;
     m.add("RtloopError", m.py().get_type::<RtloopError>())?;
     m.add("SceneError", m.py().get_type::<SceneError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

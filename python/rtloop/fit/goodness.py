@@ -26,14 +26,12 @@ def noise_sigma(image: np.ndarray) -> np.ndarray:
     """Per channel, the photo's pixel noise (linear units) from flat regions: the median absolute response
     of Immerkaer's kernel (which cancels smooth shading) over 0.6745 x 6, so edges, a minority of pixels,
     do not count (J. Immerkaer, "Fast noise variance estimation", CVIU 1996, made robust with the median)."""
-    x = np.asarray(image, np.float32)
+    x = np.ascontiguousarray(image, np.float32)
     h, w = x.shape[:2]
     if h < 3 or w < 3:
         return np.zeros(3)
-    # The kernel is the outer product of [1, -2, 1] with itself: two second differences.
-    dx = x[:, :-2] - 2 * x[:, 1:-1] + x[:, 2:]
-    acc = dx[:-2] - 2 * dx[1:-1] + dx[2:]
-    return np.median(np.abs(acc).reshape(-1, 3), axis=0).astype(np.float64) / (0.6745 * 6.0)
+    # The kernel is the outer product of [1, -2, 1] with itself: two second differences (the core's loop).
+    return _native.noise_medians(x).astype(np.float64) / (0.6745 * 6.0)
 
 
 #: JPEG's 8x8 grid: the block side in pixels.
@@ -92,9 +90,8 @@ def jpeg_blocking(image: np.ndarray, encoding: np.ndarray | None = None) -> dict
     if h < 3 * JPEG_BLOCK or w < 3 * JPEG_BLOCK:
         return out
     codes = (encoded(x) if encoding is None else encoding) * np.float32(255.0)
-    phases = np.zeros((JPEG_BLOCK, 3))
-    for c in (codes, np.ascontiguousarray(codes.transpose(1, 0, 2))):
-        phases += _phase_means(c) / 2
+    # Per phase k, along the rows then the columns, the mean of min(jump^2, edge^2) halved (the core's loop)
+    phases = _native.jpeg_phases(np.ascontiguousarray(codes, np.float32), JPEG_BLOCK, np.float32(JPEG_EDGE_CODES ** 2))
     # phases 0 and 6 have a grid line's pair as a neighbour (in d_{j-1} or d_{j+1}): not the photo's own
     grid, others = phases[JPEG_BLOCK - 1], phases[1 : JPEG_BLOCK - 2]
     inside = np.median(others, axis=0)
@@ -106,28 +103,6 @@ def jpeg_blocking(image: np.ndarray, encoding: np.ndarray | None = None) -> dict
         out["detected"] = True
         out["error_codes"] = [float(JPEG_ERROR_OVER_BLOCKING * np.sqrt(max(v, 0.0) / 2)) for v in excess]
     return out
-
-
-def _phase_means(c: np.ndarray) -> np.ndarray:
-    """Per phase of the 8-pixel grid (JPEG_BLOCK, 3): the mean over the rows of ``c`` (rows, n, 3) of the
-    clipped squared second difference across each pixel pair (j, j + 1) along a row, j = 1 .. n - 3, whose
-    phase is j mod 8. Each phase's sum runs row by row, along a row by j, in float64 (as ``mean(axis=0,
-    dtype=np.float64)`` of the phase's pairs in that order sums them): the rows are laid out in one buffer
-    of whole 8-pixel blocks (pair j at column j, the columns of no pair 0, which leaves a sum of squares as
-    it is), so one reduction takes every phase."""
-    rows, n = c.shape[0], c.shape[1]
-    d = np.diff(c, axis=1)  # d[:, j] = c[:, j + 1] - c[:, j]: the pair (j, j + 1)
-    blocks = -(-(n - 2) // JPEG_BLOCK)  # pairs j = 1 .. n - 3 at columns 1 .. n - 3
-    sq = np.zeros((rows, blocks * JPEG_BLOCK, 3), np.float32)
-    jump = sq[:, 1 : n - 2]
-    np.add(d[:, :-2], d[:, 2:], out=jump)
-    np.multiply(jump, 0.5, out=jump)
-    np.subtract(d[:, 1:-1], jump, out=jump)
-    np.multiply(jump, jump, out=jump)
-    np.minimum(jump, np.float32(JPEG_EDGE_CODES ** 2), out=jump)
-    sums = sq.reshape(rows * blocks, JPEG_BLOCK * 3).sum(axis=0, dtype=np.float64).reshape(JPEG_BLOCK, 3)
-    counts = rows * np.bincount(np.arange(1, n - 2) % JPEG_BLOCK, minlength=JPEG_BLOCK)
-    return sums / counts[:, None]
 
 
 #: A pixel within this many of the photo's per-pixel errors (noise and JPEG) below 1 may be a clipped one
