@@ -91,6 +91,12 @@ def block_scores(
     jt: npt.NDArray[np.float64], rows: list[int], r: npt.NDArray[np.float64], block_of: npt.NDArray[np.int64],
     blocks: int,
 ) -> npt.NDArray[np.float64]: ...
+def noise_medians(image: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+    """Per channel, the median absolute response of Immerkaer's kernel over the interior of the C-contiguous
+    (H, W, 3) image (H, W >= 3), as numpy computes it: (3,)."""
+def jpeg_phases(codes: npt.NDArray[np.float32], block: int, edge_sq: float) -> npt.NDArray[np.float64]:
+    """The JPEG blocking's mean clipped squared jump per phase of the grid, along the rows then the columns,
+    each halved (goodness.jpeg_blocking's), of the C-contiguous (H, W, 3) sRGB codes (H, W >= 4): (block, 3)."""
 def evaluate(
     scene: Scene,
     paths: list[str],

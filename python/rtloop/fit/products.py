@@ -180,17 +180,22 @@ def split_products(fitted: Scene, rows: list[list[float]], original: Scene, gaug
     arr = np.asarray(rows, float)
     P = arr[:, :3]
     Q = arr[:, 3] if arr.shape[1] > 3 else np.zeros(len(arr))
+    # The free albedos' objects (index into the rows) and their bounds, all at once: (n, 3) each.
+    free = [k for k, o in enumerate(d["objects"]) if f"objects.{o['name']}.albedo" in paths]
+    row_of = {k: i for i, k in enumerate(free)}
+    bounds = np.array(original.bounds([f"objects.{d['objects'][k]['name']}.albedo" for k in free]) if free else [],
+                      float).reshape(-1, 2)
+    lo_all, hi_all = bounds[:, 0].reshape(-1, 3), bounds[:, 1].reshape(-1, 3)
     if "light.intensity" in paths:
         ilo, ihi = original.bounds(["light.intensity"])[0]
         intensity = min(max(scene_to_dict(original)["light"]["intensity"], ilo), ihi)
         need = intensity
+        with np.errstate(divide="ignore", invalid="ignore"):
+            req = np.where((hi_all > 0) & (scale > 0), P[free] / (scale * np.maximum(hi_all, 1e-300)), 0.0)
+        req_max = req.max(axis=1)
         for k, o in enumerate(d["objects"]):
-            p = f"objects.{o['name']}.albedo"
-            if p in paths:
-                hi = np.array([b[1] for b in original.bounds([p])])
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    req = np.where((hi > 0) & (scale > 0), P[k] / (scale * np.maximum(hi, 1e-300)), 0.0)
-                need = max(need, float(np.max(req)))
+            if k in row_of:
+                need = max(need, float(req_max[row_of[k]]))
             sp = f"objects.{o['name']}.specular"
             if sp in paths and Q[k] > 0:
                 khi = original.bounds([sp])[0][1]
@@ -202,14 +207,13 @@ def split_products(fitted: Scene, rows: list[list[float]], original: Scene, gaug
         if gauge is not None and gauge > 0:
             intensity = min(max(1.0 / gauge, ilo), ihi)
         fitted = fitted.with_params([intensity], ["light.intensity"])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rho_all = np.where(scale > 0, P[free] / (intensity * scale), lo_all)
+    albedos = np.clip(np.nan_to_num(rho_all), lo_all, hi_all)
     for k, o in enumerate(d["objects"]):
         p = f"objects.{o['name']}.albedo"
-        if p in paths:
-            lo = np.array([b[0] for b in original.bounds([p])])
-            hi = np.array([b[1] for b in original.bounds([p])])
-            with np.errstate(divide="ignore", invalid="ignore"):
-                rho = np.where(scale > 0, P[k] / (intensity * scale), lo)
-            fitted = fitted.with_params([float(v) for v in np.clip(np.nan_to_num(rho), lo, hi)], [p])
+        if k in row_of:
+            fitted = fitted.with_params([float(v) for v in albedos[row_of[k]]], [p])
         sp = f"objects.{o['name']}.specular"
         if sp in paths:
             klo, khi = original.bounds([sp])[0]
