@@ -88,6 +88,23 @@ pub fn jpeg_phases(codes: &[f32], h: usize, w: usize, block: usize, edge_sq: f32
     phases
 }
 
+/// The 8-bit codes of `values` if each is bit for bit the value of a code in `table` (256 values): the
+/// candidate code of a value is `buckets[bits >> shift]` (a bucket past the last reads as the last; each
+/// bucket holds at most one code's value); None at the first value that is not its candidate's.
+pub fn codes8(values: &[f32], table: &[f32], buckets: &[i16], shift: u32) -> Option<Vec<u8>> {
+    let last = buckets.len().checked_sub(1)?;
+    let mut codes = Vec::with_capacity(values.len());
+    for v in values {
+        let bits = v.to_bits();
+        let code = usize::try_from(buckets[((bits >> shift) as usize).min(last)]).ok()?;
+        if code > 255 || table.get(code)?.to_bits() != bits {
+            return None;
+        }
+        codes.push(code as u8);
+    }
+    Some(codes)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -182,6 +182,21 @@ fn noise_medians<'py>(py: Python<'py>, image: PyReadonlyArray3<'py, f32>) -> PyR
     Ok(PyArray1::from_vec(py, m.to_vec()))
 }
 
+/// The 8-bit codes (uint8) of the float32 `values` (1-D) if each is bit for bit a code's value in `table`,
+/// else None (see `photo::codes8`; `buckets` and `shift` as `rtloop._srgb` builds them).
+#[pyfunction]
+fn codes8<'py>(
+    py: Python<'py>,
+    values: PyReadonlyArray1<'py, f32>,
+    table: PyReadonlyArray1<'py, f32>,
+    buckets: PyReadonlyArray1<'py, i16>,
+    shift: u32,
+) -> PyResult<Option<Bound<'py, PyArray1<u8>>>> {
+    let (v, t, b) = (values.as_slice()?, table.as_slice()?, buckets.as_slice()?);
+    let codes = py.detach(|| crate::photo::codes8(v, t, b, shift.min(31)));
+    Ok(codes.map(|c| PyArray1::from_vec(py, c)))
+}
+
 /// The JPEG blocking's mean clipped squared jump per phase of the `block`-pixel grid, float64 (block, 3),
 /// of the float32 (H, W, 3) sRGB `codes` (C-contiguous, H and W >= 4; see `photo::jpeg_phases`).
 #[pyfunction]
@@ -696,6 +711,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(block_scores, m)?)?;
     m.add_function(wrap_pyfunction!(noise_medians, m)?)?;
     m.add_function(wrap_pyfunction!(jpeg_phases, m)?)?;
+    m.add_function(wrap_pyfunction!(codes8, m)?)?;
     m.add("RtloopError", m.py().get_type::<RtloopError>())?;
     m.add("SceneError", m.py().get_type::<SceneError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

@@ -3,6 +3,7 @@ and the noise measured in the photo), as one ratio and a verdict that says where
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -110,6 +111,12 @@ def jpeg_blocking(image: np.ndarray, encoding: np.ndarray | None = None) -> dict
 CLIPPED_SIGMAS = 3.0
 
 
+@functools.cache
+def _top_code_step() -> float:
+    """The 8-bit sRGB code step at 1 (254 to 255) in linear units."""
+    return float(decode(np.float64(1.0)) - decode(np.float64(254 / 255)))
+
+
 def clip_level(sigma: Any, blocking: dict[str, Any]) -> float:
     """The objective value from which a pixel may be clipped, given the photo's noise ``sigma`` (per
     channel, linear, :func:`noise_sigma`) and its JPEG ``blocking`` (:func:`jpeg_blocking`): 1 less
@@ -118,8 +125,7 @@ def clip_level(sigma: Any, blocking: dict[str, Any]) -> float:
     8-bit file's 255) that noise is added to, or that a JPEG's blocks ring around, lies up to a few errors
     below 1; read as a measurement, it pulls the closed-form products down (its model is far above 1),
     and on a low, grazing light that moved the fitted light by half a metre."""
-    step = float(decode(np.float64(1.0)) - decode(np.float64(254 / 255)))
-    jpeg = np.asarray(blocking.get("error_codes", [0.0, 0.0, 0.0]), np.float64) * step
+    jpeg = np.asarray(blocking.get("error_codes", [0.0, 0.0, 0.0]), np.float64) * _top_code_step()
     err = np.sqrt(np.asarray(sigma, np.float64) ** 2 + jpeg ** 2)
     return float(min(SATURATED, 1.0 - CLIPPED_SIGMAS * float(err.max())))
 
