@@ -9,7 +9,10 @@
 /// difference along it, `(a - 2 b) + c` in f32, then that down the columns. The median of an even count is
 /// the f32 mean of the middle two, `(a + b) / 2`; NaN where the channel's responses hold a NaN.
 pub fn noise_medians(rgb: &[f32], h: usize, w: usize) -> [f32; 3] {
-    assert!(h >= 3 && w >= 3 && rgb.len() == h * w * 3, "noise_medians: an h x w x 3 image, h, w >= 3");
+    assert!(
+        h >= 3 && w >= 3 && rgb.len() == h * w * 3,
+        "noise_medians: an h x w x 3 image, h, w >= 3"
+    );
     let (wd, hd) = (w - 2, h - 2);
     // Along the rows: dx[i][j] = (x[i][j] - 2 x[i][j + 1]) + x[i][j + 2].
     let mut dx = vec![0f32; h * wd * 3];
@@ -21,9 +24,17 @@ pub fn noise_medians(rgb: &[f32], h: usize, w: usize) -> [f32; 3] {
         }
     }
     // Down the columns, per channel: |(dx[i][j] - 2 dx[i + 1][j]) + dx[i + 2][j]|.
-    let mut by_channel = [vec![0f32; hd * wd], vec![0f32; hd * wd], vec![0f32; hd * wd]];
+    let mut by_channel = [
+        vec![0f32; hd * wd],
+        vec![0f32; hd * wd],
+        vec![0f32; hd * wd],
+    ];
     for i in 0..hd {
-        let (a, b, c) = (&dx[i * wd * 3..], &dx[(i + 1) * wd * 3..], &dx[(i + 2) * wd * 3..]);
+        let (a, b, c) = (
+            &dx[i * wd * 3..],
+            &dx[(i + 1) * wd * 3..],
+            &dx[(i + 2) * wd * 3..],
+        );
         for j in 0..wd {
             for (ch, out) in by_channel.iter_mut().enumerate() {
                 let k = j * 3 + ch;
@@ -56,7 +67,10 @@ fn median(v: &mut [f32]) -> f32 {
 /// c_{j+1} - c_j`); its square clipped at `edge_sq` (a NaN stays NaN) is summed in f64 per phase over the
 /// lines in order and along each line in order, and divided by the phase's count of pairs.
 pub fn jpeg_phases(codes: &[f32], h: usize, w: usize, block: usize, edge_sq: f32) -> Vec<[f64; 3]> {
-    assert!(h >= 4 && w >= 4 && block > 0 && codes.len() == h * w * 3, "jpeg_phases: an h x w x 3 image");
+    assert!(
+        h >= 4 && w >= 4 && block > 0 && codes.len() == h * w * 3,
+        "jpeg_phases: an h x w x 3 image"
+    );
     let mut phases = vec![[0f64; 3]; block];
     // Rows: line i is pixels (i, 0 .. w); columns: line x is pixels (0 .. h, x).
     for (lines, n, line_step, pixel_step) in [(h, w, w * 3, 3), (w, h, 3, w * 3)] {
@@ -75,7 +89,11 @@ pub fn jpeg_phases(codes: &[f32], h: usize, w: usize, block: usize, edge_sq: f32
                     let d2 = at(j + 2, ch) - at(j + 1, ch);
                     let jump = d1 - 0.5 * (d0 + d2);
                     let sq = jump * jump;
-                    *s += f64::from(if sq.is_nan() || sq < edge_sq { sq } else { edge_sq });
+                    *s += f64::from(if sq.is_nan() || sq < edge_sq {
+                        sq
+                    } else {
+                        edge_sq
+                    });
                 }
             }
         }
@@ -110,6 +128,32 @@ mod tests {
     use super::*;
 
     #[test]
+    fn codes8_takes_only_the_codes_own_bits() {
+        // three "codes" 0, 0.25 and 1, bucketed by sign and exponent (shift 23): 0.25 in bucket 125, 1 in 127
+        let table = [0.0f32, 0.25, 1.0];
+        let buckets: Vec<i16> = (0..128)
+            .map(|b| {
+                if b == 0 {
+                    0
+                } else if b <= 125 {
+                    1
+                } else {
+                    2
+                }
+            })
+            .collect();
+        assert_eq!(
+            codes8(&[1.0, 0.0, 0.25, 1.0], &table, &buckets, 23),
+            Some(vec![2, 0, 1, 2])
+        );
+        assert_eq!(codes8(&[0.25, 0.2500001], &table, &buckets, 23), None);
+        assert_eq!(codes8(&[0.5], &table, &buckets, 23), None);
+        assert_eq!(codes8(&[-0.0], &table, &buckets, 23), None);
+        assert_eq!(codes8(&[f32::NAN], &table, &buckets, 23), None);
+        assert_eq!(codes8(&[], &table, &buckets, 23), Some(vec![]));
+    }
+
+    #[test]
     fn median_is_numpys() {
         assert_eq!(median(&mut [3.0, 1.0, 2.0]), 2.0);
         assert_eq!(median(&mut [4.0, 1.0, 3.0, 2.0]), 2.5);
@@ -122,16 +166,22 @@ mod tests {
     #[test]
     fn a_flat_or_linear_image_has_no_noise_and_no_jumps() {
         let (h, w) = (24, 32);
-        let ramp: Vec<f32> = (0..h * w * 3).map(|k| ((k / 3) % w) as f32 * 2.0 + ((k / 3) / w) as f32).collect();
+        let ramp: Vec<f32> = (0..h * w * 3)
+            .map(|k| ((k / 3) % w) as f32 * 2.0 + ((k / 3) / w) as f32)
+            .collect();
         assert_eq!(noise_medians(&ramp, h, w), [0.0; 3]);
-        assert!(jpeg_phases(&ramp, h, w, 8, 36.0).iter().all(|p| *p == [0.0; 3]));
+        assert!(jpeg_phases(&ramp, h, w, 8, 36.0)
+            .iter()
+            .all(|p| *p == [0.0; 3]));
     }
 
     #[test]
     fn a_jump_on_the_grid_line_counts_in_its_phase_only() {
         // one column step between x = 7 and x = 8 (pair 7: phase 7), 10 codes
         let (h, w) = (24, 24);
-        let img: Vec<f32> = (0..h * w * 3).map(|k| if (k / 3) % w >= 8 { 10.0 } else { 0.0 }).collect();
+        let img: Vec<f32> = (0..h * w * 3)
+            .map(|k| if (k / 3) % w >= 8 { 10.0 } else { 0.0 })
+            .collect();
         let p = jpeg_phases(&img, h, w, 8, 36.0);
         // pair 7 jumps by 10 (clipped to 36 squared); pairs 6 and 8 by -5 (25): phases 6 and 0
         // (each of these phases has 2 pairs per line, 24 lines; the columns add nothing)

@@ -97,6 +97,10 @@ def noise_medians(image: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
 def jpeg_phases(codes: npt.NDArray[np.float32], block: int, edge_sq: float) -> npt.NDArray[np.float64]:
     """The JPEG blocking's mean clipped squared jump per phase of the grid, along the rows then the columns,
     each halved (goodness.jpeg_blocking's), of the C-contiguous (H, W, 3) sRGB codes (H, W >= 4): (block, 3)."""
+def codes8(values: npt.NDArray[np.float32], table: npt.NDArray[np.float32], buckets: npt.NDArray[np.int16],
+           shift: int) -> npt.NDArray[np.uint8] | None:
+    """The 8-bit codes of the 1-D ``values`` if each is bit for bit a code's value in ``table``, else None
+    (``buckets`` and ``shift`` as ``rtloop._srgb`` builds them)."""
 def evaluate(
     scene: Scene,
     paths: list[str],

@@ -172,10 +172,16 @@ fn render_layers<'py>(
 /// Per channel, the median absolute response of Immerkaer's kernel over the interior of float32 (H, W, 3)
 /// `image` (C-contiguous, H and W >= 3; see `photo::noise_medians`), float32 (3,).
 #[pyfunction]
-fn noise_medians<'py>(py: Python<'py>, image: PyReadonlyArray3<'py, f32>) -> PyResult<Bound<'py, PyArray1<f32>>> {
+fn noise_medians<'py>(
+    py: Python<'py>,
+    image: PyReadonlyArray3<'py, f32>,
+) -> PyResult<Bound<'py, PyArray1<f32>>> {
     let shape = image.shape().to_vec();
     if shape[0] < 3 || shape[1] < 3 || shape[2] != 3 {
-        return Err(Error::Value(format!("noise_medians: an (H, W, 3) image, H and W >= 3 (got {shape:?})")).into());
+        return Err(Error::Value(format!(
+            "noise_medians: an (H, W, 3) image, H and W >= 3 (got {shape:?})"
+        ))
+        .into());
     }
     let rgb = image.as_slice()?;
     let m = py.detach(|| crate::photo::noise_medians(rgb, shape[0], shape[1]));
