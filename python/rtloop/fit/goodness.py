@@ -153,7 +153,6 @@ def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool 
         keep &= np.isin(np.arange(t.shape[0]), np.asarray(use))
     # Every pixel kept (no mask, none saturated): the arrays themselves, else their kept rows.
     everywhere = bool(keep.all())
-    tk = t if everywhere else np.compress(keep, t, axis=0)
     if codes is not None:
         c = np.asarray(codes).reshape(-1, 3)
         quant = per_code(_quarter_step_at, c if everywhere else np.compress(keep, c, axis=0))
@@ -161,19 +160,20 @@ def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool 
         e = np.asarray(encoding, np.float32).reshape(-1, 3)
         quant = _quarter_step(e if everywhere else np.compress(keep, e, axis=0))
     else:
-        quant = _quarter_step_at(tk)
+        quant = _quarter_step_at(t if everywhere else np.compress(keep, t, axis=0))
     sigma = noise_sigma(target) if sigma is None else np.asarray(sigma, np.float64)
     blocking = jpeg_blocking(target) if blocking is None else blocking
     # The JPEG's error per pixel in linear units: its RMS in codes times the code step there (4 quarter steps).
-    codes = np.asarray(blocking["error_codes"], np.float32)[None, :]
+    jpeg_codes = np.asarray(blocking["error_codes"], np.float32)[None, :]
     noise = (sigma * math.sqrt(2.0 / math.pi)).astype(np.float32)[None, :]
-    if codes.any():
-        jpeg = np.float32(4.0) * quant * codes
+    if jpeg_codes.any():
+        jpeg = np.float32(4.0) * quant * jpeg_codes
         floor = np.maximum(quant, np.sqrt(noise * noise + np.float32(2.0 / math.pi) * jpeg * jpeg))
     else:  # no JPEG: its term is 0, and noise^2 + 0 is noise^2 itself, per channel
         floor = np.maximum(quant, np.sqrt(noise * noise))
-    resid = (m if everywhere else np.compress(keep, m, axis=0)) - tk
+    resid = m - t
     np.abs(resid, out=resid)
+    resid = resid if everywhere else np.compress(keep, resid, axis=0)
     total, fl = float(resid.sum(dtype=np.float64)), float(floor.sum(dtype=np.float64))
     ratio = total / fl if fl > 0 else float("inf")
     per: dict[str, Any] = {}
