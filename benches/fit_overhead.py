@@ -11,7 +11,7 @@ quantisation floor, the render for them, the products' split, scene round trips)
 rounds x runs of each; the medians over the cases and the ratios from this one run. The light error (mm,
 against each ``scene.json``) must be the same for two builds where a change keeps every result.
 ``--baseline`` may be given more than once (``NAME=DIR``; the first is the one the ratios divide by).
-Writes ``benches/results/fit_overhead.md``.
+Writes ``benches/results/fit_overhead.md`` (with ``--fixed-malloc``: ``fit_overhead_fixed_malloc.md``).
 
 Usage (from the repository root, with the extension built)::
 
@@ -87,9 +87,16 @@ def worker(runs: int) -> dict[str, dict[str, float]]:
     return out
 
 
-def run_with(python_dir: str | None, runs: int) -> dict[str, dict[str, float]]:
+#: ``--fixed-malloc``: glibc's mmap and trim thresholds held (8 MiB, 64 MiB) instead of adapting to the
+#: process's history: a fit's large buffers then come from the heap every time, not from fresh pages (whose
+#: first touches, 0 to 700 page faults per fit, vary from run to run with what was freed before).
+FIXED_MALLOC = {"MALLOC_MMAP_THRESHOLD_": str(8 << 20), "MALLOC_TRIM_THRESHOLD_": str(64 << 20)}
+
+
+def run_with(python_dir: str | None, runs: int, fixed_malloc: bool = False) -> dict[str, dict[str, float]]:
     """`worker` in a one-thread subprocess importing rtloop from ``python_dir`` (this checkout's when None)."""
-    env = dict(os.environ, PYTHONPATH=python_dir or str(REPO / "python"), RAYON_NUM_THREADS="1")
+    env = dict(os.environ, PYTHONPATH=python_dir or str(REPO / "python"), RAYON_NUM_THREADS="1",
+               **(FIXED_MALLOC if fixed_malloc else {}))
     cmd = [sys.executable, __file__, "--worker", "--runs", str(runs)]
     text = subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout
     return json.loads(text.strip().splitlines()[-1])
@@ -101,6 +108,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="python/ folder of a baseline build (its package and extension); required, repeatable")
     parser.add_argument("--rounds", type=int, default=3, help="alternating rounds of the builds (default 3)")
     parser.add_argument("--runs", type=int, default=5, help="fits per case and round (default 5)")
+    parser.add_argument("--fixed-malloc", action="store_true",
+                        help="hold glibc's mmap and trim thresholds (see FIXED_MALLOC)")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker:
@@ -117,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
     got: dict[str, list[dict[str, dict[str, float]]]] = {k: [] for k in builds}
     for _ in range(args.rounds):
         for name, where in builds.items():
-            got[name].append(run_with(where, args.runs))
+            got[name].append(run_with(where, args.runs, args.fixed_malloc))
     names = list(got["this"][0])
     best = {k: {c: {p: min(r[c][f"{p}_ms"] for r in rs) for p in PARTS} for c in names} for k, rs in got.items()}
     err = {k: {c: rs[0][c]["light_err_mm"] for c in names} for k, rs in got.items()}
@@ -142,12 +151,13 @@ def main(argv: list[str] | None = None) -> int:
     machine = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
     header = (f"# benches/fit_overhead.py (default fit, one thread; CPU ms per fit, least of {args.rounds} x "
               f"{args.runs} fits per case, builds interleaved; medians over the {len(names)} clean direct "
-              f"photos; {machine})\n\n"
+              f"photos; {'glibc malloc thresholds held; ' if args.fixed_malloc else ''}{machine})\n\n"
               f"This checkout against {base}: medians' ratios {ratios}; light errors "
               f"{'identical' if same else 'DIFFERENT'}.\n\n")
     print(header + "\n".join(lines))
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(header + "\n".join(lines) + "\n")
+    out = OUT.with_name(OUT.stem + "_fixed_malloc.md") if args.fixed_malloc else OUT
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(header + "\n".join(lines) + "\n")
     return 0
 
 
