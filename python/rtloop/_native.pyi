@@ -42,8 +42,8 @@ def render(
     scene: Scene, width: int | None = None, height: int | None = None, spp: int = 1, footprint: bool = False
 ) -> npt.NDArray[np.float32]: ...
 def object_ids(scene: Scene, width: int | None = None, height: int | None = None) -> npt.NDArray[np.int32]: ...
-def render_pixels(scene: Scene, idx: npt.NDArray[np.uint32]) -> npt.NDArray[np.float32]:
-    """The pixels ``idx`` (flat, of the scene's own size) of ``render(scene)``, bit for bit: (len(idx), 3)."""
+def render_many(scenes: list[Scene]) -> tuple[list[npt.NDArray[np.float32]], npt.NDArray[np.int32]]:
+    """One-sample renders of scenes of one size in one pass, and the first scene's object index per pixel."""
 def save_image(path: str | PathLike[str], image: npt.NDArray[np.float32]) -> None: ...
 def render_layers(
     scenes: list[Scene], width: int, height: int, spp: int = 16, adaptive: bool = True, cover_from: int = 0,

@@ -53,19 +53,25 @@ fn render<'py>(
     image_array(py, img.height, img.width, img.rgb)
 }
 
-/// The pixels `idx` (flat indices of the scene's own size) of the one-sample render, float32 (len(idx), 3):
-/// those pixels' values of `render(scene)` bit for bit, for their cost alone.
+/// The one-sample renders of `scenes` (one image size) in one pass, scenes with the same first hits finding
+/// them once: (images float32 (H, W, 3) each, the first scene's object index per pixel, int32 (H, W)); the
+/// values of `render` and `object_ids` bit for bit.
 #[pyfunction]
-fn render_pixels<'py>(
+fn render_many<'py>(
     py: Python<'py>,
-    scene: &Bound<'py, PyScene>,
-    idx: PyReadonlyArray1<'py, u32>,
-) -> PyResult<Bound<'py, PyArray2<f32>>> {
-    let scene = &scene.get().0;
-    let idx = idx.as_slice()?;
-    let n = idx.len();
-    let rgb = py.detach(|| core_render::render_pixels(scene, idx))?;
-    Ok(PyArray1::from_vec(py, rgb).reshape([n, 3])?)
+    scenes: Vec<Bound<'py, PyScene>>,
+) -> PyResult<(Vec<Bound<'py, PyArray3<f32>>>, Bound<'py, PyArray2<i32>>)> {
+    let refs: Vec<&crate::scene::Scene> = scenes.iter().map(|b| &b.get().0).collect();
+    let Some(first) = refs.first() else {
+        return Err(Error::Invalid("render_many: no scenes".into()).into());
+    };
+    let (w, h) = (first.width as usize, first.height as usize);
+    let (images, ids) = py.detach(|| core_render::render_many_with_ids(&refs))?;
+    let images = images
+        .into_iter()
+        .map(|img| image_array(py, img.height, img.width, img.rgb))
+        .collect::<PyResult<Vec<_>>>()?;
+    Ok((images, PyArray1::from_vec(py, ids).reshape([h, w])?))
 }
 
 /// Object index per pixel centre, int32 (H, W), -1 for background.
@@ -648,7 +654,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(_kept_pools, m)?)?;
     m.add_function(wrap_pyfunction!(object_ids, m)?)?;
-    m.add_function(wrap_pyfunction!(render_pixels, m)?)?;
+    m.add_function(wrap_pyfunction!(render_many, m)?)?;
     m.add_function(wrap_pyfunction!(render_layers, m)?)?;
     m.add_function(wrap_pyfunction!(composite, m)?)?;
     m.add_function(wrap_pyfunction!(save_image, m)?)?;

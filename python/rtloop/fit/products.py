@@ -14,7 +14,7 @@ from .. import _native
 from ..scene import Scene, scene_to_dict
 
 __all__ = ["albedo_derivative", "constant_term", "fix_gauge", "product_bounds", "product_range", "products", "products_of", "specular_product", "specular_range",
-           "split_products", "unit_environment", "unit_light", "unit_lobes"]
+           "split_products", "unit_environment", "unit_light", "unit_light_scene", "unit_lobes"]
 
 
 def products_of(d: dict[str, Any]) -> dict[str, np.ndarray]:
@@ -48,6 +48,18 @@ def _unit_render(d: dict[str, Any], intensity: float, environment: float) -> np.
     """The red channel of scene dict ``d`` rendered with a white light of ``intensity``, a grey
     environment of radiance ``environment``, every albedo 1, no specular, no ambient light, no
     interreflection, exposure 1, a black background."""
+    return _native.render(_unit_scene(d, intensity, environment))[..., 0]
+
+
+def unit_light_scene(d: dict[str, Any]) -> Scene:
+    """The scene :func:`unit_light` renders (its red channel), for a caller that renders it with others."""
+    return _unit_scene(d, 1.0, 0.0)
+
+
+def _unit_scene(d: dict[str, Any], intensity: float, environment: float) -> Scene:
+    """Scene dict ``d`` with a white light of ``intensity``, a grey environment of radiance
+    ``environment``, every albedo 1, no specular, no ambient light, no interreflection, exposure 1, a
+    black background."""
     unit = {
         **d,
         "light": {**d["light"], "intensity": intensity, "color": [1.0, 1.0, 1.0]},
@@ -59,7 +71,7 @@ def _unit_render(d: dict[str, Any], intensity: float, environment: float) -> np.
         "objects": [{**o, "material": {"albedo": [1.0, 1.0, 1.0]}} for o in d["objects"]],
         "fit": {},
     }
-    return _native.render(Scene(json.dumps(unit, allow_nan=False)))[..., 0]
+    return Scene(json.dumps(unit, allow_nan=False))
 
 
 def unit_light(d: dict[str, Any]) -> np.ndarray:

@@ -102,14 +102,12 @@ def estimate_uncertainty(
     space, wd = _products_space(scene, d) if use_products else _scene_space(scene, d)
     names = space.names
     warnings: list[str] = []
-    px = used_pixels(space.work, wd, target, mask)
-    steps = _steps(names, space.scale, step)
     if render is not None and np.shape(render) != target.shape:
         raise RtloopError(f"render: shape {np.shape(render)} does not match the scene's {target.shape}")
-    if render is None:  # the fitted scene's render at the used pixels alone (the same values)
-        raw0 = _native.render_pixels(scene, px.idx.astype(np.uint32))
-    else:
-        raw0 = np.take(np.asarray(render, np.float32).reshape(-1, 3), px.idx, axis=0)
+    # Without the fit's render, the fitted scene's is made in the same pass as the unit light's.
+    px = used_pixels(space.work, wd, target, mask, also=scene if render is None else None)
+    steps = _steps(names, space.scale, step)
+    raw0 = px.rendered if render is None else np.take(np.asarray(render, np.float32).reshape(-1, 3), px.idx, axis=0)
     Jt, f0, kink, jump = _jacobian(space, wd, px, steps, clip, warnings, raw0)
     if compared is None and getattr(result, "settings", {}).get("footprint", "off") != "off":
         compared = _native.render(scene, scene.width, scene.height, 1, True)

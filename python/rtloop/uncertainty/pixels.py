@@ -11,7 +11,7 @@ import numpy as np
 
 from .. import _native
 from .._pixels import SATURATED, edges
-from ..fit.products import unit_light
+from ..fit.products import unit_light_scene
 from ..scene import Scene
 
 __all__ = ["UsedPixels", "used_pixels"]
@@ -26,11 +26,17 @@ class UsedPixels:
     saturated: np.ndarray  # (H, W) saturated in every channel
     silhouette: np.ndarray  # (H, W)
     shadow_edge: np.ndarray  # (H, W)
+    rendered: np.ndarray | None = None  # (used, 3) float32: the render of ``also`` at the used pixels
 
 
-def used_pixels(work: Scene, wd: dict[str, Any], target: np.ndarray, mask: np.ndarray | None) -> UsedPixels:
-    """The pixels of ``target`` that the model of ``work`` (``wd`` as a dict) represents smoothly."""
-    ids, unit = _native.object_ids(work), unit_light(wd)
+def used_pixels(work: Scene, wd: dict[str, Any], target: np.ndarray, mask: np.ndarray | None,
+                also: Scene | None = None) -> UsedPixels:
+    """The pixels of ``target`` that the model of ``work`` (``wd`` as a dict) represents smoothly; with
+    ``also`` (a scene of the same size and surfaces, e.g. the fitted one) its render at those pixels,
+    from the same pass over the first hits as the unit-light render and the object index."""
+    scenes = [unit_light_scene(wd)] if also is None else [unit_light_scene(wd), also]
+    images, ids = _native.render_many(scenes)  # the object index: work's first hits are the unit scene's
+    unit = images[0][..., 0]
     lit = unit > 0
     sat = target.reshape(-1, 3) >= SATURATED  # per channel: the others of the pixel still count
     saturated = sat.all(axis=1).reshape(ids.shape)
@@ -40,4 +46,5 @@ def used_pixels(work: Scene, wd: dict[str, Any], target: np.ndarray, mask: np.nd
     if mask is not None:  # pixels the fit left out (bool (H, W), True = used)
         use &= np.asarray(mask, bool)
     idx = np.flatnonzero(use)
-    return UsedPixels(ids, unit, idx, np.take(sat, idx, axis=0), saturated, silhouette, shadow_edge)
+    rendered = None if also is None else np.take(images[1].reshape(-1, 3), idx, axis=0)
+    return UsedPixels(ids, unit, idx, np.take(sat, idx, axis=0), saturated, silhouette, shadow_edge, rendered)
