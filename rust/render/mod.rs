@@ -145,9 +145,10 @@ fn shade_many(scenes: &[&Scene], idx: &[u32], ids: bool) -> Result<(Vec<Vec<f32>
                     if ids && k == 0 && s.object != u32::MAX {
                         hit[q] = s.object as i32;
                     }
+                    let mut sky = None; // the surfel's sky view, once for the scenes sharing it
                     for (m, g) in frames.iter().enumerate().filter(|&(m, _)| leader[m] == k) {
                         let mut sum = Vec3A::ZERO;
-                        sum += g.sample(&s, i, j);
+                        sum += g.sample_sky(&s, i, j, &mut sky);
                         let v = g.mean(sum).to_array();
                         let at = 3 * (m * at.len() + q);
                         part[at..at + 3].copy_from_slice(&v);
@@ -282,6 +283,24 @@ impl Frame {
             &self.geometry.shapes,
             self.shadows,
             gathered,
+        )
+    }
+
+    /// [`Frame::sample`] without the footprint (one sample per pixel), the sky view kept in `sky`
+    /// ([`shade::shade_pixel_sky`]).
+    fn sample_sky(&self, s: &Surfel, i: u32, j: u32, sky: &mut Option<f32>) -> Vec3A {
+        debug_assert!(!self.footprint);
+        let gathered = self
+            .cache
+            .as_ref()
+            .map(|c| c.pixel(j as usize * self.width as usize + i as usize));
+        shade::shade_pixel_sky(
+            s,
+            &self.params,
+            &self.geometry.shapes,
+            self.shadows,
+            gathered,
+            sky,
         )
     }
 

@@ -14,7 +14,8 @@ from .. import _native
 from ..scene import Scene, scene_to_dict
 
 __all__ = ["albedo_derivative", "constant_term", "fix_gauge", "product_bounds", "product_range", "products", "products_of", "specular_product", "specular_range",
-           "split_products", "unit_environment", "unit_light", "unit_light_scene", "unit_lobes"]
+           "split_products", "unit_environment", "unit_environment_scene", "unit_light", "unit_light_scene", "unit_lobes",
+           "unit_lobes_scene"]
 
 
 def products_of(d: dict[str, Any]) -> dict[str, np.ndarray]:
@@ -88,6 +89,11 @@ def unit_environment(d: dict[str, Any]) -> np.ndarray:
     return _unit_render(d, 0.0, 1.0)
 
 
+def unit_environment_scene(d: dict[str, Any]) -> Scene:
+    """The scene :func:`unit_environment` renders (its red channel)."""
+    return _unit_scene(d, 0.0, 1.0)
+
+
 def albedo_derivative(d: dict[str, Any], c: int, unit: np.ndarray, unit_env: np.ndarray | None = None
                       ) -> np.ndarray:
     """d render / d albedo in channel ``c`` of scene dict ``d`` without interreflection (which makes the
@@ -108,6 +114,11 @@ def unit_lobes(d: dict[str, Any], objects: set[int]) -> np.ndarray:
     """The scene ``d`` with only the specular lobes of ``objects`` (specular 1, their shininess; every
     albedo, the ambient light and the background 0): exactly the derivative of the render with respect
     to those objects' specular, on their pixels."""
+    return _native.render(unit_lobes_scene(d, objects))
+
+
+def unit_lobes_scene(d: dict[str, Any], objects: set[int]) -> Scene:
+    """The scene :func:`unit_lobes` renders."""
     lobes = {
         **d,
         "ambient": [0.0, 0.0, 0.0],
@@ -117,7 +128,7 @@ def unit_lobes(d: dict[str, Any], objects: set[int]) -> np.ndarray:
                     for k, o in enumerate(d["objects"])],
         "fit": {},
     }
-    return _native.render(Scene(json.dumps(lobes, allow_nan=False)))
+    return Scene(json.dumps(lobes, allow_nan=False))
 
 
 #: The environment radiance's range when the fit adds the term itself (not in the fit section): up to the

@@ -26,16 +26,15 @@ class UsedPixels:
     saturated: np.ndarray  # (H, W) saturated in every channel
     silhouette: np.ndarray  # (H, W)
     shadow_edge: np.ndarray  # (H, W)
-    rendered: np.ndarray | None = None  # (used, 3) float32: the render of ``also`` at the used pixels
+    rendered: list[np.ndarray]  # (used, 3) float32 each: the renders of ``also`` at the used pixels
 
 
 def used_pixels(work: Scene, wd: dict[str, Any], target: np.ndarray, mask: np.ndarray | None,
-                also: Scene | None = None) -> UsedPixels:
+                also: list[Scene] = ()) -> UsedPixels:
     """The pixels of ``target`` that the model of ``work`` (``wd`` as a dict) represents smoothly; with
-    ``also`` (a scene of the same size and surfaces, e.g. the fitted one) its render at those pixels,
-    from the same pass over the first hits as the unit-light render and the object index."""
-    scenes = [unit_light_scene(wd)] if also is None else [unit_light_scene(wd), also]
-    images, ids = _native.render_many(scenes)  # the object index: work's first hits are the unit scene's
+    ``also`` (scenes of the same size, e.g. the fitted one, the unit environment) their renders at those
+    pixels, from the same pass over the first hits as the unit-light render and the object index."""
+    images, ids = _native.render_many([unit_light_scene(wd), *also])  # ids: work's first hits are these
     unit = images[0][..., 0]
     lit = unit > 0
     sat = target.reshape(-1, 3) >= SATURATED  # per channel: the others of the pixel still count
@@ -46,5 +45,5 @@ def used_pixels(work: Scene, wd: dict[str, Any], target: np.ndarray, mask: np.nd
     if mask is not None:  # pixels the fit left out (bool (H, W), True = used)
         use &= np.asarray(mask, bool)
     idx = np.flatnonzero(use)
-    rendered = None if also is None else np.take(images[1].reshape(-1, 3), idx, axis=0)
+    rendered = [np.take(img.reshape(-1, 3), idx, axis=0) for img in images[1:]]
     return UsedPixels(ids, unit, idx, np.take(sat, idx, axis=0), saturated, silhouette, shadow_edge, rendered)
