@@ -87,6 +87,8 @@ def fd_column(
     jump: npt.NDArray[np.bool_],
     out: npt.NDArray[np.float64],
 ) -> None: ...
+def order_statistics(values: npt.NDArray[np.float64], ks: list[int]) -> list[float]:
+    """The ``ks``-th smallest of ``values`` (0-based), as ``np.partition(values, ks)[ks]``."""
 def block_scores(
     jt: npt.NDArray[np.float64], rows: list[int], r: npt.NDArray[np.float64], block_of: npt.NDArray[np.int64],
     blocks: int,

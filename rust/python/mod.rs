@@ -330,6 +330,17 @@ fn fd_columns<'py>(
     Ok(())
 }
 
+/// The `ks`-th smallest of `values` (0-based), as `np.partition(values, ks)[ks]`: exact elements.
+#[pyfunction]
+fn order_statistics<'py>(
+    py: Python<'py>,
+    values: PyReadonlyArray1<'py, f64>,
+    ks: Vec<usize>,
+) -> PyResult<Vec<f64>> {
+    let values = values.as_slice()?;
+    Ok(py.detach(|| core_uncertainty::order_statistics(values, &ks))?)
+}
+
 /// The sandwich's block sums: (len(rows), blocks) float64, g[a, b] = sum of jt[rows[a], i] * r[i] over the
 /// residuals i whose pixel is in block b (`block_of`, one per pixel, three residuals each), in order.
 #[pyfunction]
@@ -665,6 +676,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fd_column, m)?)?;
     m.add_function(wrap_pyfunction!(fd_columns, m)?)?;
     m.add_function(wrap_pyfunction!(block_scores, m)?)?;
+    m.add_function(wrap_pyfunction!(order_statistics, m)?)?;
     m.add("RtloopError", m.py().get_type::<RtloopError>())?;
     m.add("SceneError", m.py().get_type::<SceneError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
