@@ -3,13 +3,11 @@
 //! Each repeats, operation for operation, the numpy it replaces (the same numbers to the last bit).
 
 use crate::error::{Error, Result};
-use crate::render::{render_pixels, render_pixels_many};
+use crate::render::render_pixels_many;
 use crate::scene::Scene;
 
-/// What one side of a difference is: a scene to render, its used pixels' values already rendered, or the
-/// optimum's used values `f0`.
+/// What one side of a difference is: its used pixels' rendered values, or the optimum's used values `f0`.
 pub enum Side<'a> {
-    Render(&'a Scene),
     Rendered(&'a [f32]),
     Optimum,
 }
@@ -56,7 +54,7 @@ pub fn one_sided_disagree(up: f64, at: f64, down: f64) -> bool {
 }
 
 /// d f / d theta_k over the used pixels' channels: (f(up) - f(down)) / `denom` in f64 from the f32
-/// values, a side at the optimum taken from `f0`. Renders the used pixels alone, at spp 1; pixels whose
+/// values (the used pixels' renders at spp 1), a side at the optimum taken from `f0`; pixels whose
 /// value crosses 1 inside the step (with `clip`) are marked in `kink`. With both sides rendered, a pixel
 /// whose forward and backward changes in a `free` channel disagree like a jump
 /// ([`one_sided_disagree`]: a shadow edge or the terminator crossed inside the step) is marked in `jump`.
@@ -93,12 +91,6 @@ pub fn fd_column(
     let values = |side: Side<'_>, kink: &mut [bool]| -> Result<Vec<f32>> {
         Ok(match side {
             Side::Optimum => f0.to_vec(),
-            Side::Render(scene) => {
-                // the used pixels alone: the same values as theirs in a whole render
-                let mut v = render_pixels(scene, idx)?;
-                clip_used(&mut v, clipped0, free, clip, kink);
-                v
-            }
             Side::Rendered(values) => {
                 if values.len() != n {
                     return Err(Error::Invalid(format!(

@@ -73,20 +73,7 @@ def fd_columns(
     jump: npt.NDArray[np.bool_],
     jt: npt.NDArray[np.float64],
 ) -> None:
-    """``fd_column`` of several parameters into the rows ``rows`` of ``jt``, their scenes rendered in one pass."""
-def fd_column(
-    up: Scene | None,
-    down: Scene | None,
-    f0: npt.NDArray[np.float32],
-    idx: npt.NDArray[np.uint32],
-    clipped0: npt.NDArray[np.bool_],
-    free: npt.NDArray[np.bool_],
-    clip: bool,
-    denom: float,
-    kink: npt.NDArray[np.bool_],
-    jump: npt.NDArray[np.bool_],
-    out: npt.NDArray[np.float64],
-) -> None: ...
+    """Finite-difference Jacobian columns into the rows ``rows`` of ``jt``, their scenes rendered in one pass."""
 def order_statistics(values: npt.NDArray[np.float64], ks: list[int]) -> list[float]:
     """The ``ks``-th smallest of ``values`` (0-based), as ``np.partition(values, ks)[ks]``."""
 def block_scores(

@@ -13,7 +13,7 @@ use crate::error::Error;
 use crate::render as core_render;
 use crate::search::{Budget, Method, Objective};
 use crate::stage::run_stage;
-use crate::uncertainty::{self as core_uncertainty, Side};
+use crate::uncertainty as core_uncertainty;
 
 mod errors;
 mod fitness;
@@ -205,58 +205,13 @@ fn composite<'py>(
     image_array(py, shape[0] as u32, shape[1] as u32, out)
 }
 
-/// One finite-difference column of the uncertainty's Jacobian over the used pixels `idx`: renders `up`
-/// and `down` (None: the optimum's used values `f0`), writes (f(up) - f(down)) / `denom` (f64 from the
-/// f32 values, min(value, 1) with `clip`) into `out` and marks in `kink` the pixels whose value crosses 1
-/// (against `clipped0`) in a `free` channel, and in `jump` (both sides rendered) those whose forward and
-/// backward changes disagree like a jump (a shadow edge or the terminator crossed inside the step); the
-/// GIL released throughout.
-#[pyfunction]
-#[allow(clippy::too_many_arguments)]
-fn fd_column<'py>(
-    py: Python<'py>,
-    up: Option<Bound<'py, PyScene>>,
-    down: Option<Bound<'py, PyScene>>,
-    f0: PyReadonlyArray1<'py, f32>,
-    idx: PyReadonlyArray1<'py, u32>,
-    clipped0: PyReadonlyArray1<'py, bool>,
-    free: PyReadonlyArray1<'py, bool>,
-    clip: bool,
-    denom: f64,
-    mut kink: PyReadwriteArray1<'py, bool>,
-    mut jump: PyReadwriteArray1<'py, bool>,
-    mut out: PyReadwriteArray1<'py, f64>,
-) -> PyResult<()> {
-    fn side<'a>(s: &'a Option<Bound<'_, PyScene>>) -> Side<'a> {
-        match s {
-            Some(b) => Side::Render(&b.get().0), // frozen + Sync: no borrow flag
-            None => Side::Optimum,
-        }
-    }
-    let (up_s, down_s) = (side(&up), side(&down));
-    let (f0, idx, clipped0, free) = (
-        f0.as_slice()?,
-        idx.as_slice()?,
-        clipped0.as_slice()?,
-        free.as_slice()?,
-    );
-    let (kink, jump, out) = (
-        kink.as_slice_mut()?,
-        jump.as_slice_mut()?,
-        out.as_slice_mut()?,
-    );
-    py.detach(|| {
-        core_uncertainty::fd_column(
-            up_s, down_s, f0, idx, clipped0, free, clip, denom, kink, jump, out,
-        )
-    })?;
-    Ok(())
-}
-
-/// `fd_column` of several parameters at once into the rows `rows` of `jt` (P, 3 x used, float64,
-/// C-contiguous): column k's sides `ups[k]`, `downs[k]` (None: the optimum), divisor `denoms[k]`; the
-/// scenes rendered in one pass over the used pixels (scenes with the same first hits find them once).
-/// The same values as `fd_column` one by one.
+/// Finite-difference columns of the uncertainty's Jacobian over the used pixels `idx`, into the rows `rows`
+/// of `jt` (P, 3 x used, float64, C-contiguous): column k is (f(`ups[k]`) - f(`downs[k]`)) / `denoms[k]`
+/// (None: the optimum's used values `f0`; f64 from the f32 values, min(value, 1) with `clip`); the pixels
+/// whose value crosses 1 (against `clipped0`) in a `free` channel are marked in `kink`, and (both sides
+/// rendered) those whose forward and backward changes disagree like a jump (a shadow edge or the terminator
+/// crossed inside the step) in `jump`. The scenes are rendered in one pass over the used pixels (scenes with
+/// the same first hits find them once; `uncertainty::fd_columns`), the GIL released throughout.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
 fn fd_columns<'py>(
@@ -673,7 +628,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(constant_term, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     m.add_function(wrap_pyfunction!(optimize, m)?)?;
-    m.add_function(wrap_pyfunction!(fd_column, m)?)?;
     m.add_function(wrap_pyfunction!(fd_columns, m)?)?;
     m.add_function(wrap_pyfunction!(block_scores, m)?)?;
     m.add_function(wrap_pyfunction!(order_statistics, m)?)?;
