@@ -42,8 +42,8 @@ def render(
     scene: Scene, width: int | None = None, height: int | None = None, spp: int = 1, footprint: bool = False
 ) -> npt.NDArray[np.float32]: ...
 def object_ids(scene: Scene, width: int | None = None, height: int | None = None) -> npt.NDArray[np.int32]: ...
-def render_pixels(scene: Scene, idx: npt.NDArray[np.uint32]) -> npt.NDArray[np.float32]:
-    """The pixels ``idx`` (flat, of the scene's own size) of ``render(scene)``, bit for bit: (len(idx), 3)."""
+def render_many(scenes: list[Scene]) -> tuple[list[npt.NDArray[np.float32]], npt.NDArray[np.int32]]:
+    """One-sample renders of scenes of one size in one pass, and the first scene's object index per pixel."""
 def save_image(path: str | PathLike[str], image: npt.NDArray[np.float32]) -> None: ...
 def render_layers(
     scenes: list[Scene], width: int, height: int, spp: int = 16, adaptive: bool = True, cover_from: int = 0,
@@ -73,20 +73,9 @@ def fd_columns(
     jump: npt.NDArray[np.bool_],
     jt: npt.NDArray[np.float64],
 ) -> None:
-    """``fd_column`` of several parameters into the rows ``rows`` of ``jt``, their scenes rendered in one pass."""
-def fd_column(
-    up: Scene | None,
-    down: Scene | None,
-    f0: npt.NDArray[np.float32],
-    idx: npt.NDArray[np.uint32],
-    clipped0: npt.NDArray[np.bool_],
-    free: npt.NDArray[np.bool_],
-    clip: bool,
-    denom: float,
-    kink: npt.NDArray[np.bool_],
-    jump: npt.NDArray[np.bool_],
-    out: npt.NDArray[np.float64],
-) -> None: ...
+    """Finite-difference Jacobian columns into the rows ``rows`` of ``jt``, their scenes rendered in one pass."""
+def order_statistics(values: npt.NDArray[np.float64], ks: list[int]) -> list[float]:
+    """The ``ks``-th smallest of ``values`` (0-based), as ``np.partition(values, ks)[ks]``."""
 def block_scores(
     jt: npt.NDArray[np.float64], rows: list[int], r: npt.NDArray[np.float64], block_of: npt.NDArray[np.int64],
     blocks: int,

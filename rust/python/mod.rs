@@ -13,7 +13,7 @@ use crate::error::Error;
 use crate::render as core_render;
 use crate::search::{Budget, Method, Objective};
 use crate::stage::run_stage;
-use crate::uncertainty::{self as core_uncertainty, Side};
+use crate::uncertainty as core_uncertainty;
 
 mod errors;
 mod fitness;
@@ -53,19 +53,25 @@ fn render<'py>(
     image_array(py, img.height, img.width, img.rgb)
 }
 
-/// The pixels `idx` (flat indices of the scene's own size) of the one-sample render, float32 (len(idx), 3):
-/// those pixels' values of `render(scene)` bit for bit, for their cost alone.
+/// The one-sample renders of `scenes` (one image size) in one pass, scenes with the same first hits finding
+/// them once: (images float32 (H, W, 3) each, the first scene's object index per pixel, int32 (H, W)); the
+/// values of `render` and `object_ids` bit for bit.
 #[pyfunction]
-fn render_pixels<'py>(
+fn render_many<'py>(
     py: Python<'py>,
-    scene: &Bound<'py, PyScene>,
-    idx: PyReadonlyArray1<'py, u32>,
-) -> PyResult<Bound<'py, PyArray2<f32>>> {
-    let scene = &scene.get().0;
-    let idx = idx.as_slice()?;
-    let n = idx.len();
-    let rgb = py.detach(|| core_render::render_pixels(scene, idx))?;
-    Ok(PyArray1::from_vec(py, rgb).reshape([n, 3])?)
+    scenes: Vec<Bound<'py, PyScene>>,
+) -> PyResult<(Vec<Bound<'py, PyArray3<f32>>>, Bound<'py, PyArray2<i32>>)> {
+    let refs: Vec<&crate::scene::Scene> = scenes.iter().map(|b| &b.get().0).collect();
+    let Some(first) = refs.first() else {
+        return Err(Error::Invalid("render_many: no scenes".into()).into());
+    };
+    let (w, h) = (first.width as usize, first.height as usize);
+    let (images, ids) = py.detach(|| core_render::render_many_with_ids(&refs))?;
+    let images = images
+        .into_iter()
+        .map(|img| image_array(py, img.height, img.width, img.rgb))
+        .collect::<PyResult<Vec<_>>>()?;
+    Ok((images, PyArray1::from_vec(py, ids).reshape([h, w])?))
 }
 
 /// Object index per pixel centre, int32 (H, W), -1 for background.
@@ -255,58 +261,13 @@ fn composite<'py>(
     image_array(py, shape[0] as u32, shape[1] as u32, out)
 }
 
-/// One finite-difference column of the uncertainty's Jacobian over the used pixels `idx`: renders `up`
-/// and `down` (None: the optimum's used values `f0`), writes (f(up) - f(down)) / `denom` (f64 from the
-/// f32 values, min(value, 1) with `clip`) into `out` and marks in `kink` the pixels whose value crosses 1
-/// (against `clipped0`) in a `free` channel, and in `jump` (both sides rendered) those whose forward and
-/// backward changes disagree like a jump (a shadow edge or the terminator crossed inside the step); the
-/// GIL released throughout.
-#[pyfunction]
-#[allow(clippy::too_many_arguments)]
-fn fd_column<'py>(
-    py: Python<'py>,
-    up: Option<Bound<'py, PyScene>>,
-    down: Option<Bound<'py, PyScene>>,
-    f0: PyReadonlyArray1<'py, f32>,
-    idx: PyReadonlyArray1<'py, u32>,
-    clipped0: PyReadonlyArray1<'py, bool>,
-    free: PyReadonlyArray1<'py, bool>,
-    clip: bool,
-    denom: f64,
-    mut kink: PyReadwriteArray1<'py, bool>,
-    mut jump: PyReadwriteArray1<'py, bool>,
-    mut out: PyReadwriteArray1<'py, f64>,
-) -> PyResult<()> {
-    fn side<'a>(s: &'a Option<Bound<'_, PyScene>>) -> Side<'a> {
-        match s {
-            Some(b) => Side::Render(&b.get().0), // frozen + Sync: no borrow flag
-            None => Side::Optimum,
-        }
-    }
-    let (up_s, down_s) = (side(&up), side(&down));
-    let (f0, idx, clipped0, free) = (
-        f0.as_slice()?,
-        idx.as_slice()?,
-        clipped0.as_slice()?,
-        free.as_slice()?,
-    );
-    let (kink, jump, out) = (
-        kink.as_slice_mut()?,
-        jump.as_slice_mut()?,
-        out.as_slice_mut()?,
-    );
-    py.detach(|| {
-        core_uncertainty::fd_column(
-            up_s, down_s, f0, idx, clipped0, free, clip, denom, kink, jump, out,
-        )
-    })?;
-    Ok(())
-}
-
-/// `fd_column` of several parameters at once into the rows `rows` of `jt` (P, 3 x used, float64,
-/// C-contiguous): column k's sides `ups[k]`, `downs[k]` (None: the optimum), divisor `denoms[k]`; the
-/// scenes rendered in one pass over the used pixels (scenes with the same first hits find them once).
-/// The same values as `fd_column` one by one.
+/// Finite-difference columns of the uncertainty's Jacobian over the used pixels `idx`, into the rows `rows`
+/// of `jt` (P, 3 x used, float64, C-contiguous): column k is (f(`ups[k]`) - f(`downs[k]`)) / `denoms[k]`
+/// (None: the optimum's used values `f0`; f64 from the f32 values, min(value, 1) with `clip`); the pixels
+/// whose value crosses 1 (against `clipped0`) in a `free` channel are marked in `kink`, and (both sides
+/// rendered) those whose forward and backward changes disagree like a jump (a shadow edge or the terminator
+/// crossed inside the step) in `jump`. The scenes are rendered in one pass over the used pixels (scenes with
+/// the same first hits find them once; `uncertainty::fd_columns`), the GIL released throughout.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
 fn fd_columns<'py>(
@@ -378,6 +339,17 @@ fn fd_columns<'py>(
         )
     })?;
     Ok(())
+}
+
+/// The `ks`-th smallest of `values` (0-based), as `np.partition(values, ks)[ks]`: exact elements.
+#[pyfunction]
+fn order_statistics<'py>(
+    py: Python<'py>,
+    values: PyReadonlyArray1<'py, f64>,
+    ks: Vec<usize>,
+) -> PyResult<Vec<f64>> {
+    let values = values.as_slice()?;
+    Ok(py.detach(|| core_uncertainty::order_statistics(values, &ks))?)
 }
 
 /// The sandwich's block sums: (len(rows), blocks) float64, g[a, b] = sum of jt[rows[a], i] * r[i] over the
@@ -704,7 +676,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(_kept_pools, m)?)?;
     m.add_function(wrap_pyfunction!(object_ids, m)?)?;
-    m.add_function(wrap_pyfunction!(render_pixels, m)?)?;
+    m.add_function(wrap_pyfunction!(render_many, m)?)?;
     m.add_function(wrap_pyfunction!(render_layers, m)?)?;
     m.add_function(wrap_pyfunction!(composite, m)?)?;
     m.add_function(wrap_pyfunction!(save_image, m)?)?;
@@ -712,9 +684,9 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(constant_term, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     m.add_function(wrap_pyfunction!(optimize, m)?)?;
-    m.add_function(wrap_pyfunction!(fd_column, m)?)?;
     m.add_function(wrap_pyfunction!(fd_columns, m)?)?;
     m.add_function(wrap_pyfunction!(block_scores, m)?)?;
+    m.add_function(wrap_pyfunction!(order_statistics, m)?)?;
     m.add_function(wrap_pyfunction!(noise_medians, m)?)?;
     m.add_function(wrap_pyfunction!(jpeg_phases, m)?)?;
     m.add_function(wrap_pyfunction!(codes8, m)?)?;

@@ -72,6 +72,38 @@ pub fn render_pixels(scene: &Scene, idx: &[u32]) -> Result<Vec<f32>> {
 /// the finite differences of a light's position) find each pixel's first hit once and shade it under
 /// each scene. The values are each scene's own [`render_pixels`] bit for bit.
 pub fn render_pixels_many(scenes: &[&Scene], idx: &[u32]) -> Result<Vec<Vec<f32>>> {
+    Ok(shade_many(scenes, idx, false)?.0)
+}
+
+/// The whole one-sample renders of `scenes`, which must have the same image size, in one pass
+/// ([`render_pixels_many`]), and the object index per pixel of the first scene's first hits (-1 for
+/// background: [`object_ids`]'s values).
+pub fn render_many_with_ids(scenes: &[&Scene]) -> Result<(Vec<Image>, Vec<i32>)> {
+    let Some(first) = scenes.first() else {
+        return Ok((Vec::new(), Vec::new()));
+    };
+    let (width, height) = (first.width, first.height);
+    if let Some(s) = scenes
+        .iter()
+        .find(|s| (s.width, s.height) != (width, height))
+    {
+        return Err(Error::Invalid(format!(
+            "render_many: the scenes differ in size ({width}x{height} and {}x{})",
+            s.width, s.height
+        )));
+    }
+    let idx: Vec<u32> = (0..width.saturating_mul(height)).collect(); // sizes are checked below 16384
+    let (rgb, ids) = shade_many(scenes, &idx, true)?;
+    Ok((
+        rgb.into_iter()
+            .map(|rgb| Image { width, height, rgb })
+            .collect(),
+        ids,
+    ))
+}
+
+/// [`render_pixels_many`], with the first scene's object index per pixel when `ids`.
+fn shade_many(scenes: &[&Scene], idx: &[u32], ids: bool) -> Result<(Vec<Vec<f32>>, Vec<i32>)> {
     let frames = scenes
         .iter()
         .map(|s| Frame::new(s, None, None, 1, false))
@@ -95,11 +127,11 @@ pub fn render_pixels_many(scenes: &[&Scene], idx: &[u32]) -> Result<Vec<Vec<f32>
         .collect();
     let n = idx.len();
     const CHUNK: usize = 64; // fixed: each value is computed the same way however the work is split
-    let mut out = vec![vec![0.0f32; 3 * n]; frames.len()];
-    let parts: Vec<Vec<f32>> = idx
+    let parts: Vec<(Vec<f32>, Vec<i32>)> = idx
         .par_chunks(CHUNK)
         .map(|at| {
             let mut part = vec![0.0f32; 3 * at.len() * frames.len()];
+            let mut hit = vec![-1i32; if ids { at.len() } else { 0 }];
             for (q, &p) in at.iter().enumerate() {
                 for (k, f) in frames.iter().enumerate() {
                     if leader[k] != k {
@@ -110,25 +142,32 @@ pub fn render_pixels_many(scenes: &[&Scene], idx: &[u32]) -> Result<Vec<Vec<f32>
                     let s = f
                         .geometry
                         .primary(i as f32 + dx, j as f32 + dy, f.width, f.height);
+                    if ids && k == 0 && s.object != u32::MAX {
+                        hit[q] = s.object as i32;
+                    }
+                    let mut sky = None; // the surfel's sky view, once for the scenes sharing it
                     for (m, g) in frames.iter().enumerate().filter(|&(m, _)| leader[m] == k) {
                         let mut sum = Vec3A::ZERO;
-                        sum += g.sample(&s, i, j);
+                        sum += g.sample_sky(&s, i, j, &mut sky);
                         let v = g.mean(sum).to_array();
                         let at = 3 * (m * at.len() + q);
                         part[at..at + 3].copy_from_slice(&v);
                     }
                 }
             }
-            part
+            (part, hit)
         })
         .collect();
-    for (c, part) in parts.iter().enumerate() {
+    let mut out = vec![vec![0.0f32; 3 * n]; frames.len()];
+    let mut object = Vec::with_capacity(if ids { n } else { 0 });
+    for (c, (part, hit)) in parts.iter().enumerate() {
         let len = part.len() / frames.len().max(1);
         for (k, o) in out.iter_mut().enumerate() {
             o[3 * CHUNK * c..3 * CHUNK * c + len].copy_from_slice(&part[k * len..(k + 1) * len]);
         }
+        object.extend_from_slice(hit);
     }
-    Ok(out)
+    Ok((out, object))
 }
 
 /// What every pixel of one render shares: the scene's geometry and shading set-up (the bounce's kept
@@ -247,6 +286,24 @@ impl Frame {
         )
     }
 
+    /// [`Frame::sample`] without the footprint (one sample per pixel), the sky view kept in `sky`
+    /// ([`shade::shade_pixel_sky`]).
+    fn sample_sky(&self, s: &Surfel, i: u32, j: u32, sky: &mut Option<f32>) -> Vec3A {
+        debug_assert!(!self.footprint);
+        let gathered = self
+            .cache
+            .as_ref()
+            .map(|c| c.pixel(j as usize * self.width as usize + i as usize));
+        shade::shade_pixel_sky(
+            s,
+            &self.params,
+            &self.geometry.shapes,
+            self.shadows,
+            gathered,
+            sky,
+        )
+    }
+
     /// A pixel's value from the sum of its samples' radiance: their mean, finite.
     fn mean(&self, sum: Vec3A) -> Vec3A {
         (sum * (1.0 / self.offsets.len() as f32)).min(Vec3A::splat(f32::MAX))
@@ -355,6 +412,23 @@ mod tests {
                 }
             }
         }
+        // whole renders with the object index: the renders and object_ids of the first (the moved ball)
+        let refs = [&scenes[3], &scenes[0], &scenes[1]];
+        let (images, ids) = render_many_with_ids(&refs).unwrap();
+        assert_eq!(ids, object_ids(&scenes[3], None, None));
+        assert_ne!(ids, object_ids(&scenes[0], None, None)); // the ball moved: other pixels
+        for (scene, img) in refs.iter().zip(&images) {
+            let whole = render(scene, None, None, 1).unwrap();
+            assert_eq!((img.width, img.height), (whole.width, whole.height));
+            assert!(img
+                .rgb
+                .iter()
+                .zip(&whole.rgb)
+                .all(|(a, b)| a.to_bits() == b.to_bits()));
+        }
+        let mut small = scenes[0].clone();
+        small.width -= 1;
+        assert!(render_many_with_ids(&[&scenes[0], &small]).is_err());
     }
 
     /// A render with interreflection keeps the light-independent gathers of its geometry

@@ -274,7 +274,7 @@ fn sender_radiance_with(
 /// Exposure-scaled radiance towards the eye at surfel `s` (the background for a miss).
 #[inline]
 pub fn shade(s: &Surfel, p: &ShadeParams, shapes: &[PShape], shadows: bool) -> Vec3A {
-    shade_full(s, None, p, shapes, shadows, None).0
+    shade_full(s, None, p, shapes, shadows, None, &mut None).0
 }
 
 /// [`shade`], and whether the light faces the point but a shadow ray found it blocked.
@@ -285,7 +285,7 @@ pub fn shade_shadowed(
     shapes: &[PShape],
     shadows: bool,
 ) -> (Vec3A, bool) {
-    shade_full(s, None, p, shapes, shadows, None)
+    shade_full(s, None, p, shapes, shadows, None, &mut None)
 }
 
 /// [`shade`] with the pixel's `footprint` on the surface (`footprint::axes`): a sphere's shadow edge and
@@ -299,7 +299,7 @@ pub fn shade_pixel(
     shapes: &[PShape],
     shadows: bool,
 ) -> Vec3A {
-    shade_full(s, footprint, p, shapes, shadows, None).0
+    shade_full(s, footprint, p, shapes, shadows, None, &mut None).0
 }
 
 /// [`shade_pixel`] with the pixel's gather points from a render's cache (`bounce::Gathered::pixel`),
@@ -313,7 +313,21 @@ pub fn shade_pixel_cached(
     shadows: bool,
     gathered: Option<&[CachedPoint]>,
 ) -> Vec3A {
-    shade_full(s, footprint, p, shapes, shadows, gathered).0
+    shade_full(s, footprint, p, shapes, shadows, gathered, &mut None).0
+}
+
+/// [`shade_pixel_cached`] with the surfel's sky view (`environment::sky_view`, which depends on the
+/// surfaces alone) kept in `sky`: computed where the environment needs it and `sky` is None, else taken
+/// from it, so that scenes sharing a surfel compute it once. The same values bit for bit.
+pub fn shade_pixel_sky(
+    s: &Surfel,
+    p: &ShadeParams,
+    shapes: &[PShape],
+    shadows: bool,
+    gathered: Option<&[CachedPoint]>,
+    sky: &mut Option<f32>,
+) -> Vec3A {
+    shade_full(s, None, p, shapes, shadows, gathered, sky).0
 }
 
 /// [`shade_pixel`], and whether the light faces the point but is (partly) blocked.
@@ -325,6 +339,7 @@ fn shade_full(
     shapes: &[PShape],
     shadows: bool,
     gathered: Option<&[CachedPoint]>,
+    sky: &mut Option<f32>,
 ) -> (Vec3A, bool) {
     if s.object == u32::MAX {
         return (p.exposure * p.background, false);
@@ -332,7 +347,8 @@ fn shade_full(
     let m = &p.materials[s.object as usize];
     let mut l = m.albedo * p.ambient;
     if p.environment != Vec3A::ZERO {
-        let sky = sky_view(s.position, s.normal, s.object as usize, shapes);
+        let sky =
+            *sky.get_or_insert_with(|| sky_view(s.position, s.normal, s.object as usize, shapes));
         l += m.albedo * p.environment * sky;
     }
     if let (true, Some(points)) = (p.interreflection, gathered) {

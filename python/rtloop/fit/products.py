@@ -14,7 +14,8 @@ from .. import _native
 from ..scene import Scene, scene_to_dict
 
 __all__ = ["albedo_derivative", "constant_term", "fix_gauge", "product_bounds", "product_range", "products", "products_of", "specular_product", "specular_range",
-           "split_products", "unit_environment", "unit_light", "unit_lobes"]
+           "split_products", "unit_environment", "unit_environment_scene", "unit_light", "unit_light_scene", "unit_lobes",
+           "unit_lobes_scene"]
 
 
 def products_of(d: dict[str, Any]) -> dict[str, np.ndarray]:
@@ -48,6 +49,18 @@ def _unit_render(d: dict[str, Any], intensity: float, environment: float) -> np.
     """The red channel of scene dict ``d`` rendered with a white light of ``intensity``, a grey
     environment of radiance ``environment``, every albedo 1, no specular, no ambient light, no
     interreflection, exposure 1, a black background."""
+    return _native.render(_unit_scene(d, intensity, environment))[..., 0]
+
+
+def unit_light_scene(d: dict[str, Any]) -> Scene:
+    """The scene :func:`unit_light` renders (its red channel), for a caller that renders it with others."""
+    return _unit_scene(d, 1.0, 0.0)
+
+
+def _unit_scene(d: dict[str, Any], intensity: float, environment: float) -> Scene:
+    """Scene dict ``d`` with a white light of ``intensity``, a grey environment of radiance
+    ``environment``, every albedo 1, no specular, no ambient light, no interreflection, exposure 1, a
+    black background."""
     unit = {
         **d,
         "light": {**d["light"], "intensity": intensity, "color": [1.0, 1.0, 1.0]},
@@ -59,7 +72,7 @@ def _unit_render(d: dict[str, Any], intensity: float, environment: float) -> np.
         "objects": [{**o, "material": {"albedo": [1.0, 1.0, 1.0]}} for o in d["objects"]],
         "fit": {},
     }
-    return _native.render(Scene(json.dumps(unit, allow_nan=False)))[..., 0]
+    return Scene(json.dumps(unit, allow_nan=False))
 
 
 def unit_light(d: dict[str, Any]) -> np.ndarray:
@@ -74,6 +87,11 @@ def unit_environment(d: dict[str, Any]) -> np.ndarray:
     seen by surfaces of albedo 1 (occluded by the scene's own spheres and planes), no light, no
     interreflection, exposure 1."""
     return _unit_render(d, 0.0, 1.0)
+
+
+def unit_environment_scene(d: dict[str, Any]) -> Scene:
+    """The scene :func:`unit_environment` renders (its red channel)."""
+    return _unit_scene(d, 0.0, 1.0)
 
 
 def albedo_derivative(d: dict[str, Any], c: int, unit: np.ndarray, unit_env: np.ndarray | None = None
@@ -96,6 +114,11 @@ def unit_lobes(d: dict[str, Any], objects: set[int]) -> np.ndarray:
     """The scene ``d`` with only the specular lobes of ``objects`` (specular 1, their shininess; every
     albedo, the ambient light and the background 0): exactly the derivative of the render with respect
     to those objects' specular, on their pixels."""
+    return _native.render(unit_lobes_scene(d, objects))
+
+
+def unit_lobes_scene(d: dict[str, Any], objects: set[int]) -> Scene:
+    """The scene :func:`unit_lobes` renders."""
     lobes = {
         **d,
         "ambient": [0.0, 0.0, 0.0],
@@ -105,7 +128,7 @@ def unit_lobes(d: dict[str, Any], objects: set[int]) -> np.ndarray:
                     for k, o in enumerate(d["objects"])],
         "fit": {},
     }
-    return _native.render(Scene(json.dumps(lobes, allow_nan=False)))
+    return Scene(json.dumps(lobes, allow_nan=False))
 
 
 #: The environment radiance's range when the fit adds the term itself (not in the fit section): up to the

@@ -18,7 +18,7 @@ import numpy as np
 
 from .. import _native
 from ..errors import RtloopError
-from ..fit.products import albedo_derivative, unit_environment, unit_lobes
+from ..fit.products import albedo_derivative, unit_environment_scene, unit_lobes_scene
 from ..scene import Scene, load_scene, scene_to_dict
 from .linalg import _svd_scaled
 from .pixels import UsedPixels, used_pixels
@@ -102,15 +102,24 @@ def estimate_uncertainty(
     space, wd = _products_space(scene, d) if use_products else _scene_space(scene, d)
     names = space.names
     warnings: list[str] = []
-    px = used_pixels(space.work, wd, target, mask)
-    steps = _steps(names, space.scale, step)
     if render is not None and np.shape(render) != target.shape:
         raise RtloopError(f"render: shape {np.shape(render)} does not match the scene's {target.shape}")
-    if render is None:  # the fitted scene's render at the used pixels alone (the same values)
-        raw0 = _native.render_pixels(scene, px.idx.astype(np.uint32))
-    else:
-        raw0 = np.take(np.asarray(render, np.float32).reshape(-1, 3), px.idx, axis=0)
-    Jt, f0, kink, jump = _jacobian(space, wd, px, steps, clip, warnings, raw0)
+    # The renders the Jacobian needs besides the unit light's, in the same pass: the fitted scene's (without
+    # the fit's), the unit environment's and the specular lobes' (exact columns; interreflection makes an
+    # object's pixels depend on the other objects' albedos, and its own nonlinearly: then they are rendered).
+    exact = EXACT_ALBEDO and not wd.get("interreflection", False)
+    also = {"optimum": scene if render is None else None,
+            "environment": unit_environment_scene(wd) if exact and space.albedo and any(
+                wd.get("environment", [0.0, 0.0, 0.0])) else None,
+            "lobes": unit_lobes_scene(wd, set(space.specular.values())) if exact and space.specular else None}
+    also = {k: v for k, v in also.items() if v is not None}
+    px = used_pixels(space.work, wd, target, mask, also=list(also.values()))
+    got = dict(zip(also, px.rendered))
+    steps = _steps(names, space.scale, step)
+    raw0 = got["optimum"] if render is None else np.take(np.asarray(render, np.float32).reshape(-1, 3), px.idx,
+                                                          axis=0)
+    Jt, f0, kink, jump = _jacobian(space, wd, px, steps, clip, warnings, raw0, exact,
+                                   env_u=got.get("environment"), lobe_u=got.get("lobes"))
     if compared is None and getattr(result, "settings", {}).get("footprint", "off") != "off":
         compared = _native.render(scene, scene.width, scene.height, 1, True)
     if compared is not None:
@@ -217,11 +226,14 @@ def _product_sigma(space: _Space, wd: dict[str, Any], fit: _Covariance | None, u
 
 
 def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarray, clip: bool,
-              warnings: list[str], raw0: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+              warnings: list[str], raw0: np.ndarray, exact: bool, env_u: np.ndarray | None = None,
+              lobe_u: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The Jacobian's transpose over the used pixels' channels, the render there at the optimum (flat,
     min(render, 1) with ``clip``, from ``raw0``: the fitted scene's render at the used pixels, float32
-    (used, 3)), which used pixels sit on the clip's kink and which on a jump.
+    (used, 3)), which used pixels sit on the clip's kink and which on a jump. With ``exact`` the albedo
+    and specular columns are exact derivatives, from the unit-environment render ``env_u`` and the lobes'
+    ``lobe_u`` at the used pixels (float32 (used, 3); needed where the scene has an environment, where a
+    specular is a parameter).
 
     Central differences (one-sided where a step would cross a bound). With ``clip``, a pixel whose render
     crosses 1 inside a step in a channel that is not saturated sits on the clip's kink and is left out.
@@ -256,15 +268,8 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
     idx_u32, clipped0_flat, free_flat = idx.astype(np.uint32), clipped0.ravel(), free_u.ravel()
     ids_u = np.take(px.ids.ravel(), idx)
     unit_u = np.take(px.unit.ravel(), idx).astype(np.float64)
-    # Interreflection makes an object's pixels depend on the other objects' albedos (and its own
-    # nonlinearly): its albedo and specular columns are rendered.
-    exact = EXACT_ALBEDO and not wd.get("interreflection", False)
-    env_u = None
-    if exact and space.albedo and any(wd.get("environment", [0.0, 0.0, 0.0])):
-        env_u = np.take(unit_environment(wd).ravel(), idx).astype(np.float64)
-    lobe_u = None
-    if exact and space.specular:
-        lobe_u = np.take(unit_lobes(wd, set(space.specular.values())).reshape(-1, 3), idx, axis=0).astype(np.float64)
+    env_u = None if env_u is None else env_u[:, 0].astype(np.float64)  # grey: the red channel
+    lobe_u = None if lobe_u is None else lobe_u.astype(np.float64)
     pixels_of: dict[int, tuple[np.ndarray, ...]] = {}
     rendered: list[tuple[Any, Any, float, int]] = []  # (up, down, denom, row) of the rendered columns
     for k in range(P):

@@ -11,7 +11,7 @@ import numpy as np
 
 from .. import _native
 from .._pixels import SATURATED, edges
-from ..fit.products import unit_light
+from ..fit.products import unit_light_scene
 from ..scene import Scene
 
 __all__ = ["UsedPixels", "used_pixels"]
@@ -26,11 +26,16 @@ class UsedPixels:
     saturated: np.ndarray  # (H, W) saturated in every channel
     silhouette: np.ndarray  # (H, W)
     shadow_edge: np.ndarray  # (H, W)
+    rendered: list[np.ndarray]  # (used, 3) float32 each: the renders of ``also`` at the used pixels
 
 
-def used_pixels(work: Scene, wd: dict[str, Any], target: np.ndarray, mask: np.ndarray | None) -> UsedPixels:
-    """The pixels of ``target`` that the model of ``work`` (``wd`` as a dict) represents smoothly."""
-    ids, unit = _native.object_ids(work), unit_light(wd)
+def used_pixels(work: Scene, wd: dict[str, Any], target: np.ndarray, mask: np.ndarray | None,
+                also: list[Scene] = ()) -> UsedPixels:
+    """The pixels of ``target`` that the model of ``work`` (``wd`` as a dict) represents smoothly; with
+    ``also`` (scenes of the same size, e.g. the fitted one, the unit environment) their renders at those
+    pixels, from the same pass over the first hits as the unit-light render and the object index."""
+    images, ids = _native.render_many([unit_light_scene(wd), *also])  # ids: work's first hits are these
+    unit = images[0][..., 0]
     lit = unit > 0
     sat = target.reshape(-1, 3) >= SATURATED  # per channel: the others of the pixel still count
     saturated = sat.all(axis=1).reshape(ids.shape)
@@ -40,4 +45,5 @@ def used_pixels(work: Scene, wd: dict[str, Any], target: np.ndarray, mask: np.nd
     if mask is not None:  # pixels the fit left out (bool (H, W), True = used)
         use &= np.asarray(mask, bool)
     idx = np.flatnonzero(use)
-    return UsedPixels(ids, unit, idx, np.take(sat, idx, axis=0), saturated, silhouette, shadow_edge)
+    rendered = [np.take(img.reshape(-1, 3), idx, axis=0) for img in images[1:]]
+    return UsedPixels(ids, unit, idx, np.take(sat, idx, axis=0), saturated, silhouette, shadow_edge, rendered)

@@ -47,8 +47,8 @@ def hall_sheather(r: np.ndarray, alpha: float = 0.05) -> float:
     hq = n ** (-1.0 / 3.0) * nd.inv_cdf(1 - alpha / 2) ** (2.0 / 3.0) * (1.5 * nd.pdf(0.0) ** 2) ** (1.0 / 3.0)
     hq = min(hq, 0.49)
     lo, hi = (n - 1) // 4, (3 * (n - 1)) // 4  # the quartiles to one order statistic: a selection, no sort
-    q = np.partition(r, (lo, hi))
-    kappa = min(float(np.sqrt(np.einsum("i,i->", r, r) / n - (r.sum() / n) ** 2)), float(q[hi] - q[lo]) / 1.34)
+    q_lo, q_hi = _native.order_statistics(np.ascontiguousarray(r, np.float64), [lo, hi])
+    kappa = min(float(np.sqrt(np.einsum("i,i->", r, r) / n - (r.sum() / n) ** 2)), (q_hi - q_lo) / 1.34)
     return float(kappa * (nd.inv_cdf(0.5 + hq) - nd.inv_cdf(0.5 - hq))) if kappa > 0 and math.isfinite(kappa) else 0.0
 
 
