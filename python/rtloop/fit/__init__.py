@@ -186,6 +186,10 @@ def fit(
     # Where a pixel may be clipped: below 1 by the photo's own noise and JPEG error (goodness.clip_level).
     sigma, blocking = noise_sigma(target), jpeg_blocking(target)
     settings["saturated"] = stages.saturated = clip_level(sigma, blocking) if clip else None
+    # A JPEG's colour mixes across silhouettes (its 4:2:0 chroma): those pixels do not inform the products
+    # (recorded for a JPEG only: ``settings["solve_margin"]``).
+    if blocking.get("detected"):
+        settings["solve_margin"] = stages.solve_margin = JPEG_CHROMA_MARGIN
     seeds = np.random.SeedSequence(seed).generate_state(4, dtype=np.uint64)
     model: dict[str, Any] = {"terms": ["direct"], "evidence": {}}
     if held:
@@ -264,6 +268,15 @@ def fit(
     return result
 
 
+#: A JPEG (its blocking detected, :func:`.goodness.jpeg_blocking`) stores colour (chroma) at half the
+#: resolution in each direction (4:2:0, the default of libjpeg, Pillow and cameras), and its decoder
+#: interpolates each pixel's colour from the neighbouring samples ("fancy upsampling": weights 3/4 and 1/4
+#: of the 2 x 2 samples around it), so a pixel's colour mixes those of the pixels up to 2 away. Within that
+#: Chebyshev distance of another object a pixel's colour is part the other's (a red ball's rim takes the
+#: grey floor's), which biased each object's colour products toward its neighbours': those pixels still
+#: count in the loss, but not in the products' solve (``settings["solve_margin"]``).
+JPEG_CHROMA_MARGIN = 2
+
 #: The refit with the terms a photo selected searches near the light found without them (its box shrunk to
 #: +-REFIT_FRACTION of each range around it: the terms move the light by centimetres, the box by metres)
 #: with a smaller search (population, generations, polish).
@@ -307,6 +320,7 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
                       space=refit_space, threads=threads, pixels_per_object=pixels_per_object,
                       rng=np.random.default_rng(seed), callback=callback, footprint=stages.footprint)
         more.saturated = stages.saturated
+        more.solve_margin = stages.solve_margin
         return more
 
     # A fit at the photo's noise level needs no more terms: the tests are skipped (one sum, no evaluation).
