@@ -136,7 +136,9 @@ impl Fitness {
         clip: bool,
         projection: Option<Projection>,
     ) -> Result<Fitness> {
-        Fitness::with_footprint(scene, layout, target, pixels, kind, clip, projection, false, 0)
+        Fitness::with_footprint(
+            scene, layout, target, pixels, kind, clip, projection, false, 0,
+        )
     }
 
     /// [`Fitness::new`] with each pixel integrated over its area where a sphere's shadow edge or its
@@ -151,7 +153,9 @@ impl Fitness {
         clip: bool,
         projection: Option<Projection>,
     ) -> Result<Fitness> {
-        Fitness::with_footprint(scene, layout, target, pixels, kind, clip, projection, true, 0)
+        Fitness::with_footprint(
+            scene, layout, target, pixels, kind, clip, projection, true, 0,
+        )
     }
 
     /// [`Fitness::new`] (or, with `footprint`, [`Fitness::with_pixel_footprint`]) whose closed-form

@@ -72,8 +72,9 @@ impl ActivePixels {
                 .filter(|&i| !matches!(background, Some(_) if gbuffer.surfels[i as usize].object == u32::MAX))
                 .collect();
             for k in 0..objects as u32 {
-                let mine: Vec<usize> =
-                    (0..a.surfels.len()).filter(|&j| a.surfels[j].object == k).collect();
+                let mine: Vec<usize> = (0..a.surfels.len())
+                    .filter(|&j| a.surfels[j].object == k)
+                    .collect();
                 if !mine.iter().any(|&j| a.solve[j]) {
                     for j in mine {
                         a.solve[j] = interior(gbuffer, index[j] as usize);
