@@ -90,6 +90,16 @@ def test_jpeg_products_leave_out_the_chroma_mixed_pixels(variant_fits):
     assert {r.settings.get("solve_margin", 0) for r in variant_fits["noise"].values()} == {0}
 
 
+def test_a_png_with_a_faint_grid_keeps_every_interior_pixel():
+    """direct-back-left's PNG shows a significant 8-pixel grid (0.57 codes, 5.2 standard deviations), below
+    the one code RMS that makes a photo a JPEG here: its fit is the clean one (no solve margin)."""
+    scene = rtloop.load_scene(PHOTOS / "direct-back-left" / "scene_input.json")
+    photo = rtloop.load_image(PHOTOS / "direct-back-left" / "objective.png", scene)
+    assert jpeg_blocking(photo)["detected"]
+    r = rtloop.fit(scene, photo, uncertainty=False)
+    assert "solve_margin" not in r.settings and r.settings["space"] == "linear"
+
+
 def test_jpeg_products_median_within_3_percent(variant_fits):
     """The worst colour product per JPEG-40 photo (against the truth the fit never saw): median 3.6 %
     (0.5-7.3 %) before the pixels that 4:2:0 chroma mixes across a silhouette were left out of the
