@@ -119,8 +119,8 @@ def test_jpeg_products_within_3_percent(variant_fits):
 
 @pytest.mark.parametrize("kind", ["noise", "jpeg"])
 def test_noise_and_jpeg_variants_within_3cm_median_15mm(variant_errors, kind):
-    """Measured after the fix: noise 2.3-12.7 mm (median 6.1), JPEG-40 1.5-23.1 mm (median 11.7); before:
-    noise up to 545 mm, JPEG 4.9-46.7 mm (median 22.6)."""
+    """Measured after the fix: noise 2.3-12.7 mm (median 6.1), JPEG-40 1.5-23.1 mm (median 11.7; with the
+    chroma margin 1.9-22.6 mm, median 11.5); before: noise up to 545 mm, JPEG 4.9-46.7 mm (median 22.6)."""
     errs = variant_errors[kind]
     assert len(errs) >= 11
     assert max(errs.values()) < 0.03, errs
