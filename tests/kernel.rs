@@ -1728,7 +1728,8 @@ fn solve_margin_keeps_the_pixels_whose_neighbourhood_shows_their_object() {
         lit.iter().filter(|&&l| l).count() >= 2,
         "the case needs two lit objects"
     );
-    for margin in [0, 2] {
+    // margin 40: no pixel of the 96 x 72 image passes: every object falls back to its 4-neighbour interior
+    for margin in [0, 2, 40] {
         let f = Fitness::with_solve_margin(
             &scene,
             layout.clone(),
