@@ -3,8 +3,9 @@ for ``uncertainty=True`` beyond ``uncertainty=False`` (``estimate_uncertainty`` 
 render, as ``rtloop.fit`` calls it: the pixel-centre values at the optimum, Gauss-Newton and the block
 sandwich), timed alone.
 
-Cases: the Mitsuba photos of ``tests/fixtures/photos`` without interreflection (the direct ones, environment,
-gloss; the bounce's renders are issue 12's). Each is fitted once (default fit); then its uncertainty is
+Cases: the Mitsuba photos of ``tests/fixtures/photos``, those without interreflection (the direct ones,
+environment, gloss) and those whose fit takes the bounce (whose Jacobian renders it: medians apart). Each
+is fitted once (default fit); then its uncertainty is
 computed ``--runs`` times in a subprocess per build and thread count, the builds alternating over
 ``--rounds``; CPU time (all threads: ``time.process_time``) and wall time, the least over all runs (the
 machine is shared: the least is the cost without interference). ``--baseline DIR`` (a ``python/`` folder
@@ -37,9 +38,8 @@ OUT = REPO / "benches" / "results" / "uncertainty_cost.md"
 
 
 def cases() -> list[Path]:
-    """The Mitsuba photos without interreflection."""
-    return sorted(p for p in PHOTOS.iterdir()
-                  if (p / "objective.png").exists() and "bounce" not in p.name and not p.name.startswith("lamp"))
+    """The Mitsuba photos."""
+    return sorted(p for p in PHOTOS.iterdir() if (p / "objective.png").exists())
 
 
 def worker(runs: int) -> dict[str, dict[str, object]]:
@@ -70,6 +70,7 @@ def worker(runs: int) -> dict[str, dict[str, object]]:
             cpu.append(time.process_time() - c0)
         robust = u.get("robust") or {}
         out[case.name] = {"cpu_ms": 1e3 * min(cpu), "wall_ms": 1e3 * min(wall),
+                          "bounce": bool(s.to_dict().get("interreflection", False)),
                           "wall_median_ms": 1e3 * statistics.median(wall),
                           "light_m": robust.get("light_position_m"),
                           "products": {k: v for k, v in (u.get("product_sigma") or {}).items() if v is not None}}
@@ -116,15 +117,16 @@ def main() -> int:
              (f"Machine: {platform.machine()}, {os.cpu_count()} logical CPUs, shared (load {load[0]:.1f} / "
               f"{load[1]:.1f} / {load[2]:.1f} at the end). {args.rounds} rounds x {args.runs} runs per build and "
               "thread count, alternating; the least over all runs, ms. 'cpu' is all threads' CPU time."), ""]
-    head = "| photo | 1 thread: cpu | 2 threads: cpu | 2 threads: wall |"
-    sep = "|---|---|---|---|"
+    head = "| photo | bounce | 1 thread: cpu | 2 threads: cpu | 2 threads: wall |"
+    sep = "|---|---|---|---|---|"
     if args.baseline:
         head += " baseline 1 thread: cpu | baseline 2 threads: wall | light sigma, this / baseline | products sigma, this / baseline (range) |"
         sep += "---|---|---|---|"
     lines += [head, sep]
     for case in names:
         a1, a2 = best[("this", 1)][case], best[("this", 2)][case]
-        row = f"| {case} | {a1['cpu_ms']:.1f} | {a2['cpu_ms']:.1f} | {a2['wall_ms']:.1f} |"
+        row = (f"| {case} | {'yes' if a1['bounce'] else 'no'} | {a1['cpu_ms']:.1f} | {a2['cpu_ms']:.1f} | "
+               f"{a2['wall_ms']:.1f} |")
         if args.baseline:
             b1, b2 = best[("baseline", 1)][case], best[("baseline", 2)][case]
             light = (f"{a1['light_m'] / b1['light_m']:.4f}" if a1["light_m"] and b1["light_m"] else "-")
@@ -133,11 +135,17 @@ def main() -> int:
             prod = f"{min(ratios):.4f}-{max(ratios):.4f}" if ratios else "-"
             row += f" {b1['cpu_ms']:.1f} | {b2['wall_ms']:.1f} | {light} | {prod} |"
         lines.append(row)
-    med = {k: statistics.median(float(v[c]["wall_ms" if k[1] == 2 else "cpu_ms"]) for c in names)
-           for k, v in best.items()}
-    lines += ["", "Medians over the photos: " + ", ".join(
-        f"{name} {threads} thread(s) {'wall' if threads == 2 else 'cpu'} {med[(name, threads)]:.1f} ms"
-        for name, threads in best), ""]
+    lines.append("")
+    for bounce, label in ((False, "without interreflection"), (True, "whose fit takes the bounce")):
+        group = [c for c in names if bool(best[("this", 1)][c]["bounce"]) == bounce]
+        if not group:
+            continue
+        med = {k: statistics.median(float(v[c]["wall_ms" if k[1] == 2 else "cpu_ms"]) for c in group)
+               for k, v in best.items()}
+        lines.append(f"Medians over the {len(group)} photos {label}: " + ", ".join(
+            f"{name} {threads} thread(s) {'wall' if threads == 2 else 'cpu'} {med[(name, threads)]:.1f} ms"
+            for name, threads in best) + ".")
+    lines.append("")
     OUT.write_text("\n".join(lines))
     print("\n".join(lines))
     return 0

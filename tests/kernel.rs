@@ -1669,3 +1669,92 @@ fn held_bounce_alone_gives_the_serial_value_on_any_thread_count() {
         }
     }
 }
+
+/// `interior_by`: margin 0 is the 4-neighbour test (`interior`); margin m keeps exactly the pixels whose
+/// (2m + 1)^2 neighbourhood (inside the image) shows their own object. A fitness built with a margin
+/// solves the same products from a clean render at the truth (fewer pixels, none of them mixed).
+#[test]
+fn solve_margin_keeps_the_pixels_whose_neighbourhood_shows_their_object() {
+    use rtloop::fitness::{interior, interior_by};
+    let mut rng = Rng::new(12);
+    let scene = random_scene(&mut rng, 2, false, false);
+    let g = rtloop::render::GBuffer::new(
+        &rtloop::render::Geometry::new(&scene),
+        scene.width,
+        scene.height,
+    );
+    let ids = rtloop::render::object_ids(&scene, None, None);
+    let (w, h) = (scene.width as i64, scene.height as i64);
+    let mut dropped = 0;
+    for i in 0..(w * h) as usize {
+        assert_eq!(interior_by(&g, i, 0), interior(&g, i), "pixel {i}");
+        let (x, y) = (i as i64 % w, i as i64 / w);
+        for m in [1i64, 2] {
+            let want = (-m..=m).all(|dy| {
+                (-m..=m).all(|dx| {
+                    let (xx, yy) = (x + dx, y + dy);
+                    xx < 0 || yy < 0 || xx >= w || yy >= h || ids[(yy * w + xx) as usize] == ids[i]
+                })
+            });
+            assert_eq!(
+                interior_by(&g, i, m as usize),
+                want,
+                "pixel {i}, margin {m}"
+            );
+            dropped += usize::from(m == 2 && interior(&g, i) && !want);
+        }
+    }
+    assert!(dropped > 0, "the case needs silhouettes");
+    let bounds = serde_json::json!({"min": [-6, 0.5, -6], "max": [6, 8, 6]});
+    let scene = scene
+        .without_fit()
+        .with_bounds(&[("light.position".to_string(), bounds)])
+        .unwrap();
+    let layout = ParamLayout::new(&scene, &["light.position".to_string()]).unwrap();
+    let target = render(&scene, None, None, 1).unwrap().rgb;
+    let n = scene.objects.len();
+    let proj = Projection::matte(vec![[(0.0, 1e4); 3]; n]);
+    let truth = scene.light.position;
+    let lit: Vec<bool> = (0..n)
+        .map(|k| {
+            (0..(w * h) as usize).any(|i| {
+                ids[i] == k as i32
+                    && interior_by(&g, i, 2)
+                    && target[3 * i..][..3].iter().any(|v| *v > 0.0)
+            })
+        })
+        .collect();
+    assert!(
+        lit.iter().filter(|&&l| l).count() >= 2,
+        "the case needs two lit objects"
+    );
+    // margin 40: no pixel of the 96 x 72 image passes: every object falls back to its 4-neighbour interior
+    for margin in [0, 2, 40] {
+        let f = Fitness::with_solve_margin(
+            &scene,
+            layout.clone(),
+            &target,
+            None,
+            LossKind::L1Projected,
+            false,
+            Some(proj.clone()),
+            false,
+            margin,
+        )
+        .unwrap();
+        let solved = f.solved(&truth);
+        for (k, o) in scene.objects.iter().enumerate().filter(|(k, _)| lit[*k]) {
+            for c in 0..3 {
+                let p = scene.exposure
+                    * scene.light.intensity
+                    * scene.light.color[c]
+                    * o.material.albedo[c];
+                let got = solved.products[k][c];
+                assert!(
+                    (got - p).abs() <= 1e-4 * p,
+                    "margin {margin}, object {k}, channel {c}: {got} vs {p}"
+                );
+            }
+        }
+    }
+}

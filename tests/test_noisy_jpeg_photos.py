@@ -18,6 +18,8 @@ import pytest
 
 import rtloop
 from rtloop._pixels import SATURATED
+from rtloop.fit import JPEG_CHROMA_MARGIN
+from rtloop.fit.products import products_of
 from rtloop.fit.goodness import CLIPPED_SIGMAS, clip_level, jpeg_blocking, noise_sigma
 
 PHOTOS = Path(__file__).parent / "fixtures" / "photos"
@@ -42,6 +44,13 @@ def _light_error(name: str, result: rtloop.FitResult) -> float:
     return float(np.linalg.norm(np.subtract(result.scene.to_dict()["light"]["position"], truth)))
 
 
+def _worst_product(name: str, result: rtloop.FitResult) -> float:
+    """The largest colour product error (exposure x intensity x colour x albedo, per object and channel),
+    relative to the object's largest true product (../shared/tools/score_result.py's measure)."""
+    truth = products_of(json.loads((PHOTOS / name / "scene.json").read_text()))
+    return max(abs(result.products[o][c] - truth[o][c]) / max(truth[o]) for o in truth for c in range(3))
+
+
 def _fit(name: str, kind: str, **kw) -> rtloop.FitResult:
     scene = rtloop.load_scene(PHOTOS / name / "scene_input.json")
     with warnings.catch_warnings():
@@ -58,21 +67,60 @@ def test_noisy_grazing_light_within_3cm():
 
 
 @pytest.fixture(scope="module")
-def variant_errors() -> dict[str, dict[str, float]]:
+def variant_fits() -> dict[str, dict[str, rtloop.FitResult]]:
+    return {kind: {name: _fit(name, kind) for name in DIRECT} for kind in ("noise", "jpeg")}
+
+
+@pytest.fixture(scope="module")
+def variant_errors(variant_fits) -> dict[str, dict[str, float]]:
     out: dict[str, dict[str, float]] = {"noise": {}, "jpeg": {}}
     for kind, errs in out.items():
-        for name in DIRECT:
-            r = _fit(name, kind)
+        for name, r in variant_fits[kind].items():
             errs[name] = _light_error(name, r)
             # the loss space: sRGB for the JPEGs (direct light explains them), linear for the noise
             assert r.settings["space"] == ("srgb" if kind == "jpeg" else "linear"), (name, kind, r.model)
     return out
 
 
+def test_jpeg_products_leave_out_the_chroma_mixed_pixels(variant_fits):
+    """A detected JPEG's products are solved without the pixels within JPEG_CHROMA_MARGIN of another
+    object (4:2:0 chroma mixes their colours); the noisy photos (no JPEG blocking) keep every interior
+    pixel."""
+    assert {r.settings["solve_margin"] for r in variant_fits["jpeg"].values()} == {JPEG_CHROMA_MARGIN}
+    assert {r.settings.get("solve_margin", 0) for r in variant_fits["noise"].values()} == {0}
+
+
+def test_a_png_with_a_faint_grid_keeps_every_interior_pixel():
+    """direct-back-left's PNG shows a significant 8-pixel grid (0.57 codes, 5.2 standard deviations), below
+    the one code RMS that makes a photo a JPEG here: its fit is the clean one (no solve margin)."""
+    scene = rtloop.load_scene(PHOTOS / "direct-back-left" / "scene_input.json")
+    photo = rtloop.load_image(PHOTOS / "direct-back-left" / "objective.png", scene)
+    assert jpeg_blocking(photo)["detected"]
+    r = rtloop.fit(scene, photo, uncertainty=False)
+    assert "solve_margin" not in r.settings and r.settings["space"] == "linear"
+
+
+def test_jpeg_products_median_within_3_percent(variant_fits):
+    """The worst colour product per JPEG-40 photo (against the truth the fit never saw): median 3.6 %
+    (0.5-7.3 %) before the pixels that 4:2:0 chroma mixes across a silhouette were left out of the
+    products' solve, 2.5 % (0.3-6.5 %) after; the per-photo figure is the next test's."""
+    worst = {name: _worst_product(name, r) for name, r in variant_fits["jpeg"].items()}
+    assert len(worst) >= 11
+    assert np.median(list(worst.values())) < 0.03, worst
+
+
+@pytest.mark.xfail(strict=True, reason="issue 12's target, not met: inside a small ball a JPEG-40's colour "
+                   "is quantised per 16 x 16 block (chroma DC), up to 1.4 codes, 2-4 % of a product; "
+                   "direct-low-left, -three-low, -two-overhead and -side stay 3.2-6.5 % off")
+def test_jpeg_products_within_3_percent(variant_fits):
+    worst = {name: _worst_product(name, r) for name, r in variant_fits["jpeg"].items()}
+    assert max(worst.values()) < 0.03, worst
+
+
 @pytest.mark.parametrize("kind", ["noise", "jpeg"])
 def test_noise_and_jpeg_variants_within_3cm_median_15mm(variant_errors, kind):
-    """Measured after the fix: noise 2.3-12.7 mm (median 6.1), JPEG-40 1.5-23.1 mm (median 11.7); before:
-    noise up to 545 mm, JPEG 4.9-46.7 mm (median 22.6)."""
+    """Measured after the fix: noise 2.3-12.7 mm (median 6.1), JPEG-40 1.5-23.1 mm (median 11.7; with the
+    chroma margin 1.9-22.6 mm, median 11.5); before: noise up to 545 mm, JPEG 4.9-46.7 mm (median 22.6)."""
     errs = variant_errors[kind]
     assert len(errs) >= 11
     assert max(errs.values()) < 0.03, errs

@@ -105,6 +105,7 @@ def evaluate(
     footprint: bool = False,
     frozen_bounce: bool = False,
     saturated: float | None = None,
+    solve_margin: int = 0,
 ) -> npt.NDArray[np.float64]: ...
 def optimize(
     scene: Scene,
@@ -134,13 +135,17 @@ def optimize(
     polish_footprint: bool = False,
     frozen_bounce: int = 0,
     saturated: float | None = None,
+    solve_margin: int = 0,
 ) -> OptimizeResult:
     """polish_tol: the polish stops once every simplex vertex is within this fraction of each range of
     the best (default 1e-13). product_bounds: (objects, 3, 2), or (objects, 4, 2) whose row 4 bounds
     Q = intensity x specular. space: "linear" or "srgb" (the loss compares the sRGB encodings of the
     clipped render and of target; the least-squares products stay linear). saturated: objective values
     at or above it (capped at 0.999) may be clipped: the least-squares solve leaves them out and the
-    refine counts them one-sidedly (default 0.999; rtloop.fit passes goodness.clip_level)."""
+    refine counts them one-sidedly (default 0.999; rtloop.fit passes goodness.clip_level). solve_margin:
+    only pixels whose neighbours within this Chebyshev distance all show their object inform the
+    closed-form products (0, the default: the 4-neighbours; rtloop.fit passes 2 for a JPEG); the loss
+    counts every pixel."""
 
 class OptimizeResult:
     """What ``optimize`` found (immutable). For the projected loss ``products`` (per object

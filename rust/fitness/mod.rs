@@ -25,7 +25,7 @@ pub use kernel::{Candidate, Kernel};
 use loss::penalty_sums;
 pub use loss::{Norm, Space, SrgbLut, SATURATED};
 pub use pixels::Sky;
-pub use pixels::{interior, ActivePixels};
+pub use pixels::{interior, interior_by, ActivePixels};
 pub use projected::{constant_term, projection_blocker, Projection, Solved};
 pub use refine::{encoded_line_min, l1_line_min, EncodedTerm};
 pub use simd::{path as simd_path, scalar_paths};
@@ -136,7 +136,9 @@ impl Fitness {
         clip: bool,
         projection: Option<Projection>,
     ) -> Result<Fitness> {
-        Fitness::with_footprint(scene, layout, target, pixels, kind, clip, projection, false)
+        Fitness::with_footprint(
+            scene, layout, target, pixels, kind, clip, projection, false, 0,
+        )
     }
 
     /// [`Fitness::new`] with each pixel integrated over its area where a sphere's shadow edge or its
@@ -151,7 +153,38 @@ impl Fitness {
         clip: bool,
         projection: Option<Projection>,
     ) -> Result<Fitness> {
-        Fitness::with_footprint(scene, layout, target, pixels, kind, clip, projection, true)
+        Fitness::with_footprint(
+            scene, layout, target, pixels, kind, clip, projection, true, 0,
+        )
+    }
+
+    /// [`Fitness::new`] (or, with `footprint`, [`Fitness::with_pixel_footprint`]) whose closed-form
+    /// products are informed only by pixels that every pixel within `solve_margin` (Chebyshev distance)
+    /// shows the same object ([`interior_by`]; 0: the 4-neighbours, as `new` builds it). The loss still
+    /// counts every pixel.
+    #[allow(clippy::too_many_arguments)]
+    pub fn with_solve_margin(
+        scene: &Scene,
+        layout: ParamLayout,
+        target: &[f32],
+        pixels: Option<&[u32]>,
+        kind: LossKind,
+        clip: bool,
+        projection: Option<Projection>,
+        footprint: bool,
+        solve_margin: usize,
+    ) -> Result<Fitness> {
+        Fitness::with_footprint(
+            scene,
+            layout,
+            target,
+            pixels,
+            kind,
+            clip,
+            projection,
+            footprint,
+            solve_margin,
+        )
     }
 
     /// This fitness with pixels shaded at their centres, as [`Fitness::new`] builds it, from one built
@@ -186,6 +219,7 @@ impl Fitness {
         clip: bool,
         projection: Option<Projection>,
         footprint: bool,
+        solve_margin: usize,
     ) -> Result<Fitness> {
         let n = (scene.width * scene.height) as usize;
         if target.len() != 3 * n {
@@ -327,6 +361,7 @@ impl Fitness {
             background,
             scene.objects.len(),
             camera,
+            solve_margin,
         );
         // The occluded environment costs a sky view factor per pixel only where the model has it.
         let environment = match &projection {

@@ -29,7 +29,10 @@ pub struct ActivePixels {
 impl ActivePixels {
     /// Split `pixels` of `gbuffer` (objective `target`, H x W x 3) into active pixels and, where
     /// `background` is the fixed (clipped) background value, the background's fixed pairs.
-    /// With `camera` (and the scene's shapes), each active pixel's footprint too.
+    /// With `camera` (and the scene's shapes), each active pixel's footprint too. `solve_margin`: a
+    /// pixel informs the closed-form products only when every pixel within this Chebyshev distance
+    /// shows its own object ([`interior_by`]; 0: its 4-neighbours, [`interior`]); an object with no
+    /// such pixel takes its 4-neighbour interior, and one with none of those all its pixels.
     pub fn select(
         gbuffer: &GBuffer,
         target: &[f32],
@@ -37,6 +40,7 @@ impl ActivePixels {
         background: Option<Vec3A>,
         objects: usize,
         camera: Option<(&CameraFrame, &[PShape])>,
+        solve_margin: usize,
     ) -> ActivePixels {
         let mut a = ActivePixels::default();
         let (w, h) = (gbuffer.width, gbuffer.height);
@@ -47,7 +51,7 @@ impl ActivePixels {
                 Some(m) if s.object == u32::MAX => a.fixed.push((m, t)),
                 _ => {
                     a.surfels.push(s);
-                    a.solve.push(interior(gbuffer, i as usize));
+                    a.solve.push(interior_by(gbuffer, i as usize, solve_margin));
                     a.targets.push(t);
                     if let Some((cam, shapes)) = camera {
                         a.footprint.push(if s.object == u32::MAX {
@@ -56,6 +60,24 @@ impl ActivePixels {
                             let shape = &shapes[s.object as usize];
                             footprint::axes(cam, &s, shape, (i % w, i / w), (w, h))
                         });
+                    }
+                }
+            }
+        }
+        // An object with no pixel beyond the margin takes its 4-neighbour interior.
+        if solve_margin > 0 {
+            let index: Vec<u32> = pixels
+                .iter()
+                .copied()
+                .filter(|&i| !matches!(background, Some(_) if gbuffer.surfels[i as usize].object == u32::MAX))
+                .collect();
+            for k in 0..objects as u32 {
+                let mine: Vec<usize> = (0..a.surfels.len())
+                    .filter(|&j| a.surfels[j].object == k)
+                    .collect();
+                if !mine.iter().any(|&j| a.solve[j]) {
+                    for j in mine {
+                        a.solve[j] = interior(gbuffer, index[j] as usize);
                     }
                 }
             }
@@ -90,6 +112,23 @@ pub fn interior(gbuffer: &GBuffer, i: usize) -> bool {
         && (x + 1 == w || id(x + 1, y) == o)
         && (y == 0 || id(x, y - 1) == o)
         && (y + 1 == h || id(x, y + 1) == o)
+}
+
+/// Whether every pixel within Chebyshev distance `margin` of pixel `i` (inside the image) shows its
+/// object; `margin` 0 is [`interior`] (its 4-neighbours). A JPEG with 4:2:0 chroma stores one colour
+/// sample per 2 x 2 pixels and its decoder interpolates between neighbouring samples, so a pixel's
+/// colour mixes those of the pixels up to 2 away: with margin 2 no such mix crosses a silhouette.
+pub fn interior_by(gbuffer: &GBuffer, i: usize, margin: usize) -> bool {
+    if margin == 0 {
+        return interior(gbuffer, i);
+    }
+    let (w, h) = (gbuffer.width as usize, gbuffer.height as usize);
+    let (x, y) = (i % w, i / w);
+    let o = gbuffer.surfels[i].object;
+    (y.saturating_sub(margin)..(y + margin + 1).min(h)).all(|yy| {
+        (x.saturating_sub(margin)..(x + margin + 1).min(w))
+            .all(|xx| gbuffer.surfels[yy * w + xx].object == o)
+    })
 }
 
 /// Pixels per block: the working set of one block stays in L1.

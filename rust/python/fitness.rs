@@ -36,6 +36,7 @@ pub(crate) fn make_fitness(
     space: &str,
     footprint: bool,
     saturated: Option<f32>,
+    solve_margin: usize,
 ) -> PyResult<(Fitness, Vec<(f64, f64)>)> {
     let space = Space::parse(space).map_err(Error::Invalid)?;
     let layout = ParamLayout::new(scene, paths)?;
@@ -79,12 +80,7 @@ pub(crate) fn make_fitness(
         None => None,
     };
     let kind = LossKind::parse(loss)?;
-    let make = if footprint {
-        Fitness::with_pixel_footprint
-    } else {
-        Fitness::new
-    };
-    let mut fitness = make(
+    let mut fitness = Fitness::with_solve_margin(
         scene,
         layout,
         &target,
@@ -92,6 +88,8 @@ pub(crate) fn make_fitness(
         kind,
         clip,
         projection,
+        footprint,
+        solve_margin,
     )?;
     fitness.set_norm(Norm::parse(norm).map_err(Error::Invalid)?);
     fitness.set_space(space);

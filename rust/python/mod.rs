@@ -418,7 +418,7 @@ fn save_image(py: Python<'_>, path: PathBuf, image: PyReadonlyArray3<'_, f32>) -
 #[pyfunction]
 #[pyo3(signature = (scene, paths, target, population, pixels=None, loss="l1", clip=true, threads=None,
                     product_bounds=None, norm="l1", space="linear", footprint=false,
-                    frozen_bounce=false, saturated=None))]
+                    frozen_bounce=false, saturated=None, solve_margin=0))]
 #[allow(clippy::too_many_arguments)]
 fn evaluate<'py>(
     py: Python<'py>,
@@ -436,6 +436,7 @@ fn evaluate<'py>(
     footprint: bool,
     frozen_bounce: bool,
     saturated: Option<f32>,
+    solve_margin: usize,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     use rayon::prelude::*;
     let scene = &scene.get().0;
@@ -451,6 +452,7 @@ fn evaluate<'py>(
         space,
         footprint,
         saturated,
+        solve_margin,
     )?;
     if frozen_bounce {
         py.detach(|| fitness.freeze_bounce(None));
@@ -496,7 +498,7 @@ fn evaluate<'py>(
                     generations=200, f=0.6, cr=0.8, seed=0, threads=None, callback=None,
                     product_bounds=None, method="de", max_evaluations=None, polish=0, norm="l1",
                     with_products=true, space="linear", polish_tol=None, footprint=false,
-                    polish_footprint=false, frozen_bounce=0, saturated=None))]
+                    polish_footprint=false, frozen_bounce=0, saturated=None, solve_margin=0))]
 #[allow(clippy::too_many_arguments)]
 fn optimize<'py>(
     py: Python<'py>,
@@ -525,6 +527,7 @@ fn optimize<'py>(
     polish_footprint: bool,
     frozen_bounce: usize,
     saturated: Option<f32>,
+    solve_margin: usize,
 ) -> PyResult<OptimizeResult> {
     let scene = &scene.get().0;
     // Where only the polish takes the pixel footprint, the search's fitness is the polish's at pixel
@@ -542,6 +545,7 @@ fn optimize<'py>(
         space,
         footprint || only_polish,
         saturated,
+        solve_margin,
     )?;
     let (mut fitness, mut finer) = if only_polish {
         (built.at_pixel_centres(), Some(built))

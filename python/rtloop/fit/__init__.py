@@ -112,6 +112,9 @@ def fit(
     alone explains is refitted in sRGB near the light found, where its errors are alike
     (``result.model["space"]`` says why; ``settings["space"]`` is the space used). On a noisy or JPEG
     image, pixels within three of its errors below 1 count as possibly clipped (``settings["saturated"]``).
+    On a JPEG (its blocking of at least one code RMS) the pixels within JPEG_CHROMA_MARGIN (2) of another
+    object, whose colour its 4:2:0 chroma mixes with that object's, do not inform the colour products
+    (``settings["solve_margin"]``); they still count in the loss.
     ``environment``: the occluded environment term (a room's light from every direction, darkened under
     and between the objects): "auto" (default) adds it when the photo shows it (``result.model`` says
     why), "on" always fits it, "off" never; a scene that gives ``environment`` or frees it always has it.
@@ -191,6 +194,10 @@ def fit(
     encoding = encoded(target, codes)
     sigma, blocking = noise_sigma(target), jpeg_blocking(target, encoding)
     settings["saturated"] = stages.saturated = clip_level(sigma, blocking) if clip else None
+    # A JPEG's colour mixes across silhouettes (its 4:2:0 chroma): those pixels do not inform the products
+    # (recorded for a JPEG only: ``settings["solve_margin"]``).
+    if _is_jpeg(blocking):
+        settings["solve_margin"] = stages.solve_margin = JPEG_CHROMA_MARGIN
     seeds = np.random.SeedSequence(seed).generate_state(4, dtype=np.uint64)
     model: dict[str, Any] = {"terms": ["direct"], "evidence": {}}
     if held:
@@ -270,6 +277,16 @@ def fit(
     return result
 
 
+#: A JPEG (its blocking detected and of at least JPEG_SRGB_CODES, :func:`_is_jpeg`) stores colour
+#: (chroma) at half the resolution in each direction (4:2:0, the default of libjpeg, Pillow and cameras),
+#: and its decoder interpolates each pixel's colour from the neighbouring samples ("fancy upsampling":
+#: weights 3/4 and 1/4 of the 2 x 2 samples around it), so a pixel's colour mixes those of the pixels up
+#: to 2 away. Within that Chebyshev distance of another object a pixel's colour is part the other's (a
+#: red ball's rim takes the grey floor's), which biased each object's colour products toward its
+#: neighbours': those pixels still count in the loss, but not in the products' solve
+#: (``settings["solve_margin"]``).
+JPEG_CHROMA_MARGIN = 2
+
 #: The refit with the terms a photo selected searches near the light found without them (its box shrunk to
 #: +-REFIT_FRACTION of each range around it: the terms move the light by centimetres, the box by metres)
 #: with a smaller search (population, generations, polish).
@@ -315,6 +332,7 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
                       space=refit_space, threads=threads, pixels_per_object=pixels_per_object,
                       rng=np.random.default_rng(seed), callback=callback, footprint=stages.footprint)
         more.saturated = stages.saturated
+        more.solve_margin = stages.solve_margin
         return more
 
     # A fit at the photo's noise level needs no more terms: the tests are skipped (one sum, no evaluation).
@@ -423,11 +441,19 @@ def _jpeg_refit(current: Scene, work: Scene, stages: Stages, first: StageResult,
     return restore_bounds(candidate, work)
 
 
+def _is_jpeg(blocking: dict[str, Any]) -> bool:
+    """Whether the photo is a JPEG by its blocking (:func:`.goodness.jpeg_blocking`): detected, and of at
+    least JPEG_SRGB_CODES RMS (a PNG can show a significant but smaller grid: direct-back-left's 0.57
+    codes)."""
+    codes = float(np.mean(blocking.get("error_codes", [0.0, 0.0, 0.0])))
+    return bool(blocking.get("detected")) and codes >= JPEG_SRGB_CODES
+
+
 def _jpeg_codes(blocking: dict[str, Any], space: str) -> float | None:
     """The JPEG's RMS error in codes (channel mean) where ``space="auto"`` would compare it in sRGB (a
     JPEG blocking of at least JPEG_SRGB_CODES), else None."""
     codes = float(np.mean(blocking.get("error_codes", [0.0, 0.0, 0.0])))
-    return codes if space == "auto" and blocking.get("detected") and codes >= JPEG_SRGB_CODES else None
+    return codes if space == "auto" and _is_jpeg(blocking) else None
 
 
 def _stays_linear(model: dict[str, Any], codes: float) -> None:

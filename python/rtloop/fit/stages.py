@@ -66,6 +66,10 @@ class Stages:
         #: Objective values from which a pixel may be clipped (``_native.optimize``'s ``saturated``; None:
         #: SATURATED; ``goodness.clip_level`` for a noisy or JPEG photo).
         self.saturated: float | None = None
+        #: Pixels within this many (Chebyshev distance) of another object's do not inform the closed-form
+        #: products (``_native.optimize``'s ``solve_margin``; 0: a pixel's 4-neighbours show its object;
+        #: :data:`rtloop.fit.JPEG_CHROMA_MARGIN` for a JPEG, whose colour mixes across silhouettes).
+        self.solve_margin = 0
 
     def run(self, name: str, stage_scene: Scene, paths: list[str], loss: str, pixels: np.ndarray | None,
             generations: int, stage_seed: int, product_bounds: np.ndarray | None = None,
@@ -98,7 +102,7 @@ class Stages:
             method=method, polish=polish, norm=self.norm, space=self.space, with_products=callback is not None,
             polish_tol=polish_tol, footprint=self.footprint == "on",
             polish_footprint=self.footprint == "polish" and method == "lshade" and polish > 0,
-            frozen_bounce=self.frozen_bounce, saturated=self.saturated,
+            frozen_bounce=self.frozen_bounce, saturated=self.saturated, solve_margin=self.solve_margin,
         )
         history = [(gen, float(sum(objectives)), list(objectives), np.array(best))
                    for gen, best, objectives, _ in out.history]
