@@ -186,13 +186,13 @@ def fit(
     stages = Stages(work, target, use, mask, b, ident, clip=clip, norm=norm, space=space, threads=threads,
                     pixels_per_object=pixels_per_object, rng=np.random.default_rng(seed), callback=callback,
                     footprint=footprint)
-    # Where a pixel may be clipped: below 1 by the photo's own noise and JPEG error (goodness.clip_level).
     # The photo's 8-bit codes where it has them (a PNG or JPEG as load_image decodes it: the sRGB transfer
     # functions of its values then come from a table of the 256, the same numbers), and its sRGB encoding
     # once, for the JPEG blocking here and the goodness of fit at the end.
     codes = codes8(target)
     encoding = encoded(target, codes)
     sigma, blocking = noise_sigma(target), jpeg_blocking(target, encoding)
+    # Where a pixel may be clipped: below 1 by the photo's own noise and JPEG error (goodness.clip_level).
     settings["saturated"] = stages.saturated = clip_level(sigma, blocking) if clip else None
     # A JPEG's colour mixes across silhouettes (its 4:2:0 chroma): those pixels do not inform the products
     # (recorded for a JPEG only: ``settings["solve_margin"]``).
