@@ -1,13 +1,14 @@
 """Pinned results of a refactor (issue "One owner for every formula"): every fit in tests/pinned_cases.py
 gives the same numbers to the last bit (but for the CPU-dependent parts, CPU_DEPENDENT) as recorded in
-tests/fixtures/pinned_fits.json before the core was restructured. These golden values are the project's own outputs, allowed here only because they pin a
-refactor; accuracy is tested against ground truth elsewhere. A change meant to alter results re-records
-them (`python3 tests/pinned_cases.py`) and says so in its commit."""
+tests/fixtures/pinned_fits.json before the core was restructured. These golden values are the project's own
+outputs, allowed here only because they pin a refactor; accuracy is tested against ground truth elsewhere. A
+change meant to alter results re-records them (`python3 tests/pinned_cases.py`) and says so in its commit."""
 
 from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from conftest import shared_case
@@ -69,3 +70,27 @@ def test_reference_fit_is_unchanged(name, protocol):
     shared_case(name)
     diff = _first_difference(run_reference(name, protocol), PINNED["reference"][f"{name}/{protocol}"])
     assert diff is None, f"{name}/{protocol}{diff}"
+
+
+def test_only_the_cpu_dependent_parts_have_a_tolerance_and_it_is_narrow():
+    """The comparison itself: a goodness value within CPU_DEPENDENT's 1e-4 passes, one 1e-3 off does not, and
+    the core's numbers (the fit, its products) differ at the last bit."""
+    want = {"fit": {"report": {"goodness": {"ratio": 2.0}, "uncertainty": {"sigma": 1e-3},
+                               "fitted": {"x": 0.1}}}}
+
+    def changed(path: tuple[str, ...], value: float) -> dict:
+        got = json.loads(json.dumps(want))
+        node = got
+        for key in path[:-1]:
+            node = node[key]
+        node[path[-1]] = value
+        return got
+
+    goodness = ("fit", "report", "goodness", "ratio")
+    sigma = ("fit", "report", "uncertainty", "sigma")
+    fitted = ("fit", "report", "fitted", "x")
+    assert _first_difference(changed(goodness, 2.0 * (1 + 1e-6)), want) is None
+    assert _first_difference(changed(goodness, 2.0 * (1 + 1e-3)), want) is not None
+    assert _first_difference(changed(sigma, 1e-3 * (1 + 1e-12)), want) is None
+    assert _first_difference(changed(sigma, 1e-3 * (1 + 1e-6)), want) is not None
+    assert _first_difference(changed(fitted, float(np.nextafter(0.1, 1.0))), want) is not None

@@ -136,7 +136,7 @@ impl Fitness {
         clip: bool,
         projection: Option<Projection>,
     ) -> Result<Fitness> {
-        Fitness::with_footprint(
+        Fitness::with_solve_margin(
             scene, layout, target, pixels, kind, clip, projection, false, 0,
         )
     }
@@ -153,37 +153,8 @@ impl Fitness {
         clip: bool,
         projection: Option<Projection>,
     ) -> Result<Fitness> {
-        Fitness::with_footprint(
+        Fitness::with_solve_margin(
             scene, layout, target, pixels, kind, clip, projection, true, 0,
-        )
-    }
-
-    /// [`Fitness::new`] (or, with `footprint`, [`Fitness::with_pixel_footprint`]) whose closed-form
-    /// products are informed only by pixels that every pixel within `solve_margin` (Chebyshev distance)
-    /// shows the same object ([`interior_by`]; 0: the 4-neighbours, as `new` builds it). The loss still
-    /// counts every pixel.
-    #[allow(clippy::too_many_arguments)]
-    pub fn with_solve_margin(
-        scene: &Scene,
-        layout: ParamLayout,
-        target: &[f32],
-        pixels: Option<&[u32]>,
-        kind: LossKind,
-        clip: bool,
-        projection: Option<Projection>,
-        footprint: bool,
-        solve_margin: usize,
-    ) -> Result<Fitness> {
-        Fitness::with_footprint(
-            scene,
-            layout,
-            target,
-            pixels,
-            kind,
-            clip,
-            projection,
-            footprint,
-            solve_margin,
         )
     }
 
@@ -209,8 +180,12 @@ impl Fitness {
         }
     }
 
+    /// [`Fitness::new`] (or, with `footprint`, [`Fitness::with_pixel_footprint`]) whose closed-form
+    /// products are informed only by pixels that every pixel within `solve_margin` (Chebyshev distance)
+    /// shows the same object ([`interior_by`]; 0: the 4-neighbours, as `new` builds it). The loss still
+    /// counts every pixel.
     #[allow(clippy::too_many_arguments)]
-    fn with_footprint(
+    pub fn with_solve_margin(
         scene: &Scene,
         layout: ParamLayout,
         target: &[f32],

@@ -58,7 +58,8 @@ def estimate_uncertainty(
     ``{name: absolute step}`` for some parameters. ``params``: ``"auto"`` (products where the scene
     determines only products, else the scene's fit parameters), ``"products"`` or ``"scene"``.
     ``render``: the scene's render at the optimum (float32 (H, W, 3), spp 1) when the caller has it
-    (:func:`rtloop.fit` shares its goodness-of-fit render); else the pixels used are rendered alone. ``compared``: the model
+    (:func:`rtloop.fit` shares its goodness-of-fit render); else the pixels used are rendered, in the pass
+    that finds them. ``compared``: the model
     image the fit compared with the photo, whose residual sigma scales (default: for a fit that took the
     pixel footprint, ``result.settings["footprint"]``, the footprint render; else the render at the
     optimum). The Jacobian's columns stay pixel-centre differences: the footprint changes only pixels at
