@@ -15,6 +15,13 @@ pub mod uncertainty;
 #[cfg(feature = "python")]
 mod python;
 
+/// The Python extension allocates through mimalloc, which keeps the memory a fit frees for the next one:
+/// glibc's malloc hands a fit's multi-megabyte buffers back to the system and faults them in again, some
+/// 1000-2000 page faults per fit (benches/fit_overhead.py, "--fixed-malloc").
+#[cfg(feature = "python")]
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 pub use error::{Error, Result};
 pub use fitness::{Fitness, LossKind, Norm, Projection, Space};
 pub use params::ParamLayout;

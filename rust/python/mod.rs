@@ -53,6 +53,9 @@ fn render<'py>(
     image_array(py, img.height, img.width, img.rgb)
 }
 
+/// Images float32 (H, W, 3) and an object index int32 (H, W).
+type RendersAndIds<'py> = (Vec<Bound<'py, PyArray3<f32>>>, Bound<'py, PyArray2<i32>>);
+
 /// The one-sample renders of `scenes` (one image size) in one pass, scenes with the same first hits finding
 /// them once: (images float32 (H, W, 3) each, the first scene's object index per pixel, int32 (H, W)); the
 /// values of `render` and `object_ids` bit for bit.
@@ -60,7 +63,7 @@ fn render<'py>(
 fn render_many<'py>(
     py: Python<'py>,
     scenes: Vec<Bound<'py, PyScene>>,
-) -> PyResult<(Vec<Bound<'py, PyArray3<f32>>>, Bound<'py, PyArray2<i32>>)> {
+) -> PyResult<RendersAndIds<'py>> {
     let refs: Vec<&crate::scene::Scene> = scenes.iter().map(|b| &b.get().0).collect();
     let Some(first) = refs.first() else {
         return Err(Error::Invalid("render_many: no scenes".into()).into());
