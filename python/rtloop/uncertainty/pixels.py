@@ -4,6 +4,7 @@ out one by one."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -30,7 +31,7 @@ class UsedPixels:
 
 
 def used_pixels(work: Scene, wd: dict[str, Any], target: np.ndarray, mask: np.ndarray | None,
-                also: list[Scene] = ()) -> UsedPixels:
+                also: Sequence[Scene] = ()) -> UsedPixels:
     """The pixels of ``target`` that the model of ``work`` (``wd`` as a dict) represents smoothly; with
     ``also`` (scenes of the same size, e.g. the fitted one, the unit environment) their renders at those
     pixels, from the same pass over the first hits as the unit-light render and the object index."""
