@@ -7,8 +7,8 @@ use crate::render::render_pixels_many;
 use crate::scene::Scene;
 
 /// What one side of a difference is: its used pixels' rendered values, or the optimum's used values `f0`.
-pub enum Side<'a> {
-    Rendered(&'a [f32]),
+pub enum Side {
+    Rendered(Vec<f32>),
     Optimum,
 }
 
@@ -60,8 +60,8 @@ pub fn one_sided_disagree(up: f64, at: f64, down: f64) -> bool {
 /// ([`one_sided_disagree`]: a shadow edge or the terminator crossed inside the step) is marked in `jump`.
 #[allow(clippy::too_many_arguments)]
 pub fn fd_column(
-    up: Side<'_>,
-    down: Side<'_>,
+    up: Side,
+    down: Side,
     f0: &[f32],
     idx: &[u32],
     clipped0: &[bool],
@@ -86,9 +86,9 @@ pub fn fd_column(
             idx.len(), idx.len(), f0.len(), clipped0.len(), free.len(), out.len(), kink.len(), jump.len()
         )));
     }
-    let rendered = |s: &Side<'_>| !matches!(s, Side::Optimum);
+    let rendered = |s: &Side| !matches!(s, Side::Optimum);
     let both = rendered(&up) && rendered(&down);
-    let values = |side: Side<'_>, kink: &mut [bool]| -> Result<Vec<f32>> {
+    let values = |side: Side, kink: &mut [bool]| -> Result<Vec<f32>> {
         Ok(match side {
             Side::Optimum => f0.to_vec(),
             Side::Rendered(values) => {
@@ -98,7 +98,7 @@ pub fn fd_column(
                         values.len()
                     )));
                 }
-                let mut v = values.to_vec();
+                let mut v = values;
                 clip_used(&mut v, clipped0, free, clip, kink);
                 v
             }
@@ -154,10 +154,10 @@ pub fn fd_columns(
         .flatten()
         .collect();
     let values = render_pixels_many(&scenes, idx)?;
-    let mut next = values.iter();
+    let mut next = values.into_iter();
     for (c, row) in columns.iter().zip(out.iter_mut()) {
         let mut side = |s: Option<&Scene>| match s {
-            Some(_) => next.next().map_or(Side::Optimum, |v| Side::Rendered(v)),
+            Some(_) => next.next().map_or(Side::Optimum, Side::Rendered),
             None => Side::Optimum,
         };
         let (up, down) = (side(c.up), side(c.down));

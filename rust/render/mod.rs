@@ -60,17 +60,12 @@ pub fn render_with(
     Ok(Image { width, height, rgb })
 }
 
-/// The pixels `idx` (flat indices `j * width + i` of the scene's own size) of [`render`] at one sample
-/// per pixel, three values each in `idx`'s order: the same values bit for bit as those pixels of the
-/// whole render, for the cost of these pixels alone (a Jacobian column over the used pixels).
-pub fn render_pixels(scene: &Scene, idx: &[u32]) -> Result<Vec<f32>> {
-    Ok(render_pixels_many(&[scene], idx)?.pop().unwrap_or_default())
-}
-
-/// [`render_pixels`] of each of `scenes`, in one pass: scenes that see the same surfaces (the same
-/// camera, image size, spheres and planes: only the light, the materials or the environment differ, as
-/// the finite differences of a light's position) find each pixel's first hit once and shade it under
-/// each scene. The values are each scene's own [`render_pixels`] bit for bit.
+/// The pixels `idx` (flat indices `j * width + i` of the scene's own size) of [`render`] at one sample per
+/// pixel, of each of `scenes` (three values a pixel, in `idx`'s order), in one pass: scenes that see the
+/// same surfaces (the same camera, image size, spheres and planes: only the light, the materials or the
+/// environment differ, as the finite differences of a light's position) find each pixel's first hit once
+/// and shade it under each scene. The values are those pixels of each scene's whole render bit for bit,
+/// for the cost of these pixels alone (a Jacobian column over the used pixels).
 pub fn render_pixels_many(scenes: &[&Scene], idx: &[u32]) -> Result<Vec<Vec<f32>>> {
     Ok(shade_many(scenes, idx, false)?.0)
 }
@@ -363,7 +358,7 @@ mod tests {
         out
     }
 
-    /// `render_pixels` gives the listed pixels of the whole render bit for bit, in the list's order, with
+    /// `render_pixels_many` gives the listed pixels of the whole render bit for bit, in the list's order, with
     /// and without the bounce, and refuses a pixel outside the image.
     #[test]
     fn render_pixels_are_the_renders_pixels() {
@@ -374,7 +369,7 @@ mod tests {
                 let whole = render(&scene, None, None, 1).unwrap();
                 let n = scene.width * scene.height;
                 let idx: Vec<u32> = (0..n).rev().step_by(7).chain([0, n - 1, 5]).collect();
-                let got = render_pixels(&scene, &idx).unwrap();
+                let got = render_pixels_many(&[&scene], &idx).unwrap().pop().unwrap();
                 assert_eq!(got.len(), 3 * idx.len());
                 for (k, &p) in idx.iter().enumerate() {
                     for c in 0..3 {
@@ -384,7 +379,7 @@ mod tests {
                         );
                     }
                 }
-                assert!(render_pixels(&scene, &[n]).is_err());
+                assert!(render_pixels_many(&[&scene], &[n]).is_err());
             }
         }
         // several scenes at once: the light moved, the environment on, the bounce on (the same first hits,
