@@ -175,6 +175,7 @@ struct Frame {
     shadows: bool,
     footprint: bool,
     offsets: Vec<(f32, f32)>,
+    inv: f32, // 1 / the samples per pixel
     width: u32,
     height: u32,
 }
@@ -242,6 +243,7 @@ impl Frame {
             cache,
             shadows,
             footprint,
+            inv: 1.0 / offsets.len() as f32,
             offsets,
             width,
             height,
@@ -249,6 +251,7 @@ impl Frame {
     }
 
     /// Pixel (i, j): the mean of its samples, finite.
+    #[inline(always)]
     fn pixel(&self, i: u32, j: u32) -> Vec3A {
         let mut sum = Vec3A::ZERO;
         for &(dx, dy) in &self.offsets {
@@ -261,6 +264,7 @@ impl Frame {
     }
 
     /// The radiance of one sample of pixel (i, j) whose first hit is `s`.
+    #[inline(always)]
     fn sample(&self, s: &Surfel, i: u32, j: u32) -> Vec3A {
         let (width, height) = (self.width, self.height);
         let axes = (self.footprint && s.object != u32::MAX).then(|| {
@@ -300,8 +304,9 @@ impl Frame {
     }
 
     /// A pixel's value from the sum of its samples' radiance: their mean, finite.
+    #[inline(always)]
     fn mean(&self, sum: Vec3A) -> Vec3A {
-        (sum * (1.0 / self.offsets.len() as f32)).min(Vec3A::splat(f32::MAX))
+        (sum * self.inv).min(Vec3A::splat(f32::MAX))
     }
 }
 
