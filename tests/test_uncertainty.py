@@ -599,6 +599,56 @@ def test_product_sigma_is_propagated_in_the_scene_parametrization(ball_scene):
         assert u["correlation"][ki][ka] < 0, "a brighter light, darker albedos"
 
 
+def test_bounce_albedo_columns_are_one_sided_renders_channel_by_channel(ball_scene, monkeypatch):
+    """With interreflection the albedo columns are one-sided renders, one per object with all its channels
+    moved (channel c of the image depends on channel c of the albedos alone, so each column is read from its
+    own channel). Against one full-image render per parameter with that channel alone moved by its step (up
+    where the bound allows, else down: the floor's red is at its upper bound), at the used pixels: the same
+    numbers to the last bit, the other channels of each column exactly zero."""
+    from rtloop import _native
+
+    truth = {**ball_scene, "interreflection": True}
+    truth["fit"]["objects.floor.albedo"] = {"min": [0, 0, 0], "max": [0.6, 1, 1]}
+    photo = _photo(rtloop.render(truth), 0.01, 7)
+    kept = {}
+    svd, pixels = uncertainty_module._svd_scaled, uncertainty_module.used_pixels
+
+    def keep_columns(jt, *args):
+        kept["jt"] = jt.copy()
+        return svd(jt, *args)
+
+    def keep_pixels(*args, **kw):
+        kept["px"] = pixels(*args, **kw)
+        return kept["px"]
+
+    monkeypatch.setattr(uncertainty_module, "_svd_scaled", keep_columns)
+    monkeypatch.setattr(uncertainty_module, "used_pixels", keep_pixels)
+    u = estimate_uncertainty(rtloop.load_scene(truth), photo, params="scene")
+    assert any(w.startswith("objects.floor.albedo.r: at its bound") for w in u["warnings"])
+    jt, idx = kept["jt"], kept["px"].idx
+    dropped = np.all(jt == 0.0, axis=0)  # rows left out (saturated channels, clip kinks) are zero in every column
+    assert 0 < dropped.sum() < dropped.size / 2
+
+    def used(d):
+        img = _native.render(rtloop.load_scene(d), 64, 48, 1, False)
+        return np.minimum(np.take(img.reshape(-1, 3), idx, axis=0), np.float32(1.0)).astype(np.float64).ravel()
+
+    f0 = used(truth)
+    for i, o in enumerate(truth["objects"]):
+        for c, ch in enumerate("rgb"):
+            k = u["names"].index(f"objects.{o['name']}.albedo.{ch}")
+            h = u["step"][k]
+            down = o["name"] == "floor" and ch == "r"
+            moved = copy.deepcopy(truth)
+            moved["objects"][i]["material"]["albedo"][c] += -h if down else h
+            expected = (f0 - used(moved)) / h if down else (used(moved) - f0) / h
+            assert np.array_equal(jt[k][~dropped], expected[~dropped]), (o["name"], ch)
+            others = np.ones(3, bool)
+            others[c] = False
+            assert not jt[k].reshape(-1, 3)[:, others].any(), (o["name"], ch)
+            assert jt[k].reshape(-1, 3)[:, c].any(), (o["name"], ch)
+
+
 def test_interreflection_sigma_matches_the_spread_over_noise_realisations(ball_scene):
     """With interreflection the render depends on every object's albedo (the floor's lights the ball's
     underside) and not linearly on the receiver's: the albedo columns are rendered, not the direct light's

@@ -253,7 +253,14 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
     P = len(names)
     kink = np.zeros(n, dtype=bool)
     jump = np.zeros(n, dtype=bool)
-    Jt = np.zeros((P, 3 * n))  # the Jacobian's transpose: one contiguous row per parameter
+    by_object: dict[int, list[tuple[int, int, float]]] = {}  # one-sided albedo columns: (k, channel, ±h)
+    if wd.get("interreflection", False) and not exact:
+        n_objects = len({o for o, _ in space.albedo.values()})
+    else:
+        n_objects = 0
+    # the Jacobian's transpose: one contiguous row per parameter (and a scratch row per object whose albedo
+    # columns are rendered one-sided: Jt[:P], the rows above them, is still one contiguous block)
+    Jt = np.zeros((P + n_objects, 3 * n))
 
     def clipped(g: np.ndarray) -> np.ndarray:
         """The used pixels' values ``g`` (float32, (used, 3)), min(g, 1) with ``clip``, flat, noting kink
@@ -312,24 +319,50 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
             if moved:
                 Jt[k].reshape(-1, 3)[on, chans] = slope
         else:  # the renders, the clip and the difference (float32 values, exact in float64) in the core
-            if wd.get("interreflection", False) and (k in space.albedo or k in space.specular) and (up_ok or down_ok):
-                # An albedo or a specular moves no edge and the bounce makes the image a low-degree polynomial in
-                # it (the sender's albedo times the receiver's): one side, against the optimum's render, errs by
-                # h f'' / 2f' relative, under 1e-3, at half the renders (the clip's kink checked on that side).
-                if up_ok:
-                    tm, denom = theta0.copy(), h
-                else:
-                    tp, denom = theta0.copy(), h
-            up, down = (work.with_params(space.native(t), paths) if t[k] != theta0[k] else None for t in (tp, tm))
-            rendered.append((up, down, float(denom), k))
+            one_sided = bool(wd.get("interreflection", False) and (k in space.albedo or k in space.specular)
+                             and (up_ok or down_ok))
+            if one_sided and k in space.albedo:
+                # An albedo moves no edge and the bounce makes the image a low-degree polynomial in it (the
+                # sender's albedo times the receiver's): one side, against the optimum's render, errs by
+                # h f'' / 2f' relative, under 1e-3, at half the renders (the clip's kink checked on that
+                # side). Channel c of the image depends on channel c of the albedos alone, so one render
+                # moves all of an object's channels at once and each column is read from its own channel.
+                o, c = space.albedo[k]
+                by_object.setdefault(o, []).append((k, c, h if up_ok else -h))
+            else:
+                if one_sided:  # a specular, likewise one-sided (it acts on every channel: a render of its own)
+                    if up_ok:
+                        tm, denom = theta0.copy(), h
+                    else:
+                        tp, denom = theta0.copy(), h
+                up, down = (work.with_params(space.native(t), paths) if t[k] != theta0[k] else None
+                            for t in (tp, tm))
+                rendered.append((up, down, float(denom), k))
         if theta0[k] <= space.lo[k] or theta0[k] >= space.hi[k]:
             warnings.append(
                 f"{names[k]}: at its bound ({theta0[k]:.6g}); the Gauss-Newton sigma assumes an interior optimum"
             )
+    # One render per object for its one-sided albedo columns: the difference from the optimum (denominator
+    # 1, exact) into a scratch row below the Jacobian's, then channel c of it divided by that channel's step
+    # (negative for a step down): (f(θ - h) - f0) / -h is (f0 - f(θ - h)) / h to the last bit.
+    scratch = {}
+    for o, moves in by_object.items():
+        t = theta0.copy()
+        for k, _, signed_h in moves:
+            t[k] += signed_h
+        scratch[o] = P + len(scratch)
+        rendered.append((work.with_params(space.native(t), paths), None, 1.0, scratch[o]))
     if rendered:  # all their renders in one pass over the used pixels (the first hits found once)
         ups, downs, denoms, rows = (list(v) for v in zip(*rendered))
         _native.fd_columns(ups, downs, denoms, rows, f0, idx_u32, clipped0_flat, free_flat, clip, kink, jump, Jt)
-    return Jt, f0, kink, jump & ~kink
+    for o, moves in by_object.items():
+        diff = Jt[scratch[o]].reshape(-1, 3)
+        for k, c, signed_h in moves:
+            col = Jt[k].reshape(-1, 3)
+            col[:, c] = diff[:, c] / abs(signed_h)
+            if signed_h < 0:
+                np.negative(col[:, c], out=col[:, c])
+    return Jt[:P], f0, kink, jump & ~kink
 
 
 @dataclass
