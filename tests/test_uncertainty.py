@@ -390,23 +390,30 @@ def test_directional_light_no_nan_and_no_warning(ball_scene):
     assert u["light_direction"]["angle_deg"] > 0
 
 
-@pytest.mark.parametrize("glossy", [False, True, "environment"], ids=["matte", "glossy", "environment"])
-@pytest.mark.parametrize("params", ["products", "scene"])
+@pytest.mark.parametrize(("params", "glossy"), [
+    ("products", False), ("products", True), ("products", "environment"),
+    ("scene", False), ("scene", True), ("scene", "environment"), ("scene", "bounce")])
 def test_exact_columns_agree_with_finite_differences(ball_scene, monkeypatch, params, glossy):
-    """The image is linear in an albedo and in a specular (the lobe alone: albedo 0, specular 1), so their
+    """The image is linear in an albedo, in a specular (the lobe alone: albedo 0, specular 1) and in the
+    light's intensity (the render less the render without the light), so their
     Jacobian columns are taken exactly, without a render per parameter: the same pixels (clip kinks
     included: a bright light puts pixels near 1), the same columns and the same sigma as finite
     differences of the renderer, to their float32 rounding (measured: columns within 6e-5 of their
     largest entry, sigma within 9e-6). The other columns (light, shininess) are the same renders. With a
     bluish environment an albedo's column holds the occluded environment's share too (each channel's own:
     the direct light's red unit render for every channel had it 2.4 % off on a Mitsuba photo), and the
-    shadow edges are those of the direct light alone (the environment lights every pixel)."""
+    shadow edges are those of the direct light alone (the environment lights every pixel). With
+    interreflection and an environment (both bounce) the albedo columns are rendered either way, and the
+    specular's and the intensity's stay exact: a sender's bounce is diffuse, and the light's share is
+    linear in its intensity, bounce included."""
     truth = ball_scene
     truth["light"]["intensity"] = 130.0
-    if glossy == "environment":
+    if glossy in ("environment", "bounce"):
         truth["environment"] = [0.04, 0.06, 0.1]
-    elif glossy:
+    if glossy in (True, "bounce"):
         truth, _ = _glossy(truth)
+    if glossy == "bounce":
+        truth["interreflection"] = True
     photo = _photo(rtloop.render(truth), 0.01, noise_seed=3)
     result = rtloop.fit(truth, photo, seed=1)
     columns = {}
@@ -423,9 +430,10 @@ def test_exact_columns_agree_with_finite_differences(ball_scene, monkeypatch, pa
     assert exact["excluded"] == rendered["excluded"] and exact["excluded"]["clip_kink"] > 0
     assert exact["excluded"]["shadow_edge"] > 0
     assert exact["pixels"] == rendered["pixels"] and exact["dof"] == rendered["dof"]
-    linear = [k for k, n in enumerate(exact["names"]) if ".albedo." in n or n.startswith("products.")
-              or n.endswith(".specular")]
-    assert len(linear) == 6 + (glossy is True)  # the albedos (products) and the ball's specular (product)
+    linear = [k for k, n in enumerate(exact["names"]) if (".albedo." in n and glossy != "bounce")
+              or n.startswith("products.") or n.endswith(".specular") or n == "light.intensity"]
+    # the albedos (products), the ball's specular (product), the intensity in the scene's parameters
+    assert len(linear) == {"bounce": 2}.get(glossy, 6 + (glossy is True) + (params == "scene"))
     j_exact, j_rendered = columns[True], columns[False]
     for k, name in enumerate(exact["names"]):
         top = np.abs(j_rendered[k]).max()

@@ -123,6 +123,7 @@ def unit_lobes_scene(d: dict[str, Any], objects: set[int]) -> Scene:
         **d,
         "ambient": [0.0, 0.0, 0.0],
         "background": [0.0, 0.0, 0.0],
+        "interreflection": False,  # every albedo 0: the bounce adds exactly 0 (and would cost its gathers)
         "objects": [{**o, "material": {"albedo": [0.0, 0.0, 0.0], "specular": 1.0 if k in objects else 0.0,
                                        "shininess": o["material"]["shininess"]}}
                     for k, o in enumerate(d["objects"])],

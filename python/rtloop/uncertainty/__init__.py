@@ -11,6 +11,7 @@ pixels in :mod:`.pixels`, the decomposition is :mod:`.linalg`'s. See the README.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from typing import Any
 
@@ -106,13 +107,17 @@ def estimate_uncertainty(
     if render is not None and np.shape(render) != target.shape:
         raise RtloopError(f"render: shape {np.shape(render)} does not match the scene's {target.shape}")
     # The renders the Jacobian needs besides the unit light's, in the same pass: the fitted scene's (without
-    # the fit's), the unit environment's and the specular lobes' (exact columns; interreflection makes an
-    # object's pixels depend on the other objects' albedos, and its own nonlinearly: then they are rendered).
+    # the fit's), the unit environment's, the specular lobes' and the scene's without its light (exact
+    # columns; interreflection makes an object's pixels depend on the other objects' albedos, and its own
+    # nonlinearly: then the albedo columns are rendered; a lobe, and the light's intensity, stay linear).
     exact = EXACT_ALBEDO and not wd.get("interreflection", False)
+    unlit = EXACT_ALBEDO and "light.intensity" in names and float(wd["light"]["intensity"]) > 0
     also = {"optimum": scene if render is None else None,
             "environment": unit_environment_scene(wd) if exact and space.albedo and any(
                 wd.get("environment", [0.0, 0.0, 0.0])) else None,
-            "lobes": unit_lobes_scene(wd, set(space.specular.values())) if exact and space.specular else None}
+            "lobes": unit_lobes_scene(wd, set(space.specular.values())) if EXACT_ALBEDO and space.specular else None,
+            "unlit": _unlit_scene(wd) if unlit and (any(wd["ambient"]) or any(wd.get("environment", [0.0] * 3)))
+            else None}
     also = {k: v for k, v in also.items() if v is not None}
     px = used_pixels(space.work, wd, target, mask, also=list(also.values()))
     got = dict(zip(also, px.rendered))
@@ -120,7 +125,8 @@ def estimate_uncertainty(
     raw0 = got["optimum"] if render is None else np.take(np.asarray(render, np.float32).reshape(-1, 3), px.idx,
                                                           axis=0)
     Jt, f0, kink, jump = _jacobian(space, wd, px, steps, clip, warnings, raw0, exact,
-                                   env_u=got.get("environment"), lobe_u=got.get("lobes"))
+                                   env_u=got.get("environment"), lobe_u=got.get("lobes"), unlit=unlit,
+                                   unlit_u=got.get("unlit"))
     if compared is None and getattr(result, "settings", {}).get("footprint", "off") != "off":
         compared = _native.render(scene, scene.width, scene.height, 1, True)
     if compared is not None:
@@ -226,15 +232,25 @@ def _product_sigma(space: _Space, wd: dict[str, Any], fit: _Covariance | None, u
     return out
 
 
+def _unlit_scene(d: dict[str, Any]) -> Scene:
+    """Scene dict ``d`` with its light's intensity 0: its ambient and environment light alone (with their
+    bounce, where the scene has interreflection)."""
+    return Scene(json.dumps({**d, "light": {**d["light"], "intensity": 0.0}, "fit": {}}, allow_nan=False))
+
+
 def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarray, clip: bool,
               warnings: list[str], raw0: np.ndarray, exact: bool, env_u: np.ndarray | None = None,
-              lobe_u: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+              lobe_u: np.ndarray | None = None, unlit: bool = False, unlit_u: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The Jacobian's transpose over the used pixels' channels, the render there at the optimum (flat,
     min(render, 1) with ``clip``, from ``raw0``: the fitted scene's render at the used pixels, float32
     (used, 3)), which used pixels sit on the clip's kink and which on a jump. With ``exact`` the albedo
-    and specular columns are exact derivatives, from the unit-environment render ``env_u`` and the lobes'
-    ``lobe_u`` at the used pixels (float32 (used, 3); needed where the scene has an environment, where a
-    specular is a parameter).
+    columns are exact derivatives, from the unit-environment render ``env_u`` at the used pixels (float32
+    (used, 3); needed where the scene has an environment); a specular's column is the lobes' render
+    ``lobe_u`` (where given: exact with interreflection too, which bounces diffuse light only). With
+    ``unlit`` the light intensity's column is exact too: (render - render without the light) / intensity
+    on the objects' pixels, ``unlit_u`` that render (None: the scene has no ambient or environment light,
+    so it is 0 there); the background does not change.
 
     Central differences (one-sided where a step would cross a bound). With ``clip``, a pixel whose render
     crosses 1 inside a step in a channel that is not saturated sits on the clip's kink and is left out.
@@ -242,8 +258,9 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
     smooth function's (a shadow edge or the terminator crossing it inside the step: the shadow-edge mask
     holds the pixels on the edge at the optimum, a step moves a long shadow's edge further) is left out
     too: its central difference would be the jump / 2h (``fd_column``).
-    The image is linear in an albedo and in a specular: their columns are the exact derivatives (the
-    unit-light render, scaled; the lobe alone), and a pixel is on the kink where that line crosses 1.
+    The image is linear in an albedo, a specular and the light's intensity: their columns are the exact
+    derivatives (the unit-light render, scaled; the lobe alone; the light's share of the render, scaled),
+    and a pixel is on the kink where that line crosses 1.
     """
     work, paths, names, theta0, idx = space.work, space.paths, space.names, space.theta0, px.idx
     n = idx.size
@@ -278,7 +295,8 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
     unit_u = np.take(px.unit.ravel(), idx).astype(np.float64)
     env_u = None if env_u is None else env_u[:, 0].astype(np.float64)  # grey: the red channel
     lobe_u = None if lobe_u is None else lobe_u.astype(np.float64)
-    pixels_of: dict[int, tuple[np.ndarray, ...]] = {}
+    k_light = space.names.index("light.intensity") if unlit else -1
+    pixels_of: dict[int, tuple[np.ndarray, ...]] = {}  # by object index; -1: every object's
     rendered: list[tuple[Any, Any, float, int]] = []  # (up, down, denom, row) of the rendered columns
     for k in range(P):
         h = steps[k]
@@ -294,21 +312,24 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
         else:
             tm[k] -= h
             denom = h
-        if exact and (k in space.albedo or k in space.specular):
+        if (exact and k in space.albedo) or (lobe_u is not None and k in space.specular) or k == k_light:
             if k in space.albedo:
                 o, c = space.albedo[k]
                 chans = slice(c, c + 1)
             else:
-                o, chans = space.specular[k], slice(0, 3)
+                o, chans = (space.specular[k] if k in space.specular else -1), slice(0, 3)
             if o not in pixels_of:  # the object's used pixels, their render and clip state at the optimum
-                on = np.flatnonzero(ids_u == o)
+                on = np.flatnonzero(ids_u == o if o >= 0 else ids_u >= 0)
                 pixels_of[o] = (on, raw0[on].astype(np.float64), clipped0[on], free_u[on])
             on, base, was, free = pixels_of[o]
             base, was, free = base[:, chans], was[:, chans], free[:, chans]  # views
             if k in space.albedo:
                 slope = albedo_derivative(wd, c, unit_u[on], None if env_u is None else env_u[on])[:, None]
-            else:  # d render / d specular: the lobe alone (albedo 0, specular 1)
+            elif k in space.specular:  # d render / d specular: the lobe alone (albedo 0, specular 1)
                 slope = lobe_u[on]
+            else:  # d render / d intensity: the light's share of the render, per unit intensity
+                lit = base if unlit_u is None else base - unlit_u[on].astype(np.float64)
+                slope = lit / float(wd["light"]["intensity"])
             slope = slope * space.factor[k]  # per unit of the parameter
             moved = [t - theta0[k] for t in (tp[k], tm[k]) if t != theta0[k]]
             if clip:
