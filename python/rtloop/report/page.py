@@ -473,7 +473,7 @@ def _fit_report_section(page: _Page, result: Any, terr: dict[str, Any] | None, i
             body.insert(after[-1] + 1 if after else len(body), line)
         if isinstance(robust, dict) and robust.get("light_position_m") is not None:
             body.append(["light position (whole, m)", "", f"{_fmt(robust['light_position_m'], 3)} along the worse axis"])
-        heads = ["parameter", "sigma (Gauss-Newton)", "sigma (block sandwich: correlated residuals)"]
+        heads = ["parameter", "sigma (Gauss-Newton)", "sigma (block sandwich: correlated residuals and the pixel footprint's shift)"]
         boot = uncertainty.get("bootstrap") if isinstance(uncertainty, dict) else None
         if isinstance(boot, dict) and boot.get("sigma"):  # the thorough mode: one more column
             bsig = boot["sigma"]

@@ -37,6 +37,9 @@ NULL_COMPONENT = 1e-3
 #: Albedo and specular columns from the exact derivative rather than finite differences (False: render
 #: them, as a check).
 EXACT_ALBEDO = True
+#: The robust covariance holds the shift that pixels averaged over their area cause a pixel-centre fit
+#: (``_footprint_bias``); False: not estimated.
+FOOTPRINT_BIAS = True
 
 
 def estimate_uncertainty(
@@ -75,7 +78,9 @@ def estimate_uncertainty(
     ``step`` and ``warnings``; for a directional light also ``light_direction`` (the frame u, v and two
     cone angles in degrees); ``robust``: the block sandwich's sigma (see :mod:`.sandwich`: for an L1 fit
     the median regression's, ``norm`` "l1" with its density ``bandwidth``), which holds when neighbouring
-    residuals are correlated, with the light as a whole (``light_position_m``, the
+    residuals are correlated, plus the systematic shift that pixels averaged over their area cause a
+    pixel-centre fit (``footprint_shift`` per parameter, in the covariance as its outer product: a mean
+    squared error; see ``_footprint_bias``), with the light as a whole (``light_position_m``, the
     largest axis; ``light_direction_deg``) and its cost, ``seconds``. ``product_sigma`` (and
     ``robust["product_sigma"]``): the sigma of every diffuse product ``products.<object>.<r|g|b>``
     (exposure x intensity x colour x albedo) in either parametrization, propagated from the scene parameters'
@@ -121,6 +126,7 @@ def estimate_uncertainty(
     also = {k: v for k, v in also.items() if v is not None}
     px = used_pixels(space.work, wd, target, mask, also=list(also.values()))
     got = dict(zip(also, px.rendered))
+    got_full = dict(zip(also, px.images))
     steps = _steps(names, space.scale, step)
     raw0 = got["optimum"] if render is None else np.take(np.asarray(render, np.float32).reshape(-1, 3), px.idx,
                                                           axis=0)
@@ -179,9 +185,12 @@ def estimate_uncertainty(
     if space.direction is not None:
         out["light_direction"] = _direction_cone(space, fit)
     s2 = rr / dof if dof > 0 else 0.0
+    centre = got_full["optimum"] if render is None else np.asarray(render, np.float32)
+    bias = _footprint_bias(centre, px.idx, f0, Jt, drop.ravel() if drop.any() else None, fit, s2) \
+        if FOOTPRINT_BIAS else None
     robust, robust_fit = block_sandwich(Jt, r0, px.idx, scene.width, fit, s2, names,
                                         block_side(scene.width, scene.height),
-                                        norm=sandwich_norm(getattr(result, "settings", {})))
+                                        norm=sandwich_norm(getattr(result, "settings", {})), bias=bias)
     if space.direction is not None:
         robust["light_direction_deg"] = (_direction_cone(space, robust_fit)["angle_deg"]
                                          if robust_fit is not None else None)
@@ -189,6 +198,31 @@ def estimate_uncertainty(
     robust["product_sigma"] = _product_sigma(space, wd, robust_fit, use_products)
     out["robust"] = robust
     return out
+
+
+def _footprint_bias(centre: np.ndarray, idx: np.ndarray, f0: np.ndarray, Jt: np.ndarray,
+                    dropped: np.ndarray | None, fit: _Covariance, s2: float) -> np.ndarray | None:
+    """The shift of the determined parameters that pixels averaged over their area (as a camera's are)
+    would cause in a fit that compares pixel centres: (JᵀJ)⁺ Jᵀ Δ over the used residuals, Δ a pixel's area
+    average less its centre value, (f_xx + f_yy) / 24 for a value f that varies smoothly over the pixel (the
+    box's second moment, 1/12 per axis, times f''/2), the second derivatives from the 4-neighbour Laplacian
+    of ``centre``, the pixel-centre render (float32 (H, W, 3)). A used pixel is no silhouette or shadow edge,
+    so its four neighbours show the same object, lit alike; at the image border, where a neighbour clips
+    (at 1) and where the fit compared a footprint render's value rather than the centre's (``f0``, flat), Δ
+    counts 0. None where the covariance is not formed."""
+    if fit.cov is None or not s2 > 0:
+        return None
+    c = centre.astype(np.float64)
+    lap = np.zeros_like(c)
+    lap[1:-1, 1:-1] = c[:-2, 1:-1] + c[2:, 1:-1] + c[1:-1, :-2] + c[1:-1, 2:] - 4.0 * c[1:-1, 1:-1]
+    smooth = np.zeros(c.shape, bool)
+    smooth[1:-1, 1:-1] = np.maximum.reduce([c[:-2, 1:-1], c[2:, 1:-1], c[1:-1, :-2], c[1:-1, 2:], c[1:-1, 1:-1]]) < 1.0
+    at = lambda a: np.take(a.reshape(-1, 3), idx, axis=0).ravel()  # noqa: E731
+    centre_u = at(centre)
+    delta = np.where(at(smooth) & (np.minimum(centre_u, np.float32(1.0)) == f0), at(lap) / 24.0, 0.0)
+    if dropped is not None:
+        delta[dropped] = 0.0
+    return (fit.cov / s2) @ (Jt[fit.idx_p] @ delta)
 
 
 def _product_sigma(space: _Space, wd: dict[str, Any], fit: _Covariance | None, use_products: bool

@@ -28,6 +28,7 @@ class UsedPixels:
     silhouette: np.ndarray  # (H, W)
     shadow_edge: np.ndarray  # (H, W)
     rendered: list[np.ndarray]  # (used, 3) float32 each: the renders of ``also`` at the used pixels
+    images: list[np.ndarray]  # (H, W, 3) float32 each: the renders of ``also``
 
 
 def used_pixels(work: Scene, wd: dict[str, Any], target: np.ndarray, mask: np.ndarray | None,
@@ -47,4 +48,5 @@ def used_pixels(work: Scene, wd: dict[str, Any], target: np.ndarray, mask: np.nd
         use &= np.asarray(mask, bool)
     idx = np.flatnonzero(use)
     rendered = [np.take(img.reshape(-1, 3), idx, axis=0) for img in images[1:]]
-    return UsedPixels(ids, unit, idx, np.take(sat, idx, axis=0), saturated, silhouette, shadow_edge, rendered)
+    return UsedPixels(ids, unit, idx, np.take(sat, idx, axis=0), saturated, silhouette, shadow_edge, rendered,
+                      list(images[1:]))

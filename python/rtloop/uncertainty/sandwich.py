@@ -60,13 +60,16 @@ def sandwich_norm(settings: dict[str, Any]) -> str:
 
 
 def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, fit: Any, s2: float,
-                   names: list[str], block: int, norm: str = "l2") -> tuple[dict[str, Any], Any]:
+                   names: list[str], block: int, norm: str = "l2", bias: np.ndarray | None = None
+                   ) -> tuple[dict[str, Any], Any]:
     """A (Σ_b g_b g_bᵀ) A over the B blocks that hold used pixels, with the small-sample factor B / (B - p).
     ``norm`` "l2" (least squares): A = (JᵀJ)⁺, g_b = Σ_{i in block b} J_i r_i. ``norm`` "l1" (the fit's
     default; see the module): A = H⁺, H = Σ_{|r_i| <= h} J_i J_iᵀ / h (twice Powell's), g_b = Σ_{i in b} J_i sign(r_i),
     h the Hall-Sheather bandwidth of the used residuals; where H cannot be formed (no residual within h, or
-    H singular where JᵀJ is not) the least-squares form. Each sigma is the larger of this and the
-    Gauss-Newton one (the sandwich is the noisier estimate).
+    H singular where JᵀJ is not) the least-squares form. ``bias`` (over the determined parameters, ``fit.idx_p``
+    order): a systematic shift the residuals cannot show (the pixel footprint's), added as its outer product
+    and reported as ``footprint_shift``. Each sigma is the larger of this and the Gauss-Newton one (the
+    sandwich is the noisier estimate).
 
     Residual rows left out are zero in ``Jt`` and ``r0`` (they count in no sum). Returns the JSON-able
     block and a copy of ``fit`` carrying the robust covariance (None where it cannot be formed: too few
@@ -74,7 +77,7 @@ def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, 
     t0 = time.perf_counter()
     out: dict[str, Any] = {"method": "sandwich-blocks", "norm": "l2", "bandwidth": None, "block_px": int(block),
                            "blocks": 0, "sigma": {n: None for n in names}, "inflation": {n: None for n in names},
-                           "light_position_m": None}
+                           "light_position_m": None, "footprint_shift": {n: None for n in names}}
     if fit.cov is None:
         out["seconds"] = time.perf_counter() - t0
         return out, None
@@ -101,6 +104,8 @@ def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, 
     meat = (g @ g.T) * (nb / (nb - p))
     cov = a @ meat @ a
     cov = 0.5 * (cov + cov.T)
+    if bias is not None:  # a model error's systematic shift: the mean squared error's bias part
+        cov = cov + np.outer(bias, bias)
     var = np.maximum(np.diag(cov), np.diag(fit.cov))  # never below Gauss-Newton
     scale = np.sqrt(var / np.maximum(np.diag(cov), 1e-300))
     cov = cov * np.outer(scale, scale)
@@ -110,6 +115,8 @@ def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, 
         if fit.determined[k]:
             out["sigma"][names[k]] = float(sd[a_])
             out["inflation"][names[k]] = float(sd[a_] / gn[a_]) if gn[a_] > 0 else None
+            if bias is not None:
+                out["footprint_shift"][names[k]] = float(bias[a_])
     light = [f"light.position.{c}" for c in "xyz"]
     if all(n in names and fit.determined[names.index(n)] for n in light):
         at = [int(np.flatnonzero(fit.idx_p == names.index(n))[0]) for n in light]
