@@ -207,6 +207,52 @@ pub fn block_scores(
     Ok(g)
 }
 
+/// The pixel footprint's Δ per used residual (3 per used pixel `idx`, flat indices into the `width` x
+/// `height` image `centre`, RGB float32 pixel-centre values): a pixel's area average less its centre value,
+/// (f_xx + f_yy) / 24 from the 4-neighbour Laplacian, (((up + down) + left) + right) - 4 centre in f64 from
+/// the f32 values, divided by 24. 0 for a pixel on the image border, where any of the five values is not
+/// below 1 (clipped, or NaN), and where the centre value clipped at 1 is not `f0`'s (the fit compared
+/// another value there: a footprint render's). As python/rtloop/uncertainty's numpy did, to the last bit.
+pub fn footprint_delta(
+    centre: &[f32],
+    (width, height): (usize, usize),
+    idx: &[u32],
+    f0: &[f32],
+) -> Result<Vec<f64>> {
+    if centre.len() != 3 * width * height || f0.len() != 3 * idx.len() {
+        return Err(Error::Invalid(format!(
+            "footprint_delta: a {width} x {height} image needs {} values (got {}), {} used pixels {} \
+             values of f0 (got {})",
+            3 * width * height,
+            centre.len(),
+            idx.len(),
+            3 * idx.len(),
+            f0.len()
+        )));
+    }
+    let mut out = vec![0f64; 3 * idx.len()];
+    for (i, &p) in idx.iter().enumerate() {
+        let p = p as usize;
+        let (y, x) = (p / width, p % width);
+        if y >= height || x == 0 || x + 1 >= width || y == 0 || y + 1 >= height {
+            continue;
+        }
+        for c in 0..3 {
+            let at = 3 * p + c;
+            let c32 = centre[at];
+            let [up, down, left, right] =
+                [at - 3 * width, at + 3 * width, at - 3, at + 3].map(|j| f64::from(centre[j]));
+            let mid = f64::from(c32);
+            let below = [up, down, left, right, mid].iter().all(|&v| v < 1.0);
+            let clipped = if c32 > 1.0 { 1.0 } else { c32 }; // NaN stays NaN: never equal
+            if below && clipped == f0[3 * i + c] {
+                out[3 * i + c] = (up + down + left + right - 4.0 * mid) / 24.0;
+            }
+        }
+    }
+    Ok(out)
+}
+
 /// The `ks`-th smallest values of `values` (0-based; what `np.partition(values, ks)[ks]` holds: exact
 /// elements, no interpolation), by selection on a copy. Errors on a NaN or a `k` out of range.
 pub fn order_statistics(values: &[f64], ks: &[usize]) -> Result<Vec<f64>> {
@@ -252,6 +298,35 @@ mod tests {
         }
         assert!(order_statistics(&v, &[8]).is_err());
         assert!(order_statistics(&[1.0, f64::NAN], &[0]).is_err());
+    }
+
+    #[test]
+    fn footprint_delta_is_the_laplacian_over_24_inside_and_0_elsewhere() {
+        // a 4 x 3 image whose red is x^2 + y^2 / 2 (Laplacian 3), green 0.5, blue clipped at one neighbour
+        let (w, h) = (4usize, 3usize);
+        let mut img = vec![0f32; 3 * w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let p = 3 * (y * w + x);
+                img[p] = 0.01 * (x * x) as f32 + 0.005 * (y * y) as f32;
+                img[p + 1] = 0.5;
+                img[p + 2] = if (x, y) == (2, 0) { 1.0 } else { 0.25 };
+            }
+        }
+        let idx = [5u32, 6, 0];
+        let f0: Vec<f32> = idx
+            .iter()
+            .flat_map(|&p| img[3 * p as usize..3 * p as usize + 3].to_vec())
+            .collect();
+        let d = footprint_delta(&img, (w, h), &idx, &f0).unwrap();
+        assert!((d[0] - 0.03 / 24.0).abs() < 1e-9 && d[1] == 0.0 && d[2] == 0.0);
+        assert!((d[3] - 0.03 / 24.0).abs() < 1e-9 && d[4] == 0.0);
+        assert_eq!(d[5], 0.0, "a neighbour at 1: clipped");
+        assert_eq!(&d[6..], &[0.0; 3], "the border");
+        let mut other = f0.clone();
+        other[0] += 0.1; // the fit compared another value there
+        assert_eq!(footprint_delta(&img, (w, h), &idx, &other).unwrap()[0], 0.0);
+        assert!(footprint_delta(&img, (w, h), &idx, &f0[..3]).is_err());
     }
 
     #[test]

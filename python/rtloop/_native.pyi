@@ -76,6 +76,12 @@ def fd_columns(
     """Finite-difference Jacobian columns into the rows ``rows`` of ``jt``, their scenes rendered in one pass."""
 def order_statistics(values: npt.NDArray[np.float64], ks: list[int]) -> list[float]:
     """The ``ks``-th smallest of ``values`` (0-based), as ``np.partition(values, ks)[ks]``."""
+def footprint_delta(
+    centre: npt.NDArray[np.float32], idx: npt.NDArray[np.uint32], f0: npt.NDArray[np.float32]
+) -> npt.NDArray[np.float64]:
+    """The pixel footprint's area average less the centre value, (f_xx + f_yy) / 24 from the 4-neighbour
+    Laplacian of the (H, W, 3) pixel-centre render, per used residual (0 at the border, at clipped values and
+    where ``f0`` is not the centre's)."""
 def block_scores(
     jt: npt.NDArray[np.float64], rows: list[int], r: npt.NDArray[np.float64], block_of: npt.NDArray[np.int64],
     blocks: int,

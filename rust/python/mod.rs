@@ -355,6 +355,29 @@ fn order_statistics<'py>(
     Ok(py.detach(|| core_uncertainty::order_statistics(values, &ks))?)
 }
 
+/// The pixel footprint's Δ per used residual (float64, 3 per used pixel `idx`) from the pixel-centre render
+/// `centre` (H, W, 3) float32: `uncertainty::footprint_delta`.
+#[pyfunction]
+fn footprint_delta<'py>(
+    py: Python<'py>,
+    centre: PyReadonlyArray3<'py, f32>,
+    idx: PyReadonlyArray1<'py, u32>,
+    f0: PyReadonlyArray1<'py, f32>,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let shape = centre.shape();
+    if shape[2] != 3 {
+        return Err(Error::Invalid(format!(
+            "footprint_delta: centre has {} channels, not 3",
+            shape[2]
+        ))
+        .into());
+    }
+    let (width, height) = (shape[1], shape[0]);
+    let (centre, idx, f0) = (centre.as_slice()?, idx.as_slice()?, f0.as_slice()?);
+    let d = py.detach(|| core_uncertainty::footprint_delta(centre, (width, height), idx, f0))?;
+    Ok(PyArray1::from_vec(py, d))
+}
+
 /// The sandwich's block sums: (len(rows), blocks) float64, g[a, b] = sum of jt[rows[a], i] * r[i] over the
 /// residuals i whose pixel is in block b (`block_of`, one per pixel, three residuals each), in order.
 #[pyfunction]
@@ -693,6 +716,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(optimize, m)?)?;
     m.add_function(wrap_pyfunction!(fd_columns, m)?)?;
     m.add_function(wrap_pyfunction!(block_scores, m)?)?;
+    m.add_function(wrap_pyfunction!(footprint_delta, m)?)?;
     m.add_function(wrap_pyfunction!(order_statistics, m)?)?;
     m.add_function(wrap_pyfunction!(noise_medians, m)?)?;
     m.add_function(wrap_pyfunction!(jpeg_phases, m)?)?;

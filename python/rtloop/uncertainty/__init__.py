@@ -212,17 +212,11 @@ def _footprint_bias(centre: np.ndarray, idx: np.ndarray, f0: np.ndarray, Jt: np.
     counts 0. None where the covariance is not formed."""
     if fit.cov is None or not s2 > 0:
         return None
-    c = centre.astype(np.float64)
-    lap = np.zeros_like(c)
-    lap[1:-1, 1:-1] = c[:-2, 1:-1] + c[2:, 1:-1] + c[1:-1, :-2] + c[1:-1, 2:] - 4.0 * c[1:-1, 1:-1]
-    smooth = np.zeros(c.shape, bool)
-    smooth[1:-1, 1:-1] = np.maximum.reduce([c[:-2, 1:-1], c[2:, 1:-1], c[1:-1, :-2], c[1:-1, 2:], c[1:-1, 1:-1]]) < 1.0
-    at = lambda a: np.take(a.reshape(-1, 3), idx, axis=0).ravel()  # noqa: E731
-    centre_u = at(centre)
-    delta = np.where(at(smooth) & (np.minimum(centre_u, np.float32(1.0)) == f0), at(lap) / 24.0, 0.0)
+    delta = _native.footprint_delta(np.ascontiguousarray(centre, np.float32), idx.astype(np.uint32), f0)
     if dropped is not None:
         delta[dropped] = 0.0
-    return (fit.cov / s2) @ (Jt[fit.idx_p] @ delta)
+    # not Jt @ delta: a threaded BLAS product waits on the render's threads (as the residual's sum)
+    return (fit.cov / s2) @ np.einsum("ij,j->i", Jt, delta)[fit.idx_p]
 
 
 def _product_sigma(space: _Space, wd: dict[str, Any], fit: _Covariance | None, use_products: bool
