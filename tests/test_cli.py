@@ -187,7 +187,8 @@ def test_footprint_option(inputs, tmp_path, capsys):
 
 def test_uncertainty_option(inputs, tmp_path, capsys):
     """--uncertainty bootstrap adds the block bootstrap to result.json (method, cost, seed) and prints its
-    sigma with the method; off leaves the uncertainty out; a value outside the choices is refused."""
+    sigma with the method; the default names the sandwich and the pixel footprint's shift on the light; off
+    leaves the uncertainty out; a value outside the choices is refused."""
     scene_path, image_path = inputs
     common = ("--population", 8, "--generations", 3, "--snapshot-every", 0, "--final-scale", 1, "--final-spp", 1)
     out = tmp_path / "boot"
@@ -198,6 +199,14 @@ def test_uncertainty_option(inputs, tmp_path, capsys):
     assert boot["method"] == "block-bootstrap" and boot["ms"] > 0 and boot["seed"] == 0
     assert all(boot["sigma"][f"light.position.{c}"] > 0 for c in "xyz")
     assert "block bootstrap" in stdout
+    out = tmp_path / "default"
+    code, stdout, stderr = run(capsys, scene_path, image_path, "-o", out, *common)
+    assert code == 0, stderr
+    shift = json.loads((out / "result.json").read_text(encoding="utf-8"))["fit_report"]["uncertainty"]["robust"][
+        "footprint_shift"]
+    moved = 1e3 * float(np.linalg.norm([shift[f"light.position.{c}"] for c in "xyz"]))
+    assert f"block sandwich (correlated residuals) plus the pixel footprint's shift (robust.footprint_shift, " \
+           f"{moved:.2g} mm on the light)" in stdout
     out = tmp_path / "off"
     code, _, stderr = run(capsys, scene_path, image_path, "-o", out, "--uncertainty", "off", *common)
     assert code == 0, stderr

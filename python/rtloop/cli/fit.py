@@ -529,6 +529,13 @@ def _summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None =
                      f"seed {boot['seed']}, {boot['ms']:.0f} ms)")
     elif boot.get("warnings"):
         bars_note = f"error bars (+-): block sandwich (the bootstrap did not run: {boot['warnings'][0]})"
+    elif bars:
+        shift = (u.get("robust") or {}).get("footprint_shift") or {}
+        light = [shift.get(f"light.position.{c}") for c in "xyz"]
+        moved = (f", {1e3 * float(np.linalg.norm(light)):.2g} mm on the light" if all(v is not None for v in light)
+                 else "")
+        bars_note = ("error bars (+-): block sandwich (correlated residuals) plus the pixel footprint's shift "
+                     f"(robust.footprint_shift{moved})")
     for name, value in result.x.items():
         row = f"  {name:<{width}}  {value:12.6g}"
         split = truth is not None and name in truth.get("split_convention", [])
