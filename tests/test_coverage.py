@@ -106,16 +106,17 @@ def test_clean_colour_products_are_covered_and_calibrated(bench, rows):
 
 def test_the_bootstrap_covers_the_clean_photos(bench):
     """The thorough mode (``uncertainty="bootstrap"``) on the 11 clean direct photos fitted at pixel centres
-    (``footprint="off"``, where the sandwich covers 91 % of the light coordinates, 82 % with its least-squares
-    form): the true light within 3 bootstrap sigma for >= 95 % of the 33 coordinates and more than the
-    sandwich, the median sigma at most 3x the median error (not inflated), and the 84 products within 3 sigma
-    for >= 85 % (the issue's 95 % is not reached: measured 97 %, 0.84 and 92 %)."""
+    (``footprint="off"``, where the sandwich covers 94 % of the light coordinates): the true light within 3
+    bootstrap sigma for >= 95 % of the 33 coordinates and more than the sandwich, the median sigma at most 3x
+    the median error (not inflated), and the 84 products within 3 sigma for >= 95 %. Measured 97 %, 1.04 and
+    96 %; the bootstrap's sigma holds the footprint's shift, which every replicate shares (without it 97 %,
+    0.83 and 92 %: the products' assertion fails)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         rows = [bench.run_case(*c, footprint="off", bootstrap=True) for c in bench.cases() if c[1] == "clean"]
     assert _within(rows, "clean", "boot", 3) >= 0.95
     _, _, _, ratio = bench._stats(rows, "z_boot", "sigma_boot_mm")
     assert ratio <= 3.0
-    assert _within(rows, "clean", "boot", 3, products=True) >= 0.85
+    assert _within(rows, "clean", "boot", 3, products=True) >= 0.95
     # the same fits' sandwich covers fewer: the bootstrap adds coverage
     assert _within(rows, "clean", "robust", 3) < _within(rows, "clean", "boot", 3)

@@ -555,6 +555,25 @@ def test_bootstrap_is_deterministic_for_a_seed(ball_scene):
     assert a["values"] != c["values"]
 
 
+def test_bootstrap_holds_the_footprint_shift(ball_scene):
+    """The replicates share the fit's pixel-footprint shift (``robust["footprint_shift"]``), which their
+    spread cannot show: the bootstrap's sigma is the spread and the shift in quadrature (a mean squared
+    error) for the light and every product, and the light as a whole is the largest axis of the replicates'
+    covariance plus the shift's outer product."""
+    photo = _blurred_photo(rtloop.render(ball_scene), 0)
+    result = rtloop.fit(_start(ball_scene), photo, seed=3, uncertainty="bootstrap")
+    b, shift = result.uncertainty["bootstrap"], result.uncertainty["robust"]["footprint_shift"]
+    names = LIGHT + [f"products.{o}.{c}" for o in ("ball", "floor") for c in "rgb"]
+    assert b["shift_included"] == names and all(shift[n] != 0.0 for n in names)
+    for n in names:
+        spread = float(np.std(b["values"][n], ddof=1))
+        assert b["sigma"][n] == pytest.approx(np.hypot(spread, shift[n]), rel=1e-12), n
+        assert b["sigma"][n] > spread
+    d = np.array([shift[n] for n in LIGHT])
+    cov = np.cov(np.array([b["values"][n] for n in LIGHT])) + np.outer(d, d)
+    assert b["light_position_m"] == pytest.approx(np.sqrt(np.linalg.eigvalsh(cov)[-1]), rel=1e-12)
+
+
 def test_uncertainty_modes(ball_scene):
     """True and "default" are the same estimate without a bootstrap; False and "off" none; other values are
     refused with the parameter named."""

@@ -270,7 +270,9 @@ def fit(
             from ..uncertainty.bootstrap import block_bootstrap
 
             try:
-                result.uncertainty["bootstrap"] = block_bootstrap(result, target, use, seed=seed, threads=threads)
+                shift = (result.uncertainty.get("robust") or {}).get("footprint_shift")
+                result.uncertainty["bootstrap"] = block_bootstrap(result, target, use, seed=seed, threads=threads,
+                                                                  shift=shift)
             except RtloopError as e:
                 result.uncertainty["bootstrap"] = {"method": "block-bootstrap", "sigma": {}, "warnings": [str(e)]}
     result.seconds = time.perf_counter() - t0

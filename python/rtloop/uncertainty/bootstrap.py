@@ -40,14 +40,21 @@ REFIT_BUDGET = (8, 6, 200)
 
 
 def block_bootstrap(result: Any, target: np.ndarray, use: np.ndarray | None, *, seed: int = 0,
-                    replicates: int = REPLICATES, threads: int | None = None) -> dict[str, Any]:
+                    replicates: int = REPLICATES, threads: int | None = None,
+                    shift: dict[str, float | None] | None = None) -> dict[str, Any]:
     """The block bootstrap's sigma of a closed-form fit ``result`` (a :class:`rtloop.FitResult` from
     :func:`rtloop.fit`) of ``target`` (linear float (H, W, 3)) on the pixels ``use`` (indices; None: all).
 
     Returns a JSON-able dict: ``method`` ("block-bootstrap"), ``replicates``, ``block_px``, ``blocks``,
     ``seed``, ``sigma`` ({``light.position.x`` ..., ``products.<object>.<r|g|b>``: the standard deviation
     over the replicates}), ``light_position_m`` (the replicates' position covariance's largest axis),
-    ``values`` (the same names: per replicate), ``seconds`` and ``ms`` (its cost), ``warnings``."""
+    ``values`` (the same names: per replicate), ``seconds`` and ``ms`` (its cost), ``warnings``.
+
+    ``shift``: a systematic shift of the fit by name (the pixel footprint's, ``robust["footprint_shift"]`` of
+    :func:`rtloop.uncertainty.estimate_uncertainty`), which every replicate shares and their spread cannot
+    show: ``sigma`` and ``light_position_m`` then hold it as a mean squared error (the spread's variance plus
+    the shift squared; the light's covariance plus its outer product), ``shift_included`` the names it
+    entered."""
     t0 = time.perf_counter()
     if not isinstance(replicates, int) or isinstance(replicates, bool) or replicates < 2:
         raise RtloopError(f"replicates: must be an integer >= 2 (got {replicates!r})")
@@ -100,6 +107,11 @@ def block_bootstrap(result: Any, target: np.ndarray, use: np.ndarray | None, *, 
     vals = np.array(rows, dtype=np.float64)
     sd = vals.std(axis=0, ddof=1)
     cov = np.cov(vals[:, :3], rowvar=False)
+    delta = np.array([(shift or {}).get(n) if (shift or {}).get(n) is not None else np.nan for n in names])
+    known = np.isfinite(delta)
+    sd = np.where(known, np.sqrt(sd ** 2 + np.where(known, delta, 0.0) ** 2), sd)
+    if known[:3].all():
+        cov = cov + np.outer(delta[:3], delta[:3])
     warnings: list[str] = []
     lo, hi = np.array(box.bounds(["light.position"]), float).T
     at = (np.abs(vals[:, :3] - lo) < 1e-9 * (hi - lo)) | (np.abs(vals[:, :3] - hi) < 1e-9 * (hi - lo))
@@ -112,6 +124,7 @@ def block_bootstrap(result: Any, target: np.ndarray, use: np.ndarray | None, *, 
             "seed": int(seed), "sigma": {n: float(s) for n, s in zip(names, sd)},
             "light_position_m": float(np.sqrt(max(np.linalg.eigvalsh(cov)[-1], 0.0))),
             "values": {n: vals[:, i].tolist() for i, n in enumerate(names)},
+            "shift_included": [n for n, k in zip(names, known) if k],
             "seconds": seconds, "ms": 1e3 * seconds, "warnings": warnings}
 
 
