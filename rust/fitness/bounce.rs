@@ -16,7 +16,9 @@ use super::loss::{Encoding, Norm, LANES};
 use super::pixels::{Light, BLOCK};
 use super::projected::{Projection, Run, Solved, CHUNK};
 use super::simd::{self, Simd};
-use super::solve::{fallback_sums, solve_object, solve_object_env, SolveSums};
+use super::solve::{
+    environment_lane_sums, fallback_sums, solve_object, solve_object_env, SolveSums, SUM_LANES,
+};
 use rayon::prelude::*;
 
 /// The gauge's bounds for the bounce: u = 1/intensity from the intensity's range, and each object's
@@ -534,9 +536,6 @@ struct HeldRun<'a, 'r> {
     sat: f32,
 }
 
-/// The partial sums of a run's normal equations (f64 each).
-const SUM_LANES: usize = 4;
-
 impl Simd for HeldRun<'_, '_> {
     type Output = SolveSums;
     #[inline(always)]
@@ -591,43 +590,10 @@ impl Simd for HeldRun<'_, '_> {
                 let v = sky.map_or(&zeros[..n], |v| &v[..n]);
                 let bb: &[f32] = if specular { &b[..n] } else { &zeros[..n] };
                 // the nine sums of `SolveSums::add_environment`, SUM_LANES at a time
-                let mut s = [[0.0f64; SUM_LANES]; 9];
-                let mut add = |l: usize, i: usize| {
-                    let on = t[i] < sat;
-                    let a = if on { col[i] as f64 } else { 0.0 };
-                    let y = if on { t[i] as f64 } else { 0.0 };
-                    let vi = if on { v[i] as f64 } else { 0.0 };
-                    let bi = if on { bb[i] as f64 } else { 0.0 };
-                    s[0][l] += a * a;
-                    s[1][l] += a * bi;
-                    s[2][l] += bi * bi;
-                    s[3][l] += y * a;
-                    s[4][l] += y * bi;
-                    s[5][l] += a * vi;
-                    s[6][l] += vi * vi;
-                    s[7][l] += y * vi;
-                    s[8][l] += vi * bi;
-                };
-                let mut i = 0;
-                while i < full {
-                    for l in 0..SUM_LANES {
-                        add(l, i + l);
-                    }
-                    i += SUM_LANES;
-                }
-                for (l, i) in (full..n).enumerate() {
-                    add(l, i);
-                }
-                let f = |k: usize| (s[k][0] + s[k][1]) + (s[k][2] + s[k][3]);
-                sums.saa[ch] += f(0);
-                sums.sab[ch] += f(1);
-                sums.sbb[ch] += f(2);
-                sums.sya[ch] += f(3);
-                sums.syb[ch] += f(4);
-                sums.sav[ch] += f(5);
-                sums.svv[ch] += f(6);
-                sums.syv[ch] += f(7);
-                sums.svb[ch] += f(8);
+                sums.add_lanes(
+                    ch,
+                    environment_lane_sums::<AVX2>(col, bb, v, t, sat, specular),
+                );
             }
         }
         sums
@@ -636,17 +602,19 @@ impl Simd for HeldRun<'_, '_> {
 
 /// Pass 2 of [`Kernel::projected_held`] over one run, for [`simd::dispatch`]: per channel
 /// Σ penalty(enc(min(P_c·a'_c + Q·w_c·b + E_c·v, top)) - t_c), in `LANES` partial sums.
-struct HeldLoss<'a, E> {
-    cols: [&'a [f32]; 3],
-    b: &'a [f32],
-    sky: Option<&'a [f32]>,
-    t: [&'a [f32]; 3],
-    pc: [f32; 3],
-    qw: [f32; 3],
-    ec: [f32; 3],
-    top: f32,
-    norm: Norm,
-    enc: E,
+/// Also the plain closed form's pass 2 where an object has an environment column or a lobe (`cols` its
+/// unit-light factor thrice).
+pub(crate) struct HeldLoss<'a, E> {
+    pub(crate) cols: [&'a [f32]; 3],
+    pub(crate) b: &'a [f32],
+    pub(crate) sky: Option<&'a [f32]>,
+    pub(crate) t: [&'a [f32]; 3],
+    pub(crate) pc: [f32; 3],
+    pub(crate) qw: [f32; 3],
+    pub(crate) ec: [f32; 3],
+    pub(crate) top: f32,
+    pub(crate) norm: Norm,
+    pub(crate) enc: E,
 }
 
 impl<E: Encoding> HeldLoss<'_, E> {
@@ -667,13 +635,17 @@ impl<E: Encoding> HeldLoss<'_, E> {
             let (col, t) = (&self.cols[ch][..n], &self.t[ch][..n]);
             let (pc, qw, ec) = (self.pc[ch], self.qw[ch], self.ec[ch]);
             let mut lanes = [0.0f32; LANES];
-            let mut i = 0;
-            while i < full {
+            // whole runs of LANES as fixed-size chunks (no bounds checks: the loop vectorises)
+            let runs = col[..full]
+                .chunks_exact(LANES)
+                .zip(b[..full].chunks_exact(LANES))
+                .zip(v[..full].chunks_exact(LANES))
+                .zip(t[..full].chunks_exact(LANES));
+            for (((c8, b8), v8), t8) in runs {
                 for l in 0..LANES {
-                    let m = pc * col[i + l] + qw * b[i + l] + ec * v[i + l];
-                    lanes[l] += f(enc.unit(m.min(top)) - t[i + l]);
+                    let m = pc * c8[l] + qw * b8[l] + ec * v8[l];
+                    lanes[l] += f(enc.unit(m.min(top)) - t8[l]);
                 }
-                i += LANES;
             }
             for (j, i) in (full..n).enumerate() {
                 let m = pc * col[i] + qw * b[i] + ec * v[i];

@@ -4,11 +4,14 @@
 use rayon::prelude::*;
 
 use super::bounce::Gauge;
+use super::bounce::HeldLoss;
 use super::kernel::{Candidate, Kernel};
 use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, LANES};
 use super::pixels::{blinn_phong, irradiance, shadow, Group, Light, Sky, BLOCK};
 use super::simd::{self, Simd};
-use super::solve::{fallback_sums, solve_object, solve_object_env, SolveSums};
+use super::solve::{
+    environment_lane_sums, fallback_sums, solve_object, solve_object_env, SolveSums,
+};
 use crate::render::brdf::{lambert, specular_per_lambert};
 use crate::scene::Scene;
 
@@ -472,15 +475,15 @@ impl Run<'_> {
                         0.0
                     };
                 }
+                let zeros = [0.0f32; BLOCK];
+                let v = self.sky.map_or(&zeros[..len], |v| &v[r.clone()]);
                 for c in 0..3 {
+                    // the nine sums in SUM_LANES partial sums (a lobe without sky: v = 0, its sums 0)
                     let t = &g.ts[c][r.clone()];
-                    match self.sky {
-                        Some(v) => {
-                            let bb = self.specular.then_some(&*b);
-                            sums.add_environment(c, e, bb, &v[r.clone()], t, self.sat)
-                        }
-                        None => sums.add_specular(c, e, b, t, self.sat),
-                    }
+                    sums.add_lanes(
+                        c,
+                        environment_lane_sums::<AVX2>(e, b, v, t, self.sat, self.specular),
+                    );
                 }
             } else {
                 for c in 0..3 {
@@ -522,32 +525,26 @@ impl Run<'_> {
             let r = start + i0..start + i0 + len;
             let e = &e[i0..i0 + len];
             let t = [&gt[0][r.clone()], &gt[1][r.clone()], &gt[2][r.clone()]];
-            let sums = if let Some(sky) = self.sky {
-                let (b, sky) = (&b[i0..i0 + len], &sky[r.clone()]);
-                let mut sums = [0.0f32; 3];
-                for c in 0..3 {
-                    for i in 0..len {
-                        let lobe = if q_on { qw[c] * b[i] } else { 0.0 };
-                        let v = (pk[c] * e[i] + ek[c] * sky[i] + lobe).min(self.top);
-                        sums[c] += self.norm.penalty(enc.any(v) - t[c][i]);
-                    }
+            let sums: [f64; 3] = if self.sky.is_some() || q_on {
+                // enc(min(P_c·e + Q·w_c·b + E_c·v, top)), in LANES partial sums as the bounce's pass 2
+                HeldLoss {
+                    cols: [e; 3],
+                    b: &b[i0..i0 + len],
+                    sky: self.sky.map(|v| &v[r.clone()]),
+                    t,
+                    pc: pk,
+                    qw: if q_on { qw } else { [0.0; 3] },
+                    ec: ek,
+                    top: self.top,
+                    norm: self.norm,
+                    enc,
                 }
-                sums
-            } else if q_on {
-                let b = &b[i0..i0 + len];
-                let mut sums = [0.0f32; 3];
-                for c in 0..3 {
-                    for i in 0..len {
-                        let v = (pk[c] * e[i] + qw[c] * b[i]).min(self.top);
-                        sums[c] += self.norm.penalty(enc.any(v) - t[c][i]);
-                    }
-                }
-                sums
+                .run::<AVX2>()
             } else {
-                rgb_loss_in(self.norm, e, t, [0.0; 3], pk, self.top, enc)
+                rgb_loss_in(self.norm, e, t, [0.0; 3], pk, self.top, enc).map(f64::from)
             };
             for c in 0..3 {
-                part[c] += sums[c] as f64;
+                part[c] += sums[c];
             }
             i0 += len;
             if let Some((acc, bound)) = stop {

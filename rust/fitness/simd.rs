@@ -137,6 +137,53 @@ pub(crate) unsafe fn irradiance_avx2(
     irradiance_exact(g, s + full..r.end, light, &mut e[full..]);
 }
 
+/// The lane sums of `solve::environment_lane_sums` over whole runs of `SUM_LANES` (4) pixels, in f64, each
+/// lane and each sum the scalar loop's operations in its order (so the same values); with `specular` false
+/// the lobe's four sums (whose factor is 0) are left at 0.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+pub(crate) unsafe fn environment_lanes_avx2(
+    col: &[f32],
+    b: &[f32],
+    v: &[f32],
+    t: &[f32],
+    sat: f32,
+    specular: bool,
+) -> [[f64; 4]; 9] {
+    use std::arch::x86_64::*;
+    let mut s = [_mm256_setzero_pd(); 9];
+    let satv = _mm_set1_ps(sat);
+    let n = col.len() - col.len() % 4;
+    let mut i = 0;
+    while i < n {
+        let y = _mm_loadu_ps(t[i..i + 4].as_ptr());
+        // Where t >= sat (or t = +inf) every value becomes 0, as the scalar select.
+        let keep = _mm_cmplt_ps(y, satv);
+        let a = _mm256_cvtps_pd(_mm_and_ps(_mm_loadu_ps(col[i..i + 4].as_ptr()), keep));
+        let yv = _mm256_cvtps_pd(_mm_and_ps(y, keep));
+        let vv = _mm256_cvtps_pd(_mm_and_ps(_mm_loadu_ps(v[i..i + 4].as_ptr()), keep));
+        s[0] = _mm256_add_pd(s[0], _mm256_mul_pd(a, a));
+        s[3] = _mm256_add_pd(s[3], _mm256_mul_pd(yv, a));
+        s[5] = _mm256_add_pd(s[5], _mm256_mul_pd(a, vv));
+        s[6] = _mm256_add_pd(s[6], _mm256_mul_pd(vv, vv));
+        s[7] = _mm256_add_pd(s[7], _mm256_mul_pd(yv, vv));
+        if specular {
+            let bv = _mm256_cvtps_pd(_mm_and_ps(_mm_loadu_ps(b[i..i + 4].as_ptr()), keep));
+            s[1] = _mm256_add_pd(s[1], _mm256_mul_pd(a, bv));
+            s[2] = _mm256_add_pd(s[2], _mm256_mul_pd(bv, bv));
+            s[4] = _mm256_add_pd(s[4], _mm256_mul_pd(yv, bv));
+            s[8] = _mm256_add_pd(s[8], _mm256_mul_pd(vv, bv));
+        }
+        i += 4;
+    }
+    let mut out = [[0.0f64; 4]; 9];
+    for (o, v) in out.iter_mut().zip(s) {
+        _mm256_storeu_pd(o.as_mut_ptr(), v);
+    }
+    out
+}
+
 /// The lane sums of `projected::normal_equations` over whole runs of `LANES` pixels.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]

@@ -17,26 +17,62 @@ pub struct SolveSums {
     pub svb: [f64; 3],
 }
 
-impl SolveSums {
-    #[inline(always)]
-    pub(crate) fn add_specular(&mut self, c: usize, a: &[f32], b: &[f32], t: &[f32], sat: f32) {
-        let (mut aa, mut ab, mut bb, mut ya, mut yb) = (0.0f64, 0.0f64, 0.0f64, 0.0f64, 0.0f64);
-        for i in 0..a.len() {
-            if t[i] < sat {
-                let (ai, bi, yi) = (a[i] as f64, b[i] as f64, t[i] as f64);
-                aa += ai * ai;
-                ab += ai * bi;
-                bb += bi * bi;
-                ya += yi * ai;
-                yb += yi * bi;
-            }
-        }
-        self.saa[c] += aa;
-        self.sab[c] += ab;
-        self.sbb[c] += bb;
-        self.sya[c] += ya;
-        self.syb[c] += yb;
+/// The partial sums of a run's normal equations (f64 each).
+pub(crate) const SUM_LANES: usize = 4;
+
+/// The nine sums of [`SolveSums::add_environment`] over one run (`col` the diffuse factor, `b` the
+/// specular factor, `v` the sky view, `t` the objective; pixels at or above `sat` left out), `SUM_LANES` at
+/// a time in f64 (their order fixed: the same values on any machine and either path), in the order saa,
+/// sab, sbb, sya, syb, sav, svv, syv, svb. `specular` false: `b` is all 0 and its four sums are 0 (not
+/// summed). With `AVX2` the whole runs of four go through `simd::environment_lanes_avx2`.
+#[inline(always)]
+pub(crate) fn environment_lane_sums<const AVX2: bool>(
+    col: &[f32],
+    b: &[f32],
+    v: &[f32],
+    t: &[f32],
+    sat: f32,
+    specular: bool,
+) -> [f64; 9] {
+    let n = col.len();
+    let (b, v, t) = (&b[..n], &v[..n], &t[..n]);
+    let full = n - n % SUM_LANES;
+    let mut s = [[0.0f64; SUM_LANES]; 9];
+    let mut i = 0;
+    #[cfg(target_arch = "x86_64")]
+    if AVX2 {
+        // SAFETY: `AVX2` is only true on the path dispatched after checking the CPU's features.
+        s = unsafe { super::simd::environment_lanes_avx2(&col[..full], b, v, t, sat, specular) };
+        i = full;
     }
+    let mut add = |l: usize, i: usize| {
+        let on = t[i] < sat;
+        let a = if on { col[i] as f64 } else { 0.0 };
+        let y = if on { t[i] as f64 } else { 0.0 };
+        let vi = if on { v[i] as f64 } else { 0.0 };
+        let bi = if on { b[i] as f64 } else { 0.0 };
+        s[0][l] += a * a;
+        s[3][l] += y * a;
+        s[5][l] += a * vi;
+        s[6][l] += vi * vi;
+        s[7][l] += y * vi;
+        if specular {
+            s[1][l] += a * bi;
+            s[2][l] += bi * bi;
+            s[4][l] += y * bi;
+            s[8][l] += vi * bi;
+        }
+    };
+    while i < full {
+        for l in 0..SUM_LANES {
+            add(l, i + l);
+        }
+        i += SUM_LANES;
+    }
+    for (l, i) in (full..n).enumerate() {
+        add(l, i);
+    }
+    std::array::from_fn(|k| (s[k][0] + s[k][1]) + (s[k][2] + s[k][3]))
 }
 
 impl SolveSums {
@@ -52,6 +88,20 @@ impl SolveSums {
             self.syv[c] += o.syv[c];
             self.svb[c] += o.svb[c];
         }
+    }
+
+    /// Channel `c`'s nine sums of one run ([`environment_lane_sums`]) added in.
+    #[inline(always)]
+    pub(crate) fn add_lanes(&mut self, c: usize, s: [f64; 9]) {
+        self.saa[c] += s[0];
+        self.sab[c] += s[1];
+        self.sbb[c] += s[2];
+        self.sya[c] += s[3];
+        self.syb[c] += s[4];
+        self.sav[c] += s[5];
+        self.svv[c] += s[6];
+        self.syv[c] += s[7];
+        self.svb[c] += s[8];
     }
 
     /// Every sum of channel `c` over one run with an environment column: factors `a`, `b` (zero for a
@@ -356,6 +406,53 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             (self.0 >> 11) as f64 / (1u64 << 53) as f64
         }
+    }
+
+    #[test]
+    fn environment_lane_sums_are_the_nine_sums_on_either_path() {
+        // 203 pixels (not a multiple of the lanes), some saturated or excluded (t = +inf)
+        let mut rng = Lcg(11);
+        let n = 203;
+        let mut draw =
+            |scale: f64| -> Vec<f32> { (0..n).map(|_| (rng.next() * scale) as f32).collect() };
+        let (a, b, v) = (draw(2.0), draw(0.5), draw(1.0));
+        let mut t = draw(1.1);
+        t[5] = f32::INFINITY;
+        let sat = 1.0;
+        let mut seq = SolveSums::default();
+        seq.add_environment(1, &a, Some(&b), &v, &t, sat);
+        let want = [
+            seq.saa[1], seq.sab[1], seq.sbb[1], seq.sya[1], seq.syb[1], seq.sav[1], seq.svv[1],
+            seq.syv[1], seq.svb[1],
+        ];
+        let scalar = environment_lane_sums::<false>(&a, &b, &v, &t, sat, true);
+        for (k, (&x, &w)) in scalar.iter().zip(&want).enumerate() {
+            assert!(
+                (x - w).abs() <= 1e-12 * w.abs().max(1e-300),
+                "sum {k}: {x} vs {w}"
+            );
+        }
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            assert_eq!(
+                environment_lane_sums::<true>(&a, &b, &v, &t, sat, true),
+                scalar,
+                "bit for bit"
+            );
+            let zeros = vec![0.0f32; n];
+            assert_eq!(
+                environment_lane_sums::<true>(&a, &zeros, &v, &t, sat, false),
+                environment_lane_sums::<false>(&a, &zeros, &v, &t, sat, true)
+            );
+        }
+        // matte: the lobe's four sums stay 0, the others are those with b = 0
+        let matte = environment_lane_sums::<false>(&a, &b, &v, &t, sat, false);
+        assert_eq!([matte[1], matte[2], matte[4], matte[8]], [0.0; 4]);
+        assert_eq!(
+            [matte[0], matte[3], matte[5], matte[6], matte[7]],
+            [scalar[0], scalar[3], scalar[5], scalar[6], scalar[7]]
+        );
     }
 
     #[test]
