@@ -286,10 +286,15 @@ impl Kernel {
                     }
                 };
                 let mut sums = SolveSums::default();
+                let specular = run.is_specular();
+                // (without a lobe `b` is not read: any slice of the run's length serves)
+                let b = if specular { &b_all[o0..o0 + n] } else { v };
                 for c in 0..3 {
                     let ac = &ab_all[c * n_px + o0..][..n];
-                    let b = run.is_specular().then_some(&b_all[o0..o0 + n]);
-                    sums.add_environment(c, ac, b, v, &g.ts[c], sat);
+                    sums.add_lanes(
+                        c,
+                        environment_lane_sums::<AVX2>(ac, b, v, &g.ts[c], sat, specular),
+                    );
                 }
                 self.solve_into(run, obj, &sums, proj, out, &a_all[o0..o0 + n], sat);
             }

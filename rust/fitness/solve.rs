@@ -105,8 +105,9 @@ impl SolveSums {
     }
 
     /// Every sum of channel `c` over one run with an environment column: factors `a`, `b` (zero for a
-    /// matte object), sky view `v`, objective `t` (pixels at or above `sat` left out).
-    #[inline(always)]
+    /// matte object), sky view `v`, objective `t` (pixels at or above `sat` left out), one pixel after
+    /// another: the reference the tests hold [`environment_lane_sums`] to (the kernels use that).
+    #[cfg(test)]
     pub(crate) fn add_environment(
         &mut self,
         c: usize,
@@ -132,15 +133,7 @@ impl SolveSums {
                 s[8] += vi * bi;
             }
         }
-        self.saa[c] += s[0];
-        self.sab[c] += s[1];
-        self.sbb[c] += s[2];
-        self.sya[c] += s[3];
-        self.syb[c] += s[4];
-        self.sav[c] += s[5];
-        self.svv[c] += s[6];
-        self.syv[c] += s[7];
-        self.svb[c] += s[8];
+        self.add_lanes(c, s);
     }
 }
 
