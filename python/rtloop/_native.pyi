@@ -76,6 +76,9 @@ def fd_columns(
     """Finite-difference Jacobian columns into the rows ``rows`` of ``jt``, their scenes rendered in one pass."""
 def order_statistics(values: npt.NDArray[np.float64], ks: list[int]) -> list[float]:
     """The ``ks``-th smallest of ``values`` (0-based), as ``np.partition(values, ks)[ks]``."""
+def render_centre_and_footprint(scene: Scene) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+    """The pixel-centre render and the footprint render of ``scene`` (its own size) in one pass: ``render(scene)``
+    and ``render(scene, footprint=True)`` bit for bit."""
 def footprint_delta(
     centre: npt.NDArray[np.float32], idx: npt.NDArray[np.uint32], f0: npt.NDArray[np.float32]
 ) -> npt.NDArray[np.float64]:

@@ -53,6 +53,22 @@ fn render<'py>(
     image_array(py, img.height, img.width, img.rgb)
 }
 
+/// The pixel-centre render and the footprint render of `scene` (its own size), float32 (H, W, 3) each, in
+/// one pass (`render::render_centre_and_footprint`): `render(scene)` and `render(scene, footprint=True)` bit
+/// for bit.
+#[pyfunction]
+fn render_centre_and_footprint<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyScene>,
+) -> PyResult<(Bound<'py, PyArray3<f32>>, Bound<'py, PyArray3<f32>>)> {
+    let scene = &scene.get().0;
+    let (c, f) = py.detach(|| core_render::render_centre_and_footprint(scene))?;
+    Ok((
+        image_array(py, c.height, c.width, c.rgb)?,
+        image_array(py, f.height, f.width, f.rgb)?,
+    ))
+}
+
 /// Images float32 (H, W, 3) and an object index int32 (H, W).
 type RendersAndIds<'py> = (Vec<Bound<'py, PyArray3<f32>>>, Bound<'py, PyArray2<i32>>);
 
@@ -717,6 +733,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fd_columns, m)?)?;
     m.add_function(wrap_pyfunction!(block_scores, m)?)?;
     m.add_function(wrap_pyfunction!(footprint_delta, m)?)?;
+    m.add_function(wrap_pyfunction!(render_centre_and_footprint, m)?)?;
     m.add_function(wrap_pyfunction!(order_statistics, m)?)?;
     m.add_function(wrap_pyfunction!(noise_medians, m)?)?;
     m.add_function(wrap_pyfunction!(jpeg_phases, m)?)?;

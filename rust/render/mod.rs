@@ -60,6 +60,44 @@ pub fn render_with(
     Ok(Image { width, height, rgb })
 }
 
+/// The pixel-centre render of `scene` (one sample per pixel, its own size) and the footprint render
+/// ([`render_with`] with `footprint`) in one pass, each pixel's light that does not depend on the footprint
+/// (ambient, environment, the bounce) shaded once: both images bit for bit (a fit compares the footprint
+/// render; its uncertainty differentiates the pixel centres).
+pub fn render_centre_and_footprint(scene: &Scene) -> Result<(Image, Image)> {
+    let frame = Frame::new(scene, None, None, 1, true)?;
+    let (width, height) = (frame.width, frame.height);
+    let mut centre = vec![0.0f32; (width * height * 3) as usize];
+    let mut over = vec![0.0f32; (width * height * 3) as usize];
+    centre
+        .par_chunks_mut(3 * width as usize)
+        .zip(over.par_chunks_mut(3 * width as usize))
+        .enumerate()
+        .for_each(|(j, (row_c, row_f))| {
+            for (i, (pc, pf)) in row_c
+                .chunks_exact_mut(3)
+                .zip(row_f.chunks_exact_mut(3))
+                .enumerate()
+            {
+                let (c, f) = frame.pixel_pair(i as u32, j as u32);
+                pc.copy_from_slice(&c.to_array());
+                pf.copy_from_slice(&f.to_array());
+            }
+        });
+    Ok((
+        Image {
+            width,
+            height,
+            rgb: centre,
+        },
+        Image {
+            width,
+            height,
+            rgb: over,
+        },
+    ))
+}
+
 /// The pixels `idx` (flat indices `j * width + i` of the scene's own size) of [`render`] at one sample per
 /// pixel, of each of `scenes` (three values a pixel, in `idx`'s order), in one pass: scenes that see the
 /// same surfaces (the same camera, image size, spheres and planes: only the light, the materials or the
@@ -285,6 +323,42 @@ impl Frame {
         )
     }
 
+    /// Pixel (i, j) of a one-sample frame at its centre and over its footprint (the frame's, where it
+    /// takes one): [`Frame::pixel`] without and with the footprint.
+    fn pixel_pair(&self, i: u32, j: u32) -> (Vec3A, Vec3A) {
+        let (dx, dy) = self.offsets[0];
+        let s = self
+            .geometry
+            .primary(i as f32 + dx, j as f32 + dy, self.width, self.height);
+        let axes = (self.footprint && s.object != u32::MAX).then(|| {
+            let shape = &self.geometry.shapes[s.object as usize];
+            footprint::axes(
+                &self.geometry.camera,
+                &s,
+                shape,
+                (i, j),
+                (self.width, self.height),
+            )
+        });
+        let gathered = self
+            .cache
+            .as_ref()
+            .map(|c| c.pixel(j as usize * self.width as usize + i as usize));
+        let (c, f) = shade::shade_pixel_pair(
+            &s,
+            axes.as_ref(),
+            &self.params,
+            &self.geometry.shapes,
+            self.shadows,
+            gathered,
+        );
+        // as `pixel` sums its one sample into zero
+        let (mut sc, mut sf) = (Vec3A::ZERO, Vec3A::ZERO);
+        sc += c;
+        sf += f;
+        (self.mean(sc), self.mean(sf))
+    }
+
     /// [`Frame::sample`] without the footprint (one sample per pixel), the sky view kept in `sky`
     /// ([`shade::shade_pixel_sky`]).
     fn sample_sky(&self, s: &Surfel, i: u32, j: u32, sky: &mut Option<f32>) -> Vec3A {
@@ -340,6 +414,34 @@ mod tests {
                     "material": {{"albedo": [0.6, 0.6, 0.6]}}}}]}}"#
         ))
         .unwrap()
+    }
+
+    #[test]
+    fn centre_and_footprint_in_one_pass_are_the_two_renders() {
+        // with and without the bounce and the environment, a shadow edge and terminators in view
+        for (bounce, env) in [(true, 0.0), (true, 0.3), (false, 0.3), (false, 0.0)] {
+            let mut scene = bounce_scene(1.5, 0.6, env);
+            scene.interreflection = bounce;
+            let (c, f) = render_centre_and_footprint(&scene).unwrap();
+            let c0 = render_with(&scene, None, None, 1, false).unwrap();
+            let f0 = render_with(&scene, None, None, 1, true).unwrap();
+            let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(
+                bits(&c.rgb),
+                bits(&c0.rgb),
+                "centre, bounce {bounce}, env {env}"
+            );
+            assert_eq!(
+                bits(&f.rgb),
+                bits(&f0.rgb),
+                "footprint, bounce {bounce}, env {env}"
+            );
+            assert_ne!(
+                bits(&c.rgb),
+                bits(&f.rgb),
+                "the footprint changes some pixels"
+            );
+        }
     }
 
     /// The render as it was before the gathers were kept: every pixel gathers its points itself.

@@ -344,6 +344,44 @@ fn shade_full(
     if s.object == u32::MAX {
         return (p.exposure * p.background, false);
     }
+    let l = indirect(s, p, shapes, gathered, sky);
+    direct(s, footprint, p, shapes, shadows, l)
+}
+
+/// [`shade_pixel_cached`] of one surfel at its pixel centre and over its `footprint`, the light that does
+/// not depend on the footprint (ambient, environment, the bounce) gathered once: the same two values, bit
+/// for bit, as the two calls.
+pub fn shade_pixel_pair(
+    s: &Surfel,
+    footprint: Option<&[Vec3A; 2]>,
+    p: &ShadeParams,
+    shapes: &[PShape],
+    shadows: bool,
+    gathered: Option<&[CachedPoint]>,
+) -> (Vec3A, Vec3A) {
+    if s.object == u32::MAX {
+        let bg = p.exposure * p.background;
+        return (bg, bg);
+    }
+    let l = indirect(s, p, shapes, gathered, &mut None);
+    let centre = direct(s, None, p, shapes, shadows, l).0;
+    let over = match footprint {
+        Some(_) => direct(s, footprint, p, shapes, shadows, l).0,
+        None => centre,
+    };
+    (centre, over)
+}
+
+/// The light at an object's surfel (not the background) that does not come straight from the light:
+/// ambient, environment (its sky view kept in `sky`) and, with interreflection, the bounce; before exposure.
+#[inline(always)]
+fn indirect(
+    s: &Surfel,
+    p: &ShadeParams,
+    shapes: &[PShape],
+    gathered: Option<&[CachedPoint]>,
+    sky: &mut Option<f32>,
+) -> Vec3A {
     let m = &p.materials[s.object as usize];
     let mut l = m.albedo * p.ambient;
     if p.environment != Vec3A::ZERO {
@@ -363,6 +401,22 @@ fn shade_full(
             }
         });
     }
+    l
+}
+
+/// The exposure-scaled radiance at an object's surfel: the `indirect` light `l` plus the light's own
+/// (over the pixel's `footprint` where given), and whether the light faces the point but is (partly)
+/// blocked.
+#[inline(always)]
+fn direct(
+    s: &Surfel,
+    footprint: Option<&[Vec3A; 2]>,
+    p: &ShadeParams,
+    shapes: &[PShape],
+    shadows: bool,
+    mut l: Vec3A,
+) -> (Vec3A, bool) {
+    let m = &p.materials[s.object as usize];
     let Some((dir, dist, falloff)) = incidence(p.light_position, p.light_direction, s.position)
     else {
         return ((p.exposure * l).min(Vec3A::splat(f32::MAX)), false);

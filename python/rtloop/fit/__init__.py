@@ -247,11 +247,15 @@ def fit(
         reference=pinned,
     )
     # The model the fit compared with the photo, for the goodness of fit and the uncertainty's residual, and
-    # (the same where the fit took no footprint) the pixel-centre render its finite differences start from;
-    # with the footprint the uncertainty renders the pixel centres it uses itself.
-    as_compared = _native.render(current, current.width, current.height, 1, footprint != "off")
+    # the pixel-centre render the uncertainty's finite differences start from (the same where the fit took no
+    # footprint; else both in one pass, the light a footprint does not change shaded once).
     with_sigma = uncertainty not in (False, "off")
-    at_optimum = as_compared if footprint == "off" else None
+    if footprint == "off":
+        as_compared = at_optimum = _native.render(current, current.width, current.height, 1, False)
+    elif with_sigma:
+        at_optimum, as_compared = _native.render_centre_and_footprint(current)
+    else:
+        as_compared, at_optimum = _native.render(current, current.width, current.height, 1, True), None
     result.goodness = goodness(current, target, use, clip=clip, render=as_compared, sigma=sigma, blocking=blocking,
                                encoding=encoding, codes=codes)
     doubts += _at_bounds(current, all_paths)
