@@ -593,8 +593,8 @@ impl Simd for HeldRun<'_, '_> {
                 sums.sya[ch] += (ya[0] + ya[1]) + (ya[2] + ya[3]);
             } else {
                 let v = sky.map_or(&zeros[..n], |v| &v[..n]);
-                let bb: &[f32] = if specular { &b[..n] } else { &zeros[..n] };
-                // the nine sums of `SolveSums::add_environment`, SUM_LANES at a time
+                let bb: &[f32] = if specular { &b[..n] } else { v }; // not read without a lobe
+                                                                     // the nine sums of `SolveSums::add_environment`, SUM_LANES at a time
                 sums.add_lanes(
                     ch,
                     environment_lane_sums::<AVX2>(col, bb, v, t, sat, specular),
