@@ -4,7 +4,7 @@
 
 use glam::Vec3A;
 
-use crate::render::bounce::{gather, nearest_table, table_points};
+use crate::render::bounce::{gather, nearest_table};
 use crate::render::environment::sky_view;
 use crate::render::footprint::{self, sphere_edge_lit, terminator_cos};
 use crate::render::light::{self, directional_irradiance, point_irradiance};
@@ -274,11 +274,8 @@ pub(crate) fn gathers(
             let zeros = vec![Vec3A::ZERO; pts.len()];
             let solve = vec![false; pts.len()];
             let table = match shapes[k] {
-                PShape::Sphere { center, radius } => {
-                    let at = table_points(center, radius);
-                    pts.iter()
-                        .map(|s| nearest_table(&at, s.normal) as u32)
-                        .collect()
+                PShape::Sphere { .. } => {
+                    pts.iter().map(|s| nearest_table(s.normal) as u32).collect()
                 }
                 PShape::Plane { .. } | PShape::Mesh(_) => Vec::new(),
             };

@@ -66,16 +66,120 @@ pub fn table_points(center: Vec3A, radius: f32) -> Vec<(Vec3A, Vec3A)> {
         .collect()
 }
 
-/// The table point of a sphere nearest to the point of it with outward normal `n`.
-pub fn nearest_table(points: &[(Vec3A, Vec3A)], n: Vec3A) -> usize {
-    let mut best = (0, f32::NEG_INFINITY);
-    for (k, &(_, m)) in points.iter().enumerate() {
-        let d = m.dot(n);
-        if d > best.1 {
-            best = (k, d);
+/// The table point of a sphere nearest to the point of it with outward normal `n` (any length): the
+/// one whose normal has the largest dot product with `n`, the first of equals, as a scan of all
+/// [`TABLE`] points finds it, from the few points [`TableIndex`] keeps for `n`'s cell.
+pub fn nearest_table(n: Vec3A) -> usize {
+    static INDEX: std::sync::OnceLock<TableIndex> = std::sync::OnceLock::new();
+    INDEX.get_or_init(TableIndex::new).nearest(n)
+}
+
+/// The table points that can be nearest to a direction, per cell of a cube map ([`INDEX_CELLS`]² cells
+/// per face): a cell lies within the cap of angular radius ρ about its centre direction c, so the
+/// nearest point to any direction in it is within θ_min + 2ρ of c (θ_min: the nearest point's angle to
+/// c); each cell keeps, in index order, the points within that angle plus [`INDEX_MARGIN`]. A point
+/// left out is then at least the margin further from the direction than the nearest point, far more
+/// than float rounding moves a dot product, so the first largest dot product among the kept points is
+/// the scan's.
+struct TableIndex {
+    normals: Vec<Vec3A>,
+    cells: Vec<Vec<u8>>,
+}
+
+/// Cube-map cells per face edge of [`TableIndex`]: 384 cells of about 11 degrees, 1-7 points each (3.1 on
+/// average, against the scan's 64).
+const INDEX_CELLS: usize = 8;
+/// The angle (radians) by which a point left out of a [`TableIndex`] cell is further than the nearest.
+const INDEX_MARGIN: f64 = 0.01;
+
+impl TableIndex {
+    fn new() -> TableIndex {
+        let normals: Vec<Vec3A> = table_points(Vec3A::ZERO, 1.0)
+            .into_iter()
+            .map(|p| p.1)
+            .collect();
+        let angle = |a: [f64; 3], b: Vec3A| {
+            let b = [b.x as f64, b.y as f64, b.z as f64];
+            let nb = (b[0] * b[0] + b[1] * b[1] + b[2] * b[2]).sqrt();
+            ((a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) / nb)
+                .clamp(-1.0, 1.0)
+                .acos()
+        };
+        let mut cells = Vec::with_capacity(6 * INDEX_CELLS * INDEX_CELLS);
+        for face in 0..6 {
+            for iu in 0..INDEX_CELLS {
+                for iv in 0..INDEX_CELLS {
+                    let edge = |i: usize| -1.0 + 2.0 * i as f64 / INDEX_CELLS as f64;
+                    let dir = |u: f64, v: f64| unit(face_direction(face, u, v));
+                    let (u0, u1, v0, v1) = (edge(iu), edge(iu + 1), edge(iv), edge(iv + 1));
+                    let c = dir(0.5 * (u0 + u1), 0.5 * (v0 + v1));
+                    let rho = [(u0, v0), (u0, v1), (u1, v0), (u1, v1)]
+                        .iter()
+                        .map(|&(u, v)| {
+                            let d = dir(u, v);
+                            (c[0] * d[0] + c[1] * d[1] + c[2] * d[2])
+                                .clamp(-1.0, 1.0)
+                                .acos()
+                        })
+                        .fold(0.0, f64::max);
+                    let theta: Vec<f64> = normals.iter().map(|&m| angle(c, m)).collect();
+                    let min = theta.iter().copied().fold(f64::INFINITY, f64::min);
+                    cells.push(
+                        (0..normals.len())
+                            .filter(|&k| theta[k] <= min + 2.0 * rho + INDEX_MARGIN)
+                            .map(|k| k as u8)
+                            .collect(),
+                    );
+                }
+            }
         }
+        TableIndex { normals, cells }
     }
-    best.0
+
+    fn nearest(&self, n: Vec3A) -> usize {
+        let scan = |ks: &mut dyn Iterator<Item = usize>| {
+            let mut best = (0, f32::NEG_INFINITY);
+            for k in ks {
+                let d = self.normals[k].dot(n);
+                if d > best.1 {
+                    best = (k, d);
+                }
+            }
+            best.0
+        };
+        let a = n.abs();
+        let m = a.max_element();
+        // Too short or not finite: every point, as the scan itself (the cells' reasoning needs a direction).
+        if !(m > 1e-6 && m.is_finite()) {
+            return scan(&mut (0..self.normals.len()));
+        }
+        let (face, u, v) = if a.x == m {
+            (usize::from(n.x < 0.0), n.y / a.x, n.z / a.x)
+        } else if a.y == m {
+            (2 + usize::from(n.y < 0.0), n.z / a.y, n.x / a.y)
+        } else {
+            (4 + usize::from(n.z < 0.0), n.x / a.z, n.y / a.z)
+        };
+        let cell = |t: f32| (((t + 1.0) * 0.5 * INDEX_CELLS as f32) as usize).min(INDEX_CELLS - 1);
+        let kept = &self.cells[(face * INDEX_CELLS + cell(u)) * INDEX_CELLS + cell(v)];
+        scan(&mut kept.iter().map(|&k| k as usize))
+    }
+}
+
+/// The direction of cube-map face `face` (+x, -x, +y, -y, +z, -z) at face coordinates (u, v) in
+/// [-1, 1], as [`TableIndex::nearest`] reads them: +-x takes (y, z), +-y (z, x), +-z (x, y).
+fn face_direction(face: usize, u: f64, v: f64) -> [f64; 3] {
+    let s = if face % 2 == 0 { 1.0 } else { -1.0 };
+    match face / 2 {
+        0 => [s, u, v],
+        1 => [v, s, u],
+        _ => [u, v, s],
+    }
+}
+
+fn unit(d: [f64; 3]) -> [f64; 3] {
+    let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    [d[0] / l, d[1] / l, d[2] / l]
 }
 
 /// The representative points of every other shape that the surface point `p` (unit normal `n`) of
@@ -300,7 +404,7 @@ impl Gathered {
                         table: if at[g.sender].is_empty() {
                             u32::MAX
                         } else {
-                            nearest_table(&at[g.sender], g.normal) as u32
+                            nearest_table(g.normal) as u32
                         },
                         sky: if sky {
                             super::environment::sky_view(g.position, g.normal, g.sender, shapes)
@@ -407,6 +511,72 @@ mod tests {
         assert!(out.iter().any(|g| g.sender == 2));
     }
 
+    /// The first largest dot product over all table points: what [`nearest_table`] must return.
+    fn nearest_by_scan(n: Vec3A) -> usize {
+        let at = table_points(Vec3A::ZERO, 1.0);
+        let mut best = (0, f32::NEG_INFINITY);
+        for (k, &(_, m)) in at.iter().enumerate() {
+            let d = m.dot(n);
+            if d > best.1 {
+                best = (k, d);
+            }
+        }
+        best.0
+    }
+
+    #[test]
+    fn the_table_index_finds_the_scans_point() {
+        let index = TableIndex::new();
+        let sizes: Vec<usize> = index.cells.iter().map(Vec::len).collect();
+        assert!(sizes.iter().all(|&k| k >= 1));
+        assert!(*sizes.iter().max().unwrap() < TABLE / 4, "{sizes:?}");
+        let at = table_points(Vec3A::new(1.0, -2.0, 0.5), 0.3);
+        let mut hard: Vec<Vec3A> = Vec::new();
+        // The table points, the midpoints of every pair (ties between two points), cube-map cell
+        // corners and edges, axes, and lengths from tiny to huge.
+        for &(_, m) in &at {
+            hard.push(m);
+            for &(_, q) in &at {
+                hard.push(0.5 * (m + q));
+            }
+        }
+        for face in 0..6 {
+            for i in 0..=INDEX_CELLS {
+                for j in 0..=2 * INDEX_CELLS {
+                    let u = -1.0 + 2.0 * i as f64 / INDEX_CELLS as f64;
+                    let v = -1.0 + j as f64 / INDEX_CELLS as f64;
+                    let d = face_direction(face, u, v);
+                    hard.push(Vec3A::new(d[0] as f32, d[1] as f32, d[2] as f32));
+                    let d = face_direction(face, v, u);
+                    hard.push(Vec3A::new(d[0] as f32, d[1] as f32, d[2] as f32));
+                }
+            }
+        }
+        let scaled: Vec<Vec3A> = hard
+            .iter()
+            .flat_map(|&n| [n * 1e-5, n * 3.7, n * 1e20])
+            .collect();
+        hard.extend(scaled);
+        hard.extend([
+            Vec3A::ZERO,
+            Vec3A::splat(f32::NAN),
+            Vec3A::new(f32::INFINITY, 0.0, 1.0),
+            Vec3A::splat(1e-30),
+        ]);
+        for n in hard {
+            assert_eq!(nearest_table(n), nearest_by_scan(n), "{n}");
+        }
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn the_table_index_agrees_with_the_scan(x in -1.0f32..1.0, y in -1.0f32..1.0, z in -1.0f32..1.0,
+                                               scale in -3.0f32..3.0) {
+            let n = Vec3A::new(x, y, z) * 10f32.powf(scale);
+            proptest::prop_assert_eq!(nearest_table(n), nearest_by_scan(n));
+        }
+    }
+
     #[test]
     fn table_points_cover_the_sphere() {
         let at = table_points(Vec3A::new(1.0, 2.0, 3.0), 0.5);
@@ -422,7 +592,7 @@ mod tests {
             let z = 1.0 - 2.0 * (k as f32 + 0.5) / 200.0;
             let r = (1.0 - z * z).sqrt();
             let n = Vec3A::new(r * (k as f32).cos(), z, r * (k as f32).sin());
-            let j = nearest_table(&at, n);
+            let j = nearest_table(n);
             assert!(at[j].1.dot(n) > 20f32.to_radians().cos(), "{n}");
         }
     }

@@ -220,7 +220,7 @@ pub fn sender_radiance(g: &GatherPoint, p: &ShadeParams, shapes: &[PShape]) -> V
     sender_radiance_with(
         g,
         || sky_view(g.position, g.normal, g.sender, shapes),
-        |at| nearest_table(at, g.normal),
+        |_| nearest_table(g.normal),
         p,
         shapes,
     )
