@@ -285,6 +285,77 @@ fn one_candidate_alone_gives_the_serial_value_bit_for_bit_on_any_thread_count() 
     }
 }
 
+/// With interreflection the fitness's geometry and the bounce's gathers are built over the pool, and
+/// the held bounce and the refined products are solved over it: the values must be a one-thread
+/// build's, bit for bit, on any number of threads (the full bounce, the held one, the refined
+/// products and loss; with and without the pixel footprint), and one candidate alone over the pool
+/// gives the population's serial value.
+#[test]
+fn a_bounce_fitness_built_and_held_on_any_thread_count_gives_the_same_bits() {
+    let mut rng = Rng::new(23);
+    for k in 0..3 {
+        let mut scene = random_scene(&mut rng, 1 + k % 2, false, false);
+        scene.interreflection = true;
+        let target = clipped_render(&scene);
+        let layout = ParamLayout::new(&scene, &["light.position".to_string()]).unwrap();
+        let xs: Vec<Vec<f64>> = (0..3)
+            .map(|_| random_candidate(&mut rng, &layout))
+            .chain([scene.light.position.to_vec()])
+            .collect();
+        for footprint in [false, true] {
+            let values = |threads: usize| {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                pool.install(|| {
+                    let bounds = vec![[(0.0, 200.0); 3]; scene.objects.len()];
+                    let mut f = Fitness::with_solve_margin(
+                        &scene,
+                        layout.clone(),
+                        &target,
+                        None,
+                        LossKind::L1Projected,
+                        true,
+                        Some(Projection::matte(bounds)),
+                        footprint,
+                        0,
+                    )
+                    .unwrap();
+                    let mut bits = Vec::new();
+                    for x in &xs {
+                        let (mut o, mut alone) = ([0.0], [0.0]);
+                        f.evaluate(x, &mut o);
+                        // one candidate alone, over the pool: the population's serial value
+                        f.evaluate_alone(x, &mut alone);
+                        assert_eq!(o[0].to_bits(), alone[0].to_bits(), "{x:?}");
+                        bits.push(o[0].to_bits());
+                        let (solved, loss) = f.refined(x).unwrap();
+                        bits.extend(loss.iter().map(|v| v.to_bits()));
+                        bits.extend(solved.products.iter().flatten().map(|v| v.to_bits()));
+                        bits.push(solved.gauge.unwrap().to_bits());
+                    }
+                    assert!(f.freeze_bounce(Some(&xs[0])));
+                    for x in &xs {
+                        let mut o = [0.0];
+                        f.evaluate_alone(x, &mut o);
+                        bits.push(o[0].to_bits());
+                    }
+                    bits
+                })
+            };
+            let one = values(1);
+            for threads in [2, 3, 5] {
+                assert_eq!(
+                    values(threads),
+                    one,
+                    "scene {k}, footprint {footprint}, {threads} threads"
+                );
+            }
+        }
+    }
+}
+
 #[test]
 fn light_inside_an_occluder_or_on_a_surface_gives_finite_losses() {
     let mut rng = Rng::new(9);

@@ -125,7 +125,7 @@ impl Kernel {
                     .iter()
                     .map(|gth| {
                         let mut e = Vec::new();
-                        gth.light::<AVX2>(&light, &mut e);
+                        gth.light::<AVX2>(&light, &mut e, c.parallel);
                         Compact::new(gth, &e)
                     })
                     .collect(),
@@ -159,7 +159,7 @@ impl Kernel {
                 gths.iter()
                     .map(|gth| {
                         let mut e = Vec::new();
-                        gth.light::<AVX2>(&light, &mut e);
+                        gth.light::<AVX2>(&light, &mut e, c.parallel);
                         Compact::new(gth, &e)
                     })
                     .collect()

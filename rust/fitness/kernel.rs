@@ -274,7 +274,7 @@ impl Kernel {
                     }
                 });
                 for gth in gths {
-                    gth.light::<AVX2>(light, &mut e);
+                    gth.light::<AVX2>(light, &mut e, false);
                     let rho = p.materials[gth.sender].albedo;
                     let sky = &gth.points.sky;
                     for c in 0..3 {
@@ -307,7 +307,7 @@ pub(crate) fn gathered<const AVX2: bool>(
     let mut out: [Vec<f32>; 3] = std::array::from_fn(|_| vec![0.0f32; n]);
     let mut e = Vec::new();
     for gth in &g.gathers {
-        gth.light::<AVX2>(light, &mut e);
+        gth.light::<AVX2>(light, &mut e, false);
         let rho = p.materials[gth.sender].albedo;
         let sky = &gth.points.sky;
         for c in 0..3 {

@@ -404,7 +404,7 @@ impl Fitness {
             params: &p,
             clip: self.clip,
             bound: f64::INFINITY,
-            parallel: false,
+            parallel: true, // the same value, over the pool
         };
         self.kernel.projected(c, proj, &mut solved, &mut scratch);
         let mut loss = self.kernel.refine(self.clip, proj, &mut solved, &scratch);
@@ -439,7 +439,7 @@ impl Fitness {
             params: &p,
             clip: self.clip,
             bound: f64::INFINITY,
-            parallel: false,
+            parallel: true, // the same value, over the pool
         };
         self.kernel.projected(c, &proj, &mut solved, &mut scratch);
         // scratch: [a | b | a'_r | a'_g | a'_b], a'_c = a + (u/g_c)·B_c

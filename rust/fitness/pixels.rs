@@ -3,6 +3,7 @@
 //! lobe) an evaluation computes.
 
 use glam::Vec3A;
+use rayon::prelude::*;
 
 use crate::render::bounce::{gather, nearest_table};
 use crate::render::environment::sky_view;
@@ -218,26 +219,39 @@ pub(crate) struct Gather {
 }
 
 impl Gather {
-    /// The unit-light diffuse factor (irradiance / π, shadowed) at every point, into `e`.
+    /// The unit-light diffuse factor (irradiance / π, shadowed) at every point, into `e`; with
+    /// `parallel`, runs of [`GATHER_LIGHT_RUN`] points spread over the current pool (each point's value
+    /// is its own: the same either way).
     #[inline(always)]
-    pub(crate) fn light<const AVX2: bool>(&self, light: &Light, e: &mut Vec<f32>) {
-        let n = self.points.len();
-        e.resize(n, 0.0);
-        let mut start = 0;
-        while start < n {
-            let len = BLOCK.min(n - start);
-            let r = start..start + len;
-            irradiance::<AVX2>(&self.points, r.clone(), light, &mut e[r.clone()]);
-            shadow(&self.points, r.clone(), light, &mut e[r.clone()]);
-            start += len;
-        }
-        for v in e.iter_mut() {
-            *v = brdf::lambert(*v);
+    pub(crate) fn light<const AVX2: bool>(&self, light: &Light, e: &mut Vec<f32>, parallel: bool) {
+        e.resize(self.points.len(), 0.0);
+        let blocks = |first: usize, e: &mut [f32]| {
+            for (k, e) in e.chunks_mut(BLOCK).enumerate() {
+                let r = first + k * BLOCK..first + k * BLOCK + e.len();
+                irradiance::<AVX2>(&self.points, r.clone(), light, e);
+                shadow(&self.points, r, light, e);
+                for v in e.iter_mut() {
+                    *v = brdf::lambert(*v);
+                }
+            }
+        };
+        if parallel {
+            e.par_chunks_mut(GATHER_LIGHT_RUN)
+                .enumerate()
+                .for_each(|(k, e)| blocks(k * GATHER_LIGHT_RUN, e));
+        } else {
+            blocks(0, e);
         }
     }
 }
 
-/// The gathers of the pixels `idx` of `surfels` (all of object `own`).
+/// Points per parallel run of [`Gather::light`] (whole blocks, as the serial loop takes them).
+const GATHER_LIGHT_RUN: usize = 16 * BLOCK;
+
+/// Pixels per parallel run of [`gathers`].
+const GATHER_RUN: usize = 256;
+
+/// The gathers of the pixels `idx` of `surfels` (all of object `own`), built over the current pool.
 pub(crate) fn gathers(
     surfels: &[Surfel],
     idx: &[usize],
@@ -246,37 +260,74 @@ pub(crate) fn gathers(
     shadows: bool,
     sky: Sky,
 ) -> Vec<Gather> {
-    let mut per_sender: Vec<(Vec<u32>, Vec<f32>, Vec<Surfel>)> =
-        vec![Default::default(); shapes.len()];
-    let mut points = Vec::new();
-    for (j, &i) in idx.iter().enumerate() {
-        let s = &surfels[i];
-        gather(s.position, s.normal, own, shapes, &mut points);
-        for g in &points {
-            let slot = &mut per_sender[g.sender];
-            slot.0.push(j as u32);
-            slot.1.push(g.form);
-            let scale = g.position.abs().max_element() + shapes[g.sender].scale();
-            slot.2.push(Surfel {
-                position: g.position,
-                normal: g.normal,
-                view: g.normal,
-                object: g.sender as u32,
-                eps: 64.0 * f32::EPSILON * scale,
-            });
+    type PerSender = Vec<(Vec<u32>, Vec<f32>, Vec<Surfel>)>;
+    // Runs of pixels gathered in parallel, then joined in pixel order: the same lists on any pool (on
+    // one thread, one run, nothing to join).
+    let run_len = if rayon::current_num_threads() > 1 {
+        GATHER_RUN
+    } else {
+        idx.len().max(1)
+    };
+    let mut runs: Vec<PerSender> = idx
+        .par_chunks(run_len)
+        .enumerate()
+        .map(|(r, run)| {
+            let mut per_sender: PerSender = vec![Default::default(); shapes.len()];
+            let mut points = Vec::new();
+            for (jj, &i) in run.iter().enumerate() {
+                let j = r * run_len + jj;
+                let s = &surfels[i];
+                gather(s.position, s.normal, own, shapes, &mut points);
+                for g in &points {
+                    let slot = &mut per_sender[g.sender];
+                    slot.0.push(j as u32);
+                    slot.1.push(g.form);
+                    let scale = g.position.abs().max_element() + shapes[g.sender].scale();
+                    slot.2.push(Surfel {
+                        position: g.position,
+                        normal: g.normal,
+                        view: g.normal,
+                        object: g.sender as u32,
+                        eps: 64.0 * f32::EPSILON * scale,
+                    });
+                }
+            }
+            per_sender
+        })
+        .collect();
+    let mut per_sender: PerSender = if runs.len() == 1 {
+        runs.pop().expect("one run")
+    } else {
+        (0..shapes.len())
+            .map(|k| {
+                let n = runs.iter().map(|r| r[k].0.len()).sum();
+                (
+                    Vec::with_capacity(n),
+                    Vec::with_capacity(n),
+                    Vec::with_capacity(n),
+                )
+            })
+            .collect()
+    };
+    for run in runs {
+        for (to, from) in per_sender.iter_mut().zip(run) {
+            to.0.extend(from.0);
+            to.1.extend(from.1);
+            to.2.extend(from.2);
         }
     }
     per_sender
-        .into_iter()
+        .into_par_iter()
         .enumerate()
         .filter(|(_, s)| !s.0.is_empty())
         .map(|(k, (pixel, form, pts))| {
             let zeros = vec![Vec3A::ZERO; pts.len()];
             let solve = vec![false; pts.len()];
             let table = match shapes[k] {
-                PShape::Sphere { .. } => {
-                    pts.iter().map(|s| nearest_table(s.normal) as u32).collect()
-                }
+                PShape::Sphere { .. } => pts
+                    .par_iter()
+                    .map(|s| nearest_table(s.normal) as u32)
+                    .collect(),
                 PShape::Plane { .. } | PShape::Mesh(_) => Vec::new(),
             };
             let mut g = group(&pts, &zeros, &solve, &[], shapes, shadows, sky, false);
@@ -368,7 +419,7 @@ pub(crate) fn group(
         order[count[k]] = i;
         count[k] += 1;
     }
-    let mut groups: Vec<Group> = Vec::new();
+    let mut runs = Vec::new();
     let mut start = 0;
     while start < order.len() {
         let obj = surfels[order[start]].object;
@@ -376,118 +427,124 @@ pub(crate) fn group(
         while end < order.len() && surfels[order[end]].object == obj {
             end += 1;
         }
-        let idx = &order[start..end];
-        let col =
-            |f: &dyn Fn(&Surfel) -> f32| idx.iter().map(|&i| f(&surfels[i])).collect::<Vec<f32>>();
-        let tcol = |c: usize| idx.iter().map(|&i| targets[i][c]).collect::<Vec<f32>>();
-        let object = (obj != u32::MAX).then_some(obj as usize);
-        let mut g = Group {
-            object,
-            p: [
-                col(&|s| s.position.x),
-                col(&|s| s.position.y),
-                col(&|s| s.position.z),
-            ],
-            n: [
-                col(&|s| s.normal.x),
-                col(&|s| s.normal.y),
-                col(&|s| s.normal.z),
-            ],
-            v: [col(&|s| s.view.x), col(&|s| s.view.y), col(&|s| s.view.z)],
-            t: [tcol(0), tcol(1), tcol(2)],
-            te: Default::default(),
-            ts: std::array::from_fn(|c| {
-                idx.iter()
-                    .map(|&i| {
-                        if solve[i] {
-                            targets[i][c]
-                        } else {
-                            f32::INFINITY
-                        }
-                    })
-                    .collect()
-            }),
-            spheres: Vec::new(),
-            planes: Vec::new(),
-            sky: match (object, sky) {
-                (Some(o), Sky::Occluded) => idx
-                    .iter()
-                    .map(|&i| sky_view(surfels[i].position, surfels[i].normal, o, shapes))
-                    .collect(),
-                (Some(_), Sky::Open) => vec![1.0; idx.len()],
-                _ => Vec::new(),
-            },
-            gathers: match object {
-                Some(o) if bounce => gathers(surfels, idx, o, shapes, shadows, sky),
-                _ => Vec::new(),
-            },
-            blocks: idx
-                .chunks(BLOCK)
-                .map(|chunk| {
-                    let pos = |&i: &usize| surfels[i].position;
-                    let centre =
-                        chunk.iter().map(pos).fold(Vec3A::ZERO, |a, p| a + p) / chunk.len() as f32;
-                    let radius = chunk
-                        .iter()
-                        .map(|i| (pos(i) - centre).length())
-                        .fold(0.0f32, f32::max);
-                    (centre.to_array(), radius)
-                })
-                .collect(),
-            du: Default::default(),
-            dv: Default::default(),
-            spread: Vec::new(),
-            block_spread: Vec::new(),
-            own_radius: None,
-        };
-        if !footprint.is_empty() && shadows && object.is_some() {
-            let du: Vec<Vec3A> = idx.iter().map(|&i| footprint[i][0]).collect();
-            let dv: Vec<Vec3A> = idx.iter().map(|&i| footprint[i][1]).collect();
-            g.spread = idx
-                .iter()
-                .map(|&i| footprint::spread(&footprint[i]))
-                .collect();
-            g.du = std::array::from_fn(|c| du.iter().map(|u| u[c]).collect());
-            g.dv = std::array::from_fn(|c| dv.iter().map(|v| v[c]).collect());
-            g.block_spread = g
-                .spread
-                .chunks(BLOCK)
-                .map(|c| c.iter().copied().fold(0.0, f32::max))
-                .collect();
-            if let Some(PShape::Sphere { radius, .. }) = object.map(|o| &shapes[o]) {
-                g.own_radius = Some(*radius);
-            }
-        }
-        if shadows && object.is_some() {
-            for (k, shape) in shapes.iter().enumerate() {
-                if Some(k) == object {
-                    continue;
-                }
-                match *shape {
-                    PShape::Sphere { center, radius } => g.spheres.push(SphereOccluder {
-                        center: center.to_array(),
-                        radius,
-                        c: idx
-                            .iter()
-                            .map(|&i| sphere_power(surfels[i].position - center, radius))
-                            .collect(),
-                    }),
-                    PShape::Plane { point, normal } => g.planes.push(PlaneOccluder {
-                        normal: normal.to_array(),
-                        point: point.to_array(),
-                        side: idx
-                            .iter()
-                            .map(|&i| normal.dot(surfels[i].position - point))
-                            .collect(),
-                    }),
-                    PShape::Mesh(_) => {} // `Fitness::new` refuses meshes
-                }
-            }
-        }
-        groups.push(g);
+        runs.push((obj, start..end));
         start = end;
     }
-    groups
+    // One group per object, built in parallel (each in order: the same groups on any pool).
+    runs.into_par_iter()
+        .map(|(obj, range)| {
+            let idx = &order[range];
+            let col = |f: &dyn Fn(&Surfel) -> f32| {
+                idx.iter().map(|&i| f(&surfels[i])).collect::<Vec<f32>>()
+            };
+            let tcol = |c: usize| idx.iter().map(|&i| targets[i][c]).collect::<Vec<f32>>();
+            let object = (obj != u32::MAX).then_some(obj as usize);
+            let mut g = Group {
+                object,
+                p: [
+                    col(&|s| s.position.x),
+                    col(&|s| s.position.y),
+                    col(&|s| s.position.z),
+                ],
+                n: [
+                    col(&|s| s.normal.x),
+                    col(&|s| s.normal.y),
+                    col(&|s| s.normal.z),
+                ],
+                v: [col(&|s| s.view.x), col(&|s| s.view.y), col(&|s| s.view.z)],
+                t: [tcol(0), tcol(1), tcol(2)],
+                te: Default::default(),
+                ts: std::array::from_fn(|c| {
+                    idx.iter()
+                        .map(|&i| {
+                            if solve[i] {
+                                targets[i][c]
+                            } else {
+                                f32::INFINITY
+                            }
+                        })
+                        .collect()
+                }),
+                spheres: Vec::new(),
+                planes: Vec::new(),
+                sky: match (object, sky) {
+                    (Some(o), Sky::Occluded) => idx
+                        .iter()
+                        .map(|&i| sky_view(surfels[i].position, surfels[i].normal, o, shapes))
+                        .collect(),
+                    (Some(_), Sky::Open) => vec![1.0; idx.len()],
+                    _ => Vec::new(),
+                },
+                gathers: match object {
+                    Some(o) if bounce => gathers(surfels, idx, o, shapes, shadows, sky),
+                    _ => Vec::new(),
+                },
+                blocks: idx
+                    .chunks(BLOCK)
+                    .map(|chunk| {
+                        let pos = |&i: &usize| surfels[i].position;
+                        let centre = chunk.iter().map(pos).fold(Vec3A::ZERO, |a, p| a + p)
+                            / chunk.len() as f32;
+                        let radius = chunk
+                            .iter()
+                            .map(|i| (pos(i) - centre).length())
+                            .fold(0.0f32, f32::max);
+                        (centre.to_array(), radius)
+                    })
+                    .collect(),
+                du: Default::default(),
+                dv: Default::default(),
+                spread: Vec::new(),
+                block_spread: Vec::new(),
+                own_radius: None,
+            };
+            if !footprint.is_empty() && shadows && object.is_some() {
+                let du: Vec<Vec3A> = idx.iter().map(|&i| footprint[i][0]).collect();
+                let dv: Vec<Vec3A> = idx.iter().map(|&i| footprint[i][1]).collect();
+                g.spread = idx
+                    .iter()
+                    .map(|&i| footprint::spread(&footprint[i]))
+                    .collect();
+                g.du = std::array::from_fn(|c| du.iter().map(|u| u[c]).collect());
+                g.dv = std::array::from_fn(|c| dv.iter().map(|v| v[c]).collect());
+                g.block_spread = g
+                    .spread
+                    .chunks(BLOCK)
+                    .map(|c| c.iter().copied().fold(0.0, f32::max))
+                    .collect();
+                if let Some(PShape::Sphere { radius, .. }) = object.map(|o| &shapes[o]) {
+                    g.own_radius = Some(*radius);
+                }
+            }
+            if shadows && object.is_some() {
+                for (k, shape) in shapes.iter().enumerate() {
+                    if Some(k) == object {
+                        continue;
+                    }
+                    match *shape {
+                        PShape::Sphere { center, radius } => g.spheres.push(SphereOccluder {
+                            center: center.to_array(),
+                            radius,
+                            c: idx
+                                .iter()
+                                .map(|&i| sphere_power(surfels[i].position - center, radius))
+                                .collect(),
+                        }),
+                        PShape::Plane { point, normal } => g.planes.push(PlaneOccluder {
+                            normal: normal.to_array(),
+                            point: point.to_array(),
+                            side: idx
+                                .iter()
+                                .map(|&i| normal.dot(surfels[i].position - point))
+                                .collect(),
+                        }),
+                        PShape::Mesh(_) => {} // `Fitness::new` refuses meshes
+                    }
+                }
+            }
+            g
+        })
+        .collect()
 }
 
 /// e = max(0, n·l) / d² (unit light), written into `e`; 0 for a light on the surface. On a sphere with

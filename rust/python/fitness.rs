@@ -22,9 +22,27 @@ fn target_vec(scene: &Scene, target: &PyReadonlyArray3<'_, f32>) -> PyResult<Vec
     Ok(target.as_slice()?.to_vec())
 }
 
-/// The fitness of `paths` against `target` and the search bounds of `paths`.
+/// A fitness's arguments, read from Python (with the GIL, every check that names an argument done):
+/// [`FitnessArgs::build`] then builds it without the GIL, inside the call's worker pool.
+pub(crate) struct FitnessArgs {
+    layout: ParamLayout,
+    /// The search bounds of `paths`.
+    pub(crate) bounds: Vec<(f64, f64)>,
+    target: Vec<f32>,
+    pixels: Option<Vec<u32>>,
+    kind: LossKind,
+    clip: bool,
+    projection: Option<Projection>,
+    norm: Norm,
+    space: Space,
+    footprint: bool,
+    saturated: Option<f32>,
+    solve_margin: usize,
+}
+
+/// The arguments of the fitness of `paths` against `target` (see [`FitnessArgs`]).
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn make_fitness(
+pub(crate) fn fitness_args(
     scene: &Scene,
     paths: &[String],
     target: &PyReadonlyArray3<'_, f32>,
@@ -37,7 +55,7 @@ pub(crate) fn make_fitness(
     footprint: bool,
     saturated: Option<f32>,
     solve_margin: usize,
-) -> PyResult<(Fitness, Vec<(f64, f64)>)> {
+) -> PyResult<FitnessArgs> {
     let space = Space::parse(space).map_err(Error::Invalid)?;
     let layout = ParamLayout::new(scene, paths)?;
     let bounds = layout.bounds.clone();
@@ -80,19 +98,7 @@ pub(crate) fn make_fitness(
         None => None,
     };
     let kind = LossKind::parse(loss)?;
-    let mut fitness = Fitness::with_solve_margin(
-        scene,
-        layout,
-        &target,
-        pixels.as_deref(),
-        kind,
-        clip,
-        projection,
-        footprint,
-        solve_margin,
-    )?;
-    fitness.set_norm(Norm::parse(norm).map_err(Error::Invalid)?);
-    fitness.set_space(space);
+    let norm = Norm::parse(norm).map_err(Error::Invalid)?;
     if let Some(level) = saturated {
         if !level.is_finite() || level <= 0.0 {
             return Err(Error::Value(format!(
@@ -100,9 +106,44 @@ pub(crate) fn make_fitness(
             ))
             .into());
         }
-        fitness.set_saturated(level);
     }
-    Ok((fitness, bounds))
+    Ok(FitnessArgs {
+        layout,
+        bounds,
+        target,
+        pixels,
+        kind,
+        clip,
+        projection,
+        norm,
+        space,
+        footprint,
+        saturated,
+        solve_margin,
+    })
+}
+
+impl FitnessArgs {
+    /// The fitness (its geometry, pixel groups and the bounce's gathers spread over the current pool).
+    pub(crate) fn build(self, scene: &Scene) -> crate::error::Result<Fitness> {
+        let mut fitness = Fitness::with_solve_margin(
+            scene,
+            self.layout,
+            &self.target,
+            self.pixels.as_deref(),
+            self.kind,
+            self.clip,
+            self.projection,
+            self.footprint,
+            self.solve_margin,
+        )?;
+        fitness.set_norm(self.norm);
+        fitness.set_space(self.space);
+        if let Some(level) = self.saturated {
+            fitness.set_saturated(level);
+        }
+        Ok(fitness)
+    }
 }
 
 /// What `optimize` found (immutable). For the projected loss `products` (per object [P_r, P_g, P_b, Q]:

@@ -23,7 +23,7 @@ mod scene;
 mod test_hooks;
 
 use errors::{RtloopError, SceneError};
-use fitness::{make_fitness, Generation, OptimizeResult};
+use fitness::{fitness_args, Generation, OptimizeResult};
 use pool::detach_in_pool;
 use scene::PyScene;
 
@@ -482,7 +482,7 @@ fn evaluate<'py>(
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     use rayon::prelude::*;
     let scene = &scene.get().0;
-    let (mut fitness, bounds) = make_fitness(
+    let args = fitness_args(
         scene,
         &paths,
         &target,
@@ -496,27 +496,29 @@ fn evaluate<'py>(
         saturated,
         solve_margin,
     )?;
-    if frozen_bounce {
-        py.detach(|| fitness.freeze_bounce(None));
-    }
     let pop = population.as_array();
-    if pop.ncols() != bounds.len() {
+    if pop.ncols() != args.bounds.len() {
         return Err(Error::Value(format!(
             "population has {} columns; {} parameters",
             pop.ncols(),
-            bounds.len()
+            args.bounds.len()
         ))
         .into());
     }
     let rows: Vec<Vec<f64>> = pop.rows().into_iter().map(|r| r.to_vec()).collect();
-    let nobj = fitness.n_objectives();
     let out = detach_in_pool(py, threads, || {
+        let mut fitness = args.build(scene)?;
+        if frozen_bounce {
+            fitness.freeze_bounce(None);
+        }
+        let nobj = fitness.n_objectives();
         let mut out = vec![0.0; rows.len() * nobj];
         out.par_chunks_mut(nobj)
             .zip(rows.par_iter())
             .for_each(|(o, x)| fitness.evaluate(x, o));
-        out
-    })?;
+        Ok::<_, crate::error::Error>((out, nobj))
+    })??;
+    let (out, nobj) = out;
     PyArray1::from_vec(py, out).reshape([rows.len(), nobj])
 }
 
@@ -575,7 +577,7 @@ fn optimize<'py>(
     // Where only the polish takes the pixel footprint, the search's fitness is the polish's at pixel
     // centres (one set-up for both).
     let only_polish = polish_footprint && !footprint;
-    let (built, bounds) = make_fitness(
+    let args = fitness_args(
         scene,
         &paths,
         &target,
@@ -589,11 +591,7 @@ fn optimize<'py>(
         saturated,
         solve_margin,
     )?;
-    let (mut fitness, mut finer) = if only_polish {
-        (built.at_pixel_centres(), Some(built))
-    } else {
-        (built, None)
-    };
+    let bounds = args.bounds.clone();
     // The bounce held for the search and the polish alike (a polish on the full bounce would cost the
     // full fixed point per evaluation).
     fn freeze(
@@ -614,11 +612,6 @@ fn optimize<'py>(
             None => fitness.freeze_bounce(at),
         }
     }
-    let passes = if frozen_bounce > 0 && py.detach(|| freeze(&mut fitness, &mut finer, None)) {
-        frozen_bounce
-    } else {
-        1
-    };
     let budget = Budget {
         population,
         generations,
@@ -633,6 +626,17 @@ fn optimize<'py>(
     let mut history = Vec::new();
     let result = detach_in_pool(py, threads, || {
         let method = Method::named(method, &budget)?;
+        let built = args.build(scene)?;
+        let (mut fitness, mut finer) = if only_polish {
+            (built.at_pixel_centres(), Some(built))
+        } else {
+            (built, None)
+        };
+        let passes = if frozen_bounce > 0 && freeze(&mut fitness, &mut finer, None) {
+            frozen_bounce
+        } else {
+            1
+        };
         let with_products = with_products && callback.is_some();
         let (mut done, mut generations) = (0, 0);
         let mut last: Option<crate::stage::StageResult> = None;
