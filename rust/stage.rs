@@ -3,7 +3,7 @@
 
 use crate::error::Result;
 use crate::fitness::{Fitness, LossKind, Solved};
-use crate::search::{self, GenerationReport, Method, PolishReport, StopReason};
+use crate::search::{self, GenerationReport, Method, Objective, PolishReport, StopReason};
 
 /// Per object `[P_r, P_g, P_b, Q]`: the colour products and `Q` = intensity × specular (0 when matte),
 /// then `[E_r, E_g, E_b]`, the environment products, when the projection has an environment term.
@@ -101,6 +101,62 @@ where
         gauge: None,
     };
     if let Some((solved, loss)) = refined {
+        out.products = Some(product_rows(&solved));
+        out.lit_pixels = Some(solved.lit);
+        out.gauge = solved.gauge;
+        out.search_objectives = Some(std::mem::replace(
+            &mut out.objectives,
+            vec![loss.iter().sum::<f64>()],
+        ));
+    }
+    Ok(out)
+}
+
+/// A stage that only polishes: Nelder–Mead on `polish` (else `fitness`) from `x0` within `bounds`, its
+/// initial simplex `step` (a fraction of each range) along every free dimension, `evaluations` at most,
+/// stopping once the simplex spans less than `x_tol` of every range; then what [`run_stage`] gives at
+/// the best point (the loss-minimising products and that loss). For a search resumed near a known
+/// light, where a population would only find the basin again.
+pub fn polish_stage(
+    fitness: &Fitness,
+    polish: Option<&Fitness>,
+    bounds: &[(f64, f64)],
+    x0: &[f64],
+    step: f64,
+    evaluations: usize,
+    x_tol: f64,
+) -> Result<StageResult> {
+    let obj = polish.unwrap_or(fitness);
+    let mut f0 = [0.0];
+    obj.evaluate_alone(x0, &mut f0);
+    let f0 = if f0[0].is_nan() { f64::INFINITY } else { f0[0] };
+    let steps = vec![step; bounds.len()];
+    let nm = search::nelder_mead::nelder_mead(obj, bounds, x0, f0, &steps, evaluations, x_tol)?;
+    let (x, f) = if nm.f < f0 {
+        (nm.x, nm.f)
+    } else {
+        (x0.to_vec(), f0)
+    };
+    let mut out = StageResult {
+        x,
+        objectives: vec![f],
+        search_objectives: None,
+        evaluations: nm.evaluations + 1,
+        generations: 0,
+        stop: StopReason::MaxGenerations,
+        polish: Some(PolishReport {
+            evaluations: nm.evaluations,
+            f_before: f0,
+            f_after: f,
+            improvement: if f < f0 { f0 - f } else { 0.0 },
+            converged: nm.converged,
+        }),
+        active_pixels: fitness.active_pixels(),
+        products: None,
+        lit_pixels: None,
+        gauge: None,
+    };
+    if let Some((solved, loss)) = obj.refined(&out.x) {
         out.products = Some(product_rows(&solved));
         out.lit_pixels = Some(solved.lit);
         out.gauge = solved.gauge;

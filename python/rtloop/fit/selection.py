@@ -167,8 +167,8 @@ def check_interreflection(mode: Any) -> str:
 #: The refit with the bounce ranks lights with the bounce held at a reference light (``_native.optimize``'s
 #: ``frozen_bounce``: a candidate then costs a direct one's factors and one solve, not the bounce's fixed
 #: point): first at the light found without the bounce, then, for each further pass, at the light the
-#: previous pass found (a search in a tenth of the box around it); each pass's result carries the full
-#: bounce's products, gauge and loss at its light.
+#: previous pass found (a Nelder-Mead polish from it, with half the polish budget, in a tenth of the box
+#: around it); each pass's result carries the full bounce's products, gauge and loss at its light.
 BOUNCE_PASSES = 2
 
 
