@@ -59,13 +59,17 @@ pub struct StageResult {
 /// after every generation (returning `false` stops); with `with_products` its report carries the
 /// closed-form products of the best, for the projected loss. With `polish`, the method's final polish,
 /// the refined products and the reported loss are `polish`'s (the same loss with a finer image model,
-/// the pixel footprint): the search finds the basin, the polish the last digits.
+/// the pixel footprint): the search finds the basin, the polish the last digits. Without `refine` the
+/// result carries the search's own loss and no products, unless the callback stopped the search (a search
+/// whose point alone is wanted: for the bounce, the refined products' fixed point is solved again where
+/// the next pass holds it).
 pub fn run_stage<C>(
     fitness: &Fitness,
     polish: Option<&Fitness>,
     bounds: &[(f64, f64)],
     method: &Method,
     with_products: bool,
+    refine: bool,
     mut callback: C,
 ) -> Result<StageResult>
 where
@@ -86,7 +90,12 @@ where
         })?;
     // The search ranks lights by least-squares products; the result carries the products that minimise
     // the loss itself (saturated pixels one-sided), and that loss.
-    let refined = polish.unwrap_or(fitness).refined(&found.best);
+    // (a search the callback stopped is the result: refined whatever was asked)
+    let refined = if refine || found.stop == StopReason::Callback {
+        polish.unwrap_or(fitness).refined(&found.best)
+    } else {
+        None
+    };
     let mut out = StageResult {
         x: found.best,
         objectives: found.best_objectives,

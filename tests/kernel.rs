@@ -337,8 +337,10 @@ fn a_bounce_fitness_built_and_held_on_any_thread_count_gives_the_same_bits() {
                     }
                     assert!(f.freeze_bounce(Some(&xs[0])));
                     for x in &xs {
-                        let mut o = [0.0];
-                        f.evaluate_alone(x, &mut o);
+                        let (mut o, mut alone) = ([0.0], [0.0]);
+                        f.evaluate(x, &mut o);
+                        f.evaluate_alone(x, &mut alone);
+                        assert_eq!(o[0].to_bits(), alone[0].to_bits(), "held, {x:?}");
                         bits.push(o[0].to_bits());
                     }
                     bits

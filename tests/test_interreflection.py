@@ -172,3 +172,19 @@ def test_held_bounce_search_reaches_the_full_search_optimum(two):
     assert held.gauge == pytest.approx(1 / 60.0, rel=2e-3) and full.gauge == pytest.approx(1 / 60.0, rel=2e-3)
     # the second pass only polishes (at most the polish budget) from the first pass's light
     assert one.evaluations < held.evaluations <= one.evaluations + kw["polish"] + 1
+
+
+def test_a_held_search_stopped_in_its_first_pass_still_reports_the_bounce_products():
+    """A pass that another follows skips its refined products (the next pass solves the bounce again);
+    a callback that stops the first pass makes it the result, which then carries them all the same."""
+    truth = _bounced(position=[1.5, 3.5, -2.0])
+    photo = _photo(truth, footprint=False)
+    scene = _box(truth, [1.6, 3.4, -2.1], 0.4)
+    kw = {"loss": "l1_projected", "product_bounds": product_bounds(scene, False), "population": 8,
+          "generations": 6, "method": "lshade", "polish": 40, "seed": 1, "frozen_bounce": 2}
+    whole = _native.optimize(scene, ["light.position"], photo, **kw)
+    stopped = _native.optimize(scene, ["light.position"], photo, callback=lambda g, *_: g < 2, **kw)
+    assert stopped.stopped and stopped.evaluations < whole.evaluations
+    for r in (whole, stopped):
+        assert r.products is not None and r.gauge is not None and np.isfinite(r.objectives).all()
+        assert r.search_objectives is not None

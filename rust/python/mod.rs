@@ -642,7 +642,7 @@ fn optimize<'py>(
         let (mut done, mut generations) = (0, 0);
         let mut last: Option<crate::stage::StageResult> = None;
         let mut box_ = bounds.clone();
-        for _ in 0..passes {
+        for pass in 0..passes {
             if let Some(prev) = &last {
                 // the bounce held again, at the light the previous pass found
                 freeze(&mut fitness, &mut finer, Some(&prev.x));
@@ -684,6 +684,8 @@ fn optimize<'py>(
                 &box_,
                 &method,
                 with_products,
+                // a pass that another follows gives only its light (the next holds the bounce there)
+                pass + 1 == passes,
                 |rep| {
                     history.push(Generation {
                         generation: generations + rep.generation,
