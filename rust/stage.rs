@@ -109,15 +109,7 @@ where
         lit_pixels: None,
         gauge: None,
     };
-    if let Some((solved, loss)) = refined {
-        out.products = Some(product_rows(&solved));
-        out.lit_pixels = Some(solved.lit);
-        out.gauge = solved.gauge;
-        out.search_objectives = Some(std::mem::replace(
-            &mut out.objectives,
-            vec![loss.iter().sum::<f64>()],
-        ));
-    }
+    out.take_refined(refined);
     Ok(out)
 }
 
@@ -165,14 +157,22 @@ pub fn polish_stage(
         lit_pixels: None,
         gauge: None,
     };
-    if let Some((solved, loss)) = obj.refined(&out.x) {
-        out.products = Some(product_rows(&solved));
-        out.lit_pixels = Some(solved.lit);
-        out.gauge = solved.gauge;
-        out.search_objectives = Some(std::mem::replace(
-            &mut out.objectives,
-            vec![loss.iter().sum::<f64>()],
-        ));
-    }
+    out.take_refined(obj.refined(&out.x));
     Ok(out)
+}
+
+impl StageResult {
+    /// The refined products (where given) as the result: its products, lit pixels, gauge and their loss
+    /// as `objectives`, the search's own loss kept as `search_objectives`.
+    fn take_refined(&mut self, refined: Option<(Solved, [f64; 3])>) {
+        if let Some((solved, loss)) = refined {
+            self.products = Some(product_rows(&solved));
+            self.lit_pixels = Some(solved.lit);
+            self.gauge = solved.gauge;
+            self.search_objectives = Some(std::mem::replace(
+                &mut self.objectives,
+                vec![loss.iter().sum::<f64>()],
+            ));
+        }
+    }
 }
