@@ -52,6 +52,7 @@ def test_adaptive_sampling_matches_every_pixel_supersampled():
 
 def test_progress_that_raises_stops_the_render_and_interrupt_stops_it_too():
     import _thread
+    import signal
     import threading
 
     def fail(done, total):
@@ -69,9 +70,15 @@ def test_progress_that_raises_stops_the_render_and_interrupt_stops_it_too():
             timers.append(threading.Timer(0.05, _thread.interrupt_main))
             timers[0].start()
 
-    with pytest.raises(KeyboardInterrupt):
-        rtloop.insert(SCENE, np.zeros((3000, 4000, 3), np.float32), [BALL2], adaptive=False,
-                      progress=interrupt_soon)
+    # A runner started in the background by a non-interactive shell inherits SIGINT ignored, and Python then
+    # installs no handler (interrupt_main does nothing): the test takes ^C as an interactive user's Python.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            rtloop.insert(SCENE, np.zeros((3000, 4000, 3), np.float32), [BALL2], adaptive=False,
+                          progress=interrupt_soon)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     timers[0].join()
     assert calls[-1][0] < calls[-1][1]  # stopped before the last tile
 
