@@ -404,7 +404,8 @@ impl Fitness {
             params: &p,
             clip: self.clip,
             bound: f64::INFINITY,
-            parallel: true, // the same value, over the pool
+            // the bounce's fixed point over the pool (the same value); a direct solve is too small for it
+            parallel: proj.gauge.is_some(),
         };
         self.kernel.projected(c, proj, &mut solved, &mut scratch);
         let mut loss = self.kernel.refine(self.clip, proj, &mut solved, &scratch);
