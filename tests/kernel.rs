@@ -322,14 +322,17 @@ fn a_bounce_fitness_built_and_held_on_any_thread_count_gives_the_same_bits() {
                         0,
                     )
                     .unwrap();
-                    let mut bits = Vec::new();
-                    for x in &xs {
+                    // the population's serial value, which one candidate alone over the pool must give
+                    let value = |f: &Fitness, x: &[f64], held: bool| {
                         let (mut o, mut alone) = ([0.0], [0.0]);
                         f.evaluate(x, &mut o);
-                        // one candidate alone, over the pool: the population's serial value
                         f.evaluate_alone(x, &mut alone);
-                        assert_eq!(o[0].to_bits(), alone[0].to_bits(), "{x:?}");
-                        bits.push(o[0].to_bits());
+                        assert_eq!(o[0].to_bits(), alone[0].to_bits(), "held {held}, {x:?}");
+                        o[0].to_bits()
+                    };
+                    let mut bits = Vec::new();
+                    for x in &xs {
+                        bits.push(value(&f, x, false));
                         let (solved, loss) = f.refined(x).unwrap();
                         bits.extend(loss.iter().map(|v| v.to_bits()));
                         bits.extend(solved.products.iter().flatten().map(|v| v.to_bits()));
@@ -337,11 +340,7 @@ fn a_bounce_fitness_built_and_held_on_any_thread_count_gives_the_same_bits() {
                     }
                     assert!(f.freeze_bounce(Some(&xs[0])));
                     for x in &xs {
-                        let (mut o, mut alone) = ([0.0], [0.0]);
-                        f.evaluate(x, &mut o);
-                        f.evaluate_alone(x, &mut alone);
-                        assert_eq!(o[0].to_bits(), alone[0].to_bits(), "held, {x:?}");
-                        bits.push(o[0].to_bits());
+                        bits.push(value(&f, x, true));
                     }
                     bits
                 })

@@ -220,7 +220,7 @@ pub fn sender_radiance(g: &GatherPoint, p: &ShadeParams, shapes: &[PShape]) -> V
     sender_radiance_with(
         g,
         || sky_view(g.position, g.normal, g.sender, shapes),
-        |_| nearest_table(g.normal),
+        || nearest_table(g.normal),
         p,
         shapes,
     )
@@ -230,7 +230,7 @@ pub fn sender_radiance(g: &GatherPoint, p: &ShadeParams, shapes: &[PShape]) -> V
 /// point as kept, the same value.
 #[inline]
 pub fn sender_radiance_cached(c: &CachedPoint, p: &ShadeParams, shapes: &[PShape]) -> Vec3A {
-    sender_radiance_with(&c.point, || c.sky, |_| c.table as usize, p, shapes)
+    sender_radiance_with(&c.point, || c.sky, || c.table as usize, p, shapes)
 }
 
 /// [`sender_radiance`] with the point's sky view (`sky`, called only with environment light) and its
@@ -239,7 +239,7 @@ pub fn sender_radiance_cached(c: &CachedPoint, p: &ShadeParams, shapes: &[PShape
 fn sender_radiance_with(
     g: &GatherPoint,
     sky: impl Fn() -> f32,
-    table: impl Fn(&[(Vec3A, Vec3A)]) -> usize,
+    table: impl Fn() -> usize,
     p: &ShadeParams,
     shapes: &[PShape],
 ) -> Vec3A {
@@ -265,7 +265,7 @@ fn sender_radiance_with(
     // A sphere sender's own bounce (the second bounce), from its table once prepared.
     if let Some((at, light)) = p.tables.get(g.sender) {
         if !at.is_empty() {
-            l += m.albedo * light[table(at)];
+            l += m.albedo * light[table()];
         }
     }
     l
