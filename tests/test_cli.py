@@ -136,6 +136,31 @@ def test_outputs(inputs, tmp_path, capsys):
         assert "determined products" in stdout and "ball" in stdout and "floor" in stdout
 
 
+def test_a_refit_that_frees_a_lobe_logs_the_scenes_own_parameters(tmp_path, capsys):
+    """A photo of a glossy ball (tests/fixtures/photos/gloss-a025): the fit frees the ball's lobe (specular,
+    shininess) for its refit, a stage whose scene has two more parameters than the user's. Its generations
+    are logged with the user's parameters like the first stage's (the CSV's columns, the snapshots rendered
+    from the user's scene; it raised "expected 10 values, got 12" from the snapshot's render), and its
+    progress line names it a closed-form stage (an L-SHADE budget), not one of a generation count."""
+    photo = REPO / "tests" / "fixtures" / "photos" / "gloss-a025"
+    out = tmp_path / "gloss"
+    code, _, stderr = run(capsys, photo / "scene_input.json", photo / "objective.png", "--out", out,
+                          "--final-scale", 1, "--final-spp", 1)
+    assert code == 0, stderr
+    report = json.loads((out / "result.json").read_text(encoding="utf-8"))["fit_report"]
+    assert "specular" in report["model"]["terms"]
+    names = rtloop.load_scene(photo / "scene_input.json").param_names()
+    with open(out / "best_per_generation.csv", newline="", encoding="utf-8") as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == ["stage", "generation", "evaluations", "fitness", *names]
+    assert all(len(r) == len(rows[0]) for r in rows[1:])
+    refit = [r for r in rows[1:] if r[0] == "light+colour+specular"]
+    assert refit and all(np.isfinite([float(v) for v in r[3:]]).all() for r in refit)
+    assert any(n.startswith("light+colour+specular_gen") for n in os.listdir(out / "snapshots"))
+    assert "stage 2 'light+colour+specular': L-SHADE, then a Nelder-Mead polish" in stderr
+    assert "gen 0/" not in stderr
+
+
 def test_paper_protocol_generation_pair_and_options(inputs, tmp_path, capsys):
     scene_path, image_path = inputs
     out = tmp_path / "paper"

@@ -155,3 +155,17 @@ def test_direct_photos_within_2mm_with_the_pixel_footprint():
     assert len(errs) >= 11
     assert max(errs[n] for n in FIRST_DIRECT) < 0.002, errs
     assert np.median(list(errs.values())) < 0.0015, errs
+
+
+def test_a_term_rejected_first_is_tested_again_once_others_explain_their_part():
+    """Forward selection (lamp-front: a dim bluish room, a bounce and a glossy ball): the room's light
+    explains under 5 % of the loss while the bounce and the lobe are missing, so the first test rejects it;
+    tested again on top of them it is selected, and the fit finds the light within the issue's 3 cm (a fit
+    without it put the light 9 cm too far and every product 6-7 % too high)."""
+    r, truth = _fit("lamp-front")
+    ev = r.model["evidence"]["environment"]
+    assert ev["earlier_gain"] < 0.05 <= ev["gain"], ev
+    assert ev["tested_with"] == ["interreflection", "specular"] and ev["selected"], ev
+    assert r.model["terms"] == ["direct", "environment", "interreflection", "specular"]
+    err, worst = _errors(r, truth)
+    assert err < 0.03 and worst < 0.03, (err, worst)

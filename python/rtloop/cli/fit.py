@@ -275,9 +275,11 @@ class _Progress:
         if not self.enabled:
             return
         total = self.total(info.stage)
-        # The closed-form stage searches with L-SHADE: its budget is population x (N + 1) evaluations over
-        # more, shrinking generations (plus a polish, logged as one more), so no generation count is known.
-        counted = info.stage != "light+colour"
+        # The closed-form stages (the fit, and a refit with the terms the photo selected or in sRGB, named
+        # "light+colour+..." and "light+colour (srgb)") search with L-SHADE: the budget is population x (N + 1)
+        # evaluations over more, shrinking generations (plus a polish, logged as one more), so no generation
+        # count is known.
+        counted = not info.stage.startswith("light+colour")
         if info.stage != self.stage:
             self.stage = info.stage
             self.stages += 1
@@ -575,9 +577,12 @@ def _model_lines(model: dict[str, Any], fitted: dict[str, Any]) -> list[str]:
     for term, ev in (model.get("evidence") or {}).items():
         verdict = "added" if ev.get("selected") else "not added"
         bic = ev.get("delta_bic")
-        lines.append(f"  {term}: {verdict} (loss at the light found without it {ev['loss_without']:.4g} -> "
-                     f"{ev['loss_with']:.4g} with it, {100 * ev['gain']:+.1f}%"
-                     + (f", BIC {-bic:+.4g})" if bic is not None else ")"))
+        on_top = ev.get("tested_with") or []
+        lines.append(f"  {term}: {verdict} (loss at the light found without it"
+                     + (f", with {' and '.join(on_top)}" if on_top else "")
+                     + f" {ev['loss_without']:.4g} -> {ev['loss_with']:.4g} with it, {100 * ev['gain']:+.1f}%"
+                     + (f", BIC {-bic:+.4g}" if bic is not None else "")
+                     + (f"; {100 * ev['earlier_gain']:+.1f}% before them)" if "earlier_gain" in ev else ")"))
     if "environment" in terms and fitted.get("environment"):
         lines.append("  environment radiance (r g b): " + "  ".join(f"{v:.4g}" for v in fitted["environment"]))
     return lines

@@ -297,6 +297,8 @@ JPEG_CHROMA_MARGIN = 2
 #: +-REFIT_FRACTION of each range around it: the terms move the light by centimetres, the box by metres)
 #: with a smaller search (population, generations, polish).
 REFIT_FRACTION = 0.15
+#: The auto terms in the order they are tested and named.
+_TERM_ORDER = ("environment", "interreflection", "specular")
 REFIT_BUDGET = (8, 6, 120)
 
 
@@ -309,9 +311,11 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
     """The closed-form fit with the image terms the photo needs (:mod:`.selection`): fitted with the terms
     given or forced on; then, unless that fit explains the photo to its quantisation floor, each auto term
     in turn (environment, interreflection, a sphere's lobe) is tested at the light found, on top of those
-    already selected, and one refit near that light has every selected term; it replaces the first fit
-    only when its loss is lower. ``model`` receives the terms and the evidence. ``codes``: ``target``'s
-    8-bit codes where it has them (:func:`rtloop._srgb.codes8`)."""
+    already selected (a term not selected is tested again after another is: forward selection), and one
+    refit near that light has every selected term; it replaces the first fit only when its loss is lower.
+    ``model`` receives the terms and the evidence (each term's last test: ``tested_with`` the terms it was
+    tested on top of, ``earlier_gain`` its first test's gain where it was tested again). ``codes``:
+    ``target``'s 8-bit codes where it has them (:func:`rtloop._srgb.codes8`)."""
     # Ambient light (given or free, no environment) takes the closed form's constant column instead.
     ambient = constant_term(scene) == "ambient"
     env = environment_given(scene) or env_mode == "on" or ambient
@@ -336,7 +340,8 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
             return None
         more = Stages(box, target, use, mask, b2, _identifiability(box, box.fit_paths), clip=clip, norm=norm,
                       space=refit_space, threads=threads, pixels_per_object=pixels_per_object,
-                      rng=np.random.default_rng(seed), callback=callback, footprint=stages.footprint)
+                      rng=np.random.default_rng(seed), callback=callback, footprint=stages.footprint,
+                      report_names=stages.all_names)
         more.saturated = stages.saturated
         more.solve_margin = stages.solve_margin
         return more
@@ -361,30 +366,49 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
     n_sub = first.pixels // 4
     model_work, model_env, added = work, env, []
     base = float(closed_form_loss(work.with_params(x, where), where, [x], target, sub, environment=env, **kw)[0])
-    if env_mode == "auto" and not env:
-        ev = environment_evidence(model_work.with_params(x, where), where, x, target, sub, base=base,
-                                  active_pixels=n_sub, **kw)
-        model["evidence"]["environment"] = ev
-        if ev["selected"]:
-            model_env, base = True, ev["loss_with"]
-            added.append("environment")
-    if inter_mode == "auto" and not interreflection_given(work) and len(scene.object_names) > 1 and not ambient \
-            and "light.color" not in model.get("held", {}):
-        ev = interreflection_evidence(model_work.with_params(x, where), where, x, target, sub, base=base,
-                                      environment=model_env, active_pixels=n_sub, **kw)
-        model["evidence"]["interreflection"] = ev
-        if ev["selected"]:
-            model_work, base = with_interreflection(model_work), ev["loss_with"]
-            added.append("interreflection")
-    # (a lobe's highlight has the light's own colour, which a held colour would get wrong)
-    names = highlight_candidates(model_work) if highlights == "auto" and "light.color" not in model.get("held", {}) else []
-    if names:
-        ev, shininess = highlight_evidence(model_work.with_params(x, where), names, where, x, target, sub,
-                                           base=base, environment=model_env, active_pixels=n_sub, **kw)
-        model["evidence"]["specular"] = ev
-        if ev["selected"]:
-            model_work = with_highlights(model_work, names, shininess)
-            added.append("specular")
+    # Forward selection: each auto term is tested on top of those selected so far, and a term not selected
+    # is tested again once another has been added (a missing term's share of the residual shows only when
+    # the others' is explained: on lamp-front a dim room's light takes 3.5 % of the loss beside the unexplained
+    # bounce and lobe, 5.1 % on top of them), until a round adds nothing (a term is tested at most once per
+    # term selected, and once more only if another was selected after it).
+    names = highlight_candidates(work) if highlights == "auto" and "light.color" not in model.get("held", {}) else []
+    candidates = [t for t, wanted in (
+        ("environment", env_mode == "auto" and not env),
+        ("interreflection", inter_mode == "auto" and not interreflection_given(work) and len(scene.object_names) > 1
+         and not ambient and "light.color" not in model.get("held", {})),
+        # (a lobe's highlight has the light's own colour, which a held colour would get wrong)
+        ("specular", bool(names)),
+    ) if wanted]
+    tested_with: dict[str, int] = {}  # a term: how many terms were selected when it was last tested
+    while any(t not in added and tested_with.get(t, -1) < len(added) for t in candidates):
+        for term in [t for t in candidates if t not in added and tested_with.get(t, -1) < len(added)]:
+            at = model_work.with_params(x, where)
+            tested_with[term] = len(added)
+            shininess = None
+            if term == "environment":
+                ev = environment_evidence(at, where, x, target, sub, base=base, active_pixels=n_sub, **kw)
+            elif term == "interreflection":
+                ev = interreflection_evidence(at, where, x, target, sub, base=base, environment=model_env,
+                                              active_pixels=n_sub, **kw)
+            else:
+                ev, shininess = highlight_evidence(at, names, where, x, target, sub, base=base,
+                                                   environment=model_env, active_pixels=n_sub, **kw)
+            earlier = model["evidence"].get(term)
+            ev["tested_with"] = [t for t in _TERM_ORDER if t in added]
+            if earlier is not None:
+                ev["earlier_gain"] = earlier.get("earlier_gain", earlier["gain"])
+            model["evidence"][term] = ev
+            if not ev["selected"]:
+                continue
+            base = ev["loss_with"]
+            added.append(term)
+            if term == "environment":
+                model_env = True
+            elif term == "interreflection":
+                model_work = with_interreflection(model_work)
+            else:
+                model_work = with_highlights(model_work, names, shininess)
+    added.sort(key=_TERM_ORDER.index)
     if not added:
         return _jpeg_refit(current, work, stages, first, model, seeds, blocking=blocking, space=space_mode,
                            env=env, refit=refit)

@@ -21,7 +21,9 @@ class GenerationInfo:
     generation: int
     fitness: float
     objectives: list[float]
-    #: Values of all of the scene's fit parameters (the stage's best individual, the rest held fixed).
+    #: Values of all of the scene's fit parameters (the stage's best individual, the rest held fixed), in
+    #: the order of ``scene.param_names()``; in the refit with the terms a photo selected, the parameters a
+    #: term frees (a lobe's specular and shininess) are not among them.
     params: np.ndarray
     evaluations: int
 

@@ -47,7 +47,8 @@ class Stages:
     def __init__(self, scene: Scene, target: np.ndarray, use: np.ndarray | None, mask: np.ndarray | None,
                  budget: Budget, ident: dict[str, Any], *, clip: bool, norm: str, space: str,
                  threads: int | None, pixels_per_object: int, rng: np.random.Generator,
-                 callback: Callable[[GenerationInfo], Any] | None, footprint: str = "off"):
+                 callback: Callable[[GenerationInfo], Any] | None, footprint: str = "off",
+                 report_names: list[str] | None = None):
         self.scene, self.target, self.use, self.mask = scene, target, use, mask
         self.budget, self.ident = budget, ident
         self.clip, self.norm, self.space, self.threads = clip, norm, space, threads
@@ -56,6 +57,10 @@ class Stages:
         self.footprint = footprint
         self.all_paths = scene.fit_paths
         self.all_names = scene.param_names()
+        #: The callback's ``params`` are the values of these names (None: every fit parameter of ``scene``):
+        #: a refit whose scene frees a term's parameters (a lobe's specular and shininess) still reports
+        #: those of the fit's own scene, as its first stage did.
+        self.report_index = None if report_names is None else [self.all_names.index(n) for n in report_names]
         self.light_paths = [p for p in self.all_paths if p.startswith("light.")]
         self.other_paths = [p for p in self.all_paths if not p.startswith("light.")]
         self.stages: list[StageResult] = []
@@ -89,6 +94,8 @@ class Stages:
                 split = split_products(stage_scene, products, self.scene)
                 full = np.array(split.get_params(self.all_paths))
                 full[index] = best
+            if self.report_index is not None:
+                full = full[self.report_index]
             info = GenerationInfo(name, gen, float(sum(objectives)), list(objectives), full,
                                   self.evaluations + evals)
             return callback(info) is not False
