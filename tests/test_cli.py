@@ -141,11 +141,12 @@ def test_a_refit_that_frees_a_lobe_logs_the_scenes_own_parameters(tmp_path, caps
     shininess) for its refit, a stage whose scene has two more parameters than the user's. Its generations
     are logged with the user's parameters like the first stage's (the CSV's columns, the snapshots rendered
     from the user's scene; it raised "expected 10 values, got 12" from the snapshot's render), and its
-    progress line names it a closed-form stage (an L-SHADE budget), not one of a generation count."""
+    progress line names it a closed-form stage (an L-SHADE budget), not one of a generation count; the
+    report shows the fitted scene's parameters, the lobe at its fitted value."""
     photo = REPO / "tests" / "fixtures" / "photos" / "gloss-a025"
     out = tmp_path / "gloss"
     code, _, stderr = run(capsys, photo / "scene_input.json", photo / "objective.png", "--out", out,
-                          "--final-scale", 1, "--final-spp", 1)
+                          "--final-scale", 1, "--final-spp", 1, "--report")
     assert code == 0, stderr
     report = json.loads((out / "result.json").read_text(encoding="utf-8"))["fit_report"]
     assert "specular" in report["model"]["terms"]
@@ -159,6 +160,10 @@ def test_a_refit_that_frees_a_lobe_logs_the_scenes_own_parameters(tmp_path, caps
     assert any(n.startswith("light+colour+specular_gen") for n in os.listdir(out / "snapshots"))
     assert "stage 2 'light+colour+specular': L-SHADE, then a Nelder-Mead polish" in stderr
     assert "gen 0/" not in stderr
+    # The report plots the fitted scene's parameters, the lobe at its fitted value (it raised "row has 10
+    # parameter values; the scene has 12").
+    page = (out / "report.html").read_text(encoding="utf-8")
+    assert "objects.ball.shininess" in page and "freed by the fit for its refit" in page
 
 
 def test_paper_protocol_generation_pair_and_options(inputs, tmp_path, capsys):

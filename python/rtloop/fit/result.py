@@ -83,6 +83,14 @@ class FitResult:
     #: the light's intensity in W/sr (:mod:`rtloop.fit.reference`); None without one.
     reference: dict[str, Any] | None = None
 
+    def generation_names(self) -> list[str]:
+        """The names of a callback's ``GenerationInfo.params`` (and of best_per_generation.csv's columns):
+        every fit parameter of the fitted ``scene`` but those the fit freed itself (the lobe of a sphere
+        whose highlight the photo showed, ``model["specular_objects"]``), which its first stage did not
+        have."""
+        freed = {f"objects.{n}.{p}" for n in self.model.get("specular_objects", []) for p in ("specular", "shininess")}
+        return [n for n in self.scene.param_names() if n not in freed]
+
     @property
     def fitness(self) -> float:
         return float(sum(self.stages[-1].objectives)) if self.stages else float("nan")

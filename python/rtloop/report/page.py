@@ -233,8 +233,12 @@ def report(
         true_vals = np.array([terr["values"][n] for n in names], float)
 
     if generations is not None:
-        rows = _rows_given(result, generations, len(names))
+        rows = _rows_given(result, generations, names)
         source, notes = "generations", []
+        freed = [n for n in names if n not in result.generation_names()]
+        if freed:
+            notes.append(f"{', '.join(freed)}: freed by the fit for its refit (the photo showed a highlight), so "
+                         "not among the generations' values; shown at the fitted value.")
     else:
         rows, notes = _rows_from_history(result)
         source = "history"

@@ -34,7 +34,14 @@ class GenerationRow:
     params: np.ndarray
 
 
-def _rows_given(result: Any, generations: Iterable[Any], n: int) -> list[GenerationRow]:
+def _rows_given(result: Any, generations: Iterable[Any], names: list[str]) -> list[GenerationRow]:
+    """The rows of ``generations``, each a full vector over ``names`` (the fitted scene's parameters): a
+    callback's row holds the names of ``result.generation_names()``, without a lobe the fit freed itself,
+    which keeps its fitted value."""
+    n = len(names)
+    short = result.generation_names() if hasattr(result, "generation_names") else names
+    fill = np.asarray(result.scene.get_params(result.scene.fit_paths), float)
+    where = [names.index(m) for m in short]
     fitness_of = {(s.name, int(h[0])): float(h[1]) for s in result.stages for h in s.history}
     rows = []
     for r in generations:
@@ -53,9 +60,14 @@ def _rows_given(result: Any, generations: Iterable[Any], n: int) -> list[Generat
                 f"dicts with those keys, or (stage, generation[, fitness], params) tuples; got {r!r}"
             )
         params = np.asarray(params, float).reshape(-1)
+        if params.size == len(short) != n:
+            full = fill.copy()
+            full[where] = params
+            params = full
         if params.size != n:
             raise ValueError(
                 f"generations: row ({stage!r}, {gen}) has {params.size} parameter values; the scene has {n}"
+                + (f" ({len(short)} without the lobes the fit freed)" if len(short) != n else "")
             )
         gen = int(gen)
         fit_ = float(fit_) if fit_ is not None else fitness_of.get((str(stage), gen), float("nan"))
