@@ -116,8 +116,10 @@ where
 /// A stage that only polishes: Nelder–Mead on `polish` (else `fitness`) from `x0` within `bounds`, its
 /// initial simplex `step` (a fraction of each range) along every free dimension, `evaluations` at most,
 /// stopping once the simplex spans less than `x_tol` of every range; then what [`run_stage`] gives at
-/// the best point (the loss-minimising products and that loss). For a search resumed near a known
-/// light, where a population would only find the basin again.
+/// the best point (the loss-minimising products and that loss; not before [`StageResult::refine`] when
+/// `refine` is false). For a search resumed near a known light, where a population would only find the
+/// basin again.
+#[allow(clippy::too_many_arguments)]
 pub fn polish_stage(
     fitness: &Fitness,
     polish: Option<&Fitness>,
@@ -126,6 +128,7 @@ pub fn polish_stage(
     step: f64,
     evaluations: usize,
     x_tol: f64,
+    refine: bool,
 ) -> Result<StageResult> {
     let obj = polish.unwrap_or(fitness);
     let mut f0 = [0.0];
@@ -157,11 +160,20 @@ pub fn polish_stage(
         lit_pixels: None,
         gauge: None,
     };
-    out.take_refined(obj.refined(&out.x));
+    if refine {
+        out.refine(fitness, polish);
+    }
     Ok(out)
 }
 
 impl StageResult {
+    /// The refined products at `x` (as [`polish_stage`] with `refine`): for a stage first run without,
+    /// once no further pass follows it.
+    pub fn refine(&mut self, fitness: &Fitness, polish: Option<&Fitness>) {
+        let refined = polish.unwrap_or(fitness).refined(&self.x);
+        self.take_refined(refined);
+    }
+
     /// The refined products (where given) as the result: its products, lit pixels, gauge and their loss
     /// as `objectives`, the search's own loss kept as `search_objectives`.
     fn take_refined(&mut self, refined: Option<(Solved, [f64; 3])>) {
