@@ -297,9 +297,9 @@ JPEG_CHROMA_MARGIN = 2
 #: +-REFIT_FRACTION of each range around it: the terms move the light by centimetres, the box by metres)
 #: with a smaller search (population, generations, polish).
 REFIT_FRACTION = 0.15
+REFIT_BUDGET = (8, 6, 120)
 #: The auto terms in the order they are tested and named.
 _TERM_ORDER = ("environment", "interreflection", "specular")
-REFIT_BUDGET = (8, 6, 120)
 
 
 def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, model: dict[str, Any], *,
