@@ -7,7 +7,7 @@ mod common;
 use common::Oracle;
 use rtloop::fitness::SATURATED;
 use rtloop::search::{Objective, Rng};
-use rtloop::{render, Fitness, LossKind, ParamLayout, Projection, Scene};
+use rtloop::{render, Fitness, LossKind, Norm, ParamLayout, Projection, Scene};
 
 fn random_scene(rng: &mut Rng, spheres: usize, specular: bool, ambient: bool) -> Scene {
     let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.uniform();
@@ -1827,6 +1827,70 @@ fn solve_margin_keeps_the_pixels_whose_neighbourhood_shows_their_object() {
                     "margin {margin}, object {k}, channel {c}: {got} vs {p}"
                 );
             }
+        }
+    }
+}
+
+/// `refined` where the bounce was last held (`freeze_bounce` at that candidate, which keeps its full fixed
+/// point for it) gives the bits a fresh fitness computes there, and so does `refined` elsewhere and after a
+/// setting that changes the loss (which drops the kept solve).
+#[test]
+fn refined_where_the_bounce_is_held_is_the_fresh_solve() {
+    let mut rng = Rng::new(29);
+    for k in 0..3 {
+        let mut scene = random_scene(&mut rng, 1 + k % 2, false, false);
+        scene.interreflection = true;
+        let target = clipped_render(&scene);
+        let layout = ParamLayout::new(&scene, &["light.position".to_string()]).unwrap();
+        let (x, y) = (
+            random_candidate(&mut rng, &layout),
+            random_candidate(&mut rng, &layout),
+        );
+        for footprint in [false, true] {
+            let build = || {
+                let bounds = vec![[(0.0, 200.0); 3]; scene.objects.len()];
+                Fitness::with_solve_margin(
+                    &scene,
+                    layout.clone(),
+                    &target,
+                    None,
+                    LossKind::L1Projected,
+                    true,
+                    Some(Projection::matte(bounds)),
+                    footprint,
+                    0,
+                )
+                .unwrap()
+            };
+            let bits = |f: &Fitness, x: &[f64]| {
+                let (solved, loss) = f.refined(x).unwrap();
+                let mut b: Vec<u64> = loss.iter().map(|v| v.to_bits()).collect();
+                b.extend(solved.products.iter().flatten().map(|v| v.to_bits()));
+                b.push(solved.gauge.unwrap().to_bits());
+                b.extend(solved.lit.iter().map(|&v| v as u64));
+                b
+            };
+            let fresh = build();
+            let mut held = build();
+            assert!(held.freeze_bounce(Some(&x)));
+            assert_eq!(
+                bits(&held, &x),
+                bits(&fresh, &x),
+                "scene {k}, footprint {footprint}, at the hold"
+            );
+            assert_eq!(
+                bits(&held, &y),
+                bits(&fresh, &y),
+                "scene {k}, footprint {footprint}, elsewhere"
+            );
+            let (mut fresh, mut held) = (fresh, held);
+            fresh.set_norm(Norm::L2);
+            held.set_norm(Norm::L2);
+            assert_eq!(
+                bits(&held, &x),
+                bits(&fresh, &x),
+                "scene {k}, footprint {footprint}, L2 after the hold"
+            );
         }
     }
 }

@@ -78,6 +78,10 @@ pub struct Fitness {
     constant: [f64; 3],
     /// For `L1Projected`: the bounds of the closed-form unknowns.
     projection: Option<Projection>,
+    /// The bounce's full fixed point [`Fitness::freeze_bounce`] solved at a candidate: its `x`, the solve
+    /// and its scratch. [`Fitness::refined`] at the same `x` refines from it instead of solving it again
+    /// (the same inputs: the same values); cleared by every setting that changes the loss.
+    held_solve: Option<(Vec<f64>, Solved, Vec<f32>)>,
 }
 
 /// The gauge bounds of the bounce from the scene's fit section: u = 1/intensity over the intensity's
@@ -177,6 +181,7 @@ impl Fitness {
             shadows: self.shadows,
             constant: self.constant,
             projection: self.projection.clone(),
+            held_solve: None, // solved with the footprint: not this model's
         }
     }
 
@@ -370,6 +375,7 @@ impl Fitness {
             constant: penalty_sums(&active.fixed, Norm::L1, Space::Linear),
             active,
             projection,
+            held_solve: None,
         })
     }
 
@@ -398,16 +404,24 @@ impl Fitness {
             g.frozen = None;
         }
         let proj = &proj;
-        let p = self.params(x);
-        let (mut solved, mut scratch) = (Solved::default(), Vec::new());
-        let c = Candidate {
-            params: &p,
-            clip: self.clip,
-            bound: f64::INFINITY,
-            // the bounce's fixed point over the pool (the same value); a direct solve is too small for it
-            parallel: proj.gauge.is_some(),
+        let (mut solved, scratch) = match &self.held_solve {
+            // the full fixed point already solved here, where the bounce was last held
+            Some((at, solved, scratch)) if at.as_slice() == x => (solved.clone(), scratch.clone()),
+            _ => {
+                let p = self.params(x);
+                let (mut solved, mut scratch) = (Solved::default(), Vec::new());
+                let c = Candidate {
+                    params: &p,
+                    clip: self.clip,
+                    bound: f64::INFINITY,
+                    // the bounce's fixed point over the pool (the same value); a direct solve is too
+                    // small for it
+                    parallel: proj.gauge.is_some(),
+                };
+                self.kernel.projected(c, proj, &mut solved, &mut scratch);
+                (solved, scratch)
+            }
         };
-        self.kernel.projected(c, proj, &mut solved, &mut scratch);
         let mut loss = self.kernel.refine(self.clip, proj, &mut solved, &scratch);
         for c in 0..3 {
             loss[c] += self.constant[c];
@@ -458,6 +472,9 @@ impl Fitness {
         if let Some(live) = self.projection.as_mut().and_then(|p| p.gauge.as_mut()) {
             live.frozen = Some(std::sync::Arc::new(frozen));
         }
+        // `refined` at this candidate (a pass that ends where it started) takes this solve: `proj` is the
+        // projection `refined` builds (the full bounce's rounds, nothing held), the candidate the same.
+        self.held_solve = x.map(|x| (x.to_vec(), solved, scratch));
         true
     }
 
@@ -478,6 +495,7 @@ impl Fitness {
 
     /// Penalise pixel differences with `norm` (L1 by default) in every loss of this fitness.
     pub fn set_norm(&mut self, norm: Norm) {
+        self.held_solve = None;
         self.kernel.norm = norm;
         self.constant = penalty_sums(&self.active.fixed, norm, self.space());
     }
@@ -492,6 +510,7 @@ impl Fitness {
     /// them closed form); only the loss that ranks candidates, and the products that [`Fitness::refined`]
     /// reports, are in `space`.
     pub fn set_space(&mut self, space: Space) {
+        self.held_solve = None;
         self.kernel.set_space(space);
         self.constant = penalty_sums(&self.active.fixed, self.norm(), space);
     }
@@ -503,6 +522,7 @@ impl Fitness {
     /// Objective values at or above `level` (capped at [`SATURATED`]) count as possibly clipped (see
     /// [`Kernel::set_saturated`]).
     pub fn set_saturated(&mut self, level: f32) {
+        self.held_solve = None;
         self.kernel.set_saturated(level);
     }
 
