@@ -285,6 +285,33 @@ fn one_candidate_alone_gives_the_serial_value_bit_for_bit_on_any_thread_count() 
     }
 }
 
+/// A random scene of one or two spheres (`k` odd: two) with interreflection, its clipped render and the
+/// light's position as the searched parameters.
+fn bounce_case(rng: &mut Rng, k: usize) -> (Scene, Vec<f32>, ParamLayout) {
+    let mut scene = random_scene(rng, 1 + k % 2, false, false);
+    scene.interreflection = true;
+    let target = clipped_render(&scene);
+    let layout = ParamLayout::new(&scene, &["light.position".to_string()]).unwrap();
+    (scene, target, layout)
+}
+
+/// The closed-form (matte) fitness of a [`bounce_case`], with or without the pixel footprint.
+fn bounce_fitness(scene: &Scene, layout: &ParamLayout, target: &[f32], footprint: bool) -> Fitness {
+    let bounds = vec![[(0.0, 200.0); 3]; scene.objects.len()];
+    Fitness::with_solve_margin(
+        scene,
+        layout.clone(),
+        target,
+        None,
+        LossKind::L1Projected,
+        true,
+        Some(Projection::matte(bounds)),
+        footprint,
+        0,
+    )
+    .unwrap()
+}
+
 /// With interreflection the fitness's geometry and the bounce's gathers are built over the pool, and
 /// the held bounce and the refined products are solved over it: the values must be a one-thread
 /// build's, bit for bit, on any number of threads (the full bounce, the held one, the refined
@@ -294,10 +321,7 @@ fn one_candidate_alone_gives_the_serial_value_bit_for_bit_on_any_thread_count() 
 fn a_bounce_fitness_built_and_held_on_any_thread_count_gives_the_same_bits() {
     let mut rng = Rng::new(23);
     for k in 0..3 {
-        let mut scene = random_scene(&mut rng, 1 + k % 2, false, false);
-        scene.interreflection = true;
-        let target = clipped_render(&scene);
-        let layout = ParamLayout::new(&scene, &["light.position".to_string()]).unwrap();
+        let (scene, target, layout) = bounce_case(&mut rng, k);
         let xs: Vec<Vec<f64>> = (0..3)
             .map(|_| random_candidate(&mut rng, &layout))
             .chain([scene.light.position.to_vec()])
@@ -309,19 +333,7 @@ fn a_bounce_fitness_built_and_held_on_any_thread_count_gives_the_same_bits() {
                     .build()
                     .unwrap();
                 pool.install(|| {
-                    let bounds = vec![[(0.0, 200.0); 3]; scene.objects.len()];
-                    let mut f = Fitness::with_solve_margin(
-                        &scene,
-                        layout.clone(),
-                        &target,
-                        None,
-                        LossKind::L1Projected,
-                        true,
-                        Some(Projection::matte(bounds)),
-                        footprint,
-                        0,
-                    )
-                    .unwrap();
+                    let mut f = bounce_fitness(&scene, &layout, &target, footprint);
                     // the population's serial value, which one candidate alone over the pool must give
                     let value = |f: &Fitness, x: &[f64], held: bool| {
                         let (mut o, mut alone) = ([0.0], [0.0]);
@@ -1838,30 +1850,13 @@ fn solve_margin_keeps_the_pixels_whose_neighbourhood_shows_their_object() {
 fn refined_where_the_bounce_is_held_is_the_fresh_solve() {
     let mut rng = Rng::new(29);
     for k in 0..3 {
-        let mut scene = random_scene(&mut rng, 1 + k % 2, false, false);
-        scene.interreflection = true;
-        let target = clipped_render(&scene);
-        let layout = ParamLayout::new(&scene, &["light.position".to_string()]).unwrap();
+        let (scene, target, layout) = bounce_case(&mut rng, k);
         let (x, y) = (
             random_candidate(&mut rng, &layout),
             random_candidate(&mut rng, &layout),
         );
         for footprint in [false, true] {
-            let build = || {
-                let bounds = vec![[(0.0, 200.0); 3]; scene.objects.len()];
-                Fitness::with_solve_margin(
-                    &scene,
-                    layout.clone(),
-                    &target,
-                    None,
-                    LossKind::L1Projected,
-                    true,
-                    Some(Projection::matte(bounds)),
-                    footprint,
-                    0,
-                )
-                .unwrap()
-            };
+            let build = || bounce_fitness(&scene, &layout, &target, footprint);
             let bits = |f: &Fitness, x: &[f64]| {
                 let (solved, loss) = f.refined(x).unwrap();
                 let mut b: Vec<u64> = loss.iter().map(|v| v.to_bits()).collect();
