@@ -88,14 +88,7 @@ where
                 products,
             })
         })?;
-    // The search ranks lights by least-squares products; the result carries the products that minimise
-    // the loss itself (saturated pixels one-sided), and that loss.
-    // (a search the callback stopped is the result: refined whatever was asked)
-    let refined = if refine || found.stop == StopReason::Callback {
-        polish.unwrap_or(fitness).refined(&found.best)
-    } else {
-        None
-    };
+    let stopped = found.stop == StopReason::Callback;
     let mut out = StageResult {
         x: found.best,
         objectives: found.best_objectives,
@@ -109,17 +102,20 @@ where
         lit_pixels: None,
         gauge: None,
     };
-    out.take_refined(refined);
+    // The search ranks lights by least-squares products; the result carries the products that minimise
+    // the loss itself (saturated pixels one-sided), and that loss.
+    // (a search the callback stopped is the result: refined whatever was asked)
+    if refine || stopped {
+        out.refine(fitness, polish);
+    }
     Ok(out)
 }
 
 /// A stage that only polishes: Nelder–Mead on `polish` (else `fitness`) from `x0` within `bounds`, its
 /// initial simplex `step` (a fraction of each range) along every free dimension, `evaluations` at most,
-/// stopping once the simplex spans less than `x_tol` of every range; then what [`run_stage`] gives at
-/// the best point (the loss-minimising products and that loss; not before [`StageResult::refine`] when
-/// `refine` is false). For a search resumed near a known light, where a population would only find the
-/// basin again.
-#[allow(clippy::too_many_arguments)]
+/// stopping once the simplex spans less than `x_tol` of every range. Its point and loss only: the
+/// loss-minimising products at it come with [`StageResult::refine`], once no further pass follows. For a
+/// search resumed near a known light, where a population would only find the basin again.
 pub fn polish_stage(
     fitness: &Fitness,
     polish: Option<&Fitness>,
@@ -128,7 +124,6 @@ pub fn polish_stage(
     step: f64,
     evaluations: usize,
     x_tol: f64,
-    refine: bool,
 ) -> Result<StageResult> {
     let obj = polish.unwrap_or(fitness);
     let mut f0 = [0.0];
@@ -141,7 +136,7 @@ pub fn polish_stage(
     } else {
         (x0.to_vec(), f0)
     };
-    let mut out = StageResult {
+    Ok(StageResult {
         x,
         objectives: vec![f],
         search_objectives: None,
@@ -159,25 +154,16 @@ pub fn polish_stage(
         products: None,
         lit_pixels: None,
         gauge: None,
-    };
-    if refine {
-        out.refine(fitness, polish);
-    }
-    Ok(out)
+    })
 }
 
 impl StageResult {
-    /// The refined products at `x` (as [`polish_stage`] with `refine`): for a stage first run without,
-    /// once no further pass follows it.
+    /// The refined products at `x` as the result (the products that minimise the loss itself there, and
+    /// that loss): for a stage run without them, once no further pass follows it.
+    /// Its products, lit pixels and gauge, their loss as `objectives`, the search's own loss kept as
+    /// `search_objectives` (nothing where the loss has no closed-form products).
     pub fn refine(&mut self, fitness: &Fitness, polish: Option<&Fitness>) {
-        let refined = polish.unwrap_or(fitness).refined(&self.x);
-        self.take_refined(refined);
-    }
-
-    /// The refined products (where given) as the result: its products, lit pixels, gauge and their loss
-    /// as `objectives`, the search's own loss kept as `search_objectives`.
-    fn take_refined(&mut self, refined: Option<(Solved, [f64; 3])>) {
-        if let Some((solved, loss)) = refined {
+        if let Some((solved, loss)) = polish.unwrap_or(fitness).refined(&self.x) {
             self.products = Some(product_rows(&solved));
             self.lit_pixels = Some(solved.lit);
             self.gauge = solved.gauge;

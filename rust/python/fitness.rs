@@ -25,7 +25,8 @@ fn target_vec(scene: &Scene, target: &PyReadonlyArray3<'_, f32>) -> PyResult<Vec
 /// A fitness's arguments, read from Python (with the GIL, every check that names an argument done):
 /// [`FitnessArgs::build`] then builds it without the GIL, inside the call's worker pool.
 pub(crate) struct FitnessArgs {
-    layout: ParamLayout,
+    /// The searched parameters of `paths`.
+    pub(crate) layout: ParamLayout,
     /// The search bounds of `paths`.
     pub(crate) bounds: Vec<(f64, f64)>,
     target: Vec<f32>,

@@ -596,7 +596,7 @@ fn optimize<'py>(
     let bounds = args.bounds.clone();
     // The light's searched parameters: where the bounce is held depends on them alone (a lobe's shininess
     // shapes no diffuse bounce), so a pass's move is measured on them (on every parameter if none is).
-    let names = crate::params::ParamLayout::new(scene, &paths)?.names;
+    let names = &args.layout.names;
     let light_dims: Vec<bool> = if names.iter().any(|n| n.starts_with("light.")) {
         names.iter().map(|n| n.starts_with("light.")).collect()
     } else {
@@ -684,7 +684,6 @@ fn optimize<'py>(
                     REPASS_STEP,
                     evaluations,
                     x_tol,
-                    false,
                 )?;
                 // Another pass holds the bounce where this one ended, unless it barely moved the light
                 // from where this one held it: the passes have reached the held bounce's fixed point.

@@ -380,8 +380,8 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
         ("specular", bool(names)),
     ) if wanted]
     tested_with: dict[str, int] = {}  # a term: how many terms were selected when it was last tested
-    while any(t not in added and tested_with.get(t, -1) < len(added) for t in candidates):
-        for term in [t for t in candidates if t not in added and tested_with.get(t, -1) < len(added)]:
+    while todo := [t for t in candidates if t not in added and tested_with.get(t, -1) < len(added)]:
+        for term in todo:
             at = model_work.with_params(x, where)
             tested_with[term] = len(added)
             shininess = None
