@@ -155,8 +155,9 @@ def optimize(
     only pixels whose neighbours within this Chebyshev distance all show their object inform the
     closed-form products (0, the default: the 4-neighbours; rtloop.fit passes 2 for a JPEG); the loss
     counts every pixel. frozen_bounce: with interreflection, 0 searches with the full bounce; N >= 1
-    ranks lights with the bounce held at the scene's light, then N - 1 times at the light found so far,
-    each later pass a Nelder-Mead polish from it (half the polish budget) in a tenth of the box."""
+    ranks lights with the bounce held at the scene's light, then up to N - 1 times at the light found so
+    far, each later pass a Nelder-Mead polish from it (half the polish budget) in a tenth of the box; the
+    first pass's own polish takes half the budget too where N > 1."""
 
 class OptimizeResult:
     """What ``optimize`` found (immutable). For the projected loss ``products`` (per object

@@ -166,12 +166,13 @@ def check_interreflection(mode: Any) -> str:
 
 #: The refit with the bounce ranks lights with the bounce held at a reference light (``_native.optimize``'s
 #: ``frozen_bounce``: a candidate then costs a direct one's factors and one solve, not the bounce's fixed
-#: point): first at the light found without the bounce, then, for each further pass, at the light the
-#: previous pass found (a Nelder-Mead polish from it, with half the polish budget, in a tenth of the box
-#: around it), at most this many passes: a third and later pass only while the previous moved the light by
-#: more than a thousandth of the box (the held bounce's fixed point; a light the fit without the terms put
-#: 20 cm off moves 5 cm in the second pass and 2 cm in the third); the last pass's result carries the full
-#: bounce's products, gauge and loss at its light.
+#: point): first at the light found without the bounce (a search whose polish takes half the budget where
+#: passes follow), then, for each further pass, at the light the previous pass found (a Nelder-Mead polish
+#: from it, with half the polish budget, in a tenth of the box around it), at most this many passes: a
+#: third and later pass only while the previous moved the light by more than a thousandth of the box (the
+#: held bounce's fixed point; a light the fit without the terms put 20 cm off moves 5 cm in the second pass
+#: and 2 cm in the third); the last pass's result carries the full bounce's products, gauge and loss at
+#: its light.
 BOUNCE_PASSES = 4
 
 
