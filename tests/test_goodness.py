@@ -226,3 +226,38 @@ def test_the_8_bit_codes_give_the_same_numbers(case):
         for pixels in (None, use):
             assert quantisation_floor(photo, pixels, c) == quantisation_floor(photo, pixels)
             assert gm.goodness(truth, photo, pixels, codes=c, encoding=enc) == gm.goodness(truth, photo, pixels)
+
+
+@pytest.mark.parametrize("space", ["linear", "srgb"])
+@pytest.mark.parametrize("norm", ["l1", "l2", "huber", "huber:0.0005"])
+def test_the_quantisation_floor_is_the_rounding_error_in_each_norm(norm, space):
+    """explained_ratio measures a residual in multiples of the 8-bit rounding error, alike in every norm
+    and loss space: an exact model of an 8-bit photo (the residual is the rounding itself) is 1, one whose
+    residual is twice the rounding 2 (L2's loss would be 4x the floor; Huber's between 2x and 4x). The
+    rounding error is uniform over a code step on the encodings, not quite in linear units: a few per
+    cent."""
+    from rtloop._srgb import decode, encode
+    from rtloop.fit.selection import explained_ratio
+
+    rng = np.random.default_rng(3)
+    truth = rng.uniform(0.0, 1.0, (96, 128, 3))
+    photo = decode(np.round(encode(truth) * 255) / 255).astype(np.float32)
+    use = np.arange(0, 96 * 128, 2, dtype=np.uint32)
+    h = {"huber": 0.02, "huber:0.0005": 0.0005}.get(norm)
+
+    def penalty(d):
+        if norm == "l1":
+            return np.abs(d)
+        if norm == "l2":
+            return d * d
+        a = np.abs(d)
+        return np.where(a <= h, 0.5 * d * d / h, a - 0.5 * h)
+
+    for scale in (1.0, 2.0):
+        if space == "srgb":
+            d = scale * (encode(truth) - encode(photo.astype(np.float64)))
+        else:
+            d = scale * (truth - photo.astype(np.float64))
+        loss = float(penalty(d.reshape(-1, 3)[use]).sum())
+        floor, ratio = explained_ratio(loss, photo, use, norm=norm, space=space)
+        assert floor > 0 and ratio == pytest.approx(scale, rel=0.05), (scale, ratio)

@@ -572,7 +572,7 @@ def _model_lines(model: dict[str, Any], fitted: dict[str, Any]) -> list[str]:
     lines = [f"image model: {' + '.join(terms)}"]
     res = model.get("residual")
     if res:
-        lines.append(f"  residual: {res['ratio']:.2g}x the photo's 8-bit quantisation floor"
+        lines.append(f"  residual: {res['ratio']:.2g}x the size of the photo's 8-bit rounding error"
                      + (" (explained: no further term tested)" if "skipped" in model else ""))
     for term, ev in (model.get("evidence") or {}).items():
         verdict = "added" if ev.get("selected") else "not added"

@@ -46,11 +46,11 @@ from .selection import (
     closed_form_loss,
     environment_evidence,
     environment_given,
+    explained_ratio,
     highlight_candidates,
     highlight_evidence,
     interreflection_evidence,
     interreflection_given,
-    quantisation_floor,
     with_highlights,
     with_interreflection,
 )
@@ -347,13 +347,13 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
         return more
 
     # A fit at the photo's noise level needs no more terms: the tests are skipped (one sum, no evaluation).
-    floor = quantisation_floor(target, use, codes)
-    ratio = sum(first.objectives) / floor if floor > 0 else float("inf")
+    # The floor in the fit's own norm and space, and the residual's size against it (alike in every norm).
+    floor, ratio = explained_ratio(sum(first.objectives), target, use, codes, norm=norm, space=space)
     model["residual"] = {"loss": float(sum(first.objectives)), "quantisation_floor": floor, "ratio": ratio,
                          "explained_below": EXPLAINED}
     if ratio < EXPLAINED:
-        model["skipped"] = (f"the fit's loss is {ratio:.2g}x the photo's 8-bit quantisation floor (below "
-                            f"{EXPLAINED:g}x): the photo needs no more terms")
+        model["skipped"] = (f"the fit's residual is {ratio:.2g}x the size of the photo's 8-bit rounding error "
+                            f"(below {EXPLAINED:g}x): the photo needs no more terms")
         return current
     # The tests compare models on every other pixel in each direction: a term that explains 5 % of the loss
     # shows there as well, and the bounce's gathers cost a quarter.
@@ -510,8 +510,7 @@ def _encoding_check(work: Scene, stages: Stages, seed: int, target: np.ndarray, 
                    rng=np.random.default_rng(seed), callback=None, footprint=stages.footprint)
     check.saturated = None if stages.saturated is None else float(decode(np.float64(stages.saturated)))
     check.projected(seed, environment=environment)
-    floor = quantisation_floor(decoded, sub)
-    decoded_ratio = sum(check.stages[-1].objectives) / floor if floor > 0 else float("inf")
+    _, decoded_ratio = explained_ratio(sum(check.stages[-1].objectives), decoded, sub, norm=stages.norm)
     out: dict[str, Any] = {"ratio_as_given": ratio, "ratio_decoded": decoded_ratio,
                            "suspect": bool(decoded_ratio * ENCODED_GAIN <= ratio),
                            "rule": f"doubted when the sRGB-decoded image fits at least {ENCODED_GAIN:g}x better"}

@@ -35,6 +35,7 @@ __all__ = [
     "closed_form_loss",
     "environment_evidence",
     "environment_given",
+    "explained_ratio",
     "highlight_candidates",
     "highlight_evidence",
     "interreflection_evidence",
@@ -61,9 +62,10 @@ SPECULAR_RANGE = (0.0, 1.0)
 SHININESS_RANGE = (1.0, 2000.0)
 SHININESS_SPAN = 3.2
 
-#: A fit whose loss is within this many times the photo's 8-bit quantisation floor explains the photo:
-#: the terms are not tested (a clean photo of what the base model has leaves 1.9-2.7x, from the pixel
-#: footprint at edges; every test photo with an environment, a bounce or gloss 3.7x and more).
+#: A fit whose residual is within this many times the size of the photo's 8-bit rounding error
+#: (:func:`explained_ratio`, in the fit's own norm and space) explains the photo: the terms are not tested
+#: (with L1 a clean photo of what the base model has leaves 1.9-2.7x, from the pixel footprint at edges;
+#: every test photo with an environment, a bounce or gloss 3.7x and more).
 EXPLAINED = 3.0
 
 #: The least relative reduction of the loss at the fitted light for "auto" to add a term. The information
@@ -73,16 +75,100 @@ EXPLAINED = 3.0
 MIN_GAIN = 0.05
 
 
-def quantisation_floor(target: np.ndarray, pixels: np.ndarray | None, codes: np.ndarray | None = None) -> float:
-    """The L1 loss an exact model would leave on the photo from 8-bit sRGB quantisation alone: per pixel and
-    channel, a quarter of a code step (the mean absolute error of rounding) in linear units, summed over
+def quantisation_floor(target: np.ndarray, pixels: np.ndarray | None, codes: np.ndarray | None = None, *,
+                       norm: str = "l1", space: str = "linear") -> float:
+    """The loss an exact model would leave on the photo from 8-bit sRGB quantisation alone, in the fit's
+    ``norm`` and ``space``: per pixel and channel the expected penalty of an error uniform over the pixel's
+    code step (L1: a quarter of the step, L2: a twelfth of its square, Huber between the two), the step
+    in linear units (``space="linear"``) or 1/255 (``"srgb"``, the loss on the encodings), summed over
     ``pixels`` (all when None). ``codes``: ``target``'s 8-bit codes (:func:`rtloop._srgb.codes8`) where it
-    has them (each pixel's quarter step looked up: the same numbers)."""
+    has them (each pixel's step looked up: the same numbers)."""
+    if norm == "l1" and space == "linear":
+        return float(np.sum(_quarter_steps(target, pixels, codes)))
+    return _floor(_half_steps(target, pixels, codes, space), 1.0, norm)
+
+
+def explained_ratio(loss: float, target: np.ndarray, pixels: np.ndarray | None, codes: np.ndarray | None = None,
+                    *, norm: str = "l1", space: str = "linear") -> tuple[float, float]:
+    """(floor, ratio): :func:`quantisation_floor` in the fit's ``norm`` and ``space``, and how many times
+    the size of the quantisation error the residual behind ``loss`` (the fit's loss on ``pixels``, in that
+    norm and space) is: the factor the error would have to grow by to leave ``loss`` (L1: loss / floor;
+    L2: its square root; Huber: solved). A ratio compares alike in every norm: a residual twice the
+    quantisation's size is 2, where L2's loss / floor would be 4 (and that of a JPEG's sRGB-space fit is
+    measured on its encodings, where the error is)."""
+    if norm == "l1" and space == "linear":
+        floor = quantisation_floor(target, pixels, codes)
+        return floor, (loss / floor if floor > 0 else float("inf"))
+    half = _half_steps(target, pixels, codes, space)
+    floor = _floor(half, 1.0, norm)
+    if not floor > 0:
+        return floor, float("inf")
+    if norm == "l1":
+        return floor, loss / floor
+    if norm == "l2":
+        return floor, math.sqrt(loss / floor)
+    # Huber: the floor grows with the scale (as k^2, then k): bisect on k in log space.
+    values, counts = np.unique(half, return_counts=True)
+    lo, hi = 0.0, 1.0
+    while _floor(values, hi, norm, counts) < loss and hi < 1e12:
+        lo, hi = hi, 2.0 * hi
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if _floor(values, mid, norm, counts) < loss else (lo, mid)
+    return floor, hi
+
+
+def _huber_width(norm: str) -> float | None:
+    """H of a "huber" or "huber:H" norm (the core's default 0.02), else None."""
+    if norm == "huber":
+        return 0.02
+    if norm.startswith("huber:"):
+        return float(norm.split(":", 1)[1])
+    return None
+
+
+def _floor(half: np.ndarray, k: float, norm: str, counts: np.ndarray | None = None) -> float:
+    """Σ E[penalty(q)] over the pixels' channels for q uniform on ±k·``half`` (each value ``counts``
+    times; once when None), in ``norm``."""
+    a = k * np.asarray(half, np.float64)
+    h = _huber_width(norm)
+    if norm == "l1":
+        e = 0.5 * a
+    elif norm == "l2":
+        e = a * a / 3.0
+    elif h is not None:
+        # penalty 0.5 q^2 / H within H, |q| - H/2 beyond (the core's Huber)
+        inside = a * a / (6.0 * h)
+        safe = np.maximum(a, 1e-300)
+        beyond = (h * h / 6.0 + 0.5 * (a * a - h * h) - 0.5 * h * (a - h)) / safe
+        e = np.where(a <= h, inside, beyond)
+    else:
+        raise RtloopError(f"norm: unknown norm {norm!r} (known: l1, l2, huber, huber:H)")
+    return float(np.sum(e if counts is None else e * counts))
+
+
+def _quarter_steps(target: np.ndarray, pixels: np.ndarray | None, codes: np.ndarray | None) -> np.ndarray:
+    """A quarter of each used pixel's channel's code step in linear units (:func:`_quarter_step`)."""
     if codes is not None:
         c = np.asarray(codes).reshape(-1, 3)
-        return float(np.sum(per_code(_quarter_step_at, c if pixels is None else c[pixels])))
+        return per_code(_quarter_step_at, c if pixels is None else c[pixels])
     x = np.clip(np.asarray(target, np.float64).reshape(-1, 3), 0.0, 1.0)
-    return float(np.sum(_quarter_step(x if pixels is None else x[pixels])))
+    return _quarter_step(x if pixels is None else x[pixels])
+
+
+def _half_steps(target: np.ndarray, pixels: np.ndarray | None, codes: np.ndarray | None, space: str) -> np.ndarray:
+    """Half of each used pixel's channel's code step: in linear units, or on the encodings (``"srgb"``:
+    1/510, one-sided at 0 and 1, as the linear step is)."""
+    if space == "srgb":
+        if codes is not None:
+            c = np.asarray(codes).reshape(-1, 3)
+            e = (c if pixels is None else c[pixels]).astype(np.float64) / 255.0
+        else:
+            x = np.clip(np.asarray(target, np.float64).reshape(-1, 3), 0.0, 1.0)
+            e = encode(x if pixels is None else x[pixels]).astype(np.float64)
+        half = 0.5 / 255
+        return 0.5 * (np.minimum(e + half, 1.0) - np.maximum(e - half, 0.0))
+    return 2.0 * _quarter_steps(target, pixels, codes)
 
 
 def _quarter_step(x: np.ndarray) -> np.ndarray:
