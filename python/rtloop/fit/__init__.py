@@ -359,8 +359,12 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
     # shows there as well, and the bounce's gathers cost a quarter.
     grid = np.arange(scene.width * scene.height, dtype=np.uint32).reshape(scene.height, scene.width)[::2, ::2]
     sub = grid.ravel() if use is None else np.intersect1d(grid.ravel(), use).astype(np.uint32)
-    # An encoding is within [0, 1]: an image beyond it is radiance, not sRGB codes.
-    if space == "linear" and float(target.min()) >= 0.0 and float(target.max()) <= 1.0:
+    # An encoding is within [0, 1]: an image beyond it is radiance, not sRGB codes. An image whose every
+    # value is an 8-bit code's linear value (a PNG or JPEG as load_image decodes it) was decoded: linear.
+    if codes is not None:
+        model["encoding"] = {"suspect": False, "why": "its values are 8-bit sRGB codes decoded to linear (as "
+                                                      "rtloop.load_image reads a PNG or JPEG): not checked"}
+    elif space == "linear" and float(target.min()) >= 0.0 and float(target.max()) <= 1.0:
         model["encoding"] = _encoding_check(work, stages, int(seeds[0]), target, sub, ratio, environment=env)
     where, x = first.paths, list(first.x)
     n_sub = first.pixels // 4
@@ -501,9 +505,10 @@ ENCODED_GAIN = 1.5
 def _encoding_check(work: Scene, stages: Stages, seed: int, target: np.ndarray, sub: np.ndarray,
                     ratio: float, environment: bool = False) -> dict[str, Any]:
     """Whether ``target`` looks sRGB-encoded rather than linear: the base model fitted once more, on every
-    other pixel in each direction, to the target decoded from sRGB; the two losses against their
-    quantisation floors (``ratio``: the fit as given). Run only for photos in [0, 1] that the first fit does
-    not explain; ``environment``: the base model has the environment's (or ambient light's) column."""
+    other pixel in each direction, to the target decoded from sRGB; the two residuals against the rounding
+    error (:func:`.selection.explained_ratio`; ``ratio``: the fit as given). Run only for photos in [0, 1]
+    that the first fit does not explain and whose values are not decoded 8-bit codes; ``environment``: the
+    base model has the environment's (or ambient light's) column."""
     decoded = np.ascontiguousarray(decode(target), dtype=np.float32)
     check = Stages(work, decoded, sub, None, stages.budget, stages.ident, clip=stages.clip, norm=stages.norm,
                    space="linear", threads=stages.threads, pixels_per_object=stages.pixels_per_object,
@@ -515,8 +520,8 @@ def _encoding_check(work: Scene, stages: Stages, seed: int, target: np.ndarray, 
                            "suspect": bool(decoded_ratio * ENCODED_GAIN <= ratio),
                            "rule": f"doubted when the sRGB-decoded image fits at least {ENCODED_GAIN:g}x better"}
     if out["suspect"]:
-        out["doubt"] = (f"image: it looks sRGB-encoded, not linear (decoded from sRGB, the fit's loss is "
-                        f"{decoded_ratio:.2g}x its quantisation floor against {ratio:.2g}x as given): pass linear "
+        out["doubt"] = (f"image: it looks sRGB-encoded, not linear (decoded from sRGB, the fit's residual is "
+                        f"{decoded_ratio:.2g}x the rounding error against {ratio:.2g}x as given): pass linear "
                         "radiance, e.g. rtloop.load_image(path, scene) for a file, or rtloop.srgb_to_linear(array)")
     return out
 
