@@ -234,8 +234,12 @@ def highlight_evidence(scene: Scene, names: list[str], paths: list[str], x: list
     glossy = with_highlights(scene, names, SHININESS_TRIALS[0])
     gpaths = paths + [f"objects.{n}.shininess" for n in names]
     rows = [list(x) + [s] * len(names) for s in SHININESS_TRIALS]
+    # With a bounce, the trials share one: held where the first is (the light does not move between them,
+    # and a lobe's shininess shapes no diffuse bounce), so each costs a direct candidate's solve instead of
+    # the bounce's fixed point.
     with_lobe = closed_form_loss(glossy, gpaths, rows, target, pixels, environment=environment, clip=clip,
-                                 norm=norm, space=space, threads=threads, saturated=saturated)
+                                 norm=norm, space=space, threads=threads, saturated=saturated,
+                                 frozen_bounce=interreflection_given(glossy))
     k = int(np.argmin(with_lobe))
     ev = _verdict(base, float(with_lobe[k]), active_pixels, 2 * len(names), norm)
     ev["shininess_tried"] = list(SHININESS_TRIALS)
@@ -304,14 +308,16 @@ def environment_evidence(scene: Scene, paths: list[str], x: list[float], target:
 
 def closed_form_loss(scene: Scene, paths: list[str], rows: list[list[float]], target: np.ndarray,
                      pixels: np.ndarray | None, *, environment: bool, clip: bool, norm: str, space: str,
-                     threads: int | None, saturated: float | None = None) -> np.ndarray:
+                     threads: int | None, saturated: float | None = None, frozen_bounce: bool = False
+                     ) -> np.ndarray:
     """The closed-form (least-squares products) loss of ``scene`` at each row of values of ``paths``, with
     or without the environment column: the measure every test of a term compares. ``saturated``: where
-    clipping may start (``_native.evaluate``'s; None: SATURATED)."""
+    clipping may start (``_native.evaluate``'s; None: SATURATED). ``frozen_bounce``: with interreflection,
+    the bounce solved once at the scene's own values and held for every row (``_native.evaluate``'s)."""
     v = _native.evaluate(scene, paths, target, np.asarray(rows, dtype=np.float64), pixels=pixels,
                          loss="l1_projected", clip=clip, threads=threads,
                          product_bounds=product_bounds(scene, environment), norm=norm, space=space,
-                         saturated=saturated)
+                         saturated=saturated, frozen_bounce=frozen_bounce)
     return v[:, 0]
 
 
