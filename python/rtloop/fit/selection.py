@@ -107,7 +107,7 @@ def explained_ratio(loss: float, target: np.ndarray, pixels: np.ndarray | None, 
         return floor, loss / floor
     if norm == "l2":
         return floor, math.sqrt(loss / floor)
-    # Huber: the floor grows with the scale (as k^2, then k): bisect on k in log space.
+    # Huber: the floor grows with the scale k (as k^2, then k): bracket it by doubling, then bisect.
     values, counts = np.unique(half, return_counts=True)
     lo, hi = 0.0, 1.0
     while _floor(values, hi, norm, counts) < loss and hi < 1e12:
