@@ -196,10 +196,10 @@ def test_the_terms_are_tested_in_every_norm(name, norm, term):
     where the photo has a room's light, a bounce or a coat) and no term was tested: env-overhead with L2
     45 mm off, env-bounce-low 174 mm, gloss-a025 with Huber 12.6 mm. Measured against the floor in the same
     norm (the residual 6-22x the quantisation error's size) the term is found and the light comes 2.5-10x
-    closer."""
+    closer (7.0, 17.7 and 4.8 mm), within the issue's 3 cm."""
     scene = rtloop.load_scene(PHOTOS / name / "scene_input.json")
     r = rtloop.fit(scene, _photo(name, scene), norm=norm, uncertainty=False)
     assert "skipped" not in r.model and r.model["residual"]["ratio"] > 3, r.model["residual"]
     assert term in r.model["terms"], r.model
     err, _ = _errors(r, _truth(name))
-    assert err < 0.02, err
+    assert err < 0.03, err
