@@ -259,11 +259,15 @@ def check_interreflection(mode: Any) -> str:
 #: point): first at the light found without the bounce (a search whose polish takes half the budget where
 #: passes follow), then, for each further pass, at the light the previous pass found (a Nelder-Mead polish
 #: from it, with half the polish budget, in a tenth of the box around it), at most this many passes: a
-#: third and later pass only while the previous moved the light by more than a thousandth of the box (the
-#: held bounce's fixed point; a light the fit without the terms put 20 cm off moves 5 cm in the second pass
-#: and 2 cm in the third); the last pass's result carries the full bounce's products, gauge and loss at
-#: its light.
-BOUNCE_PASSES = 4
+#: third pass only while the second moved the light by more than a thousandth of the box (the held
+#: bounce's fixed point; a light the fit without the terms put 20 cm off moves 5 cm in the second pass and
+#: 2 cm in the third); the last pass's result carries the full bounce's products, gauge and loss at its
+#: light. A fourth pass would search a thousandth of the refit's box (+-2.4 mm on a lamp photo), less than
+#: the polish's own scatter on a noisy photo (the passes' moves near the fixed point, 2-5 mm): over the 25
+#: bounce, lamp and environment photos (11 committed, 14 held out) allowing it gave a mean light error of
+#: 8.78 mm against 8.76 without (median 6.08 against 5.64 mm, mean worst product 1.95 against 1.97 %), for
+#: 108 more evaluations on each of the three photos that took it (+13 % of those fits' evaluations).
+BOUNCE_PASSES = 3
 
 
 def interreflection_given(scene: Scene) -> bool:
