@@ -1,6 +1,7 @@
 //! `cargo bench`: one 128x96 render; one DE population (60 candidates) of the stage-1 fitness and of the
 //! default method's projected fitness, on 1 thread and on all threads, with the loss in linear space and
-//! (`srgb`) in sRGB space; and a whole stage-1 DE run
+//! (`srgb`) in sRGB space; ten polish candidates of the projected fitness with the sphere glossy (its
+//! Blinn-Phong lobe solved in closed form); and a whole stage-1 DE run
 //! (the paper's 60 x 200) with and without early exit. Scene: the paper's sphere on a floor
 //! (`examples/yellow-ball/scene.json`); objective: its own render, saturated at 1.
 //!
@@ -155,6 +156,58 @@ fn bench(c: &mut Criterion) {
             })
         });
         // Ten in a row inside the pool, as the polish runs them.
+        g.bench_function(
+            format!("10 candidates alone projected threads={threads}"),
+            |b| {
+                b.iter(|| {
+                    pool.install(|| {
+                        let mut o = [0.0];
+                        for _ in 0..10 {
+                            fitness.evaluate_alone(&truth, &mut o);
+                        }
+                        o
+                    })
+                })
+            },
+        );
+    }
+    g.finish();
+
+    // The same sphere glossy (specular 0.3, shininess 40) against its own render: the closed form then
+    // solves the lobe's strength too, and every candidate shades the lobe on the sphere's pixels.
+    let mut g = c.benchmark_group("glossy");
+    let mut glossy = scene.clone();
+    let ball = glossy
+        .objects
+        .iter()
+        .position(|o| matches!(o.shape, rtloop::scene::Shape::Sphere { .. }))
+        .expect("the example has a sphere");
+    glossy.objects[ball].material.specular = 0.3;
+    glossy.objects[ball].material.shininess = 40.0;
+    let glossy_target: Vec<f32> = render(&glossy, None, None, 1)
+        .unwrap()
+        .rgb
+        .iter()
+        .map(|v| v.min(1.0))
+        .collect();
+    let mut lobe = Projection::matte(vec![[(0.0, 400.0); 3]; glossy.objects.len()]);
+    lobe.specular[ball] = (0.0, 400.0);
+    let fitness = Fitness::new(
+        &glossy,
+        layout.clone(),
+        &glossy_target,
+        None,
+        LossKind::L1Projected,
+        true,
+        Some(lobe),
+    )
+    .unwrap();
+    let truth = glossy.light.position.to_vec();
+    for threads in [1, rayon::current_num_threads()] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
         g.bench_function(
             format!("10 candidates alone projected threads={threads}"),
             |b| {

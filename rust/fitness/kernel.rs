@@ -7,7 +7,7 @@ use glam::Vec3A;
 
 use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, SATURATED};
 use super::pixels::{
-    blinn_phong, gathers, group, irradiance, shadow, Gather, Group, Light, Sky, BLOCK,
+    gathers, group, half_cos, irradiance, shadow, Gather, Group, Light, Sky, BLOCK,
 };
 use super::simd::{self, Simd};
 use crate::render::bounce::{table_points, TABLE};
@@ -218,14 +218,18 @@ impl Kernel {
                 irradiance::<AVX2>(g, r.clone(), &light, &mut e[..len]);
                 shadow(g, r.clone(), &light, &mut e[..len]);
                 if specular || sky || bounce.is_some() {
+                    // max(0, n·h)^s per pixel, once for the three channels (the cosines in lanes)
+                    let mut lobes = [0.0f32; BLOCK];
+                    if specular {
+                        half_cos(g, r.clone(), &light, &mut lobes[..len]);
+                        for v in &mut lobes[..len] {
+                            *v = v.powf(m.shininess);
+                        }
+                    }
                     for c in 0..3 {
                         let mut sum = 0.0f32;
                         for (i, s) in r.clone().enumerate() {
-                            let lobe = if specular {
-                                ks[c] * blinn_phong(g, s, &light, m.shininess)
-                            } else {
-                                0.0
-                            };
+                            let lobe = if specular { ks[c] * lobes[i] } else { 0.0 };
                             let mut base = if sky { a[c] + ae[c] * g.sky[s] } else { a[c] };
                             if let Some(b) = &bounce {
                                 base += m.albedo[c] * b[c][s];

@@ -7,7 +7,7 @@ use super::bounce::Gauge;
 use super::bounce::HeldLoss;
 use super::kernel::{Candidate, Kernel};
 use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, LANES};
-use super::pixels::{blinn_phong, irradiance, shadow, Group, Light, Sky, BLOCK};
+use super::pixels::{half_cos, irradiance, shadow, Group, Light, Sky, BLOCK};
 use super::simd::{self, Simd};
 use super::solve::{
     environment_lane_sums, fallback_sums, solve_object, solve_object_env, SolveSums,
@@ -467,13 +467,20 @@ impl Run<'_> {
             if self.specular || self.sky.is_some() {
                 let b = &mut b[i0..i0 + len];
                 let norm = specular_per_lambert(self.shininess);
-                for (i, s) in r.clone().enumerate() {
-                    // (s+8)/(8 pi) max(0, n.h)^s cos / d² = e · (s+8)/8 · max(0, n.h)^s
-                    b[i] = if e[i] > 0.0 && self.specular {
-                        (e[i] * norm * blinn_phong(g, s, self.light, self.shininess)).min(f32::MAX)
-                    } else {
-                        0.0
-                    };
+                if self.specular {
+                    // (s+8)/(8 pi) max(0, n.h)^s cos / d² = e · (s+8)/8 · max(0, n.h)^s: the cosines in
+                    // lanes, the power where the light reaches the pixel
+                    let mut nh = [0.0f32; BLOCK];
+                    half_cos(g, r.clone(), self.light, &mut nh[..len]);
+                    for i in 0..len {
+                        b[i] = if e[i] > 0.0 {
+                            (e[i] * norm * nh[i].powf(self.shininess)).min(f32::MAX)
+                        } else {
+                            0.0
+                        };
+                    }
+                } else {
+                    b.fill(0.0);
                 }
                 let zeros = [0.0f32; BLOCK];
                 let v = self.sky.map_or(&zeros[..len], |v| &v[r.clone()]);
