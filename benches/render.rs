@@ -36,6 +36,40 @@ fn population(layout: &ParamLayout, n: usize) -> Vec<Vec<f64>> {
         .collect()
 }
 
+/// The objective: `scene`'s own render, saturated at 1.
+fn objective(scene: &Scene) -> Vec<f32> {
+    render(scene, None, None, 1)
+        .unwrap()
+        .rgb
+        .iter()
+        .map(|v| v.min(1.0))
+        .collect()
+}
+
+/// Ten candidates of `fitness` at `x` in a row inside `pool` (of `threads`), as the polish runs them.
+fn ten_alone(
+    g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    pool: &rayon::ThreadPool,
+    threads: usize,
+    fitness: &Fitness,
+    x: &[f64],
+) {
+    g.bench_function(
+        format!("10 candidates alone projected threads={threads}"),
+        |b| {
+            b.iter(|| {
+                pool.install(|| {
+                    let mut o = [0.0];
+                    for _ in 0..10 {
+                        fitness.evaluate_alone(x, &mut o);
+                    }
+                    o
+                })
+            })
+        },
+    );
+}
+
 fn bench(c: &mut Criterion) {
     let scene = scene();
     let pixels = (scene.width * scene.height) as u64;
@@ -46,12 +80,7 @@ fn bench(c: &mut Criterion) {
     });
     g.finish();
 
-    let target: Vec<f32> = render(&scene, None, None, 1)
-        .unwrap()
-        .rgb
-        .iter()
-        .map(|v| v.min(1.0))
-        .collect();
+    let target = objective(&scene);
     let stage1 = vec!["light.position".to_string(), "light.intensity".to_string()];
     let position = vec!["light.position".to_string()];
     let bounds = vec![[(0.0, 400.0); 3]; scene.objects.len()];
@@ -155,21 +184,7 @@ fn bench(c: &mut Criterion) {
                 })
             })
         });
-        // Ten in a row inside the pool, as the polish runs them.
-        g.bench_function(
-            format!("10 candidates alone projected threads={threads}"),
-            |b| {
-                b.iter(|| {
-                    pool.install(|| {
-                        let mut o = [0.0];
-                        for _ in 0..10 {
-                            fitness.evaluate_alone(&truth, &mut o);
-                        }
-                        o
-                    })
-                })
-            },
-        );
+        ten_alone(&mut g, &pool, threads, &fitness, &truth);
     }
     g.finish();
 
@@ -184,12 +199,7 @@ fn bench(c: &mut Criterion) {
         .expect("the example has a sphere");
     glossy.objects[ball].material.specular = 0.3;
     glossy.objects[ball].material.shininess = 40.0;
-    let glossy_target: Vec<f32> = render(&glossy, None, None, 1)
-        .unwrap()
-        .rgb
-        .iter()
-        .map(|v| v.min(1.0))
-        .collect();
+    let glossy_target = objective(&glossy);
     let mut lobe = Projection::matte(vec![[(0.0, 400.0); 3]; glossy.objects.len()]);
     lobe.specular[ball] = (0.0, 400.0);
     let fitness = Fitness::new(
@@ -208,20 +218,7 @@ fn bench(c: &mut Criterion) {
             .num_threads(threads)
             .build()
             .unwrap();
-        g.bench_function(
-            format!("10 candidates alone projected threads={threads}"),
-            |b| {
-                b.iter(|| {
-                    pool.install(|| {
-                        let mut o = [0.0];
-                        for _ in 0..10 {
-                            fitness.evaluate_alone(&truth, &mut o);
-                        }
-                        o
-                    })
-                })
-            },
-        );
+        ten_alone(&mut g, &pool, threads, &fitness, &truth);
     }
     g.finish();
 
