@@ -5,10 +5,9 @@
 
 use glam::Vec3A;
 
+use super::lobe::half_cos;
 use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, SATURATED};
-use super::pixels::{
-    gathers, group, half_cos, irradiance, shadow, Gather, Group, Light, Sky, BLOCK,
-};
+use super::pixels::{gathers, group, irradiance, shadow, Gather, Group, Light, Sky, BLOCK};
 use super::simd::{self, Simd};
 use crate::render::bounce::{table_points, TABLE};
 use crate::render::brdf::{lambert, specular_scale};

@@ -10,6 +10,7 @@ use glam::Vec3A;
 use crate::error::{Error, Result};
 pub mod bounce;
 pub mod kernel;
+mod lobe;
 pub mod loss;
 pub mod pixels;
 pub mod projected;

@@ -6,8 +6,9 @@ use rayon::prelude::*;
 use super::bounce::Gauge;
 use super::bounce::HeldLoss;
 use super::kernel::{Candidate, Kernel};
+use super::lobe::half_cos;
 use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, LANES};
-use super::pixels::{half_cos, irradiance, shadow, Group, Light, Sky, BLOCK};
+use super::pixels::{irradiance, shadow, Group, Light, Sky, BLOCK};
 use super::simd::{self, Simd};
 use super::solve::{
     environment_lane_sums, fallback_sums, solve_object, solve_object_env, SolveSums,

@@ -1,0 +1,127 @@
+//! The Blinn-Phong lobe's cosine, max(0, n·h), over a block of a group's pixels in lanes: the part of
+//! the renderer's `brdf::blinn_phong` before its power, for the closed form's specular column and the
+//! two-stage kernel.
+
+use super::pixels::{Group, Light};
+
+/// max(0, n·h) for each pixel of the block `r` into `out` (h the half vector of the unit directions to
+/// the light, `light::toward`, and to the eye): the cosine whose power is `brdf::blinn_phong`, over the
+/// block in lanes. The same operations in the same order as glam's `normalize_or_zero` and `dot` (x² + y²,
+/// then + z²; the reciprocal length 1 / sqrt), so each value is the renderer's to the bit.
+#[inline(always)]
+pub(crate) fn half_cos<'a>(
+    g: &'a Group,
+    r: std::ops::Range<usize>,
+    light: &Light,
+    out: &mut [f32],
+) {
+    let n = out.len();
+    let col = |v: &'a [Vec<f32>; 3], c: usize| -> &'a [f32] { &v[c][r.start..][..n] };
+    let (nx, ny, nz) = (col(&g.n, 0), col(&g.n, 1), col(&g.n, 2));
+    let (vx, vy, vz) = (col(&g.v, 0), col(&g.v, 1), col(&g.v, 2));
+    #[inline(always)]
+    fn unit(x: f32, y: f32, z: f32) -> [f32; 3] {
+        let rcp = 1.0 / ((x * x + y * y) + z * z).sqrt();
+        if rcp.is_finite() && rcp > 0.0 {
+            [x * rcp, y * rcp, z * rcp]
+        } else {
+            [0.0; 3]
+        }
+    }
+    #[inline(always)]
+    fn cos(l: [f32; 3], v: [f32; 3], n: [f32; 3]) -> f32 {
+        let h = unit(l[0] + v[0], l[1] + v[1], l[2] + v[2]);
+        ((n[0] * h[0] + n[1] * h[1]) + n[2] * h[2]).max(0.0)
+    }
+    match light.dir {
+        Some(l) => {
+            for i in 0..n {
+                out[i] = cos(l, [vx[i], vy[i], vz[i]], [nx[i], ny[i], nz[i]]);
+            }
+        }
+        None => {
+            let (px, py, pz) = (col(&g.p, 0), col(&g.p, 1), col(&g.p, 2));
+            let [lx, ly, lz] = light.pos;
+            for i in 0..n {
+                let l = unit(lx - px[i], ly - py[i], lz - pz[i]);
+                out[i] = cos(l, [vx[i], vy[i], vz[i]], [nx[i], ny[i], nz[i]]);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fitness::pixels::BLOCK;
+    use crate::render::light::toward;
+    use glam::Vec3A;
+
+    /// A group of the given pixels (position, normal, view); nothing else set.
+    fn pixels_of(px: &[([f32; 3], [f32; 3], [f32; 3])]) -> Group {
+        let col = |k: usize, c: usize| {
+            px.iter()
+                .map(|t| [t.0, t.1, t.2][k][c])
+                .collect::<Vec<f32>>()
+        };
+        let cols = |k: usize| [col(k, 0), col(k, 1), col(k, 2)];
+        Group {
+            object: Some(0),
+            p: cols(0),
+            n: cols(1),
+            v: cols(2),
+            t: Default::default(),
+            te: Default::default(),
+            ts: Default::default(),
+            spheres: Vec::new(),
+            planes: Vec::new(),
+            sky: Vec::new(),
+            gathers: Vec::new(),
+            blocks: Vec::new(),
+            du: Default::default(),
+            dv: Default::default(),
+            spread: Vec::new(),
+            block_spread: Vec::new(),
+            own_radius: None,
+        }
+    }
+
+    fn unit_or_any(v: [f32; 3]) -> [f32; 3] {
+        Vec3A::from_array(v).normalize_or(Vec3A::Y).to_array()
+    }
+
+    proptest::proptest! {
+        /// `half_cos` in lanes, to the power, is the renderer's Blinn-Phong lobe bit for bit (the fitness
+        /// and the render must agree), for point and directional lights, pixels at or beside the light,
+        /// and an eye direction opposite the light's (the half vector zero).
+        #[test]
+        fn half_cos_is_the_renderers_lobe_to_the_bit(
+            raw in proptest::collection::vec(
+                (proptest::array::uniform3(-4.0f32..4.0), proptest::array::uniform3(-1.0f32..1.0),
+                 proptest::array::uniform3(-1.0f32..1.0)), 1..=BLOCK),
+            light in proptest::array::uniform3(-4.0f32..4.0),
+            directional in proptest::bool::ANY,
+            shininess in 0.5f32..2000.0,
+        ) {
+            let mut px: Vec<([f32; 3], [f32; 3], [f32; 3])> =
+                raw.iter().map(|&(p, n, v)| (p, unit_or_any(n), unit_or_any(v))).collect();
+            let dir = directional.then(|| unit_or_any(light));
+            // the hard cases: a pixel at the light, and an eye looking from exactly where the light is
+            px[0].0 = light;
+            let last = px.len() - 1;
+            let to_light = toward(Vec3A::from_array(light), dir.map(Vec3A::from_array),
+                                  Vec3A::from_array(px[last].0));
+            px[last].2 = (-to_light).to_array();
+            let g = pixels_of(&px);
+            let mut out = vec![0.0f32; px.len()];
+            half_cos(&g, 0..px.len(), &Light { pos: light, dir, rgb: [1.0; 3] }, &mut out);
+            for (i, &(p, n, v)) in px.iter().enumerate() {
+                let l = toward(Vec3A::from_array(light), dir.map(Vec3A::from_array), Vec3A::from_array(p));
+                let want = crate::render::brdf::blinn_phong(Vec3A::from_array(n), l, Vec3A::from_array(v),
+                                                            shininess);
+                let got = out[i].powf(shininess);
+                proptest::prop_assert_eq!(got.to_bits(), want.to_bits(), "pixel {}: {} against {}", i, got, want);
+            }
+        }
+    }
+}
