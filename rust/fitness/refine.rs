@@ -67,15 +67,70 @@ impl Kernel {
             });
         }
         // Block coordinate descent per object: each P_c given Q, then Q given the P's (four rounds for a
-        // glossy object; one for a matte one, whose channels are independent). Every line search depends
-        // only on its own object's values, so those of a round run in parallel over (object, channel)
-        // and the result is the same on any number of threads.
-        // An environment column couples the channels' P_c and E_c: four rounds as for a glossy object.
+        // glossy object; one for a matte one, whose channels are independent). An environment column
+        // couples a channel's P_c and E_c: four rounds as for a glossy object. Every line search depends
+        // only on its own object's values, and those of an object whose Q stays (matte, or a channel that
+        // informs nothing) only on its own channel's: each such (object, channel) runs its rounds as one
+        // chain, each glossy object its rounds with its channels' searches side by side, and all the chains
+        // at once; the same searches in the same order per chain, so the same values on any number of
+        // threads as round by round over every object.
         let rounds = if objects.iter().any(|o| o.specular || o.sky.is_some()) {
             4
         } else {
             1
         };
+        let limits = Limits { proj, sat, top };
+        let glossy = |o: &RefineObject| o.specular && o.informed.iter().all(|&i| i);
+        let chains: Vec<(usize, Option<usize>)> = objects
+            .iter()
+            .enumerate()
+            .flat_map(|(k, o)| {
+                let per_channel: Vec<(usize, Option<usize>)> = if glossy(o) {
+                    vec![(k, None)]
+                } else {
+                    (0..3).map(|c| (k, Some(c))).collect()
+                };
+                per_channel
+            })
+            .collect();
+        let start = &*out;
+        let results: Vec<Chain> = chains
+            .par_iter()
+            .map(|&(k, c)| {
+                let o = &objects[k];
+                let (p, q, e) = (
+                    start.products[o.obj],
+                    start.specular[o.obj],
+                    if o.sky.is_some() {
+                        start.environment[o.obj]
+                    } else {
+                        [0.0; 3]
+                    },
+                );
+                match c {
+                    Some(c) => self.channel_chain(o, c, rounds, (p[c], q, e[c]), limits),
+                    None => self.glossy_chain(o, rounds, (p, q, e), limits),
+                }
+            })
+            .collect();
+        for (&(k, _), r) in chains.iter().zip(results) {
+            let (obj, sky) = (objects[k].obj, objects[k].sky.is_some());
+            match r {
+                Chain::Channel(c, p, e) => {
+                    out.products[obj][c] = p;
+                    if sky {
+                        out.environment[obj][c] = e;
+                    }
+                }
+                Chain::Glossy(p, q, e) => {
+                    out.products[obj] = p;
+                    out.specular[obj] = q;
+                    if sky {
+                        out.environment[obj] = e;
+                    }
+                }
+            }
+        }
         let env = |out: &Solved, o: &RefineObject| {
             if o.sky.is_some() {
                 out.environment[o.obj]
@@ -83,55 +138,6 @@ impl Kernel {
                 [0.0; 3]
             }
         };
-        let limits = Limits { proj, sat, top };
-        for round in 0..rounds {
-            let tasks: Vec<(usize, usize)> = objects
-                .iter()
-                .enumerate()
-                .filter(|(_, o)| round == 0 || o.specular || o.sky.is_some())
-                .flat_map(|(k, o)| (0..3).filter(|&c| o.informed[c]).map(move |c| (k, c)))
-                .collect();
-            let solved: Vec<f64> = tasks
-                .par_iter()
-                .map(|&(k, c)| {
-                    let o = &objects[k];
-                    let (q, ec) = (out.specular[o.obj], env(out, o)[c]);
-                    self.refine_diffuse(o, c, q, ec, out.products[o.obj][c], limits)
-                })
-                .collect();
-            for (&(k, c), v) in tasks.iter().zip(solved) {
-                out.products[objects[k].obj][c] = v;
-            }
-            let tasks: Vec<(usize, usize)> = (0..objects.len())
-                .filter(|&k| objects[k].sky.is_some())
-                .flat_map(|k| (0..3).map(move |c| (k, c)))
-                .collect();
-            let solved: Vec<f64> = tasks
-                .par_iter()
-                .map(|&(k, c)| {
-                    let o = &objects[k];
-                    let (pc, q) = (out.products[o.obj][c], out.specular[o.obj]);
-                    self.refine_environment(o, c, pc, q, out.environment[o.obj][c], limits)
-                })
-                .collect();
-            for (&(k, c), v) in tasks.iter().zip(solved) {
-                out.environment[objects[k].obj][c] = v;
-            }
-            let glossy: Vec<usize> = (0..objects.len())
-                .filter(|&k| objects[k].specular && objects[k].informed.iter().all(|&i| i))
-                .collect();
-            let solved: Vec<f64> = glossy
-                .par_iter()
-                .map(|&k| {
-                    let o = &objects[k];
-                    let (pk, q) = (out.products[o.obj], out.specular[o.obj]);
-                    self.refine_specular(o, pk, q, env(out, o), limits)
-                })
-                .collect();
-            for (&k, v) in glossy.iter().zip(solved) {
-                out.specular[objects[k].obj] = v;
-            }
-        }
         // The loss at the refined products, per object and channel, added in the groups' order.
         let losses: Vec<f64> = (0..objects.len() * 3)
             .into_par_iter()
@@ -157,6 +163,57 @@ impl Kernel {
             total[c] += acc[c];
         }
         total
+    }
+
+    /// The rounds of one channel `c` of an object whose Q stays: P_c (in round 0, and in every round of an
+    /// object with a lobe or an environment column, where the channel informs it), then E_c (with an
+    /// environment column), from `(P_c, Q, E_c)`.
+    fn channel_chain(
+        &self,
+        o: &RefineObject,
+        c: usize,
+        rounds: usize,
+        (mut p, q, mut e): (f64, f64, f64),
+        limits: Limits,
+    ) -> Chain {
+        for round in 0..rounds {
+            if (round == 0 || o.specular || o.sky.is_some()) && o.informed[c] {
+                p = self.refine_diffuse(o, c, q, e, p, limits);
+            }
+            if o.sky.is_some() {
+                e = self.refine_environment(o, c, p, q, e, limits);
+            }
+        }
+        Chain::Channel(c, p, e)
+    }
+
+    /// The rounds of a glossy object whose every channel informs: per round the three P_c side by side,
+    /// then the three E_c (with an environment column), then Q, from `(P, Q, E)`.
+    fn glossy_chain(
+        &self,
+        o: &RefineObject,
+        rounds: usize,
+        (mut p, mut q, mut e): ([f64; 3], f64, [f64; 3]),
+        limits: Limits,
+    ) -> Chain {
+        for _ in 0..rounds {
+            let (pq, pe) = (q, e);
+            let ps: Vec<f64> = (0..3)
+                .into_par_iter()
+                .map(|c| self.refine_diffuse(o, c, pq, pe[c], p[c], limits))
+                .collect();
+            p.copy_from_slice(&ps);
+            if o.sky.is_some() {
+                let pp = p;
+                let es: Vec<f64> = (0..3)
+                    .into_par_iter()
+                    .map(|c| self.refine_environment(o, c, pp[c], q, e[c], limits))
+                    .collect();
+                e.copy_from_slice(&es);
+            }
+            q = self.refine_specular(o, p, q, e, limits);
+        }
+        Chain::Glossy(p, q, e)
     }
 
     /// [`Kernel::refine`]'s line search for P_c of one object given its specular product `q` and
@@ -318,6 +375,12 @@ impl Kernel {
             self.norm.slope((m - top).min(0.0))
         }
     }
+}
+
+/// What one chain of [`Kernel::refine`] found: channel c's (c, P_c, E_c), or a glossy object's (P, Q, E).
+enum Chain {
+    Channel(usize, f64, f64),
+    Glossy([f64; 3], f64, [f64; 3]),
 }
 
 /// What every line search of one [`Kernel::refine`] shares: the products' bounds and the clip.
@@ -600,22 +663,26 @@ pub fn l1_line_min(
     top: f64,
 ) -> f64 {
     // Breakpoints with the slope change there; the slope left of every breakpoint is -Σk.
-    let mut events: Vec<(f64, f64)> = Vec::new();
+    let mut events: Vec<(f64, f64)> = Vec::with_capacity(2 * terms.size_hint().1.unwrap_or(0));
     let mut slope = 0.0;
+    let mut push = |at: f64, ds: f64| {
+        if !at.is_nan() {
+            events.push((at, ds));
+        }
+    };
     for (k, o, y, saturated) in terms {
         slope -= k;
         if saturated {
-            events.push(((top - o) / k, k));
+            push((top - o) / k, k);
         } else {
-            events.push(((y - o) / k, 2.0 * k));
-            events.push(((top - o) / k, -k));
+            push((y - o) / k, 2.0 * k);
+            push((top - o) / k, -k);
         }
     }
-    events.retain(|e| !e.0.is_nan());
-    radix_sort_by_position(&mut events);
     let (mut x, mut f) = (lo, 0.0);
     let (mut best_x, mut best_f) = (lo, 0.0);
-    for &(at, ds) in &events {
+    for i in sorted_by_position(&events) {
+        let (at, ds) = events[i];
         if at > x {
             let to = at.min(hi);
             f += slope * (to - x);
@@ -638,9 +705,10 @@ pub fn l1_line_min(
     best_x
 }
 
-/// Sort (position, slope change) events by position: LSD radix sort on the position rounded to f32 (it
-/// only merges breakpoints closer than the renderer's precision; a comparison sort cost more).
-pub(crate) fn radix_sort_by_position(events: &mut Vec<(f64, f64)>) {
+/// The indices of (position, slope change) `events` in the order of their positions rounded to f32 (it
+/// only merges breakpoints closer than the renderer's precision; a comparison sort cost more), equal ones
+/// in index order: an LSD radix sort, three 11-bit digits, of the key and the index packed in one word.
+pub(crate) fn sorted_by_position(events: &[(f64, f64)]) -> impl Iterator<Item = usize> {
     let key = |x: f64| {
         let b = (x as f32).to_bits();
         if b >> 31 == 1 {
@@ -649,26 +717,28 @@ pub(crate) fn radix_sort_by_position(events: &mut Vec<(f64, f64)>) {
             b | (1 << 31)
         }
     };
-    let mut from: Vec<(u32, (f64, f64))> = events.iter().map(|&e| (key(e.0), e)).collect();
-    let mut to = from.clone();
-    for shift in [0u32, 11, 22] {
-        let mut count = [0usize; 2049];
-        for e in &from {
-            count[((e.0 >> shift) & 2047) as usize + 1] += 1;
+    let mut from: Vec<u64> = events
+        .iter()
+        .enumerate()
+        .map(|(i, e)| (u64::from(key(e.0)) << 32) | i as u64)
+        .collect();
+    let mut to = vec![0u64; from.len()];
+    for shift in [32u32, 43, 54] {
+        let mut count = [0u32; 2049];
+        for &e in &from {
+            count[((e >> shift) & 2047) as usize + 1] += 1;
         }
         for k in 1..count.len() {
             count[k] += count[k - 1];
         }
-        for e in &from {
-            let d = ((e.0 >> shift) & 2047) as usize;
-            to[count[d]] = *e;
+        for &e in &from {
+            let d = ((e >> shift) & 2047) as usize;
+            to[count[d] as usize] = e;
             count[d] += 1;
         }
         std::mem::swap(&mut from, &mut to);
     }
-    for (dst, src) in events.iter_mut().zip(&from) {
-        *dst = src.1;
-    }
+    from.into_iter().map(|e| (e & 0xffff_ffff) as usize)
 }
 
 /// The zero of a non-decreasing `derivative` on [lo, hi] by bisection (an end when it does not change
