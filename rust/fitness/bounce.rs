@@ -54,6 +54,58 @@ pub struct Frozen {
 pub const SEARCH_ROUNDS: usize = 6;
 pub const FINAL_ROUNDS: usize = 9;
 
+/// One object's pixels in one channel for [`gauge_sums`]: the objective (`t`, at or above `sat` left
+/// out), the bounce B_c, the unit-light diffuse and specular factors and the sky view.
+struct GaugeTerms<'a> {
+    t: &'a [f32],
+    bounce: &'a [f32],
+    a: &'a [f32],
+    b: &'a [f32],
+    sky: Option<&'a [f32]>,
+}
+
+/// Lanes of [`gauge_sums`].
+const GAUGE_LANES: usize = 4;
+
+/// The fixed point's gauge sums over one object's channel: Σ r·m and Σ m² with m = P_c·B_c/g_c and r the
+/// residual without the bounce, y − P_c·a − Q·w_c·b − E_c·v, at products `[P_c, Q·w_c, E_c]` (g_c =
+/// `w`). Taken in [`GAUGE_LANES`] partial sums (pixel i in lane i mod 4, the tail in lane 0), added in
+/// lane order: independent chains of additions, the same value on any pool.
+fn gauge_sums(px: GaugeTerms, [pc, qw, ec]: [f64; 3], w: f64, sat: f32) -> (f64, f64) {
+    let n = px.t.len();
+    let (t, bounce, a, b) = (px.t, &px.bounce[..n], &px.a[..n], &px.b[..n]);
+    let term = |i: usize| -> (f64, f64) {
+        if t[i] < sat {
+            let m = pc * bounce[i] as f64 / w;
+            let mut r = t[i] as f64 - pc * a[i] as f64 - qw * b[i] as f64;
+            if let Some(v) = px.sky {
+                r -= ec * v[i] as f64;
+            }
+            (r * m, m * m)
+        } else {
+            (0.0, 0.0)
+        }
+    };
+    let (mut num, mut den) = ([0.0f64; GAUGE_LANES], [0.0f64; GAUGE_LANES]);
+    let full = n - n % GAUGE_LANES;
+    for i in (0..full).step_by(GAUGE_LANES) {
+        for l in 0..GAUGE_LANES {
+            let (rm, mm) = term(i + l);
+            num[l] += rm;
+            den[l] += mm;
+        }
+    }
+    for i in full..n {
+        let (rm, mm) = term(i);
+        num[0] += rm;
+        den[0] += mm;
+    }
+    (
+        num.iter().fold(0.0, |s, v| s + v),
+        den.iter().fold(0.0, |s, v| s + v),
+    )
+}
+
 impl Kernel {
     /// [`Kernel::projected`] with the bounce (`proj.gauge` set). `scratch` ends as
     /// [a | b | a'_r | a'_g | a'_b] per pixel: unit-light diffuse and specular factors, and the diffuse
@@ -108,48 +160,44 @@ impl Kernel {
         if let Some(f) = &gauge.frozen {
             return self.projected_held::<AVX2, E>(c, proj, f, &runs, out, scratch, enc);
         }
-        // Pass 1: factors and the bounce-free products, and each sender's light at its points.
+        // Pass 1: each sender's light at its points (every gather at once), the factors (runs of blocks
+        // over the pool, their sums added in order) and the bounce-free products.
         let mut offsets = Vec::with_capacity(self.groups.len());
         let mut offset = 0;
-        let mut gathered: Vec<Vec<Compact>> = Vec::with_capacity(self.groups.len());
-        for (g, run) in self.groups.iter().zip(&runs) {
-            let n = g.len();
+        for g in &self.groups {
             offsets.push(offset);
-            let (e, b) = (
-                &mut a_all[offset..offset + n],
-                &mut b_all[offset..offset + n],
-            );
-            offset += n;
-            gathered.push(
+            offset += g.len();
+        }
+        let gathered: Vec<Vec<Compact>> = self
+            .groups
+            .par_iter()
+            .map(|g| {
                 g.gathers
-                    .iter()
+                    .par_iter()
                     .map(|gth| {
                         let mut e = Vec::new();
                         gth.light::<AVX2>(&light, &mut e, c.parallel);
                         Compact::new(gth, &e)
                     })
-                    .collect(),
-            );
+                    .collect()
+            })
+            .collect();
+        for (gi, (g, run)) in self.groups.iter().zip(&runs).enumerate() {
+            let (o0, n) = (offsets[gi], g.len());
             let (Some(run), Some(obj)) = (run, g.object) else {
                 continue;
             };
-            let mut sums = SolveSums::default();
-            for (k, (e, b)) in e
-                .chunks_mut(BLOCK * 8)
-                .zip(b.chunks_mut(BLOCK * 8))
+            let parts: Vec<SolveSums> = a_all[o0..o0 + n]
+                .par_chunks_mut(BLOCK * 8)
+                .zip(b_all[o0..o0 + n].par_chunks_mut(BLOCK * 8))
                 .enumerate()
-            {
-                sums.add(&run.factors::<AVX2>(k * BLOCK * 8, e, b));
+                .map(|(k, (e, b))| run.factors::<AVX2>(k * BLOCK * 8, e, b))
+                .collect();
+            let mut sums = SolveSums::default();
+            for part in &parts {
+                sums.add(part);
             }
-            self.solve_into(
-                run,
-                obj,
-                &sums,
-                proj,
-                out,
-                &a_all[offsets[offsets.len() - 1]..][..n],
-                sat,
-            );
+            self.solve_into(run, obj, &sums, proj, out, &a_all[o0..o0 + n], sat);
         }
         // Each sphere's table points: their senders' light (unit light), for the second bounce.
         let table_light: Vec<Vec<Compact>> = self
@@ -187,25 +235,47 @@ impl Kernel {
         // scene's own intensity.
         let mut u = gauge.u.0;
         let mut history: Vec<f64> = Vec::with_capacity(3);
+        // A group's channels side by side in the bounce columns' rounds: (group, channel, its column).
+        fn columns<'a>(
+            ab: &'a mut [f32],
+            lens: &[usize],
+            n_px: usize,
+        ) -> Vec<(usize, usize, &'a mut [f32])> {
+            let mut cols = Vec::with_capacity(3 * lens.len());
+            for (c, mut rest) in ab.chunks_mut(n_px.max(1)).take(3).enumerate() {
+                for (gi, &n) in lens.iter().enumerate() {
+                    let (col, tail) = rest.split_at_mut(n);
+                    cols.push((gi, c, col));
+                    rest = tail;
+                }
+            }
+            cols
+        }
+        let lens: Vec<usize> = self.groups.iter().map(|g| g.len()).collect();
+        let no_sky = vec![0.0f32; lens.iter().copied().max().unwrap_or(0)];
         for round in 0..gauge.rounds {
-            // B_o,c per pixel into a'_c (as B for now).
-            for (gi, g) in self.groups.iter().enumerate() {
-                let (o0, n) = (offsets[gi], g.len());
-                for c in 0..3 {
-                    let col = &mut ab_all[c * n_px + o0..][..n];
+            // B_o,c per pixel into a'_c (as B for now), every (group, channel) at once.
+            let solved = &*out;
+            columns(ab_all, &lens, n_px)
+                .into_par_iter()
+                .for_each(|(gi, c, col)| {
+                    let g = &self.groups[gi];
                     col.fill(0.0);
                     for ((gth, cg), folds) in g.gathers.iter().zip(&gathered[gi]).zip(&folded[gi]) {
-                        let pk = out.products[gth.sender][c] as f32;
-                        let ek = out.environment.get(gth.sender).map_or(0.0, |e| e[c] as f32);
+                        let pk = solved.products[gth.sender][c] as f32;
+                        let ek = solved
+                            .environment
+                            .get(gth.sender)
+                            .map_or(0.0, |e| e[c] as f32);
                         for (j, &i) in cg.pixels.iter().enumerate() {
                             col[i as usize] += pk * cg.a[j] + ek * cg.s[j];
                         }
                         // The sender's own bounce: its albedo P_k·u/g_c times the light on its table.
                         let second = (u / w[c]) as f32 * pk;
                         for fold in folds {
-                            let pt = second * out.products[fold.sender][c] as f32;
+                            let pt = second * solved.products[fold.sender][c] as f32;
                             let et = second
-                                * out
+                                * solved
                                     .environment
                                     .get(fold.sender)
                                     .map_or(0.0, |e| e[c] as f32);
@@ -214,9 +284,9 @@ impl Kernel {
                             }
                         }
                     }
-                }
-            }
-            // u: least squares of the residual without the bounce against P_c·B_c/g_c.
+                });
+            // u: least squares of the residual without the bounce against P_c·B_c/g_c, its sums per object
+            // and channel in lanes ([`gauge_sums`]), added in that order.
             let (mut num, mut den) = (0.0f64, 0.0f64);
             let mut u_max = gauge.u.1;
             for (gi, g) in self.groups.iter().enumerate() {
@@ -228,21 +298,24 @@ impl Kernel {
                     if pc > 0.0 && w[c] > 0.0 {
                         u_max = u_max.min(gauge.albedo_max[obj][c] * w[c] / pc);
                     }
-                    let ec = out.environment.get(obj).map_or(0.0, |e| e[c]);
-                    let qw = out.specular[obj] * w[c];
-                    let t = &g.ts[c];
-                    for i in 0..n {
-                        if t[i] < sat {
-                            let m = pc * ab_all[c * n_px + o0 + i] as f64 / w[c];
-                            let mut r =
-                                t[i] as f64 - pc * a_all[o0 + i] as f64 - qw * b_all[o0 + i] as f64;
-                            if let Some(v) = sky {
-                                r -= ec * v[i] as f64;
-                            }
-                            num += r * m;
-                            den += m * m;
-                        }
-                    }
+                    let (nc, dc) = gauge_sums(
+                        GaugeTerms {
+                            t: &g.ts[c],
+                            bounce: &ab_all[c * n_px + o0..][..n],
+                            a: &a_all[o0..o0 + n],
+                            b: &b_all[o0..o0 + n],
+                            sky,
+                        },
+                        [
+                            pc,
+                            out.specular[obj] * w[c],
+                            out.environment.get(obj).map_or(0.0, |e| e[c]),
+                        ],
+                        w[c],
+                        sat,
+                    );
+                    num += nc;
+                    den += dc;
                 }
             }
             let lo = gauge.u.0.min(u_max);
@@ -264,60 +337,62 @@ impl Kernel {
                 }
                 history.clear();
             }
-            // a'_c = a + (u/g_c)·B_c, and the products given it.
-            for (gi, g) in self.groups.iter().enumerate() {
-                let (o0, n) = (offsets[gi], g.len());
-                for c in 0..3 {
+            // a'_c = a + (u/g_c)·B_c and its normal-equation sums, every (group, channel) at once; then
+            // each object's products given them, in group order.
+            let (a_all, b_all) = (&*a_all, &*b_all);
+            let lanes: Vec<(usize, usize, Option<[f64; 9]>)> = columns(ab_all, &lens, n_px)
+                .into_par_iter()
+                .map(|(gi, c, col)| {
+                    let (g, o0) = (&self.groups[gi], offsets[gi]);
+                    let n = col.len();
                     let k = if w[c] > 0.0 { (u / w[c]) as f32 } else { 0.0 };
-                    let col = &mut ab_all[c * n_px + o0..][..n];
                     for i in 0..n {
                         col[i] = a_all[o0 + i] + k * col[i];
                     }
-                }
+                    let sums = match (&runs[gi], g.object) {
+                        (Some(run), Some(_)) => {
+                            let v = run.sky().unwrap_or(&no_sky[..n]);
+                            let specular = run.is_specular();
+                            // (without a lobe `b` is not read: any slice of the run's length serves)
+                            let b = if specular { &b_all[o0..o0 + n] } else { v };
+                            Some(environment_lane_sums::<AVX2>(
+                                col, b, v, &g.ts[c], sat, specular,
+                            ))
+                        }
+                        _ => None,
+                    };
+                    (gi, c, sums)
+                })
+                .collect();
+            for (gi, g) in self.groups.iter().enumerate() {
                 let (Some(run), Some(obj)) = (&runs[gi], g.object) else {
                     continue;
                 };
-                let zeros;
-                let v = match run.sky() {
-                    Some(v) => v,
-                    None => {
-                        zeros = vec![0.0f32; n];
-                        &zeros
-                    }
-                };
                 let mut sums = SolveSums::default();
-                let specular = run.is_specular();
-                // (without a lobe `b` is not read: any slice of the run's length serves)
-                let b = if specular { &b_all[o0..o0 + n] } else { v };
-                for c in 0..3 {
-                    let ac = &ab_all[c * n_px + o0..][..n];
-                    sums.add_lanes(
-                        c,
-                        environment_lane_sums::<AVX2>(ac, b, v, &g.ts[c], sat, specular),
-                    );
+                for &(gj, c, l) in &lanes {
+                    if let (true, Some(l)) = (gj == gi, l) {
+                        sums.add_lanes(c, l);
+                    }
                 }
+                let (o0, n) = (offsets[gi], g.len());
                 self.solve_into(run, obj, &sums, proj, out, &a_all[o0..o0 + n], sat);
             }
         }
         out.gauge = Some(u);
-        // Pass 2: the loss at the products.
-        let mut acc = [0.0f64; 3];
-        for (gi, g) in self.groups.iter().enumerate() {
-            let (o0, n) = (offsets[gi], g.len());
-            let gt = if E::ENCODES { &g.te } else { &g.t };
-            let Some(obj) = g.object else {
-                for s in 0..n {
-                    for c in 0..3 {
-                        acc[c] += self.norm.penalty(gt[c][s]) as f64;
-                    }
-                }
-                continue;
-            };
-            let sky = proj.sky(obj, g);
-            for c in 0..3 {
-                let pc = out.products[obj][c] as f32;
-                let ec = out.environment.get(obj).map_or(0.0, |e| e[c]) as f32;
-                let qw = (out.specular[obj] * w[c]) as f32;
+        // Pass 2: the loss at the products, every object's channel at once, added in group order.
+        let solved = &*out;
+        let ab_all = &*ab_all;
+        let sums: Vec<f32> = (0..3 * self.groups.len())
+            .into_par_iter()
+            .map(|gc| {
+                let (gi, c) = (gc / 3, gc % 3);
+                let (g, o0, n) = (&self.groups[gi], offsets[gi], self.groups[gi].len());
+                let Some(obj) = g.object else { return 0.0 };
+                let gt = if E::ENCODES { &g.te } else { &g.t };
+                let sky = proj.sky(obj, g);
+                let pc = solved.products[obj][c] as f32;
+                let ec = solved.environment.get(obj).map_or(0.0, |e| e[c]) as f32;
+                let qw = (solved.specular[obj] * w[c]) as f32;
                 let ac = &ab_all[c * n_px + o0..][..n];
                 let mut sum = 0.0f32;
                 for i in 0..n {
@@ -327,7 +402,22 @@ impl Kernel {
                     }
                     sum += self.norm.penalty(enc.any(v.min(top)) - gt[c][i]);
                 }
-                acc[c] += sum as f64;
+                sum
+            })
+            .collect();
+        let mut acc = [0.0f64; 3];
+        for (gi, g) in self.groups.iter().enumerate() {
+            let gt = if E::ENCODES { &g.te } else { &g.t };
+            if g.object.is_none() {
+                for s in 0..g.len() {
+                    for c in 0..3 {
+                        acc[c] += self.norm.penalty(gt[c][s]) as f64;
+                    }
+                }
+                continue;
+            }
+            for c in 0..3 {
+                acc[c] += sums[3 * gi + c] as f64;
             }
         }
         acc
