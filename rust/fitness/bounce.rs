@@ -254,11 +254,13 @@ impl Kernel {
         let lens: Vec<usize> = self.groups.iter().map(|g| g.len()).collect();
         let no_sky = vec![0.0f32; lens.iter().copied().max().unwrap_or(0)];
         for round in 0..gauge.rounds {
-            // B_o,c per pixel into a'_c (as B for now), every (group, channel) at once.
+            // B_o,c per pixel into a'_c (as B for now) and, while it is at hand, the gauge's sums over the
+            // object's channel ([`gauge_sums`]), every (group, channel) at once.
             let solved = &*out;
-            columns(ab_all, &lens, n_px)
+            let (a_in, b_in) = (&*a_all, &*b_all);
+            let gauge_parts: Vec<(usize, usize, (f64, f64))> = columns(ab_all, &lens, n_px)
                 .into_par_iter()
-                .for_each(|(gi, c, col)| {
+                .filter_map(|(gi, c, col)| {
                     let g = &self.groups[gi];
                     col.fill(0.0);
                     for ((gth, cg), folds) in g.gathers.iter().zip(&gathered[gi]).zip(&folded[gi]) {
@@ -284,38 +286,44 @@ impl Kernel {
                             }
                         }
                     }
-                });
-            // u: least squares of the residual without the bounce against P_c·B_c/g_c, its sums per object
-            // and channel in lanes ([`gauge_sums`]), added in that order.
+                    let obj = g.object?;
+                    let (o0, n) = (offsets[gi], col.len());
+                    let sums = gauge_sums(
+                        GaugeTerms {
+                            t: &g.ts[c],
+                            bounce: col,
+                            a: &a_in[o0..o0 + n],
+                            b: &b_in[o0..o0 + n],
+                            sky: proj.sky(obj, g),
+                        },
+                        [
+                            solved.products[obj][c],
+                            solved.specular[obj] * w[c],
+                            solved.environment.get(obj).map_or(0.0, |e| e[c]),
+                        ],
+                        w[c],
+                        sat,
+                    );
+                    Some((gi, c, sums))
+                })
+                .collect();
+            // u: least squares of the residual without the bounce against P_c·B_c/g_c, its sums added per
+            // object and channel in that order.
             let (mut num, mut den) = (0.0f64, 0.0f64);
             let mut u_max = gauge.u.1;
             for (gi, g) in self.groups.iter().enumerate() {
                 let Some(obj) = g.object else { continue };
-                let (o0, n) = (offsets[gi], g.len());
-                let sky = proj.sky(obj, g);
                 for c in 0..3 {
                     let pc = out.products[obj][c];
                     if pc > 0.0 && w[c] > 0.0 {
                         u_max = u_max.min(gauge.albedo_max[obj][c] * w[c] / pc);
                     }
-                    let (nc, dc) = gauge_sums(
-                        GaugeTerms {
-                            t: &g.ts[c],
-                            bounce: &ab_all[c * n_px + o0..][..n],
-                            a: &a_all[o0..o0 + n],
-                            b: &b_all[o0..o0 + n],
-                            sky,
-                        },
-                        [
-                            pc,
-                            out.specular[obj] * w[c],
-                            out.environment.get(obj).map_or(0.0, |e| e[c]),
-                        ],
-                        w[c],
-                        sat,
-                    );
-                    num += nc;
-                    den += dc;
+                    for &(gj, cj, (nc, dc)) in &gauge_parts {
+                        if (gj, cj) == (gi, c) {
+                            num += nc;
+                            den += dc;
+                        }
+                    }
                 }
             }
             let lo = gauge.u.0.min(u_max);
@@ -452,6 +460,10 @@ impl Kernel {
         let (ar_all, rest) = rest.split_at_mut(n_px);
         let (ag_all, ab_all) = rest.split_at_mut(n_px);
         out.gauge = Some(frozen.u);
+        if c.parallel {
+            let slices = [a_all, b_all, ar_all, ag_all, ab_all];
+            return self.held_pooled::<AVX2, E>(proj, frozen, runs, out, slices, (sat, top), enc);
+        }
         let mut acc = [0.0f64; 3];
         let mut o0 = 0;
         for (g, run) in self.groups.iter().zip(runs) {
@@ -497,25 +509,15 @@ impl Kernel {
                 &mut ag_all[range.clone()],
                 &mut ab_all[range.clone()],
             );
-            let parts: Vec<SolveSums> = if c.parallel {
-                a.par_chunks_mut(CHUNK)
-                    .zip(b.par_chunks_mut(CHUNK))
-                    .zip(ar.par_chunks_mut(CHUNK))
-                    .zip(ag.par_chunks_mut(CHUNK))
-                    .zip(ab.par_chunks_mut(CHUNK))
-                    .enumerate()
-                    .map(|(k, ((((a, b), r), gg), bb))| pass1(k, a, b, [r, gg, bb]))
-                    .collect()
-            } else {
-                a.chunks_mut(CHUNK)
-                    .zip(b.chunks_mut(CHUNK))
-                    .zip(ar.chunks_mut(CHUNK))
-                    .zip(ag.chunks_mut(CHUNK))
-                    .zip(ab.chunks_mut(CHUNK))
-                    .enumerate()
-                    .map(|(k, ((((a, b), r), gg), bb))| pass1(k, a, b, [r, gg, bb]))
-                    .collect()
-            };
+            let parts: Vec<SolveSums> = a
+                .chunks_mut(CHUNK)
+                .zip(b.chunks_mut(CHUNK))
+                .zip(ar.chunks_mut(CHUNK))
+                .zip(ag.chunks_mut(CHUNK))
+                .zip(ab.chunks_mut(CHUNK))
+                .enumerate()
+                .map(|(k, ((((a, b), r), gg), bb))| pass1(k, a, b, [r, gg, bb]))
+                .collect();
             let mut sums = SolveSums::default();
             for part in &parts {
                 sums.add(part);
@@ -553,22 +555,162 @@ impl Kernel {
                     AVX2,
                 )
             };
-            let runs_n = n.div_ceil(CHUNK);
-            if c.parallel {
-                let parts: Vec<[f64; 3]> = (0..runs_n).into_par_iter().map(pass2).collect();
-                for part in &parts {
+            for k in 0..n.div_ceil(CHUNK) {
+                let part = pass2(k);
+                for ch in 0..3 {
+                    acc[ch] += part[ch];
+                }
+                if acc[0] + acc[1] + acc[2] > c.bound {
+                    return acc;
+                }
+            }
+        }
+        acc
+    }
+
+    /// [`Kernel::projected_held`] for one candidate over the pool (`c.parallel`): pass 1 over the runs of
+    /// [`CHUNK`] pixels of every object at once, each object's products from its runs' sums added in
+    /// order, pass 2 over every object's runs at once, the losses added per object in run order and the
+    /// objects in group order: the serial value bit for bit, in two joins per candidate (not two per
+    /// object). `slices`: the scratch's a, b, a'_r, a'_g and a'_b.
+    #[allow(clippy::too_many_arguments)]
+    fn held_pooled<const AVX2: bool, E: Encoding + Send + Sync>(
+        &self,
+        proj: &Projection,
+        frozen: &Frozen,
+        runs: &[Option<Run>],
+        out: &mut Solved,
+        slices: [&mut [f32]; 5],
+        (sat, top): (f32, f32),
+        enc: E,
+    ) -> [f64; 3] {
+        fn take<'a>(rest: &mut &'a mut [f32], n: usize) -> &'a mut [f32] {
+            let (head, tail) = std::mem::take(rest).split_at_mut(n);
+            *rest = tail;
+            head
+        }
+        let n_px = self.pixels;
+        let w: [f64; 3] = std::array::from_fn(|c| proj.weight[c] as f64);
+        let [a_all, b_all, ar_all, ag_all, ab_all] = slices;
+        // Pass 1: (group, run) jobs over disjoint slices of the factors and columns.
+        let mut jobs: Vec<(usize, HeldRun)> = Vec::new();
+        let mut rest = [
+            &mut *a_all,
+            &mut *b_all,
+            &mut *ar_all,
+            &mut *ag_all,
+            &mut *ab_all,
+        ];
+        let mut o0 = 0;
+        for (gi, (g, run)) in self.groups.iter().zip(runs).enumerate() {
+            let n = g.len();
+            let [a, b, ar, ag, ab] = rest.each_mut().map(|r| take(r, n));
+            let range = o0..o0 + n;
+            o0 += n;
+            let (Some(run), Some(_)) = (run, g.object) else {
+                continue;
+            };
+            let (sky, specular) = (run.sky(), run.is_specular());
+            let chunks = a
+                .chunks_mut(CHUNK)
+                .zip(b.chunks_mut(CHUNK))
+                .zip(ar.chunks_mut(CHUNK))
+                .zip(ag.chunks_mut(CHUNK))
+                .zip(ab.chunks_mut(CHUNK))
+                .enumerate();
+            for (k, ((((e, b), r), gg), bb)) in chunks {
+                let (start, len) = (k * CHUNK, e.len());
+                let at = start..start + len;
+                jobs.push((
+                    gi,
+                    HeldRun {
+                        run,
+                        start,
+                        e,
+                        b,
+                        held: std::array::from_fn(|ch| {
+                            &frozen.bounce[ch * n_px + range.start..][at.clone()]
+                        }),
+                        cols: [r, gg, bb],
+                        ts: std::array::from_fn(|ch| &g.ts[ch][at.clone()]),
+                        sky: sky.map(|v| &v[at.clone()]),
+                        specular,
+                        sat,
+                    },
+                ));
+            }
+        }
+        let sums: Vec<(usize, SolveSums)> = jobs
+            .into_par_iter()
+            .map(|(gi, job)| (gi, simd::dispatch(job, AVX2)))
+            .collect();
+        let mut o0 = 0;
+        for (gi, (g, run)) in self.groups.iter().zip(runs).enumerate() {
+            let range = o0..o0 + g.len();
+            o0 += g.len();
+            let (Some(run), Some(obj)) = (run, g.object) else {
+                continue;
+            };
+            let mut total = SolveSums::default();
+            for (_, part) in sums.iter().filter(|(gj, _)| *gj == gi) {
+                total.add(part);
+            }
+            self.solve_into(run, obj, &total, proj, out, &a_all[range], sat);
+        }
+        // Pass 2: the loss of every (group, run) at its object's products.
+        let (b_all, cols_all) = (&*b_all, [&*ar_all, &*ag_all, &*ab_all]);
+        let mut jobs: Vec<(usize, HeldLoss<E>)> = Vec::new();
+        let mut o0 = 0;
+        for (gi, (g, run)) in self.groups.iter().zip(runs).enumerate() {
+            let (n, start) = (g.len(), o0);
+            o0 += n;
+            let (Some(_), Some(obj)) = (run, g.object) else {
+                continue;
+            };
+            let gt = if E::ENCODES { &g.te } else { &g.t };
+            let pc: [f32; 3] = std::array::from_fn(|ch| out.products[obj][ch] as f32);
+            let ec: [f32; 3] =
+                std::array::from_fn(|ch| out.environment.get(obj).map_or(0.0, |e| e[ch]) as f32);
+            let qw: [f32; 3] = std::array::from_fn(|ch| (out.specular[obj] * w[ch]) as f32);
+            let sky = proj.sky(obj, g);
+            for k in 0..n.div_ceil(CHUNK) {
+                let r = k * CHUNK..((k + 1) * CHUNK).min(n);
+                let at = start + r.start..start + r.end;
+                jobs.push((
+                    gi,
+                    HeldLoss {
+                        cols: std::array::from_fn(|ch| &cols_all[ch][at.clone()]),
+                        b: &b_all[at.clone()],
+                        sky: sky.map(|v| &v[r.clone()]),
+                        t: std::array::from_fn(|ch| &gt[ch][r.clone()]),
+                        pc,
+                        qw,
+                        ec,
+                        top,
+                        norm: self.norm,
+                        enc,
+                    },
+                ));
+            }
+        }
+        let losses: Vec<(usize, [f64; 3])> = jobs
+            .into_par_iter()
+            .map(|(gi, job)| (gi, simd::dispatch(job, AVX2)))
+            .collect();
+        // The sums in the serial order: groups in order, an object's runs in order.
+        let mut acc = [0.0f64; 3];
+        for (gi, (g, run)) in self.groups.iter().zip(runs).enumerate() {
+            if let (Some(_), Some(_)) = (run, g.object) {
+                for (_, part) in losses.iter().filter(|(gj, _)| *gj == gi) {
                     for ch in 0..3 {
                         acc[ch] += part[ch];
                     }
                 }
             } else {
-                for k in 0..runs_n {
-                    let part = pass2(k);
+                let gt = if E::ENCODES { &g.te } else { &g.t };
+                for s in 0..g.len() {
                     for ch in 0..3 {
-                        acc[ch] += part[ch];
-                    }
-                    if acc[0] + acc[1] + acc[2] > c.bound {
-                        return acc;
+                        acc[ch] += self.norm.penalty(gt[ch][s]) as f64;
                     }
                 }
             }
