@@ -1,7 +1,8 @@
 //! `cargo bench`: one 128x96 render; one DE population (60 candidates) of the stage-1 fitness and of the
 //! default method's projected fitness, on 1 thread and on all threads, with the loss in linear space and
 //! (`srgb`) in sRGB space; ten polish candidates of the projected fitness with the sphere glossy (its
-//! Blinn-Phong lobe solved in closed form); and a whole stage-1 DE run
+//! Blinn-Phong lobe solved in closed form); the bounce's full fixed point and ten candidates with it held
+//! (the scene with interreflection); and a whole stage-1 DE run
 //! (the paper's 60 x 200) with and without early exit. Scene: the paper's sphere on a floor
 //! (`examples/yellow-ball/scene.json`); objective: its own render, saturated at 1.
 //!
@@ -219,6 +220,44 @@ fn bench(c: &mut Criterion) {
             .build()
             .unwrap();
         ten_alone(&mut g, &pool, threads, &fitness, &truth);
+    }
+    g.finish();
+
+    // The same scene with one diffuse bounce (the floor lighting the sphere's underside): the bounce's full
+    // fixed point, which a fit solves where each held pass starts and at its result, alone and with the
+    // loss-minimising products; and ten polish candidates with the bounce held there.
+    let mut g = c.benchmark_group("bounce");
+    let mut bounced = scene.clone();
+    bounced.interreflection = true;
+    let bounced_target = objective(&bounced);
+    let mut fitness = Fitness::new(
+        &bounced,
+        layout.clone(),
+        &bounced_target,
+        None,
+        LossKind::L1Projected,
+        true,
+        Some(Projection::matte(vec![
+            [(0.0, 400.0); 3];
+            bounced.objects.len()
+        ])),
+    )
+    .unwrap();
+    let truth = bounced.light.position.to_vec();
+    let near: Vec<f64> = truth.iter().map(|v| v + 0.01).collect();
+    for threads in [1, rayon::current_num_threads()] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        g.bench_function(format!("full fixed point threads={threads}"), |b| {
+            b.iter(|| pool.install(|| fitness.freeze_bounce(Some(&near))))
+        });
+        pool.install(|| fitness.freeze_bounce(Some(&truth)));
+        g.bench_function(format!("refined products threads={threads}"), |b| {
+            b.iter(|| pool.install(|| fitness.refined(&near)))
+        });
+        ten_alone(&mut g, &pool, threads, &fitness, &near);
     }
     g.finish();
 

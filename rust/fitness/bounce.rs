@@ -460,7 +460,8 @@ impl Kernel {
         let (ar_all, rest) = rest.split_at_mut(n_px);
         let (ag_all, ab_all) = rest.split_at_mut(n_px);
         out.gauge = Some(frozen.u);
-        if c.parallel {
+        // (on a pool of one thread the serial loop below is the same value, without the jobs' set-up)
+        if c.parallel && rayon::current_num_threads() > 1 {
             let slices = [a_all, b_all, ar_all, ag_all, ab_all];
             return self.held_pooled::<AVX2, E>(proj, frozen, runs, out, slices, (sat, top), enc);
         }

@@ -128,7 +128,8 @@ impl Kernel {
             .extend(proj.environment.iter().map(|b| [b[0].0, b[1].0, b[2].0]));
         let sat = if clip { self.saturated } else { f32::INFINITY };
         let top = if clip { 1.0 } else { f32::INFINITY };
-        if parallel {
+        // (on a pool of one thread the serial loop below is the same value, without the jobs' set-up)
+        if parallel && rayon::current_num_threads() > 1 {
             let runs: Vec<Option<Run>> = self
                 .groups
                 .iter()
