@@ -9,6 +9,7 @@ use glam::Vec3A;
 
 use crate::error::{Error, Result};
 pub mod bounce;
+mod held;
 pub mod kernel;
 mod lobe;
 pub mod loss;

@@ -4,7 +4,7 @@
 use rayon::prelude::*;
 
 use super::bounce::Gauge;
-use super::bounce::HeldLoss;
+use super::held::HeldLoss;
 use super::kernel::{Candidate, Kernel};
 use super::lobe::half_cos;
 use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, LANES};
@@ -130,16 +130,7 @@ impl Kernel {
         let top = if clip { 1.0 } else { f32::INFINITY };
         // (on a pool of one thread the serial loop below is the same value, without the jobs' set-up)
         if parallel && rayon::current_num_threads() > 1 {
-            let runs: Vec<Option<Run>> = self
-                .groups
-                .iter()
-                .map(|g| {
-                    g.object.map(|obj| {
-                        let shininess = p.materials[obj].shininess;
-                        Run::of(g, obj, &light, proj, shininess, (sat, top), self.norm)
-                    })
-                })
-                .collect();
+            let runs = self.runs(&light, p, proj, (sat, top));
             return self.projected_pooled::<AVX2, E>(&runs, proj, out, a_all, b_all, sat, enc);
         }
         let mut acc = [0.0f64; 3];
@@ -193,11 +184,31 @@ impl Kernel {
         acc
     }
 
+    /// Each group's [`Run`] for the light `light` (unit light) and the candidate's shininess (`p`), `None`
+    /// for the background.
+    pub(crate) fn runs<'a>(
+        &'a self,
+        light: &'a Light,
+        p: &crate::render::ShadeParams,
+        proj: &'a Projection,
+        (sat, top): (f32, f32),
+    ) -> Vec<Option<Run<'a>>> {
+        self.groups
+            .iter()
+            .map(|g| {
+                g.object.map(|obj| {
+                    let shininess = p.materials[obj].shininess;
+                    Run::of(g, obj, light, proj, shininess, (sat, top), self.norm)
+                })
+            })
+            .collect()
+    }
+
     /// One object's products from its run's sums into `out` (its environment column's too, where it has
     /// one), and the products as pass 2 takes them. `e_unit`: the run's unit-light factors (a channel
     /// whose normal equations are singular falls back on them).
     #[allow(clippy::too_many_arguments)]
-    fn solve_run(
+    pub(crate) fn solve_run(
         &self,
         run: &Run,
         obj: usize,

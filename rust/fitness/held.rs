@@ -1,0 +1,437 @@
+//! Candidates with the bounce held ([`Frozen`]): a direct candidate's unit-light factors, the held bounce
+//! folded into its diffuse column, its products and its loss (`bounce` solves the full fixed point that
+//! is held).
+
+use super::bounce::Frozen;
+use super::kernel::{Candidate, Kernel};
+use super::loss::{Encoding, Norm, LANES};
+use super::projected::{Projection, Run, Solved, CHUNK};
+use super::simd::{self, Simd};
+use super::solve::{environment_lane_sums, SolveSums, SUM_LANES};
+use rayon::prelude::*;
+
+impl Kernel {
+    /// [`Kernel::projected_bounce`] with the bounce held ([`Frozen`]): per object, its unit-light factors,
+    /// a'_c = a + the held (u/g_c)·B_c, the products given a'_c and the loss at them. The sums are taken
+    /// per run of [`CHUNK`] pixels and added in order, so the value is the same serial or spread over the
+    /// pool (`c.parallel`, a polish's lone candidate) on any number of threads; serially the sum stops
+    /// once it exceeds `c.bound` (as the direct kernel's).
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn projected_held<const AVX2: bool, E: Encoding + Send + Sync>(
+        &self,
+        c: Candidate,
+        proj: &Projection,
+        frozen: &Frozen,
+        runs: &[Option<Run>],
+        out: &mut Solved,
+        scratch: &mut [f32],
+        enc: E,
+    ) -> [f64; 3] {
+        let n_px = self.pixels;
+        let sat = if c.clip {
+            self.saturated
+        } else {
+            f32::INFINITY
+        };
+        let top = if c.clip { 1.0 } else { f32::INFINITY };
+        let (a_all, rest) = scratch.split_at_mut(n_px);
+        let (b_all, rest) = rest.split_at_mut(n_px);
+        let (ar_all, rest) = rest.split_at_mut(n_px);
+        let (ag_all, ab_all) = rest.split_at_mut(n_px);
+        out.gauge = Some(frozen.u);
+        // (on a pool of one thread the serial loop below is the same value, without the jobs' set-up)
+        if c.parallel && rayon::current_num_threads() > 1 {
+            let slices = [a_all, b_all, ar_all, ag_all, ab_all];
+            return self.held_pooled::<AVX2, E>(proj, frozen, runs, out, slices, (sat, top), enc);
+        }
+        let mut acc = [0.0f64; 3];
+        let mut o0 = 0;
+        for (g, run) in self.groups.iter().zip(runs) {
+            let n = g.len();
+            let range = o0..o0 + n;
+            o0 += n;
+            let gt = if E::ENCODES { &g.te } else { &g.t };
+            let (Some(run), Some(obj)) = (run, g.object) else {
+                for s in 0..n {
+                    for c in 0..3 {
+                        acc[c] += self.norm.penalty(gt[c][s]) as f64;
+                    }
+                }
+                continue;
+            };
+            let held: [&[f32]; 3] =
+                std::array::from_fn(|ch| &frozen.bounce[ch * n_px + range.start..][..n]);
+            let sky = run.sky();
+            let specular = run.is_specular();
+            // Pass 1, one run: the factors, a'_c, and the normal equations given a'_c.
+            let pass1 = |k: usize, a: &mut [f32], b: &mut [f32], ap: [&mut [f32]; 3]| {
+                let start = k * CHUNK;
+                let len = a.len();
+                simd::dispatch(
+                    HeldRun {
+                        run,
+                        start,
+                        e: a,
+                        b,
+                        held: std::array::from_fn(|ch| &held[ch][start..start + len]),
+                        cols: ap,
+                        ts: std::array::from_fn(|ch| &g.ts[ch][start..start + len]),
+                        sky: sky.map(|v| &v[start..start + len]),
+                        specular,
+                        sat,
+                    },
+                    AVX2,
+                )
+            };
+            let (a, b) = (&mut a_all[range.clone()], &mut b_all[range.clone()]);
+            let (ar, ag, ab) = (
+                &mut ar_all[range.clone()],
+                &mut ag_all[range.clone()],
+                &mut ab_all[range.clone()],
+            );
+            let parts: Vec<SolveSums> = a
+                .chunks_mut(CHUNK)
+                .zip(b.chunks_mut(CHUNK))
+                .zip(ar.chunks_mut(CHUNK))
+                .zip(ag.chunks_mut(CHUNK))
+                .zip(ab.chunks_mut(CHUNK))
+                .enumerate()
+                .map(|(k, ((((a, b), r), gg), bb))| pass1(k, a, b, [r, gg, bb]))
+                .collect();
+            let mut sums = SolveSums::default();
+            for part in &parts {
+                sums.add(part);
+            }
+            self.solve_run(run, obj, &sums, proj, out, &a_all[range.clone()], sat);
+            // Pass 2, one run: the loss at the products.
+            let cols = [&*ar_all, &*ag_all, &*ab_all];
+            let pass2 = |k: usize| {
+                let r = k * CHUNK..((k + 1) * CHUNK).min(n);
+                let job =
+                    self.held_loss(g, obj, range.start, r, (b_all, cols), proj, out, top, enc);
+                simd::dispatch(job, AVX2)
+            };
+            for k in 0..n.div_ceil(CHUNK) {
+                let part = pass2(k);
+                for ch in 0..3 {
+                    acc[ch] += part[ch];
+                }
+                if acc[0] + acc[1] + acc[2] > c.bound {
+                    return acc;
+                }
+            }
+        }
+        acc
+    }
+
+    /// [`Kernel::projected_held`] for one candidate over the pool (`c.parallel`): pass 1 over the runs of
+    /// [`CHUNK`] pixels of every object at once, each object's products from its runs' sums added in
+    /// order, pass 2 over every object's runs at once, the losses added per object in run order and the
+    /// objects in group order: the serial value bit for bit, in two joins per candidate (not two per
+    /// object). `slices`: the scratch's a, b, a'_r, a'_g and a'_b.
+    #[allow(clippy::too_many_arguments)]
+    fn held_pooled<const AVX2: bool, E: Encoding + Send + Sync>(
+        &self,
+        proj: &Projection,
+        frozen: &Frozen,
+        runs: &[Option<Run>],
+        out: &mut Solved,
+        slices: [&mut [f32]; 5],
+        (sat, top): (f32, f32),
+        enc: E,
+    ) -> [f64; 3] {
+        fn take<'a>(rest: &mut &'a mut [f32], n: usize) -> &'a mut [f32] {
+            let (head, tail) = std::mem::take(rest).split_at_mut(n);
+            *rest = tail;
+            head
+        }
+        let n_px = self.pixels;
+        let [a_all, b_all, ar_all, ag_all, ab_all] = slices;
+        // Pass 1: (group, run) jobs over disjoint slices of the factors and columns.
+        let mut jobs: Vec<(usize, HeldRun)> = Vec::new();
+        let mut rest = [
+            &mut *a_all,
+            &mut *b_all,
+            &mut *ar_all,
+            &mut *ag_all,
+            &mut *ab_all,
+        ];
+        let mut o0 = 0;
+        for (gi, (g, run)) in self.groups.iter().zip(runs).enumerate() {
+            let n = g.len();
+            let [a, b, ar, ag, ab] = rest.each_mut().map(|r| take(r, n));
+            let range = o0..o0 + n;
+            o0 += n;
+            let (Some(run), Some(_)) = (run, g.object) else {
+                continue;
+            };
+            let (sky, specular) = (run.sky(), run.is_specular());
+            let chunks = a
+                .chunks_mut(CHUNK)
+                .zip(b.chunks_mut(CHUNK))
+                .zip(ar.chunks_mut(CHUNK))
+                .zip(ag.chunks_mut(CHUNK))
+                .zip(ab.chunks_mut(CHUNK))
+                .enumerate();
+            for (k, ((((e, b), r), gg), bb)) in chunks {
+                let (start, len) = (k * CHUNK, e.len());
+                let at = start..start + len;
+                jobs.push((
+                    gi,
+                    HeldRun {
+                        run,
+                        start,
+                        e,
+                        b,
+                        held: std::array::from_fn(|ch| {
+                            &frozen.bounce[ch * n_px + range.start..][at.clone()]
+                        }),
+                        cols: [r, gg, bb],
+                        ts: std::array::from_fn(|ch| &g.ts[ch][at.clone()]),
+                        sky: sky.map(|v| &v[at.clone()]),
+                        specular,
+                        sat,
+                    },
+                ));
+            }
+        }
+        let sums: Vec<(usize, SolveSums)> = jobs
+            .into_par_iter()
+            .map(|(gi, job)| (gi, simd::dispatch(job, AVX2)))
+            .collect();
+        let mut o0 = 0;
+        for (gi, (g, run)) in self.groups.iter().zip(runs).enumerate() {
+            let range = o0..o0 + g.len();
+            o0 += g.len();
+            let (Some(run), Some(obj)) = (run, g.object) else {
+                continue;
+            };
+            let mut total = SolveSums::default();
+            for (_, part) in sums.iter().filter(|(gj, _)| *gj == gi) {
+                total.add(part);
+            }
+            self.solve_run(run, obj, &total, proj, out, &a_all[range], sat);
+        }
+        // Pass 2: the loss of every (group, run) at its object's products.
+        let (b_all, cols_all) = (&*b_all, [&*ar_all, &*ag_all, &*ab_all]);
+        let mut jobs: Vec<(usize, HeldLoss<E>)> = Vec::new();
+        let mut o0 = 0;
+        for (gi, (g, run)) in self.groups.iter().zip(runs).enumerate() {
+            let (n, start) = (g.len(), o0);
+            o0 += n;
+            let (Some(_), Some(obj)) = (run, g.object) else {
+                continue;
+            };
+            for k in 0..n.div_ceil(CHUNK) {
+                let r = k * CHUNK..((k + 1) * CHUNK).min(n);
+                let job = self.held_loss(g, obj, start, r, (b_all, cols_all), proj, out, top, enc);
+                jobs.push((gi, job));
+            }
+        }
+        let losses: Vec<(usize, [f64; 3])> = jobs
+            .into_par_iter()
+            .map(|(gi, job)| (gi, simd::dispatch(job, AVX2)))
+            .collect();
+        // The sums in the serial order: groups in order, an object's runs in order.
+        let mut acc = [0.0f64; 3];
+        for (gi, (g, run)) in self.groups.iter().zip(runs).enumerate() {
+            if let (Some(_), Some(_)) = (run, g.object) {
+                for (_, part) in losses.iter().filter(|(gj, _)| *gj == gi) {
+                    for ch in 0..3 {
+                        acc[ch] += part[ch];
+                    }
+                }
+            } else {
+                let gt = if E::ENCODES { &g.te } else { &g.t };
+                for s in 0..g.len() {
+                    for ch in 0..3 {
+                        acc[ch] += self.norm.penalty(gt[ch][s]) as f64;
+                    }
+                }
+            }
+        }
+        acc
+    }
+
+    /// Pass 2 of [`Kernel::projected_held`] over pixels `r` of group `g` (object `obj`), whose pixels start
+    /// at `o0` in the scratch's `b` and a'_c columns (`scratch`), at the products `out` holds for it.
+    #[allow(clippy::too_many_arguments)]
+    fn held_loss<'a, E: Encoding>(
+        &self,
+        g: &'a super::pixels::Group,
+        obj: usize,
+        o0: usize,
+        r: std::ops::Range<usize>,
+        (b_all, cols): (&'a [f32], [&'a [f32]; 3]),
+        proj: &'a Projection,
+        out: &Solved,
+        top: f32,
+        enc: E,
+    ) -> HeldLoss<'a, E> {
+        let at = o0 + r.start..o0 + r.end;
+        let gt = if E::ENCODES { &g.te } else { &g.t };
+        let w = |ch: usize| proj.weight[ch] as f64;
+        HeldLoss {
+            cols: std::array::from_fn(|ch| &cols[ch][at.clone()]),
+            b: &b_all[at.clone()],
+            sky: proj.sky(obj, g).map(|v| &v[r.clone()]),
+            t: std::array::from_fn(|ch| &gt[ch][r.clone()]),
+            pc: std::array::from_fn(|ch| out.products[obj][ch] as f32),
+            qw: std::array::from_fn(|ch| (out.specular[obj] * w(ch)) as f32),
+            ec: std::array::from_fn(|ch| out.environment.get(obj).map_or(0.0, |e| e[ch]) as f32),
+            top,
+            norm: self.norm,
+            enc,
+        }
+    }
+}
+
+/// Pass 1 of [`Kernel::projected_held`] over one run, for [`simd::dispatch`]: the unit-light factors
+/// (`e`, `b`), the diffuse columns a'_c = e + held_c (`cols`) and the normal-equation sums given them,
+/// taken in `SUM_LANES` partial sums.
+struct HeldRun<'a, 'r> {
+    run: &'a Run<'r>,
+    start: usize,
+    e: &'a mut [f32],
+    b: &'a mut [f32],
+    held: [&'a [f32]; 3],
+    cols: [&'a mut [f32]; 3],
+    ts: [&'a [f32]; 3],
+    sky: Option<&'a [f32]>,
+    specular: bool,
+    sat: f32,
+}
+
+impl Simd for HeldRun<'_, '_> {
+    type Output = SolveSums;
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) -> SolveSums {
+        let HeldRun {
+            run,
+            start,
+            e,
+            b,
+            held,
+            cols,
+            ts,
+            sky,
+            specular,
+            sat,
+        } = self;
+        run.factors::<AVX2>(start, e, b);
+        let n = e.len();
+        let full = n - n % SUM_LANES;
+        let zeros = [0.0f32; CHUNK];
+        let mut sums = SolveSums::default();
+        for (ch, col) in cols.into_iter().enumerate() {
+            let (h, t) = (&held[ch][..n], &ts[ch][..n]);
+            for i in 0..n {
+                col[i] = e[i] + h[i];
+            }
+            let col = &col[..n];
+            if sky.is_none() && !specular {
+                // Σ a'², Σ y·a' over the informing pixels (t < sat), SUM_LANES at a time.
+                let (mut aa, mut ya) = ([0.0f64; SUM_LANES], [0.0f64; SUM_LANES]);
+                let mut i = 0;
+                while i < full {
+                    for l in 0..SUM_LANES {
+                        let on = t[i + l] < sat;
+                        let a = if on { col[i + l] as f64 } else { 0.0 };
+                        let y = if on { t[i + l] as f64 } else { 0.0 };
+                        aa[l] += a * a;
+                        ya[l] += y * a;
+                    }
+                    i += SUM_LANES;
+                }
+                for (l, i) in (full..n).enumerate() {
+                    let on = t[i] < sat;
+                    let a = if on { col[i] as f64 } else { 0.0 };
+                    let y = if on { t[i] as f64 } else { 0.0 };
+                    aa[l] += a * a;
+                    ya[l] += y * a;
+                }
+                sums.saa[ch] += (aa[0] + aa[1]) + (aa[2] + aa[3]);
+                sums.sya[ch] += (ya[0] + ya[1]) + (ya[2] + ya[3]);
+            } else {
+                let v = sky.map_or(&zeros[..n], |v| &v[..n]);
+                let bb: &[f32] = if specular { &b[..n] } else { v }; // not read without a lobe
+                                                                     // the nine sums of `SolveSums::add_environment`, SUM_LANES at a time
+                sums.add_lanes(
+                    ch,
+                    environment_lane_sums::<AVX2>(col, bb, v, t, sat, specular),
+                );
+            }
+        }
+        sums
+    }
+}
+
+/// Pass 2 of [`Kernel::projected_held`] over one run, for [`simd::dispatch`]: per channel
+/// Σ penalty(enc(min(P_c·a'_c + Q·w_c·b + E_c·v, top)) - t_c), in `LANES` partial sums.
+/// Also the plain closed form's pass 2 where an object has an environment column or a lobe (`cols` its
+/// unit-light factor thrice).
+pub(crate) struct HeldLoss<'a, E> {
+    pub(crate) cols: [&'a [f32]; 3],
+    pub(crate) b: &'a [f32],
+    pub(crate) sky: Option<&'a [f32]>,
+    pub(crate) t: [&'a [f32]; 3],
+    pub(crate) pc: [f32; 3],
+    pub(crate) qw: [f32; 3],
+    pub(crate) ec: [f32; 3],
+    pub(crate) top: f32,
+    pub(crate) norm: Norm,
+    pub(crate) enc: E,
+}
+
+impl<E: Encoding> HeldLoss<'_, E> {
+    #[inline(always)]
+    fn sum(&self, f: impl Fn(f32) -> f32) -> [f64; 3] {
+        let (b, top, enc) = (self.b, self.top, self.enc);
+        let n = b.len();
+        let zeros = [0.0f32; CHUNK];
+        // no sky: E_c·0 adds +0 to a value >= +0 (products and factors are non-negative): the same value
+        let v = self.sky.map_or(&zeros[..n], |v| &v[..n]);
+        let full = if !E::ENCODES || top <= 1.0 {
+            n - n % LANES
+        } else {
+            0
+        };
+        let mut out = [0.0f64; 3];
+        for ch in 0..3 {
+            let (col, t) = (&self.cols[ch][..n], &self.t[ch][..n]);
+            let (pc, qw, ec) = (self.pc[ch], self.qw[ch], self.ec[ch]);
+            let mut lanes = [0.0f32; LANES];
+            // whole runs of LANES as fixed-size chunks (no bounds checks: the loop vectorises)
+            let runs = col[..full]
+                .chunks_exact(LANES)
+                .zip(b[..full].chunks_exact(LANES))
+                .zip(v[..full].chunks_exact(LANES))
+                .zip(t[..full].chunks_exact(LANES));
+            for (((c8, b8), v8), t8) in runs {
+                for l in 0..LANES {
+                    let m = pc * c8[l] + qw * b8[l] + ec * v8[l];
+                    lanes[l] += f(enc.unit(m.min(top)) - t8[l]);
+                }
+            }
+            for (j, i) in (full..n).enumerate() {
+                let m = pc * col[i] + qw * b[i] + ec * v[i];
+                lanes[j % LANES] += f(enc.any(m.min(top)) - t[i]);
+            }
+            out[ch] = lanes.iter().sum::<f32>() as f64;
+        }
+        out
+    }
+}
+
+impl<E: Encoding> Simd for HeldLoss<'_, E> {
+    type Output = [f64; 3];
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) -> [f64; 3] {
+        match self.norm {
+            // one closure per norm with the norm a constant, so each loop vectorises on its own
+            Norm::L1 => self.sum(|d| Norm::L1.penalty(d)),
+            Norm::L2 => self.sum(|d| Norm::L2.penalty(d)),
+            Norm::Huber(h) => self.sum(move |d| Norm::Huber(h).penalty(d)),
+        }
+    }
+}
