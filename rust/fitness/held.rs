@@ -39,11 +39,6 @@ impl Kernel {
         let (ar_all, rest) = rest.split_at_mut(n_px);
         let (ag_all, ab_all) = rest.split_at_mut(n_px);
         out.gauge = Some(frozen.u);
-        // (on a pool of one thread the serial loop below is the same value, without the jobs' set-up)
-        if c.parallel && rayon::current_num_threads() > 1 {
-            let slices = [a_all, b_all, ar_all, ag_all, ab_all];
-            return self.held_pooled::<AVX2, E>(proj, frozen, runs, out, slices, (sat, top), enc);
-        }
         let mut acc = [0.0f64; 3];
         let mut o0 = 0;
         for (g, run) in self.groups.iter().zip(runs) {
@@ -89,15 +84,25 @@ impl Kernel {
                 &mut ag_all[range.clone()],
                 &mut ab_all[range.clone()],
             );
-            let parts: Vec<SolveSums> = a
-                .chunks_mut(CHUNK)
-                .zip(b.chunks_mut(CHUNK))
-                .zip(ar.chunks_mut(CHUNK))
-                .zip(ag.chunks_mut(CHUNK))
-                .zip(ab.chunks_mut(CHUNK))
-                .enumerate()
-                .map(|(k, ((((a, b), r), gg), bb))| pass1(k, a, b, [r, gg, bb]))
-                .collect();
+            let parts: Vec<SolveSums> = if c.parallel {
+                a.par_chunks_mut(CHUNK)
+                    .zip(b.par_chunks_mut(CHUNK))
+                    .zip(ar.par_chunks_mut(CHUNK))
+                    .zip(ag.par_chunks_mut(CHUNK))
+                    .zip(ab.par_chunks_mut(CHUNK))
+                    .enumerate()
+                    .map(|(k, ((((a, b), r), gg), bb))| pass1(k, a, b, [r, gg, bb]))
+                    .collect()
+            } else {
+                a.chunks_mut(CHUNK)
+                    .zip(b.chunks_mut(CHUNK))
+                    .zip(ar.chunks_mut(CHUNK))
+                    .zip(ag.chunks_mut(CHUNK))
+                    .zip(ab.chunks_mut(CHUNK))
+                    .enumerate()
+                    .map(|(k, ((((a, b), r), gg), bb))| pass1(k, a, b, [r, gg, bb]))
+                    .collect()
+            };
             let mut sums = SolveSums::default();
             for part in &parts {
                 sums.add(part);
@@ -111,141 +116,22 @@ impl Kernel {
                     self.held_loss(g, obj, range.start, r, (b_all, cols), proj, out, top, enc);
                 simd::dispatch(job, AVX2)
             };
-            for k in 0..n.div_ceil(CHUNK) {
-                let part = pass2(k);
-                for ch in 0..3 {
-                    acc[ch] += part[ch];
-                }
-                if acc[0] + acc[1] + acc[2] > c.bound {
-                    return acc;
-                }
-            }
-        }
-        acc
-    }
-
-    /// [`Kernel::projected_held`] for one candidate over the pool (`c.parallel`): pass 1 over the runs of
-    /// [`CHUNK`] pixels of every object at once, each object's products from its runs' sums added in
-    /// order, pass 2 over every object's runs at once, the losses added per object in run order and the
-    /// objects in group order: the serial value bit for bit, in two joins per candidate (not two per
-    /// object). `slices`: the scratch's a, b, a'_r, a'_g and a'_b.
-    #[allow(clippy::too_many_arguments)]
-    fn held_pooled<const AVX2: bool, E: Encoding + Send + Sync>(
-        &self,
-        proj: &Projection,
-        frozen: &Frozen,
-        runs: &[Option<Run>],
-        out: &mut Solved,
-        slices: [&mut [f32]; 5],
-        (sat, top): (f32, f32),
-        enc: E,
-    ) -> [f64; 3] {
-        fn take<'a>(rest: &mut &'a mut [f32], n: usize) -> &'a mut [f32] {
-            let (head, tail) = std::mem::take(rest).split_at_mut(n);
-            *rest = tail;
-            head
-        }
-        let n_px = self.pixels;
-        let [a_all, b_all, ar_all, ag_all, ab_all] = slices;
-        // Pass 1: (group, run) jobs over disjoint slices of the factors and columns.
-        let mut jobs: Vec<(usize, HeldRun)> = Vec::new();
-        let mut rest = [
-            &mut *a_all,
-            &mut *b_all,
-            &mut *ar_all,
-            &mut *ag_all,
-            &mut *ab_all,
-        ];
-        let mut o0 = 0;
-        for (gi, (g, run)) in self.groups.iter().zip(runs).enumerate() {
-            let n = g.len();
-            let [a, b, ar, ag, ab] = rest.each_mut().map(|r| take(r, n));
-            let range = o0..o0 + n;
-            o0 += n;
-            let (Some(run), Some(_)) = (run, g.object) else {
-                continue;
-            };
-            let (sky, specular) = (run.sky(), run.is_specular());
-            let chunks = a
-                .chunks_mut(CHUNK)
-                .zip(b.chunks_mut(CHUNK))
-                .zip(ar.chunks_mut(CHUNK))
-                .zip(ag.chunks_mut(CHUNK))
-                .zip(ab.chunks_mut(CHUNK))
-                .enumerate();
-            for (k, ((((e, b), r), gg), bb)) in chunks {
-                let (start, len) = (k * CHUNK, e.len());
-                let at = start..start + len;
-                jobs.push((
-                    gi,
-                    HeldRun {
-                        run,
-                        start,
-                        e,
-                        b,
-                        held: std::array::from_fn(|ch| {
-                            &frozen.bounce[ch * n_px + range.start..][at.clone()]
-                        }),
-                        cols: [r, gg, bb],
-                        ts: std::array::from_fn(|ch| &g.ts[ch][at.clone()]),
-                        sky: sky.map(|v| &v[at.clone()]),
-                        specular,
-                        sat,
-                    },
-                ));
-            }
-        }
-        let sums: Vec<(usize, SolveSums)> = jobs
-            .into_par_iter()
-            .map(|(gi, job)| (gi, simd::dispatch(job, AVX2)))
-            .collect();
-        let mut o0 = 0;
-        for (gi, (g, run)) in self.groups.iter().zip(runs).enumerate() {
-            let range = o0..o0 + g.len();
-            o0 += g.len();
-            let (Some(run), Some(obj)) = (run, g.object) else {
-                continue;
-            };
-            let mut total = SolveSums::default();
-            for (_, part) in sums.iter().filter(|(gj, _)| *gj == gi) {
-                total.add(part);
-            }
-            self.solve_run(run, obj, &total, proj, out, &a_all[range], sat);
-        }
-        // Pass 2: the loss of every (group, run) at its object's products.
-        let (b_all, cols_all) = (&*b_all, [&*ar_all, &*ag_all, &*ab_all]);
-        let mut jobs: Vec<(usize, HeldLoss<E>)> = Vec::new();
-        let mut o0 = 0;
-        for (gi, (g, run)) in self.groups.iter().zip(runs).enumerate() {
-            let (n, start) = (g.len(), o0);
-            o0 += n;
-            let (Some(_), Some(obj)) = (run, g.object) else {
-                continue;
-            };
-            for k in 0..n.div_ceil(CHUNK) {
-                let r = k * CHUNK..((k + 1) * CHUNK).min(n);
-                let job = self.held_loss(g, obj, start, r, (b_all, cols_all), proj, out, top, enc);
-                jobs.push((gi, job));
-            }
-        }
-        let losses: Vec<(usize, [f64; 3])> = jobs
-            .into_par_iter()
-            .map(|(gi, job)| (gi, simd::dispatch(job, AVX2)))
-            .collect();
-        // The sums in the serial order: groups in order, an object's runs in order.
-        let mut acc = [0.0f64; 3];
-        for (gi, (g, run)) in self.groups.iter().zip(runs).enumerate() {
-            if let (Some(_), Some(_)) = (run, g.object) {
-                for (_, part) in losses.iter().filter(|(gj, _)| *gj == gi) {
+            let runs_n = n.div_ceil(CHUNK);
+            if c.parallel {
+                let parts: Vec<[f64; 3]> = (0..runs_n).into_par_iter().map(pass2).collect();
+                for part in &parts {
                     for ch in 0..3 {
                         acc[ch] += part[ch];
                     }
                 }
             } else {
-                let gt = if E::ENCODES { &g.te } else { &g.t };
-                for s in 0..g.len() {
+                for k in 0..runs_n {
+                    let part = pass2(k);
                     for ch in 0..3 {
-                        acc[ch] += self.norm.penalty(gt[ch][s]) as f64;
+                        acc[ch] += part[ch];
+                    }
+                    if acc[0] + acc[1] + acc[2] > c.bound {
+                        return acc;
                     }
                 }
             }

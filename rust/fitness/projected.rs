@@ -128,11 +128,6 @@ impl Kernel {
             .extend(proj.environment.iter().map(|b| [b[0].0, b[1].0, b[2].0]));
         let sat = if clip { self.saturated } else { f32::INFINITY };
         let top = if clip { 1.0 } else { f32::INFINITY };
-        // (on a pool of one thread the serial loop below is the same value, without the jobs' set-up)
-        if parallel && rayon::current_num_threads() > 1 {
-            let runs = self.runs(&light, p, proj, (sat, top));
-            return self.projected_pooled::<AVX2, E>(&runs, proj, out, a_all, b_all, sat, enc);
-        }
         let mut acc = [0.0f64; 3];
         let mut offset = 0;
         for g in &self.groups {
@@ -161,23 +156,74 @@ impl Kernel {
             );
             // Pass 1: unit-light irradiance / pi (and the specular factor), and the normal equations.
             let mut sums = SolveSums::default();
-            for (k, (e, b)) in e_all
-                .chunks_mut(CHUNK)
-                .zip(s_all.chunks_mut(CHUNK))
-                .enumerate()
-            {
-                sums.add(&run.factors::<AVX2>(k * CHUNK, e, b));
+            if parallel {
+                let parts: Vec<SolveSums> = e_all
+                    .par_chunks_mut(CHUNK)
+                    .zip(s_all.par_chunks_mut(CHUNK))
+                    .enumerate()
+                    .map(|(k, (e, b))| {
+                        let start = k * CHUNK;
+                        simd::dispatch(
+                            Factors {
+                                run: &run,
+                                start,
+                                e,
+                                b,
+                            },
+                            AVX2,
+                        )
+                    })
+                    .collect();
+                for part in &parts {
+                    sums.add(part);
+                }
+            } else {
+                for (k, (e, b)) in e_all
+                    .chunks_mut(CHUNK)
+                    .zip(s_all.chunks_mut(CHUNK))
+                    .enumerate()
+                {
+                    sums.add(&run.factors::<AVX2>(k * CHUNK, e, b));
+                }
             }
             let products = self.solve_run(&run, obj, &sums, proj, out, &e_all[..n], sat);
             // Pass 2: the loss at those products (serially, stopping once it exceeds `bound`).
             let (e_all, s_all) = (&*e_all, &*s_all);
-            for (k, (e, b)) in e_all.chunks(CHUNK).zip(s_all.chunks(CHUNK)).enumerate() {
-                let part = run.loss::<AVX2, E>(k * CHUNK, e, b, products, enc, Some((acc, bound)));
-                for c in 0..3 {
-                    acc[c] += part[c];
+            if parallel {
+                let parts: Vec<[f64; 3]> = e_all
+                    .par_chunks(CHUNK)
+                    .zip(s_all.par_chunks(CHUNK))
+                    .enumerate()
+                    .map(|(k, (e, b))| {
+                        let (run, start) = (&run, k * CHUNK);
+                        simd::dispatch(
+                            Loss {
+                                run,
+                                start,
+                                e,
+                                b,
+                                products,
+                                enc,
+                            },
+                            AVX2,
+                        )
+                    })
+                    .collect();
+                for part in &parts {
+                    for c in 0..3 {
+                        acc[c] += part[c];
+                    }
                 }
-                if acc[0] + acc[1] + acc[2] > bound {
-                    return acc;
+            } else {
+                for (k, (e, b)) in e_all.chunks(CHUNK).zip(s_all.chunks(CHUNK)).enumerate() {
+                    let part =
+                        run.loss::<AVX2, E>(k * CHUNK, e, b, products, enc, Some((acc, bound)));
+                    for c in 0..3 {
+                        acc[c] += part[c];
+                    }
+                    if acc[0] + acc[1] + acc[2] > bound {
+                        return acc;
+                    }
                 }
             }
         }
@@ -249,105 +295,6 @@ impl Kernel {
             ek: std::array::from_fn(|c| ek[c] as f32),
             on: run.specular && q > 0.0,
         }
-    }
-
-    /// [`Kernel::projected`] for one candidate over the pool (`parallel`): pass 1 over the runs of
-    /// `CHUNK` pixels of every object at once, each object's products from its runs' sums added in order,
-    /// pass 2 over every object's runs at once, the losses added per object in run order and the objects
-    /// in group order: the serial value bit for bit, in two joins per candidate (not two per object).
-    #[allow(clippy::too_many_arguments)]
-    fn projected_pooled<const AVX2: bool, E: Encoding + Send + Sync>(
-        &self,
-        runs: &[Option<Run>],
-        proj: &Projection,
-        out: &mut Solved,
-        a_all: &mut [f32],
-        b_all: &mut [f32],
-        sat: f32,
-        enc: E,
-    ) -> [f64; 3] {
-        // Pass 1: (group, run) jobs over disjoint slices of the factors.
-        let mut jobs: Vec<(usize, &Run, usize, &mut [f32], &mut [f32])> = Vec::new();
-        let (mut a_rest, mut b_rest) = (&mut a_all[..], &mut b_all[..]);
-        for (gi, (g, run)) in self.groups.iter().zip(runs).enumerate() {
-            let (e, a_tail) = std::mem::take(&mut a_rest).split_at_mut(g.len());
-            let (b, b_tail) = std::mem::take(&mut b_rest).split_at_mut(g.len());
-            (a_rest, b_rest) = (a_tail, b_tail);
-            if let Some(run) = run {
-                for (k, (e, b)) in e.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).enumerate() {
-                    jobs.push((gi, run, k * CHUNK, e, b));
-                }
-            }
-        }
-        let sums: Vec<(usize, SolveSums)> = jobs
-            .into_par_iter()
-            .map(|(gi, run, start, e, b)| (gi, simd::dispatch(Factors { run, start, e, b }, AVX2)))
-            .collect();
-        let mut products: Vec<Option<Products>> = vec![None; self.groups.len()];
-        let mut offset = 0;
-        for (gi, (g, run)) in self.groups.iter().zip(runs).enumerate() {
-            let n = g.len();
-            let e_all = &a_all[offset..offset + n];
-            offset += n;
-            let (Some(run), Some(obj)) = (run, g.object) else {
-                continue;
-            };
-            let mut total = SolveSums::default();
-            for (_, part) in sums.iter().filter(|(gj, _)| *gj == gi) {
-                total.add(part);
-            }
-            products[gi] = Some(self.solve_run(run, obj, &total, proj, out, e_all, sat));
-        }
-        // Pass 2: the loss of every (group, run) at its object's products.
-        let (a_all, b_all) = (&*a_all, &*b_all);
-        let mut jobs: Vec<(usize, &Run, usize, &[f32], &[f32], Products)> = Vec::new();
-        let mut offset = 0;
-        for (gi, (g, run)) in self.groups.iter().zip(runs).enumerate() {
-            let (e_all, s_all) = (
-                &a_all[offset..offset + g.len()],
-                &b_all[offset..offset + g.len()],
-            );
-            offset += g.len();
-            if let (Some(run), Some(pr)) = (run, products[gi]) {
-                for (k, (e, b)) in e_all.chunks(CHUNK).zip(s_all.chunks(CHUNK)).enumerate() {
-                    jobs.push((gi, run, k * CHUNK, e, b, pr));
-                }
-            }
-        }
-        let losses: Vec<(usize, [f64; 3])> = jobs
-            .into_par_iter()
-            .map(|(gi, run, start, e, b, products)| {
-                let loss = Loss {
-                    run,
-                    start,
-                    e,
-                    b,
-                    products,
-                    enc,
-                };
-                (gi, simd::dispatch(loss, AVX2))
-            })
-            .collect();
-        // The sums in the serial order: groups in order, an object's runs in order.
-        let mut acc = [0.0f64; 3];
-        for (gi, g) in self.groups.iter().enumerate() {
-            if g.object.is_none() {
-                // Black background (ambient-free scene): enc(0) = 0.
-                let gt = if E::ENCODES { &g.te } else { &g.t };
-                for s in 0..g.len() {
-                    for c in 0..3 {
-                        acc[c] += self.norm.penalty(gt[c][s]) as f64;
-                    }
-                }
-                continue;
-            }
-            for (_, part) in losses.iter().filter(|(gj, _)| *gj == gi) {
-                for c in 0..3 {
-                    acc[c] += part[c];
-                }
-            }
-        }
-        acc
     }
 }
 
