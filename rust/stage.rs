@@ -62,12 +62,14 @@ pub struct StageResult {
 /// the pixel footprint): the search finds the basin, the polish the last digits. Without `refine` the
 /// result carries the search's own loss and no products, unless the callback stopped the search (a search
 /// whose point alone is wanted: for the bounce, the refined products' fixed point is solved again where
-/// the next pass holds it).
+/// the next pass holds it). `start`: a point the initial population holds (`search::run_polishing`).
+#[allow(clippy::too_many_arguments)]
 pub fn run_stage<C>(
     fitness: &Fitness,
     polish: Option<&Fitness>,
     bounds: &[(f64, f64)],
     method: &Method,
+    start: Option<&[f64]>,
     with_products: bool,
     refine: bool,
     mut callback: C,
@@ -77,8 +79,13 @@ where
 {
     let active_pixels = fitness.active_pixels();
     let products_wanted = with_products && fitness.kind() == LossKind::L1Projected;
-    let found =
-        search::run_polishing(method, fitness, polish, bounds, |rep: &GenerationReport| {
+    let found = search::run_polishing(
+        method,
+        fitness,
+        polish,
+        bounds,
+        start,
+        |rep: &GenerationReport| {
             let products = products_wanted.then(|| product_rows(&fitness.solved(rep.best)));
             callback(&StageReport {
                 generation: rep.generation,
@@ -87,7 +94,8 @@ where
                 evaluations: rep.evaluations,
                 products,
             })
-        })?;
+        },
+    )?;
     let stopped = found.stop == StopReason::Callback;
     let mut out = StageResult {
         x: found.best,

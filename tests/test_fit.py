@@ -247,6 +247,29 @@ def test_srgb_space_recovers_a_self_rendered_scene(ball_scene):
         _native.optimize(scene, ["light.position"], _photo(truth), space="gamma", generations=1)
 
 
+def test_optimize_from_a_start_holds_it_and_names_a_bad_one(ball_scene):
+    """``x0``: the first member of L-SHADE's initial population, so a search too small to find the light
+    alone (4 members, no generation, no polish) ends at the true light when it starts there, and at no
+    worse a loss; a start of the wrong length, not finite, or for the paper's DE is refused, naming x0."""
+    from rtloop.fit import _product_bounds
+    truth = ball_scene
+    photo = _photo(truth, footprint=False)
+    scene = rtloop.load_scene(_wrong_start(truth))
+    true_light = list(truth["light"]["position"])
+    kw = dict(loss="l1_projected", population=4, generations=0, product_bounds=_product_bounds(scene), seed=0,
+              method="lshade")
+    alone = _native.optimize(scene, ["light.position"], photo, **kw)
+    held = _native.optimize(scene, ["light.position"], photo, x0=true_light, **kw)
+    assert np.linalg.norm(np.subtract(alone.x, true_light)) > 0.05
+    np.testing.assert_allclose(held.x, true_light, rtol=0, atol=1e-12)
+    assert sum(held.objectives) < sum(alone.objectives)
+    for bad in ([1.0, 2.0], [1.0, float("nan"), 0.0]):
+        with pytest.raises(rtloop.RtloopError, match="x0: needs 3 finite values"):
+            _native.optimize(scene, ["light.position"], photo, x0=bad, **kw)
+    with pytest.raises(rtloop.RtloopError, match="lshade"):
+        _native.optimize(scene, ["light.position"], photo, x0=true_light, **{**kw, "method": "de"})
+
+
 def test_projected_fitness_equals_l1_at_the_solved_products(ball_scene):
     """Variable projection: the closed-form loss is the plain L1 loss of the scene with the solved products."""
     truth = ball_scene

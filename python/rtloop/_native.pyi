@@ -1,6 +1,6 @@
 """Type stubs for rtloop's compiled core (rust/python/mod.rs)."""
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from os import PathLike
 from typing import Any, Self
 
@@ -145,6 +145,7 @@ def optimize(
     frozen_bounce: int = 0,
     saturated: float | None = None,
     solve_margin: int = 0,
+    x0: Sequence[float] | None = None,
 ) -> OptimizeResult:
     """polish_tol: the polish stops once every simplex vertex is within this fraction of each range of
     the best (default 1e-13). product_bounds: (objects, 3, 2), or (objects, 4, 2) whose row 4 bounds
@@ -157,7 +158,9 @@ def optimize(
     counts every pixel. frozen_bounce: with interreflection, 0 searches with the full bounce; N >= 1
     ranks lights with the bounce held at the scene's light, then up to N - 1 times at the light found so
     far, each later pass a Nelder-Mead polish from it (half the polish budget) in a tenth of the box; the
-    first pass's own polish takes half the budget too where N > 1."""
+    first pass's own polish takes half the budget too where N > 1. x0: one value per searched parameter
+    (clamped to its bounds), the first member of L-SHADE's initial population, so that a search refining
+    a point never ends worse than it (method "lshade" only)."""
 
 class OptimizeResult:
     """What ``optimize`` found (immutable). For the projected loss ``products`` (per object

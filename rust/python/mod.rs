@@ -539,13 +539,15 @@ fn evaluate<'py>(
 /// `frozen_bounce=N` > 1 adds up to N - 1 passes, each holding the bounce at the light the previous found and
 /// polishing from there ([`REPASS_POLISH`], as the first pass's own polish then), a third and later one only
 /// while the previous pass moved the light by more than [`REPASS_TOL`] (the held bounce's fixed point).
+/// `x0`: a point (one value per searched parameter, clamped to their bounds) that L-SHADE's initial
+/// population holds, so that a search refining it never ends worse than it (method "lshade" only).
 /// Returns an `OptimizeResult`.
 #[pyfunction]
 #[pyo3(signature = (scene, paths, target, *, pixels=None, loss="l1", clip=true, population=60,
                     generations=200, f=0.6, cr=0.8, seed=0, threads=None, callback=None,
                     product_bounds=None, method="de", max_evaluations=None, polish=0, norm="l1",
                     with_products=true, space="linear", polish_tol=None, footprint=false,
-                    polish_footprint=false, frozen_bounce=0, saturated=None, solve_margin=0))]
+                    polish_footprint=false, frozen_bounce=0, saturated=None, solve_margin=0, x0=None))]
 #[allow(clippy::too_many_arguments)]
 fn optimize<'py>(
     py: Python<'py>,
@@ -575,6 +577,7 @@ fn optimize<'py>(
     frozen_bounce: usize,
     saturated: Option<f32>,
     solve_margin: usize,
+    x0: Option<Vec<f64>>,
 ) -> PyResult<OptimizeResult> {
     let scene = &scene.get().0;
     // Where only the polish takes the pixel footprint, the search's fitness is the polish's at pixel
@@ -595,6 +598,17 @@ fn optimize<'py>(
         solve_margin,
     )?;
     let bounds = args.bounds.clone();
+    if let Some(x0) = &x0 {
+        if x0.len() != bounds.len() || x0.iter().any(|v| !v.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "x0: needs {} finite values, one per searched parameter ({}) (got {:?})",
+                bounds.len(),
+                args.layout.names.join(", "),
+                x0
+            ))
+            .into());
+        }
+    }
     // The light's searched parameters: where the bounce is held depends on them alone (a lobe's shininess
     // shapes no diffuse bounce), so a pass's move is measured on them (on every parameter if none is).
     let names = &args.layout.names;
@@ -714,6 +728,7 @@ fn optimize<'py>(
                 finer.as_ref(),
                 &box_,
                 first_of_many.as_ref().unwrap_or(&method),
+                x0.as_deref(),
                 with_products,
                 // a pass that another follows gives only its light (the next holds the bounce there)
                 pass + 1 == passes,

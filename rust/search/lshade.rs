@@ -337,6 +337,26 @@ pub fn minimize_polishing<O, P, C>(
     polish_obj: Option<&P>,
     bounds: &[(f64, f64)],
     cfg: &LshadeConfig,
+    callback: C,
+) -> Result<LshadeResult>
+where
+    O: Objective + ?Sized,
+    P: Objective + ?Sized,
+    C: FnMut(&GenerationReport) -> bool,
+{
+    minimize_polishing_from(obj, polish_obj, bounds, cfg, None, callback)
+}
+
+/// [`minimize_polishing`] with `start`, where given, as the initial population's first individual (clamped
+/// to `bounds`; the others drawn as without it, from the same random numbers): a search that refines a
+/// point already found (a refit with one more image term, near the light found without it) then never
+/// ends worse than that point, whatever its small population draws.
+pub fn minimize_polishing_from<O, P, C>(
+    obj: &O,
+    polish_obj: Option<&P>,
+    bounds: &[(f64, f64)],
+    cfg: &LshadeConfig,
+    start: Option<&[f64]>,
     mut callback: C,
 ) -> Result<LshadeResult>
 where
@@ -345,6 +365,15 @@ where
     C: FnMut(&GenerationReport) -> bool,
 {
     check_single_objective(obj, bounds)?;
+    if let Some(x0) = start {
+        if x0.len() != bounds.len() || x0.iter().any(|v| !v.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "the start needs {} finite values (got {:?})",
+                bounds.len(),
+                x0
+            )));
+        }
+    }
     if let Some(p) = polish_obj {
         check_single_objective(p, bounds)?;
     }
@@ -358,6 +387,11 @@ where
 
     let mut rng = Rng::new(cfg.seed);
     let mut pop = initial_population(&mut rng, bounds, n_init, cfg.init);
+    if let Some(x0) = start {
+        for (j, (v, &(lo, hi))) in x0.iter().zip(bounds).enumerate() {
+            pop[0][j] = v.clamp(lo, hi);
+        }
+    }
     let mut fit = vec![vec![0.0; 1]; n_init];
     evaluate_all(obj, &pop, &mut fit, None);
     let mut evaluations = n_init;

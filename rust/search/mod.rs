@@ -199,16 +199,19 @@ where
     O: Objective + ?Sized,
     C: FnMut(&GenerationReport) -> bool,
 {
-    run_polishing(method, obj, None::<&O>, bounds, callback)
+    run_polishing(method, obj, None::<&O>, bounds, None, callback)
 }
 
 /// [`run`], with a method's final polish on `polish_obj` where given (see
-/// [`lshade::minimize_polishing`]; DE/rand/1/bin has no polish and ignores it).
+/// [`lshade::minimize_polishing`]; DE/rand/1/bin has no polish and ignores it), and L-SHADE's initial
+/// population holding `start` where given ([`lshade::minimize_polishing_from`]; DE/rand/1/bin, the
+/// paper's method, takes none).
 pub fn run_polishing<O, P, C>(
     method: &Method,
     obj: &O,
     polish_obj: Option<&P>,
     bounds: &[(f64, f64)],
+    start: Option<&[f64]>,
     callback: C,
 ) -> Result<SearchResult>
 where
@@ -217,9 +220,14 @@ where
     C: FnMut(&GenerationReport) -> bool,
 {
     match method {
+        Method::RandOneBin(_) if start.is_some() => Err(Error::Invalid(
+            "a start point needs the \"lshade\" method (DE/rand/1/bin draws its whole population)"
+                .into(),
+        )),
         Method::RandOneBin(cfg) => rand1bin::minimize(obj, bounds, cfg, callback),
         Method::Lshade(cfg) => {
-            lshade::minimize_polishing(obj, polish_obj, bounds, cfg, callback).map(|r| r.search)
+            lshade::minimize_polishing_from(obj, polish_obj, bounds, cfg, start, callback)
+                .map(|r| r.search)
         }
     }
 }

@@ -423,10 +423,17 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
         return current
     if (codes := _jpeg_codes(blocking, space_mode)) is not None:
         _stays_linear(model, codes)
-    if "interreflection" in added or interreflection_given(work):
+    bounce = "interreflection" in added or interreflection_given(work)
+    if bounce:
         more.frozen_bounce = BOUNCE_PASSES  # the bounce held, from the light found without it
+    # The refit's search starts from the light found (and a lobe's best trial shininess), so that its small
+    # population cannot end worse than that; but not with the bounce: there the light found without it is
+    # centimetres off, and a start there stops the held passes early (they end once a pass barely moves
+    # the light): on rtloop's own bounce renders 0.15-0.41 mm -> 1.0-1.5 mm off (README, "Photos as
+    # cameras take them").
     candidate = more.projected(int(seeds[1]), environment=model_env,
-                               name="+".join(["light", "colour", *model["terms"][1:], *added]))
+                               name="+".join(["light", "colour", *model["terms"][1:], *added]),
+                               from_scene=not bounce)
     stages.stages += more.stages
     stages.evaluations += more.evaluations
     if sum(more.stages[-1].objectives) >= sum(first.objectives):
@@ -466,7 +473,7 @@ def _jpeg_refit(current: Scene, work: Scene, stages: Stages, first: StageResult,
     more = refit(box, "srgb")
     if more is None:
         return current
-    candidate = more.projected(int(seeds[1]), name="light+colour (srgb)")
+    candidate = more.projected(int(seeds[1]), name="light+colour (srgb)", from_scene=True)
     stages.stages += more.stages
     stages.evaluations += more.evaluations
     model["space"] = {"used": "srgb", "jpeg_error_codes": codes,

@@ -78,9 +78,11 @@ class Stages:
 
     def run(self, name: str, stage_scene: Scene, paths: list[str], loss: str, pixels: np.ndarray | None,
             generations: int, stage_seed: int, product_bounds: np.ndarray | None = None,
-            method: str = "de", polish: int = 0, polish_tol: float | None = None) -> StageResult:
+            method: str = "de", polish: int = 0, polish_tol: float | None = None,
+            x0: list[float] | None = None) -> StageResult:
         """One search over ``paths`` of ``stage_scene``, the rest held; its history and callbacks. The
-        history comes back from the core; the user's callback (if any) alone takes the GIL per generation."""
+        history comes back from the core; the user's callback (if any) alone takes the GIL per generation.
+        ``x0``: a point (of ``paths``) the search's initial population holds (L-SHADE only)."""
         base_full = np.array(stage_scene.get_params(self.all_paths))
         index = [self.all_names.index(n) for n in stage_scene.param_names(paths)]
         callback = self.callback
@@ -109,7 +111,7 @@ class Stages:
             method=method, polish=polish, norm=self.norm, space=self.space, with_products=callback is not None,
             polish_tol=polish_tol, footprint=self.footprint == "on",
             polish_footprint=self.footprint == "polish" and method == "lshade" and polish > 0,
-            frozen_bounce=self.frozen_bounce, saturated=self.saturated, solve_margin=self.solve_margin,
+            frozen_bounce=self.frozen_bounce, saturated=self.saturated, solve_margin=self.solve_margin, x0=x0,
         )
         history = [(gen, float(sum(objectives)), list(objectives), np.array(best))
                    for gen, best, objectives, _ in out.history]
@@ -131,13 +133,17 @@ class Stages:
         self.stages.append(stage)
         return stage
 
-    def projected(self, seed: int, environment: bool = False, name: str = "light+colour") -> Scene:
+    def projected(self, seed: int, environment: bool = False, name: str = "light+colour",
+                  from_scene: bool = False) -> Scene:
         """The closed-form method: the light (and any shininess) searched, the products solved and split;
-        with ``environment`` each object's occluded-environment product too."""
+        with ``environment`` each object's occluded-environment product too. ``from_scene``: the search's
+        initial population holds the scene's own values (a refit near a light already found: the search
+        then never ends worse than that light; L-SHADE only)."""
         b, where = self.budget, searched_paths(self.all_paths)
+        x0 = list(self.scene.get_params(where)) if from_scene and b.optimizer == "lshade" else None
         s = self.run(name, self.scene, where, "l1_projected", self.use, b.generations[0], seed,
                      product_bounds=product_bounds(self.scene, environment), method=b.optimizer,
-                     polish=b.polish, polish_tol=b.protocol.get("polish_tol"))
+                     polish=b.polish, polish_tol=b.protocol.get("polish_tol"), x0=x0)
         current = split_products(self.scene.with_params(list(s.x), where), s.products, self.scene, s.gauge)
         return keep_undetermined(current, self.scene, self.all_paths, self.ident, s.lit_pixels)
 

@@ -1,0 +1,128 @@
+//! L-SHADE from a given start (`rtloop::search::lshade::minimize_polishing_from`, what a refit near a light
+//! already found uses): the initial population holds the start (clamped to the bounds) in place of its
+//! first member and is otherwise the population drawn without it, so a search refining a point never
+//! ends worse than that point, however small its budget. Expected values come from the test function's
+//! definition (Rastrigin's global minimum 0 at the origin), not from earlier runs.
+
+use rtloop::search::lshade::{minimize_polishing, minimize_polishing_from};
+use rtloop::search::{run_polishing, DeConfig, GenerationReport, LshadeConfig, Method};
+
+/// Rastrigin: 10 n + sum(x² - 10 cos 2πx), minimum 0 at the origin, a local minimum near every integer
+/// point: a search of a few dozen evaluations from random points ends in one of those.
+fn rastrigin(x: &[f64]) -> f64 {
+    10.0 * x.len() as f64
+        + x.iter()
+            .map(|v| v * v - 10.0 * (2.0 * std::f64::consts::PI * v).cos())
+            .sum::<f64>()
+}
+
+fn small(seed: u64) -> LshadeConfig {
+    LshadeConfig {
+        max_evaluations: 40,
+        population_init: Some(8),
+        seed,
+        ..LshadeConfig::default()
+    }
+}
+
+type NoPolish = fn(&[f64]) -> f64;
+
+#[test]
+fn a_start_is_held_and_never_lost() {
+    let bounds = [(-5.12, 5.12); 4];
+    let origin = [0.0; 4];
+    let mut worse_without = 0;
+    for seed in 0..8 {
+        let cfg = small(seed);
+        let mut first: Vec<Vec<f64>> = Vec::new();
+        let plain = minimize_polishing(
+            &rastrigin,
+            None::<&NoPolish>,
+            &bounds,
+            &cfg,
+            |r: &GenerationReport| {
+                if r.generation == 0 {
+                    first = r.population.to_vec();
+                }
+                true
+            },
+        )
+        .unwrap();
+        let mut held: Vec<Vec<f64>> = Vec::new();
+        let from = minimize_polishing_from(
+            &rastrigin,
+            None::<&NoPolish>,
+            &bounds,
+            &cfg,
+            Some(&origin),
+            |r: &GenerationReport| {
+                if r.generation == 0 {
+                    held = r.population.to_vec();
+                }
+                true
+            },
+        )
+        .unwrap();
+        // The start replaces the first member; the others are the draws made without it.
+        assert_eq!(held[0], origin.to_vec());
+        assert_eq!(held[1..], first[1..]);
+        // Elitist selection: the start's value (the global minimum) is never given up.
+        assert_eq!(from.best_objectives[0], 0.0, "seed {seed}: {:?}", from.best);
+        assert_eq!(from.best, origin.to_vec());
+        worse_without += usize::from(plain.best_objectives[0] > 1e-6);
+    }
+    // The budget is too small to find the minimum alone: the start is what holds it.
+    assert!(
+        worse_without >= 6,
+        "{worse_without} of 8 searches without the start missed the minimum"
+    );
+}
+
+#[test]
+fn a_start_outside_the_box_is_clamped_and_a_bad_one_refused() {
+    let bounds = [(-1.0, 1.0), (0.5, 0.5), (-2.0, 2.0)];
+    let mut held = Vec::new();
+    minimize_polishing_from(
+        &rastrigin,
+        None::<&NoPolish>,
+        &bounds,
+        &small(3),
+        Some(&[4.0, 0.0, -3.0]),
+        |r: &GenerationReport| {
+            if r.generation == 0 {
+                held = r.population[0].clone();
+            }
+            true
+        },
+    )
+    .unwrap();
+    assert_eq!(held, vec![1.0, 0.5, -2.0]);
+    for bad in [vec![0.0, 0.5], vec![0.0, 0.5, f64::NAN]] {
+        let err = minimize_polishing_from(
+            &rastrigin,
+            None::<&NoPolish>,
+            &bounds,
+            &small(3),
+            Some(&bad),
+            |_| true,
+        );
+        assert!(err.is_err(), "{bad:?}");
+    }
+    // The paper's DE/rand/1/bin draws its whole population: a start is refused, not ignored.
+    let de = Method::RandOneBin(DeConfig {
+        population: 8,
+        generations: 2,
+        f: 0.6,
+        cr: 0.8,
+        seed: 0,
+    });
+    let got = run_polishing(
+        &de,
+        &rastrigin,
+        None::<&NoPolish>,
+        &bounds,
+        Some(&[0.0, 0.5, 0.0]),
+        |_| true,
+    );
+    assert!(got.is_err());
+}
