@@ -27,6 +27,30 @@ fn small(seed: u64) -> LshadeConfig {
 
 type NoPolish = fn(&[f64]) -> f64;
 
+/// Rastrigin searched within `bounds` (from `start` where given): the result and the initial population.
+fn searched(
+    bounds: &[(f64, f64)],
+    cfg: &LshadeConfig,
+    start: Option<&[f64]>,
+) -> (rtloop::search::LshadeResult, Vec<Vec<f64>>) {
+    let mut first = Vec::new();
+    let res = minimize_polishing_from(
+        &rastrigin,
+        None::<&NoPolish>,
+        bounds,
+        cfg,
+        start,
+        |r: &GenerationReport| {
+            if r.generation == 0 {
+                first = r.population.to_vec();
+            }
+            true
+        },
+    )
+    .unwrap();
+    (res, first)
+}
+
 #[test]
 fn a_start_is_held_and_never_lost() {
     let bounds = [(-5.12, 5.12); 4];
@@ -34,35 +58,12 @@ fn a_start_is_held_and_never_lost() {
     let mut worse_without = 0;
     for seed in 0..8 {
         let cfg = small(seed);
-        let mut first: Vec<Vec<f64>> = Vec::new();
-        let plain = minimize_polishing(
-            &rastrigin,
-            None::<&NoPolish>,
-            &bounds,
-            &cfg,
-            |r: &GenerationReport| {
-                if r.generation == 0 {
-                    first = r.population.to_vec();
-                }
-                true
-            },
-        )
-        .unwrap();
-        let mut held: Vec<Vec<f64>> = Vec::new();
-        let from = minimize_polishing_from(
-            &rastrigin,
-            None::<&NoPolish>,
-            &bounds,
-            &cfg,
-            Some(&origin),
-            |r: &GenerationReport| {
-                if r.generation == 0 {
-                    held = r.population.to_vec();
-                }
-                true
-            },
-        )
-        .unwrap();
+        let (plain, first) = searched(&bounds, &cfg, None);
+        // Without a start, `minimize_polishing` is the same search.
+        let same =
+            minimize_polishing(&rastrigin, None::<&NoPolish>, &bounds, &cfg, |_| true).unwrap();
+        assert_eq!(same.best, plain.best);
+        let (from, held) = searched(&bounds, &cfg, Some(&origin));
         // The start replaces the first member; the others are the draws made without it.
         assert_eq!(held[0], origin.to_vec());
         assert_eq!(held[1..], first[1..]);
@@ -81,21 +82,8 @@ fn a_start_is_held_and_never_lost() {
 #[test]
 fn a_start_outside_the_box_is_clamped_and_a_bad_one_refused() {
     let bounds = [(-1.0, 1.0), (0.5, 0.5), (-2.0, 2.0)];
-    let mut held = Vec::new();
-    minimize_polishing_from(
-        &rastrigin,
-        None::<&NoPolish>,
-        &bounds,
-        &small(3),
-        Some(&[4.0, 0.0, -3.0]),
-        |r: &GenerationReport| {
-            if r.generation == 0 {
-                held = r.population[0].clone();
-            }
-            true
-        },
-    )
-    .unwrap();
+    let (_, first) = searched(&bounds, &small(3), Some(&[4.0, 0.0, -3.0]));
+    let held = first[0].clone();
     assert_eq!(held, vec![1.0, 0.5, -2.0]);
     for bad in [vec![0.0, 0.5], vec![0.0, 0.5, f64::NAN]] {
         let err = minimize_polishing_from(
