@@ -11,7 +11,10 @@ quantisation floor, the render for them, the products' split, scene round trips)
 rounds x runs of each; the medians over the cases and the ratios from this one run. The light error (mm,
 against each ``scene.json``) must be the same for two builds where a change keeps every result.
 ``--baseline`` may be given more than once (``NAME=DIR``; the first is the one the ratios divide by).
-Writes ``benches/results/fit_overhead.md`` (with ``--fixed-malloc``: ``fit_overhead_fixed_malloc.md``).
+``--footprint MODE`` adds a row of this checkout's fits with ``rtloop.fit(footprint=MODE)`` (what the pixel
+footprint costs, against the error it buys).
+Writes ``benches/results/fit_overhead.md`` (with ``--fixed-malloc``: ``fit_overhead_fixed_malloc.md``; with
+``--footprint``: ``..._footprint.md``).
 
 Usage (from the repository root, with the extension built)::
 
@@ -42,7 +45,7 @@ def cases() -> list[Path]:
     return sorted(p for p in PHOTOS.glob("direct-*") if (p / "objective.png").exists())
 
 
-def worker(runs: int) -> dict[str, dict[str, float]]:
+def worker(runs: int, footprint: str | None = None) -> dict[str, dict[str, float]]:
     """Fit every case ``runs`` times with the rtloop on the path: the light error (mm) and, per part, the
     least CPU ms."""
     import numpy as np
@@ -72,12 +75,13 @@ def worker(runs: int) -> dict[str, dict[str, float]]:
         truth = json.loads((case / "scene.json").read_text())
         scene = rtloop.load_scene(case / "scene_input.json")
         photo = rtloop.load_image(case / "objective.png", scene)
-        result = rtloop.fit(scene, photo)  # warm
+        kw = {} if footprint is None else {"footprint": footprint}
+        result = rtloop.fit(scene, photo, **kw)  # warm
         best = dict.fromkeys(PARTS, float("inf"))
         for _ in range(runs):
             spent.update(search=0.0, uncertainty=0.0)
             t0 = time.process_time()
-            result = rtloop.fit(scene, photo)
+            result = rtloop.fit(scene, photo, **kw)
             total = time.process_time() - t0
             got = {"total": total, **spent, "rest": total - spent["search"] - spent["uncertainty"]}
             best = {k: min(best[k], got[k]) for k in PARTS}
@@ -93,11 +97,12 @@ def worker(runs: int) -> dict[str, dict[str, float]]:
 FIXED_MALLOC = {"MALLOC_MMAP_THRESHOLD_": str(8 << 20), "MALLOC_TRIM_THRESHOLD_": str(64 << 20)}
 
 
-def run_with(python_dir: str | None, runs: int, fixed_malloc: bool = False) -> dict[str, dict[str, float]]:
+def run_with(python_dir: str | None, runs: int, fixed_malloc: bool = False,
+             footprint: str | None = None) -> dict[str, dict[str, float]]:
     """`worker` in a one-thread subprocess importing rtloop from ``python_dir`` (this checkout's when None)."""
     env = dict(os.environ, PYTHONPATH=python_dir or str(REPO / "python"), RAYON_NUM_THREADS="1",
                **(FIXED_MALLOC if fixed_malloc else {}))
-    cmd = [sys.executable, __file__, "--worker", "--runs", str(runs)]
+    cmd = [sys.executable, __file__, "--worker", "--runs", str(runs)] + (["--footprint", footprint] if footprint else [])
     text = subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout
     return json.loads(text.strip().splitlines()[-1])
 
@@ -110,23 +115,31 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--runs", type=int, default=5, help="fits per case and round (default 5)")
     parser.add_argument("--fixed-malloc", action="store_true",
                         help="hold glibc's mmap and trim thresholds (see FIXED_MALLOC)")
+    parser.add_argument("--footprint", choices=("auto", "on", "off"), action="append", default=[],
+                        help="also time this checkout's fits with this footprint mode (a row of its own, "
+                             "interleaved with the others: the speed a footprint costs, with its error); "
+                             "repeatable")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker:
-        print(json.dumps(worker(args.runs)))
+        print(json.dumps(worker(args.runs, args.footprint[0] if args.footprint else None)))
         return 0
     if not args.baseline:
         parser.error("--baseline DIR is required")
     builds: dict[str, str | None] = {}
+    modes: dict[str, str | None] = {}  # a build's footprint mode (None: its default)
     for i, b in enumerate(args.baseline):
         name, _, where = b.rpartition("=")
         builds[name or ("baseline" if i == 0 else f"baseline{i + 1}")] = where
     builds["this"] = None
+    for mode in args.footprint:
+        builds[f"this, footprint {mode}"] = None
+        modes[f"this, footprint {mode}"] = mode
     base = next(iter(builds))
     got: dict[str, list[dict[str, dict[str, float]]]] = {k: [] for k in builds}
     for _ in range(args.rounds):
         for name, where in builds.items():
-            got[name].append(run_with(where, args.runs, args.fixed_malloc))
+            got[name].append(run_with(where, args.runs, args.fixed_malloc, modes.get(name)))
     names = list(got["this"][0])
     best = {k: {c: {p: min(r[c][f"{p}_ms"] for r in rs) for p in PARTS} for c in names} for k, rs in got.items()}
     err = {k: {c: rs[0][c]["light_err_mm"] for c in names} for k, rs in got.items()}
@@ -134,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
     lines = ["| build | light error, median (mm) | " + " | ".join(f"{p} (ms)" for p in PARTS)
              + " | " + " | ".join(f"{p} / {base}" for p in PARTS) + " |", "|" + "---|" * (2 + 2 * len(PARTS))]
     for k, where in builds.items():
-        row = [f"{k} (`{where}`)" if where else "this checkout",
+        row = [f"{k} (`{where}`)" if where else ("this checkout" + (f", footprint {modes[k]}" if k in modes else "")),
                f"{statistics.median(err[k][c] for c in names):.2f}"]
         row += [f"{med[k][p]:.1f}" for p in PARTS] + [f"{med[k][p] / med[base][p]:.2f}" for p in PARTS]
         lines.append("| " + " | ".join(row) + " |")
@@ -156,6 +169,8 @@ def main(argv: list[str] | None = None) -> int:
               f"{'identical' if same else 'DIFFERENT'}.\n\n")
     print(header + "\n".join(lines))
     out = OUT.with_name(OUT.stem + "_fixed_malloc.md") if args.fixed_malloc else OUT
+    if args.footprint:
+        out = out.with_name(out.stem + "_footprint.md")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(header + "\n".join(lines) + "\n")
     return 0
