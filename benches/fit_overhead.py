@@ -102,7 +102,8 @@ def run_with(python_dir: str | None, runs: int, fixed_malloc: bool = False,
     """`worker` in a one-thread subprocess importing rtloop from ``python_dir`` (this checkout's when None)."""
     env = dict(os.environ, PYTHONPATH=python_dir or str(REPO / "python"), RAYON_NUM_THREADS="1",
                **(FIXED_MALLOC if fixed_malloc else {}))
-    cmd = [sys.executable, __file__, "--worker", "--runs", str(runs)] + (["--footprint", footprint] if footprint else [])
+    cmd = [sys.executable, __file__, "--worker", "--runs", str(runs)]
+    cmd += ["--footprint", footprint] if footprint else []
     text = subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout
     return json.loads(text.strip().splitlines()[-1])
 
@@ -147,7 +148,8 @@ def main(argv: list[str] | None = None) -> int:
     lines = ["| build | light error, median (mm) | " + " | ".join(f"{p} (ms)" for p in PARTS)
              + " | " + " | ".join(f"{p} / {base}" for p in PARTS) + " |", "|" + "---|" * (2 + 2 * len(PARTS))]
     for k, where in builds.items():
-        row = [f"{k} (`{where}`)" if where else ("this checkout" + (f", footprint {modes[k]}" if k in modes else "")),
+        label = "this checkout" + (f", footprint {modes[k]}" if k in modes else "")
+        row = [f"{k} (`{where}`)" if where else label,
                f"{statistics.median(err[k][c] for c in names):.2f}"]
         row += [f"{med[k][p]:.1f}" for p in PARTS] + [f"{med[k][p] / med[base][p]:.2f}" for p in PARTS]
         lines.append("| " + " | ".join(row) + " |")
