@@ -152,6 +152,8 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict) -> None:
             "seed": rng.randrange(100),
             "population": rng.choice([8, 0, -1, 10**9]) if rng.random() < 0.2 else 8,
             "generations": rng.choice([1, 2, 0, -3, (1, 1), "x"]) if rng.random() < 0.2 else 1,
+            # the norm: the photo's choice (its L2 refit on a noisy photo), the others, and bad ones
+            "norm": rng.choice(["auto", "auto", "l1", "l2", "huber:0.05", "huber:-1", "L1", None]),
         }
         scene = rng.choice(FIT_SCENES)
         if rng.random() < 0.1:

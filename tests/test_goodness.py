@@ -261,3 +261,13 @@ def test_the_quantisation_floor_is_the_rounding_error_in_each_norm(norm, space):
         loss = float(penalty(d.reshape(-1, 3)[use]).sum())
         floor, ratio = explained_ratio(loss, photo, use, norm=norm, space=space)
         assert floor > 0 and ratio == pytest.approx(scale, rel=0.05), (scale, ratio)
+
+
+def test_the_clip_level_of_a_photo_drowned_in_noise_stays_a_level_the_core_takes():
+    from conftest import BALL_ON_FLOOR
+    from rtloop.fit.goodness import CLIP_LEVEL_FLOOR, clip_level
+
+    assert clip_level([0.8, 0.8, 0.8], {"error_codes": [0, 0, 0]}) == CLIP_LEVEL_FLOOR
+    photo = rtloop.render(BALL_ON_FLOOR) + np.random.default_rng(0).normal(0, 0.6, (48, 64, 3)).astype(np.float32)
+    result = rtloop.fit(BALL_ON_FLOOR, np.clip(photo, 0, None), generations=1, polish=5, uncertainty=False)
+    assert result.settings["saturated"] == CLIP_LEVEL_FLOOR

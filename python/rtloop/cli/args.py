@@ -78,8 +78,9 @@ def int_in(lo: int, hi: int) -> Callable[[str], int]:
 
 
 def norm(text: str) -> str:
-    """A loss norm as the core reads it: l1, l2, huber or huber:H with H > 0 (checked here, before the fit)."""
-    if text in ("l1", "l2", "huber"):
+    """A loss norm: auto (chosen from the photo), l1, l2, huber or huber:H with H > 0 (checked here, before
+    the fit)."""
+    if text in ("auto", "l1", "l2", "huber"):
         return text
     if text.startswith("huber:"):
         try:
@@ -88,7 +89,7 @@ def norm(text: str) -> str:
             h = math.nan
         if math.isfinite(h) and h > 0:
             return text
-    raise argparse.ArgumentTypeError(f"expected l1, l2, huber or huber:H with H > 0, got {text!r}")
+    raise argparse.ArgumentTypeError(f"expected auto, l1, l2, huber or huber:H with H > 0, got {text!r}")
 
 
 def float_in(lo: float, hi: float, lo_open: bool, what: str, not_a_number: str | None = None

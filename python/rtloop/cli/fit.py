@@ -170,9 +170,10 @@ def _build_parser() -> Parser:
                    "editors) or 'linear' (raw linear sensor counts)")
     p.add_argument("--crop", action="store_true",
                    help="centre-crop IMAGE to the scene's aspect ratio (otherwise they must match)")
-    p.add_argument("--norm", type=norm, default="l1", metavar="NORM",
-                   help="per-pixel penalty of the loss: l1 (the paper's, default), l2 (Gaussian noise), "
-                   "huber or huber:H (quadratic within H, linear beyond; robust to unmodelled pixels)")
+    p.add_argument("--norm", type=norm, default="auto", metavar="NORM",
+                   help="per-pixel penalty of the loss: auto (default: l1, refitted in l2 when the l1 fit's "
+                   "residual exceeds the photo's own noise at most pixels; fit_report.model.norm says why), l1 "
+                   "(the paper's), l2 (Gaussian noise), huber or huber:H (quadratic within H, linear beyond)")
     p.add_argument("--loss-space", choices=("auto", "linear", "srgb"), default="auto",
                    help="where --norm compares render and IMAGE: 'auto' (default: linear, and a JPEG that direct "
                    "light explains refitted in sRGB), 'linear' (radiance) or 'srgb' (both sRGB-encoded, as an "
@@ -583,6 +584,10 @@ def _model_lines(model: dict[str, Any], fitted: dict[str, Any]) -> list[str]:
                      + f" {ev['loss_without']:.4g} -> {ev['loss_with']:.4g} with it, {100 * ev['gain']:+.1f}%"
                      + (f", BIC {-bic:+.4g}" if bic is not None else "")
                      + (f"; {100 * ev['earlier_gain']:+.1f}% before them)" if "earlier_gain" in ev else ")"))
+    chosen = model.get("norm")
+    if chosen and chosen.get("median_z") is not None:
+        lines.append(f"  norm: {chosen['used']} (the L1 fit's median residual {chosen['median_z']:.2g}x the photo's "
+                     f"own error; {chosen['threshold']:g}x or more is dense and takes l2)")
     if "environment" in terms and fitted.get("environment"):
         lines.append("  environment radiance (r g b): " + "  ".join(f"{v:.4g}" for v in fitted["environment"]))
     return lines

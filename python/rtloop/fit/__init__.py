@@ -7,6 +7,7 @@ the photo does not determine (:mod:`.identifiability`). README: "Methods".
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from collections.abc import Callable
@@ -21,6 +22,7 @@ from ..scene import Scene, load_scene
 from .bounds import narrowed, restore_bounds
 from .gauge import hold_gauges, release_gauges
 from .goodness import clip_level, encoded, goodness, jpeg_blocking, noise_sigma
+from .norm import NORMS, dense_residual, norm_verdict, pixel_mask, representable_pixels
 from .identifiability import identifiability as _identifiability
 from .identifiability import lit_pixel_counts
 from .products import constant_term
@@ -80,7 +82,7 @@ def fit(
     polish: int | None = None,
     uncertainty: bool | str = True,
     mask: np.ndarray | None = None,
-    norm: str = "l1",
+    norm: str = "auto",
     space: str = "auto",
     environment: str = "auto",
     interreflection: str = "auto",
@@ -147,6 +149,7 @@ def fit(
     if space not in ("auto", *LOSS_SPACES):
         raise RtloopError(f"space: unknown loss space {space!r} (known: auto, {', '.join(LOSS_SPACES)})")
     space_mode, space = space, "linear" if space == "auto" else space
+    norm_mode, norm = check_norm(norm)
     b = budget(protocol, space, population, generations, f, cr)
     env_mode = check_environment(environment)
     check_highlights(highlights)
@@ -183,9 +186,13 @@ def fit(
         else footprint
     # The scene as fitted: with the interreflection term when asked for ("on"), else as given.
     work = with_interreflection(scene) if interreflection == "on" else scene
-    stages = Stages(work, target, use, mask, b, ident, clip=clip, norm=norm, space=space, threads=threads,
-                    pixels_per_object=pixels_per_object, rng=np.random.default_rng(seed), callback=callback,
-                    footprint=footprint)
+
+    def new_stages(norm: str, use: np.ndarray | None, mask: np.ndarray | None) -> Stages:
+        return Stages(work, target, use, mask, b, ident, clip=clip, norm=norm, space=space, threads=threads,
+                      pixels_per_object=pixels_per_object, rng=np.random.default_rng(seed), callback=callback,
+                      footprint=footprint)
+
+    stages = new_stages(norm, use, mask)
     # The photo's 8-bit codes where it has them (a PNG or JPEG as load_image decodes it: the sRGB transfer
     # functions of its values then come from a table of the 256, the same numbers), and its sRGB encoding
     # once, for the JPEG blocking here and the goodness of fit at the end.
@@ -203,12 +210,36 @@ def fit(
     if held:
         model["held"] = held
     if b.method == "projected":
-        current = _select_terms(scene, work, stages, seeds, model, env_mode=env_mode, inter_mode=interreflection,
-                                highlights=highlights, target=target, use=use, mask=mask, protocol=protocol,
-                                space=space, population=population, generations=generations, f=f, cr=cr,
-                                optimizer=optimizer, polish=polish, clip=clip, norm=norm, threads=threads,
-                                pixels_per_object=pixels_per_object, seed=seed, callback=callback,
-                                blocking=blocking, space_mode=space_mode, codes=codes)
+        def select(stages: Stages, model: dict[str, Any], encoding: dict[str, Any] | None = None) -> Scene:
+            return _select_terms(scene, work, stages, seeds, model, env_mode=env_mode,
+                                 inter_mode=interreflection, highlights=highlights, target=target,
+                                 use=stages.use, mask=stages.mask, protocol=protocol, space=space,
+                                 population=population, generations=generations, f=f, cr=cr,
+                                 optimizer=optimizer, polish=polish, clip=clip, norm=stages.norm,
+                                 threads=threads, pixels_per_object=pixels_per_object, seed=seed,
+                                 callback=callback, blocking=blocking, space_mode=space_mode, codes=codes,
+                                 encoding=encoding)
+
+        current = select(stages, model)
+        if norm_mode == "auto" and space == "linear" and model.get("space", {}).get("used") != "srgb":
+            jpeg = blocking["error_codes"] if _is_jpeg(blocking) else [0.0, 0.0, 0.0]
+            render = _native.render(current, current.width, current.height, 1, footprint != "off")
+            chosen = norm_verdict(dense_residual(render, target, use, codes, sigma, jpeg, clip=clip))
+            if chosen["used"] == "l2":  # refitted in L2 on the pixels that show one object only
+                before = scene.width * scene.height if use is None else int(use.size)
+                use = representable_pixels(scene, use)
+                mask = pixel_mask(use, scene.width, scene.height)
+                dense = new_stages("l2", use, mask)
+                dense.saturated, dense.solve_margin = stages.saturated, stages.solve_margin
+                first_terms, first_encoding = model["terms"], model.get("encoding", {})
+                model = {"terms": ["direct"], "evidence": {}, **({"held": held} if held else {})}
+                current = select(dense, model, encoding=first_encoding)
+                dense.stages[:0] = stages.stages
+                dense.evaluations += stages.evaluations
+                stages, norm = dense, "l2"
+                chosen.update(first_fit_terms=first_terms, outline_pixels_left_out=before - int(use.size))
+            model["norm"] = chosen
+            settings["norm"] = norm
         if model.get("space", {}).get("used") == "srgb":
             settings["space"] = "srgb"
     else:
@@ -307,7 +338,7 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
                   mask: Any, protocol: str, space: str, population: Any, generations: Any, f: Any, cr: Any,
                   optimizer: Any, polish: Any, clip: bool, norm: str, threads: Any, pixels_per_object: int,
                   seed: int, callback: Any, blocking: dict[str, Any], space_mode: str,
-                  codes: np.ndarray | None = None) -> Scene:
+                  codes: np.ndarray | None = None, encoding: dict[str, Any] | None = None) -> Scene:
     """The closed-form fit with the image terms the photo needs (:mod:`.selection`): fitted with the terms
     given or forced on; then, unless that fit explains the photo to its quantisation floor, each auto term
     in turn (environment, interreflection, a sphere's lobe) is tested at the light found, on top of those
@@ -315,7 +346,8 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
     refit near that light has every selected term; it replaces the first fit only when its loss is lower.
     ``model`` receives the terms and the evidence (each term's last test: ``tested_with`` the terms it was
     tested on top of, ``earlier_gain`` its first test's gain where it was tested again). ``codes``:
-    ``target``'s 8-bit codes where it has them (:func:`rtloop._srgb.codes8`)."""
+    ``target``'s 8-bit codes where it has them (:func:`rtloop._srgb.codes8`). ``encoding``: the encoding
+    check of an earlier fit of the same photo (``{}``: it had none), taken instead of checking again."""
     # Ambient light (given or free, no environment) takes the closed form's constant column instead.
     ambient = constant_term(scene) == "ambient"
     env = environment_given(scene) or env_mode == "on" or ambient
@@ -361,7 +393,10 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
     sub = grid.ravel() if use is None else np.intersect1d(grid.ravel(), use).astype(np.uint32)
     # An encoding is within [0, 1]: an image beyond it is radiance, not sRGB codes. An image whose every
     # value is an 8-bit code's linear value (a PNG or JPEG as load_image decodes it) was decoded: linear.
-    if codes is not None:
+    if encoding is not None:  # checked by the first fit (the L1 one the check's gain was measured with)
+        if encoding:
+            model["encoding"] = encoding
+    elif codes is not None:
         model["encoding"] = {"suspect": False, "why": "its values are 8-bit sRGB codes decoded to linear (as "
                                                       "rtloop.load_image reads a PNG or JPEG): not checked"}
     elif space == "linear" and float(target.min()) >= 0.0 and float(target.max()) <= 1.0:
@@ -537,6 +572,21 @@ def _encoding_check(work: Scene, stages: Stages, seed: int, target: np.ndarray, 
 AT_BOUND = 1e-6
 #: An image with at least this fraction of its pixels above 1 in some channel is doubted (0..255 or not linear).
 MOSTLY_ABOVE_ONE = 0.9
+
+
+def check_norm(norm: Any) -> tuple[str, str]:
+    """(mode, norm): ``norm`` checked (:data:`rtloop.fit.norm.NORMS` or "huber:H" with H > 0), and the norm
+    the first fit takes ("l1" for "auto")."""
+    ok = isinstance(norm, str) and (norm in NORMS or norm.startswith("huber:"))
+    if ok and norm.startswith("huber:"):
+        try:
+            h = float(norm.split(":", 1)[1])
+        except ValueError:
+            h = math.nan
+        ok = math.isfinite(h) and h > 0
+    if not ok:
+        raise RtloopError(f"norm: must be 'auto', 'l1', 'l2', 'huber' or 'huber:H' with H > 0 (got {norm!r})")
+    return norm, "l1" if norm == "auto" else norm
 
 
 #: The ``footprint`` argument's values, with True and False for "on" and "off".

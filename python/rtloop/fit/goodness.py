@@ -111,6 +111,11 @@ def jpeg_blocking(image: np.ndarray, encoding: np.ndarray | None = None) -> dict
 CLIPPED_SIGMAS = 3.0
 
 
+#: The clip level never falls below this: on a photo whose noise is a sizeable fraction of its range (three
+#: errors would put the level below 0, where the core refuses it) a pixel above half the range may be clipped.
+CLIP_LEVEL_FLOOR = 0.5
+
+
 @functools.cache
 def _top_code_step() -> float:
     """The 8-bit sRGB code step at 1 (254 to 255) in linear units."""
@@ -127,7 +132,7 @@ def clip_level(sigma: Any, blocking: dict[str, Any]) -> float:
     and on a low, grazing light that moved the fitted light by half a metre."""
     jpeg = np.asarray(blocking.get("error_codes", [0.0, 0.0, 0.0]), np.float64) * _top_code_step()
     err = np.sqrt(np.asarray(sigma, np.float64) ** 2 + jpeg ** 2)
-    return float(min(SATURATED, 1.0 - CLIPPED_SIGMAS * float(err.max())))
+    return float(min(SATURATED, max(CLIP_LEVEL_FLOOR, 1.0 - CLIPPED_SIGMAS * float(err.max()))))
 
 
 def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool = True,

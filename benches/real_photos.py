@@ -1,0 +1,146 @@
+"""Light-direction accuracy and time of the default fit on real photographs: the DiLiGenT ball.
+
+DIR is a folder made by ``../shared/tools/diligent/prepare_diligent.py --all --out DIR`` (read its README:
+the data is fetched, never committed). Each case ``DIR/L###/`` is fitted as a user would, with the defaults
+plus ``--response linear --mask``: ``rtloop.fit(scene_input, load_image(objective.png, response="linear"),
+mask=load_mask(mask.png))``, and scored by the angle between the fitted light's position (seen from the
+ball's centre at the origin) and ``truth.json``'s direction. Beside it, on the same pixels, the classical
+baseline: Lambertian least squares with the sphere's ground-truth normals (``DIR/normal_gt.npy``), the
+brightest 3 % and the attached shadows left out, Gauss-Newton on the direction.
+
+Printed: a markdown table (mean, median, max error in degrees, median time per fit in ms) per method, and
+with ``--per-light`` a row per light.
+
+Usage (from the repository root, with the extension built)::
+
+    python benches/real_photos.py DIR                      # all 96 lights, the defaults
+    python benches/real_photos.py DIR --step 6             # 16 lights (1, 7, ..., 91)
+    python benches/real_photos.py DIR --fit norm=l1 --fit norm=l2 --json out.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import rtloop
+
+
+def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    a = np.asarray(a, float) / np.linalg.norm(a)
+    b = np.asarray(b, float) / np.linalg.norm(b)
+    return float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))
+
+
+def lambertian_direction(image: np.ndarray, mask: np.ndarray, normals: np.ndarray, start: np.ndarray,
+                         drop: float = 0.03) -> np.ndarray:
+    """The light direction by Lambertian least squares over ``mask``'s pixels: y = k max(n.l, 0), k per fit,
+    the brightest ``drop`` of the pixels and those in attached shadow (n.l <= 0) left out; Gauss-Newton on
+    l from ``start``."""
+    n = normals[mask].astype(float)
+    y = image[mask].astype(float).mean(axis=1)
+    keep = y < np.quantile(y, 1.0 - drop)
+    n, y = n[keep], y[keep]
+    g = np.asarray(start, float) / np.linalg.norm(start)
+    for _ in range(50):
+        lit = n @ (g / np.linalg.norm(g)) > 0
+        a = n[lit]
+        g_new, *_ = np.linalg.lstsq(a, y[lit], rcond=None)  # y = a @ (k l): linear in g = k l on the lit set
+        if np.allclose(g_new, g, rtol=0, atol=1e-12 * np.linalg.norm(g_new)):
+            break
+        g = g_new
+    return g / np.linalg.norm(g)
+
+
+def fit_case(case: Path, options: dict[str, Any]) -> dict[str, Any]:
+    scene = rtloop.load_scene(case / "scene_input.json")
+    photo = rtloop.load_image(case / "objective.png", scene, response="linear")
+    mask = rtloop.load_mask(case / "mask.png", scene)
+    truth = np.asarray(json.loads((case / "truth.json").read_text())["direction"], float)
+    t = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", rtloop.RtloopWarning)
+        result = rtloop.fit(scene, photo, mask=mask, uncertainty=False, **options)
+    seconds = time.perf_counter() - t
+    light = np.asarray(result.scene.to_dict()["light"]["position"], float)
+    return {"error_deg": angle_deg(light, truth), "ms": 1e3 * seconds, "terms": result.model.get("terms"),
+            "norm": (result.model.get("norm") or {}).get("used", result.settings.get("norm"))}
+
+
+def baseline_case(case: Path, normals: np.ndarray) -> dict[str, Any]:
+    scene = rtloop.load_scene(case / "scene_input.json")
+    photo = rtloop.load_image(case / "objective.png", scene, response="linear")
+    mask = rtloop.load_mask(case / "mask.png", scene)
+    truth = np.asarray(json.loads((case / "truth.json").read_text())["direction"], float)
+    t = time.perf_counter()
+    d = lambertian_direction(photo, mask, normals, start=np.array([0.0, 0.0, 1.0]))
+    return {"error_deg": angle_deg(d, truth), "ms": 1e3 * (time.perf_counter() - t)}
+
+
+def summary(rows: list[dict[str, Any]]) -> dict[str, float]:
+    e = np.array([r["error_deg"] for r in rows])
+    return {"n": int(e.size), "mean_deg": float(e.mean()), "median_deg": float(np.median(e)),
+            "max_deg": float(e.max()), "median_ms": float(np.median([r["ms"] for r in rows]))}
+
+
+def parse_fit(text: str) -> tuple[str, Any]:
+    key, _, value = text.partition("=")
+    if not key or not value:
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE (a keyword of rtloop.fit), got {text!r}")
+    try:
+        return key, json.loads(value)
+    except json.JSONDecodeError:
+        return key, value
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("dir", type=Path, help="a folder made by prepare_diligent.py (L###/ cases, normal_gt.npy)")
+    p.add_argument("--step", type=int, default=1, help="every STEP-th light (default 1: all)")
+    p.add_argument("--fit", type=parse_fit, action="append", default=[], metavar="KEY=VALUE",
+                   help="a variant: rtloop.fit keywords, e.g. norm=l1 (repeat for more variants; the defaults "
+                   "always run)")
+    p.add_argument("--per-light", action="store_true", help="a row per light as well")
+    p.add_argument("--json", type=Path, help="write every row and summary here")
+    args = p.parse_args(argv)
+    cases = sorted(c for c in args.dir.glob("L[0-9][0-9][0-9]") if c.is_dir())[:: max(1, args.step)]
+    if not cases:
+        print(f"real_photos.py: no L### cases in {args.dir} (make them with prepare_diligent.py)", file=sys.stderr)
+        return 2
+    normals = np.load(args.dir / "normal_gt.npy")
+    variants: list[tuple[str, dict[str, Any]]] = [("rtloop defaults", {})]
+    variants += [(" ".join(f"{k}={v}" for k, v in [kv]), dict([kv])) for kv in args.fit]
+    out: dict[str, Any] = {"command": " ".join(["python", "benches/real_photos.py", *sys.argv[1:]]),
+                           "machine": platform.processor() or platform.machine(), "methods": {}}
+    rows = {"least squares (Lambertian, GT normals)": [baseline_case(c, normals) for c in cases]}
+    for name, options in variants:
+        rows[name] = [fit_case(c, options) for c in cases]
+    print(f"DiLiGenT ball, {len(cases)} lights, --response linear --mask\n")
+    print("| method | mean (deg) | median (deg) | max (deg) | time per fit (ms, median) |")
+    print("|---|---:|---:|---:|---:|")
+    for name, r in rows.items():
+        s = summary(r)
+        out["methods"][name] = {"summary": s, "rows": r}
+        print(f"| {name} | {s['mean_deg']:.3f} | {s['median_deg']:.3f} | {s['max_deg']:.3f} | {s['median_ms']:.1f} |")
+    if args.per_light:
+        names = list(rows)
+        print("\n| light | " + " | ".join(names) + " |")
+        print("|---|" + "---:|" * len(names))
+        for i, c in enumerate(cases):
+            print(f"| {c.name} | " + " | ".join(f"{rows[n][i]['error_deg']:.3f}" for n in names) + " |")
+    if args.json:
+        args.json.write_text(json.dumps(out, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
