@@ -552,6 +552,7 @@ def _summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None =
         lines.append(row)
     if bars_note:
         lines.append(bars_note)
+    lines += _distance_lines((u.get("robust") or {}).get("light_distance") or u.get("light_distance"))
     if truth is not None and truth.get("split_convention"):
         lines.append("  (split): the photo fixes only the products of these, not each one: their errors "
                      "say how the fit split the products (see the product errors below)")
@@ -591,6 +592,18 @@ def _model_lines(model: dict[str, Any], fitted: dict[str, Any]) -> list[str]:
     if "environment" in terms and fitted.get("environment"):
         lines.append("  environment radiance (r g b): " + "  ".join(f"{v:.4g}" for v in fitted["environment"]))
     return lines
+
+
+def _distance_lines(distance: dict[str, Any] | None) -> list[str]:
+    """The light as the photo fixes it: its direction from the subject and its distance, each +- sigma, or
+    the distance as not determined with the reason (:mod:`rtloop.uncertainty.light`)."""
+    if not distance or distance.get("direction_sigma_deg") is None:
+        return []
+    line = (f"light from the subject: direction +- {distance['direction_sigma_deg']:.2g} deg, distance "
+            f"{distance['distance_m']:.4g} m")
+    if distance["distance_determined"]:
+        return [line + f" +- {distance['distance_sigma_m']:.2g} m"]
+    return [line + " not determined", f"  ({distance['why']})"]
 
 
 def _error(message: str) -> None:

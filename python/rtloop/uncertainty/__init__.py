@@ -21,6 +21,7 @@ from .. import _native
 from ..errors import RtloopError
 from ..fit.products import albedo_derivative, unit_environment_scene, unit_lobes_scene
 from ..scene import Scene, load_scene, scene_to_dict
+from .light import light_distance
 from .linalg import _svd_scaled
 from .pixels import UsedPixels, used_pixels
 from .sandwich import block_sandwich, block_side, sandwich_norm
@@ -81,7 +82,10 @@ def estimate_uncertainty(
     residuals are correlated, plus the systematic shift that pixels averaged over their area cause a
     pixel-centre fit (``footprint_shift`` per parameter, in the covariance as its outer product: a mean
     squared error; see ``_footprint_bias``), with the light as a whole (``light_position_m``, the
-    largest axis; ``light_direction_deg``) and its cost, ``seconds``. ``product_sigma`` (and
+    largest axis; ``light_direction_deg``) and its cost, ``seconds``. ``light_distance`` (and
+    ``robust["light_distance"]``), for a point light whose position is fitted: its distance from the
+    spheres' mean centre and direction from there, each with its sigma, and whether the distance is
+    determined (:mod:`.light`). ``product_sigma`` (and
     ``robust["product_sigma"]``): the sigma of every diffuse product ``products.<object>.<r|g|b>``
     (exposure x intensity x colour x albedo) in either parametrization, propagated from the scene parameters'
     covariance where those are the parameters.
@@ -194,6 +198,10 @@ def estimate_uncertainty(
     if space.direction is not None:
         robust["light_direction_deg"] = (_direction_cone(space, robust_fit)["angle_deg"]
                                          if robust_fit is not None else None)
+    if (distance := light_distance(names, fit.cov, fit.idx_p, fit.determined, d)) is not None:
+        out["light_distance"] = distance
+        robust["light_distance"] = (light_distance(names, robust_fit.cov, robust_fit.idx_p, robust_fit.determined, d)
+                                    if robust_fit is not None else None)
     out["product_sigma"] = _product_sigma(space, wd, fit, use_products)
     robust["product_sigma"] = _product_sigma(space, wd, robust_fit, use_products)
     out["robust"] = robust
