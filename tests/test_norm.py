@@ -50,7 +50,7 @@ def test_pixel_errors_are_the_8_bit_step_on_codes_and_the_noise_elsewhere():
 
 
 def test_a_noise_free_render_keeps_l1():
-    result = _fit(copy.deepcopy(BALL_ON_FLOOR), rtloop.render(BALL_ON_FLOOR), generations=2, polish=20)
+    result = _fit(copy.deepcopy(BALL_ON_FLOOR), rtloop.render(BALL_ON_FLOOR), generations=2, polish=20, norm="auto")
     assert result.model["norm"]["used"] == "l1" and result.settings["norm"] == "l1"
     assert result.model["norm"]["median_z"] is None and "no noise" in result.model["norm"]["why"]
 
@@ -59,7 +59,7 @@ def test_an_8_bit_photo_whose_residual_is_sparse_keeps_the_l1_fit_bit_for_bit():
     case = PHOTOS / "direct-side"
     scene = rtloop.load_scene(case / "scene_input.json")
     photo = rtloop.load_image(case / "objective.png", scene)
-    auto, l1 = _fit(scene, photo), _fit(scene, photo, norm="l1")
+    auto, l1 = _fit(scene, photo, norm="auto"), _fit(scene, photo, norm="l1")
     assert auto.model["norm"]["used"] == "l1"
     assert auto.model["norm"]["median_z"] < DENSE_MEDIAN_Z
     assert auto.x == l1.x
@@ -76,7 +76,7 @@ def _dense_photo():
 
 def test_a_dense_residual_is_refitted_in_l2_on_the_pixels_that_show_one_object():
     scene = copy.deepcopy(BALL_ON_FLOOR)
-    result = _fit(scene, _dense_photo())
+    result = _fit(scene, _dense_photo(), norm="auto")
     chosen = result.model["norm"]
     assert chosen["used"] == "l2" and result.settings["norm"] == "l2"
     assert chosen["median_z"] >= DENSE_MEDIAN_Z
@@ -94,3 +94,8 @@ def test_a_dense_residual_is_refitted_in_l2_on_the_pixels_that_show_one_object()
 def test_a_bad_norm_is_one_rtloop_error_naming_it(bad):
     with pytest.raises(rtloop.RtloopError, match="norm"):
         rtloop.fit(BALL_ON_FLOOR, rtloop.render(BALL_ON_FLOOR), norm=bad)
+
+
+def test_the_default_norm_is_l1():
+    result = _fit(copy.deepcopy(BALL_ON_FLOOR), _dense_photo(), generations=2, polish=20)
+    assert result.settings["norm"] == "l1" and "norm" not in result.model

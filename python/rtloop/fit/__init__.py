@@ -82,7 +82,7 @@ def fit(
     polish: int | None = None,
     uncertainty: bool | str = True,
     mask: np.ndarray | None = None,
-    norm: str = "auto",
+    norm: str = "l1",
     space: str = "auto",
     environment: str = "auto",
     interreflection: str = "auto",
@@ -106,7 +106,9 @@ def fit(
     closed-form method. ``mask`` (bool (H, W), True = use) leaves out pixels the scene does not model
     (another object, a reflection, the photographer's shadow): they count in no loss and no solve.
     ``norm`` penalises each pixel's difference: "l1" (the paper's, default), "l2" (maximum likelihood for
-    Gaussian noise), "huber" or "huber:H" (quadratic within H, default 0.02, linear beyond). ``space`` is
+    Gaussian noise), "huber" or "huber:H" (quadratic within H, default 0.02, linear beyond), "auto" (L1, refitted
+    in L2 on the pixels that show one object where the L1 fit's residual is dense against the photo's own
+    errors: :mod:`rtloop.fit.norm`, ``result.model["norm"]``). ``space`` is
     where it is taken: "linear" (radiance) or "srgb" (the sRGB encodings of the clipped render
     and of the image, as an 8-bit file stores them: a shadow's error counts as the file resolves it); the
     closed-form products stay least squares in linear space, the reported ones minimise the sRGB loss.
