@@ -1,5 +1,6 @@
 """A fuzz campaign over the Python API (scenes, render()/fit() arguments, image arrays, CLI arguments via
-main() in-process) for a developer to run for minutes; prints the counts. Not a test: see README."""
+main() in-process, batch job lines and ids via rtloop-fit --batch) for a developer to run for minutes; prints
+the counts (--only batch: job lines alone). Not a test: see README."""
 
 from __future__ import annotations
 
@@ -9,7 +10,9 @@ import copy
 import io
 import json
 import math
+import os
 import random
+import shutil
 import sys
 import tempfile
 import traceback
@@ -19,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 import rtloop
+from rtloop.cli import batch as cli_batch
 from rtloop.cli import fit as cli_fit
 
 REPO = Path(__file__).resolve().parents[1]
@@ -127,7 +131,69 @@ def check_fit(res, scene_dict, c: Counts) -> None:
             print("out of bounds:", name, v, (lo, hi), file=sys.stderr)
 
 
-def one(rng: random.Random, c: Counts, tmp: Path, first: dict) -> None:
+JOB_IDS = ["a", "b-1", "keep", "results.jsonl", "../out", "/tmp", ".hidden", "", "a/b", "..", "x" * 129, "ok.1",
+           ".rtloop-batch.lock", "f0", 7]
+JOB_FIELDS = ["seed", "mask", "protocol", "population", "generations", "f", "cr", "norm", "space", "loss_space",
+              "optimizer", "polish", "clip", "uncertainty", "pixels_per_object", "environment", "interreflection",
+              "highlights", "footprint", "response", "crop", "grey_card", "image", "bogus"]
+JOB_VALUES = [*ODD, "auto", "on", "off", "srgb", "linear", "paper", "l2", "bootstrap", [1, 1], [2, "x"],
+              {"mask": "photo.png", "reflectance": 0.18}, {"mask": "../scene.json", "reflectance": 2}, 10**40]
+RAW_LINES = ["[" * 100_000 + "]" * 100_000, '{"id": "a", "id": "b", "scene": "s", "photo": "p"}', "{", "null",
+             '{"id": "a", "seed": 1' + "0" * 5000 + "}", "# comment", "\ufeff{}", "\x00"]
+
+
+def job_line(rng: random.Random) -> str:
+    if rng.random() < 0.1:
+        return rng.choice(RAW_LINES)
+    d: dict = {}
+    if rng.random() < 0.9:
+        d["id"] = rng.choice(JOB_IDS) if rng.random() < 0.7 else odd(rng)
+    for key, good in (("scene", "../scene.json"), ("photo", "../photo.png")):
+        if rng.random() < 0.9:
+            d[key] = good if rng.random() < 0.85 else odd(rng)
+    for key in rng.sample(JOB_FIELDS, rng.choice([0, 0, 1, 2, 3])):
+        d[key] = copy.deepcopy(rng.choice(JOB_VALUES)) if rng.random() < 0.7 else odd(rng)
+    return json.dumps(d)
+
+
+def _tree(root: Path) -> dict:
+    return {str(p.relative_to(root)): p.read_bytes() if p.is_file() else None for p in sorted(root.rglob("*"))}
+
+
+def batch(rng: random.Random, c: Counts, tmp: Path) -> None:
+    """rtloop-fit --batch on a few random job lines, in a folder with a file the batch did not write: it fits
+    or says one line; it writes only inside its output folder and deletes or changes nothing else."""
+    root = tmp / "batch"
+    shutil.rmtree(root, ignore_errors=True)
+    (root / "out" / "keep").mkdir(parents=True)
+    (root / "out" / "keep" / "notes.txt").write_text("keep me")
+    (root / "jobs.jsonl").write_text("\n".join(job_line(rng) for _ in range(rng.randint(1, 3))) + "\n")
+    flags = [] if rng.random() < 0.5 else rng.choice([["--warm-start"], ["--retry-failed"], ["--threads", str(odd(rng))],
+                        ["--final-spp", str(odd(rng))], ["--population", str(odd(rng))]])
+    before, top = {**_tree(tmp / "outside"), **_tree(root)}, set(os.listdir(tmp))
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        code = cli_batch.main(["--batch", str(root / "jobs.jsonl"), "--out", str(root / "out"), "--no-images",
+                               "-q", "--generations", "1", "--population", "4", "--no-uncertainty", *flags])
+    c.bump("batches")
+    c.bump(f"batch_exit_{code}")
+    if code not in (0, 1, 2) or len(err.getvalue().splitlines()) > 1 or "Traceback" in err.getvalue():
+        c.bump("batch_not_one_line")
+        print("batch output:", err.getvalue()[:300], file=sys.stderr)
+    after = {**_tree(tmp / "outside"), **_tree(root)}
+    if any(after.get(k, "gone") != v for k, v in before.items()):
+        c.bump("batch_lost_files")
+    if any(not k.startswith("out/") for k in set(after) - set(before)):
+        c.bump("batch_wrote_outside")
+    if set(os.listdir(tmp)) != top:
+        c.bump("batch_wrote_outside")
+
+
+def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None = None) -> None:
+    if only == "batch" or rng.random() < 0.03:
+        batch(rng, c, tmp)
+        c.bump("ok")
+        return
     kind = rng.random()
     if kind < 0.55:  # scenes
         scene = rtloop.load_scene(mutate(rng, BASE))
@@ -186,6 +252,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--inputs", type=int, default=100_000, help="generated inputs (default 100000)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--only", choices=["batch"], help="only job lines of rtloop-fit --batch")
     a = ap.parse_args()
     warnings.simplefilter("ignore")  # the library's warnings on odd images are expected here
     rng, c = random.Random(a.seed), Counts()
@@ -193,11 +260,13 @@ def main() -> int:
         tmp = Path(td)
         (tmp / "scene.json").write_text(json.dumps(BASE))
         rtloop.save_image(tmp / "photo.png", rtloop.render(BASE))
+        (tmp / "outside").mkdir()  # the batch's neighbour: nothing in it may change
+        (tmp / "outside" / "data.txt").write_text("keep me")
         first: dict = {}
         for _ in range(a.inputs):
             c.bump("inputs")
             try:
-                one(rng, c, tmp, first)
+                one(rng, c, tmp, first, a.only)
             except rtloop.RtloopError:
                 c.bump("rtloop_errors")
             except KeyboardInterrupt:
@@ -221,9 +290,17 @@ def main() -> int:
         "non_rtloop_exceptions",
         "nan_or_inf",
         "out_of_bounds",
+        "batches",
+        "batch_exit_0",
+        "batch_exit_1",
+        "batch_exit_2",
+        "batch_not_one_line",
+        "batch_lost_files",
+        "batch_wrote_outside",
     ]:
         print(f"{k}: {c.get(k, 0)}")
-    bad = sum(c.get(k, 0) for k in ["panics", "non_rtloop_exceptions", "nan_or_inf", "out_of_bounds"])
+    bad = sum(c.get(k, 0) for k in ["panics", "non_rtloop_exceptions", "nan_or_inf", "out_of_bounds",
+                                    "batch_not_one_line", "batch_lost_files", "batch_wrote_outside"])
     return 1 if bad else 0
 
 

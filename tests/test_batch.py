@@ -14,6 +14,7 @@ import pytest
 
 import rtloop
 from rtloop.batch import fit_many, job_hash, load_jobs
+from rtloop.batch.folder import LOCK, MARKER
 from rtloop.cli import batch as batch_cli
 
 REPO = Path(__file__).resolve().parents[1]
@@ -197,7 +198,7 @@ def test_batch_job_directory_holds_what_a_single_rtloop_fit_writes(photos, tmp_p
                             "--snapshot-every", "3", "-q"]) == 0
     one, job = tmp_path / "one", out / "f1"
     names = sorted(p.relative_to(one).as_posix() for p in one.rglob("*"))
-    assert sorted(p.relative_to(job).as_posix() for p in job.rglob("*")) == names
+    assert sorted(p.relative_to(job).as_posix() for p in job.rglob("*")) == sorted([*names, MARKER])
     shots = [n for n in names if n.startswith("snapshots/") and n.endswith(".bmp")]
     assert shots and "best_per_generation.csv" in names
     for name in ["best_per_generation.csv", "objective.png", "final.png", *shots]:
@@ -211,8 +212,8 @@ def test_batch_job_directory_holds_what_a_single_rtloop_fit_writes(photos, tmp_p
     dead.wait()
     (quick / f".f1.rtloop-tmp-p{dead.pid}-x1").mkdir(parents=True)  # a killed run's staging
     assert batch_cli.main(["--batch", str(jobs_file), "--out", str(quick), "--no-images", "-q"]) == 0
-    assert sorted(p.name for p in (quick / "f1").iterdir()) == ["result.json"]
-    assert sorted(p.name for p in quick.iterdir()) == ["f0", "f1", "results.jsonl"]
+    assert sorted(p.name for p in (quick / "f1").iterdir()) == [MARKER, "result.json"]
+    assert sorted(p.name for p in quick.iterdir()) == [LOCK, "f0", "f1", "results.jsonl"]
     assert records(quick)[0]["x"] == next(r for r in records(out) if r["id"] == records(quick)[0]["id"])["x"]
 
 

@@ -20,6 +20,7 @@ import rtloop
 import test_batch as tb
 from rtloop.batch import fit_many, jobs
 from rtloop.batch.on_ray import run_ray
+from rtloop.batch.folder import LOCK
 from rtloop.cli import batch as batch_cli
 
 photos = tb.photos  # the fixture: a 32x24 scene and three photos of it
@@ -147,7 +148,7 @@ def test_a_ray_batch_killed_then_interrupted_resumes_each_job_exactly_once(photo
     ids = [r["id"] for r in recs]
     assert sorted(ids) == sorted(j["id"] for j in batch) and len(set(ids)) == n  # each once
     assert recs[: len(interrupted)] == interrupted  # earlier lines untouched
-    assert not [p.name for p in out.iterdir() if p.name.startswith(".")]  # the killed run's staging, tidied
+    assert not [p.name for p in out.iterdir() if p.name.startswith(".") and p.name != LOCK]  # staging tidied
     want = {(k, s): single(scene, paths[k], s) for k in range(3) for s in range(2)}
     for r in recs:
         i = int(r["id"][1:])

@@ -5,6 +5,7 @@ CI runs the same few hundred cases every time."""
 from __future__ import annotations
 
 import copy
+import json
 import math
 
 import numpy as np
@@ -141,3 +142,73 @@ class _quiet:
 
     def __exit__(self, *exc):
         return self._w.__exit__(*exc)
+
+
+# --- batch job lines ---------------------------------------------------------------------------------------
+
+#: JSON values an adversary would put in a job line's field.
+JSON_VALUES = st.recursive(
+    st.one_of(st.none(), st.booleans(), st.integers(), st.integers(10**20, 10**40), st.floats(), st.text(max_size=8),
+              st.sampled_from(["auto", "on", "off", "srgb", "linear", "paper", "rtloop", "l2", "bootstrap"])),
+    lambda inner: st.one_of(st.lists(inner, max_size=3), st.dictionaries(st.text(max_size=6), inner, max_size=3)),
+    max_leaves=6,
+)
+JOB_IDS = st.one_of(st.sampled_from(["a", "b-1", "keep", "results.jsonl", "../out", "/tmp", ".hidden", "", "a/b",
+                                     "..", "x" * 129, "ok.1"]), st.integers(-5, 5), st.text(max_size=6), JSON_VALUES)
+BATCH_FIELDS = ["seed", "mask", "protocol", "population", "generations", "f", "cr", "norm", "space", "loss_space",
+                "optimizer", "polish", "clip", "uncertainty", "pixels_per_object", "environment",
+                "interreflection", "highlights", "footprint", "response", "crop", "grey_card", "image", "bogus"]
+
+
+@st.composite
+def job_lines(draw) -> str:
+    """One line of a JOBS file: mostly an object with the fields a job has, sometimes odd JSON or not JSON."""
+    kind = draw(st.integers(0, 9))
+    if kind == 0:
+        return draw(st.sampled_from(["[" * 5000 + "]" * 5000, '{"id": "a", "id": "b"}', "{", "null", "[]",
+                                     '{"id": "a", "seed": 1' + "0" * 5000 + "}", "# a comment", "   "]))
+    d: dict = {}
+    if draw(st.integers(0, 9)):
+        d["id"] = draw(JOB_IDS)
+    for key, good in (("scene", "scene.json"), ("photo", "photo.png")):
+        if draw(st.integers(0, 9)):
+            d[key] = good if draw(st.booleans()) else draw(st.one_of(JSON_VALUES, st.just("missing.png")))
+    for key in draw(st.lists(st.sampled_from(BATCH_FIELDS), max_size=3, unique=True)):
+        d[key] = draw(JSON_VALUES)
+    return json.dumps(d)
+
+
+def _tree(root) -> dict:
+    return {str(p.relative_to(root)): p.read_bytes() if p.is_file() else None for p in sorted(root.rglob("*"))}
+
+
+@PROPS
+@given(st.lists(job_lines(), min_size=1, max_size=3))
+def test_random_job_lines_are_fitted_or_one_line_and_touch_only_the_batch_files(lines):
+    import contextlib
+    import io
+    import tempfile
+    from pathlib import Path
+
+    from rtloop.cli import batch as batch_cli
+
+    with tempfile.TemporaryDirectory() as td:
+        root = Path(td)
+        (root / "scene.json").write_text(json.dumps(SMALL))
+        rtloop.save_image(root / "photo.png", PHOTO)
+        out = root / "out"
+        (out / "keep").mkdir(parents=True)
+        (out / "keep" / "notes.txt").write_text("keep me")
+        (root / "jobs.jsonl").write_text("\n".join(lines) + "\n")
+        before = _tree(root)
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()), _quiet():
+            code = batch_cli.main(["--batch", str(root / "jobs.jsonl"), "--out", str(out), "--no-images", "-q",
+                                   "--generations", "1", "--population", "4", "--no-uncertainty"])
+        assert code in (0, 1)
+        assert len(err.getvalue().splitlines()) <= 1 and "Traceback" not in err.getvalue()
+        after = _tree(root)
+        for name, data in before.items():  # nothing there before is changed or gone
+            assert after.get(name, "gone") == data, name
+        for name in set(after) - set(before):  # what is new is inside the output folder
+            assert name.startswith("out/"), name

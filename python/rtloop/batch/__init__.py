@@ -7,10 +7,11 @@ from collections.abc import Iterable, Iterator, Mapping
 from typing import Any
 
 from ..errors import RtloopError
+from .fields import check_options
 from .jobs import Job, JobResult, as_job, job_hash, jobs_from, load_jobs, run_job
 from .local import plan
 
-__all__ = ["Job", "JobResult", "as_job", "fit_many", "job_hash", "load_jobs", "run_job"]
+__all__ = ["Job", "JobResult", "as_job", "fit_many", "job_hash", "load_jobs", "run_job", "to_run"]
 
 
 def fit_many(
@@ -30,6 +31,7 @@ def fit_many(
     warm_fraction: float = 0.1,
     address: str | None = None,
     max_retries: int = 3,
+    fitted: Mapping[str, Mapping[str, float]] | None = None,
 ) -> Iterator[JobResult]:
     """Fit every job; an iterator of :class:`JobResult` in the order they finish.
 
@@ -46,7 +48,10 @@ def fit_many(
     ``images``, objective.png, final.png, best_per_generation.csv and snapshots/ every
     ``snapshot_every`` generations, as ``rtloop-fit`` does) into ``out``/<id>/. ``skip``: ``{id: hash}`` of jobs already
     done (see :func:`job_hash`), left out. ``warm_start`` (local only): the jobs run in order (frames of
-    a video), each light search in bounds narrowed to +-``warm_fraction`` around the previous light.
+    a video), each light search in bounds narrowed to +-``warm_fraction`` around the previous ok job's
+    light; its hash covers the values it starts from, so a resumed chain (``fitted``: ``{id: x}`` of the
+    jobs recorded as ok) goes on from the recorded frames as an uninterrupted run does (see :func:`to_run`).
+    Every job, a :class:`Job` or a dict, is checked the same way (its id names a folder inside ``out``).
     """
     if engine not in ("local", "ray"):
         raise RtloopError(f"fit_many: engine must be 'local' or 'ray', got {engine!r}")
@@ -55,16 +60,9 @@ def fit_many(
     for name, v in (("workers", workers), ("threads", threads)):
         if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v < 1):
             raise RtloopError(f"fit_many: {name} must be a whole number >= 1, got {v!r}")
-    common = dict(options or {})
+    common = shared_options(options)
     checked = jobs_from(jobs)
-    if common:
-        as_job({"id": "options", "scene": "", "photo": "", **common}, "options")  # unknown names fail here
-    todo = []
-    for job in checked:
-        digest = job_hash(job, common)
-        if skip is not None and skip.get(job.id) == digest:
-            continue
-        todo.append((job, digest))
+    todo, warm = to_run(checked, common, skip, warm_start=warm_start, warm_fraction=warm_fraction, fitted=fitted)
     kwargs = {"options": common, "out": out, "images": images, "final_scale": final_scale,
               "final_spp": final_spp, "snapshot_every": snapshot_every}
     if engine == "ray":
@@ -79,4 +77,36 @@ def fit_many(
     if warm_start:
         n_workers, n_threads = 1, threads or cores()
     return run_local(todo, workers=n_workers, threads=n_threads, warm_start=warm_start,
-                     warm_fraction=warm_fraction, **kwargs)
+                     warm_fraction=warm_fraction, warm=warm, **kwargs)
+
+
+def shared_options(options: Mapping[str, Any] | None) -> dict[str, Any]:
+    """The options every job shares, checked as a job's are (a seed is each job's own)."""
+    if options is None:
+        return {}
+    if not isinstance(options, Mapping):
+        raise RtloopError(f"fit_many: options must be a mapping of option names, got {type(options).__name__}")
+    common = dict(options)
+    if "seed" in common:
+        raise RtloopError("fit_many: options: 'seed' is each job's own: give it in the jobs")
+    return check_options(common, "fit_many: options")
+
+
+def to_run(jobs: list[Job], common: dict[str, Any], skip: Mapping[str, str] | None, *, warm_start: bool = False,
+           warm_fraction: float = 0.1, fitted: Mapping[str, Mapping[str, float]] | None = None
+           ) -> tuple[list[tuple[Job, str | None]], dict[str, float] | None]:
+    """The ``(job, hash)`` pairs to run (those ``skip`` does not record with the same hash) and, with
+    ``warm_start``, the values the first starts from. A warm-started chain skips its recorded frames up to the
+    first one to run, taking each recorded ok frame's ``fitted`` values on; the frames after that one run
+    (their hashes, None here, depend on the values found before them)."""
+    if not warm_start:
+        pairs = [(job, job_hash(job, common)) for job in jobs]
+        return [(j, h) for j, h in pairs if skip is None or skip.get(j.id) != h], None
+    warm: dict[str, float] | None = None
+    for i, job in enumerate(jobs):
+        digest = job_hash(job, common, None if warm is None else (warm_fraction, warm))
+        if skip is None or skip.get(job.id) != digest:
+            return [(job, digest)] + [(j, None) for j in jobs[i + 1:]], warm
+        if fitted is not None and isinstance(fitted.get(job.id), Mapping):
+            warm = dict(fitted[job.id])
+    return [], warm

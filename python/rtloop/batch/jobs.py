@@ -7,10 +7,9 @@ import hashlib
 import json
 import math
 import os
-import re
 import shutil
+import stat
 import time
-import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,17 +17,15 @@ from typing import Any
 
 from .._files import staging_dir
 from ..errors import RtloopError
+from ..fit.files import SCENE_CARD, fit_inputs, load_inputs, referenced
+from .fields import FIT_OPTIONS, READ_OPTIONS, check_id, check_options, check_path, check_seed
+from .folder import mark, may_replace
 
 __all__ = ["FIT_OPTIONS", "Job", "JobResult", "as_job", "job_hash", "load_jobs", "run_job"]
 
-#: Per-job options passed on to :func:`rtloop.fit` (``loss_space`` is the CLI's name for ``space``).
-FIT_OPTIONS = ("protocol", "population", "generations", "f", "cr", "norm", "space", "optimizer", "polish",
-               "clip", "uncertainty", "pixels_per_object", "environment", "interreflection",
-               "highlights")
-#: Per-job options of how the photo is read.
-READ_OPTIONS = ("response", "crop")
 _ALIASES = {"loss_space": "space", "image": "photo"}
-_ID = re.compile(r"[A-Za-z0-9_+-][A-Za-z0-9._+-]{0,127}")
+#: The most bytes of a JOBS file read.
+MAX_JOBS_FILE = 1 << 30
 
 
 @dataclass(frozen=True)
@@ -86,46 +83,75 @@ class JobResult:
 
 
 def as_job(item: Any, where: str = "job") -> Job:
-    """A :class:`Job` from a Job or a dict (a line of JOBS.jsonl); ``where`` names it in errors."""
+    """A :class:`Job` from a Job or a dict (a line of JOBS.jsonl), every field checked the same way for
+    both; ``where`` names it in errors."""
     if isinstance(item, Job):
-        return item
+        item = {"id": item.id, "scene": item.scene, "photo": item.photo, "seed": item.seed, "mask": item.mask,
+                **(item.options if isinstance(item.options, dict) else {"options": item.options})}
     if not isinstance(item, dict):
         raise RtloopError(f"{where}: expected an object with id, scene and photo, got {type(item).__name__}")
     d = {_ALIASES.get(k, k): v for k, v in item.items()}
     for key in ("id", "scene", "photo"):
         if key not in d:
             raise RtloopError(f"{where}: missing '{key}'")
-    jid = d.pop("id")
-    if isinstance(jid, int) and not isinstance(jid, bool):
-        jid = str(jid)
-    if not isinstance(jid, str) or not _ID.fullmatch(jid):
-        raise RtloopError(f"{where}: id {jid!r} must be 1-128 letters, digits, '_', '+', '-' or '.' "
-                          "(not starting with '.'): it names the job's output directory")
-    for key in ("scene", "photo", "mask"):
-        if key in d and d[key] is not None and not isinstance(d[key], (str, os.PathLike)):
-            raise RtloopError(f"{where}: '{key}' must be a path (a string)")
-    seed = d.pop("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise RtloopError(f"{where}: 'seed' must be a whole number >= 0, got {seed!r}")
-    scene, photo, mask = str(d.pop("scene")), str(d.pop("photo")), d.pop("mask", None)
-    unknown = sorted(set(d) - set(FIT_OPTIONS) - set(READ_OPTIONS))
-    if unknown:
-        known = ", ".join(("id", "scene", "photo", "seed", "mask", *READ_OPTIONS, *FIT_OPTIONS))
-        raise RtloopError(f"{where}: unknown field{'s' if len(unknown) > 1 else ''} "
-                          f"{', '.join(map(repr, unknown))} (known: {known})")
-    return Job(jid, scene, photo, seed, None if mask is None else str(mask), d)
+    jid = check_id(d.pop("id"), where)
+    scene, photo = check_path(d.pop("scene"), where, "scene"), check_path(d.pop("photo"), where, "photo")
+    mask = check_path(d.pop("mask", None), where, "mask", optional=True)
+    seed = check_seed(d.pop("seed", 0), where)
+    return Job(jid, scene, photo, seed, mask, check_options(d, where))  # type: ignore[arg-type]
+
+
+def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    d: dict[str, Any] = {}
+    for k, v in pairs:
+        if k in d:
+            raise RtloopError(f"field {k[:60]!r} given twice")
+        d[k] = v
+    return d
+
+
+def parse_line(line: str, where: str) -> Any:
+    """One JSON line: duplicate fields, nesting past Python's limit and huge numbers are one line each."""
+    try:
+        return json.loads(line, object_pairs_hook=_no_duplicates)
+    except json.JSONDecodeError as e:
+        raise RtloopError(f"{where}: not JSON ({e.msg} at column {e.colno})") from None
+    except RtloopError as e:
+        raise RtloopError(f"{where}: {e}") from None
+    except RecursionError:
+        raise RtloopError(f"{where}: not JSON this program reads (nested too deep)") from None
+    except ValueError as e:  # a number past Python's digit limit
+        raise RtloopError(f"{where}: not JSON this program reads ({' '.join(str(e).split())[:100]})") from None
+
+
+def _read_jobs_file(path: Path) -> str:
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    except OSError as e:
+        raise RtloopError(f"{path}: cannot read ({e.strerror or e})") from None
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise RtloopError(f"{path}: not a regular file")
+        if info.st_size > MAX_JOBS_FILE:
+            raise RtloopError(f"{path}: larger than {MAX_JOBS_FILE} bytes")
+        with os.fdopen(os.dup(fd), "rb") as fh:
+            data = fh.read(MAX_JOBS_FILE + 1)
+    except OSError as e:
+        raise RtloopError(f"{path}: cannot read ({e.strerror or e})") from None
+    finally:
+        os.close(fd)
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise RtloopError(f"{path}: not UTF-8 text") from None
 
 
 def load_jobs(path: str | os.PathLike[str]) -> list[Job]:
     """The jobs of a JOBS.jsonl file (one JSON object a line; blank lines and lines starting with # skipped).
     Relative paths are taken relative to the file's directory. Ids must be unique."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as e:
-        raise RtloopError(f"{path}: cannot read ({e.strerror or e})") from None
-    except UnicodeDecodeError:
-        raise RtloopError(f"{path}: not UTF-8 text") from None
+    text = _read_jobs_file(path)
     base = path.parent
     jobs: list[Job] = []
     seen: dict[str, int] = {}
@@ -133,11 +159,7 @@ def load_jobs(path: str | os.PathLike[str]) -> list[Job]:
         if not line.strip() or line.lstrip().startswith("#"):
             continue
         where = f"{path}:{n}"
-        try:
-            item = json.loads(line)
-        except json.JSONDecodeError as e:
-            raise RtloopError(f"{where}: not JSON ({e.msg} at column {e.colno})") from None
-        job = as_job(item, where)
+        job = as_job(parse_line(line, where), where)
         if job.id in seen:
             raise RtloopError(f"{where}: id {job.id!r} already used on line {seen[job.id]}")
         seen[job.id] = n
@@ -145,33 +167,65 @@ def load_jobs(path: str | os.PathLike[str]) -> list[Job]:
         def rel(p: str | None) -> str | None:
             return None if p is None else str(base / p) if not os.path.isabs(p) else p
 
-        jobs.append(Job(job.id, rel(job.scene), rel(job.photo), job.seed, rel(job.mask), job.options))  # type: ignore[arg-type]
+        options = dict(job.options)
+        if isinstance(options.get("grey_card"), dict):
+            options["grey_card"] = {**options["grey_card"], "mask": rel(options["grey_card"]["mask"])}
+        jobs.append(Job(job.id, rel(job.scene), rel(job.photo), job.seed, rel(job.mask), options))  # type: ignore[arg-type]
     return jobs
 
 
 def _file_digest(h: Any, label: str, path: str | None) -> None:
+    """Feed ``path``'s bytes to ``h``; a file that is not a regular one (a FIFO, a device) is not read."""
     h.update(label.encode() + b"\0")
     if path is None:
         h.update(b"none\0")
         return
     try:
-        with open(path, "rb") as fh:
-            h.update(b"file\0")
-            for chunk in iter(lambda: fh.read(1 << 20), b""):
-                h.update(chunk)
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
     except OSError as e:
         h.update(f"unreadable:{e.errno}\0".encode())
+        return
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            h.update(b"not-a-regular-file\0")
+            return
+        h.update(b"file\0")
+        for chunk in iter(lambda: os.read(fd, 1 << 20), b""):
+            h.update(chunk)
+    except OSError as e:
+        h.update(f"unreadable:{e.errno}\0".encode())
+    finally:
+        os.close(fd)
 
 
-def job_hash(job: Job, common: dict[str, Any] | None = None) -> str:
-    """SHA-256 (hex, 16 digits) of what decides a job's result: the scene, photo and mask files' bytes, the
-    seed and the options (the job's over ``common``). A re-run skips a job whose id and hash are recorded."""
-    h = hashlib.sha256(b"rtloop-batch-1\0")
+def _card(options: dict[str, Any]) -> Any:
+    """A job's ``grey_card`` option as :func:`rtloop.fit.files.load_inputs` takes it."""
+    if "grey_card" not in options:
+        return SCENE_CARD
+    card = options["grey_card"]
+    return None if not card else (card["mask"], card["reflectance"])
+
+
+def job_hash(job: Job, common: dict[str, Any] | None = None,
+             warm: tuple[float, dict[str, float]] | None = None) -> str:
+    """SHA-256 (hex, 16 digits) of what decides a job's result: the bytes of the scene, the photo, the mask
+    and grey card the fit reads (given, or the ones the scene names), the seed, the options (the job's over
+    ``common``) and, for a warm-started job, the fraction and the values it starts from. A re-run skips a job
+    whose id and hash are recorded."""
+    h = hashlib.sha256(b"rtloop-batch-2\0")
+    options = {**(common or {}), **job.options, "seed": job.seed}
     _file_digest(h, "scene", job.scene)
     _file_digest(h, "photo", job.photo)
-    _file_digest(h, "mask", job.mask)
-    options = {**(common or {}), **job.options, "seed": job.seed}
+    try:
+        mask, card = referenced(job.scene, job.mask, _card(options))
+    except RtloopError as e:
+        h.update(f"unresolved:{e}\0".encode())
+        mask, card = job.mask, None
+    _file_digest(h, "mask", mask)
+    _file_digest(h, "card", None if card is None else card[0])
     h.update(json.dumps(options, sort_keys=True, default=str).encode())
+    if warm is not None:
+        h.update(b"warm\0" + json.dumps([warm[0], warm[1]], sort_keys=True).encode())
     return h.hexdigest()[:16]
 
 
@@ -185,51 +239,52 @@ def run_job(job: Job, *, threads: int | None = None, options: dict[str, Any] | N
             out: str | os.PathLike[str] | None = None, images: bool = True, final_scale: int = 4,
             final_spp: int = 16, snapshot_every: int = 5, keep_fit: bool = True, hash: str | None = None,
             warm: dict[str, float] | None = None, warm_fraction: float = 0.1) -> JobResult:
-    """Load and fit one job (``options`` under the job's own) on ``threads`` threads; with ``out``, write
-    its outputs into ``out``/<id>/ as ``rtloop-fit`` does (staged, moved into place whole): result.json
-    and, with ``images``, objective.png, final.png, best_per_generation.csv and a snapshot every
+    """Load and fit one job (``options`` under the job's own) on ``threads`` threads, by the path a single
+    ``rtloop-fit`` takes (:mod:`rtloop.fit.files`: the mask and grey card the scene names unless the job
+    gives its own); with ``out``, write its outputs into ``out``/<id>/ as ``rtloop-fit`` does (staged, moved
+    into place whole, marked as the batch's; a folder there the batch did not write is never replaced):
+    result.json and, with ``images``, objective.png, final.png, best_per_generation.csv and a snapshot every
     ``snapshot_every`` generations (the last two need a callback per generation: ``images`` False keeps
     the search free of the GIL).
     ``warm`` (fit values by name, e.g. the previous frame's) starts the search for the light's position (or
     direction) in bounds narrowed to +-``warm_fraction`` of their range around it. A failure (RtloopError,
     an unreadable file, a bad option) becomes a result with status "error"; other exceptions propagate."""
-    import rtloop
-
     t0 = time.perf_counter()
     digest = hash if hash is not None else job_hash(job, options)
     opts = {**(options or {}), **job.options}
     read = {k: opts.pop(k) for k in READ_OPTIONS if k in opts}
+    card = _card(read)
+    read.pop("grey_card", None)
     staged: Path | None = None
     try:
-        scene = rtloop.load_scene(job.scene)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            image = rtloop.load_image(job.photo, scene, **read)
-            mask = None if job.mask is None else rtloop.load_mask(job.mask, scene, crop=read.get("crop", False))
+        if out is not None:
+            may_replace(Path(out) / job.id)
+        inputs = load_inputs(job.scene, job.photo, mask=job.mask, grey_card=card, **read)
+        cold = inputs.scene
         if warm:
-            scene = _warm_scene(scene, warm, warm_fraction)
+            inputs.scene = _warm_scene(inputs.scene, warm, warm_fraction)
         log = None
         if out is not None:
             from ..cli.outputs import GenerationLog
 
             staged = staging_dir(Path(out) / job.id, "rtloop-tmp")
             if images:
-                log = GenerationLog(staged, scene, snapshot_every)
+                log = GenerationLog(staged, inputs.scene, snapshot_every)
         try:
-            result = rtloop.fit(scene, image, seed=job.seed, threads=threads, mask=mask, callback=log, **opts)
+            result = fit_inputs(inputs, seed=job.seed, threads=threads, callback=log, **opts)
         finally:
             if log is not None:
                 log.close()
         if warm:
             from ..fit.bounds import restore_bounds
 
-            result.scene = restore_bounds(result.scene, rtloop.load_scene(job.scene))
+            result.scene = restore_bounds(result.scene, cold)
         if staged is not None:
-            _write_outputs(staged, Path(out), job, result, image, read, images, final_scale, final_spp)  # type: ignore[arg-type]
+            _write_outputs(staged, Path(out), job, result, inputs, read, images, final_scale, final_spp)  # type: ignore[arg-type]
         return JobResult(job.id, "ok", digest, job.seed, light=_light(result.scene), products=result.products,
                          x=result.x, fitness=result.fitness, evaluations=result.evaluations,
                          seconds=time.perf_counter() - t0, fit=result if keep_fit else None)
-    except (RtloopError, OSError, TypeError, ValueError) as e:
+    except (RtloopError, OSError, TypeError, ValueError, OverflowError) as e:
         return JobResult(job.id, "error", digest, job.seed, error=_message(job, e),
                          seconds=time.perf_counter() - t0)
     finally:
@@ -263,19 +318,20 @@ def _warm_scene(scene: Any, warm: dict[str, float], fraction: float) -> Any:
     return narrowed(scene.with_params(values, paths), paths, fraction)
 
 
-def _write_outputs(tmp: Path, out: Path, job: Job, result: Any, image: Any, read: dict[str, Any],
+def _write_outputs(tmp: Path, out: Path, job: Job, result: Any, inputs: Any, read: dict[str, Any],
                    images: bool, scale: int, spp: int) -> None:
-    """Complete the staged ``tmp`` with result.json (and objective.png, final.png) and move it into place
-    as ``out``/<id>/ (replacing an older one)."""
+    """Complete the staged ``tmp`` with result.json (and objective.png, final.png), mark it as the batch's
+    and move it into place as ``out``/<id>/ (replacing an older one the batch wrote)."""
     from .._files import move_into_place
     from ..cli.outputs import input_paths, write_final, write_result
 
     target = out / job.id
     write_result(tmp, result, input_paths(job.scene, job.photo, read.get("response", "srgb"),
-                                          read.get("crop", False), job.mask))
+                                          read.get("crop", False), inputs.mask_path))
     if images:
-        write_final(tmp, result, image, scale, spp)
-    move_into_place(tmp, target, os.path.lexists(target), "rtloop")
+        write_final(tmp, result, inputs.image, scale, spp)
+    mark(tmp)
+    move_into_place(tmp, target, may_replace(target), "rtloop")
 
 
 def jobs_from(items: Iterable[Any]) -> list[Job]:

@@ -12,7 +12,7 @@ from functools import cache
 from typing import Any
 
 from .._opencv import leave_stderr_alone
-from .jobs import Job, JobResult, run_job
+from .jobs import Job, JobResult, job_hash, run_job
 
 __all__ = ["blas_threads", "cores", "plan", "run_local"]
 
@@ -50,10 +50,11 @@ def plan(workers: int | None, threads: int | None) -> tuple[int, int]:
     return workers, threads
 
 
-def run_local(jobs: list[tuple[Job, str]], *, workers: int, threads: int, warm_start: bool,
+def run_local(jobs: list[tuple[Job, str | None]], *, workers: int, threads: int, warm_start: bool,
               **kwargs: Any) -> Iterator[JobResult]:
     """Run ``(job, hash)`` pairs; yield results as they finish. With ``warm_start`` the jobs run one after
-    another in order, each starting from the previous ok job's light. Leaving the iterator early (or
+    another in order, each starting from the previous ok job's light (the first from ``warm``; a hash None is
+    the job's with the values it starts from). Leaving the iterator early (or
     Ctrl-C) cancels the jobs not yet started and waits for the running ones. numpy's BLAS runs on
     ``threads`` threads meanwhile (process-wide): its idle threads spin, and with a fit per core the spin
     cost up to a fifth of the batch's CPU time (README "Many photos")."""
@@ -61,11 +62,13 @@ def run_local(jobs: list[tuple[Job, str]], *, workers: int, threads: int, warm_s
         yield from _run(jobs, workers=workers, threads=threads, warm_start=warm_start, **kwargs)
 
 
-def _run(jobs: list[tuple[Job, str]], *, workers: int, threads: int, warm_start: bool,
-         **kwargs: Any) -> Iterator[JobResult]:
+def _run(jobs: list[tuple[Job, str | None]], *, workers: int, threads: int, warm_start: bool,
+         warm: dict[str, float] | None = None, **kwargs: Any) -> Iterator[JobResult]:
     if warm_start:
-        warm: dict[str, float] | None = None
+        fraction = kwargs["warm_fraction"]
         for job, digest in jobs:
+            if digest is None:
+                digest = job_hash(job, kwargs["options"], None if warm is None else (fraction, warm))
             r = run_job(job, threads=threads, hash=digest, warm=warm, **kwargs)
             if r.ok:
                 warm = r.x

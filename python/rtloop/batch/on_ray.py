@@ -27,9 +27,12 @@ def _task(job: dict[str, Any], digest: str, threads: int, kwargs: dict[str, Any]
 def _plain(job: Job) -> dict[str, Any]:
     """The job's fields for a task, its paths made absolute here (a worker's working directory is not the
     driver's)."""
+    options = dict(job.options)
+    if isinstance(options.get("grey_card"), dict):
+        options["grey_card"] = {**options["grey_card"], "mask": os.path.abspath(options["grey_card"]["mask"])}
     return {"id": job.id, "scene": os.path.abspath(job.scene), "photo": os.path.abspath(job.photo),
             "seed": job.seed, "mask": None if job.mask is None else os.path.abspath(job.mask),
-            "options": dict(job.options)}
+            "options": options}
 
 
 def run_ray(jobs: list[tuple[Job, str]], *, address: str | None, threads: int, max_retries: int,

@@ -4,8 +4,6 @@
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import signal
 import sys
 import threading
@@ -15,11 +13,14 @@ from typing import Any, TextIO
 
 import rtloop
 from rtloop._files import recover_leftovers_in
-from rtloop.batch import fit_many, load_jobs
+from rtloop.batch import fit_many, load_jobs, shared_options, to_run
+from rtloop.batch.folder import LOCK, MARKER, Results, check_targets, locked
 from rtloop.batch.on_ray import RAY_HINT
 from rtloop.fit import PROTOCOLS
+from rtloop.fit.protocol import LIMITS, max_threads
 
-from .args import Parser, UsageError, generations, int_at_least
+from .args import Parser, UsageError, generations, int_at_least, int_in, norm
+from .fit import MAX_SIZE
 
 __all__ = ["main"]
 
@@ -29,32 +30,43 @@ DESCRIPTION = """\
 Fit many photos: JOBS is a JSON-lines file, one job a line:
   {"id": "shot-001", "scene": "scene.json", "photo": "shot-001.png", "seed": 1}
 with optional "mask" and per-job fit options ("protocol", "population",
-"generations", "norm", "loss_space", "response", "crop", ...); relative paths
-are relative to JOBS. Jobs run in-process (one fit per core, each on one
-thread, by default) or, with --ray, as Ray tasks on a cluster.
+"generations", "norm", "loss_space", "response", "crop", "footprint", ...);
+relative paths are relative to JOBS. Each job is fitted as rtloop-fit fits
+its scene and photo: the mask and the grey card the scene names (written by
+rtloop-scene) are used unless the job gives "mask", or "grey_card" (false: none;
+{"mask": "card.png", "reflectance": 0.18}: that card). Jobs run in-process
+(one fit per core, each on one thread, by default) or, with --ray, as Ray
+tasks on a cluster.
 """
 
-EPILOG = """\
+EPILOG = f"""\
 files written into DIR:
   results.jsonl     one line per finished job: id, status (ok/error), hash (of
-                    the scene, photo and mask bytes, seed and options), seed,
-                    light (as in result.json), products, x (the fitted
-                    values), fitness, evaluations, error, seconds; each line is
-                    appended whole (written, flushed and fsynced)
+                    the scene, photo, mask and grey card bytes, seed, options
+                    and a warm start's values), seed, light (as in
+                    result.json), products, x (the fitted values), fitness,
+                    evaluations, error, seconds; each line is appended whole
+                    (written, flushed and fsynced)
   <id>/result.json  as rtloop-fit writes it; unless --no-images also as
                     rtloop-fit: <id>/objective.png, <id>/final.png,
                     <id>/best_per_generation.csv and <id>/snapshots/ (the last
                     two from a callback per generation: --no-images is the
-                    fast path)
+                    fast path); <id>/{MARKER} marks the folder as the batch's:
+                    a job whose folder would replace anything else in DIR is
+                    refused before any fit
+  {LOCK}
+                    held while a batch runs: a second batch on DIR stops
 
 A re-run with the same DIR skips every job whose id and hash are already in
-results.jsonl (a failed one too, unless --retry-failed), so an interrupted
-batch (Ctrl-C, a killed machine) resumes where it stopped.
+results.jsonl, so an interrupted batch (Ctrl-C, a killed machine) resumes
+where it stopped; a job recorded as failed is counted as failed again (exit
+status 1) unless --retry-failed runs it again. With --warm-start the recorded
+frames are skipped up to the first to run, which starts from the last one's
+light, as in an uninterrupted run.
 
-exit status: 0 every job ok, 1 a job failed or bad input, 2 bad command line,
-130 interrupted (Ctrl-C), 143 terminated (SIGTERM).
+exit status: 0 every job ok, 1 a job failed (now or before) or bad input, 2 bad
+command line, 130 interrupted (Ctrl-C), 143 terminated (SIGTERM).
 """
-
 
 
 class _Terminated(KeyboardInterrupt):
@@ -72,14 +84,14 @@ def _build_parser() -> Parser:
     p.add_argument("--snapshot-every", type=int_at_least(0, "a whole number >= 0"), default=5, metavar="N",
                    help="render each job's best individual every N generations into <id>/snapshots/ (0: none; "
                    "default 5)")
-    p.add_argument("--workers", type=int_at_least(1, "a whole number >= 1"), metavar="N",
+    p.add_argument("--workers", type=int_in(1, 4096), metavar="N",
                    help="concurrent fits in-process (default: cores / threads)")
-    p.add_argument("--threads", type=int_at_least(1, "a whole number >= 1"), metavar="N",
+    p.add_argument("--threads", type=int_in(1, max_threads()), metavar="N",
                    help="threads per fit (default 1; on Ray the task's num_cpus)")
     p.add_argument("--ray", nargs="?", const="", default=None, metavar="ADDRESS",
                    help="run the jobs as Ray tasks on the cluster at ADDRESS (e.g. ray://head:10001 or "
                    "auto); without ADDRESS, a running local cluster or a new local Ray")
-    p.add_argument("--max-retries", type=int_at_least(0, "a whole number >= 0"), default=3, metavar="N",
+    p.add_argument("--max-retries", type=int_in(0, 1000), default=3, metavar="N",
                    help="with --ray: times a job is retried when its worker dies (default 3)")
     p.add_argument("--warm-start", action="store_true",
                    help="frames of a sequence: run the jobs in order, each light search in bounds narrowed "
@@ -87,11 +99,12 @@ def _build_parser() -> Parser:
     p.add_argument("--no-uncertainty", action="store_true",
                    help="skip the Gauss-Newton sigma of each fit (the fitted values are the same; ~1.5x the fits/s "
                    "on a small photo)")
-    p.add_argument("--retry-failed", action="store_true", help="run again the jobs recorded as failed")
+    p.add_argument("--retry-failed", action="store_true", help="run again the jobs recorded as failed (without "
+                   "it they are counted as failed again and the exit status is 1)")
     p.add_argument("--protocol", choices=sorted(PROTOCOLS), help="every job's protocol (a job's own wins)")
-    p.add_argument("--population", type=int_at_least(4, "a whole number >= 4"), metavar="N")
+    p.add_argument("--population", type=int_in(*LIMITS["population"]), metavar="N")
     p.add_argument("--generations", type=generations, metavar="N|N1,N2")
-    p.add_argument("--norm", metavar="NORM", help="l1 (default), l2, huber or huber:H")
+    p.add_argument("--norm", type=norm, metavar="NORM", help="l1 (default), l2, huber or huber:H")
     p.add_argument("--loss-space", choices=("auto", "linear", "srgb"))
     p.add_argument("--environment", choices=("auto", "on", "off"), help="the occluded environment term "
                    "(default auto: added when the photo shows it)")
@@ -99,9 +112,11 @@ def _build_parser() -> Parser:
                    "objects (default auto: added when the photo shows it)")
     p.add_argument("--highlights", choices=("auto", "off"), help="free a matte sphere's specular lobe when the "
                    "photo shows a highlight (default auto)")
+    p.add_argument("--footprint", nargs="?", choices=("auto", "on", "off"), const="on",
+                   help="every job's pixel footprint mode, as rtloop-fit's --footprint (default auto)")
     p.add_argument("--response", choices=("srgb", "linear"))
-    p.add_argument("--final-scale", type=int_at_least(1, "a whole number >= 1"), default=4, metavar="K")
-    p.add_argument("--final-spp", type=int_at_least(1, "a whole number >= 1"), default=16, metavar="S")
+    p.add_argument("--final-scale", type=int_in(1, MAX_SIZE), default=4, metavar="K")
+    p.add_argument("--final-spp", type=int_in(1, rtloop.MAX_SPP), default=16, metavar="S")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
     return p
 
@@ -110,53 +125,15 @@ def _error(message: object) -> None:
     print(f"{PROG}: error: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
 
 
-# --- results.jsonl ---------------------------------------------------------------------------------------
-
-
-class Results:
-    """DIR/results.jsonl: the records already there, and whole-line appends (one write, then fsync)."""
-
-    def __init__(self, path: Path):
-        self.path = path
-        self.done: dict[str, dict[str, Any]] = {}
-        if path.exists():
-            data = path.read_bytes()
-            end = data.rfind(b"\n") + 1
-            if end < len(data):  # a torn last line (a crash mid-write elsewhere): drop it
-                with open(path, "r+b") as fh:
-                    fh.truncate(end)
-            for line in data[:end].decode("utf-8", "replace").splitlines():
-                try:
-                    rec = json.loads(line)
-                except json.JSONDecodeError:
-                    continue
-                if isinstance(rec, dict) and isinstance(rec.get("id"), str):
-                    self.done[rec["id"]] = rec
-        self.fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
-
-    def skip(self, retry_failed: bool) -> dict[str, str]:
-        return {i: r["hash"] for i, r in self.done.items()
-                if isinstance(r.get("hash"), str) and (r.get("status") == "ok" or not retry_failed)}
-
-    def append(self, record: dict[str, Any]) -> None:
-        data = (json.dumps(record, allow_nan=False) + "\n").encode("utf-8")
-        view = memoryview(data)
-        while view:
-            view = view[os.write(self.fd, view):]
-        os.fsync(self.fd)
-
-    def close(self) -> None:
-        os.close(self.fd)
-
-
 # --- progress --------------------------------------------------------------------------------------------
 
 
 class Progress:
     """done/failed/ETA on stderr: one updating line on a terminal, else a line every 5 s and at the end."""
 
-    def __init__(self, stream: TextIO, enabled: bool, total: int, skipped: int):
+    def __init__(self, stream: TextIO, enabled: bool, total: int, skipped: int, failed_before: int = 0):
         self.stream, self.enabled, self.total, self.skipped = stream, enabled, total, skipped
+        self.failed_before = failed_before
         self.tty = enabled and bool(getattr(stream, "isatty", lambda: False)())
         self.start = time.perf_counter()
         self.last = self.start
@@ -166,8 +143,10 @@ class Progress:
         dt = time.perf_counter() - self.start
         rate = self.done / dt if dt > 0 else 0.0
         text = f"{PROG}: batch: {self.done}/{self.total} done, {self.failed} failed"
-        if self.skipped:
-            text += f", {self.skipped} already done"
+        if self.skipped - self.failed_before:
+            text += f", {self.skipped - self.failed_before} already done"
+        if self.failed_before:
+            text += f", {self.failed_before} failed before (run with --retry-failed to retry)"
         if self.done:
             eta = (self.total - self.done) / rate if rate > 0 else 0.0
             text += f", {rate:.1f} fits/s, {dt:.1f}s" + (f", ETA {eta:.1f}s" if self.done < self.total else "")
@@ -202,7 +181,7 @@ def _options(args: argparse.Namespace) -> dict[str, Any]:
     for key, name in (("protocol", "protocol"), ("population", "population"), ("generations", "generations"),
                       ("norm", "norm"), ("loss_space", "space"), ("response", "response"),
                       ("environment", "environment"), ("interreflection", "interreflection"),
-                      ("highlights", "highlights")):
+                      ("highlights", "highlights"), ("footprint", "footprint")):
         value = getattr(args, key)
         if value is not None:
             opts[name] = value
@@ -227,13 +206,25 @@ def _on_sigterm(signum: int, frame: Any) -> None:
     raise _Terminated()
 
 
+def _wants_help(argv: list[str] | None) -> bool:
+    """``-h``/``--help`` anywhere before ``--``: ``rtloop-fit --batch --help`` prints the help (argparse
+    would take --help for JOBS and fail)."""
+    args = sys.argv[1:] if argv is None else argv
+    head = args[:args.index("--")] if "--" in args else args
+    return any(a in ("-h", "--help") for a in head)
+
+
 def _main(argv: list[str] | None) -> int:
+    parser = _build_parser()
+    if _wants_help(argv):
+        parser.print_help()
+        return 0
     try:
-        args = _build_parser().parse_args(argv)
+        args = parser.parse_args(argv)
     except UsageError as e:
         _error(e)
         return 2
-    except SystemExit as e:  # --help
+    except SystemExit as e:
         return int(e.code or 0)
     if args.ray is not None:
         if args.warm_start:
@@ -248,29 +239,40 @@ def _main(argv: list[str] | None) -> int:
     try:
         jobs = load_jobs(args.batch)
         out.mkdir(parents=True, exist_ok=True)
-        recover_leftovers_in(out)  # the staged DIR/<id>/ of jobs a killed run had in flight
-        results = Results(out / "results.jsonl")
+        with locked(out):
+            return _run(args, jobs, out)
     except rtloop.RtloopError as e:
         _error(e)
         return 1
     except OSError as e:
         _error(f"{e.filename or out}: {e.strerror or e}")
         return 1
+
+
+def _run(args: argparse.Namespace, jobs: list[Any], out: Path) -> int:
+    """The batch, with the output folder locked."""
+    recover_leftovers_in(out)  # the staged DIR/<id>/ of jobs a killed run had in flight
+    check_targets(out, [j.id for j in jobs])
+    results = Results(out / "results.jsonl")
     progress: Progress | None = None
     try:
         skip = results.skip(args.retry_failed)
+        options = shared_options(_options(args))
+        todo, _ = to_run(jobs, options, skip, warm_start=args.warm_start, fitted=results.fitted())
+        todo_ids = {j.id for j, _ in todo}
+        failed_before = sum(1 for j in jobs if j.id not in todo_ids and results.done[j.id].get("status") != "ok")
         engine = "ray" if args.ray is not None else "local"
-        run = fit_many(jobs, engine, workers=args.workers, threads=args.threads, options=_options(args),
+        run = fit_many(jobs, engine, workers=args.workers, threads=args.threads, options=options,
                        out=out, images=not args.no_images, final_scale=args.final_scale,
-                       final_spp=args.final_spp, snapshot_every=args.snapshot_every, skip=skip, warm_start=args.warm_start,
-                       address=args.ray or None, max_retries=args.max_retries)
-        total = _count_todo(jobs, skip, _options(args)) if skip else len(jobs)
-        progress = Progress(sys.stderr, not args.quiet, total, len(jobs) - total)
+                       final_spp=args.final_spp, snapshot_every=args.snapshot_every, skip=skip,
+                       warm_start=args.warm_start, address=args.ray or None, max_retries=args.max_retries,
+                       fitted=results.fitted())
+        progress = Progress(sys.stderr, not args.quiet, len(todo), len(jobs) - len(todo), failed_before)
         for r in run:
             results.append(r.record())
             progress.update(r.ok)
         progress.finish(f"; results in {out / 'results.jsonl'}")
-        return 1 if progress.failed else 0
+        return 1 if progress.failed or failed_before else 0
     except _Terminated:
         if progress is not None:
             progress.finish(" (terminated)")
@@ -280,13 +282,9 @@ def _main(argv: list[str] | None) -> int:
             progress.finish(" (interrupted; run again to resume)")
         return 130
     except rtloop.RtloopError as e:
+        if progress is not None:
+            progress.finish(" (stopped)")
         _error(e)
         return 1
     finally:
         results.close()
-
-
-def _count_todo(jobs: list[Any], skip: dict[str, str], options: dict[str, Any]) -> int:
-    from rtloop.batch import job_hash
-
-    return sum(1 for j in jobs if skip.get(j.id) != job_hash(j, options))

@@ -17,7 +17,6 @@ import sys
 import textwrap
 import threading
 import time
-import warnings
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -26,6 +25,7 @@ import numpy as np
 import rtloop
 from rtloop._files import PlaceError, move_into_place, recover_leftovers, staging_dir
 from rtloop.fit import PROTOCOLS
+from rtloop.fit.files import fit_inputs, load_inputs
 from rtloop.fit.protocol import LIMITS, max_threads
 from rtloop.report import truth_errors, truth_values
 
@@ -349,44 +349,13 @@ def _commit(tmp: Path, out: Path, replace: bool) -> None:
 # --- the run ---------------------------------------------------------------------------------------------
 
 
-def scene_mask(scene_path: Path) -> Path | None:
-    """The mask a scene names (``meta.acquisition.mask``, written by rtloop-scene), relative to the scene's
-    folder; None when it names none."""
-    import json
-
-    try:
-        meta = json.loads(Path(scene_path).read_text()).get("meta") or {}
-    except (OSError, ValueError, AttributeError):
-        return None  # load_scene has read it already: not a JSON object we can look into
-    name = (meta.get("acquisition") or {}).get("mask") if isinstance(meta, dict) else None
-    if not isinstance(name, str):
-        return None
-    path = Path(scene_path).parent / name
-    if not path.is_file():
-        raise _Failure(f"{scene_path}: meta.acquisition.mask names {name}, but {path} is not a file; "
-                       "put it back, or pass --mask")
-    return path
-
-
-def scene_card(scene_path: Path) -> tuple[Path, float] | None:
-    """The grey card a scene names (``meta.acquisition.grey_card``: ``mask``, a PNG white inside the card,
-    relative to the scene's folder, and ``reflectance``), written by rtloop-scene --grey-card-reflectance."""
-    import json
-
-    try:
-        meta = json.loads(Path(scene_path).read_text()).get("meta") or {}
-        card = (meta.get("acquisition") or {}).get("grey_card") or {}
-        name, reflectance = card.get("mask"), card.get("reflectance")
-    except (OSError, ValueError, AttributeError):
-        return None
-    if not isinstance(name, str):
-        return None
-    if not isinstance(reflectance, (int, float)) or isinstance(reflectance, bool):
-        raise _Failure(f"{scene_path}: meta.acquisition.grey_card.reflectance must be a number (e.g. 0.18)")
-    path = Path(scene_path).parent / name
-    if not path.is_file():
-        raise _Failure(f"{scene_path}: meta.acquisition.grey_card.mask names {name}, but {path} is not a file")
-    return path, float(reflectance)
+def fit_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The keyword arguments of :func:`rtloop.fit` the command line gives (a batch job's own options)."""
+    return {"protocol": args.protocol, "population": args.population, "generations": args.generations,
+            "f": args.f, "cr": args.cr, "norm": args.norm, "space": args.loss_space,
+            "environment": args.environment, "interreflection": args.interreflection,
+            "highlights": args.highlights, "footprint": args.footprint,
+            "uncertainty": {"default": True, "bootstrap": "bootstrap", "off": False}[args.uncertainty]}
 
 
 class _Run:
@@ -403,22 +372,15 @@ class _Run:
     def __call__(self, tmp: Path) -> Any:
         """Load, fit and write everything into ``tmp``; returns the FitResult."""
         args = self.args
-        scene = rtloop.load_scene(args.scene)
-        if args.mask is None:
-            args.mask = scene_mask(args.scene)
+        inputs = load_inputs(args.scene, args.image, mask=args.mask, response=args.response, crop=args.crop)
+        scene, image = inputs.scene, inputs.image
         k = args.final_scale
         if max(scene.width, scene.height) * k > MAX_SIZE:
             raise _Failure(f"--final-scale {k}: final.png would be {scene.width * k}x{scene.height * k}, more "
                            f"than {MAX_SIZE} pixels on a side; use --final-scale "
                            f"{max(1, MAX_SIZE // max(scene.width, scene.height))} or less")
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            image = rtloop.load_image(args.image, scene, response=args.response, crop=args.crop)
-            mask = None if args.mask is None else rtloop.load_mask(args.mask, scene, crop=args.crop)
-            card = scene_card(args.scene)
-            reference = None if card is None else (rtloop.load_mask(card[0], scene, crop=args.crop), card[1])
-        for w in caught:
-            print(f"{PROG}: warning: {' '.join(str(w.message).split())}", file=sys.stderr)
+        for w in inputs.warnings:
+            print(f"{PROG}: warning: {' '.join(w.split())}", file=sys.stderr)
         self.check_stop()
         names = scene.param_names()
         if not names:
@@ -449,16 +411,8 @@ class _Run:
                 rows.append((info.stage, info.generation, float(info.fitness), params))
                 self.progress.generation(info)
 
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", rtloop.RtloopWarning)  # printed below from result.warnings
-                result = rtloop.fit(
-                    scene, image, protocol=args.protocol, seed=args.seed, population=args.population,
-                    generations=args.generations, f=args.f, cr=args.cr, threads=args.threads,
-                    callback=callback, mask=mask, norm=args.norm, space=args.loss_space,
-                    environment=args.environment, interreflection=args.interreflection,
-                    highlights=args.highlights, reference=reference, footprint=args.footprint,
-                    uncertainty={"default": True, "bootstrap": "bootstrap", "off": False}[args.uncertainty],
-                )
+            result = fit_inputs(inputs, seed=args.seed, threads=args.threads, callback=callback,
+                                **fit_options(args))
         self.progress.end_line()
         for w in result.warnings:
             print(f"{PROG}: warning: {w}", file=sys.stderr)
@@ -467,7 +421,7 @@ class _Run:
             print(f"{PROG}: warning: {good['verdict']}", file=sys.stderr)
         self.check_stop()
 
-        write_result(tmp, result, input_paths(args.scene, args.image, args.response, args.crop, args.mask))
+        write_result(tmp, result, input_paths(args.scene, args.image, args.response, args.crop, inputs.mask_path))
 
         k = args.final_scale
         self.progress.message(
