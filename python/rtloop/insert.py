@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from ._files import MAX_TEXT_BYTES, read_regular
 from .errors import RtloopError
 
 __all__ = ["Insertion", "insert", "load_objects"]
@@ -40,10 +41,10 @@ def load_objects(source: Any) -> list[dict[str, Any]]:
     if isinstance(source, (str, os.PathLike)):
         folder = Path(source).parent
         where = str(source)
+        if not os.path.lexists(source):
+            raise RtloopError(f"{where}: objects file not found")
         try:
-            source = json.loads(Path(source).read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise RtloopError(f"{where}: objects file not found") from None
+            source = json.loads(read_regular(source, limit=MAX_TEXT_BYTES, what="objects file").decode("utf-8"))
         except (OSError, UnicodeDecodeError, ValueError) as e:
             raise RtloopError(f"{where}: cannot read the objects ({e})") from None
     if isinstance(source, dict):
