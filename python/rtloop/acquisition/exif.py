@@ -54,6 +54,14 @@ def _positive(value: object) -> float | None:
     return v if math.isfinite(v) and v > 0 else None
 
 
+def _unit_mm(value: object) -> float | None:
+    """FocalPlaneResolutionUnit in mm (2, the default, is the inch); None for a value that is no unit."""
+    try:
+        return _UNIT_MM.get(int(value or 2))  # type: ignore[call-overload]
+    except (TypeError, ValueError, OverflowError, ZeroDivisionError):
+        return None
+
+
 def _plausible(ifd: dict, tag: int, where: str, per_mm: float = 1.0) -> float | None:
     """The tag's positive value (times ``per_mm``, its unit's conversion to mm) when plausible; None when
     absent, and None with an RtloopWarning naming the tag when outside :data:`PLAUSIBLE`."""
@@ -98,7 +106,7 @@ def exif_focal(path: str | os.PathLike[str], width: int, height: int) -> ExifFoc
     across = height if orientation in (5, 6, 7, 8) else width
     scale = across / stored[0] if stored[0] else 1.0
     focal_mm = _plausible(ifd, _FOCAL_LENGTH, where)
-    unit = _UNIT_MM.get(int(ifd.get(_FOCAL_PLANE_UNIT, 2) or 2))
+    unit = _unit_mm(ifd.get(_FOCAL_PLANE_UNIT, 2))
     res = None if unit is None else _plausible(ifd, _FOCAL_PLANE_X_RES, where, 1.0 / unit)
     if focal_mm is not None and res is not None and unit is not None:
         return ExifFocal(focal_mm * res / unit * scale, f"EXIF focal length {focal_mm:g} mm and focal-plane resolution")
