@@ -182,13 +182,15 @@ def _insert_cli(rng: random.Random, tmp: Path) -> None:
     for _ in range(rng.randint(0, 3)):
         flag = rng.choice(["--spp", "--response", "--out", "--force", "--uniform"])
         argv += [flag] if flag in ("--force", "--uniform") else [flag, str(odd(rng))]
-    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()), \
+            contextlib.chdir(work):  # a relative --out stays inside the sandbox
         try:
             insert_main(argv)
         except SystemExit as e:
             if e.code not in (0, 1, 2):
                 raise
-    made = sorted(p.name for p in work.iterdir() if p.name != "out" and p.name not in before)
+    outs = {argv[i + 1] for i, a in enumerate(argv[:-1]) if a == "--out"}
+    made = sorted(p.name for p in work.iterdir() if p.name not in before and p.name not in outs | {"out"})
     if made or not (tmp / "photo.png").is_file() or not (tmp / "objects.json").is_file():
         raise AssertionError(f"rtloop-insert wrote beside --out or lost an input: {made}")
 
