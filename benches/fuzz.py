@@ -1,6 +1,7 @@
 """A fuzz campaign over the Python API (scenes, render()/fit() arguments, image arrays, CLI arguments via
-main() in-process, batch job lines and ids via rtloop-fit --batch) for a developer to run for minutes; prints
-the counts (--only batch: job lines alone). Not a test: see README."""
+main() in-process, batch job lines and ids via rtloop-fit --batch, mesh files, EXIF focal tags,
+rtloop-insert arguments) for a developer to run for minutes; prints the counts (--only batch: job lines
+alone). Not a test: see docs/development.md."""
 
 from __future__ import annotations
 
@@ -131,6 +132,74 @@ def check_fit(res, scene_dict, c: Counts) -> None:
             print("out of bounds:", name, v, (lo, hi), file=sys.stderr)
 
 
+MESH_HEADS = [
+    "ply\nformat ascii 1.0\nelement vertex {n}\nproperty float x\nproperty float y\nproperty float z\n"
+    "element face {m}\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+    "ply\nformat binary_little_endian 1.0\nelement vertex {n}\nproperty double x\nproperty double y\n"
+    "property double z\nelement face {m}\nproperty list uint int vertex_indices\nend_header\n",
+    "v 0 0 0\nv 1e300 0 0\nv 0 1 0\nf 1 2 {m}\nmtllib /dev/zero\n",
+]
+
+
+def _mesh(rng: random.Random, tmp: Path) -> None:
+    """A mesh file: a header with odd counts and a mutated body (bytes flipped, cut, repeated)."""
+    data = bytearray(rng.choice(MESH_HEADS).format(n=rng.choice([0, 3, 2**31, 10**12, -1]),
+                                                    m=rng.choice([0, 1, 9, 2**32])).encode())
+    for _ in range(rng.randint(0, 4)):
+        if data:
+            data[rng.randrange(len(data))] = rng.randrange(256)
+    data += bytes(rng.randrange(256) for _ in range(rng.randint(0, 64)))
+    path = tmp / f"m.{rng.choice(['ply', 'obj', 'PLY'])}"
+    path.write_bytes(bytes(data[: rng.randint(0, len(data))] if rng.random() < 0.2 else data))
+    scene = copy.deepcopy(BASE)
+    scene["objects"].append({"name": "m", "shape": "mesh", "file": str(path), "scale": rng.choice([1, 1e-9, 1e9])})
+    rtloop.render(rtloop.load_scene(scene), 6, 4, 1)
+
+
+def _exif(rng: random.Random, tmp: Path) -> None:
+    from PIL import Image
+
+    from rtloop.acquisition.exif import exif_exposure, exif_focal
+
+    exif = Image.Exif()
+    exif[0x0112] = rng.randint(-1, 10)
+    tags = {t: odd(rng) if rng.random() < 0.5 else rng.choice([4.0, 28, 1600.0, 3, (1, 0), 1e9, 1e-9])
+            for t in rng.sample([0x920A, 0xA405, 0xA20E, 0xA210, 0x829A, 0x829D, 0x8827], rng.randint(1, 5))}
+    try:
+        exif.get_ifd(0x8769).update(tags)
+        Image.new("RGB", (8, 6)).save(tmp / "e.jpg", exif=exif)
+    except Exception:  # noqa: BLE001 - a value Pillow cannot write
+        return
+    found = exif_focal(tmp / "e.jpg", rng.choice([8, 6, 1000]), 6)
+    if found is not None and not (math.isfinite(found.focal_px) and found.focal_px > 0):
+        raise AssertionError(f"focal_px {found.focal_px}")
+    exif_exposure(tmp / "e.jpg")
+
+
+def _insert_cli(rng: random.Random, tmp: Path) -> None:
+    from rtloop.cli.insert import insert_main
+
+    work = tmp / "ins"
+    work.mkdir(exist_ok=True)
+    before = sorted(p.name for p in work.iterdir())
+    argv = [str(tmp / "scene.json"), str(tmp / "photo.png"), "--add", str(tmp / "objects.json"),
+            "--out", str(work / "out")]
+    for _ in range(rng.randint(0, 3)):
+        flag = rng.choice(["--spp", "--response", "--out", "--force", "--uniform"])
+        argv += [flag] if flag in ("--force", "--uniform") else [flag, str(odd(rng))]
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()), \
+            contextlib.chdir(work):  # a relative --out stays inside the sandbox
+        try:
+            insert_main(argv)
+        except SystemExit as e:
+            if e.code not in (0, 1, 2):
+                raise
+    outs = {argv[i + 1] for i, a in enumerate(argv[:-1]) if a == "--out"}
+    made = sorted(p.name for p in work.iterdir() if p.name not in before and p.name not in outs | {"out"})
+    if made or not (tmp / "photo.png").is_file() or not (tmp / "objects.json").is_file():
+        raise AssertionError(f"rtloop-insert wrote beside --out or lost an input: {made}")
+
+
 JOB_IDS = ["a", "b-1", "keep", "results.jsonl", "../out", "/tmp", ".hidden", "", "a/b", "..", "x" * 129, "ok.1",
            ".rtloop-batch.lock", "f0", 7]
 JOB_FIELDS = ["seed", "mask", "protocol", "population", "generations", "f", "cr", "norm", "space", "loss_space",
@@ -195,7 +264,9 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
         c.bump("ok")
         return
     kind = rng.random()
-    if kind < 0.55:  # scenes
+    if kind < 0.1:  # mesh files, EXIF tags, rtloop-insert arguments
+        [_mesh, _exif, _insert_cli][int(kind * 30)](rng, tmp)
+    elif kind < 0.55:  # scenes
         scene = rtloop.load_scene(mutate(rng, BASE))
         img = rtloop.render(scene, width=rng.choice([None, 4, 7]), height=None, spp=1)
         if not finite(img):
@@ -262,6 +333,8 @@ def main() -> int:
         rtloop.save_image(tmp / "photo.png", rtloop.render(BASE))
         (tmp / "outside").mkdir()  # the batch's neighbour: nothing in it may change
         (tmp / "outside" / "data.txt").write_text("keep me")
+        (tmp / "objects.json").write_text(json.dumps([{"name": "b2", "shape": "sphere", "center": [0.3, 0.2, 0],
+                                                       "radius": 0.2}]))
         first: dict = {}
         for _ in range(a.inputs):
             c.bump("inputs")

@@ -24,3 +24,15 @@ def test_a_scene_dict_nested_past_the_recursion_limit_is_a_scene_error():
     scene["ambient"] = deep
     with pytest.raises(rtloop.SceneError):
         rtloop.load_scene(scene)
+
+
+def test_an_exif_resolution_unit_that_is_not_a_number_counts_as_absent(tmp_path):
+    # It raised TypeError from int() (the property test of EXIF tags: FocalPlaneResolutionUnit (1, 0)).
+    from PIL import Image
+
+    from rtloop.acquisition.exif import exif_focal
+
+    exif = Image.Exif()
+    exif.get_ifd(0x8769).update({0x920A: 4.0, 0xA20E: 100.0, 0xA210: (1, 0)})
+    Image.new("RGB", (8, 6)).save(tmp_path / "p.jpg", exif=exif)
+    assert exif_focal(tmp_path / "p.jpg", 8, 6) is None

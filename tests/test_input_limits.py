@@ -407,3 +407,38 @@ def test_worker_pools_are_not_kept_for_every_thread_count(ball_scene, photo):
     while _os_threads() > before + 42 and time.monotonic() < deadline:
         time.sleep(0.05)
     assert _os_threads() <= before + 42
+
+
+def _fifo_with_a_late_writer(path: Path):
+    """A FIFO at ``path`` and a process that opens it for writing after 10 s: a reader that blocked in
+    open() is then let through (to fail its test) instead of hanging it."""
+    import subprocess
+
+    os.mkfifo(path)
+    return subprocess.Popen(["sh", "-c", 'sleep 10; : > "$0"', str(path)])
+
+
+@pytest.mark.parametrize("reader", ["load_image", "load_mask", "load_photo", "load_scene", "load_objects"])
+def test_a_fifo_input_is_refused_at_once_naming_it(tmp_path, ball_scene, reader):
+    from rtloop.acquisition.response import load_photo
+    from rtloop.insert import load_objects
+
+    fifo = tmp_path / ("in.json" if reader in ("load_scene", "load_objects") else "in.png")
+    writer = _fifo_with_a_late_writer(fifo)
+    call = {"load_image": lambda: rtloop.load_image(fifo, (64, 48)), "load_mask": lambda: rtloop.load_mask(fifo, (64, 48)),
+            "load_photo": lambda: load_photo(fifo), "load_scene": lambda: rtloop.load_scene(fifo),
+            "load_objects": lambda: load_objects(fifo)}[reader]
+    try:
+        with pytest.raises(rtloop.RtloopError, match=r"in\.\w+: is a FIFO \(named pipe\), not a regular file"):
+            call()
+    finally:
+        writer.kill()
+        writer.wait()
+
+
+@pytest.mark.parametrize("device", ["/dev/null", "/dev/zero"])
+def test_a_device_photo_is_refused_before_it_is_read(tmp_path, ball_scene, device):
+    link = tmp_path / "photo.png"
+    link.symlink_to(device)
+    with pytest.raises(rtloop.RtloopError, match=r"photo\.png: is a character device, not a regular file"):
+        rtloop.load_image(link, (64, 48))

@@ -115,7 +115,7 @@ def test_matte_is_the_pixel_coverage_of_a_sphere():
 
 
 @pytest.mark.parametrize("objects, message", [
-    ([{**BALL2, "radius": -1}], "added objects: objects[2].radius"),
+    ([{**BALL2, "radius": -1}], "added objects: objects[0].radius"),
     ([], "non-empty list"),
     ({"things": []}, "objects"),
 ])
@@ -189,3 +189,106 @@ def test_report_shows_the_photo_beside_the_composite(tmp_path):
     composite = rtloop.load_image(tmp_path / "report" / "insert_composite.png", scene)
     assert np.abs(composite - np.clip(r.composite, 0, 1)).max() < 0.01  # 8-bit sRGB of the composite
     assert "Inserted objects" not in rtloop.report(result, tmp_path / "plain.html").path.read_text()
+
+
+def _cli_inputs(folder: Path) -> list[str]:
+    folder.mkdir(parents=True, exist_ok=True)
+    rtloop.save_image(folder / "photo.png", rtloop.render(SCENE, 128, 96, 1))
+    (folder / "objects.json").write_text(json.dumps({"objects": [BALL2]}))
+    (folder / "result.json").write_text(Path(SCENE).read_text())
+    return [str(folder / "result.json"), str(folder / "photo.png"), "--add", str(folder / "objects.json")]
+
+
+@pytest.mark.parametrize("holds", ["result.json", "photo.png", "objects.json"])
+def test_force_never_replaces_a_directory_holding_an_input(tmp_path, capsys, holds):
+    inputs = _cli_inputs(tmp_path / "work")
+    moved = tmp_path / "work" / holds
+    here = tmp_path / "out"
+    here.mkdir()
+    moved.rename(here / holds)
+    inputs = [str(here / holds) if a == str(moved) else a for a in inputs]
+    assert insert_main([*inputs, "--out", str(here), "--force", "--spp", "1"]) == 1
+    err = capsys.readouterr().err
+    assert f"refusing to replace it with --force: it contains {here / holds}" in err and err.count("\n") <= 2
+    assert (here / holds).is_file()
+
+
+@pytest.mark.parametrize("out", [".", ".."])
+def test_force_never_replaces_the_working_directory(tmp_path, capsys, monkeypatch, out):
+    inputs = _cli_inputs(tmp_path / "work")
+    monkeypatch.chdir(tmp_path / "work")
+    assert insert_main([*inputs, "--out", out, "--force", "--spp", "1"]) == 1
+    err = capsys.readouterr().err
+    assert "refusing to replace the current directory (or one above it)" in err
+    assert (tmp_path / "work" / "photo.png").is_file()
+
+
+def test_a_mesh_file_inside_out_is_an_input_too(tmp_path, capsys):
+    inputs = _cli_inputs(tmp_path / "work")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "tri.obj").write_text("v 1.5 0.1 -1\nv 2 0.1 -1\nv 1.7 0.8 -1\nf 1 2 3\n")
+    mesh = {"name": "tri", "shape": "mesh", "file": str(out / "tri.obj"), "material": {"albedo": [0.5, 0.5, 0.5]}}
+    Path(inputs[3]).write_text(json.dumps([mesh]))
+    assert insert_main([*inputs, "--out", str(out), "--force", "--spp", "1"]) == 1
+    assert "it contains" in capsys.readouterr().err and (out / "tri.obj").is_file()
+
+
+def test_ctrl_c_exits_130_with_one_line(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    inputs = _cli_inputs(tmp_path / "work")
+    rtloop.save_image(tmp_path / "work" / "photo.png", rtloop.render(SCENE, 1024, 768, 1))
+    env = {**os.environ, "PYTHONPATH": str(Path(rtloop.__file__).parents[1])}
+    proc = subprocess.Popen([sys.executable, "-m", "rtloop.cli.insert", *inputs, "--out", str(tmp_path / "o"),
+                             "--uniform", "--spp", "4096"], stderr=subprocess.PIPE, text=True, env=env)
+    line = proc.stderr.readline()  # the rendering has begun
+    assert "rendering" in line
+    proc.send_signal(signal.SIGINT)
+    rest = proc.communicate(timeout=120)[1]
+    assert proc.returncode == 130
+    assert "rtloop-insert: interrupted" in rest and "Traceback" not in rest
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_photo_turned_by_its_exif_orientation_is_read_as_rtloop_fit_reads_it(tmp_path, capsys):
+    from PIL import Image
+
+    inputs = _cli_inputs(tmp_path / "work")
+    shown = (np.clip(rtloop.render(SCENE, 128, 96, 1), 0, 1) ** (1 / 2.2) * 255).astype(np.uint8)
+    exif = Image.Exif()
+    exif[0x0112] = 6  # stored a quarter turn anticlockwise, shown turned back clockwise
+    Image.fromarray(np.ascontiguousarray(np.rot90(shown, 1))).save(tmp_path / "work" / "photo.jpg", exif=exif)
+    inputs[1] = str(tmp_path / "work" / "photo.jpg")
+    assert insert_main([*inputs, "--out", str(tmp_path / "o"), "--spp", "1"]) == 0, capsys.readouterr().err
+    assert rtloop.load_image(tmp_path / "o" / "composite.png", (128, 96)).shape == (96, 128, 3)
+
+
+def test_photos_above_the_pixel_cap_are_refused_in_one_line(monkeypatch):
+    import sys
+
+    monkeypatch.setattr(sys.modules["rtloop.insert"], "MAX_INSERT_PIXELS", 128 * 96 - 1)
+    with pytest.raises(rtloop.RtloopError, match=r"photo: 128x96 = 0.0 megapixels, more than the 0 an insertion"):
+        rtloop.insert(SCENE, rtloop.render(SCENE, 128, 96, 1), [BALL2])
+
+
+def test_an_added_object_is_named_by_its_place_in_the_objects_file(tmp_path):
+    objects = tmp_path / "objects.json"
+    objects.write_text(json.dumps([BALL2, {**BALL2, "name": "bad", "radius": -1}]))
+    with pytest.raises(rtloop.RtloopError, match=r"objects\.json: objects\[1\]\.radius"):
+        rtloop.insert(SCENE, rtloop.render(SCENE, 128, 96, 1), objects)
+
+
+def test_a_sphere_enclosing_the_camera_and_the_light_warns(capsys, tmp_path):
+    scene = rtloop.scene_to_dict(rtloop.load_scene(SCENE))
+    shell = {**BALL2, "name": "shell", "center": scene["camera"]["position"], "radius": 20.0}
+    with pytest.warns(rtloop.RtloopWarning, match=r"objects\[0\] \(shell\): the sphere encloses the camera and "
+                                                  r"the light"):
+        rtloop.insert(SCENE, rtloop.render(SCENE, 32, 24, 1), [shell], spp=1)
+    inputs = _cli_inputs(tmp_path / "work")
+    Path(inputs[3]).write_text(json.dumps([shell]))
+    assert insert_main([*inputs, "--out", str(tmp_path / "o"), "--spp", "1"]) == 0
+    assert "rtloop-insert: warning: " in capsys.readouterr().err

@@ -284,3 +284,74 @@ def test_meshes_are_inserted_but_not_fitted(tmp_path, sphere_obj):
     assert np.abs(r.composite - sphere.composite).mean() < 0.01
     with pytest.raises(rtloop.RtloopError, match="meshes can be rendered and inserted, not fitted"):
         rtloop.fit(with_ball_as_mesh(flat) | {"fit": {"light.intensity": {"min": 1, "max": 100}}}, photo)
+
+
+def load_with_mesh(path: Path) -> None:
+    scene = rtloop.scene_to_dict(rtloop.load_scene(SCENE))
+    scene["objects"].append({"name": "m", "shape": "mesh", "file": str(path)})
+    rtloop.load_scene(scene)
+
+
+def test_a_fifo_mesh_is_refused_without_waiting_for_a_writer(tmp_path):
+    import os
+    import subprocess
+
+    fifo = tmp_path / "pipe.obj"
+    os.mkfifo(fifo)
+    # A reader that blocked in open() (holding the GIL) would wait for ever: another process lets it through.
+    writer = subprocess.Popen(["sh", "-c", 'sleep 10; : > "$0"', str(fifo)])
+    try:
+        with pytest.raises(rtloop.SceneError, match=r"objects\[2\]\.file: .*pipe\.obj: .*FIFO"):
+            load_with_mesh(fifo)
+    finally:
+        writer.kill()
+        writer.wait()
+
+
+@pytest.mark.parametrize("ext", ["obj", "ply"])
+def test_a_device_mesh_is_refused_before_it_is_read(tmp_path, ext):
+    link = tmp_path / f"dev.{ext}"
+    link.symlink_to("/dev/null")  # /dev/zero would be read for ever; both are devices
+    with pytest.raises(rtloop.SceneError, match=r"dev\.\w+: .*(character device|FIFO or device)"):
+        load_with_mesh(link)
+
+
+@pytest.mark.parametrize("count, message", [
+    (1_000_000, r"declares 1000001 elements, more than its 26 bytes of data can hold"),
+    (1_000_000_000, r"declares 1000000001 elements, more than the 10000000 read \(the limit\)"),
+])
+def test_ply_element_counts_are_bounded_by_the_file_size_and_a_cap(tmp_path, count, message):
+    bad = tmp_path / "huge.ply"
+    bad.write_text(PLY_HEAD.replace("vertex 3", f"vertex {count}") + PLY_FACE + "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
+    with pytest.raises(rtloop.SceneError, match=message):
+        load_with_mesh(bad)
+
+
+def test_ply_errors_are_one_line_and_quote_nothing_from_the_file(tmp_path):
+    secret = tmp_path / "secret.txt"
+    secret.write_text("zq9:x:0:0:the first line of a system file\nsecond line\n")
+    link = tmp_path / "mesh.ply"
+    link.symlink_to(secret)
+    with pytest.raises(rtloop.SceneError) as info:
+        load_with_mesh(link)
+    message = str(info.value)
+    assert "not a valid PLY file" in message
+    assert "\n" not in message and "zq9" not in message and "system file" not in message
+    body = tmp_path / "body.ply"
+    body.write_text(PLY_HEAD + PLY_FACE + "0 0 0\nsecret 0 0\n0 1 0\n3 0 1 2\n")
+    with pytest.raises(rtloop.SceneError) as info:
+        load_with_mesh(body)
+    assert "\n" not in str(info.value) and "secret" not in str(info.value)
+
+
+@pytest.mark.parametrize("ext", ["obj", "ply"])
+def test_a_huge_vertex_is_out_of_range_not_infinite(tmp_path, ext):
+    bad = tmp_path / f"far.{ext}"
+    rows = "0 0 0\n1e300 0 0\n0 1 0\n"
+    if ext == "obj":
+        bad.write_text("".join(f"v {r}\n" for r in rows.splitlines()) + "f 1 2 3\n")
+    else:
+        bad.write_text(PLY_HEAD.replace("float", "double") + PLY_FACE + rows + "3 0 1 2\n")
+    with pytest.raises(rtloop.SceneError, match=r"vertex 2 is out of range") as info:
+        load_with_mesh(bad)
+    assert "inf" not in str(info.value)

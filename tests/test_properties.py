@@ -212,3 +212,101 @@ def test_random_job_lines_are_fitted_or_one_line_and_touch_only_the_batch_files(
             assert after.get(name, "gone") == data, name
         for name in set(after) - set(before):  # what is new is inside the output folder
             assert name.startswith("out/"), name
+
+
+# --- mesh files, EXIF tags, insertion arguments ------------------------------------------------------------
+
+PLY_HEADS = st.sampled_from([
+    "ply\nformat ascii 1.0\nelement vertex {n}\nproperty float x\nproperty float y\nproperty float z\n"
+    "element face {m}\nproperty list uchar int vertex_indices\nend_header\n",
+    "ply\nformat binary_little_endian 1.0\nelement vertex {n}\nproperty double x\nproperty double y\n"
+    "property double z\nelement face {m}\nproperty list uint int vertex_indices\nend_header\n",
+    "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 {m}\n", "",
+])
+COUNTS = st.sampled_from([0, 1, 3, 255, 2**31 - 1, 2**32, 10**12, -1])
+
+
+def _mesh_scene(path) -> dict:
+    scene = copy.deepcopy(SMALL)
+    scene["objects"].append({"name": "m", "shape": "mesh", "file": str(path), "position": [0, 0.5, 0], "scale": 0.2})
+    return scene
+
+
+@settings(max_examples=200, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
+@given(head=PLY_HEADS, n=COUNTS, m=COUNTS, body=st.binary(max_size=300), ext=st.sampled_from(["ply", "obj"]))
+def test_mesh_files_load_or_are_refused_in_one_line(tmp_path_factory, head, n, m, body, ext):
+    path = tmp_path_factory.mktemp("mesh") / f"m.{ext}"
+    path.write_bytes(head.format(n=n, m=m).encode() + body)
+    try:
+        rtloop.load_scene(_mesh_scene(path))
+    except rtloop.SceneError as e:
+        assert "\n" not in str(e) and str(e).startswith("objects[2].file: ")
+
+
+EXIF_VALUES = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-2**31, 2**32),
+                        st.sampled_from([0, 1e-9, 1e9, (1, 0), (0, 0), "x", b"\x00"]))
+
+
+@settings(max_examples=150, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
+@given(tags=st.dictionaries(st.sampled_from([0x920A, 0xA405, 0xA20E, 0xA210]), EXIF_VALUES, max_size=4),
+       orientation=st.integers(-1, 10), size=st.tuples(st.integers(1, 64), st.integers(1, 64)))
+def test_exif_focal_lengths_are_positive_finite_or_absent(tmp_path_factory, tags, orientation, size):
+    import warnings
+
+    from PIL import Image
+
+    from rtloop.acquisition.exif import exif_focal
+
+    path = tmp_path_factory.mktemp("exif") / "p.jpg"
+    exif = Image.Exif()
+    exif[0x0112] = orientation
+    try:
+        exif.get_ifd(0x8769).update(tags)
+        Image.new("RGB", size).save(path, exif=exif)
+    except Exception:  # noqa: BLE001 - a value Pillow cannot write: nothing to read back
+        return
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", rtloop.RtloopWarning)
+        found = exif_focal(path, *size)
+    assert found is None or (math.isfinite(found.focal_px) and found.focal_px > 0)
+
+
+INSERT_FLAGS = st.lists(st.tuples(st.sampled_from(["--spp", "--response", "--out", "--force", "--uniform"]),
+                                  st.sampled_from(["1", "0", "-3", "4097", "x", "srgb", "linear", ".", "..", "out",
+                                                   "photo.png", "sub/deep", ""])), max_size=3)
+
+
+@settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
+@given(flags=INSERT_FLAGS)
+def test_insertion_arguments_exit_cleanly_and_write_only_into_out(tmp_path_factory, flags):
+    import contextlib
+    import io
+    import json
+    import os
+
+    from rtloop.cli.insert import insert_main
+
+    work = tmp_path_factory.mktemp("insert")
+    (work / "scene.json").write_text(json.dumps(SMALL))
+    rtloop.save_image(work / "photo.png", PHOTO)
+    (work / "objects.json").write_text(json.dumps([{"name": "b2", "shape": "sphere", "center": [0.3, 0.2, 0],
+                                                    "radius": 0.2}]))
+    before = {p: p.stat().st_mtime_ns for p in work.iterdir()}
+    argv = ["scene.json", "photo.png", "--add", "objects.json", "--out", "out"]
+    for flag, value in flags:
+        argv += [flag] if flag in ("--force", "--uniform") else [flag, value]
+    cwd = os.getcwd()
+    os.chdir(work)
+    try:
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+            try:
+                code = insert_main(argv)
+            except SystemExit as e:
+                code = e.code
+    finally:
+        os.chdir(cwd)
+    assert code in (0, 1, 2)
+    assert all(p.exists() and p.stat().st_mtime_ns == t for p, t in before.items())  # inputs untouched
+    outs = {a for f, a in flags if f == "--out"} or {"out"}
+    made = {p.name for p in work.iterdir()} - {p.name for p in before} - {o.split("/")[0] for o in outs}
+    assert not made, made

@@ -1,5 +1,7 @@
-"""Writing results safely: atomic writes (a temporary file renamed into place), a staged output
-directory moved into place whole, and ``jsonable`` (numpy values as plain JSON)."""
+"""Reading inputs and writing results safely: inputs read only from regular files of a bounded size (never a
+FIFO or a device, which would hang or never end), atomic writes (a temporary file renamed into place), a
+staged output directory moved into place whole (never over the inputs or the working directory), and
+``jsonable`` (numpy values as plain JSON)."""
 
 from __future__ import annotations
 
@@ -9,14 +11,116 @@ import os
 import re
 import secrets
 import shutil
+import stat
 import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["PlaceError", "jsonable", "move_into_place", "recover_leftovers", "staging_dir", "umask", "write_bytes",
-           "write_json", "write_text"]
+from .errors import RtloopError
+
+__all__ = ["MAX_IMAGE_BYTES", "MAX_TEXT_BYTES", "InputFileError", "OutputDirError", "PlaceError", "check_out_dir",
+           "jsonable", "move_into_place", "open_regular", "read_regular", "recover_leftovers", "staging_dir", "umask",
+           "write_bytes", "write_json", "write_text"]
+
+#: The largest photo or mask file read (README: "Input limits"): a 100-megapixel camera's 16-bit TIFF fits.
+MAX_IMAGE_BYTES = 1 << 30
+#: The largest scene, objects, job or calibration file (JSON) read.
+MAX_TEXT_BYTES = 64 << 20
+
+
+class InputFileError(RtloopError):
+    """An input that is not a regular file (a directory, a FIFO, a device), is missing or unreadable, or is
+    larger than its limit. ``str()`` names the file; ``reason`` is the message without the name."""
+
+    def __init__(self, name: str, reason: str):
+        super().__init__(f"{name}: {reason}")
+        self.name, self.reason = name, reason
+
+
+_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
+          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def _not_regular(name: str, mode: int, what: str) -> InputFileError:
+    kind = next((k for test, k in _KINDS if test(mode)), "not a regular file")
+    return InputFileError(name, f"is {kind}, not a regular file; give the {what} as a file")
+
+
+def open_regular(path: str | os.PathLike[str], *, limit: int, what: str = "input") -> Any:
+    """Open ``path`` for reading in binary if it is a regular file (after following links) of at most
+    ``limit`` bytes; anything else raises :class:`InputFileError` before a byte is read. The file is opened
+    without blocking (a FIFO swapped in after the check cannot hang the open) and checked again once open."""
+    name = os.fspath(path)
+    try:
+        st = os.stat(name)
+    except FileNotFoundError:
+        raise InputFileError(name, f"no such file (the {what})") from None
+    except (OSError, ValueError) as e:
+        raise InputFileError(name, f"cannot read the {what} ({getattr(e, 'strerror', None) or e})") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise _not_regular(name, st.st_mode, what)
+    try:
+        fd = os.open(name, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    except OSError as e:
+        raise InputFileError(name, f"cannot open the {what} ({e.strerror or e})") from None
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise _not_regular(name, st.st_mode, what)
+        if st.st_size > limit:
+            raise InputFileError(name, f"the {what} is {st.st_size} bytes, more than the {limit} read (the limit)")
+        os.set_blocking(fd, True)
+        return os.fdopen(fd, "rb")
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def read_regular(path: str | os.PathLike[str], *, limit: int, what: str = "input") -> bytes:
+    """The bytes of the regular file ``path`` (see :func:`open_regular`), at most ``limit`` of them."""
+    with open_regular(path, limit=limit, what=what) as fh:
+        try:
+            data = fh.read(limit + 1)
+        except OSError as e:
+            raise InputFileError(os.fspath(path), f"cannot read the {what} ({e.strerror or e})") from None
+    if len(data) > limit:  # it grew since it was opened
+        raise InputFileError(os.fspath(path), f"the {what} is more than the {limit} bytes read (the limit)")
+    return data
+
+
+class OutputDirError(RtloopError):
+    """An output directory that cannot be (re)placed: a link, not a directory, the working directory or one
+    above it, not empty without ``force``, or holding one of the inputs."""
+
+
+def check_out_dir(out: Path, force: bool, inputs: list[Path]) -> bool:
+    """Fail early (:class:`OutputDirError`) if ``out`` cannot be replaced whole by a command's results;
+    True if something is there to replace at the end. Never the working directory or one above it, and with
+    ``force`` never a directory holding one of ``inputs``."""
+    if not os.path.lexists(out):
+        return False
+    if out.is_symlink():
+        raise OutputDirError(f"{out}: is a symbolic link; give the directory it points to, or another name")
+    if not out.is_dir():
+        raise OutputDirError(f"{out}: exists and is not a directory")
+    cwd = Path.cwd().resolve()
+    resolved = out.resolve()
+    if resolved == cwd or resolved in cwd.parents:
+        raise OutputDirError(f"{out}: refusing to replace the current directory (or one above it)")
+    try:
+        empty = not any(out.iterdir())
+    except OSError as e:
+        raise OutputDirError(f"{out}: cannot read directory ({e.strerror or e})") from None
+    if empty:
+        return True
+    if not force:
+        raise OutputDirError(f"{out}: output directory exists and is not empty (use --force to replace it)")
+    for p in inputs:
+        if resolved in Path(p).resolve().parents:
+            raise OutputDirError(f"{out}: refusing to replace it with --force: it contains {p}")
+    return True
 
 
 def umask() -> int:

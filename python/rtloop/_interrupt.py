@@ -9,7 +9,7 @@ import sys
 __all__ = ["SCRIPTS", "interrupted_at_import"]
 
 #: The console scripts of pyproject.toml.
-SCRIPTS = ("rtloop-fit", "rtloop-scene", "rtloop-acquire")
+SCRIPTS = ("rtloop-fit", "rtloop-scene", "rtloop-acquire", "rtloop-insert")
 
 
 def interrupted_at_import() -> None:

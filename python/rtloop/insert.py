@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 import os
+import re
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,9 +15,14 @@ from typing import Any
 
 import numpy as np
 
-from .errors import RtloopError
+from ._files import MAX_TEXT_BYTES, read_regular
+from .errors import RtloopError, RtloopWarning
 
-__all__ = ["Insertion", "insert", "load_objects"]
+__all__ = ["MAX_INSERT_PIXELS", "Insertion", "insert", "load_objects"]
+
+#: The largest photo an insertion renders (README: "Input limits"): it takes some 115 bytes a pixel (the
+#: two renders, their samples and the composite), 2.8 GB at this cap.
+MAX_INSERT_PIXELS = 24_000_000
 
 
 @dataclass(frozen=True)
@@ -40,10 +47,10 @@ def load_objects(source: Any) -> list[dict[str, Any]]:
     if isinstance(source, (str, os.PathLike)):
         folder = Path(source).parent
         where = str(source)
+        if not os.path.lexists(source):
+            raise RtloopError(f"{where}: objects file not found")
         try:
-            source = json.loads(Path(source).read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise RtloopError(f"{where}: objects file not found") from None
+            source = json.loads(read_regular(source, limit=MAX_TEXT_BYTES, what="objects file").decode("utf-8"))
         except (OSError, UnicodeDecodeError, ValueError) as e:
             raise RtloopError(f"{where}: cannot read the objects ({e})") from None
     if isinstance(source, dict):
@@ -58,6 +65,22 @@ def load_objects(source: Any) -> list[dict[str, Any]]:
             for o in source
         ]
     return source
+
+
+def _warn_enclosing(scene: dict[str, Any], added: list[dict[str, Any]], where: str) -> None:
+    """An RtloopWarning for an added sphere that encloses the camera: the render sees only its inside (black
+    where it also encloses the light, which then lights nothing outside it)."""
+    camera = np.asarray(scene["camera"]["position"], dtype=np.float64)
+    light = scene.get("light") or {}
+    for k, o in enumerate(added):
+        if o.get("shape", "sphere") != "sphere":
+            continue
+        centre, radius = np.asarray(o["center"], dtype=np.float64), float(o["radius"])
+        if np.linalg.norm(camera - centre) < radius:
+            inside = "position" in light and np.linalg.norm(np.asarray(light["position"]) - centre) < radius
+            what = "the camera and the light" if inside else "the camera"
+            warnings.warn(f"{where}: objects[{k}] ({o.get('name', 'unnamed')}): the sphere encloses {what}: the "
+                          "composite shows only its inside", RtloopWarning, stacklevel=3)
 
 
 def insert(result: Any, photo: Any, objects: Any, *, spp: int = 16, response: str = "srgb",
@@ -76,36 +99,38 @@ def insert(result: Any, photo: Any, objects: Any, *, spp: int = 16, response: st
             supersamples every pixel (each render then is ``render(scene, W, H, spp)``).
         progress: Called as ``progress(tiles_done, tiles_total)`` while rendering, at most every 0.1 s.
     """
-    from . import _native, load_image, scene_to_dict
+    from . import _native, scene_to_dict
     from .scene import load_scene
 
     base = load_scene(result)
     base_dict = scene_to_dict(base)
     added = load_objects(objects)
     if isinstance(photo, (str, os.PathLike)):
-        from PIL import Image
+        from .acquisition.response import load_photo
 
-        try:
-            with Image.open(photo) as im:
-                size = im.size
-        except (OSError, ValueError) as e:
-            raise RtloopError(f"{photo}: cannot read the photo ({e})") from None
-        image = load_image(photo, size, response=response)
+        image = load_photo(photo, None, response=response)  # as rtloop-fit reads it: oriented, RAW too
     else:
         image = np.asarray(photo, dtype=np.float32)
         if image.ndim != 3 or image.shape[2] != 3 or not np.isfinite(image).all():
             raise RtloopError(f"photo: expected a finite (H, W, 3) linear image, got shape {image.shape}")
     height, width = image.shape[:2]
+    if width * height > MAX_INSERT_PIXELS:
+        raise RtloopError(f"{photo if isinstance(photo, (str, os.PathLike)) else 'photo'}: {width}x{height} = "
+                          f"{width * height / 1e6:.1f} megapixels, more than the {MAX_INSERT_PIXELS / 1e6:.0f} an "
+                          "insertion renders; downscale the photo first")
     if abs(width / height - base_dict["image"]["width"] / base_dict["image"]["height"]) > 0.01 * width / height:
         raise RtloopError(f"photo: {width}x{height} does not have the scene's aspect ratio "
                           f"({base_dict['image']['width']}x{base_dict['image']['height']})")
     if not (isinstance(spp, int) and 1 <= spp <= 4096):
         raise RtloopError(f"spp: must be an integer 1..4096 (got {spp!r})")
     n_old = len(base_dict["objects"])
+    where = os.fspath(objects) if isinstance(objects, (str, os.PathLike)) else "added objects"
     try:
         scene_with = load_scene({**base_dict, "objects": base_dict["objects"] + added})
-    except RtloopError as e:
-        raise RtloopError(f"added objects: {e}") from None
+    except RtloopError as e:  # named by their place in the objects given, not in the combined scene
+        renamed = re.sub(r"^objects\[(\d+)\]", lambda m: f"objects[{int(m[1]) - n_old}]", str(e))
+        raise RtloopError(f"{where}: {renamed}") from None
+    _warn_enclosing(base_dict, added, where)
     (without, with_objects), matte, _ = _native.render_layers(
         [base, scene_with], width, height, spp, bool(adaptive), n_old, progress)
     composite = _native.composite(np.ascontiguousarray(image), with_objects, without, matte)

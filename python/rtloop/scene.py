@@ -68,13 +68,13 @@ def load_scene(source: str | os.PathLike[str] | dict[str, Any] | Scene) -> Scene
             # Positions in the JSON text we made from the dict mean nothing to the caller.
             raise SceneError(re.sub(r" at line \d+ column \d+$", "", str(e))) from None
     if isinstance(source, (str, os.PathLike)):
+        from ._files import MAX_TEXT_BYTES, read_regular
+
         path = Path(source)
+        if not os.path.lexists(path):
+            raise RtloopError(f"{path}: scene file not found")
         try:
-            text = path.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise RtloopError(f"{path}: scene file not found") from None
-        except IsADirectoryError:
-            raise RtloopError(f"{path}: is a directory, not a scene file") from None
+            text = read_regular(path, limit=MAX_TEXT_BYTES, what="scene file").decode("utf-8")
         except (OSError, UnicodeDecodeError) as e:
             raise RtloopError(f"{path}: cannot read scene file ({e})") from None
         try:

@@ -21,60 +21,201 @@ pub fn resolve(file: &str, base: Option<&Path>) -> PathBuf {
     std::path::absolute(&p).unwrap_or(p)
 }
 
+/// The largest mesh file read (README: "Input limits"): 256 MiB.
+pub const MAX_MESH_BYTES: u64 = 256 << 20;
+
+/// The most PLY elements (vertices, faces and any other element together) and the most OBJ vertices plus
+/// triangles one mesh may have (README: "Input limits"); each costs some 100-200 bytes once placed.
+pub const MAX_MESH_ELEMENTS: usize = 10_000_000;
+
+/// The bytes of the regular file `path`, at most `limit` of them. Anything else (a directory, a FIFO, a
+/// device such as /dev/zero) is refused before it is read: it is opened without blocking and checked
+/// again once open, so that a FIFO cannot hang the open and an endless device cannot fill the memory.
+pub fn read_regular(path: &Path, limit: u64, what: &str) -> std::result::Result<Vec<u8>, String> {
+    use std::io::Read;
+    use std::os::unix::fs::OpenOptionsExt;
+    let not_regular = || format!("not a regular file (a directory, FIFO or device): not read as the {what} file");
+    let meta = std::fs::metadata(path).map_err(|_| format!("cannot open the {what} file"))?;
+    if !meta.is_file() {
+        return Err(not_regular());
+    }
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NONBLOCK)
+        .open(path)
+        .map_err(|_| format!("cannot open the {what} file"))?;
+    let meta = file.metadata().map_err(|_| format!("cannot read the {what} file"))?;
+    if !meta.is_file() {
+        return Err(not_regular());
+    }
+    let too_big = |n: u64| format!("the {what} file is {n} bytes, more than the {limit} read (the limit)");
+    if meta.len() > limit {
+        return Err(too_big(meta.len()));
+    }
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    file.take(limit + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|_| format!("cannot read the {what} file"))?;
+    if bytes.len() as u64 > limit {
+        return Err(too_big(bytes.len() as u64));
+    }
+    Ok(bytes)
+}
+
+/// One PLY element as read: a vertex's `x y z` (and `nx ny nz`), a face's index list; any other
+/// property is ignored. A few dozen bytes each, whatever the element.
+#[derive(Default)]
+struct PlyItem {
+    xyz: [Option<f32>; 3],
+    normal: [Option<f32>; 3],
+    indices: Option<Vec<i64>>,
+}
+
+impl PlyItem {
+    fn set(&mut self, name: &str, v: f64) -> ply_rs_bw::ply::PropertyAccessResult {
+        let slot = match name {
+            "x" => &mut self.xyz[0],
+            "y" => &mut self.xyz[1],
+            "z" => &mut self.xyz[2],
+            "nx" => &mut self.normal[0],
+            "ny" => &mut self.normal[1],
+            "nz" => &mut self.normal[2],
+            _ => return ply_rs_bw::ply::PropertyAccessResult::Ignored,
+        };
+        *slot = Some(v as f32);
+        ply_rs_bw::ply::PropertyAccessResult::Set
+    }
+}
+
+impl ply_rs_bw::ply::PropertyAccess for PlyItem {
+    fn new() -> Self {
+        Self::default()
+    }
+
+    fn set_property(&mut self, name: &str, property: ply_rs_bw::ply::Property) -> ply_rs_bw::ply::PropertyAccessResult {
+        use ply_rs_bw::ply::Property as P;
+        let list = |l: Vec<i64>| Some(l);
+        let number = match property {
+            P::Float(v) => Some(v as f64),
+            P::Double(v) => Some(v),
+            P::Char(v) => Some(v as f64),
+            P::UChar(v) => Some(v as f64),
+            P::Short(v) => Some(v as f64),
+            P::UShort(v) => Some(v as f64),
+            P::Int(v) => Some(v as f64),
+            P::UInt(v) => Some(v as f64),
+            _ => None,
+        };
+        if let Some(v) = number {
+            return self.set(name, v);
+        }
+        if name != "vertex_indices" && name != "vertex_index" {
+            return ply_rs_bw::ply::PropertyAccessResult::Ignored;
+        }
+        self.indices = match property {
+            P::ListChar(l) => list(l.into_iter().map(i64::from).collect()),
+            P::ListUChar(l) => list(l.into_iter().map(i64::from).collect()),
+            P::ListShort(l) => list(l.into_iter().map(i64::from).collect()),
+            P::ListUShort(l) => list(l.into_iter().map(i64::from).collect()),
+            P::ListInt(l) => list(l.into_iter().map(i64::from).collect()),
+            P::ListUInt(l) => list(l.into_iter().map(i64::from).collect()),
+            _ => None,
+        };
+        ply_rs_bw::ply::PropertyAccessResult::Set
+    }
+}
+
+/// The fewest bytes one element of `def` takes in the file: a binary element's fixed-size properties and
+/// list counts, an ASCII element's one character and one separator per property.
+fn min_element_bytes(def: &ply_rs_bw::ply::ElementDef, encoding: ply_rs_bw::ply::Encoding) -> usize {
+    use ply_rs_bw::ply::{PropertyType, ScalarType as S};
+    let size = |s: &S| match s {
+        S::Char | S::UChar => 1,
+        S::Short | S::UShort => 2,
+        S::Int | S::UInt | S::Float => 4,
+        S::Double => 8,
+    };
+    let bytes: usize = def
+        .properties
+        .values()
+        .map(|p| match (&p.data_type, encoding) {
+            (_, ply_rs_bw::ply::Encoding::Ascii) => 2,
+            (PropertyType::Scalar(s), _) | (PropertyType::List(s, _), _) => size(s),
+        })
+        .sum();
+    bytes.max(1)
+}
+
+/// Refuse a header whose element counts the file cannot hold (or that pass MAX_MESH_ELEMENTS) before any
+/// element is read, so that memory stays in proportion to the file.
+fn check_counts(header: &ply_rs_bw::ply::Header, body: usize) -> std::result::Result<(), String> {
+    let mut need = 0usize;
+    let mut total = 0usize;
+    for def in header.elements.values() {
+        total = total.saturating_add(def.count);
+        need = need.saturating_add(def.count.saturating_mul(min_element_bytes(def, header.encoding)));
+    }
+    if total > MAX_MESH_ELEMENTS {
+        return Err(format!(
+            "the PLY header declares {total} elements, more than the {MAX_MESH_ELEMENTS} read (the limit)"
+        ));
+    }
+    if need > body {
+        return Err(format!(
+            "the PLY header declares {total} elements, more than its {body} bytes of data can hold"
+        ));
+    }
+    Ok(())
+}
+
+/// A PLY parser's error in one line, without the file's text it quotes.
+fn ply_error(e: &ply_rs_bw::parser::ParseError) -> String {
+    let at = e.line().map(|l| format!(" at line {l}")).unwrap_or_default();
+    let why = match e.kind() {
+        std::io::ErrorKind::UnexpectedEof => "it ends early",
+        _ => "malformed",
+    };
+    format!("not a valid PLY file ({why}{at})")
+}
+
 /// A PLY file's `vertex` (`x`, `y`, `z`, and `nx`, `ny`, `nz` when every vertex has them) and `face`
 /// (`vertex_indices` or `vertex_index`, polygons split into fans) elements in `tobj`'s form, so that
 /// both formats share one validation.
-fn read_ply(path: &Path) -> std::result::Result<Vec<tobj::Model>, String> {
-    use ply_rs_bw::ply::Property as P;
-    let file = std::fs::File::open(path).map_err(|_| "cannot open the PLY file".to_string())?;
-    let parser = ply_rs_bw::parser::Parser::<ply_rs_bw::ply::DefaultElement>::new();
-    let ply = parser
-        .read_ply(&mut std::io::BufReader::new(file))
-        .map_err(|e| format!("not a valid PLY file ({e})"))?;
-    let number = |p: Option<&P>| -> Option<f32> {
-        Some(match *p? {
-            P::Float(v) => v,
-            P::Double(v) => v as f32,
-            P::Char(v) => v as f32,
-            P::UChar(v) => v as f32,
-            P::Short(v) => v as f32,
-            P::UShort(v) => v as f32,
-            P::Int(v) => v as f32,
-            P::UInt(v) => v as f32,
-            _ => return None,
-        })
-    };
-    let vertices = ply.payload.get("vertex").map_or(&[][..], Vec::as_slice);
+fn read_ply(bytes: &[u8]) -> std::result::Result<Vec<tobj::Model>, String> {
+    let parser = ply_rs_bw::parser::Parser::<PlyItem>::new();
+    let mut reader = ply_rs_bw::parser::Reader::new(std::io::Cursor::new(bytes));
+    let header = parser.read_header(&mut reader).map_err(|e| ply_error(&e))?;
+    check_counts(&header, bytes.len() - reader.get_ref().position() as usize)?;
+    let mut vertices = Vec::new();
+    let mut faces = Vec::new();
+    for (name, def) in &header.elements {
+        let items = parser
+            .read_payload_for_element(&mut reader, def, &header)
+            .map_err(|e| ply_error(&e))?;
+        match name.as_str() {
+            "vertex" => vertices = items,
+            "face" => faces = items,
+            _ => {}
+        }
+    }
     let mut mesh = tobj::Mesh::default();
     for (k, v) in vertices.iter().enumerate() {
-        for axis in ["x", "y", "z"] {
-            let c = number(v.get(axis))
-                .ok_or_else(|| format!("vertex {} has no number {axis:?}", k + 1))?;
+        for (axis, c) in ["x", "y", "z"].iter().zip(v.xyz) {
+            let c = c.ok_or_else(|| format!("vertex {} has no number {axis:?}", k + 1))?;
             mesh.positions.push(c);
         }
-        if let (Some(x), Some(y), Some(z)) = (
-            number(v.get("nx")),
-            number(v.get("ny")),
-            number(v.get("nz")),
-        ) {
+        if let [Some(x), Some(y), Some(z)] = v.normal {
             mesh.normals.extend([x, y, z]);
         }
     }
     if mesh.normals.len() != mesh.positions.len() {
         mesh.normals.clear();
     }
-    let faces = ply.payload.get("face").map_or(&[][..], Vec::as_slice);
     for (k, f) in faces.iter().enumerate() {
-        let list = f.get("vertex_indices").or_else(|| f.get("vertex_index"));
-        let idx: Vec<i64> = match list {
-            Some(P::ListChar(l)) => l.iter().map(|&i| i as i64).collect(),
-            Some(P::ListUChar(l)) => l.iter().map(|&i| i as i64).collect(),
-            Some(P::ListShort(l)) => l.iter().map(|&i| i as i64).collect(),
-            Some(P::ListUShort(l)) => l.iter().map(|&i| i as i64).collect(),
-            Some(P::ListInt(l)) => l.iter().map(|&i| i as i64).collect(),
-            Some(P::ListUInt(l)) => l.iter().map(|&i| i as i64).collect(),
-            _ => return Err(format!("face {} has no integer list vertex_indices", k + 1)),
-        };
+        let idx = f
+            .indices
+            .as_deref()
+            .ok_or_else(|| format!("face {} has no integer list vertex_indices", k + 1))?;
         if let Some(&bad) = idx.iter().find(|&&i| i < 0 || i >= vertices.len() as i64) {
             return Err(format!(
                 "face {}: vertex index {bad} is out of range ({} vertices)",
@@ -90,30 +231,43 @@ fn read_ply(path: &Path) -> std::result::Result<Vec<tobj::Model>, String> {
     Ok(vec![tobj::Model::new(mesh, String::new())])
 }
 
-/// Load the OBJ or PLY (by extension) at `path`, placed at `position` and scaled by `scale`.
-pub fn load(field: &str, path: &Path, position: V3, scale: f64) -> Result<Arc<Mesh>> {
-    let shown = path.display();
-    let err = |m: String| Error::scene(field, format!("{shown}: {m}"));
+/// An OBJ file's objects, triangulated; a material library it names is not read (the scene gives the
+/// material).
+fn read_obj(bytes: &[u8]) -> std::result::Result<Vec<tobj::Model>, String> {
     let opts = tobj::LoadOptions {
         triangulate: true,
         single_index: true,
         ..Default::default()
     };
+    let mut reader = std::io::BufReader::new(std::io::Cursor::new(bytes));
+    let no_materials = |_: &Path| Err(tobj::LoadError::OpenFileFailed);
+    let (models, _) = tobj::load_obj_buf(&mut reader, &opts, no_materials).map_err(|e| match e {
+        tobj::LoadError::ReadError => "cannot read the OBJ file".to_string(),
+        e => format!("not a valid OBJ file ({e})"),
+    })?;
+    let elements: usize = models
+        .iter()
+        .map(|m| m.mesh.positions.len() / 3 + m.mesh.indices.len() / 3)
+        .sum();
+    if elements > MAX_MESH_ELEMENTS {
+        return Err(format!(
+            "the OBJ file has {elements} vertices and triangles, more than the {MAX_MESH_ELEMENTS} read (the limit)"
+        ));
+    }
+    Ok(models)
+}
+
+/// Load the OBJ or PLY (by extension) at `path`, placed at `position` and scaled by `scale`.
+pub fn load(field: &str, path: &Path, position: V3, scale: f64) -> Result<Arc<Mesh>> {
+    let shown = path.display();
+    let err = |m: String| Error::scene(field, format!("{shown}: {m}"));
     let is_ply = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
-    let models = if is_ply {
-        read_ply(path).map_err(err)?
-    } else {
-        // Materials (.mtl) are not used: the scene gives the material.
-        tobj::load_obj(path, &opts)
-            .map_err(|e| match e {
-                tobj::LoadError::OpenFileFailed => err("cannot open the OBJ file".into()),
-                tobj::LoadError::ReadError => err("cannot read the OBJ file".into()),
-                e => err(format!("not a valid OBJ file ({e})")),
-            })?
-            .0
-    };
+    let kind = if is_ply { "PLY" } else { "OBJ" };
+    let bytes = read_regular(path, MAX_MESH_BYTES, kind).map_err(err)?;
+    let models = if is_ply { read_ply(&bytes) } else { read_obj(&bytes) }.map_err(err)?;
+    drop(bytes);
     let at = DVec3::from_array(position);
     let mut tris = Vec::new();
     let mut normals = Vec::new();
@@ -132,11 +286,12 @@ pub fn load(field: &str, path: &Path, position: V3, scale: f64) -> Result<Arc<Me
             )));
         }
         if let Some(k) = mesh.positions.iter().position(|v| !v.is_finite()) {
-            return Err(err(format!(
-                "vertex {} is not finite ({})",
-                k / 3 + 1,
-                mesh.positions[k]
-            )));
+            let why = if mesh.positions[k].is_nan() {
+                "is not finite (NaN)"
+            } else {
+                "is out of range (beyond +-3.4e38, a 32-bit float's range)"
+            };
+            return Err(err(format!("vertex {} {why}", k / 3 + 1)));
         }
         let has_normals = mesh.normals.len() == mesh.positions.len()
             && mesh.normals.iter().all(|v| v.is_finite());

@@ -76,12 +76,13 @@ def to_detection_grey(linear: np.ndarray, stretch: bool = True) -> np.ndarray:
 
 def read_json(path: str | os.PathLike[str], what: str) -> Any:
     """Parse a JSON file or raise AcquisitionError naming it and saying what it should be."""
+    from .._files import MAX_TEXT_BYTES, InputFileError, read_regular
+
     name = os.fspath(path)
     try:
-        with open(name, encoding="utf-8") as fh:
-            return json.load(fh)
-    except FileNotFoundError:
-        raise AcquisitionError(f"{name}: no such file (expected {what})") from None
+        return json.loads(read_regular(name, limit=MAX_TEXT_BYTES, what=what).decode("utf-8"))
+    except InputFileError as exc:
+        raise AcquisitionError(str(exc)) from None
     except (OSError, UnicodeDecodeError) as exc:
         raise AcquisitionError(f"{name}: cannot read {what}: {exc}") from None
     except json.JSONDecodeError as exc:

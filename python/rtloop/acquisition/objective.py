@@ -41,6 +41,7 @@ starts with the file name.
 from __future__ import annotations
 
 import functools
+import io
 import os
 import warnings
 from typing import Protocol
@@ -48,6 +49,7 @@ from typing import Protocol
 import numpy as np
 from PIL import Image
 
+from .._files import MAX_IMAGE_BYTES, InputFileError, open_regular, read_regular
 from .._opencv import imdecode
 from .._srgb import code_values
 from ..errors import AcquisitionError
@@ -134,8 +136,7 @@ def _load(name: str, scene: SceneLike, response: str, crop: bool) -> np.ndarray:
     width, height = _scene_size(scene)
 
     if is_raw(name):  # camera RAW: linear and oriented by LibRaw; the response does not apply
-        if not os.path.isfile(name):
-            raise _Fail("no such file")
+        _check_regular(name)
         try:
             linear, _ = load_raw(name)
         except AcquisitionError as exc:
@@ -190,31 +191,37 @@ def _scene_size(scene: SceneLike) -> tuple[int, int]:
 def _decode(name: str) -> tuple[np.ndarray, int]:
     """The file's pixels as stored ((h, w) grey or (h, w, 3) RGB, alpha dropped) and its
     EXIF orientation."""
-    if not os.path.exists(name):
-        raise _Fail("no such file")
-    if os.path.isdir(name):
-        raise _Fail("is a directory, not an image file")
     try:
-        data = np.fromfile(name, dtype=np.uint8)
-    except OSError as exc:
-        raise _Fail(f"cannot read file: {exc.strerror or exc}") from exc
-    if data.size == 0:
+        raw = read_regular(name, limit=MAX_IMAGE_BYTES, what="image")
+    except InputFileError as exc:
+        raise _Fail(exc.reason) from None
+    if not raw:
         raise _Fail("file is empty")
+    data = np.frombuffer(raw, dtype=np.uint8)
 
-    _check_pixel_count(name)
-    orientation = _exif_orientation(name)
+    _check_pixel_count(raw)
+    orientation = _exif_orientation(raw)
     decoded, said = imdecode(data)  # keeps bit depth; no EXIF rotation
     if decoded is not None:
         return _from_opencv(decoded), orientation
-    return _decode_with_pillow(name, said), orientation
+    return _decode_with_pillow(raw, said), orientation
 
 
-def _check_pixel_count(name: str) -> None:
+def _check_regular(name: str) -> None:
+    """Refuse, before any library opens it, a path that is not a regular file of at most MAX_IMAGE_BYTES
+    (a FIFO would hang the reader, a device such as /dev/zero never end)."""
+    try:
+        open_regular(name, limit=MAX_IMAGE_BYTES, what="image").close()
+    except InputFileError as exc:
+        raise _Fail(exc.reason) from None
+
+
+def _check_pixel_count(name: bytes) -> None:
     """Refuse, from the header alone, a file that would decode to more than MAX_DECODED_PIXELS."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # decompression-bomb warnings: the size is checked here
-            with Image.open(name) as img:
+            with Image.open(io.BytesIO(name)) as img:
                 w, h = img.size
     except Image.DecompressionBombError:  # Pillow's own refusal (over twice its MAX_IMAGE_PIXELS)
         raise _Fail(f"image claims more than {2 * (Image.MAX_IMAGE_PIXELS or 0) / 1e6:.0f} megapixels, more than "
@@ -239,11 +246,11 @@ def _from_opencv(image: np.ndarray) -> np.ndarray:
     raise _Fail(f"unsupported image with {channels} channels")
 
 
-def _decode_with_pillow(name: str, said: str = "") -> np.ndarray:
+def _decode_with_pillow(name: bytes, said: str = "") -> np.ndarray:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", Image.DecompressionBombWarning)
-            with Image.open(name) as img:
+            with Image.open(io.BytesIO(name)) as img:
                 img.load()
                 if img.mode == "F":
                     array = np.asarray(img, dtype=np.float32)
@@ -275,7 +282,7 @@ def _check_sample_type(image: np.ndarray) -> np.ndarray:
 # --- orientation ----------------------------------------------------------------------------
 
 
-def _exif_orientation(name: str) -> int:
+def _exif_orientation(name: bytes) -> int:
     """The file's EXIF orientation tag (1-8); 1 (as stored) if it is missing or unreadable.
 
     OpenCV's IMREAD_UNCHANGED ignores this tag (unlike IMREAD_COLOR), so it is applied here.
@@ -283,7 +290,7 @@ def _exif_orientation(name: str) -> int:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # decompression-bomb and EXIF-parsing warnings
-            with Image.open(name) as img:
+            with Image.open(io.BytesIO(name)) as img:
                 value = img.getexif().get(_EXIF_ORIENTATION)
     except Exception:  # noqa: BLE001 - Pillow raises many types; OpenCV may still decode the file
         return 1

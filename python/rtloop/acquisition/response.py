@@ -19,6 +19,7 @@ averaging) to a requested size, since only linear values can be averaged.
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 import os
@@ -30,6 +31,7 @@ import cv2
 import numpy as np
 from PIL import Image
 
+from .._files import MAX_IMAGE_BYTES, InputFileError, open_regular, read_regular
 from .._opencv import imdecode
 from .._srgb import decode
 from ._common import AcquisitionError
@@ -250,9 +252,11 @@ def photo_info(path: str | os.PathLike[str]) -> dict[str, Any]:
     """Size (as displayed, EXIF orientation applied), sample type and channels of an image file,
     without converting it. Raises AcquisitionError for files that cannot be read."""
     name = os.fspath(path)
-    if not os.path.isfile(name):
-        raise AcquisitionError(f"{name}: no such file" if not os.path.exists(name) else f"{name}: not a file")
-    data = np.fromfile(name, dtype=np.uint8)
+    try:
+        raw = read_regular(name, limit=MAX_IMAGE_BYTES, what="image")
+    except InputFileError as exc:
+        raise AcquisitionError(str(exc)) from None
+    data = np.frombuffer(raw, dtype=np.uint8)
     decoded = imdecode(data)[0] if data.size else None  # load_image below says why a bad file is bad
     if decoded is not None:
         h, w = decoded.shape[:2]
@@ -262,7 +266,7 @@ def photo_info(path: str | os.PathLike[str]) -> dict[str, Any]:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                with Image.open(name) as img:
+                with Image.open(io.BytesIO(raw)) as img:
                     w, h = img.size
                     mode = img.mode
         except Exception:  # noqa: BLE001 - Pillow raises many types; load_image gives the real error
@@ -278,7 +282,7 @@ def photo_info(path: str | os.PathLike[str]) -> dict[str, Any]:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            with Image.open(name) as img:
+            with Image.open(io.BytesIO(raw)) as img:
                 value = img.getexif().get(0x0112)
                 if isinstance(value, int) and 1 <= value <= 8:
                     orientation = value
@@ -323,6 +327,10 @@ def load_photo(
     name = os.fspath(path)
     resp = parse_response(response)
     if is_raw(name):  # linear from LibRaw: the response and levels do not apply
+        try:
+            open_regular(name, limit=MAX_IMAGE_BYTES, what="image").close()
+        except InputFileError as exc:
+            raise AcquisitionError(str(exc)) from None
         linear, _ = load_raw(name)
         return linear if size is None else _resize_like_load_image(linear, size, crop, name)
     info = photo_info(name)

@@ -35,6 +35,33 @@ def _plain(job: Job) -> dict[str, Any]:
             "options": options}
 
 
+#: How long a cluster's address may take to accept a connection before the batch gives up.
+CONNECT_TIMEOUT_S = 10.0
+
+
+def _probe(address: str | None) -> None:
+    """Refuse at once, in one line, a ``host:port`` (or ``ray://host:port``) address where nothing accepts a
+    TCP connection within CONNECT_TIMEOUT_S: ray.init would retry for many minutes without a word."""
+    import socket
+    from urllib.parse import urlsplit
+
+    if not address or address == "auto":
+        return
+    try:
+        parts = urlsplit(address if "://" in address else f"tcp://{address}")
+        host, port = parts.hostname, parts.port
+    except ValueError:
+        raise RtloopError(f"ray: {address!r} is not an address (host:port)") from None
+    if host is None or port is None:
+        return
+    try:
+        socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S).close()
+    except OSError as e:
+        why = "no answer" if isinstance(e, TimeoutError) else (e.strerror or str(e))
+        raise RtloopError(f"ray: cannot connect to the cluster at {address} ({why} within "
+                          f"{CONNECT_TIMEOUT_S:g} s)") from None
+
+
 def run_ray(jobs: list[tuple[Job, str]], *, address: str | None, threads: int, max_retries: int,
             task: Callable[..., JobResult] = _task, **kwargs: Any) -> Iterator[JobResult]:
     """Run ``(job, hash)`` pairs as Ray tasks; yield results as they finish. Connects to the cluster at
@@ -46,6 +73,7 @@ def run_ray(jobs: list[tuple[Job, str]], *, address: str | None, threads: int, m
     except ImportError:
         raise RtloopError(f"engine='ray': {RAY_HINT}") from None
     if not ray.is_initialized():
+        _probe(address)
         try:
             ray.init(address=address or None, logging_level="warning", log_to_driver=False)
         except ConnectionError as e:

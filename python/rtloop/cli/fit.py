@@ -23,7 +23,7 @@ from typing import Any, TextIO
 import numpy as np
 
 import rtloop
-from rtloop._files import PlaceError, move_into_place, recover_leftovers, staging_dir
+from rtloop._files import PlaceError, check_out_dir, move_into_place, recover_leftovers, staging_dir
 from rtloop.fit import PROTOCOLS
 from rtloop.fit.files import fit_inputs, load_inputs
 from rtloop.fit.protocol import LIMITS, max_threads
@@ -308,32 +308,6 @@ class _Progress:
 
 
 # --- output directory ------------------------------------------------------------------------------------
-
-
-def _check_out(out: Path, force: bool, inputs: list[Path]) -> bool:
-    """Fail early if DIR cannot be (re)placed; True if something is there to replace at the end."""
-    if not os.path.lexists(out):
-        return False
-    if out.is_symlink():
-        raise _Failure(f"{out}: is a symbolic link; give the directory it points to, or another name")
-    if not out.is_dir():
-        raise _Failure(f"{out}: exists and is not a directory")
-    cwd = Path.cwd().resolve()
-    if out.resolve() == cwd or out.resolve() in cwd.parents:
-        raise _Failure(f"{out}: refusing to replace the current directory (or one above it)")
-    try:
-        empty = not any(out.iterdir())
-    except OSError as e:
-        raise _Failure(f"{out}: cannot read directory ({e.strerror or e})") from None
-    if empty:
-        return True
-    if not force:
-        raise _Failure(f"{out}: output directory exists and is not empty (use --force to replace it)")
-    resolved = out.resolve()
-    for p in inputs:
-        if resolved in p.resolve().parents:
-            raise _Failure(f"{out}: refusing to replace it with --force: it contains {p}")
-    return True
 
 
 def _commit(tmp: Path, out: Path, replace: bool) -> None:
@@ -648,7 +622,8 @@ def _main(argv: list[str] | None, t0: float) -> int:
     try:
         for line in recover_leftovers(out):  # what killed runs left beside DIR
             print(f"{PROG}: {line}", file=sys.stderr)
-        replace = _check_out(out, args.force, [Path(args.scene), Path(args.image)])
+        inputs = [Path(p) for p in (args.scene, args.image, args.mask, args.truth) if p is not None]
+        replace = check_out_dir(out, args.force, inputs)
         try:
             tmp = staging_dir(out, "rtloop-tmp")
         except OSError as e:

@@ -3,17 +3,30 @@ composite, the matte and the two renders into an output directory moved into pla
 
 from __future__ import annotations
 
-import argparse
-import shutil
-import sys
-from collections.abc import Sequence
-from pathlib import Path
+from .._interrupt import interrupted_at_import
 
-import numpy as np
+try:
+    import argparse
+    import os
+    import shutil
+    import signal
+    import sys
+    import threading
+    import warnings
+    from collections.abc import Sequence
+    from pathlib import Path
+    from typing import Any
 
-from .._files import move_into_place, recover_leftovers, staging_dir, write_bytes
-from .._srgb import encode8
-from ..errors import RtloopError
+    import numpy as np
+
+    from .._files import check_out_dir, move_into_place, recover_leftovers, staging_dir, write_bytes
+    from .._srgb import encode8
+    from ..errors import RtloopError, RtloopWarning
+except KeyboardInterrupt:
+    interrupted_at_import()  # a console script starting: one line, exit 130
+    raise
+
+PROG = "rtloop-insert"
 
 DESCRIPTION = """\
 Insert virtual objects into a photo under the light rtloop-fit found (differential rendering, after
@@ -52,15 +65,49 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+class _Terminated(KeyboardInterrupt):
+    """SIGTERM, handled like Ctrl-C (nothing half-written) but reported as such."""
+
+
+def _on_sigterm(signum: int, frame: Any) -> None:
+    raise _Terminated()
+
+
 def insert_main(argv: Sequence[str] | None = None) -> int:
-    """Exit status: 0 done, 1 bad input, 2 bad command line."""
+    """Exit status: 0 done, 1 bad input, 2 bad command line, 130 interrupted (Ctrl-C), 143 terminated."""
     args = _parser().parse_args(argv)
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         _run(args)
+    except _Terminated:
+        print(f"\n{PROG}: terminated", file=sys.stderr, flush=True)
+        return 128 + signal.SIGTERM
+    except KeyboardInterrupt:
+        print(f"\n{PROG}: interrupted", file=sys.stderr, flush=True)
+        return 130
     except (RtloopError, OSError) as e:
-        print(f"rtloop-insert: error: {e}", file=sys.stderr)
+        where = f"{e.filename}: " if isinstance(e, OSError) and e.filename else ""
+        text = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
+        print(f"{PROG}: error: {where}{' '.join(text.split())}", file=sys.stderr)
         return 1
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
     return 0
+
+
+def _inputs(args: argparse.Namespace) -> list[Path]:
+    """The files the insertion reads (the mesh files too): an --out holding one is never replaced."""
+    from ..insert import load_objects
+
+    paths = [Path(args.result), Path(args.photo), Path(args.add)]
+    try:
+        paths += [Path(o["file"]) for o in load_objects(args.add) if isinstance(o.get("file"), str)]
+    except RtloopError:
+        pass  # reported when the insertion loads them
+    return paths
 
 
 def _show_progress(done: int, total: int) -> None:
@@ -78,16 +125,17 @@ def _run(args: argparse.Namespace) -> None:
 
     if not 1 <= args.spp <= 4096:
         raise RtloopError(f"--spp: must be 1..4096 (got {args.spp})")
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise RtloopError(f"{out}: exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()) and not args.force:
-        raise RtloopError(f"{out}: exists and is not empty; pass --force to replace it, or choose another --out")
+    out = Path(os.path.abspath(args.out))  # normalised: "." and "x/.." have a name and a parent
+    replace = check_out_dir(out, args.force, _inputs(args))
     where = "every pixel" if args.uniform else "pixels at edges"
-    print(f"rtloop-insert: rendering with and without the objects ({args.spp} spp at {where})", file=sys.stderr)
-    r = insert(args.result, args.photo, args.add, spp=args.spp, response=args.response,
-               adaptive=not args.uniform, progress=_show_progress)
+    print(f"{PROG}: rendering with and without the objects ({args.spp} spp at {where})", file=sys.stderr)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RtloopWarning)
+        r = insert(args.result, args.photo, args.add, spp=args.spp, response=args.response,
+                   adaptive=not args.uniform, progress=_show_progress)
     print(file=sys.stderr)
+    for w in caught:
+        print(f"{PROG}: warning: {' '.join(str(w.message).split())}", file=sys.stderr)
     recover_leftovers(out)
     tmp = staging_dir(out, "rtloop-insert")
     try:
@@ -97,7 +145,7 @@ def _run(args: argparse.Namespace) -> None:
         write_bytes(tmp / "matte.png", _png(np.round(r.matte * 255.0).astype(np.uint8)))
         write_bytes(tmp / "with.png", _png(encode8(r.with_objects)))
         write_bytes(tmp / "without.png", _png(encode8(r.without)))
-        move_into_place(tmp, out, out.exists(), "rtloop-insert")
+        move_into_place(tmp, out, replace, "rtloop-insert")
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

@@ -12,6 +12,7 @@ try:
     import os
     import shlex
     import shutil
+    import warnings
     from collections.abc import Sequence
     from pathlib import Path
     from typing import Any
@@ -23,6 +24,7 @@ try:
     from ..acquisition.boards import parse_board
     from ..acquisition.calibration import CameraIntrinsics
     from ..acquisition.exif import exif_exposure, exif_focal
+    from ..errors import RtloopWarning
     from ..acquisition.response import load_photo
     from .acquire import DEFAULT_BOARD
     from .args import (
@@ -247,7 +249,11 @@ def _cmd_scene(args: argparse.Namespace) -> int:
     intrinsics = CameraIntrinsics.load(args.camera) if args.camera else None
     exif = None
     if intrinsics is None and args.vfov is None:
-        exif = exif_focal(args.photo, photo.shape[1], photo.shape[0])
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", RtloopWarning)
+            exif = exif_focal(args.photo, photo.shape[1], photo.shape[0])
+        for w in caught:
+            info(f"rtloop-scene: warning: {' '.join(str(w.message).split())}")
     mask = None
     if args.ball_mask:
         m = load_photo(args.ball_mask, response="linear")
