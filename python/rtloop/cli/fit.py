@@ -470,7 +470,7 @@ class _Run:
         if args.report:
             self.progress.message("writing report.html")
             rtloop.report(result, tmp / "report.html", objective=image, truth=truth, generations=rows,
-                          speed_plot=args.speed_plot)
+                          speed_plot=args.speed_plot, final=final)
             self.check_stop()
         return result
 
