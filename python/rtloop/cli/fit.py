@@ -10,6 +10,7 @@ directory untouched. See ``rtloop-fit --help`` for the options and the files wri
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import shutil
 import signal
@@ -18,6 +19,7 @@ import threading
 import time
 import warnings
 from pathlib import Path
+from collections.abc import Iterator
 from typing import Any, TextIO
 
 import numpy as np
@@ -378,6 +380,46 @@ def scene_card(scene_path: Path) -> tuple[Path, float] | None:
     return path, float(reflectance)
 
 
+def _head(path: str, n: int = 64) -> bytes:
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(n)
+    except OSError:
+        return b""  # reported when it is read
+
+
+def _is_text(data: bytes) -> bool:
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        return e.start >= len(data) - 3  # cut inside a character at the end
+    return b"\0" not in data
+
+
+@contextlib.contextmanager
+def _cli_words() -> Iterator[None]:
+    """Errors of the readers in the command line's words: the option ``--crop``, not ``crop=True``."""
+    try:
+        yield
+    except rtloop.RtloopError as e:
+        text = str(e)
+        if "crop=True" not in text:
+            raise
+        raise _Failure(text.replace("pass crop=True", "pass --crop").replace("crop=True", "--crop")) from None
+
+
+def _check_order(scene: str, image: str) -> None:
+    """A SCENE that is not text (an image) is one clear line, not a decoding error: with IMAGE a JSON text
+    the two were given the wrong way round."""
+    head = _head(scene)
+    if not head or _is_text(head):
+        return
+    if _head(image).lstrip().startswith(b"{"):
+        raise _Failure(f"{scene}: is not a scene (JSON) but {image} is: SCENE and IMAGE swapped? "
+                       f"(usage: {PROG} SCENE IMAGE --out DIR)")
+    raise _Failure(f"{scene}: is not a scene file (JSON text); SCENE comes first, then IMAGE")
+
+
 class _Run:
     def __init__(self, args: argparse.Namespace, progress: _Progress, stop: threading.Event):
         self.args = args
@@ -392,6 +434,7 @@ class _Run:
     def __call__(self, tmp: Path) -> Any:
         """Load, fit and write everything into ``tmp``; returns the FitResult."""
         args = self.args
+        _check_order(args.scene, args.image)
         scene = rtloop.load_scene(args.scene)
         if args.mask is None:
             args.mask = scene_mask(args.scene)
@@ -400,7 +443,7 @@ class _Run:
             raise _Failure(f"--final-scale {k}: final.png would be {scene.width * k}x{scene.height * k}, more "
                            f"than {MAX_SIZE} pixels on a side; use --final-scale "
                            f"{max(1, MAX_SIZE // max(scene.width, scene.height))} or less")
-        with warnings.catch_warnings(record=True) as caught:
+        with warnings.catch_warnings(record=True) as caught, _cli_words():
             warnings.simplefilter("always")
             image = rtloop.load_image(args.image, scene, response=args.response, crop=args.crop)
             mask = None if args.mask is None else rtloop.load_mask(args.mask, scene, crop=args.crop)
