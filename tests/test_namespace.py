@@ -39,3 +39,16 @@ def test_import_loads_neither_the_batch_nor_opencv_nor_scipy():
             "'numpy.ma') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_a_fit_result_has_a_short_repr(ball_scene):
+    """repr(FitResult) is a few lines (the outcome and the fitted values), not the whole history."""
+    photo = rtloop.render(ball_scene)
+    result = rtloop.fit(ball_scene, photo, seed=1, population=8, generations=4)
+    text = repr(result)
+    assert len(text) < 800, len(text)
+    assert text.startswith("FitResult(success=True, protocol='rtloop', seed=1, ")
+    assert f"'light.position.x': {result.x['light.position.x']:.6g}" in text
+    assert f"evaluations={result.evaluations}" in text
+    for stage in result.stages:
+        assert "history" not in repr(stage) and len(repr(stage)) < 800
