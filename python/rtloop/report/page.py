@@ -264,7 +264,8 @@ def report(
         f"<title>{html.escape(heading)}</title><style>{_CSS}</style><script>{_CHECK}</script></head><body>"
         f"<h1>{html.escape(heading)}</h1>"
         f'<p class="sub">{html.escape(result.protocol)} protocol, '
-        f"{html.escape(_search_rows(result.settings, [])[1][1].split(',')[0])}, seed {result.seed}, "
+        f"{'L-SHADE' if result.settings.get('optimizer') == 'lshade' else 'differential evolution'}, "
+        f"seed {result.seed}, "
         f"{result.evaluations} evaluations in {result.seconds:.2f} s · {scene.width}×{scene.height} · "
         f"{html.escape(stamp)}</p>"
     )
