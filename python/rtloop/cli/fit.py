@@ -85,9 +85,12 @@ files written into DIR:
                     as sRGB), to compare with final.png and the snapshots
   report.html, report/*.png
                     with --report: one self-contained page (images embedded)
-                    showing the objective, the fit and their difference, the
-                    best render through the stages, the parameters and the
-                    fitness against generation, and the fit report
+                    opening with the answer (the light's position in mm with
+                    its error bar, the colours in %, the verdict, the scene
+                    from above and from the side), then the photo beside
+                    final.png and their difference, the best render through
+                    the stages, the parameters and the fitness against
+                    generation, the fitted values and the fit report
 
 Everything is written into a temporary directory beside DIR and moved into
 place when complete: a failed or interrupted run leaves no partial results. An
