@@ -285,12 +285,29 @@ def test_progress_on_a_terminal_is_one_updating_line(inputs, tmp_path, capsys, m
     assert capsys.readouterr().err == ""
 
 
+def test_scene_and_image_swapped(inputs, tmp_path, capsys):
+    """An image given as SCENE is one line that names the likely mistake, not a UTF-8 decoding error."""
+    scene_path, image_path = inputs
+    code, stdout, stderr = run(capsys, image_path, scene_path, "--out", tmp_path / "out", "--quiet")
+    assert (code, stdout) == (1, "")
+    assert error_line(stderr) == (f"rtloop-fit: error: {image_path}: is not a scene (JSON) but {scene_path} is: "
+                                  "SCENE and IMAGE swapped? (usage: rtloop-fit SCENE IMAGE --out DIR)")
+    code, _, stderr = run(capsys, image_path, image_path, "--out", tmp_path / "out", "--quiet")
+    assert code == 1 and error_line(stderr) == (f"rtloop-fit: error: {image_path}: is not a scene file (JSON "
+                                                "text); SCENE comes first, then IMAGE")
+    assert "codec" not in stderr and not (tmp_path / "out").exists()
+
+
 def test_crop_and_linear_response(inputs, tmp_path, capsys):
     scene_path, _ = inputs
     wide = tmp_path / "wide.png"
     Image.fromarray(np.full((H, 2 * W, 3), 128, np.uint8)).save(wide)
     code, _, stderr = run(capsys, scene_path, wide, "--out", tmp_path / "nocrop", "--quiet")
     assert code == 1 and "aspect" in error_line(stderr)
+    # In the command line's words: the option, not the Python argument (which rtloop.load_image names).
+    assert error_line(stderr).endswith("crop the image or pass --crop") and "crop=True" not in stderr
+    with pytest.raises(rtloop.RtloopError, match=r"pass crop=True$"):
+        rtloop.load_image(wide, rtloop.load_scene(scene_path))
     out = tmp_path / "crop"
     code, _, stderr = run(capsys, scene_path, wide, "--out", out, "--crop", "--response", "linear",
                           "--population", 8, "--generations", 1, "--final-spp", 1, "--quiet")

@@ -72,6 +72,8 @@ def test_free_light_colour_is_held_and_the_closed_form_fits():
     result = rtloop.fit(_start(truth), _photo(truth), seed=0)
     assert result.settings["method"] == "projected"
     assert "light.color" in result.model["held"]
+    # Held at its start, which is its upper bound: not fitted, so no doubt about a bound.
+    assert not any("light.color" in w for w in result.warnings), result.warnings
     assert result.scene.to_dict()["light"]["color"] == [1.0, 1.0, 1.0]  # the start's value, held
     assert _light_err(result, truth) < 1e-4
     _check_products(result, truth)

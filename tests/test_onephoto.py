@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -171,24 +172,44 @@ def _without_exif(view: str, folder: Path) -> Path:
     return path
 
 
-def test_without_exif_the_target_or_one_line(tmp_path, capsys):
+def test_without_exif_the_target_a_warning_or_one_line(tmp_path, capsys):
     """With no EXIF, every view the detector accepts: the field of view within 0.3 deg and the ball within 1 %
-    of its distance (the issue's target), or one line naming the cause and the fixes. On each of these views
-    the board's 15 corners (of a 6x4 board) fix the field of view no better than +-0.7 deg: each is refused."""
+    of its distance (the target); or, where the board fixes the field of view only to between 0.3 and 1 deg,
+    the scene with one warning line giving that spread and the distances' (the field of view within 3 of the
+    one, the camera's and the ball's distance within 3 of the other); or one line naming the cause and the
+    fixes. With --strict every view is the target or one line: on each of these the board's 15 corners (of a
+    6x4 board) fix the field of view no better than +-0.6 deg, so each is refused."""
+    warned = 0
     for view in VIEWS:
         photo = _without_exif(view, tmp_path)
         code = scene_main(_scene_args(view, photo, tmp_path / view))
-        err = capsys.readouterr().err.strip()
+        captured = capsys.readouterr()
+        err = captured.err.strip()
         if code == 0:
             scene = json.loads((tmp_path / view / "scene.json").read_text())
-            assert scene["meta"]["acquisition"]["camera_model"] == "board"
-            fov, _, ball = _errors(scene, _meta(view))
-            assert fov < 0.3, (view, fov)
-            assert ball < 0.01 * _meta(view)["ball"]["distance_from_camera_m"], (view, ball)
+            acq = scene["meta"]["acquisition"]
+            assert acq["camera_model"] == "board"
+            fov, cam, ball = _errors(scene, _meta(view))
+            std = acq["pose"]["vfov_std_deg"]
+            if std <= 0.3:
+                assert fov < 0.3, (view, fov)
+                assert ball < 0.01 * _meta(view)["ball"]["distance_from_camera_m"], (view, ball)
+                continue
+            lines = [line for line in (captured.out + captured.err).splitlines() if "no EXIF focal length" in line]
+            assert len(lines) == 1 and f"+- {std:.2f} deg (0.3 wanted)" in lines[0], (view, lines)
+            percent = float(re.search(r"about \+-([\d.]+) %", lines[0]).group(1))
+            assert fov <= 3 * std, (view, fov, std)
+            assert ball <= 3 * percent / 100 * _meta(view)["ball"]["distance_from_camera_m"], (view, ball, percent)
+            warned += 1
         else:
             assert code == 1 and len(err.splitlines()) == 1, (view, err)
             assert "focal length" in err and "--vfov" in err and "EXIF" in err, (view, err)
             assert not (tmp_path / view).exists()
+        strict = tmp_path / f"{view}-strict"
+        assert scene_main(_scene_args(view, photo, strict, "--strict")) == 1
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "--vfov" in err and not strict.exists(), (view, err)
+    assert warned >= 1
 
 
 def test_board_alone_uncertainty_covers_its_error(monkeypatch):
@@ -209,7 +230,7 @@ def test_board_alone_uncertainty_covers_its_error(monkeypatch):
         h, w = photo.shape[:2]
         detection = detect_board(to_detection_grey(photo), parse_board(_meta(view)["board"]["spec"]))
         try:
-            f, std = pose_module.estimate_focal_from_board(detection, w, h)
+            f, std = pose_module.estimate_focal_from_board(detection, w, h, strict=True)
         except rtloop.RtloopError:
             continue  # seen straight down: no estimate at all
         assert std > target, (view, std)

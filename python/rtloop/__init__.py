@@ -10,29 +10,24 @@ position and intensity and the objects' colours. See README.md for the scene for
     result.scene          # the fitted scene
 """
 
-from __future__ import annotations
-
-from typing import Any
-
-from ._interrupt import interrupted_at_import
+from ._interrupt import interrupted_at_import as _interrupted_at_import
 
 try:
-    import numpy as np
+    import numpy as _np
 
     from . import _native
     from ._native import Scene, __version__
     from ._srgb import srgb_to_linear
     from .acquisition.objective import load_image, load_mask
-    from .batch import JobResult, fit_many
     from .errors import AcquisitionError, RtloopError, RtloopWarning, SceneError, SceneTypeError
     from .fit import FitResult, StageResult, fit
-    from .fit.protocol import whole
+    from .fit.protocol import whole as _whole
     from .insert import Insertion, insert
     from .report import report
     from .scene import load_scene, save_scene, scene_to_dict
     from .uncertainty import estimate_uncertainty
 except KeyboardInterrupt:
-    interrupted_at_import()  # a console script starting: one line, exit 130
+    _interrupted_at_import()  # a console script starting: one line, exit 130
     raise
 
 __all__ = [
@@ -40,6 +35,7 @@ __all__ = [
     "FitResult",
     "Insertion",
     "JobResult",
+    "MAX_SPP",
     "RtloopError",
     "RtloopWarning",
     "Scene",
@@ -63,9 +59,27 @@ __all__ = [
     "srgb_to_linear",
 ]
 
+#: Names loaded on first use (rtloop.batch brings a process pool and hashing that one fit does not need).
+_LAZY = {"JobResult": "batch", "fit_many": "batch"}
 
-def render(scene: Any, width: int | None = None, height: int | None = None, spp: int = 1, *,
-           footprint: bool = False) -> np.ndarray:
+
+def __getattr__(name: str) -> object:
+    if name in _LAZY:
+        from importlib import import_module
+
+        value = getattr(import_module(f".{_LAZY[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'rtloop' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    """The public API (``__all__``): not the modules and helpers the package is built from."""
+    return sorted(__all__)
+
+
+def render(scene: object, width: int | None = None, height: int | None = None, spp: int = 1, *,
+           footprint: bool = False) -> _np.ndarray:
     """Render ``scene`` (a Scene, dict or path) to a float32 (H, W, 3) linear-RGB array.
 
     ``width``/``height`` default to the scene's image size and keep the field of view; ``spp`` > 1
@@ -76,7 +90,7 @@ def render(scene: Any, width: int | None = None, height: int | None = None, spp:
     """
     scene = load_scene(scene)
     width, height = _size(width, height)
-    spp = whole("spp", spp, 1, MAX_SPP)
+    spp = _whole("spp", spp, 1, MAX_SPP)
     if not isinstance(footprint, bool):
         raise RtloopError(f"footprint: must be True or False (got {footprint!r})")
     if footprint and spp != 1:
@@ -84,7 +98,7 @@ def render(scene: Any, width: int | None = None, height: int | None = None, spp:
     return _native.render(scene, width, height, spp, footprint)
 
 
-def object_ids(scene: Any, width: int | None = None, height: int | None = None) -> np.ndarray:
+def object_ids(scene: object, width: int | None = None, height: int | None = None) -> _np.ndarray:
     """Which object each pixel centre shows: int32 (H, W) index into ``objects``, -1 for background."""
     scene = load_scene(scene)
     return _native.object_ids(scene, *_size(width, height))
@@ -94,15 +108,15 @@ def object_ids(scene: Any, width: int | None = None, height: int | None = None) 
 MAX_SPP = 4096
 
 
-def _size(width: Any, height: Any) -> tuple[int | None, int | None]:
+def _size(width: object, height: object) -> tuple[int | None, int | None]:
     """An optional (width, height), each None or 1..16384 pixels as a scene's image."""
-    return tuple(None if v is None else whole(n, v, 1, 16384)  # type: ignore[return-value]
+    return tuple(None if v is None else _whole(n, v, 1, 16384)  # type: ignore[return-value]
                  for n, v in (("width", width), ("height", height)))
 
 
-def save_image(path: Any, image_linear: np.ndarray) -> None:
+def save_image(path: object, image_linear: _np.ndarray) -> None:
     """Write a linear (H, W, 3) image as 8-bit sRGB PNG or BMP (by extension), atomically."""
-    arr = np.ascontiguousarray(image_linear, dtype=np.float32)
+    arr = _np.ascontiguousarray(image_linear, dtype=_np.float32)
     if arr.ndim != 3 or arr.shape[2] != 3:
         raise RtloopError(f"image_linear: expected an (H, W, 3) image, got shape {arr.shape}")
     _native.save_image(str(path), arr)

@@ -47,9 +47,10 @@ def render_many(scenes: list[Scene]) -> tuple[list[npt.NDArray[np.float32]], npt
 def save_image(path: str | PathLike[str], image: npt.NDArray[np.float32]) -> None: ...
 def render_layers(
     scenes: list[Scene], width: int, height: int, spp: int = 16, adaptive: bool = True, cover_from: int = 0,
-    progress: Callable[[int, int], object] | None = None,
+    progress: Callable[[int, int], object] | None = None, refine: str = "steps",
 ) -> tuple[list[npt.NDArray[np.float32]], npt.NDArray[np.float32], int]:
-    """The scenes rendered together, supersampled where any has an edge: (images, coverage of the last
+    """The scenes rendered together, supersampled where any has an edge (and, ``refine``, where the
+    colour steps between neighbours, "steps", or bends, "curvature"): (images, coverage of the last
     scene's objects from ``cover_from`` on, pixels supersampled)."""
 def composite(
     photo: npt.NDArray[np.float32], with_objects: npt.NDArray[np.float32], without: npt.NDArray[np.float32],

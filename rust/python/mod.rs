@@ -116,10 +116,13 @@ fn object_ids<'py>(
 
 /// Render `scenes` together at `width` x `height`, supersampling (`spp`) only where any of them has an
 /// edge unless `adaptive` is false (see `render::adaptive`): (images (H, W, 3) each, coverage (H, W) of
-/// the last scene's objects from `cover_from` on, pixels refined). `progress(done, total)` is called
-/// with tiles done, at most every 0.1 s, with the GIL; ^C (or an exception from `progress`) stops it.
+/// the last scene's objects from `cover_from` on, pixels refined). `refine`: besides edges, "steps"
+/// refines colour steps between neighbours (for compositing onto a photo), "curvature" only where the
+/// colour bends (a standalone render). `progress(done, total)` is called with tiles done, at most every
+/// 0.1 s, with the GIL; ^C (or an exception from `progress`) stops it.
 #[pyfunction]
-#[pyo3(signature = (scenes, width, height, spp=16, adaptive=true, cover_from=0, progress=None))]
+#[pyo3(signature = (scenes, width, height, spp=16, adaptive=true, cover_from=0, progress=None,
+                    refine="steps"))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 fn render_layers<'py>(
     py: Python<'py>,
@@ -130,11 +133,24 @@ fn render_layers<'py>(
     adaptive: bool,
     cover_from: usize,
     progress: Option<Py<PyAny>>,
+    refine: &str,
 ) -> PyResult<(
     Vec<Bound<'py, PyArray3<f32>>>,
     Bound<'py, PyArray2<f32>>,
     usize,
 )> {
+    use core_render::adaptive::Sampling;
+    let sampling = match (adaptive, refine) {
+        (false, _) => Sampling::Uniform,
+        (true, "steps") => Sampling::Steps,
+        (true, "curvature") => Sampling::Curvature,
+        _ => {
+            return Err(Error::Value(format!(
+                "refine must be \"steps\" or \"curvature\" (got {refine:?})"
+            ))
+            .into())
+        }
+    };
     let scenes: Vec<&crate::scene::Scene> = scenes.iter().map(|s| &s.get().0).collect();
     let state = core_render::Progress::default();
     let mut failure: Option<PyErr> = None;
@@ -143,7 +159,7 @@ fn render_layers<'py>(
         std::thread::scope(|scope| {
             let job = scope.spawn(|| {
                 let out = core_render::render_layers(
-                    &scenes, cover_from, width, height, spp, adaptive, &state,
+                    &scenes, cover_from, width, height, spp, sampling, &state,
                 );
                 let _ = done_tx.send(());
                 out

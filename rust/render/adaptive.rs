@@ -3,7 +3,11 @@
 //!
 //! Two neighbouring pixel centres disagree when, in any of the scenes, they see another object, one is
 //! in shadow and the other not, the surface normal turns by more than [`CREASE_COS`] (a mesh's edges), or
-//! the colour jumps by more than [`CONTRAST`]. Every pixel that disagrees with one of its 8 neighbours is
+//! (with [`Sampling::Steps`]) the colour jumps by more than [`CONTRAST`]. With [`Sampling::Curvature`]
+//! a colour ramp is left at its centre sample, which is the pixel's average wherever the colour varies
+//! linearly; a pixel is refined where the colour bends, when its second differences across the 3x3
+//! neighbourhood exceed [`CURVATURE`] (the centre sample then misses the average by about their sum
+//! over 24). Every pixel that disagrees with one of its 8 neighbours is
 //! supersampled in every scene, so scenes rendered together (an insertion's with and without) share their
 //! sample positions. A straight edge that crosses a pixel always separates its centre from a neighbour's
 //! (the pixels past the image's border are sampled too), so only features thinner than a pixel between
@@ -29,6 +33,23 @@ pub const CREASE_COS: f32 = 0.99;
 pub const CONTRAST: f32 = 0.02;
 /// The absolute part of the colour step, in exposed linear units: below 8-bit sRGB's darkest codes.
 pub const CONTRAST_FLOOR: f32 = 2e-4;
+/// [`Sampling::Curvature`]'s limit on `|d2x| + |d2y|` (the second differences of a channel across a pixel's
+/// row and column) as a fraction of the brightest of the nine values (plus [`CONTRAST_FLOOR`]): a centre
+/// sample stays within a quarter of a percent (about a quarter of an 8-bit sRGB step) of the average.
+pub const CURVATURE: f32 = 0.06;
+
+/// Which pixels [`render_layers`] gives the whole `spp` grid.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Sampling {
+    /// Every pixel: each image is exactly `render`'s.
+    Uniform,
+    /// Edges (object, shadow, crease) and colour steps over [`CONTRAST`] between neighbours: for a render
+    /// composited onto a photo, where any step shows.
+    Steps,
+    /// Edges and colour curvature over [`CURVATURE`]: a standalone render (a fit's final.png), where a
+    /// smooth ramp's centre samples are its averages.
+    Curvature,
+}
 
 /// Progress of a tiled render, read from another thread: `done` of `total` tiles; setting `stop` makes
 /// the remaining tiles return at once and the render return `None`.
@@ -90,21 +111,39 @@ impl Layer {
     }
 }
 
-/// Whether the pixels of two neighbouring centre samples need the whole grid.
+/// Whether the pixels of two neighbouring centre samples see another surface: another object, one in
+/// shadow and the other not, or a crease.
 #[inline]
-fn differ(a: &Sample, b: &Sample) -> bool {
+fn edge(a: &Sample, b: &Sample) -> bool {
     a.object != b.object
         || a.shadowed != b.shadowed
         || (a.object != u32::MAX && a.normal.dot(b.normal) < CREASE_COS)
+}
+
+/// Whether the pixels of two neighbouring centre samples need the whole grid ([`Sampling::Steps`]).
+#[inline]
+fn differ(a: &Sample, b: &Sample) -> bool {
+    edge(a, b)
         || (a.rgb - b.rgb)
             .abs()
             .cmpgt(CONTRAST * a.rgb.max(b.rgb) + Vec3A::splat(CONTRAST_FLOOR))
             .any()
 }
 
+/// Whether a pixel whose 3x3 centre samples are `n` (row-major, `n[4]` its own) bends by more than
+/// [`CURVATURE`] allows ([`Sampling::Curvature`]; edges are tested apart).
+#[inline]
+fn bends(n: [&Sample; 9]) -> bool {
+    let c = n[4].rgb;
+    let d2 = (n[3].rgb + n[5].rgb - 2.0 * c).abs() + (n[1].rgb + n[7].rgb - 2.0 * c).abs();
+    let top = n.iter().fold(Vec3A::ZERO, |m, s| m.max(s.rgb));
+    d2.cmpgt(CURVATURE * top + Vec3A::splat(CONTRAST_FLOOR))
+        .any()
+}
+
 /// Render every scene of `scenes` (the same camera and size, or not: each is rendered as given) at
-/// `width` x `height`, supersampling with `spp` samples (see `camera::sample_offsets`) the pixels where
-/// any of them has an edge, or every pixel when `adaptive` is false (then each image is exactly
+/// `width` x `height`, supersampling with `spp` samples (see `camera::sample_offsets`) the pixels
+/// `sampling` picks in any of them (every pixel with [`Sampling::Uniform`]: then each image is exactly
 /// `render`'s). `None` when `progress.stop` was set before the end. Same result on any thread count.
 pub fn render_layers(
     scenes: &[&Scene],
@@ -112,7 +151,7 @@ pub fn render_layers(
     width: u32,
     height: u32,
     spp: u32,
-    adaptive: bool,
+    sampling: Sampling,
     progress: &Progress,
 ) -> Result<Option<Layers>> {
     if width == 0 || height == 0 || width > 16384 || height > 16384 {
@@ -153,7 +192,7 @@ pub fn render_layers(
         cover_from: cover_from as u32,
         width,
         height,
-        adaptive,
+        sampling,
         progress,
     };
     let refined: usize = bands
@@ -197,7 +236,7 @@ struct Job<'a> {
     cover_from: u32,
     width: u32,
     height: u32,
-    adaptive: bool,
+    sampling: Sampling,
     progress: &'a Progress,
 }
 
@@ -219,7 +258,8 @@ impl Job<'_> {
         // go on beyond it), so an edge between a border pixel's centre and the border is seen.
         let hw = x1 - x0 + 2;
         let mut centres = Vec::new();
-        if self.adaptive {
+        let adaptive = self.sampling != Sampling::Uniform;
+        if adaptive {
             centres.reserve(hw * (y1 - y0 + 2) * n_layers);
             for y in y0..y1 + 2 {
                 for x in x0..x1 + 2 {
@@ -239,12 +279,18 @@ impl Job<'_> {
         let inv = 1.0 / self.offsets.len() as f32;
         for y in y0..y1 {
             for x in x0..x1 {
-                let edge = !self.adaptive
-                    || (y..y + 3).any(|ny| {
+                let edge = match self.sampling {
+                    Sampling::Uniform => true,
+                    Sampling::Steps => (y..y + 3).any(|ny| {
                         (x..x + 3).any(|nx| {
                             (0..n_layers).any(|l| differ(at(x + 1, y + 1, l), at(nx, ny, l)))
                         })
-                    });
+                    }),
+                    Sampling::Curvature => (0..n_layers).any(|l| {
+                        let n: [&Sample; 9] = std::array::from_fn(|i| at(x + i % 3, y + i / 3, l));
+                        n.iter().any(|s| edge(n[4], s)) || bends(n)
+                    }),
+                };
                 let p = (y - y0) * w + x;
                 if edge {
                     refined += 1;
@@ -287,7 +333,7 @@ impl Job<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::render;
+    use crate::render::{render, to_srgb8};
 
     fn scene(extra: &str) -> Scene {
         let text = format!(
@@ -308,7 +354,7 @@ mod tests {
     fn uniform_layers_are_the_uniform_render_bit_for_bit() {
         let s = scene("");
         let want = render(&s, Some(70), Some(50), 4).unwrap();
-        let got = render_layers(&[&s], 1, 70, 50, 4, false, &Progress::default())
+        let got = render_layers(&[&s], 1, 70, 50, 4, Sampling::Uniform, &Progress::default())
             .unwrap()
             .unwrap();
         assert_eq!(got.images[0].rgb, want.rgb);
@@ -320,7 +366,7 @@ mod tests {
         let s = scene("");
         let (w, h) = (160, 120);
         let want = render(&s, Some(w), Some(h), 16).unwrap();
-        let got = render_layers(&[&s], 1, w, h, 16, true, &Progress::default())
+        let got = render_layers(&[&s], 1, w, h, 16, Sampling::Steps, &Progress::default())
             .unwrap()
             .unwrap();
         // At this size the floor's shading steps by more than 2% between many neighbours; at 12 MP by few.
@@ -342,6 +388,44 @@ mod tests {
     }
 
     #[test]
+    fn curvature_refines_fewer_than_steps_and_stays_close_to_many_samples() {
+        let s = scene("");
+        let (w, h) = (160, 120);
+        let reference = to_srgb8(&render(&s, Some(w), Some(h), 256).unwrap().rgb);
+        let run = |sampling| {
+            render_layers(&[&s], 1, w, h, 16, sampling, &Progress::default())
+                .unwrap()
+                .unwrap()
+        };
+        let (steps, curved) = (run(Sampling::Steps), run(Sampling::Curvature));
+        assert!(
+            curved.refined * 2 < steps.refined,
+            "{} {}",
+            curved.refined,
+            steps.refined
+        );
+        // 8-bit sRGB steps off the 256-sample render: (mean, share off by more than 2).
+        let off = |rgb: &[f32]| {
+            let d: Vec<i32> = to_srgb8(rgb)
+                .iter()
+                .zip(&reference)
+                .map(|(a, b)| (*a as i32 - *b as i32).abs())
+                .collect();
+            let n = d.len() as f64;
+            (
+                d.iter().sum::<i32>() as f64 / n,
+                d.iter().filter(|&&v| v > 2).count() as f64 / n,
+            )
+        };
+        let uniform = off(&render(&s, Some(w), Some(h), 16).unwrap().rgb);
+        let got = off(&curved.images[0].rgb);
+        assert!(
+            got.0 <= uniform.0 + 0.01 && got.1 <= uniform.1 + 0.001,
+            "{got:?} {uniform:?}"
+        );
+    }
+
+    #[test]
     fn same_result_on_any_thread_count_and_stop_returns_none() {
         let s = scene("");
         let run = |threads| {
@@ -349,7 +433,17 @@ mod tests {
                 .num_threads(threads)
                 .build()
                 .unwrap()
-                .install(|| render_layers(&[&s, &s], 1, 130, 97, 9, true, &Progress::default()))
+                .install(|| {
+                    render_layers(
+                        &[&s, &s],
+                        1,
+                        130,
+                        97,
+                        9,
+                        Sampling::Curvature,
+                        &Progress::default(),
+                    )
+                })
                 .unwrap()
                 .unwrap()
         };
@@ -358,8 +452,10 @@ mod tests {
         assert_eq!(a.coverage, b.coverage);
         let stopped = Progress::default();
         stopped.stop.store(true, Ordering::Relaxed);
-        assert!(render_layers(&[&s], 1, 64, 48, 4, true, &stopped)
-            .unwrap()
-            .is_none());
+        assert!(
+            render_layers(&[&s], 1, 64, 48, 4, Sampling::Steps, &stopped)
+                .unwrap()
+                .is_none()
+        );
     }
 }

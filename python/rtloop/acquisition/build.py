@@ -37,7 +37,7 @@ from .calibration import CameraIntrinsics, PinholeRemap
 from .camera import focal_from_vfov
 from .colour import ColourCorrection, colorchecker_correction, grey_card_balance
 from .exif import ExifFocal
-from .pose import FloorPose, estimate_floor_pose
+from .pose import VFOV_TARGET_DEG, FloorPose, estimate_floor_pose
 
 __all__ = ["AcquiredScene", "build_scene", "draw_overlay", "fit_section"]
 
@@ -104,6 +104,18 @@ def fit_section(
     }
 
 
+def loose_view_warning(where: str, vfov_deg: float, vfov_std_deg: float, focal_px: float, height: int) -> str:
+    """One line for a field of view the board fixes more loosely than ``VFOV_TARGET_DEG``: its spread and
+    the resulting spread of the focal length, which scales every distance the board's size gives (the
+    camera's, and so the ball's and the light's)."""
+    # d f / f = d vfov * (f^2 + h^2 / 4) / (f h)
+    rel = math.radians(vfov_std_deg) * (focal_px**2 + height**2 / 4) / (focal_px * height)
+    return (f"{where} has no EXIF focal length and the board fixes the vertical field of view only to "
+            f"{vfov_deg:.2f} +- {vfov_std_deg:.2f} deg ({VFOV_TARGET_DEG:g} wanted): the focal length, and with it "
+            f"the distances from the camera (the ball's, the light's), are uncertain by about +-{100 * rel:.1f} %; "
+            "give --vfov or --camera, or pass --strict to refuse such a view")
+
+
 def build_scene(
     photo: np.ndarray,
     board: BoardSpec | str | dict,
@@ -125,6 +137,7 @@ def build_scene(
     room: bool = True,
     where: str = "photo",
     objective_where: str = "objective",
+    strict: bool = False,
 ) -> AcquiredScene:
     """Build the scene from one photo (board + ball on the floor), optionally fitting another.
 
@@ -154,6 +167,9 @@ def build_scene(
             (``meta.acquisition.grey_card``) with the card's pixels (``AcquiredScene.card``), so that the fit
             reports absolute albedos and the light's intensity. Needs the grey-card ``colour`` and the card in
             the photo to fit.
+        strict: with the focal length from the board alone, refuse a board that fixes the vertical field of
+            view more loosely than ``pose.VFOV_TARGET_DEG`` (0.3 deg); without it such a board is used, with a
+            warning that gives its spread and what it means for the scene's distances.
 
     Raises:
         AcquisitionError: any step failed; the message says which and what to do.
@@ -224,9 +240,11 @@ def build_scene(
         focal, focal_source = None, "board"
 
     # 3. The board: camera and floor.
-    pose = estimate_floor_pose(photo, spec, focal_px=focal, focal_source=focal_source, where=where)
+    pose = estimate_floor_pose(photo, spec, focal_px=focal, focal_source=focal_source, where=where, strict=strict)
     camera = pose.camera
-    if focal_source == "board":
+    if focal_source == "board" and pose.vfov_std_deg is not None and pose.vfov_std_deg > VFOV_TARGET_DEG:
+        notes.append(loose_view_warning(where, camera.vfov_deg, pose.vfov_std_deg, camera.focal_px, h))
+    elif focal_source == "board":
         notes.append(
             f"{where} has no EXIF focal length: it was estimated from the board alone (vertical field of "
             f"view {camera.vfov_deg:.2f} +- {pose.vfov_std_deg:.2f} deg); "

@@ -348,7 +348,7 @@ def _fit_aspect(image: np.ndarray, width: int, height: int, crop: bool) -> np.nd
     if abs(w / h - scene_aspect) / scene_aspect > ASPECT_TOLERANCE:
         raise _Fail(
             f"image is {w}x{h} but the scene is {width}x{height}: aspect ratios differ "
-            f"({w / h:.4g} vs {scene_aspect:.4g}); crop the image or pass crop=True (--crop on the command line)"
+            f"({w / h:.4g} vs {scene_aspect:.4g}); crop the image or pass crop=True"
         )
     return image
 

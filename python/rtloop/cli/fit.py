@@ -10,14 +10,15 @@ directory untouched. See ``rtloop-fit --help`` for the options and the files wri
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import shutil
 import signal
 import sys
-import textwrap
 import threading
 import time
 from pathlib import Path
+from collections.abc import Iterator
 from typing import Any, TextIO
 
 import numpy as np
@@ -30,7 +31,8 @@ from rtloop.fit.protocol import LIMITS, max_threads
 from rtloop.report import truth_errors, truth_values
 
 from .args import Parser, UsageError, float_in, generations, int_at_least, int_in, norm
-from .outputs import GenerationLog, input_paths, write_result
+from .outputs import GenerationLog, input_paths, render_final, write_result
+from .summary import duration as _duration, summary as _summary
 
 __all__ = ["main"]
 
@@ -77,14 +79,18 @@ files written into DIR:
                     every --snapshot-every generations of every stage,
                     generation 0 included
   final.png         the fitted scene rendered at --final-scale times the
-                    scene's size, --final-spp samples per pixel
+                    scene's size, --final-spp samples in each pixel at an
+                    edge or where the shading bends (elsewhere its centre)
   objective.png     the photo as the fit saw it (linearised and resized; saved
                     as sRGB), to compare with final.png and the snapshots
   report.html, report/*.png
                     with --report: one self-contained page (images embedded)
-                    showing the objective, the fit and their difference, the
-                    best render through the stages, the parameters and the
-                    fitness against generation, and the fit report
+                    opening with the answer (the light's position in mm with
+                    its error bar, the colours in %, the verdict, the scene
+                    from above and from the side), then the photo beside
+                    final.png and their difference, the best render through
+                    the stages, the parameters and the fitness against
+                    generation, the fitted values and the fit report
 
 Everything is written into a temporary directory beside DIR and moved into
 place when complete: a failed or interrupted run leaves no partial results. An
@@ -230,16 +236,6 @@ def _build_parser() -> Parser:
 # --- progress --------------------------------------------------------------------------------------------
 
 
-def _duration(seconds: float) -> str:
-    if seconds < 60:
-        return f"{seconds:.1f}s"
-    minutes, s = divmod(int(seconds), 60)
-    if minutes < 60:
-        return f"{minutes}m{s:02d}s"
-    hours, minutes = divmod(minutes, 60)
-    return f"{hours}h{minutes:02d}m{s:02d}s"
-
-
 class _Progress:
     """Progress lines on stderr: one per stage start, then every 10 generations (or one updating line
     on a terminal)."""
@@ -332,6 +328,46 @@ def fit_options(args: argparse.Namespace) -> dict[str, Any]:
             "uncertainty": {"default": True, "bootstrap": "bootstrap", "off": False}[args.uncertainty]}
 
 
+def _head(path: str, n: int = 64) -> bytes:
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(n)
+    except OSError:
+        return b""  # reported when it is read
+
+
+def _is_text(data: bytes) -> bool:
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        return e.start >= len(data) - 3  # cut inside a character at the end
+    return b"\0" not in data
+
+
+@contextlib.contextmanager
+def _cli_words() -> Iterator[None]:
+    """Errors of the readers in the command line's words: the option ``--crop``, not ``crop=True``."""
+    try:
+        yield
+    except rtloop.RtloopError as e:
+        text = str(e)
+        if "crop=True" not in text:
+            raise
+        raise _Failure(text.replace("pass crop=True", "pass --crop").replace("crop=True", "--crop")) from None
+
+
+def _check_order(scene: str, image: str) -> None:
+    """A SCENE that is not text (an image) is one clear line, not a decoding error: with IMAGE a JSON text
+    the two were given the wrong way round."""
+    head = _head(scene)
+    if not head or _is_text(head):
+        return
+    if _head(image).lstrip().startswith(b"{"):
+        raise _Failure(f"{scene}: is not a scene (JSON) but {image} is: SCENE and IMAGE swapped? "
+                       f"(usage: {PROG} SCENE IMAGE --out DIR)")
+    raise _Failure(f"{scene}: is not a scene file (JSON text); SCENE comes first, then IMAGE")
+
+
 class _Run:
     def __init__(self, args: argparse.Namespace, progress: _Progress, stop: threading.Event):
         self.args = args
@@ -346,7 +382,9 @@ class _Run:
     def __call__(self, tmp: Path) -> Any:
         """Load, fit and write everything into ``tmp``; returns the FitResult."""
         args = self.args
-        inputs = load_inputs(args.scene, args.image, mask=args.mask, response=args.response, crop=args.crop)
+        _check_order(args.scene, args.image)
+        with _cli_words():
+            inputs = load_inputs(args.scene, args.image, mask=args.mask, response=args.response, crop=args.crop)
         scene, image = inputs.scene, inputs.image
         k = args.final_scale
         if max(scene.width, scene.height) * k > MAX_SIZE:
@@ -401,7 +439,7 @@ class _Run:
         self.progress.message(
             f"rendering final.png ({scene.width * k}x{scene.height * k}, {args.final_spp} spp)"
         )
-        final = rtloop.render(result.scene, scene.width * k, scene.height * k, args.final_spp)
+        final = render_final(result.scene, k, args.final_spp)
         self.check_stop()
         rtloop.save_image(tmp / "final.png", final)
         if truth is not None:
@@ -409,130 +447,9 @@ class _Run:
         if args.report:
             self.progress.message("writing report.html")
             rtloop.report(result, tmp / "report.html", objective=image, truth=truth, generations=rows,
-                          speed_plot=args.speed_plot)
+                          speed_plot=args.speed_plot, final=final)
             self.check_stop()
         return result
-
-
-def _summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = None,
-             report: Path | None = None) -> str:
-    stages = len(result.stages)
-    lines = [
-        f"{stages} stage{'s' if stages != 1 else ''}, {result.evaluations} evaluations, "
-        + f"fit {_duration(result.seconds)}, wall time {_duration(wall)}"
-    ]
-    lines.extend(_model_lines(result.model or {}, dict(result.scene.to_dict())))
-    good = result.goodness or {}
-    if good.get("ratio") is not None:
-        lines.append(f"goodness of fit: {good['ratio']:.2g}x the photo's noise floor: {good['verdict']}")
-    elif good.get("verdict"):
-        lines.append(f"goodness of fit: {good['verdict']}")
-    ident = result.identifiability or {}
-    if ident.get("degenerate"):
-        lines.append("")
-        lines.append("determined products (light intensity x light colour x albedo x exposure), r g b:")
-        if result.products:
-            w = max(len(n) for n in result.products)
-            for obj, rgb in result.products.items():
-                lines.append(f"  {obj:<{w}}  " + "  ".join(f"{v:12.6g}" for v in rgb))
-        if ident.get("note"):
-            lines.extend(textwrap.wrap(f"note: {ident['note']}", 78, initial_indent="  ",
-                                       subsequent_indent="  "))
-    ref = result.reference
-    if ref:
-        lines.append("")
-        lines.append(f"absolute, from the grey card of reflectance {ref['reflectance']:g} ({ref['pixels']} px): "
-                     f"light {ref['light_intensity_w_sr']:.4g} W/sr; albedos r g b:")
-        w = max(len(n) for n in ref["albedos"])
-        for obj, rgb in ref["albedos"].items():
-            lines.append(f"  {obj:<{w}}  " + "  ".join(f"{v:8.4f}" for v in rgb))
-    lines.append("")
-    lines.append(f"fitted parameters ({result.protocol} protocol, seed {result.seed}):")
-    width = max((len(n) for n in result.x), default=0)
-    if truth is not None:
-        lines.append(f"  {'':<{width}}  {'fitted':>12}  {'truth':>12}  {'error':>12}")
-    u = result.uncertainty or {}
-    boot = u.get("bootstrap") or {}
-    bars = (u.get("robust") or {}).get("sigma") or {}  # the block sandwich's, or the bootstrap's where run
-    bars_note = None
-    if boot.get("sigma"):
-        bars = {**bars, **boot["sigma"]}
-        bars_note = (f"error bars (+-): block bootstrap ({boot['replicates']} refits on {boot['block_px']} px blocks, "
-                     f"seed {boot['seed']}, {boot['ms']:.0f} ms)")
-    elif boot.get("warnings"):
-        bars_note = f"error bars (+-): block sandwich (the bootstrap did not run: {boot['warnings'][0]})"
-    elif bars:
-        shift = (u.get("robust") or {}).get("footprint_shift") or {}
-        light = [shift.get(f"light.position.{c}") for c in "xyz"]
-        moved = (f", {1e3 * float(np.linalg.norm(light)):.2g} mm on the light" if all(v is not None for v in light)
-                 else "")
-        bars_note = ("error bars (+-): block sandwich (correlated residuals) plus the pixel footprint's shift "
-                     f"(robust.footprint_shift{moved})")
-    for name, value in result.x.items():
-        row = f"  {name:<{width}}  {value:12.6g}"
-        split = truth is not None and name in truth.get("split_convention", [])
-        if truth is not None and name in truth["values"]:
-            error = f"{'(split)':>12}" if split else f"{truth['errors'][name]:+12.4g}"
-            row += f"  {truth['values'][name]:12.6g}  {error}"
-        if bars.get(name):
-            row += f"  +- {bars[name]:.3g}"
-            if truth is not None and name in truth["errors"] and not split:
-                row += f" ({truth['errors'][name] / bars[name]:+.1f} sigma)"
-        lines.append(row)
-    if bars_note:
-        lines.append(bars_note)
-    lines += _distance_lines((u.get("robust") or {}).get("light_distance") or u.get("light_distance"))
-    if truth is not None and truth.get("split_convention"):
-        lines.append("  (split): the photo fixes only the products of these, not each one: their errors "
-                     "say how the fit split the products (see the product errors below)")
-    if truth is not None:
-        if "light_position_m" in truth:
-            lines.append(f"light position error: {truth['light_position_m']:.4g} m")
-        if truth.get("product_relative"):
-            lines.append("product relative error: " + ", ".join(
-                f"{obj} {100 * rel:.3g}%" for obj, rel in truth["product_relative"].items()))
-    lines.append(f"results in {out}")
-    if report is not None:
-        lines.append(f"report: {report}")
-    return "\n".join(lines)
-
-
-def _model_lines(model: dict[str, Any], fitted: dict[str, Any]) -> list[str]:
-    """The image terms the fit used and the evidence for each it considered."""
-    terms = model.get("terms") or ["direct"]
-    lines = [f"image model: {' + '.join(terms)}"]
-    res = model.get("residual")
-    if res:
-        lines.append(f"  residual: {res['ratio']:.2g}x the size of the photo's 8-bit rounding error"
-                     + (" (explained: no further term tested)" if "skipped" in model else ""))
-    for term, ev in (model.get("evidence") or {}).items():
-        verdict = "added" if ev.get("selected") else "not added"
-        bic = ev.get("delta_bic")
-        on_top = ev.get("tested_with") or []
-        lines.append(f"  {term}: {verdict} (loss at the light found without it"
-                     + (f", with {' and '.join(on_top)}" if on_top else "")
-                     + f" {ev['loss_without']:.4g} -> {ev['loss_with']:.4g} with it, {100 * ev['gain']:+.1f}%"
-                     + (f", BIC {-bic:+.4g}" if bic is not None else "")
-                     + (f"; {100 * ev['earlier_gain']:+.1f}% before them)" if "earlier_gain" in ev else ")"))
-    chosen = model.get("norm")
-    if chosen and chosen.get("median_z") is not None:
-        lines.append(f"  norm: {chosen['used']} (the L1 fit's median residual {chosen['median_z']:.2g}x the photo's "
-                     f"own error; {chosen['threshold']:g}x or more is dense and takes l2)")
-    if "environment" in terms and fitted.get("environment"):
-        lines.append("  environment radiance (r g b): " + "  ".join(f"{v:.4g}" for v in fitted["environment"]))
-    return lines
-
-
-def _distance_lines(distance: dict[str, Any] | None) -> list[str]:
-    """The light as the photo fixes it: its direction from the subject and its distance, each +- sigma, or
-    the distance as not determined with the reason (:mod:`rtloop.uncertainty.light`)."""
-    if not distance or distance.get("direction_sigma_deg") is None:
-        return []
-    line = (f"light from the subject: direction +- {distance['direction_sigma_deg']:.2g} deg, distance "
-            f"{distance['distance_m']:.4g} m")
-    if distance["distance_determined"]:
-        return [line + f" +- {distance['distance_sigma_m']:.2g} m"]
-    return [line + " not determined", f"  ({distance['why']})"]
 
 
 def _error(message: str) -> None:

@@ -60,8 +60,9 @@ bounds scaled to the scene.
 The camera: --camera (a calibration: the photo is undistorted and its principal point
 re-centred, since the scene's camera is an ideal pinhole) is best; --vfov (the vertical
 field of view of a photo without noticeable distortion) is next; with neither, the
-photo's EXIF focal length, else the board's estimate (less accurate; refused with the
-fixes when the board's view does not fix it).
+photo's EXIF focal length, else the board's estimate (less accurate: looser than
++-0.3 deg in the field of view it is used with a warning giving its spread and the
+distances', or refused with --strict; looser than +-1 deg, refused with the fixes).
 
 Colour: --grey-card X,Y,W,H (a neutral card's rectangle in PHOTO) white-balances, and
 --colorchecker finds a ColorChecker Classic (needs OpenCV contrib's cv2.mcc) for a full
@@ -132,6 +133,12 @@ def _build_scene_parser() -> Parser:
         metavar="DEG",
         help="vertical field of view of a distortion-free photo, in degrees (default: from the photo's EXIF focal "
         "length, else from the board when it is seen at enough of an angle)",
+    )
+    g.add_argument(
+        "--strict",
+        action="store_true",
+        help="without EXIF, --vfov or --camera: refuse a board that fixes the vertical field of view more "
+        "loosely than +-0.3 deg (default: use it and warn with its spread)",
     )
     g = p.add_argument_group("photos")
     g.add_argument(
@@ -279,6 +286,7 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         card_reflectance=args.grey_card_reflectance,
         where=args.photo,
         objective_where=args.objective or args.photo,
+        strict=args.strict,
     )
     acq.scene["meta"]["acquisition"]["inputs"] = {
         "photo": os.path.abspath(args.photo),

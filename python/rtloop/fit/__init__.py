@@ -291,7 +291,7 @@ def fit(
         as_compared, at_optimum = _native.render(current, current.width, current.height, 1, True), None
     result.goodness = goodness(current, target, use, clip=clip, render=as_compared, sigma=sigma, blocking=blocking,
                                encoding=encoding, codes=codes)
-    doubts += _at_bounds(current, all_paths)
+    doubts += _at_bounds(current, [p for p in all_paths if p not in held])  # a held gauge was not fitted
     for d in doubts:
         warnings.warn(d, RtloopWarning, stacklevel=2)
     result.warnings = doubts

@@ -40,8 +40,8 @@ class StageResult:
     seconds: float
     loss: str
     pixels: int
-    #: (generation, fitness, objectives, x) of the best individual of every generation.
-    history: list[tuple[int, float, list[float], np.ndarray]] = field(default_factory=list)
+    #: (generation, fitness, objectives, x) of the best individual of every generation (not in the repr).
+    history: list[tuple[int, float, list[float], np.ndarray]] = field(default_factory=list, repr=False)
     #: For the projected loss: the closed-form products of the best individual, per object
     #: [P_r, P_g, P_b, Q] (Q = intensity x specular, 0 for a matte object), then [E_r, E_g, E_b]
     #: (exposure x environment x albedo) when the fit has the environment term.
@@ -82,6 +82,14 @@ class FitResult:
     #: With a reference of known reflectance (a grey card): the gauge it fixed, the absolute albedos and
     #: the light's intensity in W/sr (:mod:`rtloop.fit.reference`); None without one.
     reference: dict[str, Any] | None = None
+
+    def __repr__(self) -> str:
+        """A few lines' worth: the outcome, the budget and the fitted values (``report()`` has the rest)."""
+        x = ", ".join(f"{k!r}: {v:.6g}" for k, v in self.x.items())
+        more = f", warnings={len(self.warnings)}" if self.warnings else ""
+        return (f"FitResult(success={self.success}, protocol={self.protocol!r}, seed={self.seed}, "
+                f"fitness={self.fitness:.6g}, evaluations={self.evaluations}, seconds={self.seconds:.3g}, "
+                f"stages={[s.name for s in self.stages]}, x={{{x}}}{more})")
 
     def generation_names(self) -> list[str]:
         """The names of a callback's ``GenerationInfo.params`` (and of best_per_generation.csv's columns):

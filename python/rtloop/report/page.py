@@ -6,6 +6,7 @@ from __future__ import annotations
 import base64
 import datetime as _dt
 import html
+import io
 import math
 import os
 import re
@@ -31,6 +32,7 @@ from .plots import (
     _srgb8,
     plot_search,
 )
+from .answer import answer, colour_rows, light_sentence, scene_views, verdict_sentence
 from .truth import image_metrics, truth_errors
 
 __all__ = ["Report", "report"]
@@ -62,6 +64,10 @@ class Report:
     #: Where the parameter rows came from: ``"generations"`` (given) or ``"history"`` (rebuilt).
     source: str = "generations"
     notes: list[str] = field(default_factory=list)
+    #: The numbers the page opens with (:func:`rtloop.report.answer.answer`).
+    answer: dict[str, Any] = field(default_factory=dict)
+    #: What the scene picture drew per view (:func:`rtloop.report.answer.scene_views`).
+    views: dict[str, Any] = field(default_factory=dict)
 
 
 def _strip_frames(rows: Sequence[GenerationRow], every: int | None) -> list[int]:
@@ -197,6 +203,7 @@ def report(
     title: str | None = None,
     speed_vs_error_png: str | os.PathLike[str] | None = None,
     insertion: Any = None,
+    final: np.ndarray | str | os.PathLike[str] | None = None,
 ) -> Report:
     """Write the fit report of ``result`` (a :class:`FitResult`) to the HTML page ``path``.
 
@@ -211,7 +218,13 @@ def report(
     benches/results/speed_vs_error.png; skipped if the file does not exist; ``speed_vs_error_png`` is its
     older name). ``insertion``: an :class:`rtloop.Insertion` (from :func:`rtloop.insert`), shown as the
     photo beside the composite. Nothing else is read from outside ``result``, ``objective`` and ``truth``.
-    ``strip_every``: render every k-th generation in the strip (default: about ten frames).
+    ``strip_every``: render every k-th generation in the strip (default: about ten frames). ``final``:
+    the fitted scene's finished render (``rtloop-fit``'s final.png: linear float (H, W, 3) or a PNG path),
+    shown beside the photo; without it, the one-sample render at the working resolution.
+
+    The page opens with the answer: the light's position in mm with its error bar, what the photo fixes
+    of the colours (in %), the verdict, and the scene from above and from the side with the fitted light
+    and its error ellipse.
 
     The PNGs go into a folder named after the page (``report.html`` -> ``report/``) beside it; they are
     also embedded in the page, which needs nothing else to display. Returns a :class:`Report`.
@@ -250,22 +263,21 @@ def report(
         '<meta name="viewport" content="width=device-width, initial-scale=1">'
         f"<title>{html.escape(heading)}</title><style>{_CSS}</style><script>{_CHECK}</script></head><body>"
         f"<h1>{html.escape(heading)}</h1>"
-        f'<p class="sub">{html.escape(result.protocol)} protocol, method '
-        f"{html.escape(str(result.settings.get('method', '?')))}, seed {result.seed}, "
+        f'<p class="sub">{html.escape(result.protocol)} protocol, '
+        f"{'L-SHADE' if result.settings.get('optimizer') == 'lshade' else 'differential evolution'}, "
+        f"seed {result.seed}, "
         f"{result.evaluations} evaluations in {result.seconds:.2f} s · {scene.width}×{scene.height} · "
         f"{html.escape(stamp)}</p>"
     )
 
-    metrics = _objective_section(page, scene, objective)
-    verdict = (getattr(result, "goodness", None) or {}).get("verdict")
-    if verdict:
-        g = result.goodness
-        how = ("" if g.get("ratio") is None else f" (residual {g['ratio']:.3g}x the floor of 8-bit quantisation "
-               "and the noise measured in the photo; the difference image shows where)")
-        page.add(f"<p><b>Goodness of fit:</b> {html.escape(verdict)}{how}.</p>")
+    info = answer(result, terr)
+    truth_light = ([terr["values"][f"light.position.{c}"] for c in "xyz"]
+                   if terr is not None and all(f"light.position.{c}" in terr["values"] for c in "xyz") else None)
+    views = _answer_section(page, result, info, truth_light)
+    metrics = _objective_section(page, scene, objective, final)
     strip = _strip_section(page, scene, rows, strip_every, notes)
-    plots = _plots_section(page, scene, rows, true_vals, terr, ident)
-    _values_section(page, scene, terr)
+    plots = _plots_section(page, scene, rows, true_vals, terr, ident, set(info["split"]))
+    _values_section(page, scene, terr, info)
     _fit_report_section(page, result, terr, ident)
     _speed_section(page, speed_plot if speed_plot is not None else speed_vs_error_png)
     if insertion is not None:
@@ -280,11 +292,37 @@ def report(
             old.unlink(missing_ok=True)
     write_bytes(page_path, "".join(page.parts).encode("utf-8"))
     return Report(path=page_path, files=page.files, metrics=metrics, plots=plots, strip=strip, truth=terr,
-                  source=source, notes=notes)
+                  source=source, notes=notes, answer=info, views=views)
 
 
-def _objective_section(page: _Page, scene: Scene, objective: Any) -> dict[str, float]:
-    """The objective, the fitted render and their difference, with the error numbers (returned)."""
+def _answer_section(page: _Page, result: Any, info: dict[str, Any], truth_light: list[float] | None) -> dict[str, Any]:
+    """The answer first: the light, the colours, the verdict and the picture of the scene; what the
+    picture drew (returned)."""
+    page.add("<h2>The answer</h2>")
+    page.add(f'<p class="answer"><b>{html.escape(light_sentence(info))}</b></p>')
+    header, body = colour_rows(info)
+    if body:
+        page.add(_table(header, body, numeric_from=2))
+    if info["split"]:
+        page.add('<p class="muted">Without ambient light or a highlight of known strength the photo fixes only '
+                 "these products: the light's intensity and the albedos in the scene are one way of splitting "
+                 "them (a convention).</p>")
+    verdict = verdict_sentence(info)
+    if verdict:
+        page.add(f"<p><b>{html.escape(verdict)}</b> The difference image below shows where.</p>")
+    views: dict[str, Any] = {}
+    if "position" in result.scene.to_dict()["light"]:
+        fig, views = scene_views(result, info, truth_light)
+        page.add('<div class="row wide">' + page.png(
+            "scene_views.png", _png_of_figure(fig), "the scene from above and from the side with the fitted light",
+            "camera, objects and the fitted light with its 1σ error ellipse, from above and from the side")
+            + "</div>")
+    return views
+
+
+def _objective_section(page: _Page, scene: Scene, objective: Any, final: Any = None) -> dict[str, float]:
+    """The objective, the fitted render (``final`` when given) and their difference, with the error numbers
+    (returned; always of the working-resolution render the fit compared)."""
     metrics: dict[str, float] = {}
     fitted_img = np.asarray(_native.render(scene), np.float64)
     panels = []
@@ -299,25 +337,23 @@ def _objective_section(page: _Page, scene: Scene, objective: Any) -> dict[str, f
         metrics = image_metrics(fitted_img, obj)
         diff = (np.minimum(fitted_img, 1.0) - obj).mean(axis=2)
         vmax = max(float(np.max(np.abs(diff))), 1e-6)
-        panels.append(page.png("objective.png", _png_of_figure(_image_panel("objective (photo)", _srgb(obj))),
-                               "the objective"))
-        panels.append(page.png("fitted.png", _png_of_figure(_image_panel("fitted render", _srgb(fitted_img))),
-                               "the fitted render"))
+        panels.append(page.png("objective.png", _png_of_figure(_image_panel("the photo (as the fit saw it)",
+                                                                            _srgb(obj))), "the objective"))
+        panels.append(_fitted_panel(page, fitted_img, final))
         panels.append(page.png(
             "difference.png",
-            _png_of_figure(_image_panel("render − objective (linear, mean of RGB)", diff, diverging=True,
+            _png_of_figure(_image_panel("render − photo (linear, mean of RGB)", diff, diverging=True,
                                         vmax=vmax)),
             "signed difference, fitted render minus objective",
             "red: render brighter, blue: render darker; symmetric scale",
         ))
     else:
-        panels.append(page.png("fitted.png", _png_of_figure(_image_panel("fitted render", _srgb(fitted_img))),
-                               "the fitted render"))
-    page.add("<h2>Objective, fit and difference</h2>")
+        panels.append(_fitted_panel(page, fitted_img, final))
+    page.add("<h2>Photo, fit and difference</h2>")
     page.add('<div class="row three">' + "".join(panels) + "</div>")
     if metrics:
         page.add(_table(
-            ["error (fitted render vs objective)", "value"],
+            ["error (the fit's render against the photo, at the working resolution)", "value"],
             [["L1, mean |difference| (linear)", metrics["l1_linear"]],
              ["RMSE (linear)", metrics["rmse_linear"]],
              ["PSNR (sRGB, dB)", metrics["psnr_srgb_db"]],
@@ -326,6 +362,25 @@ def _objective_section(page: _Page, scene: Scene, objective: Any) -> dict[str, f
     else:
         page.add('<p class="muted">No objective given: no difference image or error numbers.</p>')
     return metrics
+
+
+def _fitted_panel(page: _Page, fitted: np.ndarray, final: Any) -> str:
+    """The fitted scene: ``final`` (an array or a PNG's path) at its own pixels where given, else the
+    working-resolution render in a panel like the photo's."""
+    if final is None:
+        return page.png("fitted.png", _png_of_figure(_image_panel("fitted render (one sample per pixel)",
+                                                                  _srgb(fitted))), "the fitted render")
+    if isinstance(final, (str, os.PathLike)):
+        from PIL import Image
+
+        data = Path(final).read_bytes()
+        with Image.open(io.BytesIO(data)) as im:
+            width = im.size[0]
+    else:
+        data = _png_of_array(_srgb8(np.asarray(final, np.float64)))
+        width = np.asarray(final).shape[1]
+    return page.png("fitted.png", data, "the fitted scene, final.png",
+                    f"the fitted scene (final.png, {width / fitted.shape[1]:.3g}× the photo's size)")
 
 
 def _strip_section(page: _Page, scene: Scene, rows: Sequence[GenerationRow], strip_every: int | None,
@@ -352,13 +407,13 @@ def _strip_section(page: _Page, scene: Scene, rows: Sequence[GenerationRow], str
 
 
 def _plots_section(page: _Page, scene: Scene, rows: Sequence[GenerationRow], true_vals: np.ndarray | None,
-                   terr: dict[str, Any] | None, ident: dict[str, Any]) -> dict[str, Any]:
+                   terr: dict[str, Any] | None, ident: dict[str, Any], split: set[str]) -> dict[str, Any]:
     """The parameters and the fitness against generation; the plotted data read back."""
     plots: dict[str, Any] = {}
     if rows:
         figs, plots = plot_search(
             scene, rows, true_vals, terr["products_true"] if terr else None,
-            products=bool(ident.get("degenerate")),
+            products=bool(ident.get("degenerate")), split=split,
         )
         imgs = [page.png(f"param_{_SAFE.sub('_', pid)}.png" if pid != "fitness" else "fitness.png",
                          _png_of_figure(fig), f"plot: {pid}") for pid, fig in figs]
@@ -369,33 +424,80 @@ def _plots_section(page: _Page, scene: Scene, rows: Sequence[GenerationRow], tru
     return plots
 
 
-def _values_section(page: _Page, scene: Scene, terr: dict[str, Any] | None) -> None:
-    """The fitted values with their bounds (and the truth and the errors when known)."""
+def _unit(name: str) -> tuple[float, str, str]:
+    """How a parameter is shown: (factor, unit, format) - positions in mm, albedos in %."""
+    if name.startswith("light.position."):
+        return 1000.0, " mm", ".1f"
+    if ".albedo." in name:
+        return 100.0, " %", ".1f"
+    if name == "light.intensity":
+        return 1.0, " W/sr", ".4g"
+    return 1.0, "", ".4g"
+
+
+def _shown(name: str, v: float | None, fmt: str | None = None, signed: bool = False) -> str:
+    if v is None:
+        return "–"
+    k, unit, f = _unit(name)
+    return f"{k * v:{'+' if signed else ''}{fmt or f}}{unit}"
+
+
+def _values_section(page: _Page, scene: Scene, terr: dict[str, Any] | None, info: dict[str, Any]) -> None:
+    """The fitted values with their 1σ and bounds (and the truth and the errors when known): positions in
+    mm, albedos in %."""
     names = scene.param_names()
     fitted = np.asarray(scene.get_params(scene.fit_paths), float)
     bounds = scene.bounds()
+    split = set(info["split"])
+    sigma = {}
+    for n in names:
+        s = (info.get("sigmas") or {}).get(n)
+        sigma[n] = "" if s is None or n in split else "± " + _shown(n, s, ".2g")
     page.add("<h2>Fitted values</h2>")
     if terr is not None:
-        zs, split = terr.get("sigmas", {}), set(terr.get("split_convention", []))
-        body = [[n, fitted[j], terr["values"][n], "split convention" if n in split else terr["errors"][n],
-                 None if n in split else zs.get(n), f"{_fmt(lo, 4)} … {_fmt(hi, 4)}"]
+        zs = terr.get("sigmas", {})
+        body = [[n, _shown(n, fitted[j]) + (" (convention)" if n in split else ""), sigma[n],
+                 _shown(n, terr["values"][n]),
+                 "split convention" if n in split else _shown(n, terr["errors"][n], ".3g", signed=True),
+                 "" if n in split or zs.get(n) is None else f"{zs[n]:+.2g}",
+                 f"{_shown(n, lo)} … {_shown(n, hi)}"]
                 for j, (n, (lo, hi)) in enumerate(zip(names, bounds))]
-        page.add(_table(["parameter", "fitted", "truth", "error", "error / sigma", "bounds"], body))
+        page.add(_table(["parameter", "fitted", "1σ", "truth", "error", "error / σ", "bounds"], body))
         if split:
             page.add("<p>Split convention: the photo fixes only the products of these parameters (light intensity "
                      "x colour x albedo x exposure), not each one; their truth and fitted values differ by how the "
                      "fit split the products. The product errors below are what the photo determines.</p>")
         errs = []
         if "light_position_m" in terr:
-            errs.append(["light position error (m)", terr["light_position_m"]])
+            errs.append(["light position error", f"{1000 * terr['light_position_m']:.3g} mm"])
         for obj, rel in terr["product_relative"].items():
-            errs.append([f"{obj}: product relative error", rel])
+            errs.append([f"{obj}: product relative error", f"{100 * rel:.3g} %"])
         if errs:
             page.add(_table(["compared with the truth", "value"], errs))
     else:
-        body = [[n, fitted[j], f"{_fmt(lo, 4)} … {_fmt(hi, 4)}"]
+        body = [[n, _shown(n, fitted[j]) + (" (convention)" if n in split else ""), sigma[n],
+                 f"{_shown(n, lo)} … {_shown(n, hi)}"]
                 for j, (n, (lo, hi)) in enumerate(zip(names, bounds))]
-        page.add(_table(["parameter", "fitted", "bounds"], body))
+        page.add(_table(["parameter", "fitted", "1σ", "bounds"], body))
+
+
+def _search_rows(st: dict[str, Any], stages: list[dict[str, Any]]) -> list[list[str]]:
+    """The settings that ran, in words: the method, the search (L-SHADE's budget, or DE's population, F and
+    CR) and the generations each stage ran, the polish."""
+    pop, gens = st.get("population"), st.get("generations") or []
+    rows = [["method", "closed form: the colours solved for every candidate light"
+             if st.get("method") == "projected" else f"{len(stages)} stage search: the light, then the colours"
+             if len(stages) > 1 else str(st.get("method", "?"))]]
+    if st.get("optimizer") == "lshade":
+        budget = f", a budget of {pop * (int(gens[0]) + 1)} evaluations" if pop and gens else ""
+        rows.append(["search", f"L-SHADE (adapts its own F and CR), population {pop} shrinking{budget}"])
+    else:
+        rows.append(["search", f"differential evolution, population {pop}, F {_fmt(st.get('f'))}, "
+                               f"CR {_fmt(st.get('cr'))}"])
+    rows.append(["generations run", ", ".join(f"{s['name']} {s['generations']}" for s in stages) or "–"])
+    if st.get("method") == "projected" and st.get("polish"):
+        rows.append(["polish", f"Nelder-Mead, up to {st['polish']} evaluations"])
+    return rows
 
 
 def _fit_report_section(page: _Page, result: Any, terr: dict[str, Any] | None, ident: dict[str, Any]) -> None:
@@ -405,11 +507,8 @@ def _fit_report_section(page: _Page, result: Any, terr: dict[str, Any] | None, i
     page.add("<h2>Fit report</h2>")
     info = [
         ["protocol", str(rep.get("protocol"))],
-        ["method", str(st.get("method", "?"))],
+        *_search_rows(st, rep.get("stages", [])),
         ["seed", str(rep.get("seed"))],
-        ["population", _fmt(st.get("population"))],
-        ["generations (light stages, colour stages)", _fmt(st.get("generations"))],
-        ["F, CR", f"{_fmt(st.get('f'))}, {_fmt(st.get('cr'))}"],
         ["render clipped to 1", _fmt(st.get("clip"))],
         ["threads", "all cores" if st.get("threads") is None else _fmt(st.get("threads"))],
         ["evaluations", _fmt(rep.get("evaluations"))],

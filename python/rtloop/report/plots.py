@@ -218,10 +218,12 @@ def _read_back(ax: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
 def plot_search(
     scene: Scene, rows: Sequence[GenerationRow], truth: np.ndarray | None = None,
     truth_products: dict[str, Sequence[float]] | None = None, products: bool = False,
+    split: Iterable[str] = (),
 ) -> tuple[list[tuple[str, Any]], dict[str, Any]]:
     """Parameter evolution (one panel per fit path, optionally the products per object) and the fitness
-    (log y) against generation across stages. Returns [(panel id, Figure)] and the plotted data read back
-    from the figures (see :attr:`Report.plots`)."""
+    (log y) against generation across stages: the one loss figure. A panel of parameters in ``split`` (the
+    factors of a product the photo fixes, split by convention) says so in its title. Returns [(panel id,
+    Figure)] and the plotted data read back from the figures (see :attr:`Report.plots`)."""
     from matplotlib.figure import Figure
 
     names = scene.param_names()
@@ -233,7 +235,8 @@ def plot_search(
     def new(title: str, ylabel: str = "") -> tuple[Any, Any]:
         fig = Figure(figsize=(5.2, 3.1))
         ax = fig.subplots()
-        fig.subplots_adjust(left=0.12, right=0.98, bottom=0.15, top=0.88 if len(spans) > 1 else 0.9)
+        fig.subplots_adjust(left=0.12, right=0.98, bottom=0.15,
+                            top=(0.88 if len(spans) > 1 else 0.9) - (0.08 if "\n" in title else 0.0))
         ax.set_title(title, fontsize=10, pad=13 if len(spans) > 1 else 6)
         ax.set_xlabel("generation (across stages)", fontsize=8)
         if ylabel:
@@ -243,7 +246,10 @@ def plot_search(
         _stage_marks(ax, spans)
         return fig, ax
 
+    split = set(split)
     for pid, title, members, colours in _panels_spec(scene, names):
+        if any(m in split for m in members):
+            title += "\n(a convention: the photo fixes only their product)"
         fig, ax = new(title)
         for k, name in enumerate(members):
             j = names.index(name)

@@ -1,0 +1,143 @@
+"""What ``rtloop-fit`` prints when it is done: the run, the image model, the goodness of fit, the fitted
+values with their error bars (and, with --truth, their errors)."""
+
+from __future__ import annotations
+
+import textwrap
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["duration", "model_lines", "summary"]
+
+
+def duration(seconds: float) -> str:
+    if seconds < 60:
+        return f"{seconds:.1f}s"
+    minutes, s = divmod(int(seconds), 60)
+    if minutes < 60:
+        return f"{minutes}m{s:02d}s"
+    hours, minutes = divmod(minutes, 60)
+    return f"{hours}h{minutes:02d}m{s:02d}s"
+
+
+def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = None,
+             report: Path | None = None) -> str:
+    stages = len(result.stages)
+    lines = [
+        f"{stages} stage{'s' if stages != 1 else ''}, {result.evaluations} evaluations, "
+        + f"fit {duration(result.seconds)}, wall time {duration(wall)}"
+    ]
+    lines.extend(model_lines(result.model or {}, dict(result.scene.to_dict())))
+    good = result.goodness or {}
+    if good.get("ratio") is not None:
+        lines.append(f"goodness of fit: {good['ratio']:.2g}x the photo's noise floor: {good['verdict']}")
+    elif good.get("verdict"):
+        lines.append(f"goodness of fit: {good['verdict']}")
+    ident = result.identifiability or {}
+    if ident.get("degenerate"):
+        lines.append("")
+        lines.append("determined products (light intensity x light colour x albedo x exposure), r g b:")
+        if result.products:
+            w = max(len(n) for n in result.products)
+            for obj, rgb in result.products.items():
+                lines.append(f"  {obj:<{w}}  " + "  ".join(f"{v:12.6g}" for v in rgb))
+        if ident.get("note"):
+            lines.extend(textwrap.wrap(f"note: {ident['note']}", 78, initial_indent="  ",
+                                       subsequent_indent="  "))
+    ref = result.reference
+    if ref:
+        lines.append("")
+        lines.append(f"absolute, from the grey card of reflectance {ref['reflectance']:g} ({ref['pixels']} px): "
+                     f"light {ref['light_intensity_w_sr']:.4g} W/sr; albedos r g b:")
+        w = max(len(n) for n in ref["albedos"])
+        for obj, rgb in ref["albedos"].items():
+            lines.append(f"  {obj:<{w}}  " + "  ".join(f"{v:8.4f}" for v in rgb))
+    lines.append("")
+    lines.append(f"fitted parameters ({result.protocol} protocol, seed {result.seed}):")
+    width = max((len(n) for n in result.x), default=0)
+    if truth is not None:
+        lines.append(f"  {'':<{width}}  {'fitted':>12}  {'truth':>12}  {'error':>12}")
+    u = result.uncertainty or {}
+    boot = u.get("bootstrap") or {}
+    bars = (u.get("robust") or {}).get("sigma") or {}  # the block sandwich's, or the bootstrap's where run
+    bars_note = None
+    if boot.get("sigma"):
+        bars = {**bars, **boot["sigma"]}
+        bars_note = (f"error bars (+-): block bootstrap ({boot['replicates']} refits on {boot['block_px']} px blocks, "
+                     f"seed {boot['seed']}, {boot['ms']:.0f} ms)")
+    elif boot.get("warnings"):
+        bars_note = f"error bars (+-): block sandwich (the bootstrap did not run: {boot['warnings'][0]})"
+    elif bars:
+        shift = (u.get("robust") or {}).get("footprint_shift") or {}
+        light = [shift.get(f"light.position.{c}") for c in "xyz"]
+        moved = (f", {1e3 * float(np.linalg.norm(light)):.2g} mm on the light" if all(v is not None for v in light)
+                 else "")
+        bars_note = ("error bars (+-): block sandwich (correlated residuals) plus the pixel footprint's shift "
+                     f"(robust.footprint_shift{moved})")
+    for name, value in result.x.items():
+        row = f"  {name:<{width}}  {value:12.6g}"
+        split = truth is not None and name in truth.get("split_convention", [])
+        if truth is not None and name in truth["values"]:
+            error = f"{'(split)':>12}" if split else f"{truth['errors'][name]:+12.4g}"
+            row += f"  {truth['values'][name]:12.6g}  {error}"
+        if bars.get(name):
+            row += f"  +- {bars[name]:.3g}"
+            if truth is not None and name in truth["errors"] and not split:
+                row += f" ({truth['errors'][name] / bars[name]:+.1f} sigma)"
+        lines.append(row)
+    if bars_note:
+        lines.append(bars_note)
+    lines += distance_lines((u.get("robust") or {}).get("light_distance") or u.get("light_distance"))
+    if truth is not None and truth.get("split_convention"):
+        lines.append("  (split): the photo fixes only the products of these, not each one: their errors "
+                     "say how the fit split the products (see the product errors below)")
+    if truth is not None:
+        if "light_position_m" in truth:
+            lines.append(f"light position error: {truth['light_position_m']:.4g} m")
+        if truth.get("product_relative"):
+            lines.append("product relative error: " + ", ".join(
+                f"{obj} {100 * rel:.3g}%" for obj, rel in truth["product_relative"].items()))
+    lines.append(f"results in {out}")
+    if report is not None:
+        lines.append(f"report: {report}")
+    return "\n".join(lines)
+
+
+def model_lines(model: dict[str, Any], fitted: dict[str, Any]) -> list[str]:
+    """The image terms the fit used and the evidence for each it considered."""
+    terms = model.get("terms") or ["direct"]
+    lines = [f"image model: {' + '.join(terms)}"]
+    res = model.get("residual")
+    if res:
+        lines.append(f"  residual: {res['ratio']:.2g}x the size of the photo's 8-bit rounding error"
+                     + (" (explained: no further term tested)" if "skipped" in model else ""))
+    for term, ev in (model.get("evidence") or {}).items():
+        verdict = "added" if ev.get("selected") else "not added"
+        bic = ev.get("delta_bic")
+        on_top = ev.get("tested_with") or []
+        lines.append(f"  {term}: {verdict} (loss at the light found without it"
+                     + (f", with {' and '.join(on_top)}" if on_top else "")
+                     + f" {ev['loss_without']:.4g} -> {ev['loss_with']:.4g} with it, {100 * ev['gain']:+.1f}%"
+                     + (f", BIC {-bic:+.4g}" if bic is not None else "")
+                     + (f"; {100 * ev['earlier_gain']:+.1f}% before them)" if "earlier_gain" in ev else ")"))
+    chosen = model.get("norm")
+    if chosen and chosen.get("median_z") is not None:
+        lines.append(f"  norm: {chosen['used']} (the L1 fit's median residual {chosen['median_z']:.2g}x the photo's "
+                     f"own error; {chosen['threshold']:g}x or more is dense and takes l2)")
+    if "environment" in terms and fitted.get("environment"):
+        lines.append("  environment radiance (r g b): " + "  ".join(f"{v:.4g}" for v in fitted["environment"]))
+    return lines
+
+
+def distance_lines(distance: dict[str, Any] | None) -> list[str]:
+    """The light as the photo fixes it: its direction from the subject and its distance, each +- sigma, or
+    the distance as not determined with the reason (:mod:`rtloop.uncertainty.light`)."""
+    if not distance or distance.get("direction_sigma_deg") is None:
+        return []
+    line = (f"light from the subject: direction +- {distance['direction_sigma_deg']:.2g} deg, distance "
+            f"{distance['distance_m']:.4g} m")
+    if distance["distance_determined"]:
+        return [line + f" +- {distance['distance_sigma_m']:.2g} m"]
+    return [line + " not determined", f"  ({distance['why']})"]
