@@ -1,5 +1,6 @@
 """A fuzz campaign over the Python API (scenes, render()/fit() arguments, image arrays, CLI arguments via
-main() in-process) for a developer to run for minutes; prints the counts. Not a test: see README."""
+main() in-process) for a developer to run for minutes; prints the counts. Not a test: see
+docs/development.md."""
 
 from __future__ import annotations
 

@@ -78,7 +78,7 @@ class FloorPose:
         }
 
 
-#: The field of view the issue asks for without EXIF (deg): the board's own estimate is used only when its
+#: The field of view needed without EXIF (deg): the board's own estimate is used only when its
 #: standard deviation is within this; else one line says why and what to give instead.
 VFOV_TARGET_DEG = 0.3
 
