@@ -429,8 +429,8 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
     # The refit's search starts from the light found (and a lobe's best trial shininess), so that its small
     # population cannot end worse than that; but not with the bounce: there the light found without it is
     # centimetres off, and a start there stops the held passes early (they end once a pass barely moves
-    # the light): on rtloop's own bounce renders 0.15-0.41 mm -> 1.0-1.5 mm off (README, "Photos as
-    # cameras take them").
+    # the light): on rtloop's own bounce renders 0.15-0.41 mm -> 1.0-1.5 mm off (docs/methods.md,
+    # "How a photo selects them").
     candidate = more.projected(int(seeds[1]), environment=model_env,
                                name="+".join(["light", "colour", *model["terms"][1:], *added]),
                                from_scene=not bounce)
