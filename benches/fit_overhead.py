@@ -1,5 +1,5 @@
-"""What a default fit of a clean direct photo costs besides its search and its uncertainty (issue 12, "Photos
-as they are": a matte direct photo no slower than at the issue's filing, +-10 %).
+"""What a default fit of a clean direct photo costs besides its search and its uncertainty (the target:
+a matte direct photo no slower than the fit before the image terms, +-10 %).
 
 Cases: the eleven clean direct Mitsuba photos ``tests/fixtures/photos/direct-*``. Each is fitted with the
 default ``rtloop.fit`` (uncertainty included) on one thread (``RAYON_NUM_THREADS=1``), in alternating
@@ -18,7 +18,7 @@ Writes ``benches/results/fit_overhead.md`` (with ``--fixed-malloc``: ``fit_overh
 
 Usage (from the repository root, with the extension built)::
 
-    python benches/fit_overhead.py --baseline main=/tmp/base/python --baseline filing=/tmp/old/python
+    python benches/fit_overhead.py --baseline main=/tmp/base/python --baseline baseline=/tmp/old/python
 """
 
 from __future__ import annotations

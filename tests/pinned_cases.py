@@ -1,5 +1,5 @@
-"""The cases whose fits are pinned bit for bit while the core is restructured (issue "One owner for every
-formula"): the four reference scenes with both protocols and synthetic scenes covering every path of the
+"""The cases whose fits are pinned bit for bit while the core is restructured (one owner for every
+formula): the four reference scenes with both protocols and synthetic scenes covering every path of the
 fit (matte, glossy, directional, ambient (closed form), the two-stage fallback, sRGB loss, other norms, mask, noise, callbacks).
 
 `python3 tests/pinned_cases.py` records `tests/fixtures/pinned_fits.json` from the code as it is;

@@ -42,22 +42,22 @@ def test_mismatch_photos_are_covered_within_one_sigma(rows):
     2 % noise or JPEG 40), 102 light coordinates: the true value within 1 sandwich sigma for 40-90 % (about
     68 % for a calibrated normal: not hugely inflated). Gauss-Newton, which treats pixels as independent,
     covers far fewer within 3 than the sandwich: the test can fail. Measured with the footprint default,
-    the noise-aware clip level and JPEG sRGB refit (issue 15), the L1 sandwich and the shadow-edge / jump
-    fix: see benches/results/coverage.md for the figures of this commit."""
+    the noise-aware clip level and JPEG sRGB refit, the L1 sandwich and the shadow-edge / jump fix: see
+    benches/results/coverage.md for the figures."""
     assert sum(r["class"] == "mismatch" for r in rows) == 34
     assert 0.40 <= _within(rows, "mismatch", "robust", 1) <= 0.90
     assert _within(rows, "mismatch", "gn", 3) < _within(rows, "mismatch", "robust", 3) - 0.15
 
 
 def test_mismatch_photos_are_covered_within_three_sigma(rows):
-    """The same 102 light coordinates within 3 sandwich sigma for >= 85 % of them (the issue's target).
+    """The same 102 light coordinates within 3 sandwich sigma for >= 85 % of them (the target).
     Three changes made it, each measured alone on the same photos: the uncertainty finds the environment and
     bounce photos' shadow edges (their unit render lit every pixel) and leaves out the pixels a shadow edge
     crosses within a step (they entered the Jacobian with a jump / 2h: env-overhead z 6.0): 97 %; the
     sandwich follows the fit's L1 norm (median regression: model error leaves large residuals of one sign
     over regions, which an L1 fit weighs by their density at zero, not their size): 91 %; the noise-aware
-    clip level and JPEG sRGB refit (issue 15: the noisy and JPEG fits 545 and 85 mm off no longer): 85 %.
-    Before all three: 83 % (benches/results/coverage.md)."""
+    clip level and JPEG sRGB refit (without it the noisy and JPEG fits were 545 and 85 mm off): 85 %.
+    Without all three: 83 % (benches/results/coverage.md)."""
     assert _within(rows, "mismatch", "robust", 3) >= 0.85
 
 
@@ -67,9 +67,9 @@ def test_mismatch_colour_products_are_covered_within_three_sigma(rows):
     propagated: the products parameters' own where those are fitted, through the intensity and albedos'
     covariance where interreflection fixes the intensity): >= 85 % within 3 sigma, 40-90 % within 1.
     Gauss-Newton, blind to correlated residuals, covers far fewer (the control, as for the light: at least 15
-    points below the sandwich). Measured on main after issues 13c and 15: 97 % and 65 %; Gauss-Newton 61 %
-    within 3 (52 % before issue 15 made the noisy and JPEG fits' errors smaller); with the pixel footprint's
-    shift in the robust sigma 99 % and 73 %."""
+    points below the sandwich). Measured without the pixel footprint's shift in the robust sigma: 97 % and
+    65 %, Gauss-Newton 61 % within 3 (52 % without the noise-aware clip level and the JPEG sRGB refit); with
+    the shift 98 % and 73 % (benches/results/coverage.md)."""
     assert _within(rows, "mismatch", "robust", 3, products=True) >= 0.85
     assert 0.40 <= _within(rows, "mismatch", "robust", 1, products=True) <= 0.90
     assert (_within(rows, "mismatch", "gn", 3, products=True)

@@ -1,4 +1,4 @@
-"""The occluded environment term (issue "Photos as they are"): scene field, renderer, kernel, closed form,
+"""The occluded environment term (photos as cameras take them): scene field, renderer, kernel, closed form,
 automatic selection. The sky view factor itself is tested against Monte Carlo in
 rust/render/environment.rs; the renderer against Mitsuba 3 in tests/test_photos.py."""
 

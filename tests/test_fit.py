@@ -394,7 +394,7 @@ def test_reference_scenes_light_within_2cm(case):
 
 
 def test_reference_scenes_median_targets():
-    """The README's figure for the default over the Mitsuba scenes, 4.0 mm and 0.15 % (medians of the light
+    """The docs' figure for the default over the Mitsuba scenes, 4.0 mm and 0.15 % (medians of the light
     error and of each scene's worst product; benches/speed_vs_error.py over three seeds), held here on one
     seed with half again as margin: 6 mm and 0.25 %."""
     names = shared_case_names()

@@ -161,7 +161,7 @@ def test_partly_saturated_photo(ball_scene):
 @pytest.mark.parametrize("noise_seed", [5, 6, 7])
 def test_strong_noise(ball_scene, noise_seed):
     """Noise 2.5 times the shared noisy-blue case's, on the saturated photo, at the paper's 128x96: the
-    light to 5 cm, the colours to the README's 2 % (measured 0.9-2.0 % over these three noise draws, so
+    light to 5 cm, the colours to the documented 2 % (measured 0.9-2.0 % over these three noise draws, so
     the bound is 2.5 %). Least squares alone got the ball's red 5-8 % low here (saturated pixels that noise
     pulls below 1 fitted as unsaturated, unsaturated ones pushed to 1 dropped); the reported products
     minimise the L1 loss with the clip kept exact (see Kernel::refine)."""
@@ -178,7 +178,7 @@ def test_strong_noise(ball_scene, noise_seed):
 @pytest.mark.parametrize("space", ["linear", "srgb"])
 def test_jpeg_quality_50(ball_scene, tmp_path, space):
     """JPEG at quality 50 subsamples chroma and quantises the dark blue channel hardest: light to 3 cm,
-    colours to the README's 2 % (see test_strong_noise; least squares alone was 7-8 % off), in both loss
+    colours to the documented 2 % (see test_strong_noise; least squares alone was 7-8 % off), in both loss
     spaces. Measured (benches/loss_space.py, seeds 0-4): light 15-17 mm in either; products 1.1-1.2 %
     linear, 0.65-0.69 % sRGB, where JPEG's errors are uniform."""
     truth = ball_scene
@@ -283,7 +283,7 @@ def test_directional_light_sun(ball_scene):
 def test_glossy_ball_with_free_specular_and_shininess(ball_scene):
     """A highlight the model knows about informs the fit instead of biasing it: intensity x specular joins
     the closed-form solve, the shininess is searched with the light, and the fit is as exact as a matte one:
-    the README's figures, light within 0.05 mm, products and intensity x specular within 1e-4, shininess
+    the documented figures, light within 0.05 mm, products and intensity x specular within 1e-4, shininess
     within 5e-4 (measured 0.008 mm, 2e-6, 3e-5 and 5e-5)."""
     truth = ball_scene
     truth["objects"][0]["material"].update(specular=0.3, shininess=30.0)

@@ -1,4 +1,4 @@
-"""Highlights the diffuse model cannot explain (issue "Photos as they are"): the default fit frees a
+"""Highlights the diffuse model cannot explain (photos as cameras take them): the default fit frees a
 matte sphere's specular lobe when the photo shows one. Against a GGX lobe rendered by Mitsuba 3 in
 tests/test_photos.py."""
 

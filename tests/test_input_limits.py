@@ -1,5 +1,5 @@
-"""Hard inputs (issue 16): every out-of-range argument or scene number is an RtloopError naming it, doubtful
-images are refused or warned about, resources are capped (README: "Input limits")."""
+"""Hard inputs: every out-of-range argument or scene number is an RtloopError naming it, doubtful
+images are refused or warned about, resources are capped (docs/scene-format.md: "Input limits")."""
 
 from __future__ import annotations
 
@@ -381,7 +381,7 @@ def _extreme(edit):
     ],
 )
 def test_numbers_at_the_limits_fit_end_to_end_with_a_json_report(photo, edit, kw):
-    """The issue's 1e308 cases, at the largest accepted values: no bare exception from the fit or the
+    """The 1e308 cases, at the largest accepted values: no bare exception from the fit or the
     uncertainty, a report JSON can hold (no inf or NaN), every value inside its bounds."""
     import json
     import warnings

@@ -1,4 +1,4 @@
-"""One diffuse bounce between the objects (issue "Photos as they are"): scene field, renderer, kernel,
+"""One diffuse bounce between the objects (photos as cameras take them): scene field, renderer, kernel,
 closed form with its gauge, automatic selection. Against Mitsuba's path tracer in tests/test_photos.py;
 the gather geometry in rust/render/bounce.rs."""
 

@@ -1,4 +1,4 @@
-"""Noisy and JPEG photos (issue "Photos as they are": light within 3 cm on every photo, median within 1.5 cm),
+"""Noisy and JPEG photos (the targets: light within 3 cm on every photo, median within 1.5 cm),
 made here from the clean direct Mitsuba photos of tests/fixtures/photos as benches/coverage.py makes them:
 2 % Gaussian noise (linear, seed 0, clipped to [0, 1]) and the PNG re-saved as JPEG quality 40 (Pillow's
 defaults: 4:2:0 chroma). Before the fix the default fit put the light of direct-low-left's noisy variant
@@ -109,9 +109,9 @@ def test_jpeg_products_median_within_3_percent(variant_fits):
     assert np.median(list(worst.values())) < 0.03, worst
 
 
-@pytest.mark.xfail(strict=True, reason="issue 12's target, not met: inside a small ball a JPEG-40's colour "
-                   "is quantised per 16 x 16 block (chroma DC), up to 1.4 codes, 2-4 % of a product; "
-                   "direct-low-left, -three-low, -two-overhead and -side stay 3.2-6.5 % off")
+@pytest.mark.xfail(strict=True, reason="every product within 3 % on JPEG-40: inside a small ball a "
+                   "JPEG-40's colour is quantised per 16 x 16 block (chroma DC), up to 1.4 codes, 2-4 % of a "
+                   "product; direct-low-left, -three-low, -two-overhead and -side stay 3.2-6.5 % off")
 def test_jpeg_products_within_3_percent(variant_fits):
     worst = {name: _worst_product(name, r) for name, r in variant_fits["jpeg"].items()}
     assert max(worst.values()) < 0.03, worst

@@ -1,4 +1,4 @@
-"""One photo is enough (issue 14): rtloop-scene then rtloop-fit on one photo each, the board and a grey card in
+"""One photo is enough: rtloop-scene then rtloop-fit on one photo each, the board and a grey card in
 it, no --vfov, against the truth of an independent renderer: the Mitsuba 3 views of tests/fixtures/onephoto
 (tools/make_onephoto.py: a ChArUco board as a bitmap texture on the floor, a ball, an 18 % grey card, a point
 light 2.7 m from the ball, a dim room light, path traced). The tests need no Mitsuba."""
@@ -21,7 +21,7 @@ from rtloop.cli.scene import scene_main
 from rtloop.fit.reference import pin_to_reference
 
 FIXTURES = Path(__file__).parent / "fixtures" / "onephoto"
-EXAMPLE = Path(__file__).parents[1] / "examples" / "one-photo"  # the README's example: the oblique view
+EXAMPLE = Path(__file__).parents[1] / "examples" / "one-photo"  # docs/acquisition.md's example: oblique
 FOLDERS = {p.name: p for p in FIXTURES.iterdir() if (p / "photo.png").exists()} | {"oblique": EXAMPLE}
 VIEWS = sorted(FOLDERS)
 
@@ -56,7 +56,7 @@ def _errors(scene: dict, meta: dict) -> tuple[float, float, float]:
 @pytest.mark.parametrize("view", VIEWS)
 def test_scene_from_one_photo_with_exif(built, view):
     """The photo's EXIF focal length gives the field of view; the board the camera; the ball is within 1 %
-    of its distance (the issue's target), the camera within 1 % of its distance to the board."""
+    of its distance (the target), the camera within 1 % of its distance to the board."""
     code, out = built[view]
     assert code == 0
     meta = _meta(view)
@@ -88,7 +88,7 @@ def fits(built, tmp_path_factory) -> dict[str, dict]:
 
 @pytest.mark.parametrize("view", VIEWS)
 def test_light_from_one_photo(fits, view):
-    """The light, 2.5-2.8 m from the ball, within 5 cm (the issue's target), from the photo with the board
+    """The light, 2.5-2.8 m from the ball, within 5 cm (the target), from the photo with the board
     and the card in it (masked) and the room light and the bounce in the scene rtloop-scene wrote."""
     meta = _meta(view)
     result = fits[view]
@@ -99,7 +99,7 @@ def test_light_from_one_photo(fits, view):
 @pytest.mark.parametrize("view", VIEWS)
 def test_grey_card_gives_absolute_albedos(fits, view):
     """With the card's reflectance known, result.json holds absolute albedos (within 3 % of Mitsuba's, the
-    issue's target) and the light's intensity in W/sr (within 3 %)."""
+    target) and the light's intensity in W/sr (within 3 %)."""
     meta = _meta(view)
     result = fits[view]
     ref = result["fit_report"]["reference"]
@@ -242,8 +242,8 @@ def test_board_alone_uncertainty_covers_its_error(monkeypatch):
 
 
 def test_readme_one_photo_example(tmp_path, capsys):
-    """The README's "One photo, end to end" commands on examples/one-photo: each step prints its errors
-    against the truth, the report is written, and the numbers are the README's targets."""
+    """The "One photo, end to end" commands (docs/acquisition.md) on examples/one-photo: each step prints its
+    errors against the truth, the report is written, and the numbers are the targets."""
     ex = "examples/one-photo"
     root = Path(__file__).parents[1]
     out = tmp_path / "one-photo"

@@ -1,10 +1,10 @@
-"""Photos as cameras take them (issue "Photos as they are"), against an independent renderer: the Mitsuba 3
+"""Photos as cameras take them, against an independent renderer: the Mitsuba 3
 renders in tests/fixtures/photos (tools/make_photos.py; path tracing, a constant environment, rough
 plastic, sphere lamps, noise and JPEG; pixels integrated over their area). The tests need no Mitsuba.
 
 Two kinds of checks: rtloop's renderer with the true scene against the photo (its environment and bounce
 terms model what Mitsuba renders), and the default fit, from the fit section a user writes today, against
-the truth it never saw (the issue's targets)."""
+the truth it never saw (the targets)."""
 
 from __future__ import annotations
 
@@ -97,7 +97,7 @@ def hard_fits() -> dict[str, tuple[float, float, list[str]]]:
     return out
 
 
-#: Photos whose colour products the model does not get within the issue's 3 %, and why (strict xfail: the
+#: Photos whose colour products the model does not get within the target's 3 %, and why (strict xfail: the
 #: test says so when that changes).
 PRODUCT_GAPS = {
     "gloss-back": "a glossy ball lit from behind: the camera sees its coat at grazing angles, where the GGX "
@@ -109,7 +109,7 @@ PRODUCT_GAPS = {
 
 @pytest.mark.parametrize("name", HARD)
 def test_hard_photo_light_within_3cm(hard_fits, name):
-    """The issue's target per photo: environment, interreflection, gloss, a desk lamp, noise and JPEG,
+    """The target per photo: environment, interreflection, gloss, a desk lamp, noise and JPEG,
     fitted with the fit section a user writes today and no extra flag: the light within 3 cm."""
     err, _, terms = hard_fits[name]
     assert err < 0.03, f"{name}: light {1000 * err:.1f} mm off (terms {terms})"
@@ -118,7 +118,7 @@ def test_hard_photo_light_within_3cm(hard_fits, name):
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=PRODUCT_GAPS[n]))
                                   if n in PRODUCT_GAPS else n for n in HARD])
 def test_hard_photo_products_within_3_percent(hard_fits, name):
-    """The issue's target per photo: every colour product within 3 %."""
+    """The target per photo: every colour product within 3 %."""
     _, worst, terms = hard_fits[name]
     assert worst < 0.03, f"{name}: product {100 * worst:.2f} % off (terms {terms})"
 
@@ -153,7 +153,7 @@ def test_direct_photos_median_within_3mm():
 
 
 #: The first three clean direct photos, whose pixel-centre errors (3.3, 0.6 and 2.3 mm) the footprint was
-#: measured against; the eight added later (issue 13) count in the median.
+#: measured against; the other eight count in the median.
 FIRST_DIRECT = ("direct-overhead", "direct-side", "direct-two-balls")
 
 
@@ -176,7 +176,7 @@ def test_direct_photos_within_2mm_with_the_pixel_footprint():
 def test_a_term_rejected_first_is_tested_again_once_others_explain_their_part():
     """Forward selection (lamp-front: a dim bluish room, a bounce and a glossy ball): the room's light
     explains under 5 % of the loss while the bounce and the lobe are missing, so the first test rejects it;
-    tested again on top of them it is selected, and the fit finds the light within the issue's 3 cm (a fit
+    tested again on top of them it is selected, and the fit finds the light within the target's 3 cm (a fit
     without it put the light 9 cm too far and every product 6-7 % too high)."""
     r, truth = _fit("lamp-front")
     ev = r.model["evidence"]["environment"]
@@ -196,7 +196,7 @@ def test_the_terms_are_tested_in_every_norm(name, norm, term):
     where the photo has a room's light, a bounce or a coat) and no term was tested: env-overhead with L2
     45 mm off, env-bounce-low 174 mm, gloss-a025 with Huber 12.6 mm. Measured against the floor in the same
     norm (the residual 6-22x the quantisation error's size) the term is found and the light comes 2.5-10x
-    closer (7.0, 17.7 and 4.8 mm), within the issue's 3 cm."""
+    closer (7.0, 17.7 and 4.8 mm), within the target's 3 cm."""
     scene = rtloop.load_scene(PHOTOS / name / "scene_input.json")
     r = rtloop.fit(scene, _photo(name, scene), norm=norm, uncertainty=False)
     assert "skipped" not in r.model and r.model["residual"]["ratio"] > 3, r.model["residual"]

@@ -1,4 +1,4 @@
-"""Pinned results of a refactor (issue "One owner for every formula"): every fit in tests/pinned_cases.py
+"""Pinned results of a refactor (one owner for every formula): every fit in tests/pinned_cases.py
 gives the same numbers to the last bit (but for the CPU-dependent parts, CPU_DEPENDENT) as recorded in
 tests/fixtures/pinned_fits.json before the core was restructured. These golden values are the project's own
 outputs, allowed here only because they pin a refactor; accuracy is tested against ground truth elsewhere. A

@@ -15,7 +15,7 @@ from rtloop import _native
 
 
 def _python_blocker(scene: rtloop.Scene, paths: list[str]) -> str | None:
-    """The rules as the README states them, written again over the scene dict (the oracle)."""
+    """The rules as docs/methods.md states them, written again over the scene dict (the oracle)."""
     d = scene.to_dict()
     if "light.position" not in paths and "light.direction" not in paths:
         return "neither light.position nor light.direction is free"

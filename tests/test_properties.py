@@ -1,4 +1,4 @@
-"""Property tests (Hypothesis, issue 16): mutated scenes, fit() arguments and image arrays either work or raise
+"""Property tests (Hypothesis): mutated scenes, fit() arguments and image arrays either work or raise
 an RtloopError; what works renders finite pixels and fits inside the scene's bounds. Bounded and derandomised so
 CI runs the same few hundred cases every time."""
 

@@ -220,7 +220,7 @@ def test_intensity_against_albedo_is_reported_when_scene_parameters_are_asked_fo
 
 
 def test_seed_spread_is_the_optimiser_not_the_data(ball_scene):
-    """The issue asks for a cross-check against repeated seeds. Refitting one photo with different seeds
+    """A cross-check against repeated seeds. Refitting one photo with different seeds
     measures only how well the optimiser converges, not what the photo determines:
 
     - noise-free photo: the seeds agree to about 1e-7 m and the fit reproduces the photo exactly, so

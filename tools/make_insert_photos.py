@@ -1,4 +1,4 @@
-"""Mitsuba 3 photos for the insertion test (issue 17): a make_photos.py case rendered again with one more
+"""Mitsuba 3 photos for the insertion test: a make_photos.py case rendered again with one more
 object, the object in rtloop's scene format beside it. Writes tests/fixtures/insert/CASE/."""
 
 from __future__ import annotations

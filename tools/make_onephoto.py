@@ -39,7 +39,8 @@ SPP = 256
 MAX_DEPTH = 4  # camera ray + three bounces: the environment's occlusion and interreflection
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = REPO / "tests" / "fixtures" / "onephoto"
-#: The view that ships as the README's end-to-end example (written to EXAMPLE_DIR when --out is the default).
+#: The view that ships as the end-to-end example of docs/acquisition.md (written to EXAMPLE_DIR when --out is
+#: the default).
 EXAMPLE_VIEW = "oblique"
 EXAMPLE_DIR = REPO / "examples" / "one-photo"
 
@@ -265,7 +266,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="make_onephoto.py", description=__doc__.split("\n\n")[0],
         epilog="Example: nice -n 10 python tools/make_onephoto.py  (into tests/fixtures/onephoto; the oblique\n"
-               "view, the README's example, into examples/one-photo)\n"
+               "view, the documented example, into examples/one-photo)\n"
                "Views: " + ", ".join(v["name"] for v in VIEWS),
         formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--only", action="append", metavar="NAME", help="render only this view (repeatable)")

@@ -398,7 +398,7 @@ def _unit(v: np.ndarray) -> np.ndarray:
 
 
 def camera_rays(camera: dict[str, Any], width: int, height: int, sub: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """Ray origin and unit directions (height*sub, width*sub, 3) as rtloop's README defines its camera."""
+    """Ray origin and unit directions (height*sub, width*sub, 3) of rtloop's camera (docs/scene-format.md)."""
     pos = np.array(camera["position"], float)
     fwd = _unit(np.array(camera["look_at"], float) - pos)
     right = _unit(np.cross(fwd, np.array(camera.get("up", [0, 1, 0]), float)))

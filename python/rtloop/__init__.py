@@ -2,7 +2,7 @@
 
 A hand-built scene (camera, spheres, planes, one point light) plus a photo go in; a differential-evolution
 search over the scene's free parameters, driven by rtloop's own ray tracer, brings back the light's
-position and intensity and the objects' colours. See README.md for the scene format.
+position and intensity and the objects' colours. See docs/scene-format.md for the scene format.
 
     scene = rtloop.load_scene("examples/yellow-ball/scene_input.json")
     photo = rtloop.load_image("examples/yellow-ball/objective.png", scene)
@@ -104,7 +104,8 @@ def object_ids(scene: object, width: int | None = None, height: int | None = Non
     return _native.object_ids(scene, *_size(width, height))
 
 
-#: Most samples per pixel render() takes (README: "Input limits"); the size is 1..16384 as in a scene.
+#: Most samples per pixel render() takes (docs/scene-format.md: "Input limits"); the size is 1..16384 as in a
+#: scene.
 MAX_SPP = 4096
 
 

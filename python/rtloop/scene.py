@@ -17,7 +17,8 @@ from .errors import RtloopError, SceneError, SceneTypeError
 __all__ = ["MAX_INTENSITY", "MAX_MAGNITUDE", "Scene", "load_scene", "save_scene", "scene_to_dict"]
 
 #: The largest magnitude of a scene number or fit bound but a direction's components: the core's
-#: ``scene::MAX_MAGNITUDE`` (README: "Input limits"; tests/test_input_limits.py checks they agree).
+#: ``scene::MAX_MAGNITUDE`` (docs/scene-format.md: "Input limits"; tests/test_input_limits.py checks they
+#: agree).
 MAX_MAGNITUDE = 1e8
 #: The largest light intensity (value or bound): it grows with distance squared (``scene::MAX_INTENSITY``).
 MAX_INTENSITY = 1e20

@@ -292,7 +292,7 @@ pub fn gather(p: Vec3A, n: Vec3A, own: usize, shapes: &[PShape], out: &mut Vec<G
                     }
                 }
             }
-            PShape::Mesh(_) => {} // meshes neither send nor (here) block bounce light (README)
+            PShape::Mesh(_) => {} // meshes neither send nor (here) block bounce light (docs/scene-format.md)
         }
     }
 }

@@ -74,7 +74,7 @@ pub fn sky_view(p: Vec3A, n: Vec3A, own: usize, shapes: &[PShape]) -> f32 {
         covered += match *shape {
             PShape::Sphere { center, radius } => sphere_view(p, n, center, radius),
             PShape::Plane { point, normal } => plane_view(p, n, point, normal),
-            PShape::Mesh(_) => 0.0, // meshes do not occlude the environment (README)
+            PShape::Mesh(_) => 0.0, // meshes do not occlude the environment (docs/scene-format.md)
         };
     }
     (1.0 - covered).clamp(0.0, 1.0)

@@ -179,8 +179,9 @@ struct RawMaterial {
 
 // ---------------------------------------------------------------- validation helpers
 
-/// The largest magnitude of any scene number and fit bound but a direction's components (README: "Input
-/// limits"): metres, colours, intensities and exposures beyond it overflow the f32 renderer's products.
+/// The largest magnitude of any scene number and fit bound but a direction's components
+/// (docs/scene-format.md: "Input limits"): metres, colours, intensities and exposures beyond it overflow the
+/// f32 renderer's products.
 pub const MAX_MAGNITUDE: f64 = 1e8;
 
 /// The largest light intensity: it scales as distance squared, so a light 1e8 m away needs 1e16 and more.

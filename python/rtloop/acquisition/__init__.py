@@ -25,8 +25,8 @@ module                 what it does
                        ``rtloop.load_image``) and a mask of the pixels the scene models (``load_mask``)
 =====================  ================================================================================
 
-Conventions are the scene format's (README): metres, right-handed, +y up; the board's face is the
-floor plane y = 0 with the origin at the board's centre. Every failure raises
+Conventions are the scene format's (docs/scene-format.md): metres, right-handed, +y up; the board's face is
+the floor plane y = 0 with the origin at the board's centre. Every failure raises
 :class:`rtloop.errors.AcquisitionError` with a message that says what to do.
 """
 

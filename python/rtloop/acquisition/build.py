@@ -50,7 +50,7 @@ class AcquiredScene:
     """Everything :func:`build_scene` found.
 
     Attributes:
-        scene: the scene dict (README format) with a ``fit`` section and ``meta.acquisition``.
+        scene: the scene dict (docs/scene-format.md) with a ``fit`` section and ``meta.acquisition``.
         objective: the photo to fit, linear RGB float32 at full size: colour-corrected, undistorted.
         photo: the board photo after the same steps (what the geometry was measured on).
         pose, silhouette, sphere, colour: the pieces, for inspection.

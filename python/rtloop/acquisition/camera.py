@@ -1,8 +1,8 @@
 """The scene format's camera, placed in the world, and its link to OpenCV's camera model.
 
 rtloop's scene camera is a pinhole with square pixels and the principal point at the image centre,
-given by ``position``, ``look_at``, ``up`` and the full vertical field of view ``vfov_deg`` (README,
-"The scene format"). OpenCV describes the same camera by an intrinsic matrix
+given by ``position``, ``look_at``, ``up`` and the full vertical field of view ``vfov_deg``
+(docs/scene-format.md, "Camera"). OpenCV describes the same camera by an intrinsic matrix
 ``K = [[f, 0, cx], [0, f, cy], [0, 0, 1]]`` and a pose ``X_cam = R X_world + t`` in its camera frame
 (x right, y *down*, z forward), with pixel centres at integer coordinates.
 

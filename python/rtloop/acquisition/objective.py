@@ -81,7 +81,7 @@ class _Fail(Exception):
 
 
 #: The most pixels a file may decode to (a 100-megapixel camera's photo fits; a "decompression bomb", a
-#: small file claiming a huge size, does not). README: "Input limits".
+#: small file claiming a huge size, does not). docs/scene-format.md: "Input limits".
 MAX_DECODED_PIXELS = 120_000_000
 
 

@@ -39,7 +39,7 @@ def blas_threads(n: int) -> AbstractContextManager[Any]:
 
 def plan(workers: int | None, threads: int | None) -> tuple[int, int]:
     """(concurrent fits, threads per fit): by default one thread per fit and one fit per core (a small
-    photo's fit gains little from a second thread; README "Many photos" has the measurement)."""
+    photo's fit gains little from a second thread; docs/batch.md has the measurement)."""
     n = cores()
     if workers is None and threads is None:
         return n, 1
@@ -57,7 +57,7 @@ def run_local(jobs: list[tuple[Job, str | None]], *, workers: int, threads: int,
     the job's with the values it starts from). Leaving the iterator early (or
     Ctrl-C) cancels the jobs not yet started and waits for the running ones. numpy's BLAS runs on
     ``threads`` threads meanwhile (process-wide): its idle threads spin, and with a fit per core the spin
-    cost up to a fifth of the batch's CPU time (README "Many photos")."""
+    cost up to a fifth of the batch's CPU time (docs/batch.md)."""
     with blas_threads(threads):
         yield from _run(jobs, workers=workers, threads=threads, warm_start=warm_start, **kwargs)
 

@@ -136,7 +136,7 @@ class _Interrupted(Exception):
     """Raised inside the fit's callback to stop the search after Ctrl-C."""
 
 
-#: The largest side of a rendered image, as of a scene's (README: "Input limits").
+#: The largest side of a rendered image, as of a scene's (docs/scene-format.md: "Input limits").
 MAX_SIZE = 16384
 
 

@@ -2,7 +2,7 @@
 
 ``fit()`` checks its inputs, picks the budget and method (:mod:`.protocol`), runs the stages
 (:mod:`.stages`), splits the solved products back into scene values (:mod:`.products`) and names what
-the photo does not determine (:mod:`.identifiability`). README: "Methods".
+the photo does not determine (:mod:`.identifiability`). docs/methods.md.
 """
 
 from __future__ import annotations
@@ -466,8 +466,8 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
     # The refit's search starts from the light found (and a lobe's best trial shininess), so that its small
     # population cannot end worse than that; but not with the bounce: there the light found without it is
     # centimetres off, and a start there stops the held passes early (they end once a pass barely moves
-    # the light): on rtloop's own bounce renders 0.15-0.41 mm -> 1.0-1.5 mm off (README, "Photos as
-    # cameras take them").
+    # the light): on rtloop's own bounce renders 0.15-0.41 mm -> 1.0-1.5 mm off (docs/methods.md,
+    # "How a photo selects them").
     candidate = more.projected(int(seeds[1]), environment=model_env,
                                name="+".join(["light", "colour", *model["terms"][1:], *added]),
                                from_scene=not bounce)
@@ -497,9 +497,9 @@ def _jpeg_refit(current: Scene, work: Scene, stages: Stages, first: StageResult,
     quantises the DCT of the sRGB-encoded values, so its errors are alike in code values and in linear
     radiance grow with the brightness: the sRGB loss weighs each pixel by what the file knows about it.
     On the JPEG-40 variants of the 11 direct Mitsuba photos the median light error falls 24.5 -> 11.7 mm
-    (README, "Noisy and JPEG photos"). Where the model lacks something the photo shows (a desk lamp's soft
-    shadow, a coat), the sRGB loss weighs up the dark pixels where that shows most (lamp-desk: 10 -> 30 mm),
-    so a photo with extra terms stays linear. ``model["space"]`` records the choice."""
+    (docs/accuracy.md, "Noisy and JPEG photos"). Where the model lacks something the photo shows (a desk
+    lamp's soft shadow, a coat), the sRGB loss weighs up the dark pixels where that shows most (lamp-desk:
+    10 -> 30 mm), so a photo with extra terms stays linear. ``model["space"]`` records the choice."""
     codes = _jpeg_codes(blocking, space)
     if codes is None:
         return current

@@ -19,7 +19,7 @@ __all__ = ["LIMITS", "LOSS_SPACES", "PIXELS_PER_OBJECT", "PROTOCOLS", "Budget", 
 #: Where a loss compares pixel values: ``linear`` radiance (default) or ``srgb`` code values.
 LOSS_SPACES = ("linear", "srgb")
 
-#: Named settings. ``paper``: the paper's numbers. ``rtloop``: the default (see README, speed against error).
+#: Named settings. ``paper``: the paper's numbers. ``rtloop``: the default (see docs/accuracy.md).
 PROTOCOLS: dict[str, dict[str, Any]] = {
     "paper": {"population": 60, "generations": (200, 200), "f": 0.6, "cr": 0.8, "refine": False},
     # Default: the closed-form method searched by L-SHADE, 16 x 17 = 272 evaluations to find the basin, then
@@ -39,7 +39,8 @@ PROTOCOLS: dict[str, dict[str, Any]] = {
 #: Pixels sampled per object for stage 2.
 PIXELS_PER_OBJECT = 64
 
-#: The range of each whole-number argument of fit() (README: "Input limits"); threads also <= 64 x cores.
+#: The range of each whole-number argument of fit() (docs/scene-format.md: "Input limits"); threads also
+#: <= 64 x cores.
 LIMITS: dict[str, tuple[int, int]] = {
     "seed": (0, 2**64 - 1),
     "population": (4, 100_000),

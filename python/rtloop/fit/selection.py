@@ -1,4 +1,4 @@
-"""Which image terms a fit uses, decided from the photo (README: "Methods", image terms).
+"""Which image terms a fit uses, decided from the photo (docs/methods.md, "Image terms").
 
 The default fit starts from the model every photo needs (direct light) and adds a term only where the photo
 shows it: nested models compared at the fitted light, by the Bayesian information criterion of the fit's

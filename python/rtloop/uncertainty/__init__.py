@@ -6,7 +6,7 @@
 
 The Jacobian comes from central differences of rtloop's renderer (exact columns for albedos and
 speculars); parameters no used pixel fixes get None. The parameters are chosen in :mod:`.space`, the
-pixels in :mod:`.pixels`, the decomposition is :mod:`.linalg`'s. See the README.
+pixels in :mod:`.pixels`, the decomposition is :mod:`.linalg`'s. See docs/uncertainty.md.
 """
 
 from __future__ import annotations
