@@ -103,9 +103,9 @@ def main() -> None:
             fits, cpu = rate(jobs, **kw)
             batch.append((label, f"{fits:.1f}", f"{cpu:.1f}"))
     cases = sorted({Path(j["scene"]).parent.name for j in jobs})
-    text = ["# What a user waits for: one rtloop-fit, a batch's outputs",
+    text = [f"# `python benches/outputs.py --runs {args.runs} --jobs {args.jobs}`: one rtloop-fit, a batch's outputs",
             "",
-            f"`python benches/outputs.py --runs {args.runs} --jobs {args.jobs}` (package: {_where(rtloop.__file__)}); "
+            f"What a user waits for (package: {_where(rtloop.__file__)}); "
             f"{platform.machine()}, "
             f"{os.cpu_count()} cores, Python {platform.python_version()}; load average (1 min) at the end "
             f"{os.getloadavg()[0]:.1f}.",
