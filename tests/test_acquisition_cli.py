@@ -563,3 +563,17 @@ def test_scene_refuses_a_head_on_board_without_a_field_of_view(tmp_path, capsys,
     code, _, err = run(scene_main, capsys, path, "--board", BOARD, "--ball-radius", "0.08", "--out", tmp_path / "o")
     assert code == 1 and len(err.strip().splitlines()) == 1
     assert "head-on" in err and "--vfov" in err and "EXIF" in err
+
+
+def test_rtloop_scene_force_never_replaces_a_folder_holding_its_photo(tmp_path, capsys):
+    from rtloop.cli.scene import scene_main
+
+    out = tmp_path / "here"
+    out.mkdir()
+    photo = out / "photo.png"
+    rtloop.save_image(photo, np.full((48, 64, 3), 0.5, np.float32))
+    code = scene_main([str(photo), "--ball-radius", "0.1", "--vfov", "40", "--out", str(out), "--force"])
+    assert code == 1
+    err = capsys.readouterr().err
+    assert "refusing to replace it with --force" in err and len(err.strip().splitlines()) == 1
+    assert photo.is_file()

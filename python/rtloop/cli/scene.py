@@ -19,7 +19,7 @@ try:
 
     import numpy as np
 
-    from .._files import move_into_place, recover_leftovers, staging_dir
+    from .._files import OutputDirError, check_out_dir, move_into_place, recover_leftovers, staging_dir
     from ..acquisition._common import AcquisitionError, write_json, write_png8, write_png16_srgb
     from ..acquisition.boards import parse_board
     from ..acquisition.calibration import CameraIntrinsics
@@ -244,12 +244,11 @@ def _cmd_scene(args: argparse.Namespace) -> int:
     from ..acquisition.build import build_scene
 
     out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise AcquisitionError(f"{out}: exists and is not a directory")
-    if out.is_dir() and any(out.iterdir()) and not args.force:
-        raise AcquisitionError(
-            f"{out}: exists and is not empty; pass --force to replace it, or choose another --out"
-        )
+    inputs = [Path(p) for p in (args.photo, args.objective, args.camera, args.truth) if p]
+    try:  # never the working directory or one above it, nor with --force a DIR holding an input
+        check_out_dir(out, args.force, inputs)
+    except OutputDirError as e:
+        raise AcquisitionError(str(e)) from None
     load = {"response": args.response, "black_level": args.black_level, "white_level": args.white_level}
     photo = load_photo(args.photo, **load)
     objective = load_photo(args.objective, **load) if args.objective else None
