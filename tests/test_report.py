@@ -428,11 +428,14 @@ def test_cli_report_and_truth(tmp_path, capsys, speed_png):
     assert re.fullmatch(r"light position error: [\d.e+-]+ m", lines[-4]), lines[-4]
     # The photo fixes intensity x albedo only: those rows show "(split)", not an error, and say why.
     assert lines[-5].startswith("  (split): the photo fixes only the products of these"), lines[-5]
+    # The light's distance and direction from the subject, each with its sigma (determined here).
+    assert re.fullmatch(r"light from the subject: direction \+- [\d.e+-]+ deg, distance [\d.]+ m \+- [\d.e+-]+ m",
+                        lines[-6]), lines[-6]
     # What the error bars hold, below the table.
-    assert lines[-6].startswith("error bars (+-): block sandwich (correlated residuals) plus the pixel footprint"), \
-        lines[-6]
+    assert lines[-7].startswith("error bars (+-): block sandwich (correlated residuals) plus the pixel footprint"), \
+        lines[-7]
     fitted = json.loads((out / "result.json").read_text(encoding="utf-8"))["fit_report"]["fitted"]
-    table = lines[-6 - len(fitted):-6]
+    table = lines[-7 - len(fitted):-7]
     for (name, value), line in zip(fitted.items(), table):
         parts = line.split()
         assert parts[0] == name and float(parts[1]) == pytest.approx(value, rel=1e-5, abs=1e-9)
@@ -440,7 +443,7 @@ def test_cli_report_and_truth(tmp_path, capsys, speed_png):
         assert (parts[3] == "(split)") == split, line
         if not split:
             float(parts[3])  # an error in metres
-    assert table[0].split()[0] == "light.position.x" and "truth" in lines[-7 - len(fitted)]
+    assert table[0].split()[0] == "light.position.x" and "truth" in lines[-8 - len(fitted)]
     assert html_text.count("<td>split convention</td>") == 7 and "Split convention:" in html_text
 
     # A truth that does not match the scene is one clear line, before any fitting.
