@@ -34,7 +34,8 @@ pub const MAX_MESH_ELEMENTS: usize = 10_000_000;
 pub fn read_regular(path: &Path, limit: u64, what: &str) -> std::result::Result<Vec<u8>, String> {
     use std::io::Read;
     use std::os::unix::fs::OpenOptionsExt;
-    let not_regular = || format!("not a regular file (a directory, FIFO or device): not read as the {what} file");
+    let not_regular =
+        || format!("not a regular file (a directory, FIFO or device): not read as the {what} file");
     let meta = std::fs::metadata(path).map_err(|_| format!("cannot open the {what} file"))?;
     if !meta.is_file() {
         return Err(not_regular());
@@ -44,11 +45,14 @@ pub fn read_regular(path: &Path, limit: u64, what: &str) -> std::result::Result<
         .custom_flags(libc::O_NONBLOCK)
         .open(path)
         .map_err(|_| format!("cannot open the {what} file"))?;
-    let meta = file.metadata().map_err(|_| format!("cannot read the {what} file"))?;
+    let meta = file
+        .metadata()
+        .map_err(|_| format!("cannot read the {what} file"))?;
     if !meta.is_file() {
         return Err(not_regular());
     }
-    let too_big = |n: u64| format!("the {what} file is {n} bytes, more than the {limit} read (the limit)");
+    let too_big =
+        |n: u64| format!("the {what} file is {n} bytes, more than the {limit} read (the limit)");
     if meta.len() > limit {
         return Err(too_big(meta.len()));
     }
@@ -92,7 +96,11 @@ impl ply_rs_bw::ply::PropertyAccess for PlyItem {
         Self::default()
     }
 
-    fn set_property(&mut self, name: &str, property: ply_rs_bw::ply::Property) -> ply_rs_bw::ply::PropertyAccessResult {
+    fn set_property(
+        &mut self,
+        name: &str,
+        property: ply_rs_bw::ply::Property,
+    ) -> ply_rs_bw::ply::PropertyAccessResult {
         use ply_rs_bw::ply::Property as P;
         let list = |l: Vec<i64>| Some(l);
         let number = match property {
@@ -127,7 +135,10 @@ impl ply_rs_bw::ply::PropertyAccess for PlyItem {
 
 /// The fewest bytes one element of `def` takes in the file: a binary element's fixed-size properties and
 /// list counts, an ASCII element's one character and one separator per property.
-fn min_element_bytes(def: &ply_rs_bw::ply::ElementDef, encoding: ply_rs_bw::ply::Encoding) -> usize {
+fn min_element_bytes(
+    def: &ply_rs_bw::ply::ElementDef,
+    encoding: ply_rs_bw::ply::Encoding,
+) -> usize {
     use ply_rs_bw::ply::{PropertyType, ScalarType as S};
     let size = |s: &S| match s {
         S::Char | S::UChar => 1,
@@ -153,7 +164,10 @@ fn check_counts(header: &ply_rs_bw::ply::Header, body: usize) -> std::result::Re
     let mut total = 0usize;
     for def in header.elements.values() {
         total = total.saturating_add(def.count);
-        need = need.saturating_add(def.count.saturating_mul(min_element_bytes(def, header.encoding)));
+        need = need.saturating_add(
+            def.count
+                .saturating_mul(min_element_bytes(def, header.encoding)),
+        );
     }
     if total > MAX_MESH_ELEMENTS {
         return Err(format!(
@@ -170,7 +184,10 @@ fn check_counts(header: &ply_rs_bw::ply::Header, body: usize) -> std::result::Re
 
 /// A PLY parser's error in one line, without the file's text it quotes.
 fn ply_error(e: &ply_rs_bw::parser::ParseError) -> String {
-    let at = e.line().map(|l| format!(" at line {l}")).unwrap_or_default();
+    let at = e
+        .line()
+        .map(|l| format!(" at line {l}"))
+        .unwrap_or_default();
     let why = match e.kind() {
         std::io::ErrorKind::UnexpectedEof => "it ends early",
         _ => "malformed",
@@ -241,10 +258,11 @@ fn read_obj(bytes: &[u8]) -> std::result::Result<Vec<tobj::Model>, String> {
     };
     let mut reader = std::io::BufReader::new(std::io::Cursor::new(bytes));
     let no_materials = |_: &Path| Err(tobj::LoadError::OpenFileFailed);
-    let (models, _) = tobj::load_obj_buf(&mut reader, &opts, no_materials).map_err(|e| match e {
-        tobj::LoadError::ReadError => "cannot read the OBJ file".to_string(),
-        e => format!("not a valid OBJ file ({e})"),
-    })?;
+    let (models, _) =
+        tobj::load_obj_buf(&mut reader, &opts, no_materials).map_err(|e| match e {
+            tobj::LoadError::ReadError => "cannot read the OBJ file".to_string(),
+            e => format!("not a valid OBJ file ({e})"),
+        })?;
     let elements: usize = models
         .iter()
         .map(|m| m.mesh.positions.len() / 3 + m.mesh.indices.len() / 3)
@@ -266,7 +284,12 @@ pub fn load(field: &str, path: &Path, position: V3, scale: f64) -> Result<Arc<Me
         .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
     let kind = if is_ply { "PLY" } else { "OBJ" };
     let bytes = read_regular(path, MAX_MESH_BYTES, kind).map_err(err)?;
-    let models = if is_ply { read_ply(&bytes) } else { read_obj(&bytes) }.map_err(err)?;
+    let models = if is_ply {
+        read_ply(&bytes)
+    } else {
+        read_obj(&bytes)
+    }
+    .map_err(err)?;
     drop(bytes);
     let at = DVec3::from_array(position);
     let mut tris = Vec::new();
