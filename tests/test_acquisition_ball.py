@@ -228,6 +228,67 @@ def test_sphere_likeness_closed_form() -> None:
     assert sphere_likeness(image, cam, centre + [50, 0, 0], r) == 0.0  # out of the photo
 
 
+# --- a 12 MP photo ----------------------------------------------------------------------------------------
+
+#: A phone's 12 MP frame: larger than the size the ball is searched at (rtloop.acquisition.ball.working).
+BIG_W, BIG_H = 4032, 3024
+BIG_CASES = ["yellow-front-light", "back-light-dark-shadow", "paper-scene"]
+
+
+@pytest.fixture(scope="module")
+def big_photos() -> dict[str, tuple[dict, np.ndarray]]:
+    out = {}
+    for name in BIG_CASES:
+        scene = scene_for(CASES[name])
+        scene["image"] = {"width": BIG_W, "height": BIG_H}
+        out[name] = (scene, rtloop.render(scene, spp=4))
+    return out
+
+
+def big_truth(scene: dict) -> tuple[PinholeCamera, np.ndarray, float]:
+    cam = PinholeCamera.from_scene_camera(scene["camera"], BIG_W, BIG_H)
+    ball = scene["objects"][0]
+    return cam, np.array(ball["center"]), ball["radius"]
+
+
+@pytest.mark.parametrize("name", BIG_CASES)
+def test_ball_in_a_12_mp_photo(big_photos, name: str) -> None:
+    """The scenes of the small photos rendered at 4032 x 3024 (the paper scene's ball 800 px across): found
+    and placed as well as at 640 x 480, by both finders, with the outline on the photo's own pixels."""
+    scene, image = big_photos[name]
+    cam, centre, r = big_truth(scene)
+    distance = float(np.linalg.norm(centre - cam.position))
+    silhouette, sphere = locate_ball(image, cam, r)
+    assert (silhouette.width, silhouette.height) == (BIG_W, BIG_H)
+    assert np.linalg.norm(sphere.centre - centre) <= 0.01 * distance
+    assert silhouette.rms_px < 1.0
+    assert silhouette.coverage > 0.3
+    assert silhouette.alpha == pytest.approx(np.arcsin(r / distance), rel=0.01)
+    outline = find_ball(image, focal_px=cam.focal_px)
+    assert np.linalg.norm(outline.centre_px - cam.project(centre[None, :])[0]) < 0.5
+    assert np.linalg.norm(place_sphere(outline, cam, r).centre - centre) <= 0.01 * distance
+
+
+def test_hint_mask_and_their_errors_in_a_12_mp_photo(big_photos) -> None:
+    """A hint and a mask in the 12 MP photo's pixels seed the search there; a hint off the photo or a mask of
+    another size is one line naming the photo's own size."""
+    scene, image = big_photos["back-light-dark-shadow"]
+    cam, centre, r = big_truth(scene)
+    distance = float(np.linalg.norm(centre - cam.position))
+    k = BIG_W / W
+    uv = cam.project(centre[None, :])[0]
+    sil, sphere = locate_ball(image, cam, r, hint=(uv[0] + 8 * k, uv[1] - 5 * k, 30 * k))
+    assert sil.source == "hint"
+    assert np.linalg.norm(sphere.centre - centre) <= 0.01 * distance
+    sil, sphere = locate_ball(image, cam, r, mask=rtloop.object_ids(scene) == 0)
+    assert sil.source == "mask"
+    assert np.linalg.norm(sphere.centre - centre) <= 0.01 * distance
+    with pytest.raises(AcquisitionError, match=rf"outside the {BIG_W}x{BIG_H} photo"):
+        locate_ball(image, cam, r, hint=(BIG_W + 10, 100, 200))
+    with pytest.raises(AcquisitionError, match=rf"mask is 640x480 but the photo is {BIG_W}x{BIG_H}"):
+        find_ball(image, mask=np.ones((H, W), bool))
+
+
 # --- failures -----------------------------------------------------------------------------------------
 
 

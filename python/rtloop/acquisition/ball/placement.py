@@ -14,8 +14,9 @@ from .._common import AcquisitionError, check_image
 from ..camera import PinholeCamera
 from .cone import BallSilhouette, _cone_points, _gauss_newton, _project_cam, _rays_cam
 from .edges import MIN_EDGE_POINTS, _edge_image, _edges_across, _OutlineScore, _refine
-from .search import _NO_BALL_HELP, _pattern_search, _seeds
+from .search import _NO_BALL_HELP, _checked_hint, _pattern_search, _seeds
 from .shading import sphere_likeness
+from .working import Working, working_size
 
 #: Least outline score (mean edge support along the predicted outline, 0..1) for a ball to be accepted.
 MIN_OUTLINE_SCORE = 0.4
@@ -149,7 +150,8 @@ def locate_ball(
     than floor (:func:`rtloop.acquisition.ball.shading.sphere_likeness`): its own shadow is a crisp,
     ball-sized outline too, seen from above on a stronger edge, but holds floor. The chosen position is then
     refined by least squares on the edge points along the outline. With ``resting=False`` a last fit frees
-    the centre's height.
+    the centre's height. A photo larger than :data:`.working.WORK_SIDE` pixels is searched in a copy of that
+    size, and the outline refined on the photo itself.
 
     Args:
         hint, mask: as for :func:`find_ball` (seed the search there instead of Hough circles).
@@ -171,8 +173,45 @@ def locate_ball(
             f"{where}: photo is {w}x{h} but the camera was posed on a {camera.width}x{camera.height} image; "
             "use the same (undistorted) photo for the board and the ball"
         )
+    size = working_size(w, h)
+    if size is None:
+        feat = _edge_image(image)
+        p, source, info = _search(image, feat, camera, radius, hint, mask, floor_height, exclude, keep_off, where)
+        return _finish(feat, camera, radius, p, source, info, resting, floor_height, where)
+    # A large photo: searched in a smaller copy, the outline then refined on the photo.
+    work = Working((w, h), size)
+    small = work.image(image)
+    small_feat, small_camera = _edge_image(small), camera.resized(*size)
+    p, source, info = _search(
+        small, small_feat, small_camera, radius,
+        work.hint(None if hint is None else _checked_hint(hint, h, w, where)), work.mask(mask, where),
+        floor_height, work.polygon(exclude), keep_off, where,
+    )
+    # Refined on the copy's edges first (a pixel of the copy is several of the photo's: the photo's
+    # edges are then taken within as many pixels of the outline, and the fit tightens from there).
+    q, edges, chosen = _refined(small_feat, small_camera, radius, p, floor_height, 1.5)
+    if edges is not None and len(chosen) >= MIN_EDGE_POINTS:
+        p = q
+    return _finish(_edge_image(image), camera, radius, p, source, info, resting, floor_height, where,
+                   tol=1.5 * max(work.sx, work.sy))
+
+
+def _search(
+    image: np.ndarray,
+    feat: np.ndarray,
+    camera: PinholeCamera,
+    radius: float,
+    hint: tuple[float, float, float] | None,
+    mask: np.ndarray | None,
+    floor_height: float,
+    exclude: np.ndarray | None,
+    keep_off: tuple[float, float, float, float] | None,
+    where: str,
+) -> tuple[np.ndarray, str, dict[str, Any]]:
+    """:func:`locate_ball`'s search: the ball's floor position (x, z), the source of its seed, and the
+    scores that chose it."""
+    h, w = image.shape[:2]
     f = camera.focal_px
-    feat = _edge_image(image)
     score = _OutlineScore(feat)
     height = floor_height + radius
     model, centre_of = _world_model(camera, radius, height)
@@ -251,14 +290,28 @@ def locate_ball(
             f"{_NO_BALL_HELP}"
         )
     likeness, outline_score, p, source = max(accepted, key=lambda item: item[0])
-    # Edge points across the found outline, then least squares on those near it (the exact fit).
-    centre = centre_of(p)
-    axis, alpha = _cone_of_centre(camera, centre, radius)
-    provisional = BallSilhouette(axis, alpha, f, w, h, np.zeros((0, 2)), 0.0, 0.0, source)
-    edges = _edges_across(feat, provisional, f)
-    chosen = np.zeros(0, int)
-    if edges is not None:
-        p, chosen = _refine(model, p, edges, f, 1.5)
+    return p, source, {"outline_score": outline_score, "sphere_likeness": likeness, "hypotheses": len(accepted)}
+
+
+def _finish(
+    feat: np.ndarray,
+    camera: PinholeCamera,
+    radius: float,
+    p: np.ndarray,
+    source: str,
+    info: dict[str, Any],
+    resting: bool,
+    floor_height: float,
+    where: str,
+    tol: float = 1.5,
+) -> tuple[BallSilhouette, SpherePlacement]:
+    """The found floor position ``p`` refined by least squares on the edge points across its outline in
+    ``feat`` (the edge image of the photo ``camera`` sees; first those within ``tol`` pixels of it), and
+    the sphere placed."""
+    h, w = feat.shape[:2]
+    f = camera.focal_px
+    model, centre_of = _world_model(camera, radius, floor_height + radius)
+    p, edges, chosen = _refined(feat, camera, radius, p, floor_height, tol)
     if edges is None or len(chosen) < MIN_EDGE_POINTS:
         raise AcquisitionError(f"{where}: the ball's outline has too few sharp edge points; {_NO_BALL_HELP}")
     points = edges.points[chosen]
@@ -271,8 +324,24 @@ def locate_ball(
     res = (np.arccos(np.clip(edges.rays[chosen] @ axis, -1, 1)) - alpha) * f
     rms = float(np.sqrt(np.mean(res**2)))
     final = BallSilhouette(
-        axis, alpha, f, w, h, points, rms, len(chosen) / edges.k, source,
-        {"outline_score": outline_score, "sphere_likeness": likeness, "hypotheses": len(accepted)},
+        axis, alpha, f, w, h, points, rms, len(chosen) / edges.k, source, info,
     )
     placement = SpherePlacement(centre, float(radius), resting, rms, float(centre[1] - floor_height))
     return final, placement
+
+
+def _refined(
+    feat: np.ndarray, camera: PinholeCamera, radius: float, p: np.ndarray, floor_height: float, tol: float
+) -> tuple[np.ndarray, Any, np.ndarray]:
+    """The resting ball's floor position ``p`` refined on the edge points across its outline within ``tol``
+    pixels (:func:`.edges._refine`), the edge candidates (None: none) and the indices of those used."""
+    h, w = feat.shape[:2]
+    f = camera.focal_px
+    model, centre_of = _world_model(camera, radius, floor_height + radius)
+    axis, alpha = _cone_of_centre(camera, centre_of(p), radius)
+    provisional = BallSilhouette(axis, alpha, f, w, h, np.zeros((0, 2)), 0.0, 0.0, "")
+    edges = _edges_across(feat, provisional, f)
+    if edges is None:
+        return p, None, np.zeros(0, int)
+    p, chosen = _refine(model, p, edges, f, tol)
+    return p, edges, chosen

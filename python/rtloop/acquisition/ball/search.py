@@ -20,6 +20,7 @@ from .cone import (
     silhouette_polyline,
 )
 from .edges import MIN_EDGE_POINTS, _edge_image, _Edges, _profile_edges, _ransac, _refine
+from .working import Working, working_size
 
 #: Least fraction of the outline (by angle) that must show a consistent edge.
 MIN_COVERAGE = 0.3
@@ -58,8 +59,14 @@ def _fit_candidate(
     x, chosen, _ = _ransac(_cone_model, [x0], minimal, edges, f, 3, 200, tol)
     if len(chosen) < MIN_EDGE_POINTS or not (0 < x[2] < np.pi / 2):
         return None
-    sil = _make_silhouette(x, edges, chosen, f, w, h, source)
-    # Second pass: profiles from the fitted outline's centre, searched close to it.
+    return _refit_near(feat, _make_silhouette(x, edges, chosen, f, w, h, source), x, k, tol)
+
+
+def _refit_near(feat: np.ndarray, sil: BallSilhouette, x: np.ndarray, k: int, tol: float) -> BallSilhouette:
+    """The cone ``x`` refitted to edges on ``k`` profiles from the outline's centre, searched close to the
+    outline ``sil`` (``sil`` where too few are found)."""
+    h, w = feat.shape[:2]
+    f = sil.focal_px
     centre = sil.centre_px
     poly = silhouette_polyline(sil, 720)
     rel = poly - centre
@@ -73,7 +80,7 @@ def _fit_candidate(
     x2, chosen2 = _refine(_cone_model, x, edges2, f, tol)
     if len(chosen2) < MIN_EDGE_POINTS or not (0 < x2[2] < np.pi / 2):
         return sil
-    return _make_silhouette(x2, edges2, chosen2, f, w, h, source)
+    return _make_silhouette(x2, edges2, chosen2, f, w, h, sil.source)
 
 
 def _make_silhouette(
@@ -138,7 +145,8 @@ def find_ball(
     exclude: np.ndarray | None = None,
     where: str = "photo",
 ) -> BallSilhouette:
-    """Find the ball's outline in a linear RGB photo of a centred pinhole camera.
+    """Find the ball's outline in a linear RGB photo of a centred pinhole camera (a photo larger than
+    :data:`.working.WORK_SIDE` pixels: in a copy of that size, the outline then refined on the photo).
 
     Args:
         image: float (H, W, 3) linear RGB.
@@ -156,6 +164,23 @@ def find_ball(
     image = check_image(image, where)
     h, w = image.shape[:2]
     f = float(focal_px) if focal_px else float(max(w, h))
+    size = working_size(w, h)
+    if size is not None:  # a large photo: searched in a smaller copy, refined on the photo
+        work = Working((w, h), size)
+        found = find_ball(
+            work.image(image),
+            focal_px=f / work.sy,
+            hint=work.hint(None if hint is None else _checked_hint(hint, h, w, where)),
+            mask=work.mask(mask, where),
+            radius_range_px=None if radius_range_px is None else (
+                radius_range_px[0] / work.sx, radius_range_px[1] / work.sx),
+            exclude=work.polygon(exclude),
+            where=where,
+        )
+        sil = work.silhouette(found, f)
+        x = np.array([sil.axis[0] / sil.axis[2], sil.axis[1] / sil.axis[2], sil.alpha])
+        r = sil.radius_px
+        return _refit_near(_edge_image(image), sil, x, int(np.clip(2 * np.pi * r, 64, 720)), max(1.0, 0.02 * r))
     feat = _edge_image(image)
     candidates: list[tuple[float, float, float, str]] = []
     if mask is not None:
