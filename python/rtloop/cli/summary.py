@@ -61,16 +61,20 @@ def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = 
         lines.append(f"  {'':<{width}}  {'fitted':>12}  {'truth':>12}  {'error':>12}")
     u = result.uncertainty or {}
     boot = u.get("bootstrap") or {}
-    bars = (u.get("robust") or {}).get("sigma") or {}  # the block sandwich's, or the bootstrap's where run
+    robust = u.get("robust") or {}
+    # the block sandwich's, or the bootstrap's where run
+    bars = {k: v for k, v in (robust.get("sigma") or {}).items() if v is not None}
     bars_note = None
-    if boot.get("sigma"):
+    if not bars and robust.get("why_none") and not boot.get("sigma"):
+        bars_note = f"no error bars: {robust['why_none']}"
+    elif boot.get("sigma"):
         bars = {**bars, **boot["sigma"]}
         bars_note = (f"error bars (+-): block bootstrap ({boot['replicates']} refits on {boot['block_px']} px blocks, "
                      f"seed {boot['seed']}, {boot['ms']:.0f} ms)")
     elif boot.get("warnings"):
         bars_note = f"error bars (+-): block sandwich (the bootstrap did not run: {boot['warnings'][0]})"
     elif bars:
-        shift = (u.get("robust") or {}).get("footprint_shift") or {}
+        shift = robust.get("footprint_shift") or {}
         light = [shift.get(f"light.position.{c}") for c in "xyz"]
         moved = (f", {1e3 * float(np.linalg.norm(light)):.2g} mm on the light" if all(v is not None for v in light)
                  else "")

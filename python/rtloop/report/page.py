@@ -588,6 +588,9 @@ def _fit_report_section(page: _Page, result: Any, terr: dict[str, Any] | None, i
                             else ""))
             heads.append(f"sigma (block bootstrap: {boot.get('replicates')} refits, {_fmt(boot.get('ms'), 3)} ms)")
         page.add(_table(heads, body))
+        for key, lead in (("why_none", "No block-sandwich error bars: "), ("smaller_blocks", "Block sandwich: ")):
+            if isinstance(robust, dict) and robust.get(key):
+                page.add(f"<p class='note'>{html.escape(lead + str(robust[key]))}</p>")
         for w in (uncertainty.get("warnings", []) if isinstance(uncertainty, dict) else []):
             page.add(f"<p class='note'>{html.escape(str(w))}</p>")
 

@@ -71,25 +71,35 @@ def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, 
     and reported as ``footprint_shift``. Each sigma is the larger of this and the Gauss-Newton one (the
     sandwich is the noisier estimate).
 
+    Where the blocks of side ``block`` are no more than the parameters (many objects, each with its own
+    colour), the side is halved, down to BLOCK_PX, until they are more than twice as many (``block_px`` is
+    the side used, ``smaller_blocks`` says why). Where even then they are not more than the parameters the
+    covariance cannot be formed: every sigma is None and ``why_none`` says why in one line.
+
     Residual rows left out are zero in ``Jt`` and ``r0`` (they count in no sum). Returns the JSON-able
-    block and a copy of ``fit`` carrying the robust covariance (None where it cannot be formed: too few
-    blocks for the parameters)."""
+    block and a copy of ``fit`` carrying the robust covariance (None where it cannot be formed)."""
     t0 = time.perf_counter()
     out: dict[str, Any] = {"method": "sandwich-blocks", "norm": "l2", "bandwidth": None, "block_px": int(block),
                            "blocks": 0, "sigma": {n: None for n in names}, "inflation": {n: None for n in names},
                            "light_position_m": None, "footprint_shift": {n: None for n in names}}
     if fit.cov is None:
+        out["why_none"] = "Gauss-Newton's covariance could not be formed (see the warnings)"
         out["seconds"] = time.perf_counter() - t0
         return out, None
     p = fit.idx_p.size
-    y, x = np.divmod(idx, width)
-    nbx = -(-width // block)
-    bid = (y // block) * nbx + x // block
-    present = np.bincount(bid) > 0
-    bid = (np.cumsum(present) - 1)[bid]  # the blocks that hold used pixels, numbered in order (no sort)
-    nb = int(present.sum())
-    out["blocks"] = int(nb)
+    bid, nb = _block_ids(idx, width, block)
+    if nb <= p and block > BLOCK_PX:
+        first = (block, nb)
+        while block > BLOCK_PX and nb <= 2 * p:
+            block = max(BLOCK_PX, block // 2)
+            bid, nb = _block_ids(idx, width, block)
+        out["smaller_blocks"] = (f"{block} px blocks, not {first[0]} px: the {first[1]} blocks of {first[0]} px "
+                                 f"that hold used pixels are no more than the {p} parameters")
+    out["block_px"], out["blocks"] = int(block), int(nb)
     if nb <= p:
+        out["why_none"] = (f"too few image blocks for the parameters: the block sandwich needs more blocks holding "
+                           f"used pixels than fitted parameters, and {nb} blocks of {block} px hold them for {p} "
+                           "parameters (fit fewer parameters, e.g. fewer objects' colours, or a larger photo)")
         out["seconds"] = time.perf_counter() - t0
         return out, None
     bid = bid.astype(np.int64, copy=False)
@@ -123,6 +133,15 @@ def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, 
         out["light_position_m"] = float(np.sqrt(max(np.linalg.eigvalsh(cov[np.ix_(at, at)])[-1], 0.0)))
     out["seconds"] = time.perf_counter() - t0
     return out, replace(fit, cov=cov)
+
+
+def _block_ids(idx: np.ndarray, width: int, block: int) -> tuple[np.ndarray, int]:
+    """Each used pixel's block, the blocks that hold used pixels numbered in order, and their count."""
+    y, x = np.divmod(idx, width)
+    nbx = -(-width // block)
+    bid = (y // block) * nbx + x // block
+    present = np.bincount(bid) > 0
+    return (np.cumsum(present) - 1)[bid], int(present.sum())  # no sort
 
 
 def _l1_bread(Jt: np.ndarray, r0: np.ndarray, fit: Any, out: dict[str, Any]) -> np.ndarray | None:
