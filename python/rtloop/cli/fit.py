@@ -29,6 +29,7 @@ from rtloop.fit import PROTOCOLS
 from rtloop.fit.files import fit_inputs, load_inputs
 from rtloop.fit.protocol import LIMITS, max_threads
 from rtloop.report import truth_errors, truth_values
+from rtloop.uncertainty.bootstrap import STAGE as BOOTSTRAP, replicate_of
 
 from .args import Parser, UsageError, float_in, generations, int_at_least, int_in, norm
 from .outputs import GenerationLog, input_paths, render_final, write_result
@@ -302,6 +303,28 @@ class _Progress:
         elif info.generation % self.EVERY == 0 or last:
             print(line, file=self.stream, flush=True)
 
+    def refit(self, replicate: int, replicates: int, generation: int) -> None:
+        """A generation of the block bootstrap's refit ``replicate`` of ``replicates``: a line as each refit
+        starts (on a terminal one updating line)."""
+        if not self.enabled:
+            return
+        if self.stage != BOOTSTRAP:
+            self.stage = BOOTSTRAP
+            self.stages += 1
+            self.message(f"stage {self.stages} '{BOOTSTRAP}': {replicates} closed-form refits on resampled "
+                         "image blocks (--uncertainty bootstrap)")
+        now = time.perf_counter()
+        line = f"  {BOOTSTRAP}  refit {replicate}/{replicates}  gen {generation}  {_duration(now - self.start)}"
+        if self.tty:
+            if generation == 0 or now - self.last_draw >= self.TTY_INTERVAL:
+                pad = max(0, self.open_line - len(line))
+                self.stream.write("\r" + line + " " * pad)
+                self.stream.flush()
+                self.open_line = len(line)
+                self.last_draw = now
+        elif generation == 0:
+            print(line, file=self.stream, flush=True)
+
 
 # --- output directory ------------------------------------------------------------------------------------
 
@@ -419,6 +442,10 @@ class _Run:
             def callback(info: Any) -> None:
                 if self.stop.is_set():
                     raise _Interrupted()
+                refit = replicate_of(info.stage)
+                if refit is not None:  # the bootstrap's refits: progress only (not the fit's search)
+                    self.progress.refit(*refit, info.generation)
+                    return
                 params = log(info)
                 rows.append((info.stage, info.generation, float(info.fitness), params))
                 self.progress.generation(info)

@@ -15,6 +15,7 @@ import rtloop
 from rtloop import _native
 from rtloop._files import write_json
 from rtloop.acquisition.raw import is_raw, raw_settings
+from rtloop.uncertainty.bootstrap import replicate_of
 
 __all__ = ["GenerationLog", "input_paths", "render_final", "result_json", "write_final", "write_result"]
 
@@ -88,8 +89,11 @@ class GenerationLog:
         self._csv = csv.writer(self._fh)
         self._csv.writerow(["stage", "generation", "evaluations", "fitness", *scene.param_names()])
 
-    def __call__(self, info: Any) -> np.ndarray:
-        """Log one generation; returns its parameters as float64."""
+    def __call__(self, info: Any) -> np.ndarray | None:
+        """Log one generation of the fit's search; returns its parameters as float64 (the block bootstrap's
+        refits are not logged: None)."""
+        if replicate_of(info.stage) is not None:
+            return None
         params = np.asarray(info.params, dtype=np.float64)
         self._csv.writerow([info.stage, info.generation, info.evaluations, repr(float(info.fitness)),
                             *(repr(float(v)) for v in params)])

@@ -101,7 +101,8 @@ def fit(
     1-sigma estimates (Gauss-Newton at the optimum, scaled by the residual, and the block sandwich) to the
     result: ``True`` or ``"default"`` (a few ms), ``"bootstrap"`` also the spatial block bootstrap (tens of
     closed-form refits on resampled image blocks, seeded by ``seed``; ``result.uncertainty["bootstrap"]``,
-    see :mod:`rtloop.uncertainty.bootstrap`), ``False`` or ``"off"`` none. ``optimizer``
+    see :mod:`rtloop.uncertainty.bootstrap`; ``callback`` runs after each of their generations too, its stage
+    ``"bootstrap R/N"``), ``False`` or ``"off"`` none. ``optimizer``
     ("de" or "lshade") and ``polish`` (Nelder-Mead evaluations) override the protocol's search for the
     closed-form method. ``mask`` (bool (H, W), True = use) leaves out pixels the scene does not model
     (another object, a reflection, the photographer's shadow): they count in no loss and no solve.
@@ -309,7 +310,7 @@ def fit(
             try:
                 shift = (result.uncertainty.get("robust") or {}).get("footprint_shift")
                 result.uncertainty["bootstrap"] = block_bootstrap(result, target, use, seed=seed, threads=threads,
-                                                                  shift=shift)
+                                                                  shift=shift, callback=callback)
             except RtloopError as e:
                 result.uncertainty["bootstrap"] = {"method": "block-bootstrap", "sigma": {}, "warnings": [str(e)]}
     result.seconds = time.perf_counter() - t0

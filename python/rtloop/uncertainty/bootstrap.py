@@ -13,6 +13,8 @@ Deterministic for a seed (the blocks drawn and every refit's search are seeded f
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -23,15 +25,18 @@ from ..fit.gauge import hold_gauges
 from ..fit.identifiability import identifiability
 from ..fit.products import products_of
 from ..fit.protocol import PROTOCOLS, budget, choose_method, searched_paths
+from ..fit.result import GenerationInfo
 from ..fit.stages import Stages
 from ..scene import Scene, scene_to_dict
 from .sandwich import block_side
 
-__all__ = ["REPLICATES", "block_bootstrap"]
+__all__ = ["REPLICATES", "STAGE", "block_bootstrap", "replicate_of"]
 
 #: Replicates of the block bootstrap (the sigma of a standard deviation from n draws is about 1 / sqrt(2 n):
 #: 13 % at 30).
 REPLICATES = 30
+#: The callback's stage name for the refits: ``"bootstrap R/N"``.
+STAGE = "bootstrap"
 #: Each refit searches the light within +-this fraction of its bound range around the fitted light.
 BOX_FRACTION = 0.05
 #: The refit's search (population, generations, Nelder-Mead polish evaluations) for 3 searched parameters;
@@ -41,7 +46,8 @@ REFIT_BUDGET = (8, 6, 200)
 
 def block_bootstrap(result: Any, target: np.ndarray, use: np.ndarray | None, *, seed: int = 0,
                     replicates: int = REPLICATES, threads: int | None = None,
-                    shift: dict[str, float | None] | None = None) -> dict[str, Any]:
+                    shift: dict[str, float | None] | None = None,
+                    callback: Callable[[GenerationInfo], Any] | None = None) -> dict[str, Any]:
     """The block bootstrap's sigma of a closed-form fit ``result`` (a :class:`rtloop.FitResult` from
     :func:`rtloop.fit`) of ``target`` (linear float (H, W, 3)) on the pixels ``use`` (indices; None: all).
 
@@ -54,7 +60,13 @@ def block_bootstrap(result: Any, target: np.ndarray, use: np.ndarray | None, *, 
     :func:`rtloop.uncertainty.estimate_uncertainty`), which every replicate shares and their spread cannot
     show: ``sigma`` and ``light_position_m`` then hold it as a mean squared error (the spread's variance plus
     the shift squared; the light's covariance plus its outer product), ``shift_included`` the names it
-    entered."""
+    entered.
+
+    ``callback(GenerationInfo)`` runs after every generation of every refit (as a fit's: the GIL is taken
+    only then), its ``stage`` ``"bootstrap R/N"`` (:func:`replicate_of` reads R and N back) and its ``params``
+    the refit's values of the fit parameters of its scene (the fit's, the gauges held). An exception it
+    raises ends the bootstrap within that generation's refit; returning False ends it after that
+    generation, with no sigma and a warning that says so."""
     t0 = time.perf_counter()
     if not isinstance(replicates, int) or isinstance(replicates, bool) or replicates < 2:
         raise RtloopError(f"replicates: must be an integer >= 2 (got {replicates!r})")
@@ -94,14 +106,27 @@ def block_bootstrap(result: Any, target: np.ndarray, use: np.ndarray | None, *, 
     names = [f"light.position.{c}" for c in "xyz"]
     names += [f"products.{o['name']}.{c}" for o in d["objects"] for c in "rgb"]
     rows = []
-    for _ in range(replicates):
+    stopped: list[int] = []
+    for k in range(replicates):
+        name = f"{STAGE} {k + 1}/{replicates}"
+        watch = None
+        if callback is not None:
+            def watch(info: GenerationInfo, name: str = name, k: int = k) -> bool:
+                if callback(replace(info, stage=name)) is False:
+                    stopped.append(k)
+                    return False
+                return True
         drawn = rng.integers(0, nb, nb)
         pixels = np.sort(np.concatenate([members[i] for i in drawn])).astype(np.uint32)
         st = Stages(box, target, pixels, None, b, ident, clip=settings.get("clip", True),
                     norm=settings.get("norm", "l1"), space=settings.get("space", "linear"), threads=threads,
                     pixels_per_object=settings.get("pixels_per_object", 0), rng=np.random.default_rng(0),
-                    callback=None, footprint=_footprint_mode(settings.get("footprint", "off")))
-        refit = scene_to_dict(st.projected(int(rng.integers(0, 2**63 - 1)), environment=env, name="bootstrap"))
+                    callback=watch, footprint=_footprint_mode(settings.get("footprint", "off")))
+        refit = scene_to_dict(st.projected(int(rng.integers(0, 2**63 - 1)), environment=env, name=name))
+        if stopped:
+            return {"method": "block-bootstrap", "replicates": k, "sigma": {}, "seed": int(seed),
+                    "seconds": time.perf_counter() - t0, "ms": 1e3 * (time.perf_counter() - t0),
+                    "warnings": [f"the callback stopped the bootstrap in refit {k + 1} of {replicates}: no sigma"]}
         prods = products_of(refit)
         rows.append([*refit["light"]["position"], *(v for o in d["objects"] for v in prods[o["name"]])])
     vals = np.array(rows, dtype=np.float64)
@@ -126,6 +151,15 @@ def block_bootstrap(result: Any, target: np.ndarray, use: np.ndarray | None, *, 
             "values": {n: vals[:, i].tolist() for i, n in enumerate(names)},
             "shift_included": [n for n, k in zip(names, known) if k],
             "seconds": seconds, "ms": 1e3 * seconds, "warnings": warnings}
+
+
+def replicate_of(stage: str) -> tuple[int, int] | None:
+    """(R, N) of a bootstrap refit's stage name ``"bootstrap R/N"``; None for any other stage."""
+    head, _, count = stage.partition(" ")
+    done, _, total = count.partition("/")
+    if head != STAGE or not (done.isdigit() and total.isdigit()):
+        return None
+    return int(done), int(total)
 
 
 def _footprint_mode(recorded: object) -> str:
