@@ -1,7 +1,17 @@
 """A fuzz campaign over the Python API (scenes, render()/fit() arguments, image arrays, CLI arguments via
 main() in-process, batch job lines and ids via rtloop-fit --batch, mesh files, EXIF focal tags,
-rtloop-insert arguments) for a developer to run for minutes; prints the counts (--only batch: job lines
-alone). Not a test: see docs/development.md."""
+rtloop-insert arguments, rtloop-scene's --strict refusal of a field of view estimated from the board alone)
+for a developer to run for minutes; prints the counts. ``--only SURFACE[,SURFACE...]`` runs only those
+surfaces (``batch``: job lines, ``ids``: job ids, ``mesh``, ``insert``, ``exif``, ``strict``), each input on
+the next in turn; ``--out FILE`` also writes the counts per surface as markdown headed by the command.
+
+What counts as a finding, by kind: ``data loss`` (a batch that deleted, changed or wrote beside its folder,
+rtloop-insert writing beside --out or losing an input, rtloop-scene writing beside --out), ``wrong answers
+reported as ok`` (a non-finite or out-of-bounds fit, a non-positive focal length from EXIF, --strict passing a
+field of view looser than its target or one the plain estimate refuses, rtloop-scene exiting 0 with
+--strict on a board-only estimate looser than the target), ``tracebacks`` (an exception other than
+RtloopError, a panic, a command's error that is not one line), ``hangs`` (an input that took longer than
+``--bound`` seconds). Not a test: see docs/development.md."""
 
 from __future__ import annotations
 
@@ -12,10 +22,12 @@ import io
 import json
 import math
 import os
+import platform
 import random
 import shutil
 import sys
 import tempfile
+import time
 import traceback
 import warnings
 from pathlib import Path
@@ -229,14 +241,16 @@ def _tree(root: Path) -> dict:
     return {str(p.relative_to(root)): p.read_bytes() if p.is_file() else None for p in sorted(root.rglob("*"))}
 
 
-def batch(rng: random.Random, c: Counts, tmp: Path) -> None:
-    """rtloop-fit --batch on a few random job lines, in a folder with a file the batch did not write: it fits
-    or says one line; it writes only inside its output folder and deletes or changes nothing else."""
+def batch(rng: random.Random, c: Counts, tmp: Path, ids: bool = False) -> None:
+    """rtloop-fit --batch on a few random job lines (``ids``: lines that differ in their ids), in a folder with
+    a file the batch did not write: it fits or says one line; it writes only inside its output folder and
+    deletes or changes nothing else."""
     root = tmp / "batch"
     shutil.rmtree(root, ignore_errors=True)
     (root / "out" / "keep").mkdir(parents=True)
     (root / "out" / "keep" / "notes.txt").write_text("keep me")
-    (root / "jobs.jsonl").write_text("\n".join(job_line(rng) for _ in range(rng.randint(1, 3))) + "\n")
+    lines = id_lines(rng) if ids else [job_line(rng) for _ in range(rng.randint(1, 3))]
+    (root / "jobs.jsonl").write_text("\n".join(lines) + "\n")
     flags = [] if rng.random() < 0.5 else rng.choice([["--warm-start"], ["--retry-failed"], ["--threads", str(odd(rng))],
                         ["--final-spp", str(odd(rng))], ["--population", str(odd(rng))]])
     before, top = {**_tree(tmp / "outside"), **_tree(root)}, set(os.listdir(tmp))
@@ -258,8 +272,115 @@ def batch(rng: random.Random, c: Counts, tmp: Path) -> None:
         c.bump("batch_wrote_outside")
 
 
+def id_lines(rng: random.Random) -> list[str]:
+    """Job lines that differ in their ids: odd ones, repeated ones, ids that name files or folders."""
+    ids = [rng.choice(JOB_IDS) if rng.random() < 0.8 else odd(rng) for _ in range(rng.randint(1, 4))]
+    if rng.random() < 0.3:
+        ids.append(ids[0])  # a repeated id
+    return [json.dumps({"id": i, "scene": "../scene.json", "photo": "../photo.png"}) for i in ids]
+
+
+STRICT_FLAGS = ["--strict", "--vfov", "--ball", "--ball-radius", "--ball-free", "--force", "--width"]
+
+
+def _strict_estimate(rng: random.Random, c: Counts) -> None:
+    """The board-only field of view on projected corners (any view, tilt, noise, corners missing): --strict
+    passes only an estimate within the target, the plain one's, and refuses whatever the plain one refuses."""
+    import cv2
+
+    from rtloop.acquisition import AcquisitionError
+    from rtloop.acquisition.boards import BoardDetection
+    from rtloop.acquisition.camera import centred_camera_matrix, focal_from_vfov
+    from rtloop.acquisition.pose import VFOV_LIMIT_DEG, VFOV_TARGET_DEG, estimate_focal_from_board
+
+    w, h = rng.choice([(800, 600), (64, 48), (4032, 3024), (600, 800)])
+    gx, gy = np.meshgrid(np.arange(rng.randint(2, 9)), np.arange(rng.randint(2, 7)))
+    obj = np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)]) * rng.choice([0.01, 0.06, 0.3])
+    keep = sorted(rng.sample(range(len(obj)), rng.randint(min(3, len(obj)), len(obj))))
+    tilt = math.radians(rng.choice([0.0, 0.3, rng.uniform(0, 80)]))
+    k = centred_camera_matrix(focal_from_vfov(rng.uniform(5, 120), h), w, h)
+    img, _ = cv2.projectPoints(obj[keep] - obj.mean(axis=0), np.array([tilt, rng.uniform(-0.3, 0.3), 0.0]),
+                               np.array([0.0, 0.0, rng.uniform(0.1, 10)]), k, np.zeros(5))
+    noise = rng.choice([0.0, 0.05, 0.3, 1.0, rng.uniform(0, 20)])
+    img = img.reshape(-1, 2) + np.random.default_rng(rng.randrange(2**32)).normal(0, noise, (len(keep), 2))
+    det = BoardDetection(img.astype(np.float32), obj[keep].astype(np.float32), np.array(keep))
+    got = {}
+    for strict in (False, True):
+        try:
+            got[strict] = estimate_focal_from_board(det, w, h, strict=strict)
+        except AcquisitionError as e:
+            if "\n" in str(e) or "--vfov" not in str(e):
+                c.bump("traceback_not_one_line")
+            got[strict] = None
+    c.bump("strict_used" if got[True] is not None else "strict_refused")
+    if got[True] is not None and not (got[True] == got[False] and math.isfinite(got[True][0])
+                                      and got[True][0] > 0 and got[True][1] <= VFOV_TARGET_DEG):
+        c.bump("wrong_ok")
+        print("--strict passed", got, file=sys.stderr)
+    if got[False] is not None and not (math.isfinite(got[False][0]) and got[False][1] <= VFOV_LIMIT_DEG):
+        c.bump("wrong_ok")
+
+
+def _strict_cli(rng: random.Random, c: Counts, tmp: Path) -> None:
+    """rtloop-scene on a photo without EXIF, --strict and the other camera and ball flags at random: exit 0, 1
+    or 2 with one line, nothing beside --out; a scene made with --strict from the board alone is within the
+    target."""
+    from rtloop.acquisition.pose import VFOV_TARGET_DEG
+    from rtloop.cli.scene import scene_main
+
+    work = tmp / "scn"
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir()
+    argv = [str(tmp / "board_photo.png"), "--board", SCENE_BOARD, "--ball-radius", "0.08", "--out", str(work / "o"),
+            "--width", "80"]
+    strict = rng.random() < 0.7
+    if strict:
+        argv.append("--strict")
+    for _ in range(rng.randint(0, 2)):
+        flag = rng.choice(STRICT_FLAGS[1:])
+        value = rng.choice([str(odd(rng)), "50", "0.08", "400,300,40", "x"])
+        argv += [flag] if flag in ("--force", "--ball-free") else [flag, value]
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        try:
+            code = scene_main(argv)
+        except SystemExit as e:
+            code = e.code
+    text = err.getvalue()
+    c.bump(f"scene_exit_{code}")
+    if code not in (0, 1, 2) or "Traceback" in text or (code == 1 and len(text.strip().splitlines()) != 1):
+        c.bump("traceback_not_one_line")
+        print("rtloop-scene:", code, text[:300], file=sys.stderr)
+    if set(os.listdir(work)) - {"o"}:
+        c.bump("data_loss")
+    if code == 0 and strict:
+        meta = json.loads((work / "o" / "scene.json").read_text())["meta"]["acquisition"]
+        std = (meta.get("pose") or {}).get("vfov_std_deg")
+        if meta.get("camera_model") == "board" and not (std is not None and std <= VFOV_TARGET_DEG):
+            c.bump("wrong_ok")
+            print("--strict made a scene from a loose board estimate:", std, file=sys.stderr)
+
+
+def _strict(rng: random.Random, c: Counts, tmp: Path) -> None:
+    if rng.random() < 0.05:
+        _strict_cli(rng, c, tmp)
+    else:
+        _strict_estimate(rng, c)
+
+
+SURFACES = ("batch", "ids", "mesh", "insert", "exif", "strict")
+
+
 def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None = None) -> None:
-    if only == "batch" or rng.random() < 0.03:
+    if only is not None:
+        c.bump(f"inputs_{only}")
+        if only in ("batch", "ids"):
+            batch(rng, c, tmp, ids=only == "ids")
+        else:
+            {"mesh": _mesh, "insert": _insert_cli, "exif": _exif, "strict": lambda r, t: _strict(r, c, t)}[only](rng, tmp)
+        c.bump("ok")
+        return
+    if rng.random() < 0.03:
         batch(rng, c, tmp)
         c.bump("ok")
         return
@@ -319,12 +440,54 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
     c.bump("ok")
 
 
+SCENE_BOARD = "6x4,70mm,52mm,DICT_5X5_100"
+
+
+def _board_photo(path: Path) -> None:
+    """A photo without EXIF of a ball beside a ChArUco board on the floor (rtloop-scene's input)."""
+    from rtloop.acquisition import PinholeCamera
+    from rtloop.acquisition._common import write_png16_srgb
+    from rtloop.acquisition.boards import parse_board
+    from rtloop.acquisition.synthetic import paste_board_on_floor
+
+    w, h = 800, 600
+    scene = {"image": {"width": w, "height": h},
+             "camera": {"position": [0.25, 0.6, -0.8], "look_at": [0.08, 0.0, 0.05], "vfov_deg": 50},
+             "light": {"position": [-0.5, 1.4, -0.6], "intensity": 4.0}, "ambient": [0.03] * 3,
+             "objects": [{"name": "ball", "shape": "sphere", "center": [0.36, 0.08, 0.12], "radius": 0.08,
+                          "material": {"albedo": [0.8, 0.6, 0.1]}},
+                         {"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0],
+                          "material": {"albedo": [0.45, 0.45, 0.45]}}]}
+    render = rtloop.render(scene, spp=4)
+    cam = PinholeCamera.from_scene_camera(scene["camera"], w, h)
+    write_png16_srgb(path, paste_board_on_floor(render, rtloop.object_ids(scene) == 1, 0.45,
+                                                parse_board(SCENE_BOARD), cam))
+
+
+#: The kinds of finding (the counts summed into each; all must be 0).
+FINDINGS = {
+    "data loss": ["batch_lost_files", "batch_wrote_outside", "data_loss"],
+    "wrong answers reported as ok": ["nan_or_inf", "out_of_bounds", "wrong_ok"],
+    "tracebacks": ["panics", "non_rtloop_exceptions", "batch_not_one_line", "traceback_not_one_line"],
+    "hangs": ["hangs"],
+}
+
+
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--inputs", type=int, default=100_000, help="generated inputs (default 100000)")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--only", choices=["batch"], help="only job lines of rtloop-fit --batch")
+    ap.add_argument("--only", metavar="SURFACE[,SURFACE...]",
+                    help=f"only these surfaces, in turn: {', '.join(SURFACES)} (batch: job lines of rtloop-fit "
+                    "--batch; ids: their job ids; strict: rtloop-scene's --strict)")
+    ap.add_argument("--bound", type=float, default=60.0,
+                    help="seconds past which one input counts as a hang (default 60)")
+    ap.add_argument("--out", type=Path, metavar="FILE", help="also write the counts as markdown (e.g. "
+                    "benches/results/fuzz.md), headed by the command")
     a = ap.parse_args()
+    only = None if a.only is None else a.only.split(",")
+    if only is not None and not set(only) <= set(SURFACES):
+        ap.error(f"--only: surfaces are {', '.join(SURFACES)} (got {a.only})")
     warnings.simplefilter("ignore")  # the library's warnings on odd images are expected here
     rng, c = random.Random(a.seed), Counts()
     with tempfile.TemporaryDirectory() as td:
@@ -335,11 +498,13 @@ def main() -> int:
         (tmp / "outside" / "data.txt").write_text("keep me")
         (tmp / "objects.json").write_text(json.dumps([{"name": "b2", "shape": "sphere", "center": [0.3, 0.2, 0],
                                                        "radius": 0.2}]))
+        _board_photo(tmp / "board_photo.png")
         first: dict = {}
-        for _ in range(a.inputs):
+        for i in range(a.inputs):
             c.bump("inputs")
+            t0 = time.perf_counter()
             try:
-                one(rng, c, tmp, first, a.only)
+                one(rng, c, tmp, first, None if only is None else only[i % len(only)])
             except rtloop.RtloopError:
                 c.bump("rtloop_errors")
             except KeyboardInterrupt:
@@ -352,6 +517,8 @@ def main() -> int:
                     first[key] = traceback.format_exc()
                     print(f"== {name}: {e}", file=sys.stderr)
                     print(first[key], file=sys.stderr)
+            if time.perf_counter() - t0 > a.bound:
+                c.bump("hangs")
     for k in [
         "inputs",
         "ok",
@@ -370,11 +537,49 @@ def main() -> int:
         "batch_not_one_line",
         "batch_lost_files",
         "batch_wrote_outside",
+        *(f"inputs_{s}" for s in SURFACES),
+        "strict_used",
+        "strict_refused",
+        "scene_exit_0",
+        "scene_exit_1",
+        "scene_exit_2",
+        "data_loss",
+        "wrong_ok",
+        "traceback_not_one_line",
+        "hangs",
     ]:
         print(f"{k}: {c.get(k, 0)}")
-    bad = sum(c.get(k, 0) for k in ["panics", "non_rtloop_exceptions", "nan_or_inf", "out_of_bounds",
-                                    "batch_not_one_line", "batch_lost_files", "batch_wrote_outside"])
-    return 1 if bad else 0
+    kinds = {kind: sum(c.get(k, 0) for k in keys) for kind, keys in FINDINGS.items()}
+    if a.out is not None:
+        _write_markdown(a.out, c, kinds, a.bound)
+    return 1 if any(kinds.values()) else 0
+
+
+def _write_markdown(path: Path, c: Counts, kinds: dict[str, int], bound: float) -> None:
+    command = " ".join(["python", "benches/fuzz.py", *sys.argv[1:]])
+    rows = [f"| {s} | {c.get(f'inputs_{s}', 0)} |" for s in SURFACES if c.get(f"inputs_{s}")]
+    if not rows:
+        rows = [f"| all (mixed) | {c.get('inputs', 0)} |"]
+    text = "\n".join([
+        f"# The fuzz campaign (`{command}`)",
+        "",
+        f"Machine: {platform.machine()}, {os.cpu_count()} logical CPUs, shared. Every input is checked as"
+        " benches/fuzz.py's docstring says; a hang is an input that took more than"
+        f" {bound:g} s.",
+        "",
+        "| surface | inputs |",
+        "|---|---|",
+        *rows,
+        f"| **all** | {c.get('inputs', 0)} |",
+        "",
+        "| finding | count |",
+        "|---|---|",
+        *(f"| {kind} | {n} |" for kind, n in kinds.items()),
+        "",
+        "Outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(c.items()) if not k.startswith("inputs")) + ".",
+        "",
+    ])
+    path.write_text(text, encoding="utf-8")
 
 
 if __name__ == "__main__":
