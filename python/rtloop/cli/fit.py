@@ -202,8 +202,9 @@ def _build_parser() -> Parser:
     p.add_argument("--uncertainty", choices=("default", "bootstrap", "off"), default="default",
                    help="error bars: 'default' (Gauss-Newton and the block sandwich, a few ms), 'bootstrap' "
                    "(also a spatial block bootstrap: 30 closed-form refits on resampled image blocks, seeded by "
-                   "--seed; about 1 s on a 128x96 direct-light photo, a minute or two with interreflection; "
-                   "its sigma is printed), 'off' (none)")
+                   "--seed; about 1 s on a 128x96 direct-light photo, 40-115 s with interreflection, 9 minutes "
+                   "for 50 balls with the environment and interreflection; each refit is shown, and Ctrl-C "
+                   "stops within a generation; its sigma is printed), 'off' (none)")
     p.add_argument("--highlights", choices=("auto", "off"), default="auto",
                    help="'auto' (default): a sphere the scene gives as matte gets a fitted specular lobe "
                    "(specular and shininess) when the photo shows a highlight the diffuse model cannot explain; "

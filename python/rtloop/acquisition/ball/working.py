@@ -3,11 +3,12 @@ the outline it finds is then refined on the photo itself.
 
 The search's steps are sized in pixels (the outline score samples at most 15 offsets across its tolerance,
 a quarter of the ball's radius in the coarse stage; the Hough circles' blur grows with the image), so a
-ball hundreds of pixels across, as an 11 MP photo shows it, slips between the samples: searched at their own size, scenes rendered at 4032 x 3024 give no
-ball, or one off by 5 % of its distance, where at 640 x 480 they give 0.1 %. The copy is the photo resized by the same factor on both axes up to
-rounding (``cv2.resize`` with INTER_AREA: the centre pixel maps onto the centre pixel), seen by the same
-camera with its focal length scaled (:meth:`PinholeCamera.resized`); the outline's cone (its axis and
-angle) and the sphere's centre in the world do not depend on the image's size.
+ball hundreds of pixels across, as an 11 MP photo shows it, slips between the samples: searched at their
+own size, scenes rendered at 4032 x 3024 give no ball, or one off by 5 % of its distance, where at 640 x 480
+they give one within 0.1 %. The copy is the photo resized by the same factor on both axes up to rounding
+(``cv2.resize`` with INTER_AREA: the centre pixel maps onto the centre pixel), seen by the same camera with
+its focal length scaled (:meth:`PinholeCamera.resized`); the outline's cone (its axis and angle) and the
+sphere's centre in the world do not depend on the image's size.
 """
 
 from __future__ import annotations
