@@ -75,6 +75,9 @@ class Stages:
         #: products (``_native.optimize``'s ``solve_margin``; 0: a pixel's 4-neighbours show its object;
         #: :data:`rtloop.fit.JPEG_CHROMA_MARGIN` for a JPEG, whose colour mixes across silhouettes).
         self.solve_margin = 0
+        #: The callback's ``params`` hold the closed-form products of each generation's best, split into the
+        #: scene's parameters (one solve per generation); False: the scene's own values stand for them.
+        self.products_per_generation = True
 
     def run(self, name: str, stage_scene: Scene, paths: list[str], loss: str, pixels: np.ndarray | None,
             generations: int, stage_seed: int, product_bounds: np.ndarray | None = None,
@@ -108,7 +111,7 @@ class Stages:
             stage_scene, paths, self.target, pixels=pixels, loss=loss, clip=self.clip, population=b.population,
             generations=generations, f=b.f, cr=b.cr, seed=stage_seed, threads=self.threads,
             callback=None if callback is None else on_generation, product_bounds=product_bounds,
-            method=method, polish=polish, norm=self.norm, space=self.space, with_products=callback is not None,
+            method=method, polish=polish, norm=self.norm, space=self.space, with_products=callback is not None and self.products_per_generation,
             polish_tol=polish_tol, footprint=self.footprint == "on",
             polish_footprint=self.footprint == "polish" and method == "lshade" and polish > 0,
             frozen_bounce=self.frozen_bounce, saturated=self.saturated, solve_margin=self.solve_margin, x0=x0,

@@ -64,7 +64,8 @@ def block_bootstrap(result: Any, target: np.ndarray, use: np.ndarray | None, *, 
 
     ``callback(GenerationInfo)`` runs after every generation of every refit (as a fit's: the GIL is taken
     only then), its ``stage`` ``"bootstrap R/N"`` (:func:`replicate_of` reads R and N back) and its ``params``
-    the refit's values of the fit parameters of its scene (the fit's, the gauges held). An exception it
+    the refit's values of the fit parameters of its scene (the fit's, the gauges held): the searched ones
+    (the light, any shininess) of the generation's best, the others the fit's. An exception it
     raises ends the bootstrap within that generation's refit; returning False ends it after that
     generation, with no sigma and a warning that says so."""
     t0 = time.perf_counter()
@@ -122,6 +123,7 @@ def block_bootstrap(result: Any, target: np.ndarray, use: np.ndarray | None, *, 
                     norm=settings.get("norm", "l1"), space=settings.get("space", "linear"), threads=threads,
                     pixels_per_object=settings.get("pixels_per_object", 0), rng=np.random.default_rng(0),
                     callback=watch, footprint=_footprint_mode(settings.get("footprint", "off")))
+        st.products_per_generation = False  # the callback watches; a solve per generation would only slow it
         refit = scene_to_dict(st.projected(int(rng.integers(0, 2**63 - 1)), environment=env, name=name))
         if stopped:
             return {"method": "block-bootstrap", "replicates": k, "sigma": {}, "seed": int(seed),
