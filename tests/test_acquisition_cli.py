@@ -577,3 +577,31 @@ def test_rtloop_scene_force_never_replaces_a_folder_holding_its_photo(tmp_path, 
     err = capsys.readouterr().err
     assert "refusing to replace it with --force" in err and len(err.strip().splitlines()) == 1
     assert photo.is_file()
+
+
+# --- a 12 MP photo ------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("hint", [False, True])
+def test_scene_from_a_12_mp_photo_finds_and_places_the_ball(tmp_path, capsys, hint) -> None:
+    """The photo of the other tests at 4032 x 3024 (the ball 300 px across): rtloop-scene finds the ball, with
+    or without --ball (given in the photo's own pixels), and places it within 1 % of its distance."""
+    w, h = 4032, 3024
+    truth = json.loads(json.dumps(TRUE_SCENE))
+    truth["image"] = {"width": w, "height": h}
+    cam = PinholeCamera.from_scene_camera(truth["camera"], w, h)
+    render = rtloop.render(truth, spp=2)
+    photo = tmp_path / "photo.png"
+    write_png16_srgb(photo, paste_board_on_floor(render, rtloop.object_ids(truth) == 1, 0.45, parse_board(BOARD), cam,
+                                                 supersample=1))
+    ball = np.array(truth["objects"][0]["center"])
+    args = [photo, "--board", BOARD, "--ball-radius", "80mm", "--vfov", "50", "--out", tmp_path / "s"]
+    if hint:
+        uv = cam.project(ball[None, :])[0]
+        args += ["--ball", f"{uv[0] + 40:.0f},{uv[1] - 25:.0f},150"]
+    code, _, err = run(scene_main, capsys, *args)
+    assert code == 0, err
+    written = json.loads((tmp_path / "s" / "scene.json").read_text())
+    centre = np.array(written["objects"][0]["center"])
+    assert np.linalg.norm(centre - ball) <= 0.01 * np.linalg.norm(ball - cam.position)
+    assert written["meta"]["acquisition"]["ball"]["source"] == ("hint" if hint else "hough")
