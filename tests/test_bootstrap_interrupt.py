@@ -149,3 +149,14 @@ def test_ctrl_c_during_the_bootstrap_stops_within_a_generation(photo, tmp_path: 
     assert err.strip().splitlines()[-1] == "rtloop-fit: interrupted"
     assert "Traceback" not in err and proc.stdout == ""
     assert not out.exists() and not [p for p in tmp_path.iterdir() if ".rtloop-" in p.name]
+
+
+def test_the_report_leaves_the_refits_out_of_the_search(photo, tmp_path: Path) -> None:
+    """rows.append as the callback collects the refits' generations too; the report's search is the fit's."""
+    rows: list[GenerationInfo] = []
+    result = rtloop.fit(scene_dict(), photo, population=8, generations=4, uncertainty="bootstrap",
+                        callback=rows.append)
+    assert any(replicate_of(r.stage) for r in rows)
+    rtloop.report(result, tmp_path / "report.html", generations=rows)
+    page = (tmp_path / "report.html").read_text(encoding="utf-8")
+    assert "bootstrap 1/" not in page and f"block bootstrap: {REPLICATES} refits" in page

@@ -37,7 +37,9 @@ class GenerationRow:
 def _rows_given(result: Any, generations: Iterable[Any], names: list[str]) -> list[GenerationRow]:
     """The rows of ``generations``, each a full vector over ``names`` (the fitted scene's parameters): a
     callback's row holds the names of ``result.generation_names()``, without a lobe the fit freed itself,
-    which keeps its fitted value."""
+    which keeps its fitted value. The block bootstrap's refits (stage ``"bootstrap R/N"``) are not the fit's
+    search: left out."""
+    from ..uncertainty.bootstrap import replicate_of
     n = len(names)
     short = result.generation_names() if hasattr(result, "generation_names") else names
     fill = np.asarray(result.scene.get_params(result.scene.fit_paths), float)
@@ -59,6 +61,8 @@ def _rows_given(result: Any, generations: Iterable[Any], names: list[str]) -> li
                 "generations: rows must be GenerationInfo-like (stage, generation, fitness, params), "
                 f"dicts with those keys, or (stage, generation[, fitness], params) tuples; got {r!r}"
             )
+        if replicate_of(str(stage)) is not None:
+            continue
         params = np.asarray(params, float).reshape(-1)
         if params.size == len(short) != n:
             full = fill.copy()
