@@ -68,7 +68,21 @@ def _fit_scenes(base: dict) -> list[dict]:
     return [base, fixed, gauges, lit, known]
 
 
+def _lights_base(base: dict) -> dict:
+    """The base under a `lights` list: its lamp, a sphere fill light and a sun, with their paths freed."""
+    d = copy.deepcopy(base)
+    lamp = d.pop("light")
+    d["lights"] = [{"name": "key", **lamp},
+                   {"name": "fill", "type": "sphere", "position": [-2.0, 3.0, -1.0], "radius": 0.3, "intensity": 5.0},
+                   {"name": "sun", "type": "directional", "direction": [0.2, 1.0, 0.1], "intensity": 0.2}]
+    d["fit"]["lights.fill.position"] = {"min": [-4, 0.5, -4], "max": [4, 6, 4]}
+    d["fit"]["lights.fill.radius"] = {"min": 0.01, "max": 1.0}
+    d["fit"]["lights.sun.intensity"] = {"min": 0, "max": 1}
+    return d
+
+
 BASE = _base()
+LIGHTS_BASE = _lights_base(BASE)
 FIT_SCENES = _fit_scenes(BASE)
 ODD = [
     None,
@@ -127,6 +141,13 @@ def finite(a) -> bool:
 
 def check_fit(res, scene_dict, c: Counts) -> None:
     c.bump("fits")
+    if hasattr(res, "lights"):  # the lights fit
+        c.bump("fits_lights")
+        values = [v for light in res.lights for key in ("position", "direction") for v in light.get(key, [])]
+        values += [v for rows in res.products.values() for row in rows for v in row]
+        if not finite(values) or not finite([light["intensity"] for light in res.lights]):
+            c.bump("nan_or_inf")
+        return
     c.bump(f"fits_{res.settings['method']}")
     for name, v in res.x.items():
         if not math.isfinite(v):
@@ -388,7 +409,7 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
     if kind < 0.1:  # mesh files, EXIF tags, rtloop-insert arguments
         [_mesh, _exif, _insert_cli][int(kind * 30)](rng, tmp)
     elif kind < 0.55:  # scenes
-        scene = rtloop.load_scene(mutate(rng, BASE))
+        scene = rtloop.load_scene(mutate(rng, rng.choice([BASE, LIGHTS_BASE])))
         img = rtloop.render(scene, width=rng.choice([None, 4, 7]), height=None, spp=1)
         if not finite(img):
             c.bump("nan_or_inf")
@@ -412,6 +433,8 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
             "generations": rng.choice([1, 2, 0, -3, (1, 1), "x"]) if rng.random() < 0.2 else 1,
             # the norm: the photo's choice (its L2 refit on a noisy photo), the others, and bad ones
             "norm": rng.choice(["auto", "auto", "l1", "l2", "huber:0.05", "huber:-1", "L1", None]),
+            # the number of lights: the one-light fit, the lights fit, the choice, and bad ones
+            "lights": rng.choice([None, None, None, 1, 2, "auto", 0, 9, "2", 1.5]),
         }
         scene = rng.choice(FIT_SCENES)
         if rng.random() < 0.1:

@@ -34,9 +34,7 @@ impl ParamLayout {
             layout.entries.push((f.path.clone(), f.target, offset));
             let suffix: &[&str] = match f.target.len() {
                 1 => &[""],
-                _ if matches!(f.target, Target::LightPosition | Target::LightDirection) => {
-                    &[".x", ".y", ".z"]
-                }
+                _ if f.target.is_vector() => &[".x", ".y", ".z"],
                 _ => &[".r", ".g", ".b"],
             };
             for k in 0..f.target.len() {

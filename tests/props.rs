@@ -81,6 +81,73 @@ fn odd_value() -> impl Strategy<Value = Value> {
     })
 }
 
+/// A scene with a `lights` list: a point light, a sphere light and a directional one, each fitted.
+const LIGHTS_SCENE: &str = r#"{"image": {"width": 16, "height": 12},
+  "camera": {"position": [0, 1, -5], "look_at": [0, 0.5, 0], "vfov_deg": 40},
+  "lights": [{"name": "key", "position": [2, 4, -2], "intensity": 50},
+             {"name": "fill", "type": "sphere", "position": [-3, 3, -1], "radius": 0.3, "intensity": 10,
+              "color": [1, 0.9, 0.8]},
+             {"name": "sun", "type": "directional", "direction": [0, 1, 0.2], "intensity": 0.5}],
+  "objects": [
+    {"name": "ball", "shape": "sphere", "center": [0, 0.5, 0], "radius": 0.5},
+    {"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0]}],
+  "fit": {"lights.fill.position": {"min": [-5, 0.5, -5], "max": [5, 8, 5]},
+          "lights.fill.radius": {"min": 0.01, "max": 1},
+          "lights.sun.direction": {"min": -1, "max": 1},
+          "lights.key.intensity": {"min": 0, "max": 100}}}"#;
+
+/// Replace one value of `text` anywhere (or delete one key): the scene parses, or the error names the
+/// field that was changed or one above it, in one line.
+fn mutation_is_named(
+    text: &str,
+    pick: prop::sample::Index,
+    value: Value,
+    delete: bool,
+) -> Result<(), TestCaseError> {
+    let mut scene: Value = serde_json::from_str(text).unwrap();
+    let mut all = Vec::new();
+    paths(&scene, &mut Vec::new(), "", &mut all);
+    let (path, key) = all[1 + pick.index(all.len() - 1)].clone();
+    let parent_key = all
+        .iter()
+        .find(|(p, _)| p[..] == path[..path.len() - 1])
+        .unwrap()
+        .1
+        .clone();
+    let deleted = delete && matches!(path.last(), Some(Value::String(_)));
+    if deleted {
+        let (last, up) = path.split_last().unwrap();
+        at_mut(&mut scene, up)
+            .as_object_mut()
+            .unwrap()
+            .remove(last.as_str().unwrap());
+    } else {
+        *at_mut(&mut scene, &path) = value;
+    }
+    match Scene::from_json(&scene.to_string()) {
+        Ok(s) => prop_assert!(s.width > 0 && s.height > 0),
+        Err(e) => {
+            let msg = e.to_string();
+            prop_assert!(!msg.contains('\n'), "{msg}");
+            let named = [key.as_str(), parent_key.as_str()]
+                .iter()
+                .chain(
+                    path.iter()
+                        .filter_map(|p| p.as_str())
+                        .collect::<Vec<_>>()
+                        .iter(),
+                )
+                .any(|k| !k.is_empty() && msg.contains(k));
+            prop_assert!(
+                named,
+                "{path:?} ({}): {msg}",
+                if deleted { "deleted" } else { "replaced" }
+            );
+        }
+    }
+    Ok(())
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: cases(256), ..ProptestConfig::default() })]
 
@@ -89,29 +156,14 @@ proptest! {
     #[test]
     fn mutated_scenes_parse_or_name_a_field(pick in any::<prop::sample::Index>(), value in odd_value(),
                                             delete in any::<bool>()) {
-        let mut scene: Value = serde_json::from_str(SCENE).unwrap();
-        let mut all = Vec::new();
-        paths(&scene, &mut Vec::new(), "", &mut all);
-        let (path, key) = all[1 + pick.index(all.len() - 1)].clone();
-        let parent_key = all.iter().find(|(p, _)| p[..] == path[..path.len() - 1]).unwrap().1.clone();
-        let deleted = delete && matches!(path.last(), Some(Value::String(_)));
-        if deleted {
-            let (last, up) = path.split_last().unwrap();
-            at_mut(&mut scene, up).as_object_mut().unwrap().remove(last.as_str().unwrap());
-        } else {
-            *at_mut(&mut scene, &path) = value;
-        }
-        match Scene::from_json(&scene.to_string()) {
-            Ok(s) => prop_assert!(s.width > 0 && s.height > 0),
-            Err(e) => {
-                let msg = e.to_string();
-                let named = [key.as_str(), parent_key.as_str()]
-                    .iter()
-                    .chain(path.iter().filter_map(|p| p.as_str()).collect::<Vec<_>>().iter())
-                    .any(|k| !k.is_empty() && msg.contains(k));
-                prop_assert!(named, "{path:?} ({}): {msg}", if deleted { "deleted" } else { "replaced" });
-            }
-        }
+        mutation_is_named(SCENE, pick, value, delete)?;
+    }
+
+    /// The same for a scene with a `lights` list (point, sphere and directional lights, fitted).
+    #[test]
+    fn mutated_light_lists_parse_or_name_a_field(pick in any::<prop::sample::Index>(), value in odd_value(),
+                                                 delete in any::<bool>()) {
+        mutation_is_named(LIGHTS_SCENE, pick, value, delete)?;
     }
 }
 

@@ -424,3 +424,67 @@ def test_scene_with_strict_refuses_a_loose_board_estimate_in_one_line(tmp_path_f
         assert len([ln for ln in lines if "error" in ln or "usage" in ln]) >= 1 and not (work / "o").exists()
     if strict and vfov is None and code != 2:
         assert code == 1 and len(lines) == 1 and "0.3 deg needed with --strict" in lines[0]
+#: SMALL under a `lights` list: its light, a sphere fill light and a sun, their geometry free.
+SMALL_LIGHTS = copy.deepcopy(SMALL)
+SMALL_LIGHTS["lights"] = [{"name": "key", **SMALL_LIGHTS.pop("light")},
+                          {"name": "fill", "type": "sphere", "position": [-2.0, 3.0, -1.0], "radius": 0.3,
+                           "intensity": 8.0},
+                          {"name": "sun", "type": "directional", "direction": [0.2, 1.0, 0.1], "intensity": 0.3}]
+SMALL_LIGHTS["fit"] = {k: v for k, v in SMALL_LIGHTS["fit"].items() if k != "light.intensity"}
+SMALL_LIGHTS["fit"]["lights.fill.position"] = {"min": [-4, 0.5, -4], "max": [4, 6, 4]}
+SMALL_LIGHTS["fit"]["lights.fill.radius"] = {"min": 0.01, "max": 1.0}
+
+LIGHT_FIELDS = [
+    (("lights", 0, "position"), 3), (("lights", 0, "intensity"), 0), (("lights", 1, "position"), 3),
+    (("lights", 1, "radius"), 0), (("lights", 1, "intensity"), 0), (("lights", 1, "color"), 3),
+    (("lights", 2, "direction"), 3), (("lights", 2, "intensity"), 0),
+    (("fit", "lights.fill.position", "min"), 3), (("fit", "lights.fill.radius", "max"), 0),
+    (("fit", "lights.fill.radius", "min"), 0),
+]
+
+
+@st.composite
+def mutated_light_lists(draw) -> dict:
+    d = copy.deepcopy(SMALL_LIGHTS)
+    for _ in range(draw(st.integers(1, 3))):
+        where, n = draw(st.sampled_from(LIGHT_FIELDS))
+        node = d
+        for k in where[:-1]:
+            node = node[k]
+        node[where[-1]] = draw(NUMBERS) if n == 0 else draw(st.lists(NUMBERS, min_size=n, max_size=n))
+    return d
+
+
+@PROPS
+@given(mutated_light_lists())
+def test_a_mutated_light_list_loads_and_renders_finite_or_is_a_scene_error(d):
+    try:
+        scene = rtloop.load_scene(d)
+    except rtloop.SceneError as e:
+        assert "\n" not in str(e) and str(e).split(":")[0]
+        return
+    assert np.isfinite(rtloop.render(scene, 8, 6)).all()
+
+
+PHOTO_LIGHTS = rtloop.render(SMALL_LIGHTS)
+
+
+@PROPS
+@given(st.one_of(st.sampled_from([None, 1, 2, 3, "auto"]),
+                 st.sampled_from([0, 9, -1, 2.0, "2", True, math.nan, [1]])),
+       st.booleans(), st.integers(0, 3))
+def test_the_lights_argument_fits_or_raises_rtloop_error(lights, listed, seed):
+    try:
+        with _quiet():
+            result = rtloop.fit(SMALL_LIGHTS if listed else SMALL, PHOTO_LIGHTS if listed else PHOTO,
+                                lights=lights, seed=seed, population=4, generations=1, uncertainty=False)
+    except rtloop.RtloopError as e:
+        assert "\n" not in str(e)
+        return
+    if not hasattr(result, "lights"):
+        assert lights in (None, 1) and not listed
+        return
+    for light in result.lights:
+        assert all(math.isfinite(v) for v in light.get("position", light.get("direction", [])))
+        assert math.isfinite(light["intensity"]) and light["intensity"] >= 0
+    assert all(math.isfinite(v) for rows in result.products.values() for row in rows for v in row)

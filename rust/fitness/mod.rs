@@ -11,6 +11,7 @@ use crate::error::{Error, Result};
 pub mod bounce;
 mod held;
 pub mod kernel;
+pub mod lights;
 mod lobe;
 pub mod loss;
 pub mod pixels;
@@ -203,6 +204,13 @@ impl Fitness {
         footprint: bool,
         solve_margin: usize,
     ) -> Result<Fitness> {
+        if !scene.single_point_light() {
+            return Err(Error::Invalid(
+                "this fitness models one point or directional light; a scene with several lights or a \
+                 sphere light is fitted by the lights fit (rtloop.fit(..., lights=N), docs/methods.md)"
+                    .into(),
+            ));
+        }
         let n = (scene.width * scene.height) as usize;
         if target.len() != 3 * n {
             return Err(Error::Invalid(format!(

@@ -17,6 +17,7 @@ use crate::uncertainty as core_uncertainty;
 
 mod errors;
 mod fitness;
+mod lights;
 mod pool;
 mod scene;
 #[cfg(feature = "test-hooks")]
@@ -832,6 +833,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyScene>()?;
     m.add_class::<OptimizeResult>()?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add_function(wrap_pyfunction!(lights::fit_lights, m)?)?;
+    m.add_function(wrap_pyfunction!(lights::lights_solve, m)?)?;
     m.add_function(wrap_pyfunction!(_kept_pools, m)?)?;
     m.add_function(wrap_pyfunction!(object_ids, m)?)?;
     m.add_function(wrap_pyfunction!(render_many, m)?)?;

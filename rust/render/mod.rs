@@ -15,6 +15,7 @@ pub mod film;
 pub mod footprint;
 pub mod hit;
 pub mod light;
+pub mod lights;
 pub mod mesh;
 pub mod shade;
 pub mod shape;

@@ -13,6 +13,7 @@ use super::environment::sky_view;
 use super::footprint::{sphere_edge_lit, terminator_cos};
 use super::hit::{occluded, Surfel};
 use super::light::{incidence, irradiance};
+use super::lights::{sphere_visibility, unit_irradiance, Emitter};
 use super::shape::PShape;
 use crate::params::Target;
 use crate::scene::Scene;
@@ -35,6 +36,10 @@ pub struct ShadeParams {
     pub light_color: Vec3A,
     /// I · color, in W/sr per channel (kept in step by `set`).
     pub light_rgb: Vec3A,
+    /// The first light's radius: a sphere light when > 0 (soft shadows, `lights::sphere_visibility`).
+    pub light_radius: f32,
+    /// The scene's further lights, each added through the same BRDF (`lights`); empty for one light.
+    pub extra_lights: Vec<Emitter>,
     pub ambient: Vec3A,
     /// The environment radiance, occluded by the scene's shapes (see `environment`).
     pub environment: Vec3A,
@@ -55,6 +60,7 @@ impl Clone for ShadeParams {
         let mut p = ShadeParams {
             materials: Vec::with_capacity(self.materials.len()),
             tables: self.tables.clone(),
+            extra_lights: self.extra_lights.clone(),
             ..*self
         };
         p.materials.extend_from_slice(&self.materials);
@@ -68,6 +74,10 @@ impl Clone for ShadeParams {
         self.light_intensity = source.light_intensity;
         self.light_color = source.light_color;
         self.light_rgb = source.light_rgb;
+        self.light_radius = source.light_radius;
+        if !source.extra_lights.is_empty() || !self.extra_lights.is_empty() {
+            self.extra_lights.clone_from(&source.extra_lights);
+        }
         self.ambient = source.ambient;
         self.environment = source.environment;
         self.interreflection = source.interreflection;
@@ -108,6 +118,8 @@ impl ShadeParams {
             light_intensity: scene.light.intensity as f32,
             light_color: v3(scene.light.color),
             light_rgb: v3(scene.light.color) * scene.light.intensity as f32,
+            light_radius: scene.light.radius as f32,
+            extra_lights: scene.extra_lights.iter().map(Emitter::new).collect(),
             ambient: v3(scene.ambient),
             environment: v3(scene.environment),
             interreflection: scene.interreflection,
@@ -205,6 +217,14 @@ impl ShadeParams {
                 self.update_flags();
             }
             Target::Shininess(i) => self.materials[i].shininess = v[0] as f32,
+            Target::ExtraPosition(i) => self.extra_lights[i - 1].position = v3(),
+            Target::ExtraDirection(i) => {
+                self.extra_lights[i - 1].direction = Some(unit_or_up(v3()))
+            }
+            Target::ExtraIntensity(i) => self.extra_lights[i - 1].intensity = v[0] as f32,
+            Target::ExtraColor(i) => self.extra_lights[i - 1].color = v3(),
+            Target::Radius(0) => self.light_radius = v[0].max(0.0) as f32,
+            Target::Radius(i) => self.extra_lights[i - 1].radius = v[0].max(0.0) as f32,
         }
         self.light_rgb = self.light_color * self.light_intensity;
     }
@@ -417,6 +437,11 @@ fn direct(
     mut l: Vec3A,
 ) -> (Vec3A, bool) {
     let m = &p.materials[s.object as usize];
+    for e in &p.extra_lights {
+        if let Some((dir, e_unit)) = unit_irradiance(s, e, shapes, shadows) {
+            l += (e.rgb() * brdf(s, m, p, dir) * e_unit).min(Vec3A::splat(f32::MAX));
+        }
+    }
     let Some((dir, dist, falloff)) = incidence(p.light_position, p.light_direction, s.position)
     else {
         return ((p.exposure * l).min(Vec3A::splat(f32::MAX)), false);
@@ -431,21 +456,31 @@ fn direct(
     let visible = match (shadows, axes) {
         (false, _) => 1.0,
         (true, _) if ndotl <= 0.0 => 1.0, // unlit anyway: no shadow ray
+        (true, _) if p.light_radius > 0.0 && p.light_direction.is_none() => {
+            sphere_visibility(s, p.light_position, p.light_radius, shapes)
+        }
         (true, None) => f32::from(u8::from(!occluded(s, dir, dist, shapes))),
         (true, Some(axes)) => visible_fraction(s, axes, p, dir, dist, shapes),
     };
     let shadowed = ndotl > 0.0 && visible < 1.0;
     if ndotl > 0.0 && visible > 0.0 {
-        let mut brdf = lambert(m.albedo);
-        if p.any_specular && m.specular > 0.0 {
-            let lobe = specular_scale(m.specular, m.shininess)
-                * blinn_phong(s.normal, dir, s.view, m.shininess);
-            brdf += Vec3A::splat(lobe);
-        }
+        let brdf = brdf(s, m, p, dir);
         l +=
             (p.light_rgb * brdf * irradiance(ndotl, falloff) * visible).min(Vec3A::splat(f32::MAX));
     }
     ((p.exposure * l).min(Vec3A::splat(f32::MAX)), shadowed)
+}
+
+/// The material's BRDF at `s` for light from `dir`: Lambert plus the Blinn–Phong lobe where specular.
+#[inline(always)]
+fn brdf(s: &Surfel, m: &PMaterial, p: &ShadeParams, dir: Vec3A) -> Vec3A {
+    let mut brdf = lambert(m.albedo);
+    if p.any_specular && m.specular > 0.0 {
+        let lobe = specular_scale(m.specular, m.shininess)
+            * blinn_phong(s.normal, dir, s.view, m.shininess);
+        brdf += Vec3A::splat(lobe);
+    }
+    brdf
 }
 
 /// The fraction of the pixel at `s` (footprint `axes`) the light reaches: each other sphere's shadow
@@ -498,6 +533,8 @@ mod tests {
             light_intensity: 10.0,
             light_color: Vec3A::ONE,
             light_rgb: Vec3A::splat(10.0),
+            light_radius: 0.0,
+            extra_lights: Vec::new(),
             ambient: Vec3A::ZERO,
             environment: Vec3A::ZERO,
             interreflection: false,

@@ -9,6 +9,7 @@ use serde_json::{json, Map, Value};
 
 use crate::error::{Error, Result};
 
+pub mod lights;
 mod mesh;
 mod target;
 pub use target::{Target, FITTABLE};
@@ -27,10 +28,12 @@ pub struct Camera {
     pub vfov_deg: f64,
 }
 
-/// The scene's one light: a point light at `position`, or a directional light (a sun, a lamp far away)
-/// shining from `direction`.
+/// A light: a point light at `position`, a sphere light (`radius` > 0) centred there, or a directional
+/// light (a sun, a lamp far away) shining from `direction`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PointLight {
+    /// Its name in a `lights` list (`light0` for the single `light`).
+    pub name: String,
     /// Point light: its position. Unused (zero) for a directional light.
     pub position: V3,
     /// Point light: radiant intensity in W/sr; directional: irradiance at normal incidence in W/m²
@@ -39,6 +42,9 @@ pub struct PointLight {
     pub color: V3,
     /// Directional light: the unit direction from the scene towards the light (normalised when set).
     pub direction: Option<V3>,
+    /// Sphere light: its radius in metres (0 for a point or directional light). Its intensity is that of
+    /// the point light it looks like from afar: radiance = intensity x colour / (pi r^2).
+    pub radius: f64,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -90,7 +96,10 @@ pub struct Scene {
     pub width: u32,
     pub height: u32,
     pub camera: Camera,
+    /// The first light (the only one of a scene with `light`).
     pub light: PointLight,
+    /// The `lights` list's further lights, in order (empty for a scene with one light).
+    pub extra_lights: Vec<PointLight>,
     pub ambient: V3,
     /// Constant environment radiance per channel (a room's light from every direction), occluded by the
     /// scene's own spheres and planes (`render::environment`); `ambient` is the unoccluded constant term.
@@ -113,7 +122,8 @@ pub struct Scene {
 struct RawScene {
     image: RawImage,
     camera: RawCamera,
-    light: RawLight,
+    light: Option<lights::RawLight>,
+    lights: Option<Vec<lights::RawLight>>,
     ambient: Option<V3>,
     environment: Option<V3>,
     interreflection: Option<bool>,
@@ -141,17 +151,6 @@ struct RawCamera {
     look_at: V3,
     up: Option<V3>,
     vfov_deg: f64,
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawLight {
-    #[serde(rename = "type")]
-    kind: Option<String>,
-    position: Option<V3>,
-    direction: Option<V3>,
-    intensity: f64,
-    color: Option<V3>,
 }
 
 #[derive(Deserialize)]
@@ -345,53 +344,7 @@ impl Scene {
             ));
         }
 
-        let l = &raw.light;
-        let (position, direction) = match l.kind.as_deref().unwrap_or("point") {
-            "point" => {
-                if l.direction.is_some() {
-                    return Err(Error::scene("light.direction", "a point light has a position, not a direction (or set \"type\": \"directional\")"));
-                }
-                let p = l.position.ok_or_else(|| {
-                    Error::scene("light.position", "missing field for a point light")
-                })?;
-                (finite3("light.position", p)?, None)
-            }
-            "directional" => {
-                if l.position.is_some() {
-                    return Err(Error::scene(
-                        "light.position",
-                        "a directional light has a direction, not a position",
-                    ));
-                }
-                let d = l.direction.ok_or_else(|| {
-                    Error::scene("light.direction", "missing field for a directional light")
-                })?;
-                let d = finite_direction("light.direction", d)?;
-                let n = norm(d);
-                if n == 0.0 || !n.is_finite() {
-                    return Err(Error::scene("light.direction", "zero-length direction"));
-                }
-                ([0.0; 3], Some([d[0] / n, d[1] / n, d[2] / n])) // stored as a unit vector
-            }
-            other => {
-                return Err(Error::scene(
-                    "light.type",
-                    format!("unknown light type {other:?} (known: \"point\", \"directional\")"),
-                ))
-            }
-        };
-        let light = PointLight {
-            position,
-            intensity: finite_upto("light.intensity", l.intensity, MAX_INTENSITY)?,
-            color: nonneg3("light.color", l.color.unwrap_or([1.0; 3]))?,
-            direction,
-        };
-        if light.intensity < 0.0 {
-            return Err(Error::scene(
-                "light.intensity",
-                format!("must be >= 0 (got {})", light.intensity),
-            ));
-        }
+        let (light, extra_lights) = lights::parse_lights(raw.light, raw.lights)?;
 
         let ambient = nonneg3("ambient", raw.ambient.unwrap_or([0.0; 3]))?;
         let environment = nonneg3("environment", raw.environment.unwrap_or([0.0; 3]))?;
@@ -420,6 +373,7 @@ impl Scene {
             height: height as u32,
             camera,
             light,
+            extra_lights,
             ambient,
             environment,
             interreflection: raw.interreflection.unwrap_or(false),
@@ -441,7 +395,14 @@ impl Scene {
         }
         let mut fit = Vec::new();
         for (path, bounds) in raw.fit.unwrap_or_default() {
-            fit.push(parse_fit_entry(&scene, &path, &bounds)?);
+            let entry = parse_fit_entry(&scene, &path, &bounds)?;
+            if fit.iter().any(|f: &FitParam| f.target == entry.target) {
+                return Err(Error::scene(
+                    format!("fit[{path:?}]"),
+                    format!("names the same parameter as another entry ({})", entry.path),
+                ));
+            }
+            fit.push(entry);
         }
         fit.sort_by_key(|p| p.target.order_key());
         scene.fit = fit;
@@ -503,15 +464,15 @@ impl Scene {
             json!({"position": self.camera.position, "look_at": self.camera.look_at,
                    "up": self.camera.up, "vfov_deg": self.camera.vfov_deg}),
         );
-        let light = match self.light.direction {
-            None => json!({"position": self.light.position, "intensity": self.light.intensity,
-                           "color": self.light.color}),
-            Some(d) => {
-                json!({"type": "directional", "direction": d, "intensity": self.light.intensity,
-                              "color": self.light.color})
-            }
-        };
-        out.insert("light".into(), light);
+        if !self.single_point_light() {
+            let list: Vec<Value> = self
+                .all_lights()
+                .map(|l| lights::light_value(l, true))
+                .collect();
+            out.insert("lights".into(), Value::Array(list));
+        } else {
+            out.insert("light".into(), lights::light_value(&self.light, false));
+        }
         out.insert("ambient".into(), json!(self.ambient));
         if self.environment != [0.0; 3] {
             out.insert("environment".into(), json!(self.environment));
@@ -783,7 +744,7 @@ fn parse_fit_entry(scene: &Scene, path: &str, bounds: &Value) -> Result<FitParam
         ));
     }
     let len = target.len();
-    let limit = if target == Target::LightIntensity {
+    let limit = if target.is_intensity() {
         MAX_INTENSITY
     } else {
         MAX_MAGNITUDE
@@ -812,6 +773,14 @@ fn parse_fit_entry(scene: &Scene, path: &str, bounds: &Value) -> Result<FitParam
             }
         }
     }
+    // The first light's own parameters keep their single-light names: a list of one light is the light.
+    let path = match target {
+        Target::LightPosition => "light.position",
+        Target::LightDirection => "light.direction",
+        Target::LightIntensity => "light.intensity",
+        Target::LightColor => "light.color",
+        _ => path,
+    };
     Ok(FitParam {
         path: path.to_string(),
         target,

@@ -18,12 +18,21 @@ pub enum Target {
     Albedo(usize),
     Specular(usize),
     Shininess(usize),
+    /// A further light's (index >= 1 in the `lights` list) position, direction, intensity and colour.
+    ExtraPosition(usize),
+    ExtraDirection(usize),
+    ExtraIntensity(usize),
+    ExtraColor(usize),
+    /// A sphere light's radius (any index).
+    Radius(usize),
 }
 
 /// The fittable paths, for error messages and documentation.
 pub const FITTABLE: &str = "light.position (point light), light.direction (directional light), \
 light.intensity, light.color, ambient, environment, exposure, \
-objects.NAME.albedo, objects.NAME.specular, objects.NAME.shininess";
+objects.NAME.albedo, objects.NAME.specular, objects.NAME.shininess, \
+lights.NAME.position, lights.NAME.direction, lights.NAME.intensity, lights.NAME.color, \
+lights.NAME.radius (sphere light)";
 
 impl Target {
     /// Parse a dotted path such as `objects.ball.albedo`. The error is a bare reason; the caller adds the field.
@@ -43,6 +52,7 @@ impl Target {
             "ambient" => Target::Ambient,
             "environment" => Target::Environment,
             "exposure" => Target::Exposure,
+            _ if path.starts_with("lights.") => return parse_light_path(path, scene),
             _ => {
                 let parts: Vec<&str> = path.split('.').collect();
                 if parts.len() != 3 || parts[0] != "objects" {
@@ -82,8 +92,13 @@ impl Target {
             | Target::LightColor
             | Target::Ambient
             | Target::Environment
-            | Target::Albedo(_) => 3,
-            Target::LightIntensity
+            | Target::Albedo(_)
+            | Target::ExtraPosition(_)
+            | Target::ExtraDirection(_)
+            | Target::ExtraColor(_) => 3,
+            Target::ExtraIntensity(_)
+            | Target::Radius(_)
+            | Target::LightIntensity
             | Target::Exposure
             | Target::Specular(_)
             | Target::Shininess(_) => 1,
@@ -102,13 +117,20 @@ impl Target {
             Target::Albedo(i) => (2, i, 0),
             Target::Specular(i) => (2, i, 1),
             Target::Shininess(i) => (2, i, 2),
+            Target::ExtraPosition(i) | Target::ExtraDirection(i) => (0, i, 0),
+            Target::ExtraIntensity(i) => (0, i, 1),
+            Target::ExtraColor(i) => (0, i, 2),
+            Target::Radius(i) => (0, i, 3),
         }
     }
 
     /// The smallest physically meaningful value, if any.
     pub fn lower_limit(&self) -> Option<f64> {
         match self {
-            Target::LightPosition | Target::LightDirection => None,
+            Target::LightPosition
+            | Target::LightDirection
+            | Target::ExtraPosition(_)
+            | Target::ExtraDirection(_) => None,
             _ => Some(0.0),
         }
     }
@@ -117,7 +139,28 @@ impl Target {
     pub fn is_linear(&self) -> bool {
         !matches!(
             self,
-            Target::LightPosition | Target::LightDirection | Target::Shininess(_)
+            Target::LightPosition
+                | Target::LightDirection
+                | Target::Shininess(_)
+                | Target::ExtraPosition(_)
+                | Target::ExtraDirection(_)
+                | Target::Radius(_)
+        )
+    }
+
+    /// True for a light's intensity (bounded by `MAX_INTENSITY`, not `MAX_MAGNITUDE`).
+    pub fn is_intensity(&self) -> bool {
+        matches!(self, Target::LightIntensity | Target::ExtraIntensity(_))
+    }
+
+    /// True for a light's position or direction (components x, y, z).
+    pub fn is_vector(&self) -> bool {
+        matches!(
+            self,
+            Target::LightPosition
+                | Target::LightDirection
+                | Target::ExtraPosition(_)
+                | Target::ExtraDirection(_)
         )
     }
 
@@ -134,6 +177,15 @@ impl Target {
             Target::Albedo(i) => scene.objects[i].material.albedo.to_vec(),
             Target::Specular(i) => vec![scene.objects[i].material.specular],
             Target::Shininess(i) => vec![scene.objects[i].material.shininess],
+            Target::ExtraPosition(i) => scene.light_at(i).position.to_vec(),
+            Target::ExtraDirection(i) => scene
+                .light_at(i)
+                .direction
+                .unwrap_or([0.0, 1.0, 0.0])
+                .to_vec(),
+            Target::ExtraIntensity(i) => vec![scene.light_at(i).intensity],
+            Target::ExtraColor(i) => scene.light_at(i).color.to_vec(),
+            Target::Radius(i) => vec![scene.light_at(i).radius],
         }
     }
 
@@ -142,14 +194,7 @@ impl Target {
         let v3 = || [v[0], v[1], v[2]];
         match *self {
             Target::LightPosition => scene.light.position = v3(),
-            Target::LightDirection => {
-                let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-                scene.light.direction = Some(if n > 0.0 && n.is_finite() {
-                    [v[0] / n, v[1] / n, v[2] / n]
-                } else {
-                    [0.0, 1.0, 0.0]
-                });
-            }
+            Target::LightDirection => scene.light.direction = Some(unit_or_up(v)),
             Target::LightIntensity => scene.light.intensity = v[0],
             Target::LightColor => scene.light.color = v3(),
             Target::Ambient => scene.ambient = v3(),
@@ -158,6 +203,72 @@ impl Target {
             Target::Albedo(i) => scene.objects[i].material.albedo = v3(),
             Target::Specular(i) => scene.objects[i].material.specular = v[0],
             Target::Shininess(i) => scene.objects[i].material.shininess = v[0],
+            Target::ExtraPosition(i) => scene.light_at_mut(i).position = v3(),
+            Target::ExtraDirection(i) => scene.light_at_mut(i).direction = Some(unit_or_up(v)),
+            Target::ExtraIntensity(i) => scene.light_at_mut(i).intensity = v[0],
+            Target::ExtraColor(i) => scene.light_at_mut(i).color = v3(),
+            Target::Radius(i) => scene.light_at_mut(i).radius = v[0].max(0.0),
         }
     }
+}
+
+/// `v` normalised; straight up for a zero or non-finite vector.
+fn unit_or_up(v: &[f64]) -> [f64; 3] {
+    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    if n > 0.0 && n.is_finite() {
+        [v[0] / n, v[1] / n, v[2] / n]
+    } else {
+        [0.0, 1.0, 0.0]
+    }
+}
+
+/// A `lights.NAME.FIELD` path. The first light's position, direction, intensity and colour are the
+/// single light's own targets (`light.position`, ...): a one-light scene fits the same way either way.
+fn parse_light_path(path: &str, scene: &Scene) -> std::result::Result<Target, String> {
+    let parts: Vec<&str> = path.split('.').collect();
+    if parts.len() != 3 {
+        return Err(format!(
+            "unknown parameter path {path:?} (fittable: {FITTABLE})"
+        ));
+    }
+    let i = scene
+        .all_lights()
+        .position(|l| l.name == parts[1])
+        .ok_or_else(|| {
+            let names: Vec<&str> = scene.all_lights().map(|l| l.name.as_str()).collect();
+            format!(
+                "unknown light {:?} (lights are: {})",
+                parts[1],
+                names.join(", ")
+            )
+        })?;
+    let l = scene.light_at(i);
+    let directional = l.direction.is_some();
+    let t = match (parts[2], i) {
+        ("position", _) if directional => {
+            return Err(format!("light {:?} is directional: fit its direction, not its position", parts[1]))
+        }
+        ("direction", _) if !directional => {
+            return Err(format!("light {:?} has a position, not a direction", parts[1]))
+        }
+        ("radius", _) if l.radius <= 0.0 => {
+            return Err(format!("light {:?} is not a sphere light: it has no radius", parts[1]))
+        }
+        ("position", 0) => Target::LightPosition,
+        ("direction", 0) => Target::LightDirection,
+        ("intensity", 0) => Target::LightIntensity,
+        ("color", 0) => Target::LightColor,
+        ("position", _) => Target::ExtraPosition(i),
+        ("direction", _) => Target::ExtraDirection(i),
+        ("intensity", _) => Target::ExtraIntensity(i),
+        ("color", _) => Target::ExtraColor(i),
+        ("radius", _) => Target::Radius(i),
+        (other, _) => {
+            return Err(format!(
+                "lights.{}.{other} cannot be fitted (fittable per light: position, direction, intensity, color, radius)",
+                parts[1]
+            ))
+        }
+    };
+    Ok(t)
 }

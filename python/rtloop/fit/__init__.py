@@ -21,6 +21,7 @@ from ..errors import RtloopError, RtloopWarning
 from ..scene import Scene, load_scene
 from .bounds import narrowed, restore_bounds
 from .gauge import hold_gauges, release_gauges
+from .lights import LightsFit, check_lights, choose_count, fit_lights
 from .goodness import clip_level, encoded, goodness, jpeg_blocking, noise_sigma
 from .norm import NORMS, dense_residual, norm_verdict, pixel_mask, representable_pixels
 from .identifiability import identifiability as _identifiability
@@ -36,6 +37,7 @@ from .protocol import (
     check_arguments,
     choose_method,
     searched_paths,
+    whole,
 )
 from .reference import check_reference, pin_to_reference
 from .result import FitResult, GenerationInfo, StageResult
@@ -89,7 +91,8 @@ def fit(
     highlights: str = "auto",
     reference: tuple[np.ndarray, float] | None = None,
     footprint: str | bool = "auto",
-) -> FitResult:
+    lights: int | str | None = None,
+) -> FitResult | LightsFit:
     """Fit the scene's free parameters (its ``fit`` section) to ``image``.
 
     ``image`` is the objective in linear RGB, float (H, W, 3) at the scene's size (see :func:`load_image`).
@@ -140,12 +143,21 @@ def fit(
     pixel centres and its polish, products and loss take the footprint (the two-stage fallback stays at
     pixel centres); "on" (or True): every search takes it too; "off" (or False): pixel centres only. The
     term tests stay at pixel centres.
+    ``lights``: the number of lights to fit (1 to 8), or "auto" to choose it from held-out pixels (one
+    light, then one more while it explains pixels the fit did not see: :func:`.lights.choose_count`).
+    None (default) or 1 for a one-light scene is the fit above; more lights, or a scene with a ``lights``
+    list of several lights or a sphere light, take the lights fit (:mod:`.lights`: matte objects, the
+    lights' geometry searched and their products solved) and return a :class:`.lights.LightsFit`.
     """
     t0 = time.perf_counter()
     scene = load_scene(scene)
     meshes = [o["name"] for o in scene.to_dict()["objects"] if o["shape"] == "mesh"]
     if meshes:
         raise RtloopError(f"fit: object {meshes[0]!r} is a mesh: meshes can be rendered and inserted, not fitted")
+    lights = check_lights(lights)
+    if lights not in (None, 1) or "lights" in scene.to_dict():
+        return _fit_lights(scene, image, mask, lights, seed=seed, threads=threads, population=population,
+                           generations=generations)
     footprint = check_footprint(footprint)
     if not (isinstance(uncertainty, bool) or isinstance(uncertainty, str) and uncertainty in ("default", "bootstrap", "off")):
         raise RtloopError(f"uncertainty: must be True, False, 'default', 'bootstrap' or 'off' (got {uncertainty!r})")
@@ -620,6 +632,22 @@ def _at_bounds(scene: Scene, paths: list[str]) -> list[str]:
         return []
     return [(f"fitted values at their fit bounds: {', '.join(at)} (widen the bounds if the truth may lie "
              "beyond)")]
+
+
+def _fit_lights(scene: Scene, image: Any, mask: Any, lights: int | str | None, *, seed: int, threads: int | None,
+                population: int | None, generations: Any) -> LightsFit:
+    """``fit()`` for several lights or a sphere light (:mod:`.lights`)."""
+    if population is not None:
+        whole("population", population, 4, 10_000)
+    if generations is not None:
+        whole("generations", generations, 1, 100_000)
+    check_arguments(scene, seed=seed, threads=threads, polish=0, pixels_per_object=PIXELS_PER_OBJECT,
+                    population=population or 40)
+    target, use = _objective(scene, image, mask, [])
+    budget = {"population": population or 40, "generations": generations or 120, "threads": threads}
+    if lights == "auto":
+        return choose_count(scene, target, seed=seed, mask=use, **budget)
+    return fit_lights(scene, target, lights, seed=seed, mask=use, **budget)
 
 
 def _objective(scene: Scene, image: Any, mask: Any, doubts: list[str]) -> tuple[np.ndarray, np.ndarray | None]:

@@ -1,0 +1,107 @@
+//! `fit_lights` and `lights_solve`: the lights fit's search and closed form (`fitness::lights`).
+
+use numpy::{PyReadonlyArray1, PyReadonlyArray3, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+
+use super::pool::detach_in_pool;
+use super::scene::PyScene;
+use crate::error::Error;
+use crate::fitness::lights::LightsFitness;
+use crate::params::ParamLayout;
+use crate::search::{Budget, Method};
+
+type Products = Vec<Vec<[f64; 3]>>;
+
+fn lights_fitness(
+    scene: &Bound<'_, PyScene>,
+    image: &PyReadonlyArray3<'_, f32>,
+    paths: &[String],
+    pixels: &PyReadonlyArray1<'_, u32>,
+) -> PyResult<LightsFitness> {
+    let s = &scene.get().0;
+    let shape = image.shape();
+    if shape != [s.height as usize, s.width as usize, 3] {
+        return Err(Error::Value(format!(
+            "image: expected shape ({}, {}, 3), got {shape:?}",
+            s.height, s.width
+        ))
+        .into());
+    }
+    let layout = ParamLayout::new(s, paths)?;
+    Ok(LightsFitness::new(
+        s,
+        layout,
+        image.as_slice()?,
+        pixels.as_slice()?,
+    )?)
+}
+
+/// Search the lights' geometry (`paths`) with L-SHADE (`seed`, `population`, `generations`) against the
+/// linear float32 (H, W, 3) `image` at `pixels` (flat indices); returns (x, loss, products per object and
+/// light then the constant, evaluations).
+#[pyfunction]
+#[pyo3(signature = (scene, image, paths, pixels, seed=0, population=40, generations=100, threads=None))]
+#[allow(clippy::too_many_arguments)]
+pub(super) fn fit_lights<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyScene>,
+    image: PyReadonlyArray3<'py, f32>,
+    paths: Vec<String>,
+    pixels: PyReadonlyArray1<'py, u32>,
+    seed: u64,
+    population: usize,
+    generations: usize,
+    threads: Option<usize>,
+) -> PyResult<(Vec<f64>, f64, Products, usize)> {
+    if population < 4 || generations == 0 {
+        return Err(Error::Value(format!(
+            "population must be >= 4 and generations >= 1 (got {population}, {generations})"
+        ))
+        .into());
+    }
+    let fitness = lights_fitness(scene, &image, &paths, &pixels)?;
+    if fitness.pixels() == 0 {
+        return Err(Error::Value("no chosen pixel sees an object".into()).into());
+    }
+    let budget = Budget {
+        population,
+        generations,
+        f: 0.5,
+        cr: 0.9,
+        seed,
+        max_evaluations: None,
+        polish: 200,
+        polish_tol: None,
+    };
+    let method = Method::named("lshade", &budget)?;
+    let bounds = fitness.layout.bounds.clone();
+    let found = detach_in_pool(py, threads, || {
+        crate::search::run(&method, &fitness, &bounds, |_| true).map(|r| {
+            let solve = fitness.solve(&r.best);
+            (r.best, solve.loss, solve.products, r.evaluations)
+        })
+    })??;
+    Ok(found)
+}
+
+/// The closed form at the lights' geometry `x` (over `paths`): (loss, products as `fit_lights` gives them).
+#[pyfunction]
+pub(super) fn lights_solve<'py>(
+    scene: &Bound<'py, PyScene>,
+    image: PyReadonlyArray3<'py, f32>,
+    paths: Vec<String>,
+    pixels: PyReadonlyArray1<'py, u32>,
+    x: Vec<f64>,
+) -> PyResult<(f64, Products)> {
+    let fitness = lights_fitness(scene, &image, &paths, &pixels)?;
+    if x.len() != fitness.layout.dim() {
+        return Err(Error::Value(format!(
+            "x: expected {} values, got {}",
+            fitness.layout.dim(),
+            x.len()
+        ))
+        .into());
+    }
+    let s = fitness.solve(&x);
+    Ok((s.loss, s.products))
+}

@@ -1,0 +1,109 @@
+"""Several lights and sphere lights: the lights fit against Mitsuba photos (tests/fixtures/lights, made by
+tools/make_light_photos.py) whose truth the fit never sees, the choice of how many lights from held-out
+pixels, and the ``lights`` argument's and field's errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import rtloop
+from rtloop.errors import RtloopError, SceneError
+
+FIXTURES = Path(__file__).resolve().parent / "fixtures" / "lights"
+
+
+def photo(name: str) -> tuple[dict, np.ndarray, Path]:
+    folder = FIXTURES / name
+    truth = json.loads((folder / "scene.json").read_text())
+    image = rtloop.load_image(folder / "objective.png", rtloop.load_scene(truth))
+    return truth, image, folder / "scene_input.json"
+
+
+def nearest(found: list[dict], position: list[float]) -> tuple[int, float]:
+    d = [np.linalg.norm(np.asarray(light["position"]) - position) for light in found]
+    return int(np.argmin(d)), float(min(d))
+
+
+def test_key_and_fill_at_a_quarter_are_both_found_with_their_products():
+    truth, image, scene_input = photo("key-fill-25")
+    res = rtloop.fit(scene_input, image, lights=2, seed=0)
+    assert [light["name"] for light in res.lights] == ["light0", "light1"]
+    key, fill = truth["lights"]
+    k, dk = nearest(res.lights, key["position"])
+    f, df = nearest(res.lights, fill["position"])
+    assert k == 0 and f == 1  # the strongest first
+    assert dk < 0.05 and df < 0.30, (dk, df)
+    for o in truth["objects"]:
+        for j, light in ((k, key), (f, fill)):
+            want = np.asarray(o["material"]["albedo"]) * light["intensity"] * np.asarray(light["color"])
+            got = np.asarray(res.products[o["name"]][j])
+            assert np.max(np.abs(got - want)) / want.max() < 0.05, (o["name"], light["name"], got, want)
+
+
+def test_the_fitted_scene_renders_the_photo():
+    truth, image, scene_input = photo("key-fill-25")
+    res = rtloop.fit(scene_input, image, lights=2, seed=0)
+    render = np.clip(rtloop.render(res.scene, None, None, 1), 0, 1)
+    ids = np.asarray(rtloop._native.object_ids(res.scene))
+    # the photo's own 8-bit steps and the pixel-centre render against Mitsuba's box-filtered pixels
+    assert np.median(np.abs(render - image)[ids >= 0]) < 2 / 255
+
+
+def test_a_sphere_light_is_placed_and_sized():
+    truth, image, scene_input = photo("soft-30")
+    res = rtloop.fit(scene_input, image, seed=0)
+    lamp = truth["lights"][0]
+    assert len(res.lights) == 1
+    assert np.linalg.norm(np.asarray(res.lights[0]["position"]) - lamp["position"]) < 0.01
+    assert abs(res.lights[0]["radius"] - lamp["radius"]) < 0.2 * lamp["radius"]
+
+
+@pytest.mark.parametrize("name, count", [("key-fill-25", 2), ("three-lights", 3)])
+def test_the_number_of_lights_is_read_from_held_out_pixels(name, count):
+    truth, image, scene_input = photo(name)
+    res = rtloop.fit(scene_input, image, lights="auto", seed=0)
+    assert len(res.lights) == count == len(truth["lights"])
+    assert [e["lights"] for e in res.evidence if e["kept"]] == [count]
+    for light in truth["lights"]:
+        assert nearest(res.lights, light["position"])[1] < 0.30
+
+
+def test_one_light_photo_keeps_one_light_with_auto():
+    truth, image, scene_input = photo("soft-10")
+    res = rtloop.fit(scene_input, image, lights="auto", seed=0)
+    assert len(res.lights) == 1
+
+
+def test_the_same_seed_gives_the_same_lights_on_any_thread_count():
+    _, image, scene_input = photo("key-fill-25")
+    a = rtloop.fit(scene_input, image, lights=2, seed=3, threads=1, generations=20)
+    b = rtloop.fit(scene_input, image, lights=2, seed=3, threads=2, generations=20)
+    assert a.lights == b.lights and a.products == b.products
+
+
+@pytest.mark.parametrize("bad", [0, 9, -1, 1.5, "two", True, [2]])
+def test_a_bad_lights_argument_is_one_line_naming_it(bad):
+    _, image, scene_input = photo("key-fill-25")
+    with pytest.raises(RtloopError, match=r"^lights: ") as e:
+        rtloop.fit(scene_input, image, lights=bad)
+    assert "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("light, field", [
+    ({"type": "sphere", "position": [0, 3, 0], "intensity": 5}, r"lights\[1\]\.radius"),
+    ({"type": "sphere", "position": [0, 3, 0], "radius": -1, "intensity": 5}, r"lights\[1\]\.radius"),
+    ({"position": [0, 3, 0], "radius": 0.2, "intensity": 5}, r"lights\[1\]\.radius"),
+    ({"name": "key", "position": [0, 3, 0], "intensity": 5}, r"lights\[1\]\.name"),
+    ({"type": "window", "position": [0, 3, 0], "intensity": 5}, r"lights\[1\]\.type"),
+    ({"position": [0, 3, 0], "intensity": -5}, r"lights\[1\]\.intensity"),
+])
+def test_a_bad_light_in_the_list_names_its_field(light, field):
+    truth, _, _ = photo("key-fill-25")
+    truth["lights"][1] = light
+    with pytest.raises(SceneError, match=field) as e:
+        rtloop.load_scene(truth)
+    assert "\n" not in str(e.value)
