@@ -41,15 +41,20 @@ FIELDS = [
 
 
 @st.composite
-def mutated_scenes(draw) -> dict:
-    d = copy.deepcopy(SMALL)
+def mutated(draw, base: dict, fields: list) -> dict:
+    """`base` with one to three of its numeric `fields` replaced by random numbers (NaN, inf and huge included)."""
+    d = copy.deepcopy(base)
     for _ in range(draw(st.integers(1, 3))):
-        where, n = draw(st.sampled_from(FIELDS))
+        where, n = draw(st.sampled_from(fields))
         node = d
         for k in where[:-1]:
             node = node[k]
         node[where[-1]] = draw(NUMBERS) if n == 0 else draw(st.lists(NUMBERS, min_size=n, max_size=n))
     return d
+
+
+def mutated_scenes():
+    return mutated(SMALL, FIELDS)
 
 
 @PROPS
@@ -424,6 +429,8 @@ def test_scene_with_strict_refuses_a_loose_board_estimate_in_one_line(tmp_path_f
         assert len([ln for ln in lines if "error" in ln or "usage" in ln]) >= 1 and not (work / "o").exists()
     if strict and vfov is None and code != 2:
         assert code == 1 and len(lines) == 1 and "0.3 deg needed with --strict" in lines[0]
+
+
 #: SMALL under a `lights` list: its light, a sphere fill light and a sun, their geometry free.
 SMALL_LIGHTS = copy.deepcopy(SMALL)
 SMALL_LIGHTS["lights"] = [{"name": "key", **SMALL_LIGHTS.pop("light")},
@@ -443,16 +450,8 @@ LIGHT_FIELDS = [
 ]
 
 
-@st.composite
-def mutated_light_lists(draw) -> dict:
-    d = copy.deepcopy(SMALL_LIGHTS)
-    for _ in range(draw(st.integers(1, 3))):
-        where, n = draw(st.sampled_from(LIGHT_FIELDS))
-        node = d
-        for k in where[:-1]:
-            node = node[k]
-        node[where[-1]] = draw(NUMBERS) if n == 0 else draw(st.lists(NUMBERS, min_size=n, max_size=n))
-    return d
+def mutated_light_lists():
+    return mutated(SMALL_LIGHTS, LIGHT_FIELDS)
 
 
 @PROPS
