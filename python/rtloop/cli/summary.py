@@ -35,6 +35,8 @@ def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = 
         lines.append(f"goodness of fit: {good['ratio']:.2g}x the photo's noise floor: {good['verdict']}")
     elif good.get("verdict"):
         lines.append(f"goodness of fit: {good['verdict']}")
+    if good.get("diagnosis"):
+        lines.append(f"  residual by object: {good['diagnosis']}")
     ident = result.identifiability or {}
     if ident.get("degenerate"):
         lines.append("")
@@ -124,6 +126,7 @@ def model_lines(model: dict[str, Any], fitted: dict[str, Any]) -> list[str]:
         lines.append(f"  {term}: {verdict} (loss at the light found without it"
                      + (f", with {' and '.join(on_top)}" if on_top else "")
                      + f" {ev['loss_without']:.4g} -> {ev['loss_with']:.4g} with it, {100 * ev['gain']:+.1f}%"
+                     + (f"; at most {ev['loss_with_nested']:.4g} with its products' best" if ev.get("raised") else "")
                      + (f", BIC {-bic:+.4g}" if bic is not None else "")
                      + (f"; {100 * ev['earlier_gain']:+.1f}% before them)" if "earlier_gain" in ev else ")"))
     chosen = model.get("norm")

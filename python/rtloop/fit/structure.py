@@ -1,0 +1,196 @@
+"""What a fit's residual is made of, per object: fine and zero-mean (texture, noise, JPEG: no shading can
+absorb it, and it does not bias the light), or smooth, with structure a shading could absorb (a wrong light,
+occluded room light, a lens's falloff, a camera's tone curve). Used by :func:`rtloop.fit.goodness.goodness`
+where the residual exceeds the noise floor.
+
+The split: the signed residual's local mean over a STRUCTURE_WINDOW x STRUCTURE_WINDOW box of the object's own
+used pixels (a normalised box filter; silhouettes do not mix objects) is its smooth part, the rest its fine
+part. White residual keeps about 1/sqrt(n) of its size in the local mean of n pixels; so the smooth part
+counts beyond that share of the fine part (``excess``), and is "structured" when that excess exceeds
+STRUCTURED_RATIO times the object's noise floor. A structured object's smooth residual is then regressed on
+the candidate causes' columns over its pixels (each beside a level and the model itself: the products
+absorb those), and the
+cause that explains most of it, at least NAMED_SHARE, is named."""
+
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+import numpy as np
+
+from .. import _native
+from ..scene import Scene, scene_to_dict
+
+__all__ = ["NAMED_SHARE", "STRUCTURED_RATIO", "STRUCTURE_WINDOW", "residual_structure"]
+
+#: The side, in pixels, of the box whose mean is a pixel's smooth residual.
+STRUCTURE_WINDOW = 7
+#: An object's smooth residual beyond white residual's share counts as structure the model lacks when it
+#: exceeds this many times the object's noise floor (the goodness verdict's own factor).
+STRUCTURED_RATIO = 3.0
+#: A cause is named when its columns explain at least this share of the smooth residual's sum of squares.
+NAMED_SHARE = 0.5
+#: ... and at least this much more than any other cause (causes alike on an object, such as a moved light and
+#: a lens's falloff on one ball, are not told apart).
+NAMED_MARGIN = 0.15
+#: The relative step of the light's position (of the distance to the subject) for its columns.
+LIGHT_STEP = 0.01
+
+CAUSES = {
+    "light": "the light's position or direction (the shading is shaped as a moved light's would be)",
+    "occlusion": "room light that the objects occlude (darker under and between them: an environment, not a "
+                 "constant ambient)",
+    "vignetting": "the lens's falloff towards the corners (vignetting)",
+    "tone_curve": "the camera's tone curve (values off in proportion to how bright they are, not as sRGB)",
+}
+
+
+def _box_mean(x: np.ndarray, w: np.ndarray, side: int) -> np.ndarray:
+    """Per pixel the mean of ``x`` (H, W, C) over the pixels of weight ``w`` (H, W; 0 or 1) within the
+    ``side`` x ``side`` box around it (0 where none), by integral images."""
+    r = side // 2
+
+    def boxsum(a: np.ndarray) -> np.ndarray:
+        p = np.pad(a, [(r + 1, r), (r + 1, r)] + [(0, 0)] * (a.ndim - 2))
+        c = p.cumsum(0).cumsum(1)
+        return c[side:, side:] - c[:-side, side:] - c[side:, :-side] + c[:-side, :-side]
+
+    n = boxsum(w.astype(np.float64))
+    s = boxsum(x * w[..., None])
+    return np.where(n[..., None] > 0, s / np.maximum(n, 1.0)[..., None], 0.0)
+
+
+def _light_columns(d: dict[str, Any]) -> list[np.ndarray]:
+    """The render's change per moved light: one render with the light moved by LIGHT_STEP of its distance
+    to the subject along each axis (or its direction turned by that many radians about two axes), less the
+    render at the fitted light; the direct light alone."""
+    light = d.get("light")
+    if not isinstance(light, dict):
+        return []
+    base = {**d, "fit": {}}
+    scenes = [Scene(json.dumps(base, allow_nan=False))]
+    if "position" in light:
+        p = np.asarray(light["position"], float)
+        centres = [o["center"] for o in d["objects"] if o.get("shape") == "sphere"]
+        ref = np.mean(np.asarray(centres, float), axis=0) if centres else np.zeros(3)
+        h = LIGHT_STEP * max(float(np.linalg.norm(p - ref)), 0.1)
+        moves = [{**light, "position": (p + h * e).tolist()} for e in np.eye(3)]
+    elif "direction" in light:
+        v = np.asarray(light["direction"], float)
+        v = v / np.linalg.norm(v)
+        a = np.eye(3)[int(np.argmin(np.abs(v)))]
+        u = np.cross(v, a)
+        u /= np.linalg.norm(u)
+        w = np.cross(v, u)
+        moves = [{**light, "direction": (v + LIGHT_STEP * t).tolist()} for t in (u, w)]
+    else:
+        return []
+    scenes += [Scene(json.dumps({**base, "light": m}, allow_nan=False)) for m in moves]
+    images, _ = _native.render_many(scenes)
+    ref_img = np.asarray(images[0], np.float64)
+    return [np.asarray(im, np.float64) - ref_img for im in images[1:]]
+
+
+def _occlusion_column(d: dict[str, Any]) -> np.ndarray:
+    """Per pixel its sky view factor (the unit environment's render with every albedo 1): where a constant
+    room light is occluded."""
+    from .products import unit_environment
+
+    return np.asarray(unit_environment(d), np.float64)[..., None].repeat(3, axis=2)
+
+
+def residual_structure(scene: Any, target: np.ndarray, model: np.ndarray, keep: np.ndarray, floor: np.ndarray,
+                       ids: np.ndarray, names: list[str]) -> dict[str, Any]:
+    """Per object of ``names`` (index k, -1 the background), the split of its residual ``model - target``
+    (both (H, W, 3)) over the used pixels ``keep`` (flat bool) into a fine and a smooth part, their sums of
+    absolute values (``fine``, ``smooth``), the smooth part beyond white residual's share of the fine
+    (``excess``) over the object's noise floor (``floor``: per used pixel and channel, as ``keep`` selects;
+    ``structured_ratio``), whether that is structure (``structured``), and for a structured object the share
+    of its smooth residual each cause explains (``causes``) and the one named (``cause``, None where none
+    reaches NAMED_SHARE: ``why`` then). ``ids``: the object index per pixel (flat)."""
+    h, w = target.shape[:2]
+    r = (np.asarray(model, np.float64) - np.asarray(target, np.float64)).reshape(h, w, 3)
+    kept = keep.reshape(h, w)
+    ids2 = ids.reshape(h, w)
+    floor_img = np.zeros((h * w, 3))
+    floor_img[keep] = floor
+    floor_img = floor_img.reshape(h, w, 3)
+    n_eff = float(STRUCTURE_WINDOW * STRUCTURE_WINDOW)
+    out: dict[str, Any] = {}
+    smooth_of: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    for k, name in [*enumerate(names), (-1, "background")]:
+        sel = kept & (ids2 == k)
+        if not sel.any():
+            continue
+        lp = _box_mean(r, sel, STRUCTURE_WINDOW)
+        smooth = float(np.abs(lp[sel]).sum())
+        fine = float(np.abs(r[sel] - lp[sel]).sum())
+        # Of white residual, the local mean keeps about 1/sqrt(n) of its size (n the box's pixels: fewer at
+        # an outline, so this is a lower bound of white residual's share and errs towards "structured").
+        excess = max(smooth - fine / math.sqrt(n_eff - 1.0), 0.0)
+        fl = float(floor_img[sel].sum())
+        ratio = excess / fl if fl > 0 else (math.inf if excess > 0 else 0.0)
+        entry: dict[str, Any] = {"fine": fine, "smooth": smooth, "excess": excess,
+                                 "structured_ratio": ratio if math.isfinite(ratio) else None,
+                                 "structured": bool(ratio >= STRUCTURED_RATIO)}
+        out[name] = entry
+        if entry["structured"] and k >= 0:
+            smooth_of[k] = (sel, lp)
+    if smooth_of:
+        d = scene_to_dict(scene) if not isinstance(scene, dict) else scene
+        columns = _cause_columns(d, np.asarray(model, np.float64).reshape(h, w, 3))
+        for k, (sel, lp) in smooth_of.items():
+            entry = out[names[k]]
+            y = lp[sel].ravel()
+            # The baseline every cause has: per channel a level and the model's own scale (the products absorb
+            # both).
+            mm = _box_mean(np.asarray(model, np.float64).reshape(h, w, 3), sel, STRUCTURE_WINDOW)[sel]
+            eye = np.eye(3)[None, :, :].repeat(mm.shape[0], axis=0)  # (n, 3 channels, 3 columns)
+            base = np.concatenate([eye, eye * mm[:, :, None]], axis=2).reshape(-1, 6)
+            left = _residual(base, y)
+            shares = {}
+            for cause, cols in columns.items():
+                if left <= 0:
+                    break
+                a = np.column_stack([base] + [_box_mean(c, sel, STRUCTURE_WINDOW)[sel].ravel() for c in cols])
+                shares[cause] = max(0.0, 1.0 - _residual(a, y) / left)
+            entry["causes"] = shares
+            best = max(shares, key=shares.get) if shares else None
+            runner = max((v for c, v in shares.items() if c != best), default=0.0)
+            if best is not None and shares[best] >= NAMED_SHARE and shares[best] - runner >= NAMED_MARGIN:
+                entry["cause"] = best
+            else:
+                entry["cause"] = None
+                entry["why"] = ("smooth residual that no single named cause explains (a light, room light, a "
+                                "lens or a camera curve the scene leaves out, or several)")
+    return out
+
+
+def _residual(a: np.ndarray, y: np.ndarray) -> float:
+    """The sum of squares of ``y`` less its least-squares fit by the columns of ``a``."""
+    coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+    res = y - a @ coef
+    return float(res @ res)
+
+
+def _cause_columns(d: dict[str, Any], model: np.ndarray) -> dict[str, list[np.ndarray]]:
+    """The candidate causes' columns (H, W, 3) each: the light's moves, the occluded room light, the
+    lens's radial falloff and a tone curve's change (a power of the model's values)."""
+    h, w = model.shape[:2]
+    yy, xx = np.mgrid[0:h, 0:w]
+    rr = ((xx - (w - 1) / 2) ** 2 + (yy - (h - 1) / 2) ** 2) / ((w / 2) ** 2 + (h / 2) ** 2)
+    m = np.clip(model, 1e-6, 1.0)
+    cols: dict[str, list[np.ndarray]] = {}
+    light = _light_columns(d)
+    if light:
+        cols["light"] = light
+    albedo = np.ones((h, w, 3))
+    ids = np.asarray(_native.object_ids(Scene(json.dumps({**d, "fit": {}}, allow_nan=False)))).reshape(h, w)
+    for k, o in enumerate(d["objects"]):
+        albedo[ids == k] = np.asarray(o["material"]["albedo"], float)
+    cols["occlusion"] = [_occlusion_column(d) * albedo]
+    cols["vignetting"] = [model * rr[..., None], model * (rr * rr)[..., None]]
+    cols["tone_curve"] = [m * np.log(m), m * np.log(m) ** 2]
+    return cols
