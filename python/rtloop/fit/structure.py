@@ -105,7 +105,7 @@ def residual_structure(scene: Any, target: np.ndarray, model: np.ndarray, keep: 
                        ids: np.ndarray, names: list[str]) -> dict[str, Any]:
     """Per object of ``names`` (index k, -1 the background), the split of its residual ``model - target``
     (both (H, W, 3)) over the used pixels ``keep`` (flat bool) into a fine and a smooth part, their sums of
-    absolute values (``fine``, ``smooth``), the smooth part beyond white residual's share of the fine
+    absolute values (``fine``, ``smooth``), its noise floor's (``floor``), the smooth part beyond white residual's share of the fine
     (``excess``) over the object's noise floor (``floor``: per used pixel and channel, as ``keep`` selects;
     ``structured_ratio``), whether that is structure (``structured``), and for a structured object the share
     of its smooth residual each cause explains (``causes``) and the one named (``cause``, None where none
@@ -132,7 +132,7 @@ def residual_structure(scene: Any, target: np.ndarray, model: np.ndarray, keep: 
         excess = max(smooth - fine / math.sqrt(n_eff - 1.0), 0.0)
         fl = float(floor_img[sel].sum())
         ratio = excess / fl if fl > 0 else (math.inf if excess > 0 else 0.0)
-        entry: dict[str, Any] = {"fine": fine, "smooth": smooth, "excess": excess,
+        entry: dict[str, Any] = {"fine": fine, "smooth": smooth, "excess": excess, "floor": fl,
                                  "structured_ratio": ratio if math.isfinite(ratio) else None,
                                  "structured": bool(ratio >= STRUCTURED_RATIO)}
         out[name] = entry
