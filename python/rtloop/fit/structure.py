@@ -141,12 +141,14 @@ def residual_structure(scene: Any, target: np.ndarray, model: np.ndarray, keep: 
     if smooth_of:
         d = scene_to_dict(scene) if not isinstance(scene, dict) else scene
         columns = _cause_columns(d, np.asarray(model, np.float64).reshape(h, w, 3))
-        for k, (sel, lp) in smooth_of.items():
+        for k, (sel_full, lp_full) in smooth_of.items():
             entry = out[names[k]]
+            box = _around(sel_full, STRUCTURE_WINDOW // 2)  # the object's pixels and the window's reach
+            sel, lp = sel_full[box], lp_full[box]
             y = lp[sel].ravel()
             # The baseline every cause has: per channel a level and the model's own scale (the products absorb
             # both).
-            mm = _box_mean(np.asarray(model, np.float64).reshape(h, w, 3), sel, STRUCTURE_WINDOW)[sel]
+            mm = _box_mean(np.asarray(model, np.float64).reshape(h, w, 3)[box], sel, STRUCTURE_WINDOW)[sel]
             eye = np.eye(3)[None, :, :].repeat(mm.shape[0], axis=0)  # (n, 3 channels, 3 columns)
             base = np.concatenate([eye, eye * mm[:, :, None]], axis=2).reshape(-1, 6)
             left = _residual(base, y)
@@ -154,7 +156,7 @@ def residual_structure(scene: Any, target: np.ndarray, model: np.ndarray, keep: 
             for cause, cols in columns.items():
                 if left <= 0:
                     break
-                a = np.column_stack([base] + [_box_mean(c, sel, STRUCTURE_WINDOW)[sel].ravel() for c in cols])
+                a = np.column_stack([base] + [_box_mean(c[box], sel, STRUCTURE_WINDOW)[sel].ravel() for c in cols])
                 shares[cause] = max(0.0, 1.0 - _residual(a, y) / left)
             entry["causes"] = shares
             best = max(shares, key=shares.get) if shares else None
@@ -168,11 +170,28 @@ def residual_structure(scene: Any, target: np.ndarray, model: np.ndarray, keep: 
     return out
 
 
+def _around(sel: np.ndarray, margin: int) -> tuple[slice, slice]:
+    """The rows and columns of the bounding box of ``sel`` (H, W bool), ``margin`` pixels wider (a box mean
+    over it is the full image's there: the pixels beyond hold none of the object's)."""
+    rows, cols = np.flatnonzero(sel.any(axis=1)), np.flatnonzero(sel.any(axis=0))
+    return (slice(max(int(rows[0]) - margin, 0), int(rows[-1]) + margin + 1),
+            slice(max(int(cols[0]) - margin, 0), int(cols[-1]) + margin + 1))
+
+
 def _residual(a: np.ndarray, y: np.ndarray) -> float:
-    """The sum of squares of ``y`` less its least-squares fit by the columns of ``a``."""
-    coef, *_ = np.linalg.lstsq(a, y, rcond=None)
-    res = y - a @ coef
-    return float(res @ res)
+    """The sum of squares of ``y`` less its least-squares fit by the columns of ``a``: by the normal equations
+    of the unit-norm columns (a few columns), their sums by einsum: a BLAS call on the tall matrix (threaded)
+    waits on the renderer's threads, 10-100x slower."""
+    cols = [c / n if (n := math.sqrt(float(np.einsum("i,i->", c, c)))) > 0 else c
+            for c in np.asfortranarray(a).T]
+    k = len(cols)
+    gram = np.empty((k, k))
+    for i in range(k):
+        for j in range(i, k):
+            gram[i, j] = gram[j, i] = float(np.einsum("i,i->", cols[i], cols[j]))
+    b = np.array([float(np.einsum("i,i->", c, y)) for c in cols])
+    coef = np.linalg.lstsq(gram, b, rcond=1e-12)[0]
+    return max(float(np.einsum("i,i->", y, y)) - 2.0 * float(coef @ b) + float(coef @ gram @ coef), 0.0)
 
 
 def _cause_columns(d: dict[str, Any], model: np.ndarray) -> dict[str, list[np.ndarray]]:
