@@ -123,3 +123,31 @@ def test_the_vignetting_is_named_on_the_floor():
     g = rtloop.fit(scene, vignetted(photo), uncertainty=False).goodness
     assert g["explained"]["floor"] == "vignetting"
     assert g["per_object"]["floor"]["structure"]["causes"]["vignetting"] >= 0.5
+
+
+LIGHTS = Path(__file__).resolve().parent / "fixtures" / "lights"
+
+
+@pytest.mark.parametrize("case", ["key-fill-10", "three-lights"])
+def test_a_second_light_is_not_called_texture(case):
+    """Photos with a fill light (10 % of the key) or three lamps fitted as one light: every flagged object's
+    residual is structured."""
+    scene = rtloop.load_scene(LIGHTS / case / "scene_input.json")
+    g = rtloop.fit(scene, rtloop.load_image(LIGHTS / case / "objective.png", scene), uncertainty=False).goodness
+    flagged = _flagged(g)
+    assert flagged and all(v != "texture/noise" for v in flagged.values()), flagged
+
+
+def test_rtloop_fit_prints_what_the_residual_is(tmp_path, capsys):
+    """rtloop-fit on a photo whose room light the fit leaves out: the summary and the warning say, per object,
+    what the residual is."""
+    from rtloop import cli
+
+    case = PHOTOS / "env-overhead"
+    code = cli.main([str(case / "scene_input.json"), str(case / "objective.png"), "--out", str(tmp_path / "o"),
+                     "--environment", "off", "--interreflection", "off", "--highlights", "off",
+                     "--final-scale", "1", "--final-spp", "1", "--snapshot-every", "0"])
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    assert "  residual by object: ball: not explained" in out.out
+    assert "rtloop-fit: residual by object: " in out.err
