@@ -151,3 +151,17 @@ def test_rtloop_fit_prints_what_the_residual_is(tmp_path, capsys):
     assert code == 0, out.err
     assert "  residual by object: ball: not explained" in out.out
     assert "rtloop-fit: residual by object: " in out.err
+
+
+def test_the_box_mean_over_an_objects_pixels_against_a_direct_sum():
+    from rtloop.fit.structure import _box_mean
+
+    rng = np.random.default_rng(0)
+    x, w = rng.random((20, 30, 7)), rng.random((20, 30)) > 0.4
+    want = np.zeros_like(x)
+    for i in range(20):
+        for j in range(30):
+            sl = (slice(max(i - 3, 0), i + 4), slice(max(j - 3, 0), j + 4))
+            if w[sl].any():
+                want[i, j] = x[sl][w[sl]].mean(axis=0)
+    assert np.allclose(_box_mean(x, w, 7), want, rtol=0, atol=1e-12)

@@ -49,15 +49,18 @@ CAUSES = {
 
 def _box_mean(x: np.ndarray, w: np.ndarray, side: int) -> np.ndarray:
     """Per pixel the mean of ``x`` (H, W, C) over the pixels of weight ``w`` (H, W; 0 or 1) within the
-    ``side`` x ``side`` box around it (0 where none), by integral images."""
-    r = side // 2
+    ``side`` x ``side`` box around it (0 where none): OpenCV's box sums, zero beyond the image."""
+    import cv2  # here, not at import: `import rtloop` loads no OpenCV
 
     def boxsum(a: np.ndarray) -> np.ndarray:
-        p = np.pad(a, [(r + 1, r), (r + 1, r)] + [(0, 0)] * (a.ndim - 2))
-        c = p.cumsum(0).cumsum(1)
-        return c[side:, side:] - c[:-side, side:] - c[side:, :-side] + c[:-side, :-side]
+        planes = a.reshape(a.shape[0], a.shape[1], -1)
+        # at most CV_CN_MAX (512) channels a call
+        out = [cv2.boxFilter(np.ascontiguousarray(planes[..., i:i + 256]), -1, (side, side), normalize=False,
+                             borderType=cv2.BORDER_CONSTANT) for i in range(0, planes.shape[2], 256)]
+        out = [o.reshape(a.shape[0], a.shape[1], -1) for o in out]
+        return np.concatenate(out, axis=2).reshape(a.shape)
 
-    n = boxsum(w.astype(np.float64))
+    n = boxsum(w.astype(np.float64)[..., None])[..., 0]
     s = boxsum(x * w[..., None])
     return np.where(n[..., None] > 0, s / np.maximum(n, 1.0)[..., None], 0.0)
 
@@ -140,33 +143,15 @@ def residual_structure(scene: Any, target: np.ndarray, model: np.ndarray, keep: 
             smooth_of[k] = (sel, lp)
     if smooth_of:
         d = scene_to_dict(scene) if not isinstance(scene, dict) else scene
-        columns = _cause_columns(d, np.asarray(model, np.float64).reshape(h, w, 3))
+        m3 = np.asarray(model, np.float64).reshape(h, w, 3)
+        columns = _cause_columns(d, m3, ids2)
+        # every image a regression needs, the model's first, as one stack: one box mean per object
+        stack = np.concatenate([m3, *(c for cols in columns.values() for c in cols)], axis=2)
         for k, (sel_full, lp_full) in smooth_of.items():
-            entry = out[names[k]]
             box = _around(sel_full, STRUCTURE_WINDOW // 2)  # the object's pixels and the window's reach
-            sel, lp = sel_full[box], lp_full[box]
-            y = lp[sel].ravel()
-            # The baseline every cause has: per channel a level and the model's own scale (the products absorb
-            # both).
-            mm = _box_mean(np.asarray(model, np.float64).reshape(h, w, 3)[box], sel, STRUCTURE_WINDOW)[sel]
-            eye = np.eye(3)[None, :, :].repeat(mm.shape[0], axis=0)  # (n, 3 channels, 3 columns)
-            base = np.concatenate([eye, eye * mm[:, :, None]], axis=2).reshape(-1, 6)
-            left = _residual(base, y)
-            shares = {}
-            for cause, cols in columns.items():
-                if left <= 0:
-                    break
-                a = np.column_stack([base] + [_box_mean(c[box], sel, STRUCTURE_WINDOW)[sel].ravel() for c in cols])
-                shares[cause] = max(0.0, 1.0 - _residual(a, y) / left)
-            entry["causes"] = shares
-            best = max(shares, key=shares.get) if shares else None
-            runner = max((v for c, v in shares.items() if c != best), default=0.0)
-            if best is not None and shares[best] >= NAMED_SHARE and shares[best] - runner >= NAMED_MARGIN:
-                entry["cause"] = best
-            else:
-                entry["cause"] = None
-                entry["why"] = ("smooth residual that no single named cause explains (a light, room light, a "
-                                "lens or a camera curve the scene leaves out, or several)")
+            sel = sel_full[box]
+            means = _box_mean(stack[box], sel, STRUCTURE_WINDOW)[sel]  # (n, 3 x images)
+            out[names[k]].update(_attribute(lp_full[box][sel].ravel(), means, columns))
     return out
 
 
@@ -178,25 +163,62 @@ def _around(sel: np.ndarray, margin: int) -> tuple[slice, slice]:
             slice(max(int(cols[0]) - margin, 0), int(cols[-1]) + margin + 1))
 
 
-def _residual(a: np.ndarray, y: np.ndarray) -> float:
-    """The sum of squares of ``y`` less its least-squares fit by the columns of ``a``: by the normal equations
-    of the unit-norm columns (a few columns), their sums by einsum: a BLAS call on the tall matrix (threaded)
-    waits on the renderer's threads, 10-100x slower."""
-    cols = [c / n if (n := math.sqrt(float(np.einsum("i,i->", c, c)))) > 0 else c
-            for c in np.asfortranarray(a).T]
-    k = len(cols)
-    gram = np.empty((k, k))
-    for i in range(k):
-        for j in range(i, k):
-            gram[i, j] = gram[j, i] = float(np.einsum("i,i->", cols[i], cols[j]))
-    b = np.array([float(np.einsum("i,i->", c, y)) for c in cols])
-    coef = np.linalg.lstsq(gram, b, rcond=1e-12)[0]
-    return max(float(np.einsum("i,i->", y, y)) - 2.0 * float(coef @ b) + float(coef @ gram @ coef), 0.0)
+def _attribute(y: np.ndarray, means: np.ndarray, columns: dict[str, list[np.ndarray]]) -> dict[str, Any]:
+    """The share of the smooth residual ``y`` (flat, pixel-major over the channels) each cause explains
+    beyond the baseline every cause has (per channel a level and the model's own scale: the products absorb
+    both), from the box means ``means`` (n, 3 x images: the model's, then each cause's columns in order); the
+    cause named, or None and why. Least squares by the normal equations of the unit-norm columns, their sums
+    by einsum (a few columns: a solve of the tall matrix, or a threaded BLAS call beside the renderer's
+    threads, costs 10-100x more)."""
+    n = means.shape[0]
+    base = []
+    for c in range(3):  # a level per channel
+        e = np.zeros((n, 3))
+        e[:, c] = 1.0
+        base.append(e.ravel())
+    for c in range(3):  # the model's own scale per channel
+        e = np.zeros((n, 3))
+        e[:, c] = means[:, c]
+        base.append(e.ravel())
+    vecs = base + [means[:, 3 * i:3 * i + 3].ravel() for i in range(1, means.shape[1] // 3)]
+    vecs = [v / nv if (nv := math.sqrt(float(np.einsum("i,i->", v, v)))) > 0 else v for v in vecs]
+    size = len(vecs)
+    gram = np.empty((size, size))
+    for i in range(size):
+        for j in range(i, size):
+            gram[i, j] = gram[j, i] = float(np.einsum("i,i->", vecs[i], vecs[j]))
+    b = np.array([float(np.einsum("i,i->", v, y)) for v in vecs])
+    yy = float(np.einsum("i,i->", y, y))
+
+    def left(idx: list[int]) -> float:
+        g, bb = gram[np.ix_(idx, idx)], b[idx]
+        coef = np.linalg.lstsq(g, bb, rcond=1e-12)[0]
+        return max(yy - 2.0 * float(coef @ bb) + float(coef @ g @ coef), 0.0)
+
+    baseline = left(list(range(6)))
+    shares: dict[str, float] = {}
+    at = 6
+    for cause, cols in columns.items():
+        idx = list(range(6)) + list(range(at, at + len(cols)))
+        at += len(cols)
+        if baseline > 0:
+            shares[cause] = max(0.0, 1.0 - left(idx) / baseline)
+    out: dict[str, Any] = {"causes": shares}
+    best = max(shares, key=shares.get) if shares else None
+    runner = max((v for c, v in shares.items() if c != best), default=0.0)
+    if best is not None and shares[best] >= NAMED_SHARE and shares[best] - runner >= NAMED_MARGIN:
+        out["cause"] = best
+    else:
+        out["cause"] = None
+        out["why"] = ("smooth residual that no single named cause explains (a light, room light, a lens or a "
+                      "camera curve the scene leaves out, or several)")
+    return out
 
 
-def _cause_columns(d: dict[str, Any], model: np.ndarray) -> dict[str, list[np.ndarray]]:
+def _cause_columns(d: dict[str, Any], model: np.ndarray, ids: np.ndarray) -> dict[str, list[np.ndarray]]:
     """The candidate causes' columns (H, W, 3) each: the light's moves, the occluded room light, the
-    lens's radial falloff and a tone curve's change (a power of the model's values)."""
+    lens's radial falloff and a tone curve's change (a power of the model's values). ``ids``: the object
+    index per pixel (H, W)."""
     h, w = model.shape[:2]
     yy, xx = np.mgrid[0:h, 0:w]
     rr = ((xx - (w - 1) / 2) ** 2 + (yy - (h - 1) / 2) ** 2) / ((w / 2) ** 2 + (h / 2) ** 2)
@@ -206,7 +228,6 @@ def _cause_columns(d: dict[str, Any], model: np.ndarray) -> dict[str, list[np.nd
     if light:
         cols["light"] = light
     albedo = np.ones((h, w, 3))
-    ids = np.asarray(_native.object_ids(Scene(json.dumps({**d, "fit": {}}, allow_nan=False)))).reshape(h, w)
     for k, o in enumerate(d["objects"]):
         albedo[ids == k] = np.asarray(o["material"]["albedo"], float)
     cols["occlusion"] = [_occlusion_column(d) * albedo]
