@@ -82,3 +82,16 @@ def test_a_known_environment_measures_the_intensity():
     assert fitted["light"]["intensity"] == pytest.approx(truth["light"]["intensity"], rel=0.01)
     floor = next(o for o in fitted["objects"] if o["name"] == "floor")
     assert floor["material"]["albedo"] == pytest.approx([0.5, 0.5, 0.5], rel=0.01)
+
+
+def test_a_free_ambient_is_compared_not_refitted():
+    """A free ambient (its fitted values named ``ambient``): the occluded environment is compared and found
+    better, but not refitted; the evidence says why, and the fit returns."""
+    d = json.loads((AMBIENT / "room-one-ball" / "scene_input.json").read_text())
+    d["fit"]["ambient"] = {"min": [0, 0, 0], "max": [0.5, 0.5, 0.5]}
+    scene = rtloop.load_scene(d)
+    result = rtloop.fit(scene, rtloop.load_image(AMBIENT / "room-one-ball" / "objective.png", scene),
+                        uncertainty=False)
+    ev = result.model["constant"]
+    assert ev["use_environment"] and ev["used"] == "ambient" and "free `environment`" in ev["refit_blocked"]
+    assert "ambient.r" in result.x

@@ -421,7 +421,7 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
     if ambient and declares_ambient(work):  # the declared ambient, or the same light occluded (.constant)
         model["constant"] = ev = compare_constant(work, where, x, target, sub, **kw)
         more = refit(narrowed(as_environment(work).with_params(x, where), where, REFIT_FRACTION), space) \
-            if ev["use_environment"] else None
+            if ev["use_environment"] and "refit_blocked" not in ev else None
         if more is not None:
             candidate = more.projected(int(seeds[2]), environment=True, name="light+colour+environment",
                                        from_scene=True)

@@ -41,13 +41,19 @@ def compare_constant(work: Scene, where: list[str], x: list[float], target: np.n
     """The closed-form loss at the light ``x`` (of ``where``) with the declared ambient and with the same
     radiance occluded (:func:`as_environment`), on ``pixels``; ``kw``: :func:`.selection.closed_form_loss`'s
     clip, norm, space, threads and saturated. ``use_environment`` where the environment lowers it by MIN_GAIN
-    or more (the same number of unknowns: no information criterion needed)."""
+    or more (the same number of unknowns: no information criterion needed); ``refit_blocked`` (why) where the
+    ambient is free: its fitted values keep their names, so it is only compared."""
     amb = closed_form_loss(work.with_params(x, where), where, [x], target, pixels, environment=True, **kw)[0]
     env_scene = as_environment(work)
     env = closed_form_loss(env_scene.with_params(x, where), where, [x], target, pixels, environment=True, **kw)[0]
     gain = (amb - env) / amb if amb > 0 else 0.0
-    return {"declared": "ambient", "loss_ambient": float(amb), "loss_environment": float(env), "gain": float(gain),
-            "use_environment": bool(gain >= MIN_GAIN),
-            "rule": (f"the declared ambient's radiance as an occluded environment, compared at the light found: "
-                     f"used when it lowers the loss by at least {MIN_GAIN:.0%} (the photo darker under and between "
-                     "the objects than an unoccluded ambient allows)")}
+    out = {"declared": "ambient", "loss_ambient": float(amb), "loss_environment": float(env), "gain": float(gain),
+           "use_environment": bool(gain >= MIN_GAIN),
+           "rule": (f"the declared ambient's radiance as an occluded environment, compared at the light found: "
+                    f"used when it lowers the loss by at least {MIN_GAIN:.0%} (the photo darker under and between "
+                    "the objects than an unoccluded ambient allows)")}
+    if "ambient" in work.fit_paths and out["use_environment"]:
+        out["refit_blocked"] = ("the ambient is a fitted parameter (its values are reported by that name): not "
+                                "refitted as an environment; give it a value, or free `environment` instead, to "
+                                "fit the occluded room light")
+    return out
