@@ -459,6 +459,8 @@ class _Run:
         good = result.goodness or {}
         if (good.get("ratio") or 0.0) >= good.get("explained_below", float("inf")):
             print(f"{PROG}: warning: {good['verdict']}", file=sys.stderr)
+            if good.get("diagnosis"):
+                print(f"{PROG}: residual by object: {good['diagnosis']}", file=sys.stderr)
         self.check_stop()
 
         write_result(tmp, result, input_paths(args.scene, args.image, args.response, args.crop, inputs.mask_path))

@@ -19,7 +19,8 @@ from .. import _native
 from .._srgb import codes8, decode
 from ..errors import RtloopError, RtloopWarning
 from ..scene import Scene, load_scene
-from .bounds import narrowed, restore_bounds
+from .constant import as_environment, compare_constant, declares_ambient
+from .bounds import AT_BOUND, at_bounds as _at_bounds, narrowed, restore_bounds
 from .gauge import hold_gauges, release_gauges
 from .lights import LightsFit, check_lights, choose_count, fit_lights
 from .goodness import clip_level, encoded, goodness, jpeg_blocking, noise_sigma
@@ -417,6 +418,21 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
     elif space == "linear" and float(target.min()) >= 0.0 and float(target.max()) <= 1.0:
         model["encoding"] = _encoding_check(work, stages, int(seeds[0]), target, sub, ratio, environment=env)
     where, x = first.paths, list(first.x)
+    if ambient and declares_ambient(work):  # the declared ambient, or the same light occluded (.constant)
+        model["constant"] = ev = compare_constant(work, where, x, target, sub, **kw)
+        more = refit(narrowed(as_environment(work).with_params(x, where), where, REFIT_FRACTION), space) \
+            if ev["use_environment"] and "refit_blocked" not in ev else None
+        if more is not None:
+            candidate = more.projected(int(seeds[2]), environment=True, name="light+colour+environment",
+                                       from_scene=True)
+            stages.stages += more.stages
+            stages.evaluations += more.evaluations
+            ev["loss_refit"] = float(sum(more.stages[-1].objectives))
+            if ev["loss_refit"] < sum(first.objectives):
+                work, first, ambient = as_environment(work), more.stages[-1], False
+                current, where, x = restore_bounds(candidate, work), first.paths, list(first.x)
+                model["terms"][model["terms"].index("ambient")] = "environment"
+        ev["used"] = "ambient" if ambient else "environment"
     n_sub = first.pixels // 4
     model_work, model_env, added = work, env, []
     base = float(closed_form_loss(work.with_params(x, where), where, [x], target, sub, environment=env, **kw)[0])
@@ -583,8 +599,6 @@ def _encoding_check(work: Scene, stages: Stages, seed: int, target: np.ndarray, 
     return out
 
 
-#: A fitted value this close to a bound (as a fraction of its range) is reported as at the bound.
-AT_BOUND = 1e-6
 #: An image with at least this fraction of its pixels above 1 in some channel is doubted (0..255 or not linear).
 MOSTLY_ABOVE_ONE = 0.9
 
@@ -615,23 +629,6 @@ def check_footprint(footprint: Any) -> str:
     if isinstance(footprint, str) and footprint in FOOTPRINT_MODES:
         return footprint
     raise RtloopError(f"footprint: must be 'auto', 'on' or 'off' (or True / False) (got {footprint!r})")
-
-
-def _at_bounds(scene: Scene, paths: list[str]) -> list[str]:
-    """A doubt naming the fitted values at one of their bounds (a range too narrow, or a wrong input)."""
-    at = []
-    for p in paths:
-        for n, v, (lo, hi) in zip(scene.param_names([p]), scene.get_params([p]), scene.bounds([p])):
-            near = AT_BOUND * (hi - lo)
-            if hi <= lo:
-                continue
-            # a physical limit is no doubt: 0 for what cannot be negative, 1 for an albedo (a yellow ball's red)
-            if (v - lo <= near and (lo != 0 or p == "light.position")) or (hi - v <= near and not (p.endswith(".albedo") and hi == 1)):
-                at.append(f"{n} = {v:.6g}")
-    if not at:
-        return []
-    return [(f"fitted values at their fit bounds: {', '.join(at)} (widen the bounds if the truth may lie "
-             "beyond)")]
 
 
 def _fit_lights(scene: Scene, image: Any, mask: Any, lights: int | str | None, *, seed: int, threads: int | None,
