@@ -291,3 +291,19 @@ def test_raw_photo_in_rtloop_fit(tmp_path, capsys):
     assert inputs["response"] == "raw" and len(inputs["raw"]["white_balance"]) == 4
     assert inputs["raw"]["white_level"] == 4095
     capsys.readouterr()
+
+
+@pytest.mark.parametrize("view", VIEWS)
+def test_the_views_are_framed_as_their_scene(built, view):
+    """The scene rtloop-scene wrote frames the photo as it is (the ChArUco board's texture on the floor and
+    the card left out by the mask): the outlines registered in place, forced whatever the residual."""
+    from rtloop.fit import framing
+    from rtloop.fit.files import fit_inputs, load_inputs
+
+    code, out = built[view]
+    assert code == 0
+    inputs = load_inputs(out / "scene.json", out / "objective.png")
+    result = fit_inputs(inputs, uncertainty=False, framing="off")
+    use = None if inputs.mask is None else np.flatnonzero(inputs.mask.ravel())
+    check, _ = framing.measure(result.scene, inputs.image, use, framing._compared(result))
+    assert check["checked"] and not check["mismatch"], check
