@@ -370,7 +370,7 @@ def test_strict_passes_only_a_field_of_view_within_the_target_and_refuses_in_one
     elif "does not fix the focal length" in strict:
         assert f"{VFOV_TARGET_DEG:g} deg needed with --strict" in strict
     if isinstance(loose, tuple):
-        assert math.isfinite(loose[0]) and loose[0] > 0 and 0 <= loose[1] <= VFOV_LIMIT_DEG
+        assert math.isfinite(loose[0]) and loose[0] > 0 and 0 <= loose[1] <= VFOV_LIMIT_DEG and math.isfinite(loose[1])
     else:
         assert isinstance(strict, str)
 
@@ -379,8 +379,8 @@ _BOARD_PHOTO: dict = {}
 
 
 def _board_photo(tmp_path_factory):
-    """A photo without EXIF of a ball beside a board its corners fix the field of view of to +-0.45 deg (between
-    the 0.3 deg target and the 1 deg limit), made once."""
+    """A photo without EXIF of a ball beside a board its corners fix the field of view of to +-0.45 deg
+    (looser than the 0.3 deg target), made once."""
     if "path" not in _BOARD_PHOTO:
         import sys
         from pathlib import Path
