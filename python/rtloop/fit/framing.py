@@ -50,13 +50,15 @@ CHECK_ABOVE = 2.0
 BAND = 3
 #: The photo and the template are blurred by this Gaussian (pixels) before registering: a wider basin.
 BLUR_PX = 1.0
-#: Huber's threshold (sRGB-encoded luminance, 0-1) for the first HUBER_STEPS steps; then Tukey's biweight
+#: Huber's threshold (sRGB-encoded luminance, 0-1) for at most HUBER_STEPS steps; then Tukey's biweight
 #: at TUKEY_C robust standard deviations of the residual (1.4826 x its median absolute value).
 HUBER = 0.02
 HUBER_STEPS = 10
 TUKEY_C = 4.685
-#: At most this many Gauss-Newton steps; fewer once a step moves nothing by more than 1e-4 px.
+#: At most this many Gauss-Newton steps; each phase (Huber, Tukey) ends once a step moves nothing (roll and
+#: zoom at the band's radius, shifts) by SETTLED_PX or more.
 STEPS = 40
+SETTLED_PX = 1e-3
 #: The standard error's blocks: BLOCK x BLOCK pixels (the blur's correlation length is about 3 px).
 BLOCK = 4
 #: The outlines' normals: the gradient of each object's indicator blurred by this Gaussian (pixels), which
@@ -128,7 +130,7 @@ def register_outlines(template: np.ndarray, photo: np.ndarray, band: np.ndarray,
     scale = np.array([radius, radius, 1.0, 1.0])
     p = np.zeros(4) if start is None else np.asarray(start, np.float64).copy()
     gain, offset = np.ones(k), np.zeros(k)
-    tukey = None
+    tukey, settled = None, False
     for step_no in range(STEPS):
         u, v = _warp_coords(p, x, y, c)
         iv, ix, iy = _sample(p_img, u, v), _sample(gx, u, v), _sample(gy, u, v)
@@ -139,11 +141,12 @@ def register_outlines(template: np.ndarray, photo: np.ndarray, band: np.ndarray,
         jac = np.concatenate([geo, onehot * iv[:, None], onehot], axis=1)
         r = g * iv + offset[group] - t
         a = np.abs(r)
-        if step_no < HUBER_STEPS:
+        if tukey is None and (step_no >= HUBER_STEPS or settled):
+            tukey = max(TUKEY_C * 1.4826 * float(np.median(a)), 1e-4)
+            settled = False
+        if tukey is None:
             wts = np.where(a <= HUBER, 1.0, HUBER / np.maximum(a, 1e-12))
         else:
-            if tukey is None:
-                tukey = max(TUKEY_C * 1.4826 * float(np.median(a)), 1e-4)
             wts = np.where(a < tukey, (1 - (a / tukey) ** 2) ** 2, 0.0)
         normal = jac.T @ (jac * wts[:, None])
         normal[:2, :2] += np.eye(2) * RIDGE * float(np.trace(normal[:4, :4])) / 4.0
@@ -157,7 +160,8 @@ def register_outlines(template: np.ndarray, photo: np.ndarray, band: np.ndarray,
         p += step[:4] / scale
         gain += step[4:4 + k]
         offset += step[4 + k:]
-        if step_no >= HUBER_STEPS and float(np.abs(step[:4]).max()) < 1e-4:  # pixels
+        settled = float(np.abs(step[:4]).max()) < SETTLED_PX
+        if settled and tukey is not None:
             break
     if not np.isfinite(p).all():
         return None
