@@ -209,6 +209,12 @@ def _build_parser() -> Parser:
                    help="'auto' (default): a sphere the scene gives as matte gets a fitted specular lobe "
                    "(specular and shininess) when the photo shows a highlight the diffuse model cannot explain; "
                    "'off': never")
+    p.add_argument("--framing", choices=("check", "correct", "off"), default="check",
+                   help="whether IMAGE is framed as the scene's camera frames it (the objects' outlines against "
+                   "the fitted render): 'check' (default) says so in the verdict where the outlines are 0.5 px "
+                   "or more off (a cropped, rotated or resized photo, or a wrong field of view), 'correct' "
+                   "resamples IMAGE into the scene's framing by the roll, zoom and shift its outlines give and "
+                   "fits again (objective.png is then the resampled photo), 'off'")
     p.add_argument("--mask", type=Path, metavar="PNG",
                    help="an image of IMAGE's size (or the scene's): white where the scene models the photo, "
                    "black where it does not (another object, a reflection); black pixels are left out of the fit (default: the mask the scene names, "
@@ -348,7 +354,7 @@ def fit_options(args: argparse.Namespace) -> dict[str, Any]:
     return {"protocol": args.protocol, "population": args.population, "generations": args.generations,
             "f": args.f, "cr": args.cr, "norm": args.norm, "space": args.loss_space,
             "environment": args.environment, "interreflection": args.interreflection,
-            "highlights": args.highlights, "footprint": args.footprint,
+            "highlights": args.highlights, "footprint": args.footprint, "framing": args.framing,
             "uncertainty": {"default": True, "bootstrap": "bootstrap", "off": False}[args.uncertainty]}
 
 
@@ -457,13 +463,17 @@ class _Run:
         for w in result.warnings:
             print(f"{PROG}: warning: {w}", file=sys.stderr)
         good = result.goodness or {}
-        if (good.get("ratio") or 0.0) >= good.get("explained_below", float("inf")):
+        if (good.get("ratio") or 0.0) >= good.get("explained_below", float("inf")) or \
+                (good.get("framing") or {}).get("mismatch"):
             print(f"{PROG}: warning: {good['verdict']}", file=sys.stderr)
             if good.get("diagnosis"):
                 print(f"{PROG}: residual by object: {good['diagnosis']}", file=sys.stderr)
         self.check_stop()
 
         write_result(tmp, result, input_paths(args.scene, args.image, args.response, args.crop, inputs.mask_path))
+        if getattr(result, "reframed", None) is not None:  # --framing correct: the photo as the fit saw it
+            image = result.reframed[0]
+            rtloop.save_image(tmp / "objective.png", image)
 
         k = args.final_scale
         self.progress.message(

@@ -37,6 +37,13 @@ def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = 
         lines.append(f"goodness of fit: {good['verdict']}")
     if good.get("diagnosis"):
         lines.append(f"  residual by object: {good['diagnosis']}")
+    framing = good.get("framing") or {}
+    if framing.get("corrected"):
+        c, before = framing["correction"], framing["as_given"]
+        lines.append(f"framing corrected: the photo resampled into the scene's framing (turned {c['roll_deg']:+.2f} "
+                     f"deg, zoomed {c['zoom_percent']:+.2f} %, shifted ({c['shift_px'][0]:+.2f}, "
+                     f"{c['shift_px'][1]:+.2f}) px; outlines {before['outline_rms_px']:.2f} px off as given, "
+                     f"{framing.get('outline_rms_px', float('nan')):.2f} px after)")
     ident = result.identifiability or {}
     if ident.get("degenerate"):
         lines.append("")

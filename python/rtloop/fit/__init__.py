@@ -7,7 +7,6 @@ the photo does not determine (:mod:`.identifiability`). docs/methods.md.
 
 from __future__ import annotations
 
-import math
 import time
 import warnings
 from collections.abc import Callable
@@ -20,12 +19,14 @@ from .._srgb import codes8, decode
 from ..errors import RtloopError, RtloopWarning
 from ..scene import Scene, load_scene
 from .constant import as_environment, compare_constant, declares_ambient
-from .bounds import AT_BOUND, at_bounds as _at_bounds, narrowed, restore_bounds
+from .bounds import at_bounds, narrowed, restore_bounds
 from .gauge import hold_gauges, release_gauges
 from .lights import LightsFit, check_lights, choose_count, fit_lights
+from .framing import check_framing, fit_reframed, framing_check, mismatch_verdict
 from .goodness import clip_level, encoded, goodness, jpeg_blocking, noise_sigma
 from .norm import NORMS, dense_residual, norm_verdict, pixel_mask, representable_pixels
 from .identifiability import identifiability as _identifiability
+from .inputs import check_footprint, check_norm, objective
 from .identifiability import lit_pixel_counts
 from .products import constant_term
 from .products import product_bounds as _product_bounds
@@ -93,6 +94,7 @@ def fit(
     reference: tuple[np.ndarray, float] | None = None,
     footprint: str | bool = "auto",
     lights: int | str | None = None,
+    framing: str = "check",
 ) -> FitResult | LightsFit:
     """Fit the scene's free parameters (its ``fit`` section) to ``image``.
 
@@ -149,17 +151,29 @@ def fit(
     None (default) or 1 for a one-light scene is the fit above; more lights, or a scene with a ``lights``
     list of several lights or a sphere light, take the lights fit (:mod:`.lights`: matte objects, the
     lights' geometry searched and their products solved) and return a :class:`.lights.LightsFit`.
+    ``framing``: whether the photo is framed as the scene's camera frames it (the objects' outlines against
+    the fitted render, :mod:`.framing`): "check" (default) says so in ``goodness["framing"]`` and the
+    verdict where the residual is at least twice the noise floor; "correct" resamples the photo into the
+    scene's framing by the camera correction (roll, zoom, shift) its outlines give and fits again; "off".
     """
     t0 = time.perf_counter()
     scene = load_scene(scene)
     meshes = [o["name"] for o in scene.to_dict()["objects"] if o["shape"] == "mesh"]
     if meshes:
         raise RtloopError(f"fit: object {meshes[0]!r} is a mesh: meshes can be rendered and inserted, not fitted")
-    lights = check_lights(lights)
+    lights, framing = check_lights(lights), check_framing(framing)
     if lights not in (None, 1) or "lights" in scene.to_dict():
+        if framing == "correct":
+            raise RtloopError("framing: 'correct' fits a camera correction with one light, not with several")
         return _fit_lights(scene, image, mask, lights, seed=seed, threads=threads, population=population,
                            generations=generations)
     footprint = check_footprint(footprint)
+    if framing == "correct":
+        return fit_reframed(fit, scene, image, mask, reference, dict(
+            protocol=protocol, seed=seed, population=population, generations=generations, f=f, cr=cr,
+            threads=threads, clip=clip, pixels_per_object=pixels_per_object, callback=callback,
+            optimizer=optimizer, polish=polish, uncertainty=uncertainty, norm=norm, space=space,
+            environment=environment, interreflection=interreflection, highlights=highlights, footprint=footprint))
     if not (isinstance(uncertainty, bool) or isinstance(uncertainty, str) and uncertainty in ("default", "bootstrap", "off")):
         raise RtloopError(f"uncertainty: must be True, False, 'default', 'bootstrap' or 'off' (got {uncertainty!r})")
     if space not in ("auto", *LOSS_SPACES):
@@ -173,7 +187,7 @@ def fit(
     check_arguments(scene, seed=seed, threads=threads, polish=polish, pixels_per_object=pixels_per_object,
                     population=b.population)
     doubts: list[str] = []
-    target, use = _objective(scene, image, mask, doubts)
+    target, use = objective(scene, image, mask, doubts)
     if reference is not None:
         reference = (check_reference(scene, reference[0], reference[1]), reference[1])
     all_paths = scene.fit_paths
@@ -305,7 +319,11 @@ def fit(
         as_compared, at_optimum = _native.render(current, current.width, current.height, 1, True), None
     result.goodness = goodness(current, target, use, clip=clip, render=as_compared, sigma=sigma, blocking=blocking,
                                encoding=encoding, codes=codes)
-    doubts += _at_bounds(current, [p for p in all_paths if p not in held])  # a held gauge was not fitted
+    result.goodness["framing"] = framing_check(current, target, use, result.goodness["ratio"], framing,
+                                               as_compared)
+    if result.goodness["framing"]["mismatch"]:
+        result.goodness["verdict"] = mismatch_verdict(result.goodness["framing"])
+    doubts += at_bounds(current, [p for p in all_paths if p not in held])  # a held gauge was not fitted
     for d in doubts:
         warnings.warn(d, RtloopWarning, stacklevel=2)
     result.warnings = doubts
@@ -599,38 +617,6 @@ def _encoding_check(work: Scene, stages: Stages, seed: int, target: np.ndarray, 
     return out
 
 
-#: An image with at least this fraction of its pixels above 1 in some channel is doubted (0..255 or not linear).
-MOSTLY_ABOVE_ONE = 0.9
-
-
-def check_norm(norm: Any) -> tuple[str, str]:
-    """(mode, norm): ``norm`` checked (:data:`rtloop.fit.norm.NORMS` or "huber:H" with H > 0), and the norm
-    the first fit takes ("l1" for "auto")."""
-    ok = isinstance(norm, str) and (norm in NORMS or norm.startswith("huber:"))
-    if ok and norm.startswith("huber:"):
-        try:
-            h = float(norm.split(":", 1)[1])
-        except ValueError:
-            h = math.nan
-        ok = math.isfinite(h) and h > 0
-    if not ok:
-        raise RtloopError(f"norm: must be 'auto', 'l1', 'l2', 'huber' or 'huber:H' with H > 0 (got {norm!r})")
-    return norm, "l1" if norm == "auto" else norm
-
-
-#: The ``footprint`` argument's values, with True and False for "on" and "off".
-FOOTPRINT_MODES = ("auto", "on", "off")
-
-
-def check_footprint(footprint: Any) -> str:
-    """``footprint`` as one of :data:`FOOTPRINT_MODES`, else an RtloopError naming the argument."""
-    if isinstance(footprint, (bool, np.bool_)):
-        return "on" if footprint else "off"
-    if isinstance(footprint, str) and footprint in FOOTPRINT_MODES:
-        return footprint
-    raise RtloopError(f"footprint: must be 'auto', 'on' or 'off' (or True / False) (got {footprint!r})")
-
-
 def _fit_lights(scene: Scene, image: Any, mask: Any, lights: int | str | None, *, seed: int, threads: int | None,
                 population: int | None, generations: Any) -> LightsFit:
     """``fit()`` for several lights or a sphere light (:mod:`.lights`)."""
@@ -640,52 +626,8 @@ def _fit_lights(scene: Scene, image: Any, mask: Any, lights: int | str | None, *
         whole("generations", generations, 1, 100_000)
     check_arguments(scene, seed=seed, threads=threads, polish=0, pixels_per_object=PIXELS_PER_OBJECT,
                     population=population or 40)
-    target, use = _objective(scene, image, mask, [])
+    target, use = objective(scene, image, mask, [])
     budget = {"population": population or 40, "generations": generations or 120, "threads": threads}
     if lights == "auto":
         return choose_count(scene, target, seed=seed, mask=use, **budget)
     return fit_lights(scene, target, lights, seed=seed, mask=use, **budget)
-
-
-def _objective(scene: Scene, image: Any, mask: Any, doubts: list[str]) -> tuple[np.ndarray, np.ndarray | None]:
-    """The image as float32 checked against the scene, and the mask's pixel indices (None: all)."""
-    kind = getattr(getattr(image, "dtype", None), "kind", None)
-    if kind is None:
-        image = np.asarray(image)
-        kind = image.dtype.kind
-    if kind in "uib":
-        raise RtloopError(
-            f"image: a {np.asarray(image).dtype} array is not linear radiance (a decoded file's code values?); "
-            "load the file with rtloop.load_image(path, scene), convert it with rtloop.srgb_to_linear(array), "
-            "or pass float linear radiance (0 = black, 1 = the brightest value a file could store)"
-        )
-    if kind != "f":
-        raise RtloopError(f"image: must be a float array of linear radiance (got dtype {np.asarray(image).dtype})")
-    target = np.ascontiguousarray(image, dtype=np.float32)
-    if target.shape != (scene.height, scene.width, 3):
-        raise RtloopError(
-            f"image: shape {target.shape} does not match the scene's ({scene.height}, {scene.width}, 3); "
-            "load it with rtloop.load_image(path, scene)"
-        )
-    if not np.isfinite(target).all():
-        raise RtloopError("image: contains NaN or infinite values")
-    if (target < 0).any():
-        doubts.append(f"image: {np.mean(target < 0):.2%} of the values are negative (min {float(target.min()):.4g}): "
-                      "linear radiance is >= 0 (zero-mean noise is fine, an offset or a wrong encoding is not)")
-    if float(target.max()) > 1.0 and np.mean(target.max(axis=2) > 1.0) >= MOSTLY_ABOVE_ONE:
-        doubts.append(f"image: {np.mean(target.max(axis=2) > 1.0):.0%} of the pixels are above 1: is it 0..255 "
-                      "code values or not linear? (rtloop.load_image gives linear 0..1)")
-    if mask is None:
-        return target, None
-    m = np.asarray(mask)
-    if m.shape != (scene.height, scene.width):
-        raise RtloopError(f"mask: shape {m.shape} does not match the scene's ({scene.height}, {scene.width})")
-    if m.dtype.kind not in "biuf":
-        raise RtloopError(f"mask: must be bool (True = use) or 0/1 numbers (got dtype {m.dtype})")
-    if m.dtype.kind == "f" and not np.isfinite(m).all():
-        raise RtloopError("mask: contains NaN or infinite values (use a bool array, True = use)")
-    if m.dtype.kind != "b" and not np.isin(m, (0, 1)).all():
-        raise RtloopError("mask: numbers other than 0 and 1 (use a bool array, True = use)")
-    if not m.any():
-        raise RtloopError("mask: selects no pixel")
-    return target, np.flatnonzero(m.astype(bool).ravel()).astype(np.uint32)
