@@ -24,7 +24,7 @@ from .gauge import hold_gauges, release_gauges
 from .lights import LightsFit, check_lights, choose_count, fit_lights
 from .framing import check_framing, fit_reframed, framing_check, mismatch_verdict
 from .goodness import clip_level, encoded, goodness, jpeg_blocking, noise_sigma
-from .norm import NORMS, dense_residual, norm_verdict, pixel_mask, representable_pixels
+from .norm import dense_residual, norm_verdict, pixel_mask, representable_pixels
 from .identifiability import identifiability as _identifiability
 from .inputs import check_footprint, check_norm, objective
 from .identifiability import lit_pixel_counts
