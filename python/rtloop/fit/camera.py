@@ -1,0 +1,450 @@
+"""The camera between the scene and the file: lens vignetting and a tone curve that is not sRGB.
+
+A camera multiplies the scene's radiance by its vignetting V (the natural cos^4 falloff of the angle off
+the optical axis, times a lens's radial falloff 1 + k1 r^2 + k2 r^4, r = 1 at the image corner) and
+writes it through its tone curve. Both are fitted with the light, not after it: with the light at x, a
+matte scene's pixel i of object o in channel c is p_oc S_i(x), S the shading of unit albedo and
+intensity, so at each candidate light the products and the camera's parameters come from one small
+least squares (:class:`Shading`): for the vignetting, V_i p_oc S_i (alternating k and p, both linear);
+for the tone curve, g(v_i) = p_oc S_i with g a monotone piecewise-linear function of the file's value v
+(non-negative ramp weights, a non-negative least squares on the normal equations). A Nelder-Mead search
+over the light minimises that fit's residual; the photo is then corrected (divided by V, or mapped through
+g) and fitted as any other (docs/camera.md).
+
+A term is taken only when the photo shows it: at the light the ordinary fit found, each term is fitted
+on half of the image's 8 x 8 pixel blocks (a checkerboard) and judged on the other half (and the other
+way round); it is selected when its held-out L1 residual is at least HELD_OUT_GAIN lower than the
+products' alone. The test costs two renders and a few small solves, so a photo that needs neither term
+keeps the ordinary fit, bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .. import _native
+from .._pixels import SATURATED, edges
+from .._srgb import codes8, encode
+from ..errors import RtloopError
+from ..scene import Scene, load_scene
+from .bounds import narrowed, restore_bounds
+
+MODES = ("auto", "on", "off")
+#: A term is selected when its held-out residual is at least this fraction below the products' alone.
+HELD_OUT_GAIN = 0.3
+#: The checkerboard's block side (pixels) for the held-out test.
+BLOCK = 8
+#: The tone curve's knots in the file's value (sRGB-encoded 0..1): g is linear between them.
+KNOTS = np.array([0.0, 0.08, 0.16, 0.25, 0.35, 0.45, 0.55, 0.65, 0.75, 0.85, 0.93, 1.0])
+#: The lens's radial terms fitted: 1 (k1 r^2) or 2 (k1 r^2 + k2 r^4).
+LENS_TERMS = 2
+#: Levenberg-Marquardt steps of the joint search: in the test, and when a term is taken.
+DETECT_STEPS = 2
+SEARCH_STEPS = 30
+#: Nelder-Mead evaluations after it (a valley the steps stall in).
+SEARCH_POLISH = 200
+#: The refit of the corrected photo searches +-REFIT_FRACTION of each range around the joint search's light.
+REFIT_FRACTION = 0.003
+#: The camera terms are fitted on every STRIDE-th pixel in each direction.
+STRIDE = 2
+
+
+@dataclass
+class Camera:
+    """The checked camera options of a fit."""
+
+    vignetting: str = "auto"
+    tone: str = "auto"
+    given: np.ndarray | None = None  # a given falloff (flat field or k1, k2), (H, W)
+    given_from: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def active(self) -> bool:
+        return self.given is not None or self.vignetting != "off" or self.tone != "off"
+
+
+def off_axis(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """Per pixel: cos^4 of the angle off the optical axis (a pinhole with the scene's vertical field of
+    view) and r, the distance from the image centre over the half-diagonal."""
+    d = scene.to_dict()
+    w, h = scene.width, scene.height
+    f = (h / 2) / math.tan(math.radians(float(d["camera"]["vfov_deg"])) / 2)
+    x = np.arange(w) + 0.5 - w / 2
+    y = np.arange(h) + 0.5 - h / 2
+    rr = np.hypot(*np.meshgrid(x, y))
+    return (f / np.hypot(f, rr)) ** 4, rr / math.hypot(w / 2, h / 2)
+
+
+def falloff(cos4: np.ndarray, r: np.ndarray, k1: float, k2: float) -> np.ndarray:
+    """V = cos^4 x (1 + k1 r^2 + k2 r^4)."""
+    return cos4 * (1 + k1 * r**2 + k2 * r**4)
+
+
+def check_camera(scene: Scene, vignetting: Any, tone: Any, flat_field: Any) -> Camera:
+    """The camera options checked (an RtloopError naming the argument otherwise)."""
+    cam = Camera()
+    if isinstance(vignetting, str):
+        if vignetting not in MODES:
+            raise RtloopError(f"vignetting: must be 'auto', 'on', 'off' or (k1, k2) (got {vignetting!r})")
+        cam.vignetting = vignetting
+    else:
+        try:
+            k = [float(v) for v in vignetting]
+        except (TypeError, ValueError):
+            k = []
+        if len(k) != 2 or not all(math.isfinite(v) for v in k):
+            raise RtloopError(f"vignetting: must be 'auto', 'on', 'off' or (k1, k2) (got {vignetting!r})")
+        cos4, r = off_axis(scene)
+        v = falloff(cos4, r, *k)
+        if not (np.isfinite(v).all() and (v > 0).all()):
+            raise RtloopError(f"vignetting: (k1, k2) = ({k[0]:g}, {k[1]:g}) makes the falloff 0 or negative "
+                              "inside the image (1 + k1 r^2 + k2 r^4 must stay positive for r in [0, 1])")
+        cam.vignetting, cam.given, cam.given_from = "given", v, {"k1": k[0], "k2": k[1], "source": "given"}
+    if not (isinstance(tone, str) and tone in MODES):
+        raise RtloopError(f"tone: must be 'auto', 'on' or 'off' (got {tone!r})")
+    cam.tone = tone
+    if flat_field is not None:
+        if cam.given is not None:
+            raise RtloopError("flat_field: give either a flat field or vignetting=(k1, k2), not both")
+        cam.given, cam.given_from = flat_field_falloff(scene, flat_field), {"source": "flat field"}
+        cam.vignetting = "given"
+    return cam
+
+
+def flat_field_falloff(scene: Scene, flat: Any) -> np.ndarray:
+    """The falloff a photo of a flat white target shows: its channel mean over its brightest 1 %."""
+    f = np.asarray(flat)
+    if f.dtype.kind != "f" or f.ndim not in (2, 3):
+        raise RtloopError(f"flat_field: must be a float array of linear values (got dtype {f.dtype})")
+    if f.ndim == 3 and f.shape[2] == 3:
+        f = f.mean(axis=2)
+    if f.shape != (scene.height, scene.width):
+        raise RtloopError(f"flat_field: shape {np.asarray(flat).shape} does not match the scene's "
+                          f"({scene.height}, {scene.width}[, 3])")
+    if not np.isfinite(f).all() or not (f > 0).all():
+        raise RtloopError("flat_field: every value must be finite and above 0 (a photo of a flat white target)")
+    if (f >= SATURATED).mean() > 0.01:
+        raise RtloopError(f"flat_field: {(f >= SATURATED).mean():.0%} of its pixels are saturated: expose the "
+                          "flat white target darker")
+    top = float(np.quantile(f, 0.99))
+    return np.minimum(f / top, 1.0)
+
+
+class Shading:
+    """A matte scene's shading S(x) of unit albedo and intensity at the pixels that inform the camera
+    terms (one object in the pixel and its 4-neighbours, unsaturated), and the small solves on it."""
+
+    def __init__(self, fitted: Scene, target: np.ndarray, use: np.ndarray | None, environment: bool = False):
+        d = fitted.to_dict()
+        d["fit"] = {"light.position": d["fit"]["light.position"]}
+        d["light"].update(intensity=1.0, color=[1.0, 1.0, 1.0])
+        d["exposure"] = 1.0
+        d.pop("interreflection", None)
+        d.pop("environment", None)
+        for o in d["objects"]:
+            o["material"]["albedo"] = [1.0, 1.0, 1.0]
+        self.scene = load_scene(d)
+        ids = _native.object_ids(self.scene, self.scene.width, self.scene.height)
+        self.env = None
+        ok = (ids >= 0) & ~edges(ids) & (target.max(axis=2) < SATURATED)
+        ok[:, 1::STRIDE] = ok[1::STRIDE, :] = False
+        if use is not None:
+            keep = np.zeros(ok.size, bool)
+            keep[use] = True
+            ok &= keep.reshape(ok.shape)
+        self.ok = ok
+        self.t = target[ok].astype(np.float64)  # (n, 3)
+        self.group = (ids[ok][:, None] * 3 + np.arange(3)).ravel()  # object x channel per value
+        self.groups = len(d["objects"]) * 3
+        cos4, r = off_axis(fitted)
+        self.c4, self.r2 = np.repeat(cos4[ok], 3), np.repeat(r[ok], 3) ** 2
+        from scipy.sparse import csr_matrix
+
+        n = self.group.size
+        self.onehot = csr_matrix((np.ones(n), (self.group, np.arange(n))), shape=(self.groups, n))
+        self._cache: dict[int, Any] = {}
+        cb = ((np.indices(ok.shape) // BLOCK).sum(axis=0) % 2).astype(bool)[ok]
+        self.halves = (np.repeat(cb, 3), np.repeat(~cb, 3))
+        self.v = encode(np.clip(self.t, 0, 1)).astype(np.float64).ravel()
+        lo, hi = KNOTS[:-1], KNOTS[1:]
+        self.ramps = np.clip((self.v[:, None] - lo) / (hi - lo), 0.0, 1.0)
+        if environment:  # the environment's column: its view factor (the light off, a white environment)
+            d.update(environment=[1.0, 1.0, 1.0])
+            d["light"]["intensity"] = 0.0
+            e = load_scene(d)
+            self.env = np.asarray(_native.render(e, e.width, e.height, 1, False), np.float64)[ok].ravel()
+
+    def shading(self, position: Any) -> np.ndarray:
+        s = self.scene.with_params([float(p) for p in position], ["light.position"])
+        return np.asarray(_native.render(s, s.width, s.height, 1, True), np.float64)[self.ok].ravel()
+
+    def _model(self, y: np.ndarray, s: np.ndarray, sel: np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
+        """The least-squares products (and environment products) per object and channel fitted to ``y``
+        on ``sel``: the model's values p S (+ e E) at every pixel, each column times ``scale``."""
+        g, cols = self.group[sel], [s] if self.env is None else [s, self.env]
+        if scale is not None:
+            cols = [c * scale for c in cols]
+        ys = y[sel]
+        if len(cols) == 1:
+            num = np.bincount(g, ys * cols[0][sel], self.groups)
+            den = np.bincount(g, cols[0][sel] ** 2, self.groups)
+            p = np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0).clip(0.0)
+            return p[self.group] * cols[0]
+        a, b = cols[0][sel], cols[1][sel]
+        aa, ab, bb = (np.bincount(g, u * v, self.groups) for u, v in ((a, a), (a, b), (b, b)))
+        ay, by = np.bincount(g, a * ys, self.groups), np.bincount(g, b * ys, self.groups)
+        det = aa * bb - ab * ab
+        good = det > 1e-12 * np.maximum(aa * bb, 1e-300)
+        det = np.where(good, det, 1.0)
+        p = np.where(good, (bb * ay - ab * by) / det, np.where(aa > 0, ay / np.where(aa > 0, aa, 1.0), 0.0))
+        e = np.where(good, (aa * by - ab * ay) / det, 0.0)
+        return p[self.group] * cols[0] + e[self.group] * cols[1]
+
+    def base(self, s: np.ndarray, sel: np.ndarray) -> np.ndarray:
+        """The products alone: the model's values at every pixel, fitted on ``sel``."""
+        return self._model(self.t.ravel(), s, sel)
+
+    def vignetting(self, s: np.ndarray, sel: np.ndarray, rounds: int = 4) -> tuple[np.ndarray, tuple[float, float]]:
+        """Products x V (k1, k2 and the products alternated, each a linear least squares): the model's
+        values and (k1, k2)."""
+        y = self.t.ravel()
+        c4, r2 = self.c4, self.r2
+        k = np.zeros(2)
+        for _ in range(rounds):
+            lens = 1 + k[0] * r2 + k[1] * r2 * r2
+            a = self._model(y, s, sel, c4 * lens) / lens  # y = a (1 + k1 r^2 + k2 r^4)
+            a1, a2, e = (a * r2)[sel], (a * r2 * r2)[sel], (y - a)[sel]
+            # sums, not BLAS dot products (whose threads contend with the renderer's)
+            m11, m12, m22 = (a1 * a1).sum(), (a1 * a2).sum(), (a2 * a2).sum()
+            det = m11 * m22 - m12 * m12
+            if not det > 1e-12 * m11 * m22:
+                break
+            r1, r2_ = (a1 * e).sum(), (a2 * e).sum()
+            if LENS_TERMS == 1:
+                k = np.array([r1 / m11, 0.0])
+            else:
+                k = np.array([m22 * r1 - m12 * r2_, m11 * r2_ - m12 * r1]) / det
+                if k[0] > 0:  # a lens darkens away from its axis: 1 + k1 r^2 + k2 r^4 falls from r = 0
+                    k = np.array([0.0, min(r2_ / m22, 0.0)])
+        v = c4 * (1 + k[0] * r2 + k[1] * r2 * r2)
+        return self._model(y, s, sel, v), (float(k[0]), float(k[1]))
+
+    def tone(self, s: np.ndarray, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """g(v) = p S (+ e E): the ramp weights w >= 0 and the products >= 0 by a non-negative least
+        squares on the normal equations, g's mean over the pixels held at the sRGB decoding's (the scale).
+        Returns (g(v), the model, w)."""
+        from scipy.optimize import nnls
+
+        key = id(sel)
+        if key not in self._cache:
+            b = self.ramps[sel]
+            self._cache[key] = (sel, np.einsum("ij,ik->jk", b, b), b.mean(axis=0), float(self.t.ravel()[sel].mean()))
+        _, m_bb, b_mean, mean_t = self._cache[key]
+        k, m = m_bb.shape[0], self.groups
+        cols = [np.where(sel, c, 0.0) for c in ([s] if self.env is None else [s, self.env])]
+        blocks = [[m_bb] + [-(self.onehot @ (self.ramps * c[:, None])).T for c in cols]]
+        for i, c in enumerate(cols):
+            blocks.append([blocks[0][1 + i].T] + [np.diag(self.onehot @ (c * d)) for d in cols])
+        normal = np.block(blocks)
+        n = normal.shape[0]
+        normal += 1e-12 * np.trace(normal) / n * np.eye(n)
+        u = np.linalg.cholesky(normal).T
+        scale = math.sqrt(float(np.trace(normal))) * 10
+        row = np.concatenate([b_mean, np.zeros(n - k)]) * scale
+        x = nnls(np.vstack([u, row]), np.concatenate([np.zeros(n), [mean_t * scale]]), maxiter=50 * n)[0]
+        w = x[:k]
+        model = sum(x[k + i * m: k + (i + 1) * m][self.group] * c for i, c in
+                    enumerate([s] if self.env is None else [s, self.env]))
+        return self.ramps @ w, model, w
+
+
+def _l1(a: np.ndarray, b: np.ndarray, sel: np.ndarray) -> float:
+    return float(np.abs(a[sel] - b[sel]).sum())
+
+
+def residual(sh: Shading, term: str, s: np.ndarray, sel: np.ndarray) -> np.ndarray:
+    """The joint fit's residual at a shading ``s`` (fitted on ``sel``)."""
+    if term == "vignetting":
+        return sh.vignetting(s, sel)[0] - sh.t.ravel()
+    if term == "tone":
+        g, ps, _ = sh.tone(s, sel)
+        return ps - g
+    return sh.base(s, sel) - sh.t.ravel()
+
+
+def search(sh: Shading, term: str, start: Any, bounds: list[tuple[float, float]], iterations: int,
+           shading: dict[tuple[float, ...], np.ndarray] | None = None, polish: int = 0) -> tuple[np.ndarray, int]:
+    """Levenberg-Marquardt over the light's position on the joint fit's squared residual (the camera's
+    parameters and the products solved at each light: variable projection; the Jacobian by forward
+    differences of 1e-4 of each range), from ``start``, ``iterations`` steps at most. ``shading``: renders
+    shared between the terms' searches. Returns the light and the renders taken."""
+    lo, hi = np.array(bounds, float).T
+    h = 1e-4 * (hi - lo)
+    cache = {} if shading is None else shading
+    every = np.ones(sh.t.size, bool)
+    renders = 0
+
+    def shade(x: np.ndarray) -> np.ndarray:
+        nonlocal renders
+        key = tuple(np.round(x, 12))
+        if key not in cache:
+            cache[key] = sh.shading(x)
+            renders += 1
+        return cache[key]
+
+    x = np.clip(np.asarray(start, float), lo, hi)
+    r = residual(sh, term, shade(x), every)
+    loss, lam = float((r * r).sum()), 1e-3
+    for _ in range(iterations):
+        cols = []
+        for i in range(3):
+            step = x.copy()
+            step[i] += h[i] if x[i] + h[i] <= hi[i] else -h[i]
+            cols.append((residual(sh, term, shade(step), every) - r) / (step[i] - x[i]))
+        j = np.stack(cols, axis=1)
+        jtj, jtr = np.einsum("ij,ik->jk", j, j), np.einsum("ij,i->j", j, r)
+        moved = False
+        for _ in range(6):
+            try:
+                delta = -np.linalg.solve(jtj + lam * np.diag(np.diag(jtj) + 1e-30), jtr)
+            except np.linalg.LinAlgError:
+                break
+            trial = np.clip(x + delta, lo, hi)
+            rt = residual(sh, term, shade(trial), every)
+            lt = float((rt * rt).sum())
+            if lt < loss:
+                x, r, loss, lam, moved = trial, rt, lt, lam / 10, True
+                break
+            lam *= 10
+        if not moved or np.all(np.abs(delta) < h):
+            break
+    if polish:
+        from scipy.optimize import minimize
+
+        def loss_at(p: np.ndarray) -> float:
+            e = residual(sh, term, shade(np.clip(p, lo, hi)), every)
+            return float((e * e).sum())
+
+        simplex = np.vstack([x, x + np.diag(0.01 * (hi - lo))])
+        opt = minimize(loss_at, x, method="Nelder-Mead",
+                       options={"initial_simplex": simplex, "maxfev": polish, "xatol": 1e-5, "fatol": 0.0})
+        if opt.fun < loss:
+            x = np.clip(opt.x, lo, hi)
+    return x, renders
+
+
+def evidence(sh: Shading, position: Any, terms: list[str], bounds: list[tuple[float, float]]) -> dict[str, Any]:
+    """Each term's light after DETECT_STEPS joint steps from the ordinary fit's; there, the term fitted on
+    one half of the blocks and judged on the other (both ways), against the products alone after as many
+    steps."""
+    shared: dict[tuple[float, ...], np.ndarray] = {}
+
+    def held_out(term: str) -> tuple[float, np.ndarray]:
+        # the same steps for the products alone: a term is not credited with what a better light gives
+        x, _ = search(sh, term, position, bounds, DETECT_STEPS, shared)
+        s = shared.get(tuple(np.round(x, 12)))
+        s = sh.shading(x) if s is None else s
+        return sum(float(np.abs(residual(sh, term, s, a))[b].sum()) for a, b in (sh.halves, sh.halves[::-1])), x
+
+    base, _ = held_out("base")
+    out = {}
+    for t in terms:
+        held, x = held_out(t)
+        gain = 1.0 - held / base if base > 0 else 0.0
+        out[t] = {"held_out_l1": held, "held_out_l1_without": base, "gain": round(gain, 4),
+                  "selected": bool(gain >= HELD_OUT_GAIN), "light": [float(v) for v in x],
+                  "rule": f"selected when the held-out L1 residual falls by at least {HELD_OUT_GAIN:.0%} "
+                          f"(fitted on half of the {BLOCK} x {BLOCK} px blocks, judged on the other half)"}
+    return out
+
+
+def corrected(target: np.ndarray, term: str, fitted: Any, scene: Scene) -> tuple[np.ndarray, dict[str, Any]]:
+    """The photo with the camera's term undone, and the term's record."""
+    if term == "vignetting":
+        cos4, r = off_axis(scene)
+        v = falloff(cos4, r, *fitted)  # 1 on the optical axis: the products are the scene's
+        out = np.where(target >= SATURATED, target, target / v[..., None])
+        return out.astype(np.float32), {"k1": fitted[0], "k2": fitted[1], "corner": float(v.min())}
+    w = np.asarray(fitted)
+    lo, hi = KNOTS[:-1], KNOTS[1:]
+    top = float(w.sum())
+    if top <= 0:
+        raise RtloopError("tone: the fitted curve is flat")
+    v = encode(np.clip(target, 0, 1)).astype(np.float64)
+    g = np.clip((v[..., None] - lo) / (hi - lo), 0, 1) @ (w / top)
+    curve = np.cumsum(np.concatenate([[0.0], w / top]))
+    return g.astype(np.float32), {"knots": KNOTS.round(3).tolist(), "linear_at_knots": curve.round(5).tolist()}
+
+
+def applicable(fitted: Scene) -> str | None:
+    """Why the camera terms are not tested on this fit (None: they are): a matte scene, one point light
+    whose position the fit frees, no ambient light."""
+    d = fitted.to_dict()
+    if "light.position" not in fitted.fit_paths or d["light"].get("type", "point") != "point":
+        return "the camera terms are tested for a free point light's position only"
+    if any(o["material"].get("specular", 0.0) > 0 for o in d["objects"]):
+        return "the camera terms are tested on matte scenes only"
+    if any(float(a) > 0 for a in d.get("ambient", [0, 0, 0])):
+        return "the camera terms are tested without ambient light only"
+    return None
+
+
+def fit_through_camera(fit_once: Callable[..., Any], scene: Scene, image: np.ndarray, use: np.ndarray | None,
+                       cam: Camera) -> Any:
+    """``fit_once(image)`` (the ordinary fit), and where the photo shows vignetting or a tone curve (or
+    the user gives a falloff) the fit of the photo with the camera undone (``result.model["camera"]``)."""
+    target = np.ascontiguousarray(image, dtype=np.float32)
+    if cam.given is not None:
+        out = np.where(target >= SATURATED, target, target / cam.given[..., None]).astype(np.float32)
+        result = fit_once(out)
+        result.model["camera"] = {"terms": ["vignetting"], "vignetting": cam.given_from}
+        return result
+    first = fit_once(target)
+    why = applicable(first.scene) if first.settings.get("method") == "projected" else \
+        "the two-stage method selects no term (as it selects no image term)"
+    if why is None and "skipped" in first.model and "on" not in (cam.vignetting, cam.tone):
+        why = "the fit explains the photo to its rounding error (model.residual): nothing more is tested"
+    if why is not None:
+        first.model["camera"] = {"terms": [], "not_tested": why}
+        return first
+    terms = [t for t, mode in (("vignetting", cam.vignetting), ("tone", cam.tone)) if mode != "off"]
+    if "tone" in terms and cam.tone == "auto" and codes8(target) is None:
+        terms.remove("tone")  # linear data (RAW, 16-bit, float) stays linear
+    sh = Shading(first.scene, target, use, environment="environment" in first.model.get("terms", [])
+                 or "environment" in first.scene.to_dict())
+    if not terms or sh.t.shape[0] < 4 * BLOCK * BLOCK:
+        first.model["camera"] = {"terms": []}
+        return first
+    position = first.scene.get_params(["light.position"])
+    bounds = first.scene.bounds(["light.position"])
+    try:
+        ev = evidence(sh, position, terms, bounds)
+    except (np.linalg.LinAlgError, ValueError) as e:  # a degenerate photo (no shading to speak of)
+        first.model["camera"] = {"terms": [], "not_tested": f"the camera terms' solve failed: {e}"}
+        return first
+    chosen = [t for t in terms if ev[t]["selected"] or dict(vignetting=cam.vignetting, tone=cam.tone)[t] == "on"]
+    record: dict[str, Any] = {"terms": [], "evidence": ev}
+    if not chosen:
+        first.model["camera"] = record
+        return first
+    term = max(chosen, key=lambda t: ev[t]["gain"])  # one camera term per photo
+    light, renders = search(sh, term, ev[term]["light"], bounds, SEARCH_STEPS, polish=SEARCH_POLISH)
+    every = np.ones(sh.t.size, bool)
+    s = sh.shading(light)
+    fitted = sh.vignetting(s, every)[1] if term == "vignetting" else sh.tone(s, every)[2]
+    out, params = corrected(target, term, fitted, first.scene)
+    # The photo with the camera undone, fitted in a box of +-REFIT_FRACTION of each range around the joint
+    # search's light (the ordinary search would trade the light against what the correction left).
+    near = narrowed(scene.with_params([float(v) for v in light], ["light.position"]), ["light.position"],
+                    REFIT_FRACTION)
+    result = fit_once(out, near)
+    result.scene = restore_bounds(result.scene, scene)
+    record.update(terms=[term], **{term: params}, search={"light": [float(v) for v in light],
+                                                           "renders": renders})
+    result.model["camera"] = record
+    return result
