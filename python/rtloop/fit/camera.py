@@ -36,13 +36,11 @@ from .bounds import narrowed, restore_bounds
 
 MODES = ("auto", "on", "off")
 #: A term is selected when its held-out residual is at least this fraction below the products' alone.
-HELD_OUT_GAIN = 0.3
+HELD_OUT_GAIN = 0.4
 #: The checkerboard's block side (pixels) for the held-out test.
 BLOCK = 8
 #: The tone curve's knots in the file's value (sRGB-encoded 0..1): g is linear between them.
 KNOTS = np.array([0.0, 0.08, 0.16, 0.25, 0.35, 0.45, 0.55, 0.65, 0.75, 0.85, 0.93, 1.0])
-#: The lens's radial terms fitted: 1 (k1 r^2) or 2 (k1 r^2 + k2 r^4).
-LENS_TERMS = 2
 #: Levenberg-Marquardt steps of the joint search: in the test, and when a term is taken.
 DETECT_STEPS = 2
 SEARCH_STEPS = 30
@@ -50,8 +48,10 @@ SEARCH_STEPS = 30
 SEARCH_POLISH = 200
 #: The refit of the corrected photo searches +-REFIT_FRACTION of each range around the joint search's light.
 REFIT_FRACTION = 0.003
-#: The camera terms are fitted on every STRIDE-th pixel in each direction.
-STRIDE = 2
+#: The camera terms are tested on every DETECT_STRIDE-th pixel in each direction, and fitted on every
+#: SEARCH_STRIDE-th.
+DETECT_STRIDE = 4
+SEARCH_STRIDE = 2
 
 
 @dataclass
@@ -139,7 +139,8 @@ class Shading:
     """A matte scene's shading S(x) of unit albedo and intensity at the pixels that inform the camera
     terms (one object in the pixel and its 4-neighbours, unsaturated), and the small solves on it."""
 
-    def __init__(self, fitted: Scene, target: np.ndarray, use: np.ndarray | None, environment: bool = False):
+    def __init__(self, fitted: Scene, target: np.ndarray, use: np.ndarray | None, environment: bool = False,
+                 stride: int = 2):
         d = fitted.to_dict()
         d["fit"] = {"light.position": d["fit"]["light.position"]}
         d["light"].update(intensity=1.0, color=[1.0, 1.0, 1.0])
@@ -152,7 +153,9 @@ class Shading:
         ids = _native.object_ids(self.scene, self.scene.width, self.scene.height)
         self.env = None
         ok = (ids >= 0) & ~edges(ids) & (target.max(axis=2) < SATURATED)
-        ok[:, 1::STRIDE] = ok[1::STRIDE, :] = False
+        keep = np.zeros_like(ok)
+        keep[::stride, ::stride] = True
+        ok &= keep
         if use is not None:
             keep = np.zeros(ok.size, bool)
             keep[use] = True
@@ -168,6 +171,7 @@ class Shading:
         n = self.group.size
         self.onehot = csr_matrix((np.ones(n), (self.group, np.arange(n))), shape=(self.groups, n))
         self._cache: dict[int, Any] = {}
+        self._k = np.zeros(2)
         cb = ((np.indices(ok.shape) // BLOCK).sum(axis=0) % 2).astype(bool)[ok]
         self.halves = (np.repeat(cb, 3), np.repeat(~cb, 3))
         self.v = encode(np.clip(self.t, 0, 1)).astype(np.float64).ravel()
@@ -209,30 +213,56 @@ class Shading:
         """The products alone: the model's values at every pixel, fitted on ``sel``."""
         return self._model(self.t.ravel(), s, sel)
 
-    def vignetting(self, s: np.ndarray, sel: np.ndarray, rounds: int = 4) -> tuple[np.ndarray, tuple[float, float]]:
-        """Products x V (k1, k2 and the products alternated, each a linear least squares): the model's
-        values and (k1, k2)."""
-        y = self.t.ravel()
-        c4, r2 = self.c4, self.r2
-        k = np.zeros(2)
+    def vignetting(self, s: np.ndarray, sel: np.ndarray, rounds: int = 8,
+                   falling: bool = False) -> tuple[np.ndarray, tuple[float, float]]:
+        """Products x V by Gauss-Newton on the products and (k1, k2) together (the model is bilinear: an
+        alternation converges in hundreds of rounds), the products' normal equations eliminated per
+        object and channel (Schur complement); with ``falling`` (the reported falloff) k1 > 0 is refitted
+        with k1 = 0. The model's values and (k1, k2)."""
+        # from the last call's k (the searches' neighbouring lights): a step or two instead of several
+        k = self._lens_steps(s, sel, self._k, 2, rounds)
+        if falling and k[0] > 0:  # a lens darkens away from its axis: 1 + k1 r^2 + k2 r^4 falls from r = 0
+            k = self._lens_steps(s, sel, np.array([0.0, min(k[1], 0.0)]), 1, rounds)
+        self._k = k if np.isfinite(k).all() else np.zeros(2)
+        v = self.c4 * (1 + k[0] * self.r2 + k[1] * self.r2 * self.r2)
+        return self._model(self.t.ravel(), s, sel, v), (float(k[0]), float(k[1]))
+
+    def _lens_steps(self, s: np.ndarray, sel: np.ndarray, k: np.ndarray, free: int, rounds: int) -> np.ndarray:
+        """Gauss-Newton steps on (products, k): ``free`` 2 frees k1 and k2, 1 only k2 (k1 held)."""
+        y, g, m = self.t.ravel()[sel], self.group[sel], self.groups
+        q = self.r2[sel]
+        base = [c[sel] * self.c4[sel] for c in ([s] if self.env is None else [s, self.env])]
+        powers = [q, q * q][2 - free:]
+        n = len(base)
+        p = None
         for _ in range(rounds):
-            lens = 1 + k[0] * r2 + k[1] * r2 * r2
-            a = self._model(y, s, sel, c4 * lens) / lens  # y = a (1 + k1 r^2 + k2 r^4)
-            a1, a2, e = (a * r2)[sel], (a * r2 * r2)[sel], (y - a)[sel]
-            # sums, not BLAS dot products (whose threads contend with the renderer's)
-            m11, m12, m22 = (a1 * a1).sum(), (a1 * a2).sum(), (a2 * a2).sum()
-            det = m11 * m22 - m12 * m12
-            if not det > 1e-12 * m11 * m22:
+            lens = 1 + k[0] * q + k[1] * q * q
+            jp = [c * lens for c in base]  # d model / d products
+            if p is None:  # the products at k = start, by least squares
+                app = np.stack([np.stack([np.bincount(g, a * b, m) for b in jp], -1) for a in jp], -2)
+                bp = np.stack([np.bincount(g, a * y, m) for a in jp], -1)
+                p = _solve_groups(app, bp)
+            unlensed = sum(p[g, i] * base[i] for i in range(n))
+            res = y - unlensed * lens
+            jk = [unlensed * w for w in powers]
+            app = np.stack([np.stack([np.bincount(g, a * b, m) for b in jp], -1) for a in jp], -2)  # (m, n, n)
+            apk = np.stack([np.stack([np.bincount(g, a * b, m) for b in jk], -1) for a in jp], -2)  # (m, n, f)
+            akk = np.array([[float((a * b).sum()) for b in jk] for a in jk])
+            bp = np.stack([np.bincount(g, a * res, m) for a in jp], -1)
+            bk = np.array([float((a * res).sum()) for a in jk])
+            inv_app_apk = _solve_groups(app, apk)
+            inv_app_bp = _solve_groups(app, bp)
+            schur = akk - np.einsum("gnf,gne->fe", apk, inv_app_apk)
+            rhs = bk - np.einsum("gnf,gn->f", apk, inv_app_bp)
+            try:
+                dk = np.linalg.solve(schur + 1e-12 * np.trace(schur) * np.eye(free), rhs)
+            except np.linalg.LinAlgError:
                 break
-            r1, r2_ = (a1 * e).sum(), (a2 * e).sum()
-            if LENS_TERMS == 1:
-                k = np.array([r1 / m11, 0.0])
-            else:
-                k = np.array([m22 * r1 - m12 * r2_, m11 * r2_ - m12 * r1]) / det
-                if k[0] > 0:  # a lens darkens away from its axis: 1 + k1 r^2 + k2 r^4 falls from r = 0
-                    k = np.array([0.0, min(r2_ / m22, 0.0)])
-        v = c4 * (1 + k[0] * r2 + k[1] * r2 * r2)
-        return self._model(y, s, sel, v), (float(k[0]), float(k[1]))
+            p = p + inv_app_bp - np.einsum("gnf,f->gn", inv_app_apk, dk)
+            k = k + (dk if free == 2 else np.array([0.0, dk[0]]))
+            if np.max(np.abs(dk)) < 1e-7:
+                break
+        return k
 
     def tone(self, s: np.ndarray, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """g(v) = p S (+ e E): the ramp weights w >= 0 and the products >= 0 by a non-negative least
@@ -267,6 +297,25 @@ def _l1(a: np.ndarray, b: np.ndarray, sel: np.ndarray) -> float:
     return float(np.abs(a[sel] - b[sel]).sum())
 
 
+def _solve_groups(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Per object and channel: a (m, n, n) x = b (m, n[, f]) for n = 1 or 2, in closed form (LAPACK's call
+    costs more than these solves); a group without pixels, or a singular one, gets 0."""
+    rhs = b if b.ndim == 3 else b[..., None]
+    if a.shape[-1] == 1:
+        d = a[:, 0, 0]
+        good = d > 0
+        out = np.where(good[:, None, None], rhs / np.where(good, d, 1.0)[:, None, None], 0.0)
+    else:
+        p, q, r, t = a[:, 0, 0], a[:, 0, 1], a[:, 1, 0], a[:, 1, 1]
+        det = p * t - q * r
+        good = np.abs(det) > 1e-12 * np.maximum(p * t, 1e-300)
+        det = np.where(good, det, 1.0)
+        x0 = (t[:, None] * rhs[:, 0] - q[:, None] * rhs[:, 1]) / det[:, None]
+        x1 = (p[:, None] * rhs[:, 1] - r[:, None] * rhs[:, 0]) / det[:, None]
+        out = np.where(good[:, None, None], np.stack([x0, x1], axis=1), 0.0)
+    return out if b.ndim == 3 else out[..., 0]
+
+
 def residual(sh: Shading, term: str, s: np.ndarray, sel: np.ndarray) -> np.ndarray:
     """The joint fit's residual at a shading ``s`` (fitted on ``sel``)."""
     if term == "vignetting":
@@ -278,11 +327,14 @@ def residual(sh: Shading, term: str, s: np.ndarray, sel: np.ndarray) -> np.ndarr
 
 
 def search(sh: Shading, term: str, start: Any, bounds: list[tuple[float, float]], iterations: int,
-           shading: dict[tuple[float, ...], np.ndarray] | None = None, polish: int = 0) -> tuple[np.ndarray, int]:
+           shading: dict[tuple[float, ...], np.ndarray] | None = None, polish: int = 0,
+           slopes: list[np.ndarray] | None = None) -> tuple[np.ndarray, int]:
     """Levenberg-Marquardt over the light's position on the joint fit's squared residual (the camera's
     parameters and the products solved at each light: variable projection; the Jacobian by forward
     differences of 1e-4 of each range), from ``start``, ``iterations`` steps at most. ``shading``: renders
-    shared between the terms' searches. Returns the light and the renders taken."""
+    shared between the terms' searches; ``slopes``: the shading's derivatives along each coordinate, taken
+    for every step's differences instead of rendering them (the test's cheap steps). Returns the light
+    and the renders taken."""
     lo, hi = np.array(bounds, float).T
     h = 1e-4 * (hi - lo)
     cache = {} if shading is None else shading
@@ -303,6 +355,9 @@ def search(sh: Shading, term: str, start: Any, bounds: list[tuple[float, float]]
     for _ in range(iterations):
         cols = []
         for i in range(3):
+            if slopes is not None:
+                cols.append((residual(sh, term, shade(x) + h[i] * slopes[i], every) - r) / h[i])
+                continue
             step = x.copy()
             step[i] += h[i] if x[i] + h[i] <= hi[i] else -h[i]
             cols.append((residual(sh, term, shade(step), every) - r) / (step[i] - x[i]))
@@ -343,10 +398,21 @@ def evidence(sh: Shading, position: Any, terms: list[str], bounds: list[tuple[fl
     one half of the blocks and judged on the other (both ways), against the products alone after as many
     steps."""
     shared: dict[tuple[float, ...], np.ndarray] = {}
+    lo, hi = np.array(bounds, float).T
+    x0 = np.clip(np.asarray(position, float), lo, hi)
+    s0 = shared[tuple(np.round(x0, 12))] = sh.shading(x0)
+    slopes = []
+    for i, h in enumerate(1e-4 * (hi - lo)):
+        step = x0.copy()
+        step[i] += h if x0[i] + h <= hi[i] else -h
+        shared[tuple(np.round(step, 12))] = si = sh.shading(step)
+        slopes.append((si - s0) / (step[i] - x0[i]))
 
     def held_out(term: str) -> tuple[float, np.ndarray]:
         # the same steps for the products alone: a term is not credited with what a better light gives
-        x, _ = search(sh, term, position, bounds, DETECT_STEPS, shared)
+        # the tone curve's light can be a metre off (its steps need their own differences, and one more)
+        x, _ = search(sh, term, x0, bounds, DETECT_STEPS + (term == "tone"), shared,
+                      slopes=None if term == "tone" else slopes)
         s = shared.get(tuple(np.round(x, 12)))
         s = sh.shading(x) if s is None else s
         return sum(float(np.abs(residual(sh, term, s, a))[b].sum()) for a, b in (sh.halves, sh.halves[::-1])), x
@@ -415,8 +481,8 @@ def fit_through_camera(fit_once: Callable[..., Any], scene: Scene, image: np.nda
     terms = [t for t, mode in (("vignetting", cam.vignetting), ("tone", cam.tone)) if mode != "off"]
     if "tone" in terms and cam.tone == "auto" and codes8(target) is None:
         terms.remove("tone")  # linear data (RAW, 16-bit, float) stays linear
-    sh = Shading(first.scene, target, use, environment="environment" in first.model.get("terms", [])
-                 or "environment" in first.scene.to_dict())
+    env = "environment" in first.model.get("terms", []) or "environment" in first.scene.to_dict()
+    sh = Shading(first.scene, target, use, environment=env, stride=DETECT_STRIDE)
     if not terms or sh.t.shape[0] < 4 * BLOCK * BLOCK:
         first.model["camera"] = {"terms": []}
         return first
@@ -433,10 +499,11 @@ def fit_through_camera(fit_once: Callable[..., Any], scene: Scene, image: np.nda
         first.model["camera"] = record
         return first
     term = max(chosen, key=lambda t: ev[t]["gain"])  # one camera term per photo
+    sh = Shading(first.scene, target, use, environment=env, stride=SEARCH_STRIDE)
     light, renders = search(sh, term, ev[term]["light"], bounds, SEARCH_STEPS, polish=SEARCH_POLISH)
     every = np.ones(sh.t.size, bool)
     s = sh.shading(light)
-    fitted = sh.vignetting(s, every)[1] if term == "vignetting" else sh.tone(s, every)[2]
+    fitted = sh.vignetting(s, every, falling=True)[1] if term == "vignetting" else sh.tone(s, every)[2]
     out, params = corrected(target, term, fitted, first.scene)
     # The photo with the camera undone, fitted in a box of +-REFIT_FRACTION of each range around the joint
     # search's light (the ordinary search would trade the light against what the correction left).
