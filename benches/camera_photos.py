@@ -55,7 +55,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     options = dict(o.split("=", 1) for o in args.option)
     rows = []
-    print(f"command: python benches/camera_photos.py {' '.join(argv if argv is not None else sys.argv[1:])}\n")
+    command = " ".join(["python benches/camera_photos.py", *(argv if argv is not None else sys.argv[1:])])
+    print(f"# Camera-pipeline photos (`{command}`)\n")
     print("| photo | light (cm) | products (%) | products up to one scale (%) | camera terms | verdict | "
           "light sigma (cm) | time (s) |")
     print("|---|---|---|---|---|---|---|---|")

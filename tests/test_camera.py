@@ -55,15 +55,17 @@ def _falloff(scene: rtloop.Scene, k1: float, k2: float) -> np.ndarray:
 
 @pytest.mark.parametrize("name", ["blue-ball-vignette", "orange-ball-vignette"])
 def test_vignetting_is_chosen_and_fitted_with_the_light(name):
-    scene, image, truth, _ = _load(FIXTURES / name)
+    scene, image, truth, meta = _load(FIXTURES / name)
     res = rtloop.fit(scene, image, uncertainty=False)
     cam = res.model["camera"]
     assert cam["terms"] == ["vignetting"]
     assert cam["evidence"]["vignetting"]["selected"] and not cam["evidence"]["tone"]["selected"]
     light, worst, _ = _errors(res, truth)
     # without the term: 7.7 and 119 cm, the floor's products 27 % and 52 % off
-    assert light < 0.05
-    assert worst < 0.08
+    assert light < 0.01
+    assert worst < 0.02
+    k = cam["vignetting"]
+    assert (k["k1"], k["k2"]) == pytest.approx((meta["post"]["k1"], meta["post"]["k2"]), abs=0.03)
 
 
 @pytest.mark.parametrize("name", ["blue-ball-tone", "orange-ball-tone"])
@@ -129,7 +131,7 @@ def test_linear_images_stay_linear_and_show_their_vignetting():
     assert "tone" not in res.model["camera"]["evidence"]  # float (linear) data: no tone curve is tested
     assert res.model["camera"]["terms"] == ["vignetting"]
     light, worst, _ = _errors(res, truth)
-    assert light < 0.05 and worst < 0.08
+    assert light < 0.01 and worst < 0.02
 
 
 @pytest.mark.parametrize("kwargs, field", [

@@ -3,19 +3,19 @@
 A camera multiplies the scene's radiance by its vignetting V (the natural cos^4 falloff of the angle off
 the optical axis, times a lens's radial falloff 1 + k1 r^2 + k2 r^4, r = 1 at the image corner) and
 writes it through its tone curve. Both are fitted with the light, not after it: with the light at x, a
-matte scene's pixel i of object o in channel c is p_oc S_i(x), S the shading of unit albedo and
-intensity, so at each candidate light the products and the camera's parameters come from one small
-least squares (:class:`Shading`): for the vignetting, V_i p_oc S_i (alternating k and p, both linear);
-for the tone curve, g(v_i) = p_oc S_i with g a monotone piecewise-linear function of the file's value v
-(non-negative ramp weights, a non-negative least squares on the normal equations). A Nelder-Mead search
-over the light minimises that fit's residual; the photo is then corrected (divided by V, or mapped through
-g) and fitted as any other (docs/camera.md).
+matte scene's pixel of object o in channel c is p_oc S_i(x), S the shading of unit albedo and intensity,
+so at each candidate light the products and the camera's parameters come from one small least squares
+(:class:`Shading`): for the vignetting V_i p_oc S_i (Gauss-Newton on the products and k together); for
+the tone curve g(v_i) = p_oc S_i with g a monotone piecewise-linear function of the file's value v
+(non-negative ramp weights, a non-negative least squares on the normal equations). Levenberg-Marquardt
+steps search the light on that fit's residual; the photo is then corrected
+(divided by V, or mapped through g) and fitted as any other near that light (docs/camera.md).
 
-A term is taken only when the photo shows it: at the light the ordinary fit found, each term is fitted
-on half of the image's 8 x 8 pixel blocks (a checkerboard) and judged on the other half (and the other
-way round); it is selected when its held-out L1 residual is at least HELD_OUT_GAIN lower than the
-products' alone. The test costs two renders and a few small solves, so a photo that needs neither term
-keeps the ordinary fit, bit for bit.
+A term is taken only when the photo shows it: from the light the ordinary fit found, each term and the
+products alone take a few such steps; each is then fitted on half of the image's 8 x 8 pixel blocks (a
+checkerboard) and judged on the other half (and the other way round); a term is selected when its
+held-out L1 residual is at least HELD_OUT_GAIN lower than the products' alone. A photo the ordinary fit
+explains to its rounding error is not tested, so its fit stays the ordinary one, bit for bit.
 """
 
 from __future__ import annotations
@@ -44,8 +44,6 @@ KNOTS = np.array([0.0, 0.08, 0.16, 0.25, 0.35, 0.45, 0.55, 0.65, 0.75, 0.85, 0.9
 #: Levenberg-Marquardt steps of the joint search: in the test, and when a term is taken.
 DETECT_STEPS = 2
 SEARCH_STEPS = 30
-#: Nelder-Mead evaluations after it (a valley the steps stall in).
-SEARCH_POLISH = 200
 #: The refit of the corrected photo searches +-REFIT_FRACTION of each range around the joint search's light.
 REFIT_FRACTION = 0.003
 #: The camera terms are tested on every DETECT_STRIDE-th pixel in each direction, and fitted on every
@@ -166,10 +164,6 @@ class Shading:
         self.groups = len(d["objects"]) * 3
         cos4, r = off_axis(fitted)
         self.c4, self.r2 = np.repeat(cos4[ok], 3), np.repeat(r[ok], 3) ** 2
-        from scipy.sparse import csr_matrix
-
-        n = self.group.size
-        self.onehot = csr_matrix((np.ones(n), (self.group, np.arange(n))), shape=(self.groups, n))
         self._cache: dict[int, Any] = {}
         self._k = np.zeros(2)
         cb = ((np.indices(ok.shape) // BLOCK).sum(axis=0) % 2).astype(bool)[ok]
@@ -268,8 +262,6 @@ class Shading:
         """g(v) = p S (+ e E): the ramp weights w >= 0 and the products >= 0 by a non-negative least
         squares on the normal equations, g's mean over the pixels held at the sRGB decoding's (the scale).
         Returns (g(v), the model, w)."""
-        from scipy.optimize import nnls
-
         key = id(sel)
         if key not in self._cache:
             b = self.ramps[sel]
@@ -277,16 +269,17 @@ class Shading:
         _, m_bb, b_mean, mean_t = self._cache[key]
         k, m = m_bb.shape[0], self.groups
         cols = [np.where(sel, c, 0.0) for c in ([s] if self.env is None else [s, self.env])]
-        blocks = [[m_bb] + [-(self.onehot @ (self.ramps * c[:, None])).T for c in cols]]
+        grouped = [-np.stack([np.bincount(self.group, self.ramps[:, j] * c, m) for j in range(k)]) for c in cols]
+        blocks = [[m_bb] + grouped]
         for i, c in enumerate(cols):
-            blocks.append([blocks[0][1 + i].T] + [np.diag(self.onehot @ (c * d)) for d in cols])
+            blocks.append([grouped[i].T] + [np.diag(np.bincount(self.group, c * d, m)) for d in cols])
         normal = np.block(blocks)
         n = normal.shape[0]
         normal += 1e-12 * np.trace(normal) / n * np.eye(n)
         u = np.linalg.cholesky(normal).T
         scale = math.sqrt(float(np.trace(normal))) * 10
         row = np.concatenate([b_mean, np.zeros(n - k)]) * scale
-        x = nnls(np.vstack([u, row]), np.concatenate([np.zeros(n), [mean_t * scale]]), maxiter=50 * n)[0]
+        x = nnls(np.vstack([u, row]), np.concatenate([np.zeros(n), [mean_t * scale]]))
         w = x[:k]
         model = sum(x[k + i * m: k + (i + 1) * m][self.group] * c for i, c in
                     enumerate([s] if self.env is None else [s, self.env]))
@@ -295,6 +288,29 @@ class Shading:
 
 def _l1(a: np.ndarray, b: np.ndarray, sel: np.ndarray) -> float:
     return float(np.abs(a[sel] - b[sel]).sum())
+
+
+def nnls(a: np.ndarray, b: np.ndarray, iterations: int = 0) -> np.ndarray:
+    """min |a x - b| subject to x >= 0 (Lawson and Hanson's active set, for the few tens of unknowns here)."""
+    n = a.shape[1]
+    x, passive = np.zeros(n), np.zeros(n, bool)
+    for _ in range(iterations or 3 * n):
+        w = a.T @ (b - a @ x)
+        if passive.all() or w[~passive].max() <= 1e-12 * max(1.0, float(np.abs(w).max())):
+            break
+        passive[np.flatnonzero(~passive)[np.argmax(w[~passive])]] = True
+        while True:
+            z = np.zeros(n)
+            z[passive] = np.linalg.lstsq(a[:, passive], b, rcond=None)[0]
+            if (z[passive] > 0).all():
+                x = z
+                break
+            neg = passive & (z <= 0)
+            alpha = float(np.min(x[neg] / (x[neg] - z[neg])))
+            x = x + alpha * (z - x)
+            passive &= x > 1e-15
+            x[~passive] = 0.0
+    return x
 
 
 def _solve_groups(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -327,14 +343,14 @@ def residual(sh: Shading, term: str, s: np.ndarray, sel: np.ndarray) -> np.ndarr
 
 
 def search(sh: Shading, term: str, start: Any, bounds: list[tuple[float, float]], iterations: int,
-           shading: dict[tuple[float, ...], np.ndarray] | None = None, polish: int = 0,
+           shading: dict[tuple[float, ...], np.ndarray] | None = None,
            slopes: list[np.ndarray] | None = None) -> tuple[np.ndarray, int]:
     """Levenberg-Marquardt over the light's position on the joint fit's squared residual (the camera's
     parameters and the products solved at each light: variable projection; the Jacobian by forward
     differences of 1e-4 of each range), from ``start``, ``iterations`` steps at most. ``shading``: renders
-    shared between the terms' searches; ``slopes``: the shading's derivatives along each coordinate, taken
-    for every step's differences instead of rendering them (the test's cheap steps). Returns the light
-    and the renders taken."""
+    shared between the terms' searches; ``slopes``: the shading's derivatives along each coordinate at
+    ``start``, the first step's differences taken on them and the later steps' Jacobian Broyden-updated
+    (the test's cheap steps: a render per trial only). Returns the light and the renders taken."""
     lo, hi = np.array(bounds, float).T
     h = 1e-4 * (hi - lo)
     cache = {} if shading is None else shading
@@ -352,16 +368,19 @@ def search(sh: Shading, term: str, start: Any, bounds: list[tuple[float, float]]
     x = np.clip(np.asarray(start, float), lo, hi)
     r = residual(sh, term, shade(x), every)
     loss, lam = float((r * r).sum()), 1e-3
+    j = None
     for _ in range(iterations):
-        cols = []
-        for i in range(3):
-            if slopes is not None:
-                cols.append((residual(sh, term, shade(x) + h[i] * slopes[i], every) - r) / h[i])
-                continue
-            step = x.copy()
-            step[i] += h[i] if x[i] + h[i] <= hi[i] else -h[i]
-            cols.append((residual(sh, term, shade(step), every) - r) / (step[i] - x[i]))
-        j = np.stack(cols, axis=1)
+        if slopes is not None:
+            if j is None:  # later steps: Broyden-updated at the last accepted step (below), no renders
+                j = np.stack([(residual(sh, term, shade(x) + h[i] * slopes[i], every) - r) / h[i]
+                              for i in range(3)], axis=1)
+        else:
+            cols = []
+            for i in range(3):
+                step = x.copy()
+                step[i] += h[i] if x[i] + h[i] <= hi[i] else -h[i]
+                cols.append((residual(sh, term, shade(step), every) - r) / (step[i] - x[i]))
+            j = np.stack(cols, axis=1)
         jtj, jtr = np.einsum("ij,ik->jk", j, j), np.einsum("ij,i->j", j, r)
         moved = False
         for _ in range(6):
@@ -373,23 +392,14 @@ def search(sh: Shading, term: str, start: Any, bounds: list[tuple[float, float]]
             rt = residual(sh, term, shade(trial), every)
             lt = float((rt * rt).sum())
             if lt < loss:
+                if slopes is not None:  # Broyden's update of the Jacobian along the step taken
+                    d = trial - x
+                    j = j + np.outer(rt - r - np.einsum("ij,j->i", j, d), d) / max(float((d * d).sum()), 1e-300)
                 x, r, loss, lam, moved = trial, rt, lt, lam / 10, True
                 break
             lam *= 10
         if not moved or np.all(np.abs(delta) < h):
             break
-    if polish:
-        from scipy.optimize import minimize
-
-        def loss_at(p: np.ndarray) -> float:
-            e = residual(sh, term, shade(np.clip(p, lo, hi)), every)
-            return float((e * e).sum())
-
-        simplex = np.vstack([x, x + np.diag(0.01 * (hi - lo))])
-        opt = minimize(loss_at, x, method="Nelder-Mead",
-                       options={"initial_simplex": simplex, "maxfev": polish, "xatol": 1e-5, "fatol": 0.0})
-        if opt.fun < loss:
-            x = np.clip(opt.x, lo, hi)
     return x, renders
 
 
@@ -410,7 +420,8 @@ def evidence(sh: Shading, position: Any, terms: list[str], bounds: list[tuple[fl
 
     def held_out(term: str) -> tuple[float, np.ndarray]:
         # the same steps for the products alone: a term is not credited with what a better light gives
-        # the tone curve's light can be a metre off (its steps need their own differences, and one more)
+        # the tone curve's light can be a metre off: one more step, each with differences of its own (a
+        # Broyden update of the first step's Jacobian stops short)
         x, _ = search(sh, term, x0, bounds, DETECT_STEPS + (term == "tone"), shared,
                       slopes=None if term == "tone" else slopes)
         s = shared.get(tuple(np.round(x, 12)))
@@ -500,7 +511,7 @@ def fit_through_camera(fit_once: Callable[..., Any], scene: Scene, image: np.nda
         return first
     term = max(chosen, key=lambda t: ev[t]["gain"])  # one camera term per photo
     sh = Shading(first.scene, target, use, environment=env, stride=SEARCH_STRIDE)
-    light, renders = search(sh, term, ev[term]["light"], bounds, SEARCH_STEPS, polish=SEARCH_POLISH)
+    light, renders = search(sh, term, ev[term]["light"], bounds, SEARCH_STEPS)
     every = np.ones(sh.t.size, bool)
     s = sh.shading(light)
     fitted = sh.vignetting(s, every, falling=True)[1] if term == "vignetting" else sh.tone(s, every)[2]
