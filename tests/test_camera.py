@@ -162,3 +162,22 @@ def test_cli_prints_the_camera_and_takes_the_flags(tmp_path, capsys):
     assert main([str(folder / "scene_input.json"), str(folder / "objective.png"), "--out", str(tmp_path / "b"),
                  "--vignetting", "1,x", "-q"]) == 2
     assert "--vignetting" in capsys.readouterr().err
+
+
+def test_cli_flat_field_file(tmp_path, capsys):
+    import cv2
+
+    from rtloop.cli.fit import main
+
+    folder = FIXTURES / "blue-ball-vignette"
+    scene, _, truth, meta = _load(folder)
+    flat = (0.8 * _falloff(scene, meta["post"]["k1"], meta["post"]["k2"])).astype(np.float32)
+    cv2.imwrite(str(tmp_path / "flat.tiff"), np.repeat(flat[..., None], 3, axis=2))  # float TIFF: linear
+    assert main([str(folder / "scene_input.json"), str(folder / "objective.png"), "--out", str(tmp_path / "a"),
+                 "--flat-field", str(tmp_path / "flat.tiff"), "--uncertainty", "off", "-q"]) == 0
+    assert "from the flat field" in capsys.readouterr().out
+    fitted = json.loads((tmp_path / "a" / "result.json").read_text())
+    assert np.linalg.norm(np.subtract(fitted["light"]["position"], truth["light"]["position"])) < 0.01
+    assert main([str(folder / "scene_input.json"), str(folder / "objective.png"), "--out", str(tmp_path / "b"),
+                 "--flat-field", str(tmp_path / "missing.png"), "-q"]) == 1
+    assert "missing.png" in capsys.readouterr().err
