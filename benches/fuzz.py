@@ -435,11 +435,13 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
             "norm": rng.choice(["auto", "auto", "l1", "l2", "huber:0.05", "huber:-1", "L1", None]),
             # the number of lights: the one-light fit, the lights fit, the choice, and bad ones
             "lights": rng.choice([None, None, None, 1, 2, "auto", 0, 9, "2", 1.5]),
-            # the camera: the photo's choice, forced, off, a given falloff, a flat field, and bad ones
-            "vignetting": rng.choice(["auto", "auto", "on", "off", (-0.3, -0.05), (0.0, 0.0), (-3.0, 0.0),
-                                      (math.nan, 0.0), "0.1,0.2", None]),
-            "tone": rng.choice(["auto", "auto", "on", "off", "srgb", None]),
         }
+        # the camera (one fit in five): the photo's choice, forced, off, a given falloff, and bad ones
+        if rng.random() < 0.2:
+            opts["vignetting"] = rng.choice(["on", "on", "off", (-0.3, -0.05), (0.0, 0.0), (-3.0, 0.0),
+                                             (math.nan, 0.0), "0.1,0.2", None])
+        if rng.random() < 0.2:
+            opts["tone"] = rng.choice(["on", "on", "off", "srgb", None])
         if shape[:2] == (9, 12) and rng.random() < 0.1:
             flat = np.random.default_rng(rng.randrange(2**32)).uniform(-0.1, 1.2, (9, 12, 3))
             opts["flat_field"] = flat.astype(rng.choice([np.float32, np.float64, np.uint8]))
