@@ -482,6 +482,15 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
             # the framing check and its correction, and bad values
             "framing": rng.choice(["check", "check", "check", "correct", "off", "CHECK", None, 1]),
         }
+        # the camera (one fit in five): the photo's choice, forced, off, a given falloff, and bad ones
+        if rng.random() < 0.2:
+            opts["vignetting"] = rng.choice(["on", "on", "off", (-0.3, -0.05), (0.0, 0.0), (-3.0, 0.0),
+                                             (math.nan, 0.0), "0.1,0.2", None])
+        if rng.random() < 0.2:
+            opts["tone"] = rng.choice(["on", "on", "off", "srgb", None])
+        if shape[:2] == (9, 12) and rng.random() < 0.1:
+            flat = np.random.default_rng(rng.randrange(2**32)).uniform(-0.1, 1.2, (9, 12, 3))
+            opts["flat_field"] = flat.astype(rng.choice([np.float32, np.float64, np.uint8]))
         scene = rng.choice(FIT_SCENES)
         if rng.random() < 0.1:
             scene = mutate(rng, scene)
@@ -498,7 +507,7 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
     else:  # CLI arguments via main()
         argv = [str(tmp / "scene.json"), str(tmp / "photo.png"), "--out", str(tmp / "out")]
         flags = ["--seed", "--population", "--generations", "--threads", "--norm", "--space", "--protocol",
-                 "--framing"]
+                 "--framing", "--vignetting", "--tone-curve", "--flat-field"]
         for _ in range(rng.randint(0, 3)):
             argv += [rng.choice(flags), str(odd(rng))]
         with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):

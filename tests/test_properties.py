@@ -92,6 +92,17 @@ ARGS = st.fixed_dictionaries({}, optional={
     "norm": _argument(st.sampled_from(["auto", "l1", "l2", "huber", "huber:0.1"]),
                       st.sampled_from(["huber:-1", "huber:nan", "huber:", "AUTO", "bogus", None, 2])),
     "framing": _argument(st.sampled_from(["check", "correct", "off"]), st.sampled_from(["CHECK", "on", None, 1, True])),
+    "vignetting": _argument(st.one_of(st.sampled_from(["auto", "on", "off"]),
+                                      st.tuples(st.floats(-0.6, 0.2), st.floats(-0.3, 0.1))),
+                            st.one_of(st.sampled_from(["x", None, 1.0, (1.0,), "0.1,0.2"]),
+                                      st.tuples(NUMBERS, NUMBERS))),
+    "tone": _argument(st.sampled_from(["auto", "on", "off"]), st.sampled_from(["srgb", None, 1, "ON"])),
+    "flat_field": _argument(
+        st.builds(lambda a, b: np.clip(np.full((12, 16, 3), a, np.float32) - b * np.linspace(
+            0, 1, 16, dtype=np.float32)[None, :, None], 1e-3, None), st.floats(0.05, 0.95), st.floats(0, 0.04)),
+        st.sampled_from([np.zeros((12, 16), np.float32), np.ones((12, 16), np.float32),
+                         np.full((12, 16, 3), np.nan, np.float32), np.ones((16, 12), np.float32),
+                         np.ones((12, 16), np.uint8), "flat.png"])),
 })
 
 #: SMALL's photo with noise of a 16-bit camera's size (a few steps) and a misfit everywhere (its albedo 1.5x

@@ -31,7 +31,7 @@ from rtloop.fit.protocol import LIMITS, max_threads
 from rtloop.report import truth_errors, truth_values
 from rtloop.uncertainty.bootstrap import STAGE as BOOTSTRAP, replicate_of
 
-from .args import Parser, UsageError, float_in, generations, int_at_least, int_in, norm
+from .args import Parser, UsageError, float_in, generations, int_at_least, int_in, norm, vignetting
 from .outputs import GenerationLog, input_paths, render_final, write_result
 from .summary import duration as _duration, summary as _summary
 
@@ -215,6 +215,17 @@ def _build_parser() -> Parser:
                    "or more off (a cropped, rotated or resized photo, or a wrong field of view), 'correct' "
                    "resamples IMAGE into the scene's framing by the roll, zoom and shift its outlines give and "
                    "fits again (objective.png is then the resampled photo), 'off'")
+    p.add_argument("--vignetting", type=vignetting, default="auto", metavar="auto|on|off|K1,K2",
+                   help="the lens's falloff cos^4 x (1 + k1 r^2 + k2 r^4) (r = 1 at the corner): 'auto' (default) "
+                   "fits it with the light when held-out pixels show it, 'on', 'off', or K1,K2 to give it "
+                   "(docs/camera.md)")
+    p.add_argument("--flat-field", metavar="FILE",
+                   help="a photo of a flat white target through the same lens and settings: the falloff it shows "
+                   "divides IMAGE (instead of --vignetting)")
+    p.add_argument("--tone-curve", choices=("auto", "on", "off"), default="auto",
+                   help="'auto' (default): where IMAGE is an 8-bit file whose tone curve is not sRGB (held-out "
+                   "pixels show it), a monotone curve is fitted with the light; 'on', 'off'; --response linear "
+                   "keeps the image linear (off)")
     p.add_argument("--mask", type=Path, metavar="PNG",
                    help="an image of IMAGE's size (or the scene's): white where the scene models the photo, "
                    "black where it does not (another object, a reflection); black pixels are left out of the fit (default: the mask the scene names, "
@@ -355,6 +366,9 @@ def fit_options(args: argparse.Namespace) -> dict[str, Any]:
             "f": args.f, "cr": args.cr, "norm": args.norm, "space": args.loss_space,
             "environment": args.environment, "interreflection": args.interreflection,
             "highlights": args.highlights, "footprint": args.footprint, "framing": args.framing,
+            "vignetting": args.vignetting,
+            "tone": "off" if args.response == "linear" and args.tone_curve == "auto" else args.tone_curve,
+            **({"flat_field": (args.flat_field, args.response)} if args.flat_field is not None else {}),
             "uncertainty": {"default": True, "bootstrap": "bootstrap", "off": False}[args.uncertainty]}
 
 

@@ -157,6 +157,28 @@ def model_lines(model: dict[str, Any], fitted: dict[str, Any]) -> list[str]:
                      f"own error; {chosen['threshold']:g}x or more is dense and takes l2)")
     if "environment" in terms and fitted.get("environment"):
         lines.append("  environment radiance (r g b): " + "  ".join(f"{v:.4g}" for v in fitted["environment"]))
+    return lines + camera_lines(model.get("camera") or {})
+
+
+def camera_lines(camera: dict[str, Any]) -> list[str]:
+    """The camera terms (vignetting, tone curve) the fit used, and the held-out evidence for each."""
+    if not camera:
+        return []
+    terms = camera.get("terms") or []
+    lines = [f"camera: {' + '.join(terms) if terms else 'sRGB, no vignetting'}"]
+    if "not_tested" in camera:
+        lines.append(f"  not tested: {camera['not_tested']}")
+    for term, ev in (camera.get("evidence") or {}).items():
+        lines.append(f"  {term}: {'added' if ev['selected'] else 'not added'} (held-out L1 residual "
+                     f"{ev['held_out_l1_without']:.4g} -> {ev['held_out_l1']:.4g} with it, {100 * ev['gain']:+.1f}%)")
+    v = camera.get("vignetting")
+    if v:
+        lines.append("  vignetting: " + ("from the flat field" if v.get("source") == "flat field" else
+                                         f"cos^4 x (1 + {v['k1']:.3g} r^2 + {v['k2']:.3g} r^4)")
+                     + (f", corners at {100 * v['corner']:.0f}% of the centre" if "corner" in v else ""))
+    if camera.get("tone"):
+        lines.append("  tone curve (linear at the file's values " + ", ".join(f"{k:g}" for k in camera["tone"]["knots"])
+                     + "): " + " ".join(f"{x:.3g}" for x in camera["tone"]["linear_at_knots"]))
     return lines
 
 

@@ -20,6 +20,7 @@ from ..errors import RtloopError, RtloopWarning
 from ..scene import Scene, load_scene
 from .constant import as_environment, compare_constant, declares_ambient
 from .bounds import at_bounds, narrowed, restore_bounds
+from .camera import check_camera, fit_through_camera
 from .gauge import hold_gauges, release_gauges
 from .lights import LightsFit, check_lights, choose_count, fit_lights
 from .framing import check_framing, fit_reframed, framing_check, mismatch_verdict
@@ -95,6 +96,9 @@ def fit(
     footprint: str | bool = "auto",
     lights: int | str | None = None,
     framing: str = "check",
+    vignetting: Any = "auto",
+    tone: str = "auto",
+    flat_field: np.ndarray | None = None,
 ) -> FitResult | LightsFit:
     """Fit the scene's free parameters (its ``fit`` section) to ``image``.
 
@@ -155,7 +159,13 @@ def fit(
     the fitted render, :mod:`.framing`): "check" (default) says so in ``goodness["framing"]`` and the
     verdict where the residual is at least twice the noise floor; "correct" resamples the photo into the
     scene's framing by the camera correction (roll, zoom, shift) its outlines give and fits again; "off".
+    ``vignetting``, ``tone``: the camera between the scene and the file (:mod:`.camera`, docs/camera.md):
+    "auto" (default) fits the lens's falloff (cos^4 x (1 + k1 r^2 + k2 r^4)) or a monotone tone curve
+    with the light where held-out pixels show it (a tone curve on 8-bit images only), "on", "off";
+    ``vignetting=(k1, k2)`` or ``flat_field`` (a linear photo of a flat white target, (H, W[, 3])) give
+    the falloff. ``result.model["camera"]`` records the terms and the evidence.
     """
+    args = dict(locals())
     t0 = time.perf_counter()
     scene = load_scene(scene)
     meshes = [o["name"] for o in scene.to_dict()["objects"] if o["shape"] == "mesh"]
@@ -167,6 +177,15 @@ def fit(
             raise RtloopError("framing: 'correct' fits a camera correction with one light, not with several")
         return _fit_lights(scene, image, mask, lights, seed=seed, threads=threads, population=population,
                            generations=generations)
+    cam = check_camera(scene, vignetting, tone, flat_field)
+    if cam.active:
+        def once(img: np.ndarray, near: Scene | None = None) -> FitResult:
+            return fit(**{**args, "image": img, "vignetting": "off", "tone": "off", "flat_field": None,
+                          **({"scene": near} if near is not None else {})})
+
+        result = fit_through_camera(once, scene, *objective(scene, image, mask, []), cam)
+        result.seconds = time.perf_counter() - t0
+        return result
     footprint = check_footprint(footprint)
     if framing == "correct":
         return fit_reframed(fit, scene, image, mask, reference, dict(
