@@ -93,6 +93,53 @@ def test_a_bad_lights_argument_is_one_line_naming_it(bad):
     assert "\n" not in str(e.value)
 
 
+def test_lamp_and_window_are_found_from_the_scene_s_own_list():
+    truth, image, scene_input = photo("lamp-window")
+    res = rtloop.fit(scene_input, image, seed=0)
+    lamp, window = truth["lights"]
+    assert [light["kind"] for light in res.lights] == ["point", "rectangle"]
+    assert np.linalg.norm(np.asarray(res.lights[0]["position"]) - lamp["position"]) < 0.05
+    assert np.linalg.norm(np.asarray(res.lights[1]["position"]) - window["position"]) < 0.30
+
+
+def test_a_window_renders_as_mitsuba_renders_it():
+    """The truth of the lamp + window photo through rtloop's renderer against Mitsuba's photo on the lit
+    pixels of the objects (away from silhouettes and the steepest pixels: shadow edges, which Mitsuba's
+    box-filtered pixels average and the pixel-centre render does not); the window alone too, rendered by
+    both, so that the rectangle light's own term is compared, not only the lamp's."""
+    truth, image, _ = photo("lamp-window")
+    scene = rtloop.load_scene(truth)
+    render = np.clip(rtloop.render(scene, None, None, 1), 0, 1)
+    ids = np.asarray(rtloop._native.object_ids(scene))
+    from rtloop._pixels import edges
+    from rtloop.fit.lights import steep
+    ok = (ids >= 0) & ~edges(ids) & ~steep(image, 0.1).reshape(ids.shape) & (image.max(axis=2) > 0.05)
+    assert ok.sum() > 2000
+    diff = np.abs(render - image)[ok]
+    assert np.median(diff) < 2 / 255 and np.quantile(diff, 0.95) < 6 / 255, (np.median(diff), np.quantile(diff, 0.95))
+    # Without the window the lit pixels darken well beyond that: the comparison sees the window's term.
+    no_window = dict(truth, lights=truth["lights"][:1])
+    dark = np.clip(rtloop.render(rtloop.load_scene(no_window), None, None, 1), 0, 1)
+    assert np.median(np.abs(dark - image)[ok]) > 10 / 255
+
+
+@pytest.mark.parametrize("light, field", [
+    ({"type": "rectangle", "position": [0, 3, 0], "normal": [0, -1, 0], "intensity": 5}, r"lights\[1\]\.size"),
+    ({"type": "rectangle", "position": [0, 3, 0], "size": [1, 0], "normal": [0, -1, 0], "intensity": 5},
+     r"lights\[1\]\.size"),
+    ({"type": "rectangle", "position": [0, 3, 0], "size": [1, 1], "intensity": 5}, r"lights\[1\]\.normal"),
+    ({"type": "rectangle", "position": [0, 3, 0], "size": [1, 1], "normal": [0, -1, 0], "up": [0, 1, 0],
+      "intensity": 5}, r"lights\[1\]\.up"),
+    ({"position": [0, 3, 0], "normal": [0, -1, 0], "intensity": 5}, r"lights\[1\]\.normal"),
+])
+def test_a_bad_rectangle_light_names_its_field(light, field):
+    truth, _, _ = photo("key-fill-25")
+    truth["lights"][1] = light
+    with pytest.raises(SceneError, match=field) as e:
+        rtloop.load_scene(truth)
+    assert "\n" not in str(e.value)
+
+
 @pytest.mark.parametrize("light, field", [
     ({"type": "sphere", "position": [0, 3, 0], "intensity": 5}, r"lights\[1\]\.radius"),
     ({"type": "sphere", "position": [0, 3, 0], "radius": -1, "intensity": 5}, r"lights\[1\]\.radius"),

@@ -429,10 +429,13 @@ SMALL_LIGHTS = copy.deepcopy(SMALL)
 SMALL_LIGHTS["lights"] = [{"name": "key", **SMALL_LIGHTS.pop("light")},
                           {"name": "fill", "type": "sphere", "position": [-2.0, 3.0, -1.0], "radius": 0.3,
                            "intensity": 8.0},
-                          {"name": "sun", "type": "directional", "direction": [0.2, 1.0, 0.1], "intensity": 0.3}]
+                          {"name": "sun", "type": "directional", "direction": [0.2, 1.0, 0.1], "intensity": 0.3},
+                          {"name": "window", "type": "rectangle", "position": [-3.0, 2.0, 1.0], "size": [1.5, 1.0],
+                           "normal": [1.0, -0.3, -0.2], "up": [0.0, 1.0, 0.0], "intensity": 6.0}]
 SMALL_LIGHTS["fit"] = {k: v for k, v in SMALL_LIGHTS["fit"].items() if k != "light.intensity"}
 SMALL_LIGHTS["fit"]["lights.fill.position"] = {"min": [-4, 0.5, -4], "max": [4, 6, 4]}
 SMALL_LIGHTS["fit"]["lights.fill.radius"] = {"min": 0.01, "max": 1.0}
+SMALL_LIGHTS["fit"]["lights.window.position"] = {"min": [-5, 0.5, -3], "max": [-1, 4, 3]}
 
 LIGHT_FIELDS = [
     (("lights", 0, "position"), 3), (("lights", 0, "intensity"), 0), (("lights", 1, "position"), 3),
@@ -440,6 +443,8 @@ LIGHT_FIELDS = [
     (("lights", 2, "direction"), 3), (("lights", 2, "intensity"), 0),
     (("fit", "lights.fill.position", "min"), 3), (("fit", "lights.fill.radius", "max"), 0),
     (("fit", "lights.fill.radius", "min"), 0),
+    (("lights", 3, "position"), 3), (("lights", 3, "size"), 2), (("lights", 3, "normal"), 3),
+    (("lights", 3, "up"), 3), (("lights", 3, "intensity"), 0), (("fit", "lights.window.position", "max"), 3),
 ]
 
 
@@ -488,3 +493,4 @@ def test_the_lights_argument_fits_or_raises_rtloop_error(lights, listed, seed):
         assert all(math.isfinite(v) for v in light.get("position", light.get("direction", [])))
         assert math.isfinite(light["intensity"]) and light["intensity"] >= 0
     assert all(math.isfinite(v) for rows in result.products.values() for row in rows for v in row)
+
