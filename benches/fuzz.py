@@ -458,6 +458,8 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
         flags = ["--seed", "--population", "--generations", "--threads", "--norm", "--space", "--protocol"]
         for _ in range(rng.randint(0, 3)):
             argv += [rng.choice(flags), str(odd(rng))]
+        if rng.random() < 0.2:  # the lights fit: counts, "auto" and bad ones
+            argv += ["--lights", rng.choice(["1", "2", "auto", "0", "9", "x", "2.5", "", str(odd(rng))])]
         with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
             try:
                 cli_fit.main(argv)

@@ -494,3 +494,34 @@ def test_the_lights_argument_fits_or_raises_rtloop_error(lights, listed, seed):
         assert math.isfinite(light["intensity"]) and light["intensity"] >= 0
     assert all(math.isfinite(v) for rows in result.products.values() for row in rows for v in row)
 
+
+@settings(max_examples=25, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
+@given(value=st.one_of(st.sampled_from(["1", "2", "auto", "0", "9", "-1", "2.5", "AUTO", "", "two", "1e1"]),
+                       st.text(max_size=4)),
+       listed=st.booleans())
+def test_the_lights_flag_fits_or_exits_with_one_line(tmp_path_factory, value, listed):
+    import contextlib
+    import io
+
+    from rtloop.cli.fit import main
+
+    work = tmp_path_factory.mktemp("lights_cli")
+    (work / "scene.json").write_text(json.dumps(SMALL_LIGHTS if listed else SMALL))
+    rtloop.save_image(work / "photo.png", PHOTO_LIGHTS if listed else PHOTO)
+    argv = [str(work / "scene.json"), str(work / "photo.png"), "--out", str(work / "out"), "--lights", value,
+            "--population", "4", "--generations", "1", "--final-scale", "1", "--final-spp", "1", "-q"]
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        code = main(argv)
+    if code == 0:
+        report = json.loads((work / "out" / "result.json").read_text())["fit_report"]
+        if report.get("method") != "lights":  # --lights 1 on a one-light scene: the ordinary fit
+            assert value.strip() == "1" and not listed
+            return
+        assert report["lights"]
+        for light in report["lights"]:
+            assert all(math.isfinite(v) for v in light.get("position", [0.0]) + light.get("position_error", [0.0]))
+    else:
+        assert code in (1, 2), code
+        lines = [line for line in err.getvalue().splitlines() if line]
+        assert len(lines) == 1 and lines[0].startswith("rtloop-fit: error: "), lines
