@@ -154,3 +154,25 @@ def test_a_bad_light_in_the_list_names_its_field(light, field):
     with pytest.raises(SceneError, match=field) as e:
         rtloop.load_scene(truth)
     assert "\n" not in str(e.value)
+
+
+def test_an_inserted_ball_casts_a_shadow_from_each_light():
+    """rtloop.insert under the key + fill truth: the light the added ball takes from the floor is the sum
+    of what it takes under each light alone (the same renderer with one light), and each alone takes a
+    visible shadow's worth, so both shadows are there, each where its own light puts it."""
+    truth, image, _ = photo("key-fill-25")
+    ball = [{"name": "added", "shape": "sphere", "center": [0.1, 0.3, -0.9], "radius": 0.3,
+             "material": {"albedo": [0.8, 0.8, 0.8]}}]
+    with_ball = rtloop.load_scene(dict(truth, objects=truth["objects"] + ball))
+    floor = np.asarray(rtloop._native.object_ids(with_ball)) == 2  # floor still seen with the ball there
+
+    def taken(scene: dict) -> np.ndarray:
+        r = rtloop.insert(scene, image, ball, spp=1, adaptive=False)
+        return (r.without - r.with_objects).sum(axis=2)[floor]
+
+    both = taken(truth)
+    key = taken(dict(truth, lights=truth["lights"][:1]))
+    fill = taken(dict(truth, lights=truth["lights"][1:]))
+    assert (key > 0.02).sum() > 20 and (fill > 0.02).sum() > 20
+    assert ((key > 0.02) & (fill < 1e-6)).sum() > 10 and ((fill > 0.02) & (key < 1e-6)).sum() > 10
+    assert np.max(np.abs(both - (key + fill))) < 1e-5 * max(float(np.max(both)), 1.0)
