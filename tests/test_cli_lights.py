@@ -73,7 +73,7 @@ def test_a_bad_lights_flag_is_one_line_naming_it(tmp_path, capsys, value):
     assert len(lines) == 1 and "--lights" in lines[0] and "from 1 to 8 or 'auto'" in lines[0], lines
 
 
-@pytest.mark.parametrize("flags, named", [(["--report"], "--report"), (["--generations", "5,5"], "--generations")])
+@pytest.mark.parametrize("flags, named", [(["--truth", "x.json"], "--truth"), (["--generations", "5,5"], "--generations")])
 def test_options_the_lights_fit_does_not_take_are_refused(tmp_path, capsys, flags, named):
     code, _, _, err = run(tmp_path, "key-fill-25", "--lights", "2", *flags, capsys=capsys)
     assert code == 1
@@ -100,3 +100,14 @@ def test_one_light_on_a_one_light_scene_is_the_ordinary_fit(tmp_path, capsys):
     assert code == 0, capsys.readouterr().err
     report = json.loads((tmp_path / "out" / "result.json").read_text())["fit_report"]
     assert report.get("method") != "lights" and "stages" in json.dumps(report)
+
+
+def test_the_report_lists_each_light_and_the_evidence(tmp_path, capsys):
+    code, result, _, _ = run(tmp_path, "key-fill-25", "--lights", "auto", "--report", "-q", capsys=capsys)
+    assert code == 0
+    page = (tmp_path / "out" / "report.html").read_text()
+    for light in result["fit_report"]["lights"]:
+        assert f"<td>{light['name']}</td>" in page
+        assert f"{np.linalg.norm(light['position_error']) * 100:.2f} cm" in page
+    assert "How many lights" in page and page.count("<tr>") > 8
+    assert (tmp_path / "out" / "report" / "difference.png").is_file()

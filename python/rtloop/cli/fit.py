@@ -99,7 +99,8 @@ with --lights N|auto (or a SCENE with a "lights" list: several lights, a sphere
 or a rectangle light), the lights fit: result.json's fit_report lists each light
 (position or direction, intensity, their error bars, its share of the light)
 and, with auto, the held-out error per number of lights; objective.png and
-final.png as above; no snapshots, CSV or report.
+final.png as above, and with --report a page of the lights and their evidence;
+no snapshots or CSV.
 
 Everything is written into a temporary directory beside DIR and moved into
 place when complete: a failed or interrupted run leaves no partial results. An

@@ -62,7 +62,7 @@ def _round(v: Any) -> Any:
 def run_lights(args: argparse.Namespace, inputs: Any, tmp: Path, refuse: Any) -> Any:
     """Fit, then write result.json, objective.png and final.png into ``tmp``; returns the LightsFit.
     ``refuse(message)`` raises the command's one-line failure for options this fit does not take."""
-    for flag, given in (("--report", args.report), ("--truth", args.truth is not None),
+    for flag, given in (("--truth", args.truth is not None),
                         ("--uncertainty bootstrap", args.uncertainty == "bootstrap"),
                         ("--generations N1,N2", isinstance(args.generations, tuple))):
         if given:
@@ -85,8 +85,10 @@ def run_lights(args: argparse.Namespace, inputs: Any, tmp: Path, refuse: Any) ->
         "seed": args.seed,
     }
     write_json(tmp / "result.json", doc)
-    k = args.final_scale
-    rtloop.save_image(tmp / "final.png", render_final(fit.scene, k, args.final_spp))
+    final = render_final(fit.scene, args.final_scale, args.final_spp)
+    rtloop.save_image(tmp / "final.png", final)
+    if args.report:
+        rtloop.report(fit, tmp / "report.html", objective=inputs.image, final=final)
     return fit
 
 
