@@ -176,3 +176,15 @@ def test_an_inserted_ball_casts_a_shadow_from_each_light():
     assert (key > 0.02).sum() > 20 and (fill > 0.02).sum() > 20
     assert ((key > 0.02) & (fill < 1e-6)).sum() > 10 and ((fill > 0.02) & (key < 1e-6)).sum() > 10
     assert np.max(np.abs(both - (key + fill))) < 1e-5 * max(float(np.max(both)), 1.0)
+
+
+@pytest.mark.parametrize("name, count", [("key-fill-25", 2), ("lamp-window", None)])
+def test_each_light_s_error_bar_covers_its_error(name, count):
+    """The truth (unseen by the fit) lies within 4 error bars of each fitted light (3-D lengths): the
+    independent-pixel curvature alone puts it 10-20 error bars away on these photos."""
+    truth, image, scene_input = photo(name)
+    res = rtloop.fit(scene_input, image, lights=count, seed=0)
+    for light in res.lights:
+        _, error = nearest(truth["lights"], light["position"])
+        bar = float(np.linalg.norm(light["position_error"]))
+        assert 0 < bar < 0.5 and error < 4 * bar, (light["name"], error, bar)

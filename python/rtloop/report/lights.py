@@ -67,8 +67,8 @@ def lights_report(fit: Any, path: str | os.PathLike[str], *, objective: Any = No
     page.add("<h2>The lights</h2>")
     page.add(_table(["light", "kind", "position (m) or direction", "error bar (1σ)", "intensity",
                      "its error bar", "share of the light"], light_rows(fit), numeric_from=9))
-    page.add('<p class="muted">Error bars: the loss\'s curvature at the optimum with the pixels taken as '
-             "independent (a lower bound where the model misses a little everywhere; docs/methods.md).</p>")
+    page.add('<p class="muted">Error bars (1σ): the loss\'s curvature at the optimum plus a delete-a-tile '
+             "jackknife over 4 × 3 tiles of the image (docs/methods.md).</p>")
     page.add("<h2>How many lights</h2>")
     if fit.evidence:
         page.add(_table(["lights", "held-out error", "held-out pixels", "kept"],
