@@ -70,12 +70,16 @@ def _fit_scenes(base: dict) -> list[dict]:
 
 
 def _lights_base(base: dict) -> dict:
-    """The base under a `lights` list: its lamp, a sphere fill light and a sun, with their paths freed."""
+    """The base under a `lights` list: its lamp, a sphere fill light, a sun and a window (a rectangle light),
+    with their paths freed."""
     d = copy.deepcopy(base)
     lamp = d.pop("light")
     d["lights"] = [{"name": "key", **lamp},
                    {"name": "fill", "type": "sphere", "position": [-2.0, 3.0, -1.0], "radius": 0.3, "intensity": 5.0},
-                   {"name": "sun", "type": "directional", "direction": [0.2, 1.0, 0.1], "intensity": 0.2}]
+                   {"name": "sun", "type": "directional", "direction": [0.2, 1.0, 0.1], "intensity": 0.2},
+                   {"name": "window", "type": "rectangle", "position": [-3.0, 2.0, 1.0], "size": [1.5, 1.0],
+                    "normal": [1.0, -0.3, -0.2], "up": [0.0, 1.0, 0.0], "intensity": 4.0}]
+    d["fit"]["lights.window.position"] = {"min": [-5, 0.5, -3], "max": [-1, 4, 3]}
     d["fit"]["lights.fill.position"] = {"min": [-4, 0.5, -4], "max": [4, 6, 4]}
     d["fit"]["lights.fill.radius"] = {"min": 0.01, "max": 1.0}
     d["fit"]["lights.sun.intensity"] = {"min": 0, "max": 1}
@@ -510,6 +514,8 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
                  "--framing", "--vignetting", "--tone-curve", "--flat-field"]
         for _ in range(rng.randint(0, 3)):
             argv += [rng.choice(flags), str(odd(rng))]
+        if rng.random() < 0.2:  # the lights fit: counts, "auto" and bad ones
+            argv += ["--lights", rng.choice(["1", "2", "auto", "0", "9", "x", "2.5", "", str(odd(rng))])]
         with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
             try:
                 cli_fit.main(argv)

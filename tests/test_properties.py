@@ -449,10 +449,13 @@ SMALL_LIGHTS = copy.deepcopy(SMALL)
 SMALL_LIGHTS["lights"] = [{"name": "key", **SMALL_LIGHTS.pop("light")},
                           {"name": "fill", "type": "sphere", "position": [-2.0, 3.0, -1.0], "radius": 0.3,
                            "intensity": 8.0},
-                          {"name": "sun", "type": "directional", "direction": [0.2, 1.0, 0.1], "intensity": 0.3}]
+                          {"name": "sun", "type": "directional", "direction": [0.2, 1.0, 0.1], "intensity": 0.3},
+                          {"name": "window", "type": "rectangle", "position": [-3.0, 2.0, 1.0], "size": [1.5, 1.0],
+                           "normal": [1.0, -0.3, -0.2], "up": [0.0, 1.0, 0.0], "intensity": 6.0}]
 SMALL_LIGHTS["fit"] = {k: v for k, v in SMALL_LIGHTS["fit"].items() if k != "light.intensity"}
 SMALL_LIGHTS["fit"]["lights.fill.position"] = {"min": [-4, 0.5, -4], "max": [4, 6, 4]}
 SMALL_LIGHTS["fit"]["lights.fill.radius"] = {"min": 0.01, "max": 1.0}
+SMALL_LIGHTS["fit"]["lights.window.position"] = {"min": [-5, 0.5, -3], "max": [-1, 4, 3]}
 
 LIGHT_FIELDS = [
     (("lights", 0, "position"), 3), (("lights", 0, "intensity"), 0), (("lights", 1, "position"), 3),
@@ -460,6 +463,8 @@ LIGHT_FIELDS = [
     (("lights", 2, "direction"), 3), (("lights", 2, "intensity"), 0),
     (("fit", "lights.fill.position", "min"), 3), (("fit", "lights.fill.radius", "max"), 0),
     (("fit", "lights.fill.radius", "min"), 0),
+    (("lights", 3, "position"), 3), (("lights", 3, "size"), 2), (("lights", 3, "normal"), 3),
+    (("lights", 3, "up"), 3), (("lights", 3, "intensity"), 0), (("fit", "lights.window.position", "max"), 3),
 ]
 
 
@@ -537,3 +542,35 @@ def test_any_warped_photo_fits_with_finite_framing_numbers(turn, zoom, dx, dy, m
     if f.get("corrected"):
         moved, inside = result.reframed
         assert np.isfinite(moved).all() and inside.any()
+
+
+@settings(max_examples=25, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
+@given(value=st.one_of(st.sampled_from(["1", "2", "auto", "0", "9", "-1", "2.5", "AUTO", "", "two", "1e1"]),
+                       st.text(max_size=4)),
+       listed=st.booleans())
+def test_the_lights_flag_fits_or_exits_with_one_line(tmp_path_factory, value, listed):
+    import contextlib
+    import io
+
+    from rtloop.cli.fit import main
+
+    work = tmp_path_factory.mktemp("lights_cli")
+    (work / "scene.json").write_text(json.dumps(SMALL_LIGHTS if listed else SMALL))
+    rtloop.save_image(work / "photo.png", PHOTO_LIGHTS if listed else PHOTO)
+    argv = [str(work / "scene.json"), str(work / "photo.png"), "--out", str(work / "out"), "--lights", value,
+            "--population", "4", "--generations", "1", "--final-scale", "1", "--final-spp", "1", "-q"]
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        code = main(argv)
+    if code == 0:
+        report = json.loads((work / "out" / "result.json").read_text())["fit_report"]
+        if report.get("method") != "lights":  # --lights 1 on a one-light scene: the ordinary fit
+            assert value.strip() == "1" and not listed
+            return
+        assert report["lights"]
+        for light in report["lights"]:
+            assert all(math.isfinite(v) for v in light.get("position", [0.0]) + light.get("position_error", [0.0]))
+    else:
+        assert code in (1, 2), code
+        lines = [line for line in err.getvalue().splitlines() if line]
+        assert len(lines) == 1 and lines[0].startswith("rtloop-fit: error: "), lines

@@ -27,11 +27,13 @@ import rtloop
 from rtloop._files import PlaceError, check_out_dir, move_into_place, recover_leftovers, staging_dir
 from rtloop.fit import PROTOCOLS
 from rtloop.fit.files import fit_inputs, load_inputs
+from rtloop.fit.lights import LightsFit
 from rtloop.fit.protocol import LIMITS, max_threads
 from rtloop.report import truth_errors, truth_values
 from rtloop.uncertainty.bootstrap import STAGE as BOOTSTRAP, replicate_of
 
 from .args import Parser, UsageError, float_in, generations, int_at_least, int_in, norm, vignetting
+from .lights import LIGHTS_HELP, lights_count, lights_summary, run_lights, uses_lights
 from .outputs import GenerationLog, input_paths, render_final, write_result
 from .summary import duration as _duration, summary as _summary
 
@@ -92,6 +94,13 @@ files written into DIR:
                     final.png and their difference, the best render through
                     the stages, the parameters and the fitness against
                     generation, the fitted values and the fit report
+
+with --lights N|auto (or a SCENE with a "lights" list: several lights, a sphere
+or a rectangle light), the lights fit: result.json's fit_report lists each light
+(position or direction, intensity, their error bars, its share of the light)
+and, with auto, the held-out error per number of lights; objective.png and
+final.png as above, and with --report a page of the lights and their evidence;
+no snapshots or CSV.
 
 Everything is written into a temporary directory beside DIR and moved into
 place when complete: a failed or interrupted run leaves no partial results. An
@@ -248,6 +257,7 @@ def _build_parser() -> Parser:
     p.add_argument("--truth", metavar="SCENE",
                    help="the true scene (JSON, e.g. a reference scene's scene.json): print the errors of the "
                    "fitted values and draw the truth in the report")
+    p.add_argument("--lights", type=lights_count, metavar="N|auto", help=LIGHTS_HELP)
     p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
     return p
 
@@ -441,6 +451,14 @@ class _Run:
         names = scene.param_names()
         if not names:
             raise _Failure(f"{args.scene}: the scene's fit section names no free parameters")
+        if uses_lights(args, scene):
+            self.progress.message(f"{PROG}: fitting the lights of {args.scene} to {args.image} "
+                                  f"({scene.width}x{scene.height}, {args.lights or 'its own'} lights)")
+
+            def refuse(message: str) -> None:
+                raise _Failure(message)
+
+            return run_lights(args, inputs, tmp, refuse)
         truth = None
         if args.truth is not None:
             truth = rtloop.load_scene(args.truth)
@@ -629,6 +647,9 @@ def _main(argv: list[str] | None, t0: float) -> int:
         if tmp is not None and os.path.lexists(tmp):
             shutil.rmtree(tmp, ignore_errors=True)
 
+    if isinstance(result, LightsFit):
+        print(lights_summary(result, out, time.perf_counter() - t0, _duration))
+        return 0
     print(_summary(result, out, time.perf_counter() - t0, truth=run.truth_errors,
                    report=out / "report.html" if args.report else None))
     return 0
