@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["imdecode", "leave_stderr_alone"]
+__all__ = ["cv2", "imdecode", "leave_stderr_alone"]
 
 _lock = threading.Lock()  # fd 2 is process-wide: one decode at a time holds it
 _local = threading.local()
@@ -62,3 +62,16 @@ def _plain(line: str) -> str:
             return " ".join(rest[3:])
         return " ".join(rest)
     return line
+
+
+class _Lazy:
+    """OpenCV's module, imported at its first use: ``from .._opencv import cv2`` at a module's top keeps
+    ``import rtloop`` free of OpenCV."""
+
+    def __getattr__(self, name: str) -> Any:
+        import cv2 as module
+
+        return getattr(module, name)
+
+
+cv2 = _Lazy()

@@ -177,22 +177,7 @@ def fit(
             raise RtloopError("framing: 'correct' fits a camera correction with one light, not with several")
         return _fit_lights(scene, image, mask, lights, seed=seed, threads=threads, population=population,
                            generations=generations)
-    cam = check_camera(scene, vignetting, tone, flat_field)
-    if cam.active:
-        def once(img: np.ndarray, near: Scene | None = None) -> FitResult:
-            return fit(**{**args, "image": img, "vignetting": "off", "tone": "off", "flat_field": None,
-                          **({"scene": near} if near is not None else {})})
-
-        result = fit_through_camera(once, scene, *objective(scene, image, mask, []), cam)
-        result.seconds = time.perf_counter() - t0
-        return result
     footprint = check_footprint(footprint)
-    if framing == "correct":
-        return fit_reframed(fit, scene, image, mask, reference, dict(
-            protocol=protocol, seed=seed, population=population, generations=generations, f=f, cr=cr,
-            threads=threads, clip=clip, pixels_per_object=pixels_per_object, callback=callback,
-            optimizer=optimizer, polish=polish, uncertainty=uncertainty, norm=norm, space=space,
-            environment=environment, interreflection=interreflection, highlights=highlights, footprint=footprint))
     if not (isinstance(uncertainty, bool) or isinstance(uncertainty, str) and uncertainty in ("default", "bootstrap", "off")):
         raise RtloopError(f"uncertainty: must be True, False, 'default', 'bootstrap' or 'off' (got {uncertainty!r})")
     if space not in ("auto", *LOSS_SPACES):
@@ -205,6 +190,22 @@ def fit(
     check_interreflection(interreflection)
     check_arguments(scene, seed=seed, threads=threads, polish=polish, pixels_per_object=pixels_per_object,
                     population=b.population)
+    # Every argument checked: the camera's terms and the framing's correction each fit through fit() again.
+    cam = check_camera(scene, vignetting, tone, flat_field)
+    if cam.active:
+        def once(img: np.ndarray, near: Scene | None = None) -> FitResult:
+            return fit(**{**args, "image": img, "vignetting": "off", "tone": "off", "flat_field": None,
+                          **({"scene": near} if near is not None else {})})
+
+        result = fit_through_camera(once, scene, *objective(scene, image, mask, []), cam)
+        result.seconds = time.perf_counter() - t0
+        return result
+    if framing == "correct":
+        return fit_reframed(fit, scene, image, mask, reference, dict(
+            protocol=protocol, seed=seed, population=population, generations=generations, f=f, cr=cr,
+            threads=threads, clip=clip, pixels_per_object=pixels_per_object, callback=callback,
+            optimizer=optimizer, polish=polish, uncertainty=uncertainty, norm=args["norm"], space=args["space"],
+            environment=environment, interreflection=interreflection, highlights=highlights, footprint=footprint))
     doubts: list[str] = []
     target, use = objective(scene, image, mask, doubts)
     if reference is not None:

@@ -21,10 +21,10 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-import cv2
 import numpy as np
 
 from .. import _native
+from .._opencv import cv2
 from .._pixels import edges
 from .._srgb import encode
 from ..errors import RtloopError
