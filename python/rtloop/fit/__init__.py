@@ -20,6 +20,7 @@ from .._srgb import codes8, decode
 from ..errors import RtloopError, RtloopWarning
 from ..scene import Scene, load_scene
 from .bounds import narrowed, restore_bounds
+from .coat import choose_lobe, with_coat
 from .gauge import hold_gauges, release_gauges
 from .lights import LightsFit, check_lights, choose_count, fit_lights
 from .goodness import clip_level, encoded, goodness, jpeg_blocking, noise_sigma
@@ -447,6 +448,9 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
             else:
                 ev, shininess = highlight_evidence(at, names, where, x, target, sub, base=base,
                                                    environment=model_env, active_pixels=n_sub, **kw)
+                if ev["selected"]:  # the coat against Blinn-Phong, by the same evidence (fit/coat.py)
+                    choose_lobe(ev, at, names, where, x, target, sub, base=base, environment=model_env,
+                                active_pixels=n_sub, **kw)
             earlier = model["evidence"].get(term)
             ev["tested_with"] = [t for t in _TERM_ORDER if t in added]
             if earlier is not None:
@@ -461,7 +465,8 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
             elif term == "interreflection":
                 model_work = with_interreflection(model_work)
             else:
-                model_work = with_highlights(model_work, names, shininess)
+                model_work = with_coat(model_work, names, ev["coat"]["roughness"]) if ev.get("lobe") == "coat" \
+                    else with_highlights(model_work, names, shininess)
     added.sort(key=_TERM_ORDER.index)
     if not added:
         return _jpeg_refit(current, work, stages, first, model, seeds, blocking=blocking, space=space_mode,
