@@ -207,8 +207,8 @@ def _build_parser() -> Parser:
                    "stops within a generation; its sigma is printed), 'off' (none)")
     p.add_argument("--highlights", choices=("auto", "off"), default="auto",
                    help="'auto' (default): a sphere the scene gives as matte gets a fitted specular lobe "
-                   "(specular and shininess) when the photo shows a highlight the diffuse model cannot explain; "
-                   "'off': never")
+                   "(Blinn-Phong, or a clear coat with its roughness where that explains it better) when the "
+                   "photo shows a highlight the diffuse model cannot explain; 'off': never")
     p.add_argument("--mask", type=Path, metavar="PNG",
                    help="an image of IMAGE's size (or the scene's): white where the scene models the photo, "
                    "black where it does not (another object, a reflection); black pixels are left out of the fit (default: the mask the scene names, "

@@ -131,9 +131,9 @@ def fit(
     ``interreflection``: one diffuse bounce between the objects (the floor lighting a ball's underside, a
     red ball tinting the floor): "auto" (default) adds it when the photo shows it, "on", "off"; the bounce
     depends on the albedos themselves, so with it the fit also estimates the light's intensity.
-    ``highlights``: "auto" (default) frees the specular lobe (specular and shininess) of every sphere the
-    scene gives as matte when the photo shows a highlight the diffuse model cannot explain (the fitted
-    scene's fit section then lists them; ``result.model`` says why); "off" never.
+    ``highlights``: "auto" (default) frees a lobe on every sphere the scene gives as matte when the photo
+    shows a highlight the diffuse model cannot explain: Blinn-Phong (specular, shininess) or, where it explains
+    it better, a clear coat (``material.coat``, its roughness chosen; ``result.model`` says why); "off" never.
     ``reference``: ``(card, reflectance)``, a surface of known reflectance lying on a plane of the scene
     (a grey card; ``card`` bool (H, W), True on it, and left out of the fit by ``mask``): the fitted scene is
     rescaled to absolute albedos and the light's intensity in W/sr (:mod:`rtloop.fit.reference`), recorded
