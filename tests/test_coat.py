@@ -157,3 +157,32 @@ def test_a_blinn_phong_ball_keeps_the_blinn_phong_lobe():
     ev = r.model["evidence"]["specular"]
     assert ev["selected"] and ev["lobe"] == "blinn-phong", ev
     assert "coat" not in r.scene.to_dict()["objects"][0]["material"]
+
+
+def test_the_lights_fit_refuses_a_coat_in_one_line():
+    scene = rtloop.load_scene(_truth(CASES[0]) | {"fit": {
+        "light.position": {"min": [-8, 0.5, -8], "max": [8, 8, 8]},
+        "objects.ball.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]}}})
+    photo = np.load(COAT / CASES[0] / "linear.npz")["image"]
+    with pytest.raises(RtloopError, match=r"^lights: objects.ball.material.coat: [^\n]*$"):
+        rtloop.fit(scene, photo, lights=2, uncertainty=False)
+
+
+def test_the_two_stage_method_fits_a_declared_coat():
+    """A scene that declares the coat, with the floor's albedo known and the intensity free (the two-stage
+    method, whose kernel shades the coat per pixel), on rtloop's own render of it: the light, intensity and
+    base albedo come back."""
+    d = _truth("coat-a010-red")
+    d["image"] = {"width": 64, "height": 48}
+    truth = copy.deepcopy(d)
+    d["light"]["position"] = [0.0, 3.0, -1.0]
+    d["objects"][0]["material"]["albedo"] = [0.5, 0.5, 0.5]
+    d["fit"] = {"light.position": {"min": [-5, 0.5, -5], "max": [5, 6, 5]}, "light.intensity": {"min": 1, "max": 100},
+                "objects.ball.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]}}
+    r = rtloop.fit(rtloop.load_scene(d), rtloop.render(rtloop.load_scene(truth)), uncertainty=False)
+    assert r.settings["method"] == "two-stage"
+    f = r.scene.to_dict()
+    assert float(np.linalg.norm(np.subtract(f["light"]["position"], truth["light"]["position"]))) < 0.005
+    assert abs(f["light"]["intensity"] / truth["light"]["intensity"] - 1) < 0.01
+    np.testing.assert_allclose(f["objects"][0]["material"]["albedo"], truth["objects"][0]["material"]["albedo"],
+                               rtol=0.01)
