@@ -2,7 +2,8 @@
 main() in-process, batch job lines and ids via rtloop-fit --batch, mesh files, EXIF focal tags,
 rtloop-insert arguments, rtloop-scene's --strict refusal of a field of view estimated from the board alone)
 for a developer to run for minutes; prints the counts. ``--only SURFACE[,SURFACE...]`` runs only those
-surfaces (``batch``: job lines, ``ids``: job ids, ``mesh``, ``insert``, ``exif``, ``strict``), each input on
+surfaces (``batch``: job lines, ``ids``: job ids, ``mesh``, ``insert``, ``exif``, ``strict``, ``framing``: warped
+photos through fit()'s framing check and correction), each input on
 the next in turn; ``--out FILE`` also writes the counts per surface as markdown headed by the command.
 
 What counts as a finding, by kind: ``data loss`` (a batch that deleted, changed or wrote beside its folder,
@@ -69,12 +70,16 @@ def _fit_scenes(base: dict) -> list[dict]:
 
 
 def _lights_base(base: dict) -> dict:
-    """The base under a `lights` list: its lamp, a sphere fill light and a sun, with their paths freed."""
+    """The base under a `lights` list: its lamp, a sphere fill light, a sun and a window (a rectangle light),
+    with their paths freed."""
     d = copy.deepcopy(base)
     lamp = d.pop("light")
     d["lights"] = [{"name": "key", **lamp},
                    {"name": "fill", "type": "sphere", "position": [-2.0, 3.0, -1.0], "radius": 0.3, "intensity": 5.0},
-                   {"name": "sun", "type": "directional", "direction": [0.2, 1.0, 0.1], "intensity": 0.2}]
+                   {"name": "sun", "type": "directional", "direction": [0.2, 1.0, 0.1], "intensity": 0.2},
+                   {"name": "window", "type": "rectangle", "position": [-3.0, 2.0, 1.0], "size": [1.5, 1.0],
+                    "normal": [1.0, -0.3, -0.2], "up": [0.0, 1.0, 0.0], "intensity": 4.0}]
+    d["fit"]["lights.window.position"] = {"min": [-5, 0.5, -3], "max": [-1, 4, 3]}
     d["fit"]["lights.fill.position"] = {"min": [-4, 0.5, -4], "max": [4, 6, 4]}
     d["fit"]["lights.fill.radius"] = {"min": 0.01, "max": 1.0}
     d["fit"]["lights.sun.intensity"] = {"min": 0, "max": 1}
@@ -95,6 +100,16 @@ BASE = _base()
 LIGHTS_BASE = _lights_base(BASE)
 COAT_BASE = _coat_base(BASE)
 FIT_SCENES = _fit_scenes(BASE)
+
+
+def _framing_base() -> dict:
+    """tests/fixtures/photos/direct-two-balls' scene as a user writes it, at 64 x 48: two outlines."""
+    d = json.loads((REPO / "tests" / "fixtures" / "photos" / "direct-two-balls" / "scene.json").read_text())
+    d["image"] = {"width": 64, "height": 48}
+    return d
+
+
+FRAMING_BASE = _framing_base()
 ODD = [
     None,
     True,
@@ -248,8 +263,8 @@ JOB_IDS = ["a", "b-1", "keep", "results.jsonl", "../out", "/tmp", ".hidden", "",
            ".rtloop-batch.lock", "f0", 7]
 JOB_FIELDS = ["seed", "mask", "protocol", "population", "generations", "f", "cr", "norm", "space", "loss_space",
               "optimizer", "polish", "clip", "uncertainty", "pixels_per_object", "environment", "interreflection",
-              "highlights", "footprint", "response", "crop", "grey_card", "image", "bogus"]
-JOB_VALUES = [*ODD, "auto", "on", "off", "srgb", "linear", "paper", "l2", "bootstrap", [1, 1], [2, "x"],
+              "highlights", "footprint", "framing", "response", "crop", "grey_card", "image", "bogus"]
+JOB_VALUES = [*ODD, "auto", "on", "off", "srgb", "linear", "paper", "l2", "bootstrap", "check", "correct", [1, 1], [2, "x"],
               {"mask": "photo.png", "reflectance": 0.18}, {"mask": "../scene.json", "reflectance": 2}, 10**40]
 RAW_LINES = ["[" * 100_000 + "]" * 100_000, '{"id": "a", "id": "b", "scene": "s", "photo": "p"}', "{", "null",
              '{"id": "a", "seed": 1' + "0" * 5000 + "}", "# comment", "\ufeff{}", "\x00"]
@@ -400,9 +415,6 @@ def _strict(rng: random.Random, c: Counts, tmp: Path) -> None:
         _strict_estimate(rng, c)
 
 
-SURFACES = ("batch", "ids", "mesh", "insert", "exif", "strict", "coat")
-
-
 def _coat(rng: random.Random, c: Counts) -> None:
     """A coated scene mutated (its coat's fields most often) through load_scene and render, or fitted by
     default (the lobe chosen from the photo) to a render of a coated ball under another light, with noise."""
@@ -430,6 +442,41 @@ def _coat(rng: random.Random, c: Counts) -> None:
     check_fit(res, scene, c)
 
 
+def _framing(rng: random.Random, c: Counts) -> None:
+    """A photo of the two-ball scene turned, zoomed and shifted by a random warp (or noise, or a constant),
+    fitted with a random framing mode: it fits (finite, within bounds, the framing's numbers finite) or
+    says one line."""
+    import cv2
+
+    scene = copy.deepcopy(FRAMING_BASE)
+    photo = rtloop.render(scene, spp=4)
+    h, w = photo.shape[:2]
+    kind = rng.random()
+    if kind < 0.7:
+        turn, zoom = rng.uniform(-8, 8), math.exp(rng.uniform(-0.2, 0.2))
+        m = cv2.getRotationMatrix2D(((w - 1) / 2, (h - 1) / 2), turn, zoom)
+        m[:, 2] += [rng.uniform(-6, 6), rng.uniform(-6, 6)]
+        photo = cv2.warpAffine(photo, m, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+    elif kind < 0.85:
+        photo = np.random.default_rng(rng.randrange(2**32)).uniform(0, 1, photo.shape).astype(np.float32)
+    else:
+        photo = np.full(photo.shape, rng.choice([0.0, 0.5, 1.0]), np.float32)
+    mode = rng.choice(["check", "correct", "correct", "off", "bogus"])
+    res = rtloop.fit(scene, np.ascontiguousarray(photo, np.float32), framing=mode, population=8,
+                     generations=rng.choice([1, 3]), polish=20, uncertainty=rng.choice([False, True]))
+    check_fit(res, scene, c)
+    f = res.goodness.get("framing", {})
+    numbers = [v for k in ("outline_rms_px", "outline_rms_se_px", "roll_deg", "zoom_percent") if k in f for v in [f[k]]]
+    numbers += list(f.get("shift_px", []))
+    if not finite(numbers):
+        c.bump("nan_or_inf")
+    if f.get("corrected") and not finite(res.reframed[0]):
+        c.bump("nan_or_inf")
+
+
+SURFACES = ("batch", "ids", "mesh", "insert", "exif", "strict", "framing", "coat")
+
+
 def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None = None) -> None:
     if only is not None:
         c.bump(f"inputs_{only}")
@@ -437,6 +484,7 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
             batch(rng, c, tmp, ids=only == "ids")
         else:
             {"mesh": _mesh, "insert": _insert_cli, "exif": _exif, "strict": lambda r, t: _strict(r, c, t),
+             "framing": lambda r, t: _framing(r, c),
              "coat": lambda r, t: _coat(r, c)}[only](rng, tmp)
         c.bump("ok")
         return
@@ -474,7 +522,18 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
             "norm": rng.choice(["auto", "auto", "l1", "l2", "huber:0.05", "huber:-1", "L1", None]),
             # the number of lights: the one-light fit, the lights fit, the choice, and bad ones
             "lights": rng.choice([None, None, None, 1, 2, "auto", 0, 9, "2", 1.5]),
+            # the framing check and its correction, and bad values
+            "framing": rng.choice(["check", "check", "check", "correct", "off", "CHECK", None, 1]),
         }
+        # the camera (one fit in five): the photo's choice, forced, off, a given falloff, and bad ones
+        if rng.random() < 0.2:
+            opts["vignetting"] = rng.choice(["on", "on", "off", (-0.3, -0.05), (0.0, 0.0), (-3.0, 0.0),
+                                             (math.nan, 0.0), "0.1,0.2", None])
+        if rng.random() < 0.2:
+            opts["tone"] = rng.choice(["on", "on", "off", "srgb", None])
+        if shape[:2] == (9, 12) and rng.random() < 0.1:
+            flat = np.random.default_rng(rng.randrange(2**32)).uniform(-0.1, 1.2, (9, 12, 3))
+            opts["flat_field"] = flat.astype(rng.choice([np.float32, np.float64, np.uint8]))
         scene = rng.choice(FIT_SCENES)
         if rng.random() < 0.1:
             scene = mutate(rng, scene)
@@ -490,9 +549,12 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
         check_fit(res, scene, c)
     else:  # CLI arguments via main()
         argv = [str(tmp / "scene.json"), str(tmp / "photo.png"), "--out", str(tmp / "out")]
-        flags = ["--seed", "--population", "--generations", "--threads", "--norm", "--space", "--protocol"]
+        flags = ["--seed", "--population", "--generations", "--threads", "--norm", "--space", "--protocol",
+                 "--framing", "--vignetting", "--tone-curve", "--flat-field"]
         for _ in range(rng.randint(0, 3)):
             argv += [rng.choice(flags), str(odd(rng))]
+        if rng.random() < 0.2:  # the lights fit: counts, "auto" and bad ones
+            argv += ["--lights", rng.choice(["1", "2", "auto", "0", "9", "x", "2.5", "", str(odd(rng))])]
         with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
             try:
                 cli_fit.main(argv)

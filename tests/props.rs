@@ -108,6 +108,18 @@ const COAT_SCENE: &str = r#"{"image": {"width": 16, "height": 12},
           "objects.ball.roughness": {"min": 0.05, "max": 0.5},
           "objects.ball.specular": {"min": 0, "max": 2}}}"#;
 
+/// A scene with a rectangle light (a window) beside a lamp, the window's centre and intensity fitted.
+const WINDOW_SCENE: &str = r#"{"image": {"width": 16, "height": 12},
+  "camera": {"position": [0, 1, -5], "look_at": [0, 0.5, 0], "vfov_deg": 40},
+  "lights": [{"name": "lamp", "position": [2, 4, -2], "intensity": 50},
+             {"name": "window", "type": "rectangle", "position": [-3.5, 2, 1], "size": [1.5, 1],
+              "normal": [1, -0.2, -0.1], "up": [0, 1, 0], "intensity": 30, "color": [0.9, 0.95, 1]}],
+  "objects": [
+    {"name": "ball", "shape": "sphere", "center": [0, 0.5, 0], "radius": 0.5},
+    {"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0]}],
+  "fit": {"lights.window.position": {"min": [-5, 0.5, -5], "max": [5, 8, 5]},
+          "lights.window.intensity": {"min": 0, "max": 100}}}"#;
+
 /// Replace one value of `text` anywhere (or delete one key): the scene parses, or the error names the
 /// field that was changed or one above it, in one line.
 fn mutation_is_named(
@@ -196,6 +208,13 @@ proptest! {
         let scene = Scene::from_json(&v.to_string()).unwrap();
         let img = render::render(&scene, None, None, 1).unwrap();
         prop_assert!(img.rgb.iter().all(|p| p.is_finite() && *p >= 0.0));
+    }
+
+    /// The same for a scene with a rectangle light.
+    #[test]
+    fn mutated_window_scenes_parse_or_name_a_field(pick in any::<prop::sample::Index>(), value in odd_value(),
+                                                   delete in any::<bool>()) {
+        mutation_is_named(WINDOW_SCENE, pick, value, delete)?;
     }
 }
 

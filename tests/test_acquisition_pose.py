@@ -98,23 +98,17 @@ def test_board_alone_refused_when_its_field_of_view_is_looser_than_the_target(vi
     assert "--vfov" in msg and "EXIF" in msg
 
 
-def test_board_alone_looser_than_the_target_is_used_within_the_limit(views) -> None:
-    """Not strict: a board that fixes the field of view to between the 0.3 deg target and the 1 deg limit is
-    used (its spread in the pose, within 3 of which the truth lies); a looser one is refused."""
-    from rtloop.acquisition.pose import VFOV_LIMIT_DEG
-
-    used = refused = 0
+def test_board_alone_looser_than_the_target_is_used_with_its_spread(views) -> None:
+    """Not strict: a board that fixes the field of view more loosely than the 0.3 deg target is used (its
+    spread in the pose; where under 2 deg, the truth within 3 of it), whatever the spread."""
+    used = 0
     for truth, image in views:
-        try:
-            pose = estimate_floor_pose(image, SPEC)
-        except AcquisitionError as e:
-            assert f"more than the {VFOV_LIMIT_DEG:g} deg it can be used to" in str(e)
-            refused += 1
-            continue
-        assert pose.vfov_std_deg <= VFOV_LIMIT_DEG
-        assert abs(pose.camera.vfov_deg - truth.vfov_deg) <= 3 * pose.vfov_std_deg
+        pose = estimate_floor_pose(image, SPEC)
+        assert math.isfinite(pose.vfov_std_deg)
+        if pose.vfov_std_deg < 2.0:
+            assert abs(pose.camera.vfov_deg - truth.vfov_deg) <= 3 * pose.vfov_std_deg
         used += pose.vfov_std_deg > VFOV_TARGET_DEG
-    assert used >= 1, "no view between the target and the limit"
+    assert used >= 1, "no view looser than the target"
 
 
 def test_board_alone_uncertainty_covers_its_error(views, monkeypatch) -> None:

@@ -93,6 +93,53 @@ def test_a_bad_lights_argument_is_one_line_naming_it(bad):
     assert "\n" not in str(e.value)
 
 
+def test_lamp_and_window_are_found_from_the_scene_s_own_list():
+    truth, image, scene_input = photo("lamp-window")
+    res = rtloop.fit(scene_input, image, seed=0)
+    lamp, window = truth["lights"]
+    assert [light["kind"] for light in res.lights] == ["point", "rectangle"]
+    assert np.linalg.norm(np.asarray(res.lights[0]["position"]) - lamp["position"]) < 0.05
+    assert np.linalg.norm(np.asarray(res.lights[1]["position"]) - window["position"]) < 0.30
+
+
+def test_a_window_renders_as_mitsuba_renders_it():
+    """The truth of the lamp + window photo through rtloop's renderer against Mitsuba's photo on the lit
+    pixels of the objects (away from silhouettes and the steepest pixels: shadow edges, which Mitsuba's
+    box-filtered pixels average and the pixel-centre render does not); the window alone too, rendered by
+    both, so that the rectangle light's own term is compared, not only the lamp's."""
+    truth, image, _ = photo("lamp-window")
+    scene = rtloop.load_scene(truth)
+    render = np.clip(rtloop.render(scene, None, None, 1), 0, 1)
+    ids = np.asarray(rtloop._native.object_ids(scene))
+    from rtloop._pixels import edges
+    from rtloop.fit.lights import steep
+    ok = (ids >= 0) & ~edges(ids) & ~steep(image, 0.1).reshape(ids.shape) & (image.max(axis=2) > 0.05)
+    assert ok.sum() > 2000
+    diff = np.abs(render - image)[ok]
+    assert np.median(diff) < 2 / 255 and np.quantile(diff, 0.95) < 6 / 255, (np.median(diff), np.quantile(diff, 0.95))
+    # Without the window the lit pixels darken well beyond that: the comparison sees the window's term.
+    no_window = dict(truth, lights=truth["lights"][:1])
+    dark = np.clip(rtloop.render(rtloop.load_scene(no_window), None, None, 1), 0, 1)
+    assert np.median(np.abs(dark - image)[ok]) > 10 / 255
+
+
+@pytest.mark.parametrize("light, field", [
+    ({"type": "rectangle", "position": [0, 3, 0], "normal": [0, -1, 0], "intensity": 5}, r"lights\[1\]\.size"),
+    ({"type": "rectangle", "position": [0, 3, 0], "size": [1, 0], "normal": [0, -1, 0], "intensity": 5},
+     r"lights\[1\]\.size"),
+    ({"type": "rectangle", "position": [0, 3, 0], "size": [1, 1], "intensity": 5}, r"lights\[1\]\.normal"),
+    ({"type": "rectangle", "position": [0, 3, 0], "size": [1, 1], "normal": [0, -1, 0], "up": [0, 1, 0],
+      "intensity": 5}, r"lights\[1\]\.up"),
+    ({"position": [0, 3, 0], "normal": [0, -1, 0], "intensity": 5}, r"lights\[1\]\.normal"),
+])
+def test_a_bad_rectangle_light_names_its_field(light, field):
+    truth, _, _ = photo("key-fill-25")
+    truth["lights"][1] = light
+    with pytest.raises(SceneError, match=field) as e:
+        rtloop.load_scene(truth)
+    assert "\n" not in str(e.value)
+
+
 @pytest.mark.parametrize("light, field", [
     ({"type": "sphere", "position": [0, 3, 0], "intensity": 5}, r"lights\[1\]\.radius"),
     ({"type": "sphere", "position": [0, 3, 0], "radius": -1, "intensity": 5}, r"lights\[1\]\.radius"),
@@ -107,3 +154,37 @@ def test_a_bad_light_in_the_list_names_its_field(light, field):
     with pytest.raises(SceneError, match=field) as e:
         rtloop.load_scene(truth)
     assert "\n" not in str(e.value)
+
+
+def test_an_inserted_ball_casts_a_shadow_from_each_light():
+    """rtloop.insert under the key + fill truth: the light the added ball takes from the floor is the sum
+    of what it takes under each light alone (the same renderer with one light), and each alone takes a
+    visible shadow's worth, so both shadows are there, each where its own light puts it."""
+    truth, image, _ = photo("key-fill-25")
+    ball = [{"name": "added", "shape": "sphere", "center": [0.1, 0.3, -0.9], "radius": 0.3,
+             "material": {"albedo": [0.8, 0.8, 0.8]}}]
+    with_ball = rtloop.load_scene(dict(truth, objects=truth["objects"] + ball))
+    floor = np.asarray(rtloop._native.object_ids(with_ball)) == 2  # floor still seen with the ball there
+
+    def taken(scene: dict) -> np.ndarray:
+        r = rtloop.insert(scene, image, ball, spp=1, adaptive=False)
+        return (r.without - r.with_objects).sum(axis=2)[floor]
+
+    both = taken(truth)
+    key = taken(dict(truth, lights=truth["lights"][:1]))
+    fill = taken(dict(truth, lights=truth["lights"][1:]))
+    assert (key > 0.02).sum() > 20 and (fill > 0.02).sum() > 20
+    assert ((key > 0.02) & (fill < 1e-6)).sum() > 10 and ((fill > 0.02) & (key < 1e-6)).sum() > 10
+    assert np.max(np.abs(both - (key + fill))) < 1e-5 * max(float(np.max(both)), 1.0)
+
+
+@pytest.mark.parametrize("name, count", [("key-fill-25", 2), ("lamp-window", None)])
+def test_each_light_s_error_bar_covers_its_error(name, count):
+    """The truth (unseen by the fit) lies within 4 error bars of each fitted light (3-D lengths): the
+    independent-pixel curvature alone puts it 10-20 error bars away on these photos."""
+    truth, image, scene_input = photo(name)
+    res = rtloop.fit(scene_input, image, lights=count, seed=0)
+    for light in res.lights:
+        _, error = nearest(truth["lights"], light["position"])
+        bar = float(np.linalg.norm(light["position_error"]))
+        assert 0 < bar < 0.5 and error < 4 * bar, (light["name"], error, bar)

@@ -174,12 +174,13 @@ def _without_exif(view: str, folder: Path) -> Path:
 
 def test_without_exif_the_target_a_warning_or_one_line(tmp_path, capsys):
     """With no EXIF, every view the detector accepts: the field of view within 0.3 deg and the ball within 1 %
-    of its distance (the target); or, where the board fixes the field of view only to between 0.3 and 1 deg,
-    the scene with one warning line giving that spread and the distances' (the field of view within 3 of the
-    one, the camera's and the ball's distance within 3 of the other); or one line naming the cause and the
-    fixes. With --strict every view is the target or one line: on each of these the board's 15 corners (of a
-    6x4 board) fix the field of view no better than +-0.6 deg, so each is refused."""
-    warned = 0
+    where the board alone fixes it that well; else a scene with one warning giving the board's spread and
+    the field of view refined from the ball resting on the floor (the truth within 3 of the board's spreads,
+    the ball within 3 of the distances' spread), or, where even the ball is not found at the board's
+    estimate, one line naming the fixes. With --strict every view is the target or one line: on each of these
+    the board's 15 corners (of a 6x4 board) fix the field of view no better than +-0.7 deg, so each is
+    refused."""
+    built = 0
     for view in VIEWS:
         photo = _without_exif(view, tmp_path)
         code = scene_main(_scene_args(view, photo, tmp_path / view))
@@ -197,19 +198,45 @@ def test_without_exif_the_target_a_warning_or_one_line(tmp_path, capsys):
                 continue
             lines = [line for line in (captured.out + captured.err).splitlines() if "no EXIF focal length" in line]
             assert len(lines) == 1 and f"+- {std:.2f} deg (0.3 wanted)" in lines[0], (view, lines)
+            assert "refined from the ball resting on the floor to" in lines[0], (view, lines)
             percent = float(re.search(r"about \+-([\d.]+) %", lines[0]).group(1))
             assert fov <= 3 * std, (view, fov, std)
             assert ball <= 3 * percent / 100 * _meta(view)["ball"]["distance_from_camera_m"], (view, ball, percent)
-            warned += 1
+            built += 1
         else:
             assert code == 1 and len(err.splitlines()) == 1, (view, err)
-            assert "focal length" in err and "--vfov" in err and "EXIF" in err, (view, err)
+            assert "--vfov" in err and "EXIF" in err, (view, err)
             assert not (tmp_path / view).exists()
         strict = tmp_path / f"{view}-strict"
         assert scene_main(_scene_args(view, photo, strict, "--strict")) == 1
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and "--vfov" in err and not strict.exists(), (view, err)
-    assert warned >= 1
+    assert built >= 4
+
+
+#: Without EXIF, the light from rtloop-scene's refined field of view and rtloop-fit: the target is 5 cm.
+NO_EXIF_LIGHT_M = 0.05
+
+
+@pytest.mark.parametrize("view", [pytest.param(v, marks=pytest.mark.xfail(
+    strict=True, reason="a long lens (32 deg): the ball's outline fixes the field of view to 0.8 deg, the light "
+    "6 cm off")) if v == "low" else v for v in VIEWS if v != "overhead"])
+def test_without_exif_the_light_from_the_refined_field_of_view(tmp_path, view):
+    """The field of view refined from the ball is nearer the truth than the board's own estimate (or within
+    0.3 deg), and the light from rtloop-fit within NO_EXIF_LIGHT_M. Truth: the Mitsuba renders'."""
+    photo = _without_exif(view, tmp_path)
+    assert scene_main(_scene_args(view, photo, tmp_path / "scene")) == 0
+    scene = json.loads((tmp_path / "scene" / "scene.json").read_text())
+    meta = _meta(view)
+    refined = scene["meta"]["acquisition"]["focal_refinement"]
+    truth = meta["camera"]["vfov_deg"]
+    assert abs(refined["vfov_deg"] - truth) <= max(abs(refined["board_vfov_deg"] - truth), 0.3), (view, refined)
+    assert fit_cli.main([str(tmp_path / "scene" / "scene.json"), str(tmp_path / "scene" / "objective.png"), "--out",
+                         str(tmp_path / "fit"), "--snapshot-every", "0", "--final-scale", "1", "--final-spp", "1",
+                         "--uncertainty", "off"]) == 0
+    result = json.loads((tmp_path / "fit" / "result.json").read_text())
+    err = float(np.linalg.norm(np.subtract(result["light"]["position"], meta["light"]["position"])))
+    assert err < NO_EXIF_LIGHT_M, f"{view}: light {1000 * err:.1f} mm off"
 
 
 def test_board_alone_uncertainty_covers_its_error(monkeypatch):
@@ -291,3 +318,19 @@ def test_raw_photo_in_rtloop_fit(tmp_path, capsys):
     assert inputs["response"] == "raw" and len(inputs["raw"]["white_balance"]) == 4
     assert inputs["raw"]["white_level"] == 4095
     capsys.readouterr()
+
+
+@pytest.mark.parametrize("view", VIEWS)
+def test_the_views_are_framed_as_their_scene(built, view):
+    """The scene rtloop-scene wrote frames the photo as it is (the ChArUco board's texture on the floor and
+    the card left out by the mask): the outlines registered in place, forced whatever the residual."""
+    from rtloop.fit import framing
+    from rtloop.fit.files import fit_inputs, load_inputs
+
+    code, out = built[view]
+    assert code == 0
+    inputs = load_inputs(out / "scene.json", out / "objective.png")
+    result = fit_inputs(inputs, uncertainty=False, framing="off")
+    use = None if inputs.mask is None else np.flatnonzero(inputs.mask.ravel())
+    check, _ = framing.measure(result.scene, inputs.image, use, framing._compared(result))
+    assert check["checked"] and not check["mismatch"], check

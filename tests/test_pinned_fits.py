@@ -24,8 +24,10 @@ PINNED = json.loads(FIXTURE.read_text())
 #: EPYC with AVX-512 against the fixture (recorded without it): goodness up to 1.2e-5 relative (a jump
 #: ratio of float32 sRGB codes), the encoding check 8e-8, the uncertainty 1.2e-11, the residual 8e-15.
 #: With numpy's AVX-512 paths switched off (NPY_DISABLE_CPU_FEATURES) the goodness matches exactly.
+#: The camera terms' test (its held-out sums and the small solves of its steps) is numpy's too.
 CPU_DEPENDENT = ((".report.goodness.", 1e-4), (".report.model.encoding", 1e-4),
-                 (".report.uncertainty.", 1e-9), (".report.model.residual", 1e-9))
+                 (".report.uncertainty.", 1e-9), (".report.model.residual", 1e-9),
+                 (".report.model.camera", 1e-6))
 
 
 def _tolerance(path: str) -> float:

@@ -2,8 +2,9 @@
 """Render rtloop's several-light test photos with an independent renderer (Mitsuba 3, ``scalar_rgb``).
 
 Each case is a small scene (balls on an infinite floor) under two or three lights: a key light and a fill
-of a given fraction of its power, three lamps, a lamp and a sphere light, or one sphere light of 0.1-0.5 m
-(soft shadows). It reuses ``make_photos.py``'s conventions and code (camera, floor, materials, sRGB
+of a given fraction of its power, three lamps, a lamp and a sphere light, one sphere light of 0.1-0.5 m
+(soft shadows), or a lamp beside a window (a 1.5 x 1 m rectangle light about 4 m away, radiance
+intensity x colour / area, one-sided) under a dim constant room light. It reuses ``make_photos.py``'s conventions and code (camera, floor, materials, sRGB
 encoding, a sphere light's radiance I / (pi r^2)). For each case it writes ``OUT/NAME/``:
 
 ``scene.json``        the truth in rtloop's scene format (a ``lights`` list);
@@ -61,6 +62,32 @@ CASES: list[dict[str, Any]] = [
 ]
 
 
+WINDOW_CENTRE = np.array([-3.4, 2.2, 1.4])
+WINDOW_NORMAL = (np.array([0.0, 0.6, 0.0]) - WINDOW_CENTRE) / np.linalg.norm(np.array([0.0, 0.6, 0.0]) - WINDOW_CENTRE)
+WINDOW = {"name": "window", "type": "rectangle", "position": WINDOW_CENTRE.tolist(), "size": [1.5, 1.0],
+          "normal": WINDOW_NORMAL.tolist(), "up": [0.0, 1.0, 0.0], "intensity": 30.0, "color": [0.85, 0.92, 1.0]}
+CASES.append({"name": "lamp-window", "description": "two balls under a lamp and a 1.5 x 1 m window about 4 m "
+              "away, a dim constant room light", "lights": [KEY, WINDOW], "objects": TWO_BALLS, "seed": 60,
+              "environment": [0.01, 0.01, 0.01]})
+
+
+def rectangle_frame(light: dict[str, Any]) -> np.ndarray:
+    """The 4x4 matrix taking Mitsuba's rectangle ([-1, 1]^2 in z = 0, normal +z) to the window: x along
+    its width (up x normal), y along its height (up made orthogonal to the normal), z along its normal."""
+    n = np.asarray(light["normal"], float)
+    n /= np.linalg.norm(n)
+    up = np.asarray(light.get("up", [0.0, 1.0, 0.0]), float)
+    up = up - up.dot(n) * n
+    up /= np.linalg.norm(up)
+    u = np.cross(up, n)
+    m = np.eye(4)
+    m[:3, 0] = u * light["size"][0] / 2
+    m[:3, 1] = up * light["size"][1] / 2
+    m[:3, 2] = n
+    m[:3, 3] = light["position"]
+    return m
+
+
 def mitsuba_scene(case: dict[str, Any], spp: int) -> dict[str, Any]:
     first = case["lights"][0]
     c = mp.Case(case["name"], case["description"], "", mp.CAM_A, first["position"], first["intensity"],
@@ -69,13 +96,21 @@ def mitsuba_scene(case: dict[str, Any], spp: int) -> dict[str, Any]:
     d = mp.mitsuba_dict(c, spp=spp, seed=case["seed"])
     for k, light in enumerate(case["lights"][1:]):
         rgb = light["intensity"] * np.asarray(light["color"], float)
-        if light.get("type") == "sphere":
+        if light.get("type") == "rectangle":
+            radiance = rgb / (light["size"][0] * light["size"][1])
+            d[f"window{k + 1}"] = {"type": "rectangle",
+                                   "to_world": mp._mi().ScalarTransform4f(rectangle_frame(light).tolist()),
+                                   "bsdf": {"type": "diffuse", "reflectance": mp._rgb([0, 0, 0])},
+                                   "emitter": {"type": "area", "radiance": mp._rgb(radiance)}}
+        elif light.get("type") == "sphere":
             d[f"lamp{k + 1}"] = {"type": "sphere", "center": light["position"], "radius": light["radius"],
                                  "bsdf": {"type": "diffuse", "reflectance": mp._rgb([0, 0, 0])},
                                  "emitter": {"type": "area",
                                              "radiance": mp._rgb(mp.lamp_radiance(rgb, light["radius"]))}}
         else:
             d[f"light{k + 1}"] = {"type": "point", "position": light["position"], "intensity": mp._rgb(rgb)}
+    if case.get("environment"):
+        d["environment"] = {"type": "constant", "radiance": mp._rgb(case["environment"])}
     return d
 
 
@@ -98,6 +133,8 @@ def make(case: dict[str, Any], out: Path, spp: int) -> None:
              "image": {"width": mp.WIDTH, "height": mp.HEIGHT}, "camera": camera,
              "lights": [{k: v for k, v in light.items()} for light in case["lights"]],
              "ambient": [0.0, 0.0, 0.0], "exposure": 1.0, "objects": objects_json(case)}
+    if case.get("environment"):
+        truth["environment"] = case["environment"]
     first = case["lights"][0]
     guess = {"name": "key", "position": mp.INPUT_LIGHT["position"], "intensity": first["intensity"],
              "color": first["color"]}
@@ -106,8 +143,15 @@ def make(case: dict[str, Any], out: Path, spp: int) -> None:
     if first.get("type") == "sphere":
         guess.update(type="sphere", radius=0.2)
         fit["lights.key.radius"] = {"min": 0.02, "max": 0.8}
-    scene_input = {k: v for k, v in truth.items() if k not in ("lights", "objects")}
-    scene_input.update(lights=[guess], objects=objects_json(case, mp.INPUT_ALBEDO), fit=fit)
+    scene_input = {k: v for k, v in truth.items() if k not in ("lights", "objects", "environment")}
+    lights = [guess]
+    for light in case["lights"][1:]:
+        if light.get("type") == "rectangle":
+            # The window's size and the wall it is in are known; its centre is a guess, fitted.
+            lights.append({**light, "position": [-3.0, 2.5, 0.0], "intensity": first["intensity"],
+                           "color": [1.0, 1.0, 1.0]})
+            fit[f"lights.{light['name']}.position"] = {"min": [-6.0, 0.5, -4.0], "max": [-1.0, 5.0, 4.0]}
+    scene_input.update(lights=lights, objects=objects_json(case, mp.INPUT_ALBEDO), fit=fit)
     mp.write_json(folder / "scene.json", truth)
     mp.write_json(folder / "scene_input.json", scene_input)
     mp.write_json(folder / "meta.json", {"renderer": f"mitsuba {mp.MITSUBA_VERSION} {mp.VARIANT}",

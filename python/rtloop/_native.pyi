@@ -1,4 +1,4 @@
-"""Type stubs for rtloop's compiled core (rust/python/mod.rs)."""
+"""Type stubs for rtloop's compiled core (rust/python/)."""
 
 from collections.abc import Callable, Sequence
 from os import PathLike

@@ -69,15 +69,16 @@ def load_objects(source: Any) -> list[dict[str, Any]]:
 
 def _warn_enclosing(scene: dict[str, Any], added: list[dict[str, Any]], where: str) -> None:
     """An RtloopWarning for an added sphere that encloses the camera: the render sees only its inside (black
-    where it also encloses the light, which then lights nothing outside it)."""
+    where it also encloses the light, which then lights nothing outside it; any of a ``lights`` list)."""
     camera = np.asarray(scene["camera"]["position"], dtype=np.float64)
-    light = scene.get("light") or {}
+    lights = scene.get("lights") or [scene.get("light") or {}]
     for k, o in enumerate(added):
         if o.get("shape", "sphere") != "sphere":
             continue
         centre, radius = np.asarray(o["center"], dtype=np.float64), float(o["radius"])
         if np.linalg.norm(camera - centre) < radius:
-            inside = "position" in light and np.linalg.norm(np.asarray(light["position"]) - centre) < radius
+            inside = any("position" in light and np.linalg.norm(np.asarray(light["position"]) - centre) < radius
+                         for light in lights)
             what = "the camera and the light" if inside else "the camera"
             warnings.warn(f"{where}: objects[{k}] ({o.get('name', 'unnamed')}): the sphere encloses {what}: the "
                           "composite shows only its inside", RtloopWarning, stacklevel=3)
@@ -85,7 +86,8 @@ def _warn_enclosing(scene: dict[str, Any], added: list[dict[str, Any]], where: s
 
 def insert(result: Any, photo: Any, objects: Any, *, spp: int = 16, response: str = "srgb",
            adaptive: bool = True, progress: Callable[[int, int], object] | None = None) -> Insertion:
-    """Insert ``objects`` into ``photo`` under the light fitted in ``result``.
+    """Insert ``objects`` into ``photo`` under the light fitted in ``result`` (every light of a ``lights``
+    list: each casts its shadow, a sphere's or rectangle's soft).
 
     Args:
         result: The fitted scene: a result.json path (rtloop-fit's), a scene dict or a Scene.

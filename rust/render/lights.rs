@@ -6,6 +6,12 @@
 //! horizon exactly the irradiance I cos(theta)/d^2 of a point light at its centre; an occluder hides part
 //! of it: the visible fraction is estimated from `SOFT_SAMPLES` fixed points of a sunflower spiral on the disc the
 //! sphere shows the point (no random numbers: the same image on any thread count).
+//!
+//! A rectangle light (a window) of area A and intensity I (its radiant intensity along its normal;
+//! radiance I/A) is integrated by the midpoint rule over a fixed `RECT_GRID` x `RECT_GRID` grid of cells:
+//! each cell's centre q is a small emitter of intensity I/N along the normal, giving
+//! (I/N) cos(theta_e) cos(theta) / |q - x|^2, shadowed by its own shadow ray. One-sided: a point behind
+//! the rectangle's plane gets nothing. The same grid makes its soft shadow.
 
 use glam::Vec3A;
 
@@ -17,6 +23,31 @@ use crate::scene::PointLight;
 /// The shadow rays per sphere light and surface point.
 pub const SOFT_SAMPLES: usize = 16;
 
+/// A rectangle light's grid: `RECT_GRID` x `RECT_GRID` cells, one shadow ray each.
+pub const RECT_GRID: usize = 4;
+
+/// A rectangle light in working form: half its width along `half_u`, half its height along `half_v`,
+/// shining towards the unit `normal`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RectAxes {
+    pub half_u: Vec3A,
+    pub half_v: Vec3A,
+    pub normal: Vec3A,
+}
+
+impl RectAxes {
+    pub fn new(r: &crate::scene::RectLight) -> RectAxes {
+        let n = glam::DVec3::from_array(r.normal);
+        let up = glam::DVec3::from_array(r.up);
+        let u = up.cross(n).normalize_or_zero();
+        RectAxes {
+            half_u: (u * (0.5 * r.size[0])).as_vec3a(),
+            half_v: (up * (0.5 * r.size[1])).as_vec3a(),
+            normal: n.as_vec3a(),
+        }
+    }
+}
+
 /// A light in working form.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Emitter {
@@ -27,6 +58,8 @@ pub struct Emitter {
     pub color: Vec3A,
     /// 0 for a point or directional light.
     pub radius: f32,
+    /// A rectangle light's shape (centred at `position`).
+    pub rect: Option<RectAxes>,
 }
 
 impl Emitter {
@@ -38,6 +71,7 @@ impl Emitter {
             intensity: l.intensity as f32,
             color: v3(l.color),
             radius: l.radius as f32,
+            rect: l.rect.as_ref().map(RectAxes::new),
         }
     }
 
@@ -96,6 +130,9 @@ pub fn unit_irradiance(
     shapes: &[PShape],
     shadows: bool,
 ) -> Option<(Vec3A, f32)> {
+    if let Some(r) = &e.rect {
+        return rect_irradiance(s, e.position, r, shapes, shadows);
+    }
     let (dir, dist, falloff) = incidence(e.position, e.direction, s.position)?;
     let ndotl = s.normal.dot(dir);
     if ndotl <= 0.0 {
@@ -107,6 +144,45 @@ pub fn unit_irradiance(
         (true, true) => sphere_visibility(s, e.position, e.radius, shapes),
     };
     (visible > 0.0).then(|| (dir, irradiance(ndotl, falloff) * visible))
+}
+
+/// A unit-intensity rectangle light's irradiance at `s` (the midpoint rule over its fixed grid, each
+/// cell's shadow ray when `shadows`) and the unit direction its light arrives from on average (for the
+/// specular lobe); `None` where no cell lights the point.
+pub fn rect_irradiance(
+    s: &Surfel,
+    center: Vec3A,
+    r: &RectAxes,
+    shapes: &[PShape],
+    shadows: bool,
+) -> Option<(Vec3A, f32)> {
+    let mut sum = 0.0f32;
+    let mut towards = Vec3A::ZERO;
+    for i in 0..RECT_GRID {
+        for j in 0..RECT_GRID {
+            let a = (2.0 * i as f32 + 1.0) / RECT_GRID as f32 - 1.0;
+            let b = (2.0 * j as f32 + 1.0) / RECT_GRID as f32 - 1.0;
+            let w = center + a * r.half_u + b * r.half_v - s.position;
+            let d2 = w.length_squared();
+            if !(d2 > f32::MIN_POSITIVE) {
+                continue;
+            }
+            let dist = d2.sqrt();
+            let dir = w / dist;
+            let (cos, cos_e) = (s.normal.dot(dir), -r.normal.dot(dir));
+            if cos <= 0.0 || cos_e <= 0.0 || (shadows && occluded(s, dir, dist, shapes)) {
+                continue;
+            }
+            let e = cos * cos_e / d2;
+            sum += e;
+            towards += e * dir;
+        }
+    }
+    let sum = (sum / (RECT_GRID * RECT_GRID) as f32).min(f32::MAX);
+    (sum > 0.0).then(|| {
+        let fallback = (center - s.position).normalize_or_zero();
+        (towards.normalize_or(fallback), sum)
+    })
 }
 
 #[cfg(test)]

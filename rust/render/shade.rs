@@ -14,7 +14,7 @@ use super::environment::sky_view;
 use super::footprint::{sphere_edge_lit, terminator_cos};
 use super::hit::{occluded, Surfel};
 use super::light::{incidence, irradiance};
-use super::lights::{sphere_visibility, unit_irradiance, Emitter};
+use super::lights::{sphere_visibility, unit_irradiance, Emitter, RectAxes};
 use super::shape::PShape;
 use crate::params::Target;
 use crate::scene::Scene;
@@ -39,6 +39,8 @@ pub struct ShadeParams {
     pub light_rgb: Vec3A,
     /// The first light's radius: a sphere light when > 0 (soft shadows, `lights::sphere_visibility`).
     pub light_radius: f32,
+    /// The first light's shape when it is a rectangle light (`lights::rect_irradiance`).
+    pub light_rect: Option<RectAxes>,
     /// The scene's further lights, each added through the same BRDF (`lights`); empty for one light.
     pub extra_lights: Vec<Emitter>,
     pub ambient: Vec3A,
@@ -80,6 +82,7 @@ impl Clone for ShadeParams {
         self.light_color = source.light_color;
         self.light_rgb = source.light_rgb;
         self.light_radius = source.light_radius;
+        self.light_rect = source.light_rect;
         if !source.extra_lights.is_empty() || !self.extra_lights.is_empty() {
             self.extra_lights.clone_from(&source.extra_lights);
         }
@@ -139,6 +142,7 @@ impl ShadeParams {
             light_color: v3(scene.light.color),
             light_rgb: v3(scene.light.color) * scene.light.intensity as f32,
             light_radius: scene.light.radius as f32,
+            light_rect: scene.light.rect.as_ref().map(RectAxes::new),
             extra_lights: scene.extra_lights.iter().map(Emitter::new).collect(),
             ambient: v3(scene.ambient),
             environment: v3(scene.environment),
@@ -474,6 +478,20 @@ fn direct(
             l += (e.rgb() * brdf(s, m, p, dir) * e_unit).min(Vec3A::splat(f32::MAX));
         }
     }
+    if let Some(r) = &p.light_rect {
+        let e = Emitter {
+            position: p.light_position,
+            direction: None,
+            intensity: p.light_intensity,
+            color: p.light_color,
+            radius: 0.0,
+            rect: Some(*r),
+        };
+        if let Some((dir, e_unit)) = unit_irradiance(s, &e, shapes, shadows) {
+            l += (e.rgb() * brdf(s, m, p, dir) * e_unit).min(Vec3A::splat(f32::MAX));
+        }
+        return ((p.exposure * l).min(Vec3A::splat(f32::MAX)), false);
+    }
     let Some((dir, dist, falloff)) = incidence(p.light_position, p.light_direction, s.position)
     else {
         return ((p.exposure * l).min(Vec3A::splat(f32::MAX)), false);
@@ -574,6 +592,7 @@ mod tests {
             light_color: Vec3A::ONE,
             light_rgb: Vec3A::splat(10.0),
             light_radius: 0.0,
+            light_rect: None,
             extra_lights: Vec::new(),
             ambient: Vec3A::ZERO,
             environment: Vec3A::ZERO,

@@ -15,6 +15,7 @@ mod coat;
 pub mod lights;
 mod mesh;
 mod target;
+pub use lights::{PointLight, RectLight};
 pub use target::{Target, FITTABLE};
 
 use std::path::Path;
@@ -29,25 +30,6 @@ pub struct Camera {
     pub up: V3,
     /// Full vertical field of view in degrees.
     pub vfov_deg: f64,
-}
-
-/// A light: a point light at `position`, a sphere light (`radius` > 0) centred there, or a directional
-/// light (a sun, a lamp far away) shining from `direction`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct PointLight {
-    /// Its name in a `lights` list (`light0` for the single `light`).
-    pub name: String,
-    /// Point light: its position. Unused (zero) for a directional light.
-    pub position: V3,
-    /// Point light: radiant intensity in W/sr; directional: irradiance at normal incidence in W/m²
-    /// (times `color` in both cases).
-    pub intensity: f64,
-    pub color: V3,
-    /// Directional light: the unit direction from the scene towards the light (normalised when set).
-    pub direction: Option<V3>,
-    /// Sphere light: its radius in metres (0 for a point or directional light). Its intensity is that of
-    /// the point light it looks like from afar: radiance = intensity x colour / (pi r^2).
-    pub radius: f64,
 }
 
 #[derive(Clone, Debug, PartialEq)]

@@ -34,7 +34,7 @@ pub const FITTABLE: &str = "light.position (point light), light.direction (direc
 light.intensity, light.color, ambient, environment, exposure, \
 objects.NAME.albedo, objects.NAME.specular, objects.NAME.shininess, \
 objects.NAME.roughness (coated), lights.NAME.position, lights.NAME.direction, lights.NAME.intensity, lights.NAME.color, \
-lights.NAME.radius (sphere light)";
+lights.NAME.radius (sphere light; a rectangle light's position is its centre)";
 
 impl Target {
     /// Parse a dotted path such as `objects.ball.albedo`. The error is a bare reason; the caller adds the field.

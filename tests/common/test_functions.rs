@@ -1,5 +1,5 @@
 //! Standard test functions for the optimisers (all with minimum 0). Shared by the cargo tests
-//! (tests/de_shade.rs) and the `test-hooks` Python extension (rust/python/test_hooks.rs); not part of the
+//! (tests/search/) and the `test-hooks` Python extension (rust/python/test_hooks.rs); not part of the
 //! library.
 #![allow(dead_code)]
 use std::f64::consts::PI;

@@ -37,6 +37,7 @@ from .calibration import CameraIntrinsics, PinholeRemap
 from .camera import focal_from_vfov
 from .colour import ColourCorrection, colorchecker_correction, grey_card_balance
 from .exif import ExifFocal
+from .focal import refine_vfov_by_ball
 from .pose import VFOV_TARGET_DEG, FloorPose, estimate_floor_pose
 
 __all__ = ["AcquiredScene", "build_scene", "draw_overlay", "fit_section"]
@@ -286,7 +287,28 @@ def build_scene(
             where=where,
         )
     except AcquisitionError as exc:
-        raise AcquisitionError(f"{exc} (the ball is looked for beside the board, not on it)") from None
+        loose = "" if focal_source != "board" else (
+            f"; the field of view is the board's alone, {camera.vfov_deg:.1f} +- {pose.vfov_std_deg:.2f} deg: give "
+            "--vfov or --camera, or use a photo whose EXIF has the focal length")
+        raise AcquisitionError(f"{exc} (the ball is looked for beside the board, not on it{loose})") from None
+    refinement = None
+    if focal_source == "board" and (pose.vfov_std_deg or 0.0) > VFOV_TARGET_DEG:
+        # the board alone fixes the field of view loosely: refined from the ball resting on the floor
+        locate = {"mask": mask, "resting": resting, "exclude": board_outline, "keep_off": (-bw / 2, bw / 2, -bh / 2, bh / 2)}
+        found = (float(silhouette.centre_px[0]), float(silhouette.centre_px[1]), float(silhouette.radius_px))
+        refinement = refine_vfov_by_ball(photo, spec, ball_radius, pose, found, locate=locate, where=where)
+        if refinement is not None:
+            std = pose.vfov_std_deg
+            pose = estimate_floor_pose(photo, spec, focal_px=focal_from_vfov(refinement.vfov_deg, h),
+                                       focal_source="board", where=where)
+            pose.vfov_std_deg = std
+            camera = pose.camera
+            locate["exclude"] = _board_outline_px(pose)
+            silhouette, sphere = locate_ball(photo, camera, ball_radius, hint=found, where=where, **locate)
+            notes[:] = [n for n in notes if "no EXIF focal length" not in n]
+            notes.append(loose_view_warning(where, refinement.board_vfov_deg, std, camera.focal_px, h)
+                         .replace("; give --vfov", f"; refined from the ball resting on the floor to "
+                                  f"{refinement.vfov_deg:.2f} deg (where its outline fits best); give --vfov"))
     if silhouette.rms_px > 1.0:
         notes.append(
             f"the ball's outline fits its edge points with {silhouette.rms_px:.2f} px RMS (more than 1 px); "
@@ -353,6 +375,7 @@ def build_scene(
     report = {
         "photo_size": [w, h],
         "camera_model": focal_source,
+        **({"focal_refinement": refinement.to_dict()} if refinement is not None else {}),
         **({"focal_from": exif.source} if focal_source == "exif" and exif is not None else {}),
         "colour": {k: v for k, v in correction.report().items() if k != "patch_corners_px"},
         "pose": pose.report(),

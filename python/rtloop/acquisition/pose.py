@@ -81,10 +81,10 @@ class FloorPose:
 #: The field of view wanted without EXIF (deg): a board's own estimate looser than this is used with a
 #: warning that gives its spread, or refused in one line (why, and what to give instead) when strict.
 VFOV_TARGET_DEG = 0.3
-#: Looser than this (deg) the board's estimate is refused even when not strict: about +-2 % on every distance
-#: from the camera at a 50 deg field of view, and nearer head-on the linearised spread describes the error
-#: less and less (a board tilted 10 deg from head-on: +-1.9 deg, 1.6 deg off).
-VFOV_LIMIT_DEG = 1.0
+#: Looser than this (deg) the board's estimate is refused even when not strict: only a spread it cannot
+#: give (a singular covariance). Looser than VFOV_TARGET_DEG the scene builder refines the field of view from
+#: the ball resting on the floor (:mod:`.focal`).
+VFOV_LIMIT_DEG = math.inf
 
 
 def _focal_std(
@@ -146,11 +146,11 @@ def estimate_focal_from_board(detection: BoardDetection, width: int, height: int
     # d vfov / d f = -h / (f^2 + h^2/4) radians per pixel
     vfov_std = math.degrees(f_std * height / (f * f + height * height / 4))
     gate = VFOV_TARGET_DEG if strict else VFOV_LIMIT_DEG
-    if not vfov_std <= gate:
+    if not (vfov_std <= gate and math.isfinite(vfov_std)):
         raise AcquisitionError(
             f"the board's view does not fix the focal length (vertical field of view {vfov:.1f} +- "
             f"{vfov_std:.2f} deg from its {n} corners, reprojected to {noise:.2f} px; "
-            f"{f'{gate:g} deg needed with --strict' if strict else f'more than the {gate:g} deg it can be used to'}"
+            f"{f'{gate:g} deg needed with --strict' if strict else 'no spread it can be used with'}"
             "): seen too nearly head-on, or too small, far or "
             "few-cornered for its perspective to show; give --vfov or --camera, use a photo whose EXIF has the "
             "focal length, or photograph a larger board closer and at more of an angle"

@@ -18,7 +18,7 @@ __all__ = ["FIT_OPTIONS", "OPTIONS", "READ_OPTIONS", "RESERVED", "check_id", "ch
 #: Per-job options passed on to :func:`rtloop.fit` (``loss_space`` is the CLI's name for ``space``).
 FIT_OPTIONS = ("protocol", "population", "generations", "f", "cr", "norm", "space", "optimizer", "polish",
                "clip", "uncertainty", "pixels_per_object", "environment", "interreflection",
-               "highlights", "footprint")
+               "highlights", "footprint", "framing")
 #: Per-job options of which files are read and how: :func:`rtloop.fit.files.load_inputs`.
 READ_OPTIONS = ("response", "crop", "grey_card")
 OPTIONS = FIT_OPTIONS + READ_OPTIONS
@@ -116,6 +116,7 @@ _CHECKS: dict[str, Callable[[Any, str], Any]] = {
     "clip": _BOOL, "uncertainty": _choice(True, False, "bootstrap"), "pixels_per_object": _WHOLE,
     "environment": _choice("auto", "on", "off"), "interreflection": _choice("auto", "on", "off"),
     "highlights": _choice("auto", "off"), "footprint": _choice("auto", "on", "off", True, False),
+    "framing": _choice("check", "correct", "off"),
     "response": _TEXT, "crop": _BOOL, "grey_card": _grey_card,
 }
 

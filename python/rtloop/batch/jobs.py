@@ -329,7 +329,8 @@ def _write_outputs(tmp: Path, out: Path, job: Job, result: Any, inputs: Any, rea
     write_result(tmp, result, input_paths(job.scene, job.photo, read.get("response", "srgb"),
                                           read.get("crop", False), inputs.mask_path))
     if images:
-        write_final(tmp, result, inputs.image, scale, spp)
+        reframed = getattr(result, "reframed", None)  # framing="correct": the photo as the fit saw it
+        write_final(tmp, result, inputs.image if reframed is None else reframed[0], scale, spp)
     mark(tmp)
     move_into_place(tmp, target, may_replace(target), "rtloop")
 

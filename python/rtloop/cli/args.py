@@ -196,3 +196,17 @@ positive_float = float_in(0.0, math.inf, True, "a number > 0", "a number")
 def info(text: str) -> None:
     """A line for the user on stderr (stdout is for results)."""
     print(text, file=sys.stderr)
+
+
+def vignetting(text: str) -> str | tuple[float, float]:
+    """--vignetting: auto, on, off or K1,K2 (two finite numbers)."""
+    if text in ("auto", "on", "off"):
+        return text
+    parts = text.split(",")
+    try:
+        k = tuple(float(v) for v in parts)
+    except ValueError:
+        k = ()
+    if len(k) != 2 or not all(math.isfinite(v) for v in k):
+        raise argparse.ArgumentTypeError(f"{text!r}: 'auto', 'on', 'off' or K1,K2 (two numbers)")
+    return (k[0], k[1])

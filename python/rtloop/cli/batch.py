@@ -114,6 +114,8 @@ def _build_parser() -> Parser:
                    "photo shows a highlight (default auto)")
     p.add_argument("--footprint", nargs="?", choices=("auto", "on", "off"), const="on",
                    help="every job's pixel footprint mode, as rtloop-fit's --footprint (default auto)")
+    p.add_argument("--framing", choices=("check", "correct", "off"),
+                   help="every job's framing check, as rtloop-fit's --framing (default check)")
     p.add_argument("--response", choices=("srgb", "linear"))
     p.add_argument("--final-scale", type=int_in(1, MAX_SIZE), default=4, metavar="K")
     p.add_argument("--final-spp", type=int_in(1, rtloop.MAX_SPP), default=16, metavar="S")
@@ -181,7 +183,7 @@ def _options(args: argparse.Namespace) -> dict[str, Any]:
     for key, name in (("protocol", "protocol"), ("population", "population"), ("generations", "generations"),
                       ("norm", "norm"), ("loss_space", "space"), ("response", "response"),
                       ("environment", "environment"), ("interreflection", "interreflection"),
-                      ("highlights", "highlights"), ("footprint", "footprint")):
+                      ("highlights", "highlights"), ("footprint", "footprint"), ("framing", "framing")):
         value = getattr(args, key)
         if value is not None:
             opts[name] = value

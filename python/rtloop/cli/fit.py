@@ -27,11 +27,13 @@ import rtloop
 from rtloop._files import PlaceError, check_out_dir, move_into_place, recover_leftovers, staging_dir
 from rtloop.fit import PROTOCOLS
 from rtloop.fit.files import fit_inputs, load_inputs
+from rtloop.fit.lights import LightsFit
 from rtloop.fit.protocol import LIMITS, max_threads
 from rtloop.report import truth_errors, truth_values
 from rtloop.uncertainty.bootstrap import STAGE as BOOTSTRAP, replicate_of
 
-from .args import Parser, UsageError, float_in, generations, int_at_least, int_in, norm
+from .args import Parser, UsageError, float_in, generations, int_at_least, int_in, norm, vignetting
+from .lights import LIGHTS_HELP, lights_count, lights_summary, run_lights, uses_lights
 from .outputs import GenerationLog, input_paths, render_final, write_result
 from .summary import duration as _duration, summary as _summary
 
@@ -92,6 +94,13 @@ files written into DIR:
                     final.png and their difference, the best render through
                     the stages, the parameters and the fitness against
                     generation, the fitted values and the fit report
+
+with --lights N|auto (or a SCENE with a "lights" list: several lights, a sphere
+or a rectangle light), the lights fit: result.json's fit_report lists each light
+(position or direction, intensity, their error bars, its share of the light)
+and, with auto, the held-out error per number of lights; objective.png and
+final.png as above, and with --report a page of the lights and their evidence;
+no snapshots or CSV.
 
 Everything is written into a temporary directory beside DIR and moved into
 place when complete: a failed or interrupted run leaves no partial results. An
@@ -209,6 +218,23 @@ def _build_parser() -> Parser:
                    help="'auto' (default): a sphere the scene gives as matte gets a fitted specular lobe "
                    "(Blinn-Phong, or a clear coat with its roughness where that explains it better) when the "
                    "photo shows a highlight the diffuse model cannot explain; 'off': never")
+    p.add_argument("--framing", choices=("check", "correct", "off"), default="check",
+                   help="whether IMAGE is framed as the scene's camera frames it (the objects' outlines against "
+                   "the fitted render): 'check' (default) says so in the verdict where the outlines are 0.5 px "
+                   "or more off (a cropped, rotated or resized photo, or a wrong field of view), 'correct' "
+                   "resamples IMAGE into the scene's framing by the roll, zoom and shift its outlines give and "
+                   "fits again (objective.png is then the resampled photo), 'off'")
+    p.add_argument("--vignetting", type=vignetting, default="auto", metavar="auto|on|off|K1,K2",
+                   help="the lens's falloff cos^4 x (1 + k1 r^2 + k2 r^4) (r = 1 at the corner): 'auto' (default) "
+                   "fits it with the light when held-out pixels show it, 'on', 'off', or K1,K2 to give it "
+                   "(docs/camera.md)")
+    p.add_argument("--flat-field", metavar="FILE",
+                   help="a photo of a flat white target through the same lens and settings: the falloff it shows "
+                   "divides IMAGE (instead of --vignetting)")
+    p.add_argument("--tone-curve", choices=("auto", "on", "off"), default="auto",
+                   help="'auto' (default): where IMAGE is an 8-bit file whose tone curve is not sRGB (held-out "
+                   "pixels show it), a monotone curve is fitted with the light; 'on', 'off'; --response linear "
+                   "keeps the image linear (off)")
     p.add_argument("--mask", type=Path, metavar="PNG",
                    help="an image of IMAGE's size (or the scene's): white where the scene models the photo, "
                    "black where it does not (another object, a reflection); black pixels are left out of the fit (default: the mask the scene names, "
@@ -231,6 +257,7 @@ def _build_parser() -> Parser:
     p.add_argument("--truth", metavar="SCENE",
                    help="the true scene (JSON, e.g. a reference scene's scene.json): print the errors of the "
                    "fitted values and draw the truth in the report")
+    p.add_argument("--lights", type=lights_count, metavar="N|auto", help=LIGHTS_HELP)
     p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
     return p
 
@@ -348,7 +375,10 @@ def fit_options(args: argparse.Namespace) -> dict[str, Any]:
     return {"protocol": args.protocol, "population": args.population, "generations": args.generations,
             "f": args.f, "cr": args.cr, "norm": args.norm, "space": args.loss_space,
             "environment": args.environment, "interreflection": args.interreflection,
-            "highlights": args.highlights, "footprint": args.footprint,
+            "highlights": args.highlights, "footprint": args.footprint, "framing": args.framing,
+            "vignetting": args.vignetting,
+            "tone": "off" if args.response == "linear" and args.tone_curve == "auto" else args.tone_curve,
+            **({"flat_field": (args.flat_field, args.response)} if args.flat_field is not None else {}),
             "uncertainty": {"default": True, "bootstrap": "bootstrap", "off": False}[args.uncertainty]}
 
 
@@ -421,6 +451,14 @@ class _Run:
         names = scene.param_names()
         if not names:
             raise _Failure(f"{args.scene}: the scene's fit section names no free parameters")
+        if uses_lights(args, scene):
+            self.progress.message(f"{PROG}: fitting the lights of {args.scene} to {args.image} "
+                                  f"({scene.width}x{scene.height}, {args.lights or 'its own'} lights)")
+
+            def refuse(message: str) -> None:
+                raise _Failure(message)
+
+            return run_lights(args, inputs, tmp, refuse)
         truth = None
         if args.truth is not None:
             truth = rtloop.load_scene(args.truth)
@@ -457,11 +495,17 @@ class _Run:
         for w in result.warnings:
             print(f"{PROG}: warning: {w}", file=sys.stderr)
         good = result.goodness or {}
-        if (good.get("ratio") or 0.0) >= good.get("explained_below", float("inf")):
+        if (good.get("ratio") or 0.0) >= good.get("explained_below", float("inf")) or \
+                (good.get("framing") or {}).get("mismatch"):
             print(f"{PROG}: warning: {good['verdict']}", file=sys.stderr)
+            if good.get("diagnosis"):
+                print(f"{PROG}: residual by object: {good['diagnosis']}", file=sys.stderr)
         self.check_stop()
 
         write_result(tmp, result, input_paths(args.scene, args.image, args.response, args.crop, inputs.mask_path))
+        if getattr(result, "reframed", None) is not None:  # --framing correct: the photo as the fit saw it
+            image = result.reframed[0]
+            rtloop.save_image(tmp / "objective.png", image)
 
         k = args.final_scale
         self.progress.message(
@@ -603,6 +647,9 @@ def _main(argv: list[str] | None, t0: float) -> int:
         if tmp is not None and os.path.lexists(tmp):
             shutil.rmtree(tmp, ignore_errors=True)
 
+    if isinstance(result, LightsFit):
+        print(lights_summary(result, out, time.perf_counter() - t0, _duration))
+        return 0
     print(_summary(result, out, time.perf_counter() - t0, truth=run.truth_errors,
                    report=out / "report.html" if args.report else None))
     return 0

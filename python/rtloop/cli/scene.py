@@ -61,8 +61,9 @@ The camera: --camera (a calibration: the photo is undistorted and its principal 
 re-centred, since the scene's camera is an ideal pinhole) is best; --vfov (the vertical
 field of view of a photo without noticeable distortion) is next; with neither, the
 photo's EXIF focal length, else the board's estimate (less accurate: looser than
-+-0.3 deg in the field of view it is used with a warning giving its spread and the
-distances', or refused with --strict; looser than +-1 deg, refused with the fixes).
++-0.3 deg in the field of view it is refined from the ball resting on the floor, the
+field of view at which a resting ball's outline fits the photo best, and used with a
+warning giving the board's spread and the distances', or refused with --strict).
 
 Colour: --grey-card X,Y,W,H (a neutral card's rectangle in PHOTO) white-balances, and
 --colorchecker finds a ColorChecker Classic (needs OpenCV contrib's cv2.mcc) for a full

@@ -35,6 +35,15 @@ def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = 
         lines.append(f"goodness of fit: {good['ratio']:.2g}x the photo's noise floor: {good['verdict']}")
     elif good.get("verdict"):
         lines.append(f"goodness of fit: {good['verdict']}")
+    if good.get("diagnosis"):
+        lines.append(f"  residual by object: {good['diagnosis']}")
+    framing = good.get("framing") or {}
+    if framing.get("corrected"):
+        c, before = framing["correction"], framing["as_given"]
+        lines.append(f"framing corrected: the photo resampled into the scene's framing (turned {c['roll_deg']:+.2f} "
+                     f"deg, zoomed {c['zoom_percent']:+.2f} %, shifted ({c['shift_px'][0]:+.2f}, "
+                     f"{c['shift_px'][1]:+.2f}) px; outlines {before['outline_rms_px']:.2f} px off as given, "
+                     f"{framing.get('outline_rms_px', float('nan')):.2f} px after)")
     ident = result.identifiability or {}
     if ident.get("degenerate"):
         lines.append("")
@@ -62,8 +71,9 @@ def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = 
     u = result.uncertainty or {}
     boot = u.get("bootstrap") or {}
     robust = u.get("robust") or {}
-    # the block sandwich's, or the bootstrap's where run
-    bars = {k: v for k, v in (robust.get("sigma") or {}).items() if v is not None}
+    # the reported bars (the block sandwich's, widened by what the model lacks), or the bootstrap's where run
+    reported = u.get("bars") or {}
+    bars = {k: v for k, v in (reported.get("sigma") or robust.get("sigma") or {}).items() if v is not None}
     bars_note = None
     if not bars and robust.get("why_none") and not boot.get("sigma"):
         bars_note = f"no error bars: {robust['why_none']}"
@@ -80,6 +90,9 @@ def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = 
                  else "")
         bars_note = ("error bars (+-): block sandwich (correlated residuals) plus the pixel footprint's shift "
                      f"(robust.footprint_shift{moved})")
+        if reported.get("widened_by", 1.0) > 1.0:
+            bars_note += (f", widened {reported['widened_by']:.2g}x for what the model lacks (a smooth residual "
+                          f"{reported['model_lacks']:.2g}x the noise floor: see the goodness of fit)")
     for name, value in result.x.items():
         row = f"  {name:<{width}}  {value:12.6g}"
         split = truth is not None and name in truth.get("split_convention", [])
@@ -93,6 +106,8 @@ def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = 
         lines.append(row)
     if bars_note:
         lines.append(bars_note)
+    if not robust.get("why_none"):  # else the one line above says why there is none
+        lines += undetermined_lines(reported.get("not_determined") or {}, set(result.x))
     lines += distance_lines((u.get("robust") or {}).get("light_distance") or u.get("light_distance"))
     if truth is not None and truth.get("split_convention"):
         lines.append("  (split): the photo fixes only the products of these, not each one: their errors "
@@ -107,6 +122,15 @@ def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = 
     if report is not None:
         lines.append(f"report: {report}")
     return "\n".join(lines)
+
+
+def undetermined_lines(why: dict[str, str], shown: set[str]) -> list[str]:
+    """The fitted parameters the photo does not determine, grouped by the reason."""
+    groups: dict[str, list[str]] = {}
+    for name, reason in why.items():
+        if name in shown or name.startswith("products."):
+            groups.setdefault(reason, []).append(name)
+    return [f"not determined: {', '.join(names)}: {reason}" for reason, names in groups.items()]
 
 
 def model_lines(model: dict[str, Any], fitted: dict[str, Any]) -> list[str]:
@@ -124,6 +148,7 @@ def model_lines(model: dict[str, Any], fitted: dict[str, Any]) -> list[str]:
         lines.append(f"  {term}: {verdict} (loss at the light found without it"
                      + (f", with {' and '.join(on_top)}" if on_top else "")
                      + f" {ev['loss_without']:.4g} -> {ev['loss_with']:.4g} with it, {100 * ev['gain']:+.1f}%"
+                     + (f"; at most {ev['loss_with_nested']:.4g} with its products' best" if ev.get("raised") else "")
                      + (f", BIC {-bic:+.4g}" if bic is not None else "")
                      + (f"; {100 * ev['earlier_gain']:+.1f}% before them)" if "earlier_gain" in ev else ")"))
         if ev.get("lobe") == "coat":
@@ -137,6 +162,28 @@ def model_lines(model: dict[str, Any], fitted: dict[str, Any]) -> list[str]:
                      f"own error; {chosen['threshold']:g}x or more is dense and takes l2)")
     if "environment" in terms and fitted.get("environment"):
         lines.append("  environment radiance (r g b): " + "  ".join(f"{v:.4g}" for v in fitted["environment"]))
+    return lines + camera_lines(model.get("camera") or {})
+
+
+def camera_lines(camera: dict[str, Any]) -> list[str]:
+    """The camera terms (vignetting, tone curve) the fit used, and the held-out evidence for each."""
+    if not camera:
+        return []
+    terms = camera.get("terms") or []
+    lines = [f"camera: {' + '.join(terms) if terms else 'sRGB, no vignetting'}"]
+    if "not_tested" in camera:
+        lines.append(f"  not tested: {camera['not_tested']}")
+    for term, ev in (camera.get("evidence") or {}).items():
+        lines.append(f"  {term}: {'added' if ev['selected'] else 'not added'} (held-out L1 residual "
+                     f"{ev['held_out_l1_without']:.4g} -> {ev['held_out_l1']:.4g} with it, {100 * ev['gain']:+.1f}%)")
+    v = camera.get("vignetting")
+    if v:
+        lines.append("  vignetting: " + ("from the flat field" if v.get("source") == "flat field" else
+                                         f"cos^4 x (1 + {v['k1']:.3g} r^2 + {v['k2']:.3g} r^4)")
+                     + (f", corners at {100 * v['corner']:.0f}% of the centre" if "corner" in v else ""))
+    if camera.get("tone"):
+        lines.append("  tone curve (linear at the file's values " + ", ".join(f"{k:g}" for k in camera["tone"]["knots"])
+                     + "): " + " ".join(f"{x:.3g}" for x in camera["tone"]["linear_at_knots"]))
     return lines
 
 

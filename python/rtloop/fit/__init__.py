@@ -7,7 +7,6 @@ the photo does not determine (:mod:`.identifiability`). docs/methods.md.
 
 from __future__ import annotations
 
-import math
 import time
 import warnings
 from collections.abc import Callable
@@ -19,13 +18,17 @@ from .. import _native
 from .._srgb import codes8, decode
 from ..errors import RtloopError, RtloopWarning
 from ..scene import Scene, load_scene
-from .bounds import narrowed, restore_bounds
+from .constant import as_environment, compare_constant, declares_ambient
+from .bounds import at_bounds, narrowed, restore_bounds
+from .camera import check_camera, fit_through_camera
 from .coat import choose_lobe, with_coat
 from .gauge import hold_gauges, release_gauges
 from .lights import LightsFit, check_lights, choose_count, fit_lights
+from .framing import check_framing, fit_reframed, framing_check, mismatch_verdict
 from .goodness import clip_level, encoded, goodness, jpeg_blocking, noise_sigma
-from .norm import NORMS, dense_residual, norm_verdict, pixel_mask, representable_pixels
+from .norm import dense_residual, norm_verdict, pixel_mask, representable_pixels
 from .identifiability import identifiability as _identifiability
+from .inputs import check_footprint, check_norm, objective
 from .identifiability import lit_pixel_counts
 from .products import constant_term
 from .products import product_bounds as _product_bounds
@@ -93,6 +96,10 @@ def fit(
     reference: tuple[np.ndarray, float] | None = None,
     footprint: str | bool = "auto",
     lights: int | str | None = None,
+    framing: str = "check",
+    vignetting: Any = "auto",
+    tone: str = "auto",
+    flat_field: np.ndarray | None = None,
 ) -> FitResult | LightsFit:
     """Fit the scene's free parameters (its ``fit`` section) to ``image``.
 
@@ -149,17 +156,44 @@ def fit(
     None (default) or 1 for a one-light scene is the fit above; more lights, or a scene with a ``lights``
     list of several lights or a sphere light, take the lights fit (:mod:`.lights`: matte objects, the
     lights' geometry searched and their products solved) and return a :class:`.lights.LightsFit`.
+    ``framing``: whether the photo is framed as the scene's camera frames it (the objects' outlines against
+    the fitted render, :mod:`.framing`): "check" (default) says so in ``goodness["framing"]`` and the
+    verdict where the residual is at least twice the noise floor; "correct" resamples the photo into the
+    scene's framing by the camera correction (roll, zoom, shift) its outlines give and fits again; "off".
+    ``vignetting``, ``tone``: the camera between the scene and the file (:mod:`.camera`, docs/camera.md):
+    "auto" (default) fits the lens's falloff (cos^4 x (1 + k1 r^2 + k2 r^4)) or a monotone tone curve
+    with the light where held-out pixels show it (a tone curve on 8-bit images only), "on", "off";
+    ``vignetting=(k1, k2)`` or ``flat_field`` (a linear photo of a flat white target, (H, W[, 3])) give
+    the falloff. ``result.model["camera"]`` records the terms and the evidence.
     """
+    args = dict(locals())
     t0 = time.perf_counter()
     scene = load_scene(scene)
     meshes = [o["name"] for o in scene.to_dict()["objects"] if o["shape"] == "mesh"]
     if meshes:
         raise RtloopError(f"fit: object {meshes[0]!r} is a mesh: meshes can be rendered and inserted, not fitted")
-    lights = check_lights(lights)
+    lights, framing = check_lights(lights), check_framing(framing)
     if lights not in (None, 1) or "lights" in scene.to_dict():
+        if framing == "correct":
+            raise RtloopError("framing: 'correct' fits a camera correction with one light, not with several")
         return _fit_lights(scene, image, mask, lights, seed=seed, threads=threads, population=population,
                            generations=generations)
+    cam = check_camera(scene, vignetting, tone, flat_field)
+    if cam.active:
+        def once(img: np.ndarray, near: Scene | None = None) -> FitResult:
+            return fit(**{**args, "image": img, "vignetting": "off", "tone": "off", "flat_field": None,
+                          **({"scene": near} if near is not None else {})})
+
+        result = fit_through_camera(once, scene, *objective(scene, image, mask, []), cam)
+        result.seconds = time.perf_counter() - t0
+        return result
     footprint = check_footprint(footprint)
+    if framing == "correct":
+        return fit_reframed(fit, scene, image, mask, reference, dict(
+            protocol=protocol, seed=seed, population=population, generations=generations, f=f, cr=cr,
+            threads=threads, clip=clip, pixels_per_object=pixels_per_object, callback=callback,
+            optimizer=optimizer, polish=polish, uncertainty=uncertainty, norm=norm, space=space,
+            environment=environment, interreflection=interreflection, highlights=highlights, footprint=footprint))
     if not (isinstance(uncertainty, bool) or isinstance(uncertainty, str) and uncertainty in ("default", "bootstrap", "off")):
         raise RtloopError(f"uncertainty: must be True, False, 'default', 'bootstrap' or 'off' (got {uncertainty!r})")
     if space not in ("auto", *LOSS_SPACES):
@@ -173,7 +207,7 @@ def fit(
     check_arguments(scene, seed=seed, threads=threads, polish=polish, pixels_per_object=pixels_per_object,
                     population=b.population)
     doubts: list[str] = []
-    target, use = _objective(scene, image, mask, doubts)
+    target, use = objective(scene, image, mask, doubts)
     if reference is not None:
         reference = (check_reference(scene, reference[0], reference[1]), reference[1])
     all_paths = scene.fit_paths
@@ -305,7 +339,11 @@ def fit(
         as_compared, at_optimum = _native.render(current, current.width, current.height, 1, True), None
     result.goodness = goodness(current, target, use, clip=clip, render=as_compared, sigma=sigma, blocking=blocking,
                                encoding=encoding, codes=codes)
-    doubts += _at_bounds(current, [p for p in all_paths if p not in held])  # a held gauge was not fitted
+    result.goodness["framing"] = framing_check(current, target, use, result.goodness["ratio"], framing,
+                                               as_compared)
+    if result.goodness["framing"]["mismatch"]:
+        result.goodness["verdict"] = mismatch_verdict(result.goodness["framing"])
+    doubts += at_bounds(current, [p for p in all_paths if p not in held])  # a held gauge was not fitted
     for d in doubts:
         warnings.warn(d, RtloopWarning, stacklevel=2)
     result.warnings = doubts
@@ -418,6 +456,21 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
     elif space == "linear" and float(target.min()) >= 0.0 and float(target.max()) <= 1.0:
         model["encoding"] = _encoding_check(work, stages, int(seeds[0]), target, sub, ratio, environment=env)
     where, x = first.paths, list(first.x)
+    if ambient and declares_ambient(work):  # the declared ambient, or the same light occluded (.constant)
+        model["constant"] = ev = compare_constant(work, where, x, target, sub, **kw)
+        more = refit(narrowed(as_environment(work).with_params(x, where), where, REFIT_FRACTION), space) \
+            if ev["use_environment"] and "refit_blocked" not in ev else None
+        if more is not None:
+            candidate = more.projected(int(seeds[2]), environment=True, name="light+colour+environment",
+                                       from_scene=True)
+            stages.stages += more.stages
+            stages.evaluations += more.evaluations
+            ev["loss_refit"] = float(sum(more.stages[-1].objectives))
+            if ev["loss_refit"] < sum(first.objectives):
+                work, first, ambient = as_environment(work), more.stages[-1], False
+                current, where, x = restore_bounds(candidate, work), first.paths, list(first.x)
+                model["terms"][model["terms"].index("ambient")] = "environment"
+        ev["used"] = "ambient" if ambient else "environment"
     n_sub = first.pixels // 4
     model_work, model_env, added = work, env, []
     base = float(closed_form_loss(work.with_params(x, where), where, [x], target, sub, environment=env, **kw)[0])
@@ -588,57 +641,6 @@ def _encoding_check(work: Scene, stages: Stages, seed: int, target: np.ndarray, 
     return out
 
 
-#: A fitted value this close to a bound (as a fraction of its range) is reported as at the bound.
-AT_BOUND = 1e-6
-#: An image with at least this fraction of its pixels above 1 in some channel is doubted (0..255 or not linear).
-MOSTLY_ABOVE_ONE = 0.9
-
-
-def check_norm(norm: Any) -> tuple[str, str]:
-    """(mode, norm): ``norm`` checked (:data:`rtloop.fit.norm.NORMS` or "huber:H" with H > 0), and the norm
-    the first fit takes ("l1" for "auto")."""
-    ok = isinstance(norm, str) and (norm in NORMS or norm.startswith("huber:"))
-    if ok and norm.startswith("huber:"):
-        try:
-            h = float(norm.split(":", 1)[1])
-        except ValueError:
-            h = math.nan
-        ok = math.isfinite(h) and h > 0
-    if not ok:
-        raise RtloopError(f"norm: must be 'auto', 'l1', 'l2', 'huber' or 'huber:H' with H > 0 (got {norm!r})")
-    return norm, "l1" if norm == "auto" else norm
-
-
-#: The ``footprint`` argument's values, with True and False for "on" and "off".
-FOOTPRINT_MODES = ("auto", "on", "off")
-
-
-def check_footprint(footprint: Any) -> str:
-    """``footprint`` as one of :data:`FOOTPRINT_MODES`, else an RtloopError naming the argument."""
-    if isinstance(footprint, (bool, np.bool_)):
-        return "on" if footprint else "off"
-    if isinstance(footprint, str) and footprint in FOOTPRINT_MODES:
-        return footprint
-    raise RtloopError(f"footprint: must be 'auto', 'on' or 'off' (or True / False) (got {footprint!r})")
-
-
-def _at_bounds(scene: Scene, paths: list[str]) -> list[str]:
-    """A doubt naming the fitted values at one of their bounds (a range too narrow, or a wrong input)."""
-    at = []
-    for p in paths:
-        for n, v, (lo, hi) in zip(scene.param_names([p]), scene.get_params([p]), scene.bounds([p])):
-            near = AT_BOUND * (hi - lo)
-            if hi <= lo:
-                continue
-            # a physical limit is no doubt: 0 for what cannot be negative, 1 for an albedo (a yellow ball's red)
-            if (v - lo <= near and (lo != 0 or p == "light.position")) or (hi - v <= near and not (p.endswith(".albedo") and hi == 1)):
-                at.append(f"{n} = {v:.6g}")
-    if not at:
-        return []
-    return [(f"fitted values at their fit bounds: {', '.join(at)} (widen the bounds if the truth may lie "
-             "beyond)")]
-
-
 def _fit_lights(scene: Scene, image: Any, mask: Any, lights: int | str | None, *, seed: int, threads: int | None,
                 population: int | None, generations: Any) -> LightsFit:
     """``fit()`` for several lights or a sphere light (:mod:`.lights`)."""
@@ -648,52 +650,8 @@ def _fit_lights(scene: Scene, image: Any, mask: Any, lights: int | str | None, *
         whole("generations", generations, 1, 100_000)
     check_arguments(scene, seed=seed, threads=threads, polish=0, pixels_per_object=PIXELS_PER_OBJECT,
                     population=population or 40)
-    target, use = _objective(scene, image, mask, [])
+    target, use = objective(scene, image, mask, [])
     budget = {"population": population or 40, "generations": generations or 120, "threads": threads}
     if lights == "auto":
         return choose_count(scene, target, seed=seed, mask=use, **budget)
     return fit_lights(scene, target, lights, seed=seed, mask=use, **budget)
-
-
-def _objective(scene: Scene, image: Any, mask: Any, doubts: list[str]) -> tuple[np.ndarray, np.ndarray | None]:
-    """The image as float32 checked against the scene, and the mask's pixel indices (None: all)."""
-    kind = getattr(getattr(image, "dtype", None), "kind", None)
-    if kind is None:
-        image = np.asarray(image)
-        kind = image.dtype.kind
-    if kind in "uib":
-        raise RtloopError(
-            f"image: a {np.asarray(image).dtype} array is not linear radiance (a decoded file's code values?); "
-            "load the file with rtloop.load_image(path, scene), convert it with rtloop.srgb_to_linear(array), "
-            "or pass float linear radiance (0 = black, 1 = the brightest value a file could store)"
-        )
-    if kind != "f":
-        raise RtloopError(f"image: must be a float array of linear radiance (got dtype {np.asarray(image).dtype})")
-    target = np.ascontiguousarray(image, dtype=np.float32)
-    if target.shape != (scene.height, scene.width, 3):
-        raise RtloopError(
-            f"image: shape {target.shape} does not match the scene's ({scene.height}, {scene.width}, 3); "
-            "load it with rtloop.load_image(path, scene)"
-        )
-    if not np.isfinite(target).all():
-        raise RtloopError("image: contains NaN or infinite values")
-    if (target < 0).any():
-        doubts.append(f"image: {np.mean(target < 0):.2%} of the values are negative (min {float(target.min()):.4g}): "
-                      "linear radiance is >= 0 (zero-mean noise is fine, an offset or a wrong encoding is not)")
-    if float(target.max()) > 1.0 and np.mean(target.max(axis=2) > 1.0) >= MOSTLY_ABOVE_ONE:
-        doubts.append(f"image: {np.mean(target.max(axis=2) > 1.0):.0%} of the pixels are above 1: is it 0..255 "
-                      "code values or not linear? (rtloop.load_image gives linear 0..1)")
-    if mask is None:
-        return target, None
-    m = np.asarray(mask)
-    if m.shape != (scene.height, scene.width):
-        raise RtloopError(f"mask: shape {m.shape} does not match the scene's ({scene.height}, {scene.width})")
-    if m.dtype.kind not in "biuf":
-        raise RtloopError(f"mask: must be bool (True = use) or 0/1 numbers (got dtype {m.dtype})")
-    if m.dtype.kind == "f" and not np.isfinite(m).all():
-        raise RtloopError("mask: contains NaN or infinite values (use a bool array, True = use)")
-    if m.dtype.kind != "b" and not np.isin(m, (0, 1)).all():
-        raise RtloopError("mask: numbers other than 0 and 1 (use a bool array, True = use)")
-    if not m.any():
-        raise RtloopError("mask: selects no pixel")
-    return target, np.flatnonzero(m.astype(bool).ravel()).astype(np.uint32)

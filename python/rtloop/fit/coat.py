@@ -104,7 +104,8 @@ def coat_evidence(scene: Scene, names: list[str], paths: list[str], x: list[floa
                 tried.append(r2)
                 loss += losses([r2])
     best = int(np.argmin(loss))
-    ev = _verdict(base, loss[best], active_pixels, 2 * len(names), norm)
+    # not nested: a coat of weight 0 still dims the base by its Fresnel transmission
+    ev = _verdict(base, loss[best], active_pixels, 2 * len(names), norm, nested=False)
     ev["roughness_tried"] = tried
     ev["loss_per_roughness"] = loss
     ev["roughness"] = tried[best]
@@ -125,5 +126,7 @@ def choose_lobe(lobe: dict[str, Any], scene: Scene, names: list[str], paths: lis
     lobe["coat"] = coat[0]
     lobe["lobe"] = "coat" if coat[0]["selected"] and coat[0]["better_than_blinn_phong"] else "blinn-phong"
     if lobe["lobe"] == "coat":  # the term's loss is the coat's: later terms are tested on top of it
-        lobe["blinn_phong"] = {k: lobe[k] for k in ("loss_with", "gain", "delta_bic")}
-        lobe.update({k: coat[0][k] for k in ("loss_with", "gain", "delta_bic")})
+        keys = [k for k in ("loss_with", "gain", "delta_bic", "nested", "loss_with_nested", "raised") if k in coat[0]]
+        lobe["blinn_phong"] = {k: lobe[k] for k in keys if k in lobe}
+        lobe.update({k: coat[0][k] for k in keys})
+        lobe.pop("why_raised", None)

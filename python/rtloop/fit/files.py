@@ -107,6 +107,9 @@ def fit_inputs(inputs: Inputs, *, seed: int = 0, threads: int | None = None, cal
     warnings are in the result's ``warnings``, not shown."""
     import rtloop
 
+    flat = options.get("flat_field")
+    if isinstance(flat, (tuple, list)):  # (path, response): the photo of a flat white target
+        options["flat_field"] = rtloop.load_image(flat[0], inputs.scene, response=flat[1])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RtloopWarning)
         return rtloop.fit(inputs.scene, inputs.image, seed=seed, threads=threads, callback=callback,

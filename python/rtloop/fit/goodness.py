@@ -12,6 +12,7 @@ import numpy as np
 from .. import _native
 from .._pixels import SATURATED
 from .._srgb import decode, encode, per_code
+from .structure import CAUSES, residual_structure
 
 __all__ = ["CLIPPED_SIGMAS", "EXPLAINED_RATIO", "clip_level", "encoded", "goodness", "jpeg_blocking", "noise_sigma"]
 
@@ -193,9 +194,17 @@ def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool 
         excess = sum(v["share_of_excess"] for v in per.values())
         for v in per.values():
             v["share_of_excess"] = v["share_of_excess"] / excess if excess > 0 else 0.0
+        full_ids = np.asarray(_native.object_ids(scene)).reshape(-1)
+        parts = residual_structure(scene, np.asarray(target, np.float32).reshape(scene.height, scene.width, 3),
+                                   m.reshape(scene.height, scene.width, 3), keep, floor,
+                                   full_ids, list(scene.object_names))
+        for name, part in parts.items():
+            per[name]["structure"] = part
     out: dict[str, Any] = {"ratio": ratio, "loss": total, "floor": fl, "noise_sigma": [float(s) for s in sigma],
                            "jpeg_blocking": blocking,
                            "pixels": int(keep.sum()), "per_object": per, "explained_below": EXPLAINED_RATIO}
+    if per:
+        out["explained"], out["diagnosis"] = _diagnosis(per)
     if not keep.any() or not math.isfinite(ratio):
         out["ratio"] = None
         out["verdict"] = "no unsaturated pixel to judge the fit by: every used pixel is at or above 1"
@@ -208,3 +217,29 @@ def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool 
                           "cover what it lacks; look at the difference image, and at a mask for what the scene "
                           "leaves out)")
     return out
+
+
+def _diagnosis(per: dict[str, Any]) -> tuple[dict[str, str], str]:
+    """Per object whose residual exceeds its floor, what it is (``explained``: "texture/noise" where the
+    excess is fine and zero-mean, else the cause named by :func:`.structure.residual_structure`, or
+    "unexplained structure"), and one line saying so."""
+    explained: dict[str, str] = {}
+    lines = []
+    for name, v in per.items():
+        part = v.get("structure")
+        if part is None or (v["ratio"] is not None and v["ratio"] < EXPLAINED_RATIO):
+            continue
+        if not part["structured"]:
+            explained[name] = "texture/noise"
+            lines.append(f"{name}: explained: texture/noise (fine, zero-mean residual; its smooth part is "
+                         f"{part['structured_ratio']:.2g}x the noise floor)")
+        elif part.get("cause"):
+            explained[name] = part["cause"]
+            lines.append(f"{name}: not explained: {CAUSES[part['cause']]} (smooth residual "
+                         f"{part['structured_ratio']:.2g}x the noise floor, {part['causes'][part['cause']]:.0%} of it)")
+        else:
+            explained[name] = "unexplained structure"
+            why = part.get("why", "smooth residual")
+            lines.append(f"{name}: not explained: {why} ({part['structured_ratio']:.2g}x the noise floor)"
+                         if part["structured_ratio"] is not None else f"{name}: not explained: {why}")
+    return explained, "; ".join(lines)

@@ -1,9 +1,9 @@
-"""The lights fit: any number of point, directional and sphere lights, their geometry searched by L-SHADE
+"""The lights fit: any number of point, directional, sphere and rectangle lights, their geometry searched by L-SHADE
 and, per object and channel, each light's product (intensity x colour x albedo) and a constant solved in
 closed form (non-negative least squares; ``rust/fitness/lights.rs``). docs/methods.md, "Several lights".
 
-``fit(scene, image, lights=N)`` lands here for N > 1, or for a scene that already has several lights or a
-sphere light; with ``lights="auto"`` the number is chosen from held-out pixels (:func:`choose_count`).
+``fit(scene, image, lights=N)`` lands here for N > 1, or for a scene that already has several lights, a
+sphere light or a rectangle light; with ``lights="auto"`` the number is chosen from held-out pixels (:func:`choose_count`).
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ from .. import _native
 from .._pixels import edges
 from ..errors import RtloopError
 from ..scene import Scene, load_scene, scene_to_dict
+from .lights_errors import light_errors
 
 #: Pixels compared per fit at most (a seeded sample of the objects' interiors).
 MAX_PIXELS = 6000
@@ -37,7 +38,9 @@ class LightsFit:
     """What the lights fit found."""
 
     scene: Scene
-    #: Per light: name, kind, position or direction, radius, intensity, colour, its share of the light.
+    #: Per light: name, kind, position or direction, radius (size and normal), intensity, colour, its share
+    #: of the light, and the error bars (``position_error`` per axis in metres, ``direction_error``,
+    #: ``radius_error``, ``intensity_error``; None for the first light's intensity, which is held).
     lights: list[dict[str, Any]]
     #: Per object: per light the RGB product intensity x colour x albedo, then the constant (ambient) term.
     products: dict[str, list[list[float]]]
@@ -147,7 +150,8 @@ def _split(d: dict[str, Any], x: list[float], paths: list[str], products: list[l
             light["intensity"] = intensity
             light["color"] = [float(v / intensity) if intensity > 0 else 1.0 for v in rgb]
         report.append({"name": light["name"], "kind": light.get("type", "point"),
-                       **{key: light[key] for key in ("position", "direction", "radius") if key in light},
+                       **{key: light[key] for key in ("position", "direction", "radius", "size", "normal")
+                          if key in light},
                        "intensity": float(light["intensity"]), "color": light.get("color", [1.0, 1.0, 1.0]),
                        "share": float(prods[:, i, :].sum()) / total})
     for o, p in zip(out["objects"], prods):
@@ -185,8 +189,10 @@ def _strongest_first(d: dict[str, Any], paths: list[str], x: list[float],
 
 
 def fit_lights(scene: Any, target: np.ndarray, count: int | None, *, seed: int = 0, population: int = 40,
-               generations: int = 120, threads: int | None = None, mask: np.ndarray | None = None) -> LightsFit:
-    """Fit ``count`` lights (the scene's own number when None) to the linear float32 ``target``."""
+               generations: int = 120, threads: int | None = None, mask: np.ndarray | None = None,
+               errors: bool = True) -> LightsFit:
+    """Fit ``count`` lights (the scene's own number when None) to the linear float32 ``target``; with
+    ``errors``, each light's error bars (:mod:`.lights_errors`)."""
     scene = load_scene(scene)
     start = time.perf_counter()
     have = len(_light_list(scene_to_dict(scene)))
@@ -197,12 +203,24 @@ def fit_lights(scene: Any, target: np.ndarray, count: int | None, *, seed: int =
                                                         generations, threads)
     x, products = _strongest_first(d, paths, list(x), products)
     out, report = _split(d, x, paths, products)
+    if errors:
+        _attach_errors(report, d, paths, x, target, pixels, seed)
     fitted = load_scene(out)
     return LightsFit(
         scene=fitted, lights=report,
         products={name: [list(map(float, row)) for row in p] for name, p in zip(work.object_names, products)},
         loss=float(loss), evaluations=int(evaluations), seconds=time.perf_counter() - start,
     )
+
+
+def _attach_errors(report: list[dict[str, Any]], d: dict[str, Any], paths: list[str], x: list[float],
+                   target: np.ndarray, pixels: np.ndarray, seed: int) -> None:
+    """Each light's error bars (:func:`.lights_errors.light_errors`) into its report entry."""
+    bars = light_errors(d, paths, x, target, pixels, seed, lambda xk, pk: _split(d, xk, paths, pk)[1])
+    for i, (light, bar) in enumerate(zip(report, bars)):
+        light.update(bar)
+        if i == 0:  # the first light's intensity is held: it sets the albedos' scale
+            light["intensity_error"] = None
 
 
 def choose_count(scene: Any, target: np.ndarray, *, seed: int = 0, limit: int = AUTO_LIMIT,
@@ -218,7 +236,7 @@ def choose_count(scene: Any, target: np.ndarray, *, seed: int = 0, limit: int = 
     held = held[~steep(target, EDGE_SHARE)[held]]
     best, evidence = None, []
     for count in range(have, max(limit, have) + 1):
-        found = fit_lights(scene, target, count, seed=seed, mask=train, **kw)
+        found = fit_lights(scene, target, count, seed=seed, mask=train, errors=False, **kw)
         d, paths = with_lights(scene, count)
         x = _geometry(found, paths)
         err, _ = _native.lights_solve(load_scene(d), target, paths, held, x)
@@ -232,6 +250,8 @@ def choose_count(scene: Any, target: np.ndarray, *, seed: int = 0, limit: int = 
             evidence[-2]["kept"] = False
     assert best is not None
     best.evidence = evidence
+    d, paths = with_lights(scene, len(best.lights))
+    _attach_errors(best.lights, d, paths, _geometry(best, paths), target, pixels, seed)
     return best
 
 

@@ -274,9 +274,10 @@ HIGHLIGHT_SEEN = 0.5 / 255
 
 def _intensity_from_known(d: dict[str, Any], original: Scene, arr: np.ndarray) -> float | None:
     """The intensity the photo measures against something of known strength, by least squares: a fixed,
-    non-zero specular k (its product Q = intensity x k), else fixed ambient light a (per object and
-    channel P / E = intensity x colour_c / a_c, P = exposure x intensity x colour x albedo, E = exposure x
-    a x albedo). None when neither is in the scene."""
+    non-zero specular k (its product Q = intensity x k), else a fixed constant radiance a, ambient or
+    occluded environment alike (per object and channel P / E = intensity x colour_c / a_c, P = exposure x
+    intensity x colour x albedo, E = exposure x a x albedo). None when neither is in the scene (a zero
+    radiance measures nothing)."""
     paths = original.fit_paths
     ks = np.array([o["material"].get("specular", 0.0) if f"objects.{o['name']}.specular" not in paths else 0.0
                    for o in scene_to_dict(original)["objects"]], float)
@@ -298,9 +299,10 @@ def _intensity_from_known(d: dict[str, Any], original: Scene, arr: np.ndarray) -
         den = float(np.sum(w * ks * ks))
         if den > 0:
             return float(np.sum(w * ks * arr[:, 3]) / den)
-    if arr.shape[1] < 7 or constant_term(original) != "ambient" or "ambient" in paths:
+    key = constant_term(original)
+    if arr.shape[1] < 7 or key in paths:
         return None
-    a = np.asarray(scene_to_dict(original)["ambient"], float)
+    a = np.asarray(scene_to_dict(original).get(key, [0.0, 0.0, 0.0]), float)
     colour = np.asarray(d["light"]["color"], float)
     w = np.where(a > 0, colour / np.where(a > 0, a, 1.0), 0.0) * arr[:, 4:7]  # P ~ intensity x w
     den = float(np.sum(w * w))

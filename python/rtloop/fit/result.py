@@ -82,6 +82,9 @@ class FitResult:
     #: With a reference of known reflectance (a grey card): the gauge it fixed, the absolute albedos and
     #: the light's intensity in W/sr (:mod:`rtloop.fit.reference`); None without one.
     reference: dict[str, Any] | None = None
+    #: With ``framing="correct"`` where the photo was resampled into the scene's framing: the photo and the
+    #: mask (bool (H, W)) that were fitted (:mod:`rtloop.fit.framing`); None otherwise.
+    reframed: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
 
     def __repr__(self) -> str:
         """A few lines' worth: the outcome, the budget and the fitted values (``report()`` has the rest)."""

@@ -241,7 +241,7 @@ def highlight_evidence(scene: Scene, names: list[str], paths: list[str], x: list
                                  norm=norm, space=space, threads=threads, saturated=saturated,
                                  frozen_bounce=interreflection_given(glossy))
     k = int(np.argmin(with_lobe))
-    ev = _verdict(base, float(with_lobe[k]), active_pixels, 2 * len(names), norm)
+    ev = _verdict(base, float(with_lobe[k]), active_pixels, 2 * len(names), norm, nested=True)
     ev["shininess_tried"] = list(SHININESS_TRIALS)
     ev["loss_per_shininess"] = [float(v) for v in with_lobe]
     return ev, SHININESS_TRIALS[k]
@@ -290,10 +290,11 @@ def interreflection_evidence(scene: Scene, paths: list[str], x: list[float], tar
     bounce's closed form does not model the coat)."""
     if any("coat" in o["material"] for o in scene_to_dict(scene)["objects"]):
         return {"loss_without": base, "loss_with": base, "gain": 0.0, "delta_bic": None, "selected": False,
-                "rule": "not tested: the bounce does not model a coated object"}
+                "rule": "not tested: the bounce does not model a coated object", "nested": False,
+                "loss_with_nested": base, "raised": False}
     l1 = closed_form_loss(with_interreflection(scene), paths, [x], target, pixels, environment=environment,
                           clip=clip, norm=norm, space=space, threads=threads, saturated=saturated)[0]
-    return _verdict(base, l1, active_pixels, 1, norm)
+    return _verdict(base, l1, active_pixels, 1, norm, nested=False)
 
 
 def environment_given(scene: Scene) -> bool:
@@ -311,7 +312,7 @@ def environment_evidence(scene: Scene, paths: list[str], x: list[float], target:
     n ln(L0/L1); minus k ln n for the k = 3 x objects added products), and the verdict."""
     l1 = closed_form_loss(scene, paths, [x], target, pixels, environment=True, clip=clip, norm=norm, space=space,
                           threads=threads, saturated=saturated)[0]
-    return _verdict(base, l1, active_pixels, 3 * len(scene.object_names), norm)
+    return _verdict(base, l1, active_pixels, 3 * len(scene.object_names), norm, nested=True)
 
 
 def closed_form_loss(scene: Scene, paths: list[str], rows: list[list[float]], target: np.ndarray,
@@ -329,8 +330,24 @@ def closed_form_loss(scene: Scene, paths: list[str], rows: list[list[float]], ta
     return v[:, 0]
 
 
-def _verdict(l0: float, l1: float, active_pixels: int, k: int, norm: str) -> dict[str, Any]:
-    """The evidence for a term that takes the loss from ``l0`` to ``l1`` with ``k`` more parameters."""
+#: Why a term's closed-form loss can exceed the loss without it (``evidence[term]["why_raised"]``).
+WHY_RAISED = {
+    True: ("the closed form solves the products by least squares and the loss is the fit's {norm}: a term's column "
+           "lowers the squared residual, not always the {norm} loss (a residual with large one-signed regions, "
+           "such as a light the model lacks, pulls least-squares products away from the {norm} optimum); the "
+           "term's own products at 0 give the loss without it, so its best loss is at most that "
+           "(``loss_with_nested``)"),
+    False: ("the bounce is not nested in the direct model: its strength is the albedos' over the light's "
+            "intensity, which the intensity's bounds (or a known intensity) keep from 0, so it cannot be "
+            "switched off by its products"),
+}
+
+
+def _verdict(l0: float, l1: float, active_pixels: int, k: int, norm: str, *, nested: bool) -> dict[str, Any]:
+    """The evidence for a term that takes the loss from ``l0`` to ``l1`` with ``k`` more parameters.
+    ``nested``: the model without the term is the model with it at 0 (the environment, a lobe: their
+    products' bounds hold 0), so the term's best loss is at most ``l0`` (``loss_with_nested``); the
+    selection is unchanged by it (a term must lower the closed form's own loss)."""
     n = 3 * max(int(active_pixels), 1)
     gain = (l0 - l1) / l0 if l0 > 0 else 0.0
     per = n if norm == "l2" else 2 * n
@@ -339,11 +356,17 @@ def _verdict(l0: float, l1: float, active_pixels: int, k: int, norm: str) -> dic
     else:
         dbic = math.inf if l0 > l1 else -k * math.log(n)
     selected = bool(gain >= MIN_GAIN and dbic > 0)
-    return {
+    out = {
         "loss_without": l0,
         "loss_with": l1,
         "gain": gain,
         "delta_bic": dbic if math.isfinite(dbic) else None,
         "selected": selected,
         "rule": f"added when the loss falls by at least {MIN_GAIN:.0%} and the BIC falls",
+        "nested": nested,
+        "loss_with_nested": min(l0, l1) if nested else l1,
+        "raised": bool(l1 > l0),
     }
+    if l1 > l0:
+        out["why_raised"] = WHY_RAISED[nested].format(norm=norm.upper())
+    return out

@@ -30,8 +30,15 @@ def split_names(result: Any) -> list[str]:
 
 
 def _sigmas(unc: dict[str, Any]) -> tuple[dict[str, float], str]:
-    """Per name, the error bar the fit reports (the block sandwich's where it ran, else Gauss-Newton's),
-    and which it is."""
+    """Per name, the error bar the fit reports (its reported bars, ``u["bars"]``: the block sandwich's widened
+    by what the model lacks, none where the photo does not determine it; else the sandwich's where it ran,
+    else Gauss-Newton's), and which it is."""
+    reported = unc.get("bars") or {}
+    if any(v is not None for v in (reported.get("sigma") or {}).values()):
+        w = float(reported.get("widened_by") or 1.0)
+        return ({k: v for k, v in reported["sigma"].items() if v is not None},
+                "block sandwich (correlated residuals)" + (f", widened {w:.2g}× for what the model lacks"
+                                                             if w > 1 else ""))
     robust = (unc.get("robust") or {}).get("sigma") or {}
     plain = unc.get("sigma") if isinstance(unc.get("sigma"), dict) else {}
     if any(v is not None for v in robust.values()):
@@ -58,7 +65,8 @@ def answer(result: Any, terr: dict[str, Any] | None = None) -> dict[str, Any]:
     ``sigma_mm`` per axis, ``worse_axis_mm``, ``covariance_m2``, ``error_mm`` against a truth), ``colours``
     (per object: ``what`` ("product" or "albedo"), R, G, B ``values``, ``sigma_percent`` and, with a
     truth, ``error_percent``), ``verdict`` and ``ratio`` (the residual against the photo's noise floor),
-    ``bars`` (which error bars), ``sigmas`` (theirs, per parameter) and ``split`` (:func:`split_names`)."""
+    ``diagnosis`` (what the residual is made of, per object), ``not_determined`` (name: why), ``bars`` (which
+    error bars), ``sigmas`` (theirs, per parameter) and ``split`` (:func:`split_names`)."""
     unc = getattr(result, "uncertainty", None) or {}
     sigma, bars = _sigmas(unc)
     d = result.scene.to_dict()
@@ -80,7 +88,8 @@ def answer(result: Any, terr: dict[str, Any] | None = None) -> dict[str, Any]:
         light["sigma_deg"] = (unc.get("robust") or {}).get("light_direction_deg") or cone.get("angle_deg")
     good = getattr(result, "goodness", None) or {}
     return {"light": light, "colours": _colours(result, d, unc, terr), "verdict": good.get("verdict"),
-            "ratio": good.get("ratio"), "bars": bars, "sigmas": sigma, "split": split_names(result)}
+            "ratio": good.get("ratio"), "diagnosis": good.get("diagnosis"), "bars": bars, "sigmas": sigma,
+            "not_determined": (unc.get("bars") or {}).get("not_determined", {}), "split": split_names(result)}
 
 
 def _colours(result: Any, d: dict[str, Any], unc: dict[str, Any], terr: dict[str, Any] | None) -> dict[str, Any]:
@@ -91,6 +100,8 @@ def _colours(result: Any, d: dict[str, Any], unc: dict[str, Any], terr: dict[str
     robust = (unc.get("robust") or {}).get("product_sigma") or {}
     plain = unc.get("product_sigma") if isinstance(unc.get("product_sigma"), dict) else {}
     sig = {**plain, **{k: v for k, v in robust.items() if v is not None}}
+    if (unc.get("bars") or {}).get("sigma"):  # the reported bars: none where not determined
+        sig = dict(unc["bars"]["sigma"])
     bars = _sigmas(unc)[0]
     out: dict[str, Any] = {}
     for obj in d["objects"]:
@@ -308,4 +319,5 @@ def verdict_sentence(info: dict[str, Any]) -> str | None:
     if not info.get("verdict"):
         return None
     how = "" if info.get("ratio") is None else f" (residual {info['ratio']:.2g}× the photo's noise floor)"
-    return f"Verdict: {info['verdict']}{how}."
+    why = f" By object: {info['diagnosis']}." if info.get("diagnosis") else ""
+    return f"Verdict: {info['verdict']}{how}.{why}"

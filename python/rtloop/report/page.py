@@ -205,7 +205,8 @@ def report(
     insertion: Any = None,
     final: np.ndarray | str | os.PathLike[str] | None = None,
 ) -> Report:
-    """Write the fit report of ``result`` (a :class:`FitResult`) to the HTML page ``path``.
+    """Write the fit report of ``result`` (a :class:`FitResult`) to the HTML page ``path`` (a lights fit's
+    :class:`~rtloop.fit.lights.LightsFit` gets its own page: :func:`rtloop.report.lights.lights_report`).
 
     ``objective``: the photo the fit saw (linear float (H, W, 3) at the scene's size, or an image path,
     loaded with :func:`rtloop.load_image`) for the objective / fitted / difference panels and the error
@@ -231,6 +232,10 @@ def report(
     """
     from matplotlib.figure import Figure  # noqa: F401  (fail early, before writing anything)
 
+    if hasattr(result, "evidence"):  # a lights fit (rtloop.fit.lights.LightsFit): its own page
+        from .lights import lights_report
+
+        return lights_report(result, path, objective=objective, final=final, title=title)
     page_path = Path(path)
     folder = page_path.with_name(page_path.stem if page_path.suffix else page_path.name + "_files")
     folder.mkdir(parents=True, exist_ok=True)

@@ -21,6 +21,7 @@ from .. import _native
 from ..errors import RtloopError
 from ..fit.products import albedo_derivative, unit_environment_scene, unit_lobes_scene
 from ..scene import Scene, load_scene, scene_to_dict
+from .bars import error_bars
 from .light import light_distance
 from .linalg import _svd_scaled
 from .pixels import UsedPixels, used_pixels
@@ -205,7 +206,17 @@ def estimate_uncertainty(
     out["product_sigma"] = _product_sigma(space, wd, fit, use_products)
     robust["product_sigma"] = _product_sigma(space, wd, robust_fit, use_products)
     out["robust"] = robust
+    out["bars"] = _bars(out, scene, d, getattr(result, "goodness", None), getattr(result, "products", None))
     return out
+
+
+def _bars(u: dict[str, Any], scene: Scene, d: dict[str, Any], goodness: dict[str, Any] | None,
+          products: dict[str, list[float]] | None) -> dict[str, Any]:
+    """:func:`.bars.error_bars` of ``u`` with the scene's bounds by parameter name and the fitted values
+    (the products' from ``products``)."""
+    bounds = dict(zip(scene.param_names(), scene.bounds(scene.fit_paths)))
+    values = {f"products.{o}.{c}": float(v[i]) for o, v in (products or {}).items() for i, c in enumerate("rgb")}
+    return error_bars(u, d, bounds, values, goodness)
 
 
 def _footprint_bias(centre: np.ndarray, idx: np.ndarray, f0: np.ndarray, Jt: np.ndarray,

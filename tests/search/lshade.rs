@@ -4,8 +4,9 @@
 //! and the configuration checks.
 //!
 //! Expected values come from the functions' definitions (their known minima, written out again here
-//! independently of the library), never from earlier runs. Run with `cargo test --test de_shade`.
+//! independently of the library), never from earlier runs. Run with `cargo test --test search lshade`.
 
+use std::f64::consts::PI;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use rtloop::search::lshade::{minimize, minimize_polishing};
@@ -14,48 +15,12 @@ use rtloop::search::{
     LshadeResult, Objective, Rng, StopReason, Variant,
 };
 
-#[path = "common/test_functions.rs"]
-mod test_functions;
-use test_functions as lib;
+use crate::defs::{ackley, distance, griewank, rastrigin, rosenbrock, sphere};
+use crate::test_functions as lib;
 
 // ---------------------------------------------------------------------------------------------------
-// Test functions (independent definitions) and helpers
+// The search box of each test function, and helpers
 // ---------------------------------------------------------------------------------------------------
-
-use std::f64::consts::{E, PI};
-
-fn sphere(x: &[f64]) -> f64 {
-    x.iter().map(|v| v * v).sum()
-}
-
-fn rosenbrock(x: &[f64]) -> f64 {
-    (0..x.len().saturating_sub(1))
-        .map(|i| 100.0 * (x[i + 1] - x[i] * x[i]).powi(2) + (1.0 - x[i]).powi(2))
-        .sum()
-}
-
-fn rastrigin(x: &[f64]) -> f64 {
-    x.iter()
-        .map(|v| v * v - 10.0 * (2.0 * PI * v).cos() + 10.0)
-        .sum()
-}
-
-fn ackley(x: &[f64]) -> f64 {
-    let n = x.len() as f64;
-    let a = (x.iter().map(|v| v * v).sum::<f64>() / n).sqrt();
-    let b = x.iter().map(|v| (2.0 * PI * v).cos()).sum::<f64>() / n;
-    20.0 + E - 20.0 * (-0.2 * a).exp() - b.exp()
-}
-
-fn griewank(x: &[f64]) -> f64 {
-    let mut s = 0.0;
-    let mut p = 1.0;
-    for (i, v) in x.iter().enumerate() {
-        s += v * v;
-        p *= (v / ((i + 1) as f64).sqrt()).cos();
-    }
-    s / 4000.0 - p + 1.0
-}
 
 /// Name, function, minimiser coordinate (the same in every dimension), and the usual search box.
 type Case = (&'static str, fn(&[f64]) -> f64, f64, (f64, f64));
@@ -67,14 +32,6 @@ const CASES: [Case; 5] = [
     ("ackley", ackley, 0.0, (-32.768, 32.768)),
     ("griewank", griewank, 0.0, (-600.0, 600.0)),
 ];
-
-fn distance(a: &[f64], b: &[f64]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y) * (x - y))
-        .sum::<f64>()
-        .sqrt()
-}
 
 fn cfg(max_evaluations: usize, seed: u64) -> LshadeConfig {
     LshadeConfig {

@@ -4,17 +4,9 @@
 //! ends worse than that point, however small its budget. Expected values come from the test function's
 //! definition (Rastrigin's global minimum 0 at the origin), not from earlier runs.
 
+use crate::defs::rastrigin;
 use rtloop::search::lshade::{minimize_polishing, minimize_polishing_from};
 use rtloop::search::{run_polishing, DeConfig, GenerationReport, LshadeConfig, Method};
-
-/// Rastrigin: 10 n + sum(x² - 10 cos 2πx), minimum 0 at the origin, a local minimum near every integer
-/// point: a search of a few dozen evaluations from random points ends in one of those.
-fn rastrigin(x: &[f64]) -> f64 {
-    10.0 * x.len() as f64
-        + x.iter()
-            .map(|v| v * v - 10.0 * (2.0 * std::f64::consts::PI * v).cos())
-            .sum::<f64>()
-}
 
 fn small(seed: u64) -> LshadeConfig {
     LshadeConfig {

@@ -2,43 +2,15 @@
 //! dimensions, determinism across thread counts, Pareto selection, early stopping and NaN handling.
 //!
 //! Expected values come from the test functions' definitions (their known minima), never from earlier
-//! runs. Run with `cargo test --test de`.
+//! runs. Run with `cargo test --test search rand1bin`.
 
+use crate::defs::{distance, rastrigin, rosenbrock, sphere};
 use rtloop::search::rand1bin::minimize;
 use rtloop::search::{replaces, DeConfig, DeResult, GenerationReport, Objective};
 
 // ---------------------------------------------------------------------------------------------------
 // Test functions and helpers
 // ---------------------------------------------------------------------------------------------------
-
-/// Sphere: sum x_i^2, minimum 0 at the origin.
-fn sphere(x: &[f64]) -> f64 {
-    x.iter().map(|v| v * v).sum()
-}
-
-/// Rosenbrock: sum 100 (x_{i+1} - x_i^2)^2 + (1 - x_i)^2, minimum 0 at (1, ..., 1).
-fn rosenbrock(x: &[f64]) -> f64 {
-    x.windows(2)
-        .map(|w| 100.0 * (w[1] - w[0] * w[0]).powi(2) + (1.0 - w[0]).powi(2))
-        .sum()
-}
-
-/// Rastrigin: 10 n + sum x_i^2 - 10 cos(2 pi x_i), global minimum 0 at the origin; every other integer
-/// lattice point is a local minimum with value >= ~1.
-fn rastrigin(x: &[f64]) -> f64 {
-    10.0 * x.len() as f64
-        + x.iter()
-            .map(|v| v * v - 10.0 * (2.0 * std::f64::consts::PI * v).cos())
-            .sum::<f64>()
-}
-
-fn distance(a: &[f64], b: &[f64]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y) * (x - y))
-        .sum::<f64>()
-        .sqrt()
-}
 
 fn cfg(population: usize, generations: usize, seed: u64) -> DeConfig {
     DeConfig {

@@ -1,0 +1,78 @@
+"""The field of view of a photo without EXIF, refined from the ball resting on the floor: where the board
+alone fixes it loosely, each field of view within REACH_SIGMAS of the board's estimate poses the camera on
+the board and places a ball of the known radius resting on that floor; the outline such a ball projects
+fits the photo's edges best at the true field of view (a wrong one makes the resting ball's outline too
+large or too small, too high or too low, for its place on the floor). The refined field of view is the
+minimum of the outline's RMS residual over a grid, by a parabola through the best three.
+docs/acquisition.md, "No EXIF"."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ._common import AcquisitionError
+from .ball import locate_ball
+from .camera import focal_from_vfov
+from .pose import FloorPose, estimate_floor_pose
+
+__all__ = ["REACH_SIGMAS", "FocalRefinement", "refine_vfov_by_ball"]
+
+#: The grid reaches this many of the board's standard deviations either side of its estimate, at most
+#: REACH_MAX_DEG, in steps of a third of a standard deviation (at least STEP_MIN_DEG).
+REACH_SIGMAS = 3.0
+REACH_MAX_DEG = 8.0
+STEP_MIN_DEG = 0.2
+
+
+@dataclass
+class FocalRefinement:
+    """The refined field of view and what gave it: ``grid`` (vfov deg, outline RMS px) per field of view
+    tried where a ball was found."""
+
+    vfov_deg: float
+    board_vfov_deg: float
+    board_std_deg: float
+    grid: list[tuple[float, float]]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"vfov_deg": self.vfov_deg, "board_vfov_deg": self.board_vfov_deg, "board_std_deg": self.board_std_deg,
+                "grid": [[round(v, 4), round(r, 4)] for v, r in self.grid]}
+
+
+def refine_vfov_by_ball(photo: np.ndarray, spec: Any, radius: float, pose: FloorPose, hint: tuple[float, float, float],
+                        *, locate: dict[str, Any], where: str) -> FocalRefinement | None:
+    """The vertical field of view at which a ball of ``radius`` resting on the floor the board gives best
+    fits the photo's outline (``hint``: the ball's centre and radius in pixels found at the board's
+    estimate; ``locate``: :func:`locate_ball`'s other keyword arguments). None where fewer than three
+    fields of view found the ball."""
+    h = photo.shape[0]
+    v0, std = pose.camera.vfov_deg, float(pose.vfov_std_deg or 0.0)
+    reach = min(REACH_SIGMAS * std, REACH_MAX_DEG)
+    step = max(std / 3.0, STEP_MIN_DEG)
+    n = max(1, int(math.floor(reach / step)))
+    grid: list[tuple[float, float]] = []
+    for k in range(-n, n + 1):
+        v = v0 + k * step
+        if not 3.0 <= v <= 150.0:
+            continue
+        try:
+            p = estimate_floor_pose(photo, spec, focal_px=focal_from_vfov(v, h), focal_source="board", where=where)
+            silhouette, _ = locate_ball(photo, p.camera, radius, hint=hint, where=where, **locate)
+        except AcquisitionError:
+            continue
+        if math.isfinite(silhouette.rms_px):
+            grid.append((v, float(silhouette.rms_px)))
+    if len(grid) < 3:
+        return None
+    vs, rs = np.array([g[0] for g in grid]), np.array([g[1] for g in grid])
+    i = int(np.argmin(rs))
+    best = float(vs[i])
+    if 0 < i < len(vs) - 1:  # a parabola through the best and its neighbours
+        a, b, _ = np.polyfit(vs[i - 1:i + 2], rs[i - 1:i + 2] ** 2, 2)
+        if a > 0:
+            best = float(np.clip(-b / (2 * a), vs[i - 1], vs[i + 1]))
+    return FocalRefinement(best, v0, std, grid)

@@ -1,0 +1,100 @@
+"""The error bars a fit reports (``u["bars"]``): the block sandwich's sigma (``u["robust"]``; none where it
+cannot be formed, with its reason), widened by what the model lacks, and every parameter the data do not
+determine reported as not determined, with the reason, rather than as a sigma larger than the question.
+
+- **What the model lacks**: the goodness verdict's structured residual (:mod:`rtloop.fit.structure`: each
+  object's smooth residual beyond what fine residual leaves, over its noise floor), summed over the objects,
+  is ``model_lacks``; every sigma is multiplied by ``widened_by`` = max(1, model_lacks / WIDEN_PER): in
+  proportion to it. A photo the model explains (within the floor, or whose excess is texture and noise)
+  keeps the sandwich's bars.
+- **Not determined**: a light coordinate whose sigma exceeds LIGHT_DETERMINED of the light's distance from
+  the subject or LIGHT_SIGMA_MAX_M (the direction then is what the photo fixes: ``light_distance``), or every light coordinate
+  where that distance is not determined; any other parameter (a product, the intensity, an albedo, an
+  environment) whose sigma exceeds a uniform distribution's over its bounds (range / sqrt(12): the photo
+  says no more than the bounds), or, for a product, its own value (a colour known to no better than 100 %).
+  Each gets ``sigma`` None and ``why``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+__all__ = ["LIGHT_DETERMINED", "LIGHT_SIGMA_MAX_M", "WIDEN_PER", "error_bars", "model_lacks"]
+
+#: The bars are widened by model_lacks / WIDEN_PER (at least 1). Chosen on the coverage fixtures
+#: (benches/coverage.py, camera class: vignetting and tone curves the model lacks): 3 left 3 of the 17
+#: judged photos' lights beyond 3 sigma, with a light sigma of 0.6 m; 2 none beyond, at most 0.42 m.
+WIDEN_PER = 2.0
+
+#: A light coordinate is determined when its sigma is at most this fraction of the light's distance from
+#: the subject (one eighth: about 7 degrees of direction) ...
+LIGHT_DETERMINED = 0.125
+#: ... and at most this many metres (scenes are in metres): a light placed to no better than half a metre
+#: is not placed, whatever its distance.
+LIGHT_SIGMA_MAX_M = 0.5
+
+_LIGHT = ("light.position.x", "light.position.y", "light.position.z")
+
+
+def model_lacks(goodness: dict[str, Any] | None) -> float:
+    """The structured residual over the noise floor, all objects together (0 where the goodness of fit
+    found the residual within its floor or computed no split)."""
+    per = (goodness or {}).get("per_object") or {}
+    excess = floor = 0.0
+    for name, v in per.items():
+        s = v.get("structure")
+        if name == "background" or not s or s.get("floor") is None:
+            continue
+        excess += float(s["excess"])
+        floor += float(s["floor"])
+    return excess / floor if floor > 0 else 0.0
+
+
+def error_bars(u: dict[str, Any], d: dict[str, Any], bounds: dict[str, tuple[float, float]],
+               values: dict[str, float], goodness: dict[str, Any] | None) -> dict[str, Any]:
+    """The reported bars from an uncertainty estimate ``u`` (its robust sigma and product sigma), the fitted scene dict ``d``, each parameter's ``bounds`` and fitted ``values`` (by name;
+    products by ``products.<object>.<c>``), and the fit's ``goodness``. Returns ``sigma`` (name: float or
+    None), ``not_determined`` (name: why), ``widened_by``, ``model_lacks`` and ``source``."""
+    base = u.get("robust") or {}
+    source = "robust"
+    sig = {**(base.get("sigma") or {}), **(base.get("product_sigma") or {})}
+    lacks = model_lacks(goodness)
+    widen = max(1.0, lacks / WIDEN_PER)
+    out: dict[str, float | None] = {}
+    why: dict[str, str] = {}
+    distance = base.get("light_distance") or u.get("light_distance")
+    for name, s in sig.items():
+        if s is None:
+            out[name] = None
+            why[name] = base.get("why_none") or ("no used pixel fixes it, or the image fixes only a combination with "
+                                                 "others (see warnings)")
+            continue
+        s = float(s) * widen
+        out[name] = s
+        if name in _LIGHT and distance:
+            r = float(distance.get("distance_m") or 0.0)
+            if not distance.get("distance_determined", True):
+                why[name] = ("the light's distance is not determined: " + distance.get("why", "")
+                             ).rstrip(": ") + "; its direction is (light_distance)"
+            elif r > 0 and s > LIGHT_DETERMINED * r:
+                why[name] = (f"its sigma ({s:.3g} m) exceeds {LIGHT_DETERMINED:g} of the light's distance from the "
+                             f"subject ({r:.3g} m): the photo does not place the light along this axis")
+            elif s > LIGHT_SIGMA_MAX_M:
+                why[name] = (f"its sigma ({s:.3g} m) exceeds {LIGHT_SIGMA_MAX_M:g} m: the photo does not place the "
+                             "light along this axis")
+        elif name in bounds:
+            lo, hi = bounds[name]
+            spread = (hi - lo) / math.sqrt(12.0) if math.isfinite(hi - lo) else math.inf
+            if s > spread:
+                why[name] = (f"its sigma ({s:.3g}) exceeds a uniform one over its bounds [{lo:.3g}, {hi:.3g}] "
+                             f"({spread:.3g}): the photo says no more than the bounds")
+        if name not in why and name.startswith("products.") and name in values and s > abs(values[name]):
+            why[name] = (f"its sigma ({s:.3g}) exceeds its value ({values[name]:.3g}): the photo does not fix this "
+                         "colour (an object too dark, too small or unlit)")
+        if name in why:
+            out[name] = None
+    return {"sigma": out, "not_determined": why, "widened_by": widen, "model_lacks": lacks, "source": source,
+            "rule": (f"the {source} sigma times max(1, model_lacks / {WIDEN_PER:g}); a light coordinate over "
+                     f"{LIGHT_DETERMINED:g} of the light's distance or {LIGHT_SIGMA_MAX_M:g} m, or another parameter "
+                     "over a uniform sigma on its bounds (a product over its value), is not determined")}

@@ -1,0 +1,53 @@
+//! The standard test functions, each written out from its definition (all with minimum 0), independently of
+//! the copies in `tests/common/test_functions.rs` that the Python test hooks share: `lshade.rs` checks those
+//! against these.
+
+use std::f64::consts::{E, PI};
+
+/// Sphere: sum x_i^2, minimum 0 at the origin.
+pub fn sphere(x: &[f64]) -> f64 {
+    x.iter().map(|v| v * v).sum()
+}
+
+/// Rosenbrock: sum 100 (x_{i+1} - x_i^2)^2 + (1 - x_i)^2, minimum 0 at (1, ..., 1).
+pub fn rosenbrock(x: &[f64]) -> f64 {
+    (0..x.len().saturating_sub(1))
+        .map(|i| 100.0 * (x[i + 1] - x[i] * x[i]).powi(2) + (1.0 - x[i]).powi(2))
+        .sum()
+}
+
+/// Rastrigin: sum x_i^2 - 10 cos(2 pi x_i) + 10, minimum 0 at the origin; every other integer lattice point
+/// is a local minimum with value >= ~1, so a search of a few dozen evaluations from random points ends in one.
+pub fn rastrigin(x: &[f64]) -> f64 {
+    x.iter()
+        .map(|v| v * v - 10.0 * (2.0 * PI * v).cos() + 10.0)
+        .sum()
+}
+
+/// Ackley (a = 20, b = 0.2, c = 2 pi), minimum 0 at the origin.
+pub fn ackley(x: &[f64]) -> f64 {
+    let n = x.len() as f64;
+    let a = (x.iter().map(|v| v * v).sum::<f64>() / n).sqrt();
+    let b = x.iter().map(|v| (2.0 * PI * v).cos()).sum::<f64>() / n;
+    20.0 + E - 20.0 * (-0.2 * a).exp() - b.exp()
+}
+
+/// Griewank, minimum 0 at the origin.
+pub fn griewank(x: &[f64]) -> f64 {
+    let mut s = 0.0;
+    let mut p = 1.0;
+    for (i, v) in x.iter().enumerate() {
+        s += v * v;
+        p *= (v / ((i + 1) as f64).sqrt()).cos();
+    }
+    s / 4000.0 - p + 1.0
+}
+
+/// Euclidean distance.
+pub fn distance(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y) * (x - y))
+        .sum::<f64>()
+        .sqrt()
+}

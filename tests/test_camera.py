@@ -1,0 +1,183 @@
+"""The camera between the scene and the file (rtloop.fit.camera): vignetting and a tone curve, on Mitsuba
+renders passed through a camera's processing (tests/fixtures/camera, tools/make_camera_photos.py), scored
+against their truth."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import rtloop
+from rtloop.errors import RtloopError
+
+FIXTURES = Path(__file__).parent / "fixtures" / "camera"
+PHOTOS = Path(__file__).parent / "fixtures" / "photos"
+
+
+def _load(folder: Path) -> tuple[rtloop.Scene, np.ndarray, dict, dict]:
+    scene = rtloop.load_scene(folder / "scene_input.json")
+    image = rtloop.load_image(folder / "objective.png", scene)
+    return scene, image, json.loads((folder / "scene.json").read_text()), json.loads((folder / "meta.json").read_text())
+
+
+def _errors(res: rtloop.FitResult, truth: dict) -> tuple[float, float, float]:
+    """Light error (m), worst product error and worst product error up to one common scale (relative to
+    each object's largest true product), as ../shared/tools/score_result.py measures them."""
+    fitted = res.scene.to_dict()
+    light = float(np.linalg.norm(np.subtract(fitted["light"]["position"], truth["light"]["position"])))
+
+    def products(s: dict) -> np.ndarray:
+        rgb = float(s["light"]["intensity"]) * np.array(s["light"].get("color", [1, 1, 1]), float)
+        return np.array([rgb * np.array(o["material"]["albedo"], float) for o in s["objects"]])
+
+    f, t = products(fitted), products(truth)
+    k = math.exp(float(np.mean(np.log(t / f))))
+    worst = max(float(np.max(np.abs(a - b)) / np.max(b)) for a, b in zip(f, t))
+    scaled = max(float(np.max(np.abs(k * a - b)) / np.max(b)) for a, b in zip(f, t))
+    return light, worst, scaled
+
+
+def _falloff(scene: rtloop.Scene, k1: float, k2: float) -> np.ndarray:
+    """cos^4 x (1 + k1 r^2 + k2 r^4) of a pinhole with the scene's vertical field of view, r = 1 at the
+    corner (written here from the camera, independently of the package)."""
+    h, w = scene.height, scene.width
+    f = (h / 2) / math.tan(math.radians(scene.to_dict()["camera"]["vfov_deg"]) / 2)
+    yy, xx = np.mgrid[0:h, 0:w]
+    px, py = xx + 0.5 - w / 2, yy + 0.5 - h / 2
+    cos = f / np.sqrt(f * f + px * px + py * py)
+    r2 = (px * px + py * py) / ((w / 2) ** 2 + (h / 2) ** 2)
+    return cos**4 * (1 + k1 * r2 + k2 * r2 * r2)
+
+
+@pytest.mark.parametrize("name", ["blue-ball-vignette", "orange-ball-vignette"])
+def test_vignetting_is_chosen_and_fitted_with_the_light(name):
+    scene, image, truth, meta = _load(FIXTURES / name)
+    res = rtloop.fit(scene, image, uncertainty=False)
+    cam = res.model["camera"]
+    assert cam["terms"] == ["vignetting"]
+    assert cam["evidence"]["vignetting"]["selected"] and not cam["evidence"]["tone"]["selected"]
+    light, worst, _ = _errors(res, truth)
+    # without the term: 7.7 and 119 cm, the floor's products 27 % and 52 % off
+    assert light < 0.01
+    assert worst < 0.02
+    k = cam["vignetting"]
+    assert (k["k1"], k["k2"]) == pytest.approx((meta["post"]["k1"], meta["post"]["k2"]), abs=0.03)
+
+
+@pytest.mark.parametrize("name", ["blue-ball-tone", "orange-ball-tone"])
+def test_tone_curve_is_chosen_and_fitted_with_the_light(name):
+    scene, image, truth, _ = _load(FIXTURES / name)
+    res = rtloop.fit(scene, image, uncertainty=False)
+    cam = res.model["camera"]
+    assert cam["terms"] == ["tone"]
+    light, _, scaled = _errors(res, truth)
+    # without the term: 100 cm off, products 47 % and 39 % off; the curve's top (its scale) is weakly
+    # determined, the colours relative to each other are
+    assert light < 0.05
+    assert scaled < 0.05
+    curve = np.array(cam["tone"]["linear_at_knots"])
+    assert (np.diff(curve) >= 0).all() and curve[0] == 0 and curve[-1] == pytest.approx(1.0)
+    # the truth's curve: gamma 2.2 under the S-curve u^a / (u^a + (1 - u)^a), inverted at the knots
+    v = np.clip(np.array(cam["tone"]["knots"]), 1e-9, 1 - 1e-9)
+    q = (v / (1 - v)) ** (1 / 1.5)
+    true = (q / (1 + q)) ** 2.2
+    assert np.max(np.abs(curve - true)) < 0.1
+
+
+@pytest.mark.parametrize("source", ["k1,k2", "flat field"])
+def test_a_given_falloff_divides_the_photo(source):
+    scene, image, truth, meta = _load(FIXTURES / "blue-ball-vignette")
+    k1, k2 = meta["post"]["k1"], meta["post"]["k2"]
+    if source == "k1,k2":
+        res = rtloop.fit(scene, image, vignetting=(k1, k2), uncertainty=False)
+    else:
+        flat = 0.8 * _falloff(scene, k1, k2)  # a flat white target, exposed below white
+        res = rtloop.fit(scene, image, flat_field=np.repeat(flat[..., None], 3, axis=2).astype(np.float32),
+                         uncertainty=False)
+    assert res.model["camera"]["terms"] == ["vignetting"]
+    light, worst, _ = _errors(res, truth)
+    assert light < 0.01
+    assert worst < 0.02
+
+
+@pytest.mark.parametrize("name", ["direct-overhead", "direct-two-balls", "env-overhead", "bounce-red-ball"])
+def test_photos_without_a_camera_keep_the_ordinary_fit_bit_for_bit(name):
+    scene, image, _, _ = _load(PHOTOS / name)
+    auto = rtloop.fit(scene, image, uncertainty=False)
+    off = rtloop.fit(scene, image, uncertainty=False, vignetting="off", tone="off")
+    assert auto.model["camera"]["terms"] == []
+    assert auto.x == off.x
+    assert auto.products == off.products
+
+
+@pytest.mark.parametrize("name", ["blue-ball-bayer", "orange-ball-bayer"])
+def test_sensor_noise_and_demosaicing_select_no_camera_term(name):
+    scene, image, truth, _ = _load(FIXTURES / name)
+    res = rtloop.fit(scene, image, uncertainty=False)
+    assert res.model["camera"]["terms"] == []
+    light, worst, _ = _errors(res, truth)
+    assert light < 0.06 and worst < 0.03
+
+
+def test_linear_images_stay_linear_and_show_their_vignetting():
+    scene, _, truth, meta = _load(FIXTURES / "blue-ball-vignette")
+    linear = np.load(FIXTURES / "blue-ball-linear.npz")["linear"].astype(np.float32)
+    vignetted = np.minimum(linear * _falloff(scene, meta["post"]["k1"], meta["post"]["k2"])[..., None], 1.0)
+    res = rtloop.fit(scene, vignetted.astype(np.float32), uncertainty=False)
+    assert "tone" not in res.model["camera"]["evidence"]  # float (linear) data: no tone curve is tested
+    assert res.model["camera"]["terms"] == ["vignetting"]
+    light, worst, _ = _errors(res, truth)
+    assert light < 0.01 and worst < 0.02
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    ({"vignetting": "maybe"}, "vignetting"), ({"vignetting": (1.0,)}, "vignetting"),
+    ({"vignetting": (math.nan, 0.0)}, "vignetting"), ({"vignetting": (-2.0, 0.0)}, "vignetting"),
+    ({"tone": "srgb"}, "tone"), ({"flat_field": np.ones((3, 3), np.float32)}, "flat_field"),
+    ({"flat_field": np.zeros((96, 128), np.float32)}, "flat_field"),
+    ({"flat_field": np.ones((96, 128), np.uint8)}, "flat_field"),
+    ({"flat_field": np.ones((96, 128), np.float32), "vignetting": (0.0, 0.0)}, "flat_field"),
+])
+def test_bad_camera_arguments_name_the_argument(kwargs, field):
+    scene, image, _, _ = _load(FIXTURES / "blue-ball-vignette")
+    with pytest.raises(RtloopError, match=f"^{field}: "):
+        rtloop.fit(scene, image, uncertainty=False, **kwargs)
+
+
+def test_cli_prints_the_camera_and_takes_the_flags(tmp_path, capsys):
+    from rtloop.cli.fit import main
+
+    folder = FIXTURES / "orange-ball-tone"
+    assert main([str(folder / "scene_input.json"), str(folder / "objective.png"), "--out", str(tmp_path / "a"),
+                 "--uncertainty", "off", "--vignetting", "off", "-q"]) == 0
+    out = capsys.readouterr().out
+    assert "camera: tone" in out and "tone: added" in out
+    report = json.loads((tmp_path / "a" / "result.json").read_text())["fit_report"]
+    assert report["model"]["camera"]["terms"] == ["tone"]
+    assert "vignetting" not in report["model"]["camera"]["evidence"]
+    assert main([str(folder / "scene_input.json"), str(folder / "objective.png"), "--out", str(tmp_path / "b"),
+                 "--vignetting", "1,x", "-q"]) == 2
+    assert "--vignetting" in capsys.readouterr().err
+
+
+def test_cli_flat_field_file(tmp_path, capsys):
+    import cv2
+
+    from rtloop.cli.fit import main
+
+    folder = FIXTURES / "blue-ball-vignette"
+    scene, _, truth, meta = _load(folder)
+    flat = (0.8 * _falloff(scene, meta["post"]["k1"], meta["post"]["k2"])).astype(np.float32)
+    cv2.imwrite(str(tmp_path / "flat.tiff"), np.repeat(flat[..., None], 3, axis=2))  # float TIFF: linear
+    assert main([str(folder / "scene_input.json"), str(folder / "objective.png"), "--out", str(tmp_path / "a"),
+                 "--flat-field", str(tmp_path / "flat.tiff"), "--uncertainty", "off", "-q"]) == 0
+    assert "from the flat field" in capsys.readouterr().out
+    fitted = json.loads((tmp_path / "a" / "result.json").read_text())
+    assert np.linalg.norm(np.subtract(fitted["light"]["position"], truth["light"]["position"])) < 0.01
+    assert main([str(folder / "scene_input.json"), str(folder / "objective.png"), "--out", str(tmp_path / "b"),
+                 "--flat-field", str(tmp_path / "missing.png"), "-q"]) == 1
+    assert "missing.png" in capsys.readouterr().err
