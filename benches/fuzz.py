@@ -86,8 +86,19 @@ def _lights_base(base: dict) -> dict:
     return d
 
 
+def _coat_base(base: dict) -> dict:
+    """The base with its first object coated (``material.coat``), its roughness and specular weight free."""
+    d = copy.deepcopy(base)
+    first = d["objects"][0]
+    first["material"] = {**first.get("material", {}), "specular": 0.8, "coat": {"roughness": 0.15, "ior": 1.5}}
+    d["fit"][f"objects.{first['name']}.roughness"] = {"min": 0.05, "max": 0.5}
+    d["fit"][f"objects.{first['name']}.specular"] = {"min": 0, "max": 2}
+    return d
+
+
 BASE = _base()
 LIGHTS_BASE = _lights_base(BASE)
+COAT_BASE = _coat_base(BASE)
 FIT_SCENES = _fit_scenes(BASE)
 
 
@@ -404,6 +415,33 @@ def _strict(rng: random.Random, c: Counts, tmp: Path) -> None:
         _strict_estimate(rng, c)
 
 
+def _coat(rng: random.Random, c: Counts) -> None:
+    """A coated scene mutated (its coat's fields most often) through load_scene and render, or fitted by
+    default (the lobe chosen from the photo) to a render of a coated ball under another light, with noise."""
+    d = copy.deepcopy(COAT_BASE)
+    coat = d["objects"][0]["material"]["coat"]
+    if rng.random() < 0.5:
+        for _ in range(rng.randint(1, 3)):
+            coat[rng.choice(["roughness", "ior", "other"])] = odd(rng) if rng.random() < 0.6 else rng.uniform(-1, 4)
+        if rng.random() < 0.2:
+            d = mutate(rng, d)
+        img = rtloop.render(rtloop.load_scene(d), width=rng.choice([None, 5]), height=None, spp=1)
+        if not finite(img):
+            c.bump("nan_or_inf")
+        return
+    truth = copy.deepcopy(d)
+    truth["objects"][0]["material"]["coat"]["roughness"] = rng.choice([0.03, 0.1, 0.3, 0.9])
+    box = truth["fit"]["light.position"]
+    truth["light"]["position"] = [rng.uniform(lo, hi) for lo, hi in zip(box["min"], box["max"])]
+    arr = rtloop.render(d if rng.random() < 0.5 else truth)
+    arr = arr + np.random.default_rng(rng.randrange(2**32)).normal(0, rng.choice([0, 0.01]), arr.shape)
+    user = copy.deepcopy(BASE)  # the user's scene: a matte ball; the fit tries the coat where it shows
+    scene = user if rng.random() < 0.7 else d
+    res = rtloop.fit(scene, np.maximum(arr, 0).astype(np.float32), protocol="rtloop", seed=rng.randrange(100),
+                     population=8, generations=1)
+    check_fit(res, scene, c)
+
+
 def _framing(rng: random.Random, c: Counts) -> None:
     """A photo of the two-ball scene turned, zoomed and shifted by a random warp (or noise, or a constant),
     fitted with a random framing mode: it fits (finite, within bounds, the framing's numbers finite) or
@@ -436,7 +474,7 @@ def _framing(rng: random.Random, c: Counts) -> None:
         c.bump("nan_or_inf")
 
 
-SURFACES = ("batch", "ids", "mesh", "insert", "exif", "strict", "framing")
+SURFACES = ("batch", "ids", "mesh", "insert", "exif", "strict", "framing", "coat")
 
 
 def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None = None) -> None:
@@ -446,7 +484,8 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
             batch(rng, c, tmp, ids=only == "ids")
         else:
             {"mesh": _mesh, "insert": _insert_cli, "exif": _exif, "strict": lambda r, t: _strict(r, c, t),
-             "framing": lambda r, t: _framing(r, c)}[only](rng, tmp)
+             "framing": lambda r, t: _framing(r, c),
+             "coat": lambda r, t: _coat(r, c)}[only](rng, tmp)
         c.bump("ok")
         return
     if rng.random() < 0.03:
@@ -457,7 +496,7 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
     if kind < 0.1:  # mesh files, EXIF tags, rtloop-insert arguments
         [_mesh, _exif, _insert_cli][int(kind * 30)](rng, tmp)
     elif kind < 0.55:  # scenes
-        scene = rtloop.load_scene(mutate(rng, rng.choice([BASE, LIGHTS_BASE])))
+        scene = rtloop.load_scene(mutate(rng, rng.choice([BASE, LIGHTS_BASE, COAT_BASE])))
         img = rtloop.render(scene, width=rng.choice([None, 4, 7]), height=None, spp=1)
         if not finite(img):
             c.bump("nan_or_inf")
@@ -564,7 +603,7 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--only", metavar="SURFACE[,SURFACE...]",
                     help=f"only these surfaces, in turn: {', '.join(SURFACES)} (batch: job lines of rtloop-fit "
-                    "--batch; ids: their job ids; strict: rtloop-scene's --strict)")
+                    "--batch; ids: their job ids; strict: rtloop-scene's --strict; coat: coated scenes and fits)")
     ap.add_argument("--bound", type=float, default=60.0,
                     help="seconds past which one input counts as a hang (default 60)")
     ap.add_argument("--out", type=Path, metavar="FILE", help="also write the counts as markdown (e.g. "

@@ -96,6 +96,18 @@ const LIGHTS_SCENE: &str = r#"{"image": {"width": 16, "height": 12},
           "lights.sun.direction": {"min": -1, "max": 1},
           "lights.key.intensity": {"min": 0, "max": 100}}}"#;
 
+/// A scene with a coated ball (`material.coat`) whose roughness and specular weight are fitted.
+const COAT_SCENE: &str = r#"{"image": {"width": 16, "height": 12},
+  "camera": {"position": [0, 1, -5], "look_at": [0, 0.5, 0], "vfov_deg": 40},
+  "light": {"position": [2, 4, -2], "intensity": 50},
+  "objects": [
+    {"name": "ball", "shape": "sphere", "center": [0, 0.5, 0], "radius": 0.5,
+     "material": {"albedo": [0.8, 0.3, 0.2], "specular": 0.7, "coat": {"roughness": 0.2, "ior": 1.5}}},
+    {"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0]}],
+  "fit": {"light.position": {"min": [-5, 0.5, -5], "max": [5, 8, 5]},
+          "objects.ball.roughness": {"min": 0.05, "max": 0.5},
+          "objects.ball.specular": {"min": 0, "max": 2}}}"#;
+
 /// A scene with a rectangle light (a window) beside a lamp, the window's centre and intensity fitted.
 const WINDOW_SCENE: &str = r#"{"image": {"width": 16, "height": 12},
   "camera": {"position": [0, 1, -5], "look_at": [0, 0.5, 0], "vfov_deg": 40},
@@ -176,6 +188,26 @@ proptest! {
     fn mutated_light_lists_parse_or_name_a_field(pick in any::<prop::sample::Index>(), value in odd_value(),
                                                  delete in any::<bool>()) {
         mutation_is_named(LIGHTS_SCENE, pick, value, delete)?;
+    }
+
+    /// The same for a scene with a coated ball (its coat's fields and its fitted roughness).
+    #[test]
+    fn mutated_coats_parse_or_name_a_field(pick in any::<prop::sample::Index>(), value in odd_value(),
+                                           delete in any::<bool>()) {
+        mutation_is_named(COAT_SCENE, pick, value, delete)?;
+    }
+
+    /// A parsed coat renders finite, non-negative pixels for any roughness and IOR in range and any light.
+    #[test]
+    fn coats_render_finite(roughness in 1e-3f64..1.0, ior in 1.01f64..3.0, specular in 0.0f64..4.0,
+                           light in [-5.0f64..5.0, 0.6f64..8.0, -5.0f64..5.0]) {
+        let mut v: Value = serde_json::from_str(COAT_SCENE).unwrap();
+        v["objects"][0]["material"]["coat"] = serde_json::json!({"roughness": roughness, "ior": ior});
+        v["objects"][0]["material"]["specular"] = specular.into();
+        v["light"]["position"] = serde_json::json!(light);
+        let scene = Scene::from_json(&v.to_string()).unwrap();
+        let img = render::render(&scene, None, None, 1).unwrap();
+        prop_assert!(img.rgb.iter().all(|p| p.is_finite() && *p >= 0.0));
     }
 
     /// The same for a scene with a rectangle light.

@@ -137,16 +137,17 @@ def test_outputs(inputs, tmp_path, capsys):
 
 
 def test_a_refit_that_frees_a_lobe_logs_the_scenes_own_parameters(tmp_path, capsys):
-    """A photo of a glossy ball (tests/fixtures/photos/gloss-a025): the fit frees the ball's lobe (specular,
-    shininess) for its refit, a stage whose scene has two more parameters than the user's. Its generations
+    """A photo of a glossy ball (tests/fixtures/photos/gloss-a025): the fit frees the ball's lobe (a coat's
+    specular weight, its roughness chosen from the photo) for its refit, a stage whose scene has more
+    parameters than the user's. Its generations
     are logged with the user's parameters like the first stage's (the CSV's columns, the snapshots rendered
     from the user's scene; it raised "expected 10 values, got 12" from the snapshot's render), and its
     progress line names it a closed-form stage (an L-SHADE budget), not one of a generation count; the
     report shows the fitted scene's parameters, the lobe at its fitted value."""
     photo = REPO / "tests" / "fixtures" / "photos" / "gloss-a025"
     out = tmp_path / "gloss"
-    code, _, stderr = run(capsys, photo / "scene_input.json", photo / "objective.png", "--out", out,
-                          "--final-scale", 1, "--final-spp", 1, "--report")
+    code, stdout, stderr = run(capsys, photo / "scene_input.json", photo / "objective.png", "--out", out,
+                               "--final-scale", 1, "--final-spp", 1, "--report")
     assert code == 0, stderr
     report = json.loads((out / "result.json").read_text(encoding="utf-8"))["fit_report"]
     assert "specular" in report["model"]["terms"]
@@ -163,7 +164,10 @@ def test_a_refit_that_frees_a_lobe_logs_the_scenes_own_parameters(tmp_path, caps
     # The report plots the fitted scene's parameters, the lobe at its fitted value (it raised "row has 10
     # parameter values; the scene has 12").
     page = (out / "report.html").read_text(encoding="utf-8")
-    assert "objects.ball.shininess" in page and "freed by the fit for its refit" in page
+    # the ball is coated plastic (Mitsuba's roughplastic): the lobe freed is the coat's specular weight
+    assert report["model"]["evidence"]["specular"]["lobe"] == "coat"
+    assert "objects.ball.specular" in page and "freed by the fit for its refit" in page
+    assert "lobe: a clear coat (GGX roughness" in stdout + stderr
 
 
 def test_paper_protocol_generation_pair_and_options(inputs, tmp_path, capsys):

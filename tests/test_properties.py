@@ -57,6 +57,43 @@ def mutated_scenes():
     return mutated(SMALL, FIELDS)
 
 
+COATED = copy.deepcopy(SMALL)
+COATED["objects"][0]["material"] = {**COATED["objects"][0]["material"], "coat": {"roughness": 0.2, "ior": 1.5}}
+COATED["fit"]["objects.ball.roughness"] = {"min": 0.05, "max": 0.5}
+COAT_VALUES = st.one_of(NUMBERS, st.sampled_from([None, "x", [], {}, [0.1], True]))
+
+
+@st.composite
+def mutated_coats(draw) -> dict:
+    """COATED with its coat's fields, the roughness's bounds or the coat itself replaced or deleted."""
+    d = copy.deepcopy(COATED)
+    coat = d["objects"][0]["material"]["coat"]
+    for _ in range(draw(st.integers(1, 3))):
+        which = draw(st.sampled_from(["roughness", "ior", "extra", "coat", "min", "max", "drop"]))
+        if which in ("roughness", "ior", "extra"):
+            coat[which] = draw(COAT_VALUES)
+        elif which == "coat":
+            d["objects"][0]["material"]["coat"] = draw(COAT_VALUES)
+        elif which == "drop":
+            coat.pop(draw(st.sampled_from(["roughness", "ior"])), None)
+        else:
+            d["fit"]["objects.ball.roughness"][which] = draw(COAT_VALUES)
+    return d
+
+
+@PROPS
+@given(mutated_coats())
+def test_a_mutated_coat_loads_and_renders_finite_or_is_one_line_naming_it(d):
+    try:
+        scene = rtloop.load_scene(d)
+    except rtloop.SceneError as e:
+        msg = str(e)
+        assert "\n" not in msg and ("coat" in msg or "roughness" in msg), msg
+        return
+    img = rtloop.render(scene, 8, 6)
+    assert np.isfinite(img).all() and (img >= 0).all()
+
+
 @PROPS
 @given(mutated_scenes())
 def test_a_mutated_scene_loads_and_renders_finite_or_is_a_scene_error(d):

@@ -5,7 +5,7 @@
 
 use glam::Vec3A;
 
-use super::lobe::half_cos;
+use super::lobe::{coat_factors, half_cos};
 use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, SATURATED};
 use super::pixels::{gathers, group, irradiance, shadow, Gather, Group, Light, Sky, BLOCK};
 use super::simd::{self, Simd};
@@ -216,7 +216,26 @@ impl Kernel {
                 let r = start..start + len;
                 irradiance::<AVX2>(g, r.clone(), &light, &mut e[..len]);
                 shadow(g, r.clone(), &light, &mut e[..len]);
-                if specular || sky || bounce.is_some() {
+                if let Some(coat) = p.coat(obj) {
+                    // the coat: diffuse and lobe factors per pixel (`lobe::coat_factors`)
+                    let mut lobes = [0.0f32; BLOCK];
+                    coat_factors(g, r.clone(), &light, coat, &mut e[..len], &mut lobes[..len]);
+                    for c in 0..3 {
+                        let kd = p.exposure * light.rgb[c] * m.albedo[c];
+                        let ks = p.exposure * light.rgb[c] * m.specular;
+                        let mut sum = 0.0f32;
+                        for (i, s) in r.clone().enumerate() {
+                            let mut base = if sky { a[c] + ae[c] * g.sky[s] } else { a[c] };
+                            if let Some(b) = &bounce {
+                                base += m.albedo[c] * b[c][s];
+                            }
+                            let v = base + kd * e[i] + ks * lobes[i];
+                            let v = if clip { v.min(1.0) } else { v };
+                            sum += self.norm.penalty(enc.any(v) - gt[c][s]);
+                        }
+                        acc[c] += sum as f64;
+                    }
+                } else if specular || sky || bounce.is_some() {
                     // max(0, n·h)^s per pixel, once for the three channels (the cosines in lanes)
                     let mut lobes = [0.0f32; BLOCK];
                     if specular {

@@ -3,6 +3,52 @@
 //! two-stage kernel.
 
 use super::pixels::{Group, Light};
+use crate::render::coat::Coat;
+use crate::render::light::incidence;
+use glam::Vec3A;
+
+/// Why the closed form cannot take a scene's coat, if it cannot: the bounce's closed form does not model
+/// a coated object.
+pub fn coat_blocker(scene: &crate::scene::Scene) -> Option<String> {
+    let o = scene.objects.iter().find(|o| o.material.coat.is_some())?;
+    scene.interreflection.then(|| {
+        format!(
+            "objects.{} has a coat and the scene has interreflection",
+            o.name
+        )
+    })
+}
+
+/// The coat's factors over the block `r`: `e` holds each pixel's unit-light irradiance (cos/d², shadowed)
+/// and becomes the diffuse factor per unit albedo, e·`Coat::diffuse`; `b` gets the lobe's, e·`Coat::specular`
+/// (the renderer's `Coat` calls, on the same directions as `shade`'s).
+pub(crate) fn coat_factors(
+    g: &Group,
+    r: std::ops::Range<usize>,
+    light: &Light,
+    coat: &Coat,
+    e: &mut [f32],
+    b: &mut [f32],
+) {
+    let pos = Vec3A::from_array(light.pos);
+    let dir = light.dir.map(Vec3A::from_array);
+    for (i, s) in r.enumerate() {
+        if e[i] <= 0.0 {
+            e[i] = 0.0;
+            b[i] = 0.0;
+            continue;
+        }
+        let at = |v: &[Vec<f32>; 3]| Vec3A::new(v[0][s], v[1][s], v[2][s]);
+        let (n, v, p) = (at(&g.n), at(&g.v), at(&g.p));
+        let Some((l, _, _)) = incidence(pos, dir, p) else {
+            e[i] = 0.0;
+            b[i] = 0.0;
+            continue;
+        };
+        b[i] = (e[i] * coat.specular(n, l, v)).min(f32::MAX);
+        e[i] *= coat.diffuse(n.dot(l), n.dot(v));
+    }
+}
 
 /// max(0, n·h) for each pixel of the block `r` into `out` (h the half vector of the unit directions to
 /// the light, `light::toward`, and to the eye): the cosine whose power is `brdf::blinn_phong`, over the
@@ -55,7 +101,6 @@ mod tests {
     use super::*;
     use crate::fitness::pixels::BLOCK;
     use crate::render::light::toward;
-    use glam::Vec3A;
 
     /// A group of the given pixels (position, normal, view); nothing else set.
     fn pixels_of(px: &[([f32; 3], [f32; 3], [f32; 3])]) -> Group {

@@ -8,6 +8,7 @@
 use glam::Vec3A;
 
 use crate::error::{Error, Result};
+mod blocker;
 pub mod bounce;
 mod held;
 pub mod kernel;
@@ -24,12 +25,13 @@ use crate::params::{ParamLayout, Target};
 use crate::render::{shade, GBuffer, Geometry, PShape, ShadeParams, Surfel};
 use crate::scene::Scene;
 use crate::search::Objective;
+pub use blocker::{constant_term, projection_blocker};
 pub use kernel::{Candidate, Kernel};
 use loss::penalty_sums;
 pub use loss::{Norm, Space, SrgbLut, SATURATED};
 pub use pixels::Sky;
 pub use pixels::{interior, interior_by, ActivePixels};
-pub use projected::{constant_term, projection_blocker, Projection, Solved};
+pub use projected::{Projection, Solved};
 pub use refine::{encoded_line_min, l1_line_min, EncodedTerm};
 pub use simd::{path as simd_path, scalar_paths};
 pub use solve::{closed_form, fallback_sums, solve_object, SolveSums};
@@ -291,7 +293,10 @@ impl Fitness {
             if let Some((path, _, _)) = layout.entries.iter().find(|(_, t, _)| {
                 !matches!(
                     t,
-                    Target::LightPosition | Target::LightDirection | Target::Shininess(_)
+                    Target::LightPosition
+                        | Target::LightDirection
+                        | Target::Shininess(_)
+                        | Target::Roughness(_)
                 )
             }) {
                 return Err(Error::Invalid(format!(

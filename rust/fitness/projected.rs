@@ -6,15 +6,14 @@ use rayon::prelude::*;
 use super::bounce::Gauge;
 use super::held::HeldLoss;
 use super::kernel::{Candidate, Kernel};
-use super::lobe::half_cos;
+use super::lobe::{coat_factors, half_cos};
 use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, LANES};
-use super::pixels::{irradiance, shadow, Group, Light, Sky, BLOCK};
+use super::pixels::{irradiance, shadow, Group, Light, BLOCK};
 use super::simd::{self, Simd};
 use super::solve::{
     environment_lane_sums, fallback_sums, solve_object, solve_object_env, SolveSums,
 };
 use crate::render::brdf::{lambert, specular_per_lambert};
-use crate::scene::Scene;
 
 /// [`Kernel::projected`] for [`simd::dispatch`], one build per encoding.
 struct Projected<'a, E> {
@@ -151,6 +150,7 @@ impl Kernel {
                 &light,
                 proj,
                 p.materials[obj].shininess,
+                p.coat(obj),
                 (sat, top),
                 self.norm,
             );
@@ -235,7 +235,7 @@ impl Kernel {
     pub(crate) fn runs<'a>(
         &'a self,
         light: &'a Light,
-        p: &crate::render::ShadeParams,
+        p: &'a crate::render::ShadeParams,
         proj: &'a Projection,
         (sat, top): (f32, f32),
     ) -> Vec<Option<Run<'a>>> {
@@ -244,7 +244,16 @@ impl Kernel {
             .map(|g| {
                 g.object.map(|obj| {
                     let shininess = p.materials[obj].shininess;
-                    Run::of(g, obj, light, proj, shininess, (sat, top), self.norm)
+                    Run::of(
+                        g,
+                        obj,
+                        light,
+                        proj,
+                        shininess,
+                        p.coat(obj),
+                        (sat, top),
+                        self.norm,
+                    )
                 })
             })
             .collect()
@@ -295,75 +304,6 @@ impl Kernel {
             ek: std::array::from_fn(|c| ek[c] as f32),
             on: run.specular && q > 0.0,
         }
-    }
-}
-
-/// `None` when the closed form (the projected method) applies to `scene` with the fit section `paths`
-/// free, else why not: the one decision of it (Python's fit asks this too).
-pub fn projection_blocker(scene: &Scene, paths: &[String]) -> Option<String> {
-    let free = |p: &str| paths.iter().any(|q| q == p);
-    if !free("light.position") && !free("light.direction") {
-        return Some("neither light.position nor light.direction is free".into());
-    }
-    let ambient = scene.ambient.iter().any(|&v| v != 0.0) || free("ambient");
-    if ambient && (scene.environment.iter().any(|&v| v != 0.0) || free("environment")) {
-        return Some("the scene has both ambient light and an environment".into());
-    }
-    if ambient && scene.interreflection {
-        return Some("the scene has ambient light and interreflection".into());
-    }
-    let allowed = |p: &str| {
-        matches!(
-            p,
-            "light.position" | "light.direction" | "light.intensity" | "environment" | "ambient"
-        ) || scene.objects.iter().any(|o| {
-            ["albedo", "specular", "shininess"]
-                .iter()
-                .any(|m| p == format!("objects.{}.{m}", o.name))
-        })
-    };
-    let extra: Vec<&str> = paths
-        .iter()
-        .map(String::as_str)
-        .filter(|p| !allowed(p))
-        .collect();
-    if !extra.is_empty() {
-        return Some(format!(
-            "{} cannot be solved in closed form",
-            extra.join(", ")
-        ));
-    }
-    if free("light.intensity") {
-        let names = |f: &dyn Fn(&crate::scene::Object) -> bool| {
-            let v: Vec<&str> = scene
-                .objects
-                .iter()
-                .filter(|o| f(o))
-                .map(|o| o.name.as_str())
-                .collect();
-            v.join(", ")
-        };
-        let fixed = names(&|o| !free(&format!("objects.{}.albedo", o.name)));
-        if !fixed.is_empty() {
-            return Some(format!(
-                "light.intensity is free but the albedo of {fixed} is fixed"
-            ));
-        }
-    }
-    None
-}
-
-/// The constant-radiance term the closed form's second column models for `scene`: its occluded
-/// environment, or else its ambient light (given or free; unoccluded), or none. The projected method
-/// solves one of them (`projection_blocker` refuses both at once).
-pub fn constant_term(scene: &Scene) -> Sky {
-    let free = |p: &str| scene.fit.iter().any(|f| f.path == p);
-    if scene.environment != [0.0; 3] || free("environment") {
-        Sky::Occluded
-    } else if scene.ambient != [0.0; 3] || free("ambient") {
-        Sky::Open
-    } else {
-        Sky::Occluded
     }
 }
 
@@ -437,6 +377,8 @@ pub(crate) struct Run<'a> {
     /// The group's sky view factors when the object has an environment column.
     pub(crate) sky: Option<&'a [f32]>,
     pub(crate) shininess: f32,
+    /// The object's coat: its diffuse and specular factors replace Lambert's and the lobe's.
+    pub(crate) coat: Option<&'a crate::render::coat::Coat>,
     pub(crate) sat: f32,
     pub(crate) top: f32,
     pub(crate) norm: Norm,
@@ -451,6 +393,7 @@ impl<'a> Run<'a> {
         light: &'a Light,
         proj: &'a Projection,
         shininess: f32,
+        coat: Option<&'a crate::render::coat::Coat>,
         (sat, top): (f32, f32),
         norm: Norm,
     ) -> Run<'a> {
@@ -460,6 +403,7 @@ impl<'a> Run<'a> {
             specular: proj.specular[obj].1 > 0.0,
             sky: proj.sky(obj, g),
             shininess,
+            coat,
             sat,
             top,
             norm,
@@ -498,13 +442,15 @@ impl Run<'_> {
             let e = &mut e[i0..i0 + len];
             irradiance::<AVX2>(g, r.clone(), self.light, e);
             shadow(g, r.clone(), self.light, e);
-            for ei in e.iter_mut() {
-                *ei = lambert(*ei);
+            match self.coat {
+                // the coat's factors: diffuse per unit albedo and the lobe per unit weight
+                Some(coat) => coat_factors(g, r.clone(), self.light, coat, e, &mut b[i0..i0 + len]),
+                None => e.iter_mut().for_each(|ei| *ei = lambert(*ei)),
             }
             if self.specular || self.sky.is_some() {
                 let b = &mut b[i0..i0 + len];
                 let norm = specular_per_lambert(self.shininess);
-                if self.specular {
+                if self.specular && self.coat.is_none() {
                     // (s+8)/(8 pi) max(0, n.h)^s cos / d² = e · (s+8)/8 · max(0, n.h)^s: the cosines in
                     // lanes, the power where the light reaches the pixel
                     let mut nh = [0.0f32; BLOCK];
@@ -516,7 +462,7 @@ impl Run<'_> {
                             0.0
                         };
                     }
-                } else {
+                } else if !self.specular {
                     b.fill(0.0);
                 }
                 let zeros = [0.0f32; BLOCK];

@@ -9,6 +9,7 @@ pub mod adaptive;
 pub mod bounce;
 pub mod brdf;
 pub mod camera;
+pub mod coat;
 pub mod composite;
 pub mod environment;
 pub mod film;

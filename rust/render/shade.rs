@@ -9,6 +9,7 @@ use glam::Vec3A;
 
 use super::bounce::{gather, nearest_table, table_points, CachedPoint, GatherPoint, Gathered};
 use super::brdf::{blinn_phong, lambert, specular_scale};
+use super::coat::Coat;
 use super::environment::sky_view;
 use super::footprint::{sphere_edge_lit, terminator_cos};
 use super::hit::{occluded, Surfel};
@@ -55,6 +56,9 @@ pub struct ShadeParams {
     pub materials: Vec<PMaterial>,
     /// False when every specular is 0: the Blinn–Phong lobe is skipped entirely.
     pub any_specular: bool,
+    /// Per object its coat (`coat`), or empty when no object has one: a coated object's direct light
+    /// goes through the coat's BRDF instead of Lambert plus Blinn–Phong.
+    pub coats: Vec<Option<Coat>>,
 }
 
 impl Clone for ShadeParams {
@@ -63,6 +67,7 @@ impl Clone for ShadeParams {
             materials: Vec::with_capacity(self.materials.len()),
             tables: self.tables.clone(),
             extra_lights: self.extra_lights.clone(),
+            coats: self.coats.clone(),
             ..*self
         };
         p.materials.extend_from_slice(&self.materials);
@@ -92,12 +97,27 @@ impl Clone for ShadeParams {
         if !source.tables.is_empty() || !self.tables.is_empty() {
             self.tables.clone_from(&source.tables);
         }
+        if !source.coats.is_empty() || !self.coats.is_empty() {
+            self.coats.clone_from(&source.coats);
+        }
     }
 }
 
 /// The unit vector along `d`; straight up for a zero (or non-finite) candidate direction.
 pub fn unit_or_up(d: Vec3A) -> Vec3A {
     d.try_normalize().unwrap_or(Vec3A::Y)
+}
+
+/// Per object its coat, or empty when no object has one.
+fn coats_of(scene: &Scene) -> Vec<Option<Coat>> {
+    if scene.objects.iter().all(|o| o.material.coat.is_none()) {
+        return Vec::new();
+    }
+    scene
+        .objects
+        .iter()
+        .map(|o| o.material.coat.map(|c| Coat::new(c.roughness, c.ior)))
+        .collect()
 }
 
 fn v3(a: [f64; 3]) -> Vec3A {
@@ -132,6 +152,7 @@ impl ShadeParams {
             exposure: scene.exposure as f32,
             any_specular: false,
             materials,
+            coats: coats_of(scene),
         };
         p.update_flags();
         p
@@ -200,6 +221,12 @@ impl ShadeParams {
         self.tables = tables;
     }
 
+    /// The coat of object `i`, if it has one.
+    #[inline(always)]
+    pub fn coat(&self, i: usize) -> Option<&Coat> {
+        self.coats.get(i).and_then(|c| c.as_ref())
+    }
+
     fn update_flags(&mut self) {
         self.any_specular = self.materials.iter().any(|m| m.specular != 0.0);
     }
@@ -221,6 +248,11 @@ impl ShadeParams {
                 self.update_flags();
             }
             Target::Shininess(i) => self.materials[i].shininess = v[0] as f32,
+            Target::Roughness(i) => {
+                if let Some(Some(c)) = self.coats.get_mut(i) {
+                    *c = Coat::new(v[0], c.eta as f64);
+                }
+            }
             Target::ExtraPosition(i) => self.extra_lights[i - 1].position = v3(),
             Target::ExtraDirection(i) => {
                 self.extra_lights[i - 1].direction = Some(unit_or_up(v3()))
@@ -489,9 +521,17 @@ fn direct(
     ((p.exposure * l).min(Vec3A::splat(f32::MAX)), shadowed)
 }
 
-/// The material's BRDF at `s` for light from `dir`: Lambert plus the Blinn–Phong lobe where specular.
+/// The material's BRDF at `s` for light from `dir`: Lambert plus the Blinn–Phong lobe where specular,
+/// or the coat's (`coat::Coat`) where the object has one.
 #[inline(always)]
 fn brdf(s: &Surfel, m: &PMaterial, p: &ShadeParams, dir: Vec3A) -> Vec3A {
+    if let Some(c) = p.coat(s.object as usize) {
+        let mut brdf = m.albedo * c.diffuse(s.normal.dot(dir), s.normal.dot(s.view));
+        if m.specular > 0.0 {
+            brdf += Vec3A::splat(m.specular * c.specular(s.normal, dir, s.view));
+        }
+        return brdf;
+    }
     let mut brdf = lambert(m.albedo);
     if p.any_specular && m.specular > 0.0 {
         let lobe = specular_scale(m.specular, m.shininess)
@@ -557,6 +597,7 @@ mod tests {
             ambient: Vec3A::ZERO,
             environment: Vec3A::ZERO,
             interreflection: false,
+            coats: Vec::new(),
             tables: Vec::new(),
             background: Vec3A::new(0.1, 0.2, 0.3),
             exposure: 1.0,

@@ -8,7 +8,10 @@ use serde::Deserialize;
 use serde_json::{json, Map, Value};
 
 use crate::error::{Error, Result};
+pub use coat::CoatSpec;
+use coat::{coat_spec, RawCoat};
 
+mod coat;
 pub mod lights;
 mod mesh;
 mod target;
@@ -34,6 +37,9 @@ pub struct Material {
     pub albedo: V3,
     pub specular: f64,
     pub shininess: f64,
+    /// A clear coat over the base (`render::coat`): the lobe is the coat's GGX one, weighted by
+    /// `specular`, and `shininess` is unused.
+    pub coat: Option<CoatSpec>,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -156,6 +162,7 @@ struct RawMaterial {
     albedo: Option<V3>,
     specular: Option<f64>,
     shininess: Option<f64>,
+    coat: Option<RawCoat>,
 }
 
 // ---------------------------------------------------------------- validation helpers
@@ -424,6 +431,9 @@ impl Scene {
                     "specular": o.material.specular,
                     "shininess": o.material.shininess,
                 });
+                if let Some(c) = o.material.coat {
+                    v["material"]["coat"] = json!({"roughness": c.roughness, "ior": c.ior});
+                }
                 v
             })
             .collect();
@@ -640,11 +650,22 @@ fn parse_object(
         albedo: None,
         specular: None,
         shininess: None,
+        coat: None,
     });
+    let coat = match &m.coat {
+        None => None,
+        Some(c) => Some(coat_spec(&f("material.coat"), c)?),
+    };
+    // A coat's lobe weight is 1 (a physical coat, Mitsuba's `specular_reflectance`) unless given.
+    let specular_default = if coat.is_some() { 1.0 } else { 0.0 };
     let material = Material {
         albedo: nonneg3(&f("material.albedo"), m.albedo.unwrap_or([0.5; 3]))?,
-        specular: finite(&f("material.specular"), m.specular.unwrap_or(0.0))?,
+        specular: finite(
+            &f("material.specular"),
+            m.specular.unwrap_or(specular_default),
+        )?,
         shininess: finite(&f("material.shininess"), m.shininess.unwrap_or(0.0))?,
+        coat,
     };
     if material.specular < 0.0 {
         return Err(Error::scene(

@@ -18,6 +18,8 @@ pub enum Target {
     Albedo(usize),
     Specular(usize),
     Shininess(usize),
+    /// A coated object's coat roughness (GGX α).
+    Roughness(usize),
     /// A further light's (index >= 1 in the `lights` list) position, direction, intensity and colour.
     ExtraPosition(usize),
     ExtraDirection(usize),
@@ -31,7 +33,7 @@ pub enum Target {
 pub const FITTABLE: &str = "light.position (point light), light.direction (directional light), \
 light.intensity, light.color, ambient, environment, exposure, \
 objects.NAME.albedo, objects.NAME.specular, objects.NAME.shininess, \
-lights.NAME.position, lights.NAME.direction, lights.NAME.intensity, lights.NAME.color, \
+objects.NAME.roughness (coated), lights.NAME.position, lights.NAME.direction, lights.NAME.intensity, lights.NAME.color, \
 lights.NAME.radius (sphere light; a rectangle light's position is its centre)";
 
 impl Target {
@@ -72,9 +74,16 @@ impl Target {
                     "albedo" => Target::Albedo(i),
                     "specular" => Target::Specular(i),
                     "shininess" => Target::Shininess(i),
+                    "roughness" if scene.objects[i].material.coat.is_some() => Target::Roughness(i),
+                    "roughness" => {
+                        return Err(format!(
+                            "objects.{}.roughness: the object has no coat (give its material a \"coat\")",
+                            parts[1]
+                        ))
+                    }
                     other => {
                         return Err(format!(
-                            "objects.{}.{other} cannot be fitted (fittable per object: albedo, specular, shininess)",
+                            "objects.{}.{other} cannot be fitted (fittable per object: albedo, specular, shininess, roughness)",
                             parts[1]
                         ))
                     }
@@ -101,7 +110,8 @@ impl Target {
             | Target::LightIntensity
             | Target::Exposure
             | Target::Specular(_)
-            | Target::Shininess(_) => 1,
+            | Target::Shininess(_)
+            | Target::Roughness(_) => 1,
         }
     }
 
@@ -117,6 +127,7 @@ impl Target {
             Target::Albedo(i) => (2, i, 0),
             Target::Specular(i) => (2, i, 1),
             Target::Shininess(i) => (2, i, 2),
+            Target::Roughness(i) => (2, i, 3),
             Target::ExtraPosition(i) | Target::ExtraDirection(i) => (0, i, 0),
             Target::ExtraIntensity(i) => (0, i, 1),
             Target::ExtraColor(i) => (0, i, 2),
@@ -142,6 +153,7 @@ impl Target {
             Target::LightPosition
                 | Target::LightDirection
                 | Target::Shininess(_)
+                | Target::Roughness(_)
                 | Target::ExtraPosition(_)
                 | Target::ExtraDirection(_)
                 | Target::Radius(_)
@@ -177,6 +189,9 @@ impl Target {
             Target::Albedo(i) => scene.objects[i].material.albedo.to_vec(),
             Target::Specular(i) => vec![scene.objects[i].material.specular],
             Target::Shininess(i) => vec![scene.objects[i].material.shininess],
+            Target::Roughness(i) => {
+                vec![scene.objects[i].material.coat.map_or(0.0, |c| c.roughness)]
+            }
             Target::ExtraPosition(i) => scene.light_at(i).position.to_vec(),
             Target::ExtraDirection(i) => scene
                 .light_at(i)
@@ -203,6 +218,12 @@ impl Target {
             Target::Albedo(i) => scene.objects[i].material.albedo = v3(),
             Target::Specular(i) => scene.objects[i].material.specular = v[0],
             Target::Shininess(i) => scene.objects[i].material.shininess = v[0],
+            Target::Roughness(i) => {
+                if let Some(c) = &mut scene.objects[i].material.coat {
+                    let (lo, hi) = crate::render::coat::ALPHA_RANGE;
+                    c.roughness = v[0].clamp(lo, hi);
+                }
+            }
             Target::ExtraPosition(i) => scene.light_at_mut(i).position = v3(),
             Target::ExtraDirection(i) => scene.light_at_mut(i).direction = Some(unit_or_up(v)),
             Target::ExtraIntensity(i) => scene.light_at_mut(i).intensity = v[0],

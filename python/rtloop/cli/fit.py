@@ -216,8 +216,8 @@ def _build_parser() -> Parser:
                    "stops within a generation; its sigma is printed), 'off' (none)")
     p.add_argument("--highlights", choices=("auto", "off"), default="auto",
                    help="'auto' (default): a sphere the scene gives as matte gets a fitted specular lobe "
-                   "(specular and shininess) when the photo shows a highlight the diffuse model cannot explain; "
-                   "'off': never")
+                   "(Blinn-Phong, or a clear coat with its roughness where that explains it better) when the "
+                   "photo shows a highlight the diffuse model cannot explain; 'off': never")
     p.add_argument("--framing", choices=("check", "correct", "off"), default="check",
                    help="whether IMAGE is framed as the scene's camera frames it (the objects' outlines against "
                    "the fitted render): 'check' (default) says so in the verdict where the outlines are 0.5 px "

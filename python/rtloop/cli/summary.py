@@ -151,6 +151,11 @@ def model_lines(model: dict[str, Any], fitted: dict[str, Any]) -> list[str]:
                      + (f"; at most {ev['loss_with_nested']:.4g} with its products' best" if ev.get("raised") else "")
                      + (f", BIC {-bic:+.4g}" if bic is not None else "")
                      + (f"; {100 * ev['earlier_gain']:+.1f}% before them)" if "earlier_gain" in ev else ")"))
+        if ev.get("lobe") == "coat":
+            lines.append(f"    lobe: a clear coat (GGX roughness {ev['coat']['roughness']:.3g}, IOR {ev['coat']['ior']:g}), "
+                         f"its loss {ev['coat']['loss_with']:.4g} against Blinn-Phong's {ev['blinn_phong']['loss_with']:.4g}")
+        elif ev.get("lobe"):
+            lines.append("    lobe: Blinn-Phong (a clear coat explained the highlight no better)")
     chosen = model.get("norm")
     if chosen and chosen.get("median_z") is not None:
         lines.append(f"  norm: {chosen['used']} (the L1 fit's median residual {chosen['median_z']:.2g}x the photo's "

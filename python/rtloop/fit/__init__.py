@@ -21,6 +21,7 @@ from ..scene import Scene, load_scene
 from .constant import as_environment, compare_constant, declares_ambient
 from .bounds import at_bounds, narrowed, restore_bounds
 from .camera import check_camera, fit_through_camera
+from .coat import choose_lobe, with_coat
 from .gauge import hold_gauges, release_gauges
 from .lights import LightsFit, check_lights, choose_count, fit_lights
 from .framing import check_framing, fit_reframed, framing_check, mismatch_verdict
@@ -137,9 +138,9 @@ def fit(
     ``interreflection``: one diffuse bounce between the objects (the floor lighting a ball's underside, a
     red ball tinting the floor): "auto" (default) adds it when the photo shows it, "on", "off"; the bounce
     depends on the albedos themselves, so with it the fit also estimates the light's intensity.
-    ``highlights``: "auto" (default) frees the specular lobe (specular and shininess) of every sphere the
-    scene gives as matte when the photo shows a highlight the diffuse model cannot explain (the fitted
-    scene's fit section then lists them; ``result.model`` says why); "off" never.
+    ``highlights``: "auto" (default) frees a lobe on every sphere the scene gives as matte when the photo
+    shows a highlight the diffuse model cannot explain: Blinn-Phong (specular, shininess) or, where it explains
+    it better, a clear coat (``material.coat``, its roughness chosen; ``result.model`` says why); "off" never.
     ``reference``: ``(card, reflectance)``, a surface of known reflectance lying on a plane of the scene
     (a grey card; ``card`` bool (H, W), True on it, and left out of the fit by ``mask``): the fitted scene is
     rescaled to absolute albedos and the light's intensity in W/sr (:mod:`rtloop.fit.reference`), recorded
@@ -501,6 +502,9 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
             else:
                 ev, shininess = highlight_evidence(at, names, where, x, target, sub, base=base,
                                                    environment=model_env, active_pixels=n_sub, **kw)
+                if ev["selected"]:  # the coat against Blinn-Phong, by the same evidence (fit/coat.py)
+                    choose_lobe(ev, at, names, where, x, target, sub, base=base, environment=model_env,
+                                active_pixels=n_sub, **kw)
             earlier = model["evidence"].get(term)
             ev["tested_with"] = [t for t in _TERM_ORDER if t in added]
             if earlier is not None:
@@ -515,7 +519,8 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
             elif term == "interreflection":
                 model_work = with_interreflection(model_work)
             else:
-                model_work = with_highlights(model_work, names, shininess)
+                model_work = with_coat(model_work, names, ev["coat"]["roughness"]) if ev.get("lobe") == "coat" \
+                    else with_highlights(model_work, names, shininess)
     added.sort(key=_TERM_ORDER.index)
     if not added:
         return _jpeg_refit(current, work, stages, first, model, seeds, blocking=blocking, space=space_mode,

@@ -77,6 +77,10 @@ def with_lights(scene: Scene, count: int) -> tuple[dict[str, Any], list[str]]:
     """The scene as a dict with ``count`` lights: its own, then copies of its first light named ``light1``,
     ... with the first light's position bounds; and the searched geometric paths."""
     d = scene_to_dict(scene)
+    coated = [o["name"] for o in d["objects"] if "coat" in o["material"]]
+    if coated:
+        raise RtloopError(f"lights: objects.{coated[0]}.material.coat: the lights fit models Lambertian objects; "
+                          "fit a coated object with one light")
     lights = _light_list(d)
     if count < len(lights):
         raise RtloopError(f"lights: the scene has {len(lights)} lights; cannot fit fewer ({count})")

@@ -52,6 +52,13 @@ def _unit_render(d: dict[str, Any], intensity: float, environment: float) -> np.
     return _native.render(_unit_scene(d, intensity, environment))[..., 0]
 
 
+def _coated(o: dict[str, Any], material: dict[str, Any]) -> dict[str, Any]:
+    """``material`` with object ``o``'s coat where it has one (a coated base's unit render goes through
+    the coat)."""
+    coat = o.get("material", {}).get("coat")
+    return {**material, "coat": coat} if coat is not None else material
+
+
 def unit_light_scene(d: dict[str, Any]) -> Scene:
     """The scene :func:`unit_light` renders (its red channel), for a caller that renders it with others."""
     return _unit_scene(d, 1.0, 0.0)
@@ -69,7 +76,8 @@ def _unit_scene(d: dict[str, Any], intensity: float, environment: float) -> Scen
         "interreflection": False,
         "exposure": 1.0,
         "background": [0.0, 0.0, 0.0],
-        "objects": [{**o, "material": {"albedo": [1.0, 1.0, 1.0]}} for o in d["objects"]],
+        "objects": [{**o, "material": _coated(o, {"albedo": [1.0, 1.0, 1.0], "specular": 0.0})}
+                    for o in d["objects"]],
         "fit": {},
     }
     return Scene(json.dumps(unit, allow_nan=False))
@@ -124,8 +132,9 @@ def unit_lobes_scene(d: dict[str, Any], objects: set[int]) -> Scene:
         "ambient": [0.0, 0.0, 0.0],
         "background": [0.0, 0.0, 0.0],
         "interreflection": False,  # every albedo 0: the bounce adds exactly 0 (and would cost its gathers)
-        "objects": [{**o, "material": {"albedo": [0.0, 0.0, 0.0], "specular": 1.0 if k in objects else 0.0,
-                                       "shininess": o["material"]["shininess"]}}
+        "objects": [{**o, "material": _coated(o, {"albedo": [0.0, 0.0, 0.0],
+                                                  "specular": 1.0 if k in objects else 0.0,
+                                                  "shininess": o["material"]["shininess"]})}
                     for k, o in enumerate(d["objects"])],
         "fit": {},
     }

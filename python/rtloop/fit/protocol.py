@@ -140,9 +140,10 @@ def budget(protocol: str, space: str, population: int | None, generations: int |
 
 
 def searched_paths(paths: list[str]) -> list[str]:
-    """What the closed-form method searches: the light's position or direction and any free shininess."""
+    """What the closed-form method searches: the light's position or direction and any free shininess or
+    coat roughness."""
     where = ["light.direction"] if "light.direction" in paths else ["light.position"]
-    return where + [p for p in paths if p.endswith(".shininess")]
+    return where + [p for p in paths if p.endswith((".shininess", ".roughness"))]
 
 
 def choose_method(b: Budget, scene: Scene, paths: list[str], *, population: int | None,

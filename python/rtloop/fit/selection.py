@@ -205,7 +205,7 @@ def highlight_candidates(scene: Scene) -> list[str]:
     if "light.position" not in paths and "light.direction" not in paths:
         return []
     return [o["name"] for o in scene_to_dict(scene)["objects"]
-            if o["shape"] == "sphere" and o["material"]["specular"] == 0
+            if o["shape"] == "sphere" and o["material"]["specular"] == 0 and "coat" not in o["material"]
             and f"objects.{o['name']}.specular" not in paths and f"objects.{o['name']}.shininess" not in paths
             and f"objects.{o['name']}.albedo" in paths]
 
@@ -286,7 +286,12 @@ def interreflection_evidence(scene: Scene, paths: list[str], x: list[float], tar
                        saturated: float | None = None) -> dict[str, Any]:
     """Whether one bounce between the objects explains the photo better at the light ``x`` found without
     it: the closed-form loss without (``base``) and with it (its one extra unknown is the gauge, 1 /
-    intensity: k = 1), as :func:`environment_evidence`."""
+    intensity: k = 1), as :func:`environment_evidence`. Not selected on a scene with a coated object (the
+    bounce's closed form does not model the coat)."""
+    if any("coat" in o["material"] for o in scene_to_dict(scene)["objects"]):
+        return {"loss_without": base, "loss_with": base, "gain": 0.0, "delta_bic": None, "selected": False,
+                "rule": "not tested: the bounce does not model a coated object", "nested": False,
+                "loss_with_nested": base, "raised": False}
     l1 = closed_form_loss(with_interreflection(scene), paths, [x], target, pixels, environment=environment,
                           clip=clip, norm=norm, space=space, threads=threads, saturated=saturated)[0]
     return _verdict(base, l1, active_pixels, 1, norm, nested=False)
