@@ -11,10 +11,16 @@ use crate::error::{Error, Result};
 pub use coat::CoatSpec;
 use coat::{coat_spec, RawCoat};
 
+mod checks;
 mod coat;
+mod fit;
 pub mod lights;
 mod mesh;
 mod target;
+use checks::{cross, finite, finite3, finite_direction, finite_upto, nonneg3};
+pub(crate) use checks::{norm, unit};
+pub use checks::{MAX_INTENSITY, MAX_MAGNITUDE};
+use fit::parse_fit_entry;
 pub use lights::{PointLight, RectLight};
 pub use target::{Target, FITTABLE};
 
@@ -163,103 +169,6 @@ struct RawMaterial {
     specular: Option<f64>,
     shininess: Option<f64>,
     coat: Option<RawCoat>,
-}
-
-// ---------------------------------------------------------------- validation helpers
-
-/// The largest magnitude of any scene number and fit bound but a direction's components
-/// (docs/scene-format.md: "Input limits"): metres, colours, intensities and exposures beyond it overflow the
-/// f32 renderer's products.
-pub const MAX_MAGNITUDE: f64 = 1e8;
-
-/// The largest light intensity: it scales as distance squared, so a light 1e8 m away needs 1e16 and more.
-pub const MAX_INTENSITY: f64 = 1e20;
-
-fn finite(field: &str, v: f64) -> Result<f64> {
-    finite_upto(field, v, MAX_MAGNITUDE)
-}
-
-fn finite_upto(field: &str, v: f64, limit: f64) -> Result<f64> {
-    if !v.is_finite() {
-        Err(Error::scene(
-            field,
-            format!("must be a finite number (got {v})"),
-        ))
-    } else if v.abs() > limit {
-        Err(Error::scene(
-            field,
-            format!("must be within +-{limit:e} (got {v:e})"),
-        ))
-    } else {
-        Ok(v)
-    }
-}
-
-/// Finite components of any size: a direction (only its orientation is used).
-fn finite_direction(field: &str, v: V3) -> Result<V3> {
-    for (k, c) in v.iter().enumerate() {
-        if !c.is_finite() {
-            return Err(Error::scene(
-                field,
-                format!("component {k} must be a finite number (got {c})"),
-            ));
-        }
-    }
-    Ok(v)
-}
-
-fn finite3(field: &str, v: V3) -> Result<V3> {
-    let v = finite_direction(field, v)?;
-    for (k, c) in v.iter().enumerate() {
-        if c.abs() > MAX_MAGNITUDE {
-            return Err(Error::scene(
-                field,
-                format!("component {k} must be within +-{MAX_MAGNITUDE:e} (got {c:e})"),
-            ));
-        }
-    }
-    Ok(v)
-}
-
-fn nonneg3(field: &str, v: V3) -> Result<V3> {
-    let v = finite3(field, v)?;
-    if v.iter().any(|&c| c < 0.0) {
-        return Err(Error::scene(
-            field,
-            format!("must be >= 0 in every component (got {v:?})"),
-        ));
-    }
-    Ok(v)
-}
-
-/// The Euclidean length, computed scaled so that no finite vector overflows (or underflows) to 0 or inf.
-pub(crate) fn norm(v: V3) -> f64 {
-    let m = v[0].abs().max(v[1].abs()).max(v[2].abs());
-    if m == 0.0 || !m.is_finite() {
-        return m;
-    }
-    let (x, y, z) = (v[0] / m, v[1] / m, v[2] / m);
-    m * (x * x + y * y + z * z).sqrt()
-}
-
-/// `v` normalised in f64 as glam does it, scaled first when its squared length would overflow or
-/// underflow (a `[0, 1e300, 0]` normal), so the bits of ordinary vectors are glam's.
-pub(crate) fn unit(v: V3) -> glam::DVec3 {
-    let d = glam::DVec3::from_array(v);
-    let l2 = d.length_squared();
-    if l2.is_finite() && l2 > 1e-290 {
-        d.normalize()
-    } else {
-        (d / d.abs().max_element()).normalize()
-    }
-}
-
-fn cross(a: V3, b: V3) -> V3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
 }
 
 impl Scene {
@@ -683,111 +592,5 @@ fn parse_object(
         name,
         shape,
         material,
-    })
-}
-
-impl FitParam {
-    /// The entry in the public format: `{"min": ..., "max": ...}` (numbers for one component, else lists).
-    fn to_value(&self) -> Value {
-        let (min, max) = if self.min.len() == 1 {
-            (json!(self.min[0]), json!(self.max[0]))
-        } else {
-            (json!(self.min), json!(self.max))
-        };
-        json!({"min": min, "max": max})
-    }
-}
-
-fn bound_values(field: &str, v: Option<&Value>, len: usize, limit: f64) -> Result<Vec<f64>> {
-    let v = v.ok_or_else(|| Error::scene(field, "missing"))?;
-    let nums: Vec<Option<f64>> = match v {
-        Value::Number(n) => vec![n.as_f64(); len],
-        Value::Array(a) if a.len() == len => a.iter().map(|x| x.as_f64()).collect(),
-        Value::Array(a) => {
-            return Err(Error::scene(
-                field,
-                format!("expected {len} numbers or one number, got {}", a.len()),
-            ))
-        }
-        _ => {
-            return Err(Error::scene(
-                field,
-                format!("expected a number or a list of {len} numbers, got {v}"),
-            ))
-        }
-    };
-    nums.into_iter()
-        .map(|x| match x {
-            Some(x) if x.is_finite() && x.abs() <= limit => Ok(x),
-            Some(x) if x.is_finite() => Err(Error::scene(
-                field,
-                format!("every bound must be within +-{limit:e} (got {x:e})"),
-            )),
-            _ => Err(Error::scene(
-                field,
-                format!("every bound must be a finite number (got {v})"),
-            )),
-        })
-        .collect()
-}
-
-fn parse_fit_entry(scene: &Scene, path: &str, bounds: &Value) -> Result<FitParam> {
-    let field = format!("fit[{path:?}]");
-    let target = Target::parse(path, scene).map_err(|m| Error::scene(&field, m))?;
-    let obj = bounds.as_object().ok_or_else(|| {
-        Error::scene(
-            &field,
-            format!("expected {{\"min\": ..., \"max\": ...}}, got {bounds}"),
-        )
-    })?;
-    if let Some(k) = obj.keys().find(|k| *k != "min" && *k != "max") {
-        return Err(Error::scene(
-            &field,
-            format!("unknown key {k:?} (expected \"min\" and \"max\")"),
-        ));
-    }
-    let len = target.len();
-    let limit = if target.is_intensity() {
-        MAX_INTENSITY
-    } else {
-        MAX_MAGNITUDE
-    };
-    let min = bound_values(&format!("{field}.min"), obj.get("min"), len, limit)?;
-    let max = bound_values(&format!("{field}.max"), obj.get("max"), len, limit)?;
-    for k in 0..len {
-        if min[k] > max[k] {
-            return Err(Error::scene(
-                &field,
-                format!("min > max in component {k} ({} > {})", min[k], max[k]),
-            ));
-        }
-        if target == Target::Exposure && min[k] <= 0.0 {
-            return Err(Error::scene(
-                format!("{field}.min"),
-                format!("must be > 0 for exposure (got {})", min[k]),
-            ));
-        }
-        if let Some(lo) = target.lower_limit() {
-            if min[k] < lo {
-                return Err(Error::scene(
-                    format!("{field}.min"),
-                    format!("must be >= {lo} for {path} (got {})", min[k]),
-                ));
-            }
-        }
-    }
-    // The first light's own parameters keep their single-light names: a list of one light is the light.
-    let path = match target {
-        Target::LightPosition => "light.position",
-        Target::LightDirection => "light.direction",
-        Target::LightIntensity => "light.intensity",
-        Target::LightColor => "light.color",
-        _ => path,
-    };
-    Ok(FitParam {
-        path: path.to_string(),
-        target,
-        min,
-        max,
     })
 }
