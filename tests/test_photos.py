@@ -22,7 +22,7 @@ from rtloop.fit.products import products_of
 PHOTOS = Path(__file__).parent / "fixtures" / "photos"
 CASES = sorted(p.name for p in PHOTOS.iterdir() if (p / "objective.png").exists())
 DIRECT = [c for c in CASES if c.startswith("direct-")]
-HARD = [c for c in CASES if not c.startswith("direct-")]
+HARD = [c for c in CASES if not c.startswith(("direct-", "edge-"))]  # edge-*: tests/test_edges.py
 
 
 def _truth(name: str) -> dict:

@@ -323,6 +323,42 @@ CASES: list[Case] = [
         [_sphere("ball", [0.0, 0.75, 0.0], 0.75, _plastic([0.62, 0.14, 0.1], 0.1)), _floor([0.5, 0.5, 0.5])],
         seed=53,
     ),
+    # Outlines: photos whose light lies mostly on silhouette pixels (a rim lit from behind), against a
+    # nearly black floor, or straight overhead; clean direct light, as the direct-* cases.
+    Case(
+        "edge-back",
+        "orange ball lit from behind (the light beyond the ball, 148 deg from the camera): a thin lit rim "
+        "along the top of its silhouette; direct light",
+        "the ball's light is all on its silhouette: two to three pixels wide, each pixel part ball, part floor",
+        CAM_A, [0.25, 1.4, 3.3], 11.0, [1.0, 1.0, 1.0],
+        [_sphere("ball", [0.0, 0.7, 0.0], 0.7, _diffuse([0.8, 0.55, 0.3])), _floor([0.5, 0.5, 0.5])],
+        seed=71,
+    ),
+    Case(
+        "edge-back-side",
+        "green ball lit from behind on the photo's right: a lit crescent on one side of its silhouette; "
+        "direct light",
+        "a back light to one side: the rim and the long shadow towards the camera carry the light",
+        CAM_B, [-2.2, 1.8, 2.6], 24.0, [1.0, 0.97, 0.92],
+        [_sphere("ball", [0.0, 0.65, 0.0], 0.65, _diffuse([0.3, 0.7, 0.35])), _floor([0.55, 0.52, 0.5])],
+        seed=72,
+    ),
+    Case(
+        "edge-dark-floor",
+        "pale blue ball under a warm light from the front left over a nearly black floor; direct light",
+        "the floor says almost nothing: the ball's outline against the black floor carries the light",
+        CAM_B, [2.0, 3.0, -1.5], 40.0, [1.0, 0.8, 0.6],
+        [_sphere("ball", [0.0, 0.7, 0.0], 0.7, _diffuse([0.55, 0.7, 0.85])), _floor([0.03, 0.03, 0.03])],
+        seed=73,
+    ),
+    Case(
+        "edge-overhead",
+        "pink ball under a light straight overhead (90 deg), its shadow right under it; direct light",
+        "the terminator at the ball's equator meets its silhouette against the shadow",
+        CAM_C, [0.0, 4.0, 0.0], 35.0, [1.0, 1.0, 1.0],
+        [_sphere("ball", [0.0, 0.6, 0.0], 0.6, _diffuse([0.75, 0.35, 0.5])), _floor([0.5, 0.5, 0.48])],
+        seed=74,
+    ),
     Case(
         "lamp-desk",
         "phone photo: green plastic ball under a 20 cm spherical desk lamp front left (48 deg, out of frame), "
