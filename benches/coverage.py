@@ -60,7 +60,7 @@ def cases(extra: bool = False) -> list[tuple[str, str, Path, Any]]:
     ``extra`` also the camera class (each direct photo vignetted, tone-curved and with a textured floor) and
     the ambient class (each environment photo with its scene declaring the room light as ``ambient``)."""
     out = []
-    # edge-* (clean direct photos whose light shows on outlines) are tests/test_edges.py's, not in this set
+    # edge-* (clean direct photos whose light shows only on outlines) are kept apart from this set
     for folder in sorted(p for p in FIXTURES.iterdir() if (p / "scene.json").exists()
                          and not p.name.startswith("edge-")):
         clean = folder.name.startswith("direct-")
