@@ -51,3 +51,18 @@ pub fn distance(a: &[f64], b: &[f64]) -> f64 {
         .sum::<f64>()
         .sqrt()
 }
+
+/// Rastrigin with some more work per evaluation (terms of 1e-12), so that several threads really share a
+/// generation in the determinism tests.
+pub fn busy_rastrigin(x: &[f64]) -> f64 {
+    let mut acc = rastrigin(x);
+    for k in 1..50 {
+        acc += 1e-12 * (k as f64 * x[0]).sin();
+    }
+    acc
+}
+
+/// The bit patterns of `v`, to compare results bit for bit.
+pub fn bits(v: &[f64]) -> Vec<u64> {
+    v.iter().map(|x| x.to_bits()).collect()
+}

@@ -15,7 +15,9 @@ use rtloop::search::{
     LshadeResult, Objective, Rng, StopReason, Variant,
 };
 
-use crate::defs::{ackley, distance, griewank, rastrigin, rosenbrock, sphere};
+use crate::defs::{
+    ackley, bits, busy_rastrigin, distance, griewank, rastrigin, rosenbrock, sphere,
+};
 use crate::test_functions as lib;
 
 // ---------------------------------------------------------------------------------------------------
@@ -652,23 +654,12 @@ fn polish_improves_an_unconverged_result_and_reports_it() {
 
 type History = (Vec<(Vec<u64>, u64, usize, usize)>, Vec<u64>, u64, usize);
 
-fn bits(v: &[f64]) -> Vec<u64> {
-    v.iter().map(|x| x.to_bits()).collect()
-}
-
 fn history_on_threads(threads: usize, c: &LshadeConfig) -> History {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
         .unwrap();
-    // Some work per evaluation, so that several threads really share a generation.
-    let obj = |x: &[f64]| {
-        let mut acc = rastrigin(x);
-        for k in 1..50 {
-            acc += 1e-12 * (k as f64 * x[0]).sin();
-        }
-        acc
-    };
+    let obj = busy_rastrigin;
     let bounds = [(-5.0, 3.0); 6];
     pool.install(|| {
         assert_eq!(rayon::current_num_threads(), threads);

@@ -4,7 +4,7 @@
 //! Expected values come from the test functions' definitions (their known minima), never from earlier
 //! runs. Run with `cargo test --test search rand1bin`.
 
-use crate::defs::{distance, rastrigin, rosenbrock, sphere};
+use crate::defs::{bits, busy_rastrigin, distance, rastrigin, rosenbrock, sphere};
 use rtloop::search::rand1bin::minimize;
 use rtloop::search::{replaces, DeConfig, DeResult, GenerationReport, Objective};
 
@@ -271,23 +271,12 @@ fn dimension_with_min_equal_max_stays_fixed() {
 /// Best vector and objectives of every generation, as bits, plus the final result.
 type History = (Vec<(Vec<u64>, Vec<u64>, usize)>, Vec<u64>, Vec<u64>);
 
-fn bits(v: &[f64]) -> Vec<u64> {
-    v.iter().map(|x| x.to_bits()).collect()
-}
-
 fn history_on_threads(threads: usize, seed: u64) -> History {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
         .unwrap();
-    // Some work per evaluation, so that several threads really share a generation.
-    let obj = |x: &[f64]| {
-        let mut acc = rastrigin(x);
-        for k in 1..50 {
-            acc += 1e-12 * (k as f64 * x[0]).sin();
-        }
-        acc
-    };
+    let obj = busy_rastrigin;
     let bounds = [(-5.0, 3.0); 6];
     pool.install(|| {
         assert_eq!(rayon::current_num_threads(), threads);
