@@ -5,9 +5,10 @@
 
 use glam::Vec3A;
 
+use super::light_terms::{irradiance, shadow};
 use super::lobe::{coat_factors, half_cos};
 use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, SATURATED};
-use super::pixels::{gathers, group, irradiance, shadow, Gather, Group, Light, Sky, BLOCK};
+use super::pixels::{gathers, group, Gather, Group, Light, Sky, BLOCK};
 use super::simd::{self, Simd};
 use crate::render::bounce::{table_points, TABLE};
 use crate::render::brdf::{lambert, specular_scale};

@@ -12,6 +12,7 @@ mod blocker;
 pub mod bounce;
 mod held;
 pub mod kernel;
+mod light_terms;
 pub mod lights;
 pub mod line_min;
 mod lobe;

@@ -6,9 +6,10 @@ use rayon::prelude::*;
 use super::bounce::Gauge;
 use super::held::HeldLoss;
 use super::kernel::{Candidate, Kernel};
+use super::light_terms::{irradiance, shadow};
 use super::lobe::{coat_factors, half_cos};
 use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, LANES};
-use super::pixels::{irradiance, shadow, Group, Light, BLOCK};
+use super::pixels::{Group, Light, BLOCK};
 use super::simd::{self, Simd};
 use super::solve::{
     environment_lane_sums, fallback_sums, solve_object, solve_object_env, SolveSums,

@@ -2,9 +2,10 @@
 //! compiler does not vectorise on its own (written with intrinsics).
 
 #[cfg(target_arch = "x86_64")]
-use super::loss::LANES;
+use super::light_terms::irradiance_exact;
 #[cfg(target_arch = "x86_64")]
-use super::pixels::{irradiance_exact, Group, Light};
+use super::loss::LANES;
+use super::pixels::{Group, Light};
 
 /// A kernel compiled twice: `run::<true>` inside an `avx2,fma` function, `run::<false>` for any CPU.
 pub(crate) trait Simd {

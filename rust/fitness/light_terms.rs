@@ -1,0 +1,322 @@
+//! The per-block light terms of a group of active pixels: the irradiance max(0, n·l)/d² (at pixel centres,
+//! or over a pixel's footprint where a sphere's terminator crosses it) and the shadow factor of the
+//! group's possible occluders (soft where a shadow's edge crosses a pixel), for a point and a directional
+//! light. The AVX2 irradiance is in `simd.rs`, which this dispatches to.
+
+use glam::Vec3A;
+
+use super::pixels::{offset, Group, Light, SphereOccluder, BLOCK};
+use crate::render::footprint::{sphere_edge_lit, terminator_cos};
+use crate::render::light::{directional_irradiance, point_irradiance};
+use crate::render::shape::segment_meets_sphere;
+
+/// e = max(0, n·l) / d² (unit light), written into `e`; 0 for a light on the surface. On a sphere with
+/// a footprint, max(0, n·l) is its mean over the pixel where the terminator crosses it.
+#[inline(always)]
+pub(crate) fn irradiance<const AVX2: bool>(
+    g: &Group,
+    r: std::ops::Range<usize>,
+    light: &Light,
+    e: &mut [f32],
+) {
+    irradiance_centre::<AVX2>(g, r.clone(), light, e);
+    if let Some(radius) = g.own_radius {
+        soft_terminator(g, r, light, radius, e);
+    }
+}
+
+/// Where a sphere's terminator crosses a pixel of the block `r` (n·l within the normal's change over
+/// the footprint, |x| / radius, of 0), `e` becomes the pixel mean of max(0, n·l) (`box_ramp`, n·l
+/// linear across the pixel) over d².
+#[inline(always)]
+fn soft_terminator(
+    g: &Group,
+    r: std::ops::Range<usize>,
+    light: &Light,
+    radius: f32,
+    e: &mut [f32],
+) {
+    let n = e.len();
+    let spread = &g.spread[r.start..][..n];
+    let mut near = [0u32; BLOCK];
+    let mut span = (u32::MAX, 0u32);
+    fn col(v: &[Vec<f32>; 3], start: usize, n: usize) -> [&[f32]; 3] {
+        [
+            &v[0][start..][..n],
+            &v[1][start..][..n],
+            &v[2][start..][..n],
+        ]
+    }
+    let ([px, py, pz], [nx, ny, nz]) = (col(&g.p, r.start, n), col(&g.n, r.start, n));
+    let inv_r2 = 1.0 / (radius * radius);
+    let (l, point) = light.target();
+    for i in 0..n {
+        let d = offset(l, point, [px[i], py[i], pz[i]]);
+        let nd = nx[i] * d[0] + ny[i] * d[1] + nz[i] * d[2];
+        let d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        mark(
+            nd * nd < spread[i] * spread[i] * inv_r2 * d2,
+            i,
+            &mut near,
+            &mut span,
+        );
+    }
+    if let Some((r, lo, hi)) = marked(r.start, span) {
+        terminator_pixels(g, r, light, radius, &near[lo..hi], &mut e[lo..hi]);
+    }
+}
+
+/// `soft_terminator`'s pixels marked `near`: their pixel mean of max(0, n·l) over d² (the whole block
+/// in lanes, applied where marked).
+#[inline(always)]
+fn terminator_pixels<'a>(
+    g: &'a Group,
+    r: std::ops::Range<usize>,
+    light: &Light,
+    radius: f32,
+    near: &[u32],
+    e: &mut [f32],
+) {
+    let n = e.len();
+    let col = |v: &'a [Vec<f32>; 3], c: usize| -> &'a [f32] { &v[c][r.start..][..n] };
+    let (px, py, pz) = (col(&g.p, 0), col(&g.p, 1), col(&g.p, 2));
+    let (nx, ny, nz) = (col(&g.n, 0), col(&g.n, 1), col(&g.n, 2));
+    let (ux, uy, uz) = (col(&g.du, 0), col(&g.du, 1), col(&g.du, 2));
+    let (vx, vy, vz) = (col(&g.dv, 0), col(&g.dv, 1), col(&g.dv, 2));
+    let (e, near) = (&mut e[..n], &near[..n]);
+    let (l, point) = light.target();
+    for i in 0..n {
+        let d = offset(l, point, [px[i], py[i], pz[i]]);
+        let d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        // Unit l, and the fall-off 1/d² (none for a directional light).
+        let inv = 1.0 / d2.sqrt().max(f32::MIN_POSITIVE);
+        let fall = if point > 0.0 { inv * inv } else { 1.0 };
+        let u = [d[0] * inv, d[1] * inv, d[2] * inv];
+        let axes = [[ux[i], uy[i], uz[i]], [vx[i], vy[i], vz[i]]];
+        let m = terminator_cos([nx[i], ny[i], nz[i]], u, axes, radius) * fall;
+        e[i] = if near[i] != 0 && d2 > f32::MIN_POSITIVE {
+            m
+        } else {
+            e[i]
+        };
+    }
+}
+
+/// `irradiance` at the pixel centres.
+#[inline(always)]
+fn irradiance_centre<const AVX2: bool>(
+    g: &Group,
+    r: std::ops::Range<usize>,
+    light: &Light,
+    e: &mut [f32],
+) {
+    if let Some(d) = light.dir {
+        // Directional light: no fall-off, e = max(0, n·l).
+        let n = e.len();
+        let (nx, ny, nz) = (
+            &g.n[0][r.start..][..n],
+            &g.n[1][r.start..][..n],
+            &g.n[2][r.start..][..n],
+        );
+        for i in 0..n {
+            e[i] = directional_irradiance(d, [nx[i], ny[i], nz[i]]);
+        }
+        return;
+    }
+    #[cfg(target_arch = "x86_64")]
+    if AVX2 {
+        // SAFETY: `AVX2` is only true on the path dispatched after checking the CPU's features.
+        unsafe { super::simd::irradiance_avx2(g, r, light, e) };
+        return;
+    }
+    irradiance_exact(g, r, light, e);
+}
+
+#[inline(always)]
+/// The scalar form of `irradiance` for a point light.
+pub(crate) fn irradiance_exact(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mut [f32]) {
+    let n = e.len();
+    let (px, py, pz) = (
+        &g.p[0][r.start..][..n],
+        &g.p[1][r.start..][..n],
+        &g.p[2][r.start..][..n],
+    );
+    let (nx, ny, nz) = (
+        &g.n[0][r.start..][..n],
+        &g.n[1][r.start..][..n],
+        &g.n[2][r.start..][..n],
+    );
+    let [lx, ly, lz] = light.pos;
+    for i in 0..n {
+        let d = [lx - px[i], ly - py[i], lz - pz[i]];
+        e[i] = point_irradiance(d, [nx[i], ny[i], nz[i]]);
+    }
+}
+
+/// Zero `e` where the segment from the pixel to the light is blocked by another object.
+#[inline(always)]
+pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mut [f32]) {
+    if let Some(d) = light.dir {
+        shadow_directional(g, r, d, e);
+        return;
+    }
+    let n = e.len();
+    let (px, py, pz) = (
+        &g.p[0][r.start..][..n],
+        &g.p[1][r.start..][..n],
+        &g.p[2][r.start..][..n],
+    );
+    let [lx, ly, lz] = light.pos;
+    let (centre, reach) = g.blocks[r.start / BLOCK];
+    let (b, l) = (Vec3A::from_array(centre), Vec3A::from_array(light.pos));
+    for s in &g.spheres {
+        // Every segment from a pixel of this block to the light stays within `reach` of the segment from
+        // the block's centre to the light: if the sphere is farther than that, no pixel is shadowed by it.
+        let c = Vec3A::from_array(s.center);
+        let v = l - b;
+        let t = if v.length_squared() > 0.0 {
+            ((c - b).dot(v) / v.length_squared()).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let gap = (c - (b + t * v)).length();
+        let spread = g.block_spread.get(r.start / BLOCK).copied().unwrap_or(0.0);
+        if gap
+            > (s.radius + reach + spread) * (1.0 + 1e-4) + 1e-6 * (c.abs().max_element() + s.radius)
+        {
+            continue;
+        }
+        let cc = &s.c[r.start..][..n];
+        let [cx, cy, cz] = s.center;
+        if g.spread.is_empty() {
+            for i in 0..n {
+                // Segment x(t) = p + t·d, t in [0, 1], d = L - p; sphere |x - c|² = r².
+                let dx = lx - px[i];
+                let dy = ly - py[i];
+                let dz = lz - pz[i];
+                let a = dx * dx + dy * dy + dz * dz;
+                let b = (px[i] - cx) * dx + (py[i] - cy) * dy + (pz[i] - cz) * dz;
+                let hit = segment_meets_sphere::<true>(a, b, cc[i]);
+                e[i] = if hit { 0.0 } else { e[i] };
+            }
+            continue;
+        }
+        // With a footprint, a pixel the edge may cross keeps its light here and gets its lit fraction
+        // below: the line's distance h from the centre within the footprint's reach w of the radius,
+        // |h² - r²| = |b² - ac| / a < 2rw + w² (w bounds the line's move, (1 - t) x footprint).
+        let spread = &g.spread[r.start..][..n];
+        let mut near = [0u32; BLOCK];
+        let mut span = (u32::MAX, 0u32);
+        let rad = s.radius;
+        for i in 0..n {
+            let dx = lx - px[i];
+            let dy = ly - py[i];
+            let dz = lz - pz[i];
+            let a = dx * dx + dy * dy + dz * dz;
+            let b = (px[i] - cx) * dx + (py[i] - cy) * dy + (pz[i] - cz) * dz;
+            let hit = segment_meets_sphere::<true>(a, b, cc[i]);
+            let w = spread[i];
+            let close = (b * b - a * cc[i]).abs() < a * w * (2.0 * rad + w);
+            let edge = close & (b < 0.0) & (a + b > 0.0) & (e[i] > 0.0);
+            mark(edge, i, &mut near, &mut span);
+            e[i] = if hit & !edge { 0.0 } else { e[i] };
+        }
+        soft_edge::<true>(g, r.start, span, s, light.pos, &near, e);
+    }
+    for pl in &g.planes {
+        let side_l = pl.normal[0] * (lx - pl.point[0])
+            + pl.normal[1] * (ly - pl.point[1])
+            + pl.normal[2] * (lz - pl.point[2]);
+        let side = &pl.side[r.start..][..n];
+        for i in 0..n {
+            e[i] = if side[i] * side_l < 0.0 { 0.0 } else { e[i] };
+        }
+    }
+}
+
+/// The pixel footprint at sphere `s`'s shadow edge: each pixel of the block `r` marked `near` (its light
+/// still unshadowed in `e`) gets its lit fraction, the edge taken straight across the pixel
+/// (`render::footprint::box_edge`). `BOUNDED`: a point light at `to` (the segment to it), else a
+/// directional light towards the unit `to` (a ray). The whole block in lanes, applied where marked.
+#[inline(always)]
+fn soft_edge<'a, const BOUNDED: bool>(
+    g: &'a Group,
+    start: usize,
+    span: (u32, u32),
+    s: &SphereOccluder,
+    to: [f32; 3],
+    near: &[u32; BLOCK],
+    e: &mut [f32],
+) {
+    let Some((r, lo, hi)) = marked(start, span) else {
+        return;
+    };
+    let (near, e) = (&near[lo..hi], &mut e[lo..hi]);
+    let n = e.len();
+    let col = |v: &'a [Vec<f32>; 3], c: usize| -> &'a [f32] { &v[c][r.start..][..n] };
+    let (px, py, pz) = (col(&g.p, 0), col(&g.p, 1), col(&g.p, 2));
+    let (ux, uy, uz) = (col(&g.du, 0), col(&g.du, 1), col(&g.du, 2));
+    let (vx, vy, vz) = (col(&g.dv, 0), col(&g.dv, 1), col(&g.dv, 2));
+    let (e, near) = (&mut e[..n], &near[..n]);
+    let point = if BOUNDED { 1.0 } else { 0.0 };
+    for i in 0..n {
+        let axes = [[ux[i], uy[i], uz[i]], [vx[i], vy[i], vz[i]]];
+        let lit = sphere_edge_lit([px[i], py[i], pz[i]], axes, to, point, s.center, s.radius);
+        e[i] = if near[i] != 0 { e[i] * lit } else { e[i] };
+    }
+}
+
+/// Mark pixel `i` of a block as `edge` (or not) and widen `span`, the marked pixels' [first, last + 1).
+#[inline(always)]
+fn mark(edge: bool, i: usize, near: &mut [u32; BLOCK], span: &mut (u32, u32)) {
+    near[i] = u32::from(edge);
+    span.0 = span.0.min(if edge { i as u32 } else { u32::MAX });
+    span.1 = span.1.max(if edge { i as u32 + 1 } else { 0 });
+}
+
+/// The group's range of a block's marked `span` (the block starting at `start`) and the span within the
+/// block; `None` when nothing is marked.
+#[inline(always)]
+fn marked(start: usize, (lo, hi): (u32, u32)) -> Option<(std::ops::Range<usize>, usize, usize)> {
+    let (lo, hi) = (lo as usize, hi as usize);
+    (hi > lo).then(|| (start + lo..start + hi, lo, hi))
+}
+
+/// `shadow` for a directional light: rays p + t·d, t in (0, inf), d the unit direction to the light.
+#[inline(always)]
+pub(crate) fn shadow_directional(g: &Group, r: std::ops::Range<usize>, d: [f32; 3], e: &mut [f32]) {
+    let n = e.len();
+    let (px, py, pz) = (
+        &g.p[0][r.start..][..n],
+        &g.p[1][r.start..][..n],
+        &g.p[2][r.start..][..n],
+    );
+    for s in &g.spheres {
+        let cc = &s.c[r.start..][..n];
+        let [cx, cy, cz] = s.center;
+        let mut near = [0u32; BLOCK];
+        let mut span = (u32::MAX, 0u32);
+        let footprint = !g.spread.is_empty();
+        for i in 0..n {
+            // |d| = 1: blocked when the far root of t² + 2bt + c = 0 is positive.
+            let b = (px[i] - cx) * d[0] + (py[i] - cy) * d[1] + (pz[i] - cz) * d[2];
+            let hit = segment_meets_sphere::<false>(1.0, b, cc[i]);
+            // As for a point light (`shadow`), with a = 1 and the ray's whole move.
+            let edge = footprint && {
+                let w = g.spread[r.start + i];
+                ((b * b - cc[i]).abs() < w * (2.0 * s.radius + w)) & (b < 0.0) & (e[i] > 0.0)
+            };
+            mark(edge, i, &mut near, &mut span);
+            e[i] = if hit & !edge { 0.0 } else { e[i] };
+        }
+        soft_edge::<false>(g, r.start, span, s, d, &near, e);
+    }
+    for pl in &g.planes {
+        // The ray heads towards the plane's other side when n·d and the pixel's side differ in sign.
+        let side_l = pl.normal[0] * d[0] + pl.normal[1] * d[1] + pl.normal[2] * d[2];
+        let side = &pl.side[r.start..][..n];
+        for i in 0..n {
+            e[i] = if side[i] * side_l < 0.0 { 0.0 } else { e[i] };
+        }
+    }
+}
