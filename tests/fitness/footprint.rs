@@ -1,0 +1,241 @@
+//! The pixel footprint against a supersampled render, and at pixel centres against the plain fitness.
+
+use super::*;
+
+/// A ball resting on the floor with a second, smaller ball in its shadow, under `light` (a point light's
+/// position, or a directional light's direction with `sun`).
+/// `Fitness::with_pixel_footprint` or `Fitness::new`, as `footprint` says.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn with_or_without_footprint(
+    footprint: bool,
+    scene: &Scene,
+    layout: &ParamLayout,
+    target: &[f32],
+    pixels: Option<&[u32]>,
+    kind: LossKind,
+    clip: bool,
+    proj: Option<Projection>,
+) -> Fitness {
+    let ctor = if footprint {
+        Fitness::with_pixel_footprint
+    } else {
+        Fitness::new
+    };
+    ctor(scene, layout.clone(), target, pixels, kind, clip, proj).unwrap()
+}
+
+pub(crate) fn edge_scene(light: [f64; 3], sun: bool) -> Scene {
+    let light = if sun {
+        format!(
+            r#""type": "directional", "direction": [{}, {}, {}], "intensity": 3"#,
+            light[0], light[1], light[2]
+        )
+    } else {
+        format!(
+            r#""position": [{}, {}, {}], "intensity": 40"#,
+            light[0], light[1], light[2]
+        )
+    };
+    Scene::from_json(&format!(
+        r#"{{"image": {{"width": 96, "height": 72}},
+            "camera": {{"position": [0.3, 2.2, -5.5], "look_at": [0, 0.4, 0], "vfov_deg": 38}},
+            "light": {{{light}}},
+            "objects": [
+              {{"name": "big", "shape": "sphere", "center": [0, 0.6, 0], "radius": 0.6,
+                "material": {{"albedo": [0.8, 0.5, 0.3]}}}},
+              {{"name": "small", "shape": "sphere", "center": [-1.0, 0.3, 0.4], "radius": 0.3,
+                "material": {{"albedo": [0.3, 0.6, 0.8]}}}},
+              {{"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0],
+                "material": {{"albedo": [0.6, 0.6, 0.6]}}}}],
+            "fit": {{"{}": {{"min": -9, "max": 9}}}}}}"#,
+        if sun {
+            "light.direction"
+        } else {
+            "light.position"
+        }
+    ))
+    .unwrap()
+}
+
+#[test]
+fn pixel_footprint_matches_a_supersampled_render_at_shadow_edges_and_terminators() {
+    // The reference integrates every pixel by brute force (a 32 x 32 grid of camera rays, the renderer's
+    // own shading per ray); the footprint kernel integrates only where an edge crosses a pixel, in
+    // closed form. Compared on the pixels where the two differ from the pixel-centre render by more than
+    // 1 %, away from silhouettes (which the footprint does not integrate).
+    for (light, sun) in [
+        ([2.5, 2.2, 0.8], false),
+        ([1.8, 4.0, -1.5], false),
+        ([0.7, 0.5, 0.2], true),
+    ] {
+        let scene = edge_scene(light, sun);
+        let (w, h) = (scene.width as usize, scene.height as usize);
+        let fine = render(&scene, None, None, 1024).unwrap().rgb;
+        let centre = render(&scene, None, None, 1).unwrap().rgb;
+        let ids = rtloop::render::object_ids(&scene, None, None);
+        let near_silhouette = |i: usize| {
+            let (x, y) = ((i % w) as i64, (i / w) as i64);
+            (-1..=1).any(|dy| {
+                (-1..=1).any(|dx| {
+                    let (u, v) = (x + dx, y + dy);
+                    u >= 0
+                        && v >= 0
+                        && (u as usize) < w
+                        && (v as usize) < h
+                        && ids[v as usize * w + u as usize] != ids[i]
+                })
+            })
+        };
+        let edges: Vec<u32> = (0..w * h)
+            .filter(|&i| {
+                let d = (0..3)
+                    .map(|c| (fine[3 * i + c] - centre[3 * i + c]).abs())
+                    .fold(0.0f32, f32::max);
+                ids[i] >= 0
+                    && !near_silhouette(i)
+                    && d > 0.01 * fine[3 * i..3 * i + 3].iter().sum::<f32>() / 3.0 + 1e-4
+            })
+            .map(|i| i as u32)
+            .collect();
+        assert!(
+            edges.len() > 40,
+            "{light:?}: only {} edge pixels",
+            edges.len()
+        );
+        let path = if sun {
+            "light.direction"
+        } else {
+            "light.position"
+        };
+        let layout = ParamLayout::new(&scene, &[path.to_string()]).unwrap();
+        let x = if sun {
+            light.to_vec()
+        } else {
+            scene.light.position.to_vec()
+        };
+        let err = |f: Fitness| f.channel_losses(&x).iter().sum::<f64>() / (3 * edges.len()) as f64;
+        let make = |footprint: bool| {
+            with_or_without_footprint(
+                footprint,
+                &scene,
+                &layout,
+                &fine,
+                Some(&edges),
+                LossKind::L1,
+                false,
+                None,
+            )
+        };
+        let (with, without) = (err(make(true)), err(make(false)));
+        let mean: f64 = edges
+            .iter()
+            .map(|&i| fine[3 * i as usize..3 * i as usize + 3].iter().sum::<f32>() as f64 / 3.0)
+            .sum::<f64>()
+            / edges.len() as f64;
+        eprintln!(
+            "{light:?}: footprint {with:.5}, pixel centres {without:.5}, mean edge pixel {mean:.4}"
+        );
+        assert!(
+            with < 0.1 * without,
+            "{light:?}: footprint error {with:.5}, pixel centres {without:.5}, mean edge pixel {mean:.4}"
+        );
+    }
+}
+
+#[test]
+fn footprint_render_is_what_the_footprint_fitness_models() {
+    // The renderer (`shade_pixel`, pixel by pixel) and the kernel (blocked, with its cheap edge bound)
+    // call the same footprint formulas: at the true scene the loss against the footprint render vanishes.
+    for (light, sun) in [([2.5, 2.2, 0.8], false), ([0.7, 0.5, 0.2], true)] {
+        let scene = edge_scene(light, sun);
+        let target = rtloop::render::render_with(&scene, None, None, 1, true)
+            .unwrap()
+            .rgb;
+        let path = if sun {
+            "light.direction"
+        } else {
+            "light.position"
+        };
+        let layout = ParamLayout::new(&scene, &[path.to_string()]).unwrap();
+        let x = if sun {
+            light.to_vec()
+        } else {
+            scene.light.position.to_vec()
+        };
+        let f =
+            Fitness::with_pixel_footprint(&scene, layout, &target, None, LossKind::L1, false, None)
+                .unwrap();
+        let loss: f64 = f.channel_losses(&x).iter().sum();
+        let total: f64 = target.iter().map(|&v| v as f64).sum();
+        assert!(loss < 1e-5 * total, "{light:?}: {loss} against {total}");
+        // ... and differs from the centre render there.
+        let centre = render(&scene, None, None, 1).unwrap().rgb;
+        let moved: f64 = centre
+            .iter()
+            .zip(&target)
+            .map(|(a, b)| (a - b).abs() as f64)
+            .sum();
+        assert!(moved > 100.0 * loss.max(1e-9), "{light:?}: {moved}");
+    }
+}
+
+#[test]
+fn a_footprint_fitness_at_pixel_centres_is_the_plain_fitness_bit_for_bit() {
+    // The default fit searches with `at_pixel_centres()` of the fitness its polish takes (one set-up for
+    // both models): it must be the fitness `new` builds, on every loss the fit uses, point and
+    // directional light, with the closed-form products. The footprint fitness itself differs (the test
+    // can fail both ways).
+    let mut rng = Rng::new(17);
+    for sun in [false, true] {
+        let scene = edge_scene(
+            if sun {
+                [0.7, 0.5, 0.2]
+            } else {
+                [2.5, 2.2, 0.8]
+            },
+            sun,
+        );
+        let path = if sun {
+            "light.direction"
+        } else {
+            "light.position"
+        };
+        let layout = ParamLayout::new(&scene, &[path.to_string()]).unwrap();
+        let target = clipped_render(&edge_scene(
+            if sun {
+                [0.6, 0.55, 0.25]
+            } else {
+                [2.2, 2.5, 0.6]
+            },
+            sun,
+        ));
+        let proj = Projection::matte(vec![[(0.0, 50.0); 3]; scene.objects.len()]);
+        for (kind, proj) in [(LossKind::L1, None), (LossKind::L1Projected, Some(proj))] {
+            let make = |footprint: bool| {
+                with_or_without_footprint(
+                    footprint,
+                    &scene,
+                    &layout,
+                    &target,
+                    None,
+                    kind,
+                    true,
+                    proj.clone(),
+                )
+            };
+            let (plain, fine) = (make(false), make(true));
+            let centres = fine.at_pixel_centres();
+            let mut differs = false;
+            for _ in 0..20 {
+                let x = random_candidate(&mut rng, &layout);
+                let (mut a, mut b, mut c) = ([0.0], [0.0], [0.0]);
+                plain.evaluate(&x, &mut a);
+                centres.evaluate(&x, &mut b);
+                fine.evaluate(&x, &mut c);
+                assert_eq!(a[0].to_bits(), b[0].to_bits(), "{kind:?} sun {sun}: {x:?}");
+                differs |= a[0] != c[0];
+            }
+            assert!(differs, "{kind:?} sun {sun}: the footprint changed no loss");
+        }
+    }
+}

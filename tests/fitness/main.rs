@@ -1,0 +1,135 @@
+//! Integration tests of `rtloop::fitness`, a module each: the fused kernel (SoA, blocked, shadow terms
+//! precomputed) against the plain per-pixel path through the renderer's `shade` (tests/common), on random
+//! scenes with shadows, several spheres, specular terms, ambient light and saturated objective pixels; the
+//! closed form, the refine, the sRGB space, the SIMD paths, the footprint and the held bounce. Run with
+//! `cargo test --test fitness`.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+use common::Oracle;
+use rtloop::fitness::SATURATED;
+use rtloop::search::{Objective, Rng};
+use rtloop::{render, Fitness, LossKind, Norm, ParamLayout, Projection, Scene};
+
+mod footprint;
+mod held;
+mod kernel;
+mod lobe;
+mod projected;
+mod refine;
+mod simd;
+mod srgb;
+#[allow(unused_imports)]
+use {footprint::*, held::*, kernel::*, lobe::*, projected::*, refine::*, simd::*, srgb::*};
+
+pub(crate) fn random_scene(rng: &mut Rng, spheres: usize, specular: bool, ambient: bool) -> Scene {
+    let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.uniform();
+    let mut objects = Vec::new();
+    for k in 0..spheres {
+        let r = u(0.3, 1.0);
+        let (ks, s) = if specular {
+            (u(0.0, 0.5), u(1.0, 60.0))
+        } else {
+            (0.0, 0.0)
+        };
+        objects.push(format!(
+            r#"{{"name": "s{k}", "shape": "sphere", "center": [{}, {r}, {}], "radius": {r},
+               "material": {{"albedo": [{}, {}, {}], "specular": {ks}, "shininess": {s}}}}}"#,
+            u(-2.0, 2.0),
+            u(-1.5, 1.5),
+            u(0.05, 1.0),
+            u(0.05, 1.0),
+            u(0.05, 1.0)
+        ));
+    }
+    objects.push(format!(
+        r#"{{"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [{}, 1, {}],
+           "material": {{"albedo": [{}, {}, {}]}}}}"#,
+        u(-0.05, 0.05),
+        u(-0.05, 0.05),
+        u(0.1, 0.9),
+        u(0.1, 0.9),
+        u(0.1, 0.9)
+    ));
+    let amb = if ambient { u(0.0, 0.2) } else { 0.0 };
+    let mut fit = vec![
+        r#""light.position": {"min": [-6, 0.5, -6], "max": [6, 8, 6]}"#.to_string(),
+        r#""light.intensity": {"min": 1, "max": 200}"#.to_string(),
+    ];
+    for k in 0..spheres {
+        fit.push(format!(r#""objects.s{k}.albedo": {{"min": 0, "max": 1}}"#));
+    }
+    fit.push(r#""objects.floor.albedo": {"min": 0, "max": 1}"#.to_string());
+    let text = format!(
+        r#"{{"image": {{"width": 96, "height": 72}},
+            "camera": {{"position": [{}, {}, -7], "look_at": [0, 0.7, 0], "vfov_deg": 40}},
+            "light": {{"position": [{}, {}, {}], "intensity": {}}},
+            "ambient": [{amb}, {amb}, {amb}], "exposure": {},
+            "objects": [{}], "fit": {{{}}}}}"#,
+        u(-1.0, 1.0),
+        u(1.0, 3.0),
+        u(-4.0, 4.0),
+        u(1.0, 6.0),
+        u(-4.0, 4.0),
+        u(20.0, 120.0),
+        u(0.7, 1.5),
+        objects.join(","),
+        fit.join(",")
+    );
+    Scene::from_json(&text).unwrap()
+}
+
+/// A fitness of all of `layout` over the whole image, no closed-form products.
+pub(crate) fn fitness(
+    scene: &Scene,
+    layout: &ParamLayout,
+    target: &[f32],
+    kind: LossKind,
+    clip: bool,
+) -> Fitness {
+    Fitness::new(scene, layout.clone(), target, None, kind, clip, None).unwrap()
+}
+
+/// The scene's render as the fitness models pixels (the footprint), clipped at 1 as a photo saturates.
+pub(crate) fn clipped_render(scene: &Scene) -> Vec<f32> {
+    render(scene, None, None, 1)
+        .unwrap()
+        .rgb
+        .iter()
+        .map(|v| v.min(1.0))
+        .collect()
+}
+
+/// The closed-form (projected) fitness of `layout` over the whole image.
+pub(crate) fn projected(
+    scene: &Scene,
+    layout: ParamLayout,
+    target: &[f32],
+    proj: Projection,
+    clip: bool,
+) -> Fitness {
+    Fitness::new(
+        scene,
+        layout,
+        target,
+        None,
+        LossKind::L1Projected,
+        clip,
+        Some(proj),
+    )
+    .unwrap()
+}
+
+pub(crate) fn random_candidate(rng: &mut Rng, layout: &ParamLayout) -> Vec<f64> {
+    layout
+        .bounds
+        .iter()
+        .map(|&(lo, hi)| lo + (hi - lo) * rng.uniform())
+        .collect()
+}
+
+/// Relative difference with a floor: the losses are sums over ~7000 pixels x 3 channels of f32 terms.
+pub(crate) fn close(a: f64, b: f64, rel: f64) -> bool {
+    (a - b).abs() <= rel * a.abs().max(b.abs()).max(1.0)
+}
