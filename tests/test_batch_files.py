@@ -88,6 +88,28 @@ def test_job_lines_pass_footprint_and_grey_card(acquired, tmp_path, capsys):
     capsys.readouterr()
 
 
+def test_job_lines_pass_the_camera_terms(tmp_path, capsys):
+    """"vignetting" and "tone" in a job line do what rtloop-fit's --vignetting and --tone-curve do: a vignetted
+    photo's job equals the single fit bit for bit with the falloff fitted, given, or left out."""
+    case = Path(__file__).resolve().parent / "fixtures" / "camera" / "blue-ball-vignette"
+    scene, photo = case / "scene_input.json", case / "objective.png"
+    flags = {"fit": [], "given": ["--vignetting=-0.3,-0.1"], "off": ["--vignetting", "off", "--tone-curve", "off"]}
+    for name, extra in flags.items():
+        assert fit_cli.main([str(scene), str(photo), "--out", str(tmp_path / name), *extra, *FAST]) == 0
+    jobs = write_jobs(tmp_path / "jobs.jsonl", [
+        {"id": "fit", "scene": str(scene), "photo": str(photo)},
+        {"id": "given", "scene": str(scene), "photo": str(photo), "vignetting": [-0.3, -0.1]},
+        {"id": "off", "scene": str(scene), "photo": str(photo), "vignetting": "off", "tone": "off"}])
+    assert batch_cli.main(["--batch", str(jobs), "--out", str(tmp_path / "b"), "--no-images", "-q"]) == 0
+    for name in flags:
+        one, job = result_json(tmp_path / name), result_json(tmp_path / "b" / name)
+        assert job["fit_report"]["fitted"] == one["fit_report"]["fitted"], name
+        assert job["fit_report"]["model"].get("camera") == one["fit_report"]["model"].get("camera"), name
+    assert result_json(tmp_path / "fit")["fit_report"]["model"]["camera"]["terms"] == ["vignetting"]
+    assert result_json(tmp_path / "off")["fit_report"]["model"].get("camera", {}).get("terms", []) == []
+    capsys.readouterr()
+
+
 def test_job_objects_are_checked_as_job_lines_are(acquired, tmp_path):
     """An id of a Job object is checked as a job line's: no path outside the output folder."""
     out = tmp_path / "out"

@@ -211,8 +211,8 @@ JOB_IDS = st.one_of(st.sampled_from(["a", "b-1", "keep", "results.jsonl", "../ou
                                      "..", "x" * 129, "ok.1"]), st.integers(-5, 5), st.text(max_size=6), JSON_VALUES)
 BATCH_FIELDS = ["seed", "mask", "protocol", "population", "generations", "f", "cr", "norm", "space", "loss_space",
                 "optimizer", "polish", "clip", "uncertainty", "pixels_per_object", "environment",
-                "interreflection", "highlights", "footprint", "framing", "response", "crop", "grey_card", "image",
-                "bogus"]
+                "interreflection", "highlights", "footprint", "framing", "vignetting", "tone", "response", "crop",
+                "grey_card", "image", "bogus"]
 
 
 @st.composite

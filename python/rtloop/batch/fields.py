@@ -18,7 +18,7 @@ __all__ = ["FIT_OPTIONS", "OPTIONS", "READ_OPTIONS", "RESERVED", "check_id", "ch
 #: Per-job options passed on to :func:`rtloop.fit` (``loss_space`` is the CLI's name for ``space``).
 FIT_OPTIONS = ("protocol", "population", "generations", "f", "cr", "norm", "space", "optimizer", "polish",
                "clip", "uncertainty", "pixels_per_object", "environment", "interreflection",
-               "highlights", "footprint", "framing")
+               "highlights", "footprint", "framing", "vignetting", "tone")
 #: Per-job options of which files are read and how: :func:`rtloop.fit.files.load_inputs`.
 READ_OPTIONS = ("response", "crop", "grey_card")
 OPTIONS = FIT_OPTIONS + READ_OPTIONS
@@ -106,6 +106,17 @@ def _grey_card(value: Any, name: str) -> Any:
     return {"mask": mask, "reflectance": float(refl)}
 
 
+def _vignetting(value: Any, name: str) -> Any:
+    """"auto", "on", "off" or [k1, k2] (two finite numbers: the lens's falloff given)."""
+    what = '"auto", "on", "off" or [k1, k2] (two finite numbers)'
+    if isinstance(value, str) and value in ("auto", "on", "off"):
+        return value
+    if isinstance(value, (list, tuple)) and len(value) == 2 and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value):
+        return (float(value[0]), float(value[1]))
+    raise ValueError(what)
+
+
 _NUMBER = _kind(int, float, what="a number")
 _WHOLE = _kind(int, what="a whole number")
 _TEXT = _kind(str, what="text")
@@ -116,7 +127,7 @@ _CHECKS: dict[str, Callable[[Any, str], Any]] = {
     "clip": _BOOL, "uncertainty": _choice(True, False, "bootstrap"), "pixels_per_object": _WHOLE,
     "environment": _choice("auto", "on", "off"), "interreflection": _choice("auto", "on", "off"),
     "highlights": _choice("auto", "off"), "footprint": _choice("auto", "on", "off", True, False),
-    "framing": _choice("check", "correct", "off"),
+    "framing": _choice("check", "correct", "off"), "vignetting": _vignetting, "tone": _choice("auto", "on", "off"),
     "response": _TEXT, "crop": _BOOL, "grey_card": _grey_card,
 }
 

@@ -19,7 +19,7 @@ from rtloop.batch.on_ray import RAY_HINT
 from rtloop.fit import PROTOCOLS
 from rtloop.fit.protocol import LIMITS, max_threads
 
-from .args import Parser, UsageError, generations, int_at_least, int_in, norm
+from .args import Parser, UsageError, generations, int_at_least, int_in, norm, vignetting
 from .fit import MAX_SIZE
 
 __all__ = ["main"]
@@ -116,6 +116,10 @@ def _build_parser() -> Parser:
                    help="every job's pixel footprint mode, as rtloop-fit's --footprint (default auto)")
     p.add_argument("--framing", choices=("check", "correct", "off"),
                    help="every job's framing check, as rtloop-fit's --framing (default check)")
+    p.add_argument("--vignetting", type=vignetting, metavar="auto|on|off|K1,K2",
+                   help="every job's lens falloff, as rtloop-fit's --vignetting (default auto)")
+    p.add_argument("--tone-curve", choices=("auto", "on", "off"),
+                   help="every job's tone-curve term, as rtloop-fit's --tone-curve (default auto)")
     p.add_argument("--response", choices=("srgb", "linear"))
     p.add_argument("--final-scale", type=int_in(1, MAX_SIZE), default=4, metavar="K")
     p.add_argument("--final-spp", type=int_in(1, rtloop.MAX_SPP), default=16, metavar="S")
@@ -183,7 +187,8 @@ def _options(args: argparse.Namespace) -> dict[str, Any]:
     for key, name in (("protocol", "protocol"), ("population", "population"), ("generations", "generations"),
                       ("norm", "norm"), ("loss_space", "space"), ("response", "response"),
                       ("environment", "environment"), ("interreflection", "interreflection"),
-                      ("highlights", "highlights"), ("footprint", "footprint"), ("framing", "framing")):
+                      ("highlights", "highlights"), ("footprint", "footprint"), ("framing", "framing"),
+                      ("vignetting", "vignetting"), ("tone_curve", "tone")):
         value = getattr(args, key)
         if value is not None:
             opts[name] = value

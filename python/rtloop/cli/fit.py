@@ -227,7 +227,7 @@ def _build_parser() -> Parser:
     p.add_argument("--vignetting", type=vignetting, default="auto", metavar="auto|on|off|K1,K2",
                    help="the lens's falloff cos^4 x (1 + k1 r^2 + k2 r^4) (r = 1 at the corner): 'auto' (default) "
                    "fits it with the light when held-out pixels show it, 'on', 'off', or K1,K2 to give it "
-                   "(docs/camera.md)")
+                   "(with an '=' when K1 is negative: --vignetting=-0.3,-0.1; docs/camera.md)")
     p.add_argument("--flat-field", metavar="FILE",
                    help="a photo of a flat white target through the same lens and settings: the falloff it shows "
                    "divides IMAGE (instead of --vignetting)")
@@ -377,7 +377,7 @@ def fit_options(args: argparse.Namespace) -> dict[str, Any]:
             "environment": args.environment, "interreflection": args.interreflection,
             "highlights": args.highlights, "footprint": args.footprint, "framing": args.framing,
             "vignetting": args.vignetting,
-            "tone": "off" if args.response == "linear" and args.tone_curve == "auto" else args.tone_curve,
+            "tone": args.tone_curve,
             **({"flat_field": (args.flat_field, args.response)} if args.flat_field is not None else {}),
             "uncertainty": {"default": True, "bootstrap": "bootstrap", "off": False}[args.uncertainty]}
 

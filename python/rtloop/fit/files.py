@@ -33,6 +33,7 @@ class Inputs:
     mask_path: str | None = None
     reference: tuple[np.ndarray, float] | None = None
     warnings: list[str] = field(default_factory=list)
+    response: str = "srgb"
 
 
 def _acquisition(scene_path: str | os.PathLike[str]) -> dict[str, Any]:
@@ -98,14 +99,18 @@ def load_inputs(scene_path: str | os.PathLike[str], photo_path: str | os.PathLik
         image = rtloop.load_image(photo_path, scene, response=response, crop=crop)
         pixels = None if mask_path is None else rtloop.load_mask(mask_path, scene, crop=crop)
         reference = None if card is None else (rtloop.load_mask(card[0], scene, crop=crop), card[1])
-    return Inputs(scene, image, pixels, mask_path, reference, [str(w.message) for w in caught])
+    return Inputs(scene, image, pixels, mask_path, reference, [str(w.message) for w in caught], response)
 
 
 def fit_inputs(inputs: Inputs, *, seed: int = 0, threads: int | None = None, callback: Any = None,
                **options: Any) -> Any:
     """:func:`rtloop.fit` on what :func:`load_inputs` read (``options`` as its keyword arguments); its
-    warnings are in the result's ``warnings``, not shown."""
+    warnings are in the result's ``warnings``, not shown. A photo read as linear (``response="linear"``)
+    stays linear: its tone curve is not tested unless ``tone`` says so."""
     import rtloop
+
+    if inputs.response == "linear" and options.get("tone", "auto") == "auto":
+        options = {**options, "tone": "off"}
 
     flat = options.get("flat_field")
     if isinstance(flat, (tuple, list)):  # (path, response): the photo of a flat white target
