@@ -53,8 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     lines = [f"# `{command}`", "",
              f"CPU seconds per fit (all threads, `threads=1`), least of {a.runs} runs, seed 0; {platform.machine()}, "
              f"2 cores shared with other jobs, Python {platform.python_version()}. Default fit: `rtloop.fit` with its "
-             "defaults (the rtloop protocol, its uncertainty included). Lights path: `fit_lights` (population 40, "
-             "120 generations, polish), with and without its error bars.", "",
+             "defaults (the rtloop protocol, its uncertainty included). Lights path: `fit_lights` with its defaults "
+             "(the staged search of python/rtloop/fit/lights_search.py), with and without its error bars.", "",
              "| photo | default fit | lights path, 1 light | same, no error bars | lights path, 2 lights | "
              "1 light: lights / default | 2 lights / default | 2 lights / lights 1 |",
              "|---|---|---|---|---|---|---|---|"]

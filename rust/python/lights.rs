@@ -36,11 +36,14 @@ fn lights_fitness(
     )?)
 }
 
-/// Search the lights' geometry (`paths`) with L-SHADE (`seed`, `population`, `generations`) against the
-/// linear float32 (H, W, 3) `image` at `pixels` (flat indices); returns (x, loss, products per object and
-/// light then the constant, evaluations).
+/// Search the lights' geometry (`paths`) with L-SHADE (`seed`, `population`, `generations`, then a
+/// Nelder–Mead polish of `polish` evaluations) against the linear float32 (H, W, 3) `image` at `pixels`
+/// (flat indices); `bounds` (min, max per value; min == max holds one) replaces the scene's search box
+/// and `start` joins the initial population. Returns (x, loss, products per object and light then the
+/// constant, evaluations).
 #[pyfunction]
-#[pyo3(signature = (scene, image, paths, pixels, seed=0, population=40, generations=100, threads=None))]
+#[pyo3(signature = (scene, image, paths, pixels, seed=0, population=40, generations=100, threads=None,
+                    start=None, bounds=None, polish=200))]
 #[allow(clippy::too_many_arguments)]
 pub(super) fn fit_lights<'py>(
     py: Python<'py>,
@@ -52,6 +55,9 @@ pub(super) fn fit_lights<'py>(
     population: usize,
     generations: usize,
     threads: Option<usize>,
+    start: Option<Vec<f64>>,
+    bounds: Option<Vec<(f64, f64)>>,
+    polish: usize,
 ) -> PyResult<(Vec<f64>, f64, Products, usize)> {
     if population < 4 || generations == 0 {
         return Err(Error::Value(format!(
@@ -70,13 +76,30 @@ pub(super) fn fit_lights<'py>(
         cr: 0.9,
         seed,
         max_evaluations: None,
-        polish: 200,
+        polish,
         polish_tol: None,
     };
     let method = Method::named("lshade", &budget)?;
-    let bounds = fitness.layout.bounds.clone();
+    let dim = fitness.layout.dim();
+    for (what, n) in [
+        ("start", start.as_ref().map(Vec::len)),
+        ("bounds", bounds.as_ref().map(Vec::len)),
+    ] {
+        if let Some(n) = n.filter(|&n| n != dim) {
+            return Err(Error::Value(format!("{what}: expected {dim} values, got {n}")).into());
+        }
+    }
+    let bounds = bounds.unwrap_or_else(|| fitness.layout.bounds.clone());
     let found = detach_in_pool(py, threads, || {
-        crate::search::run(&method, &fitness, &bounds, |_| true).map(|r| {
+        crate::search::run_polishing(
+            &method,
+            &fitness,
+            None::<&LightsFitness>,
+            &bounds,
+            start.as_deref(),
+            |_| true,
+        )
+        .map(|r| {
             let solve = fitness.solve(&r.best);
             (r.best, solve.loss, solve.products, r.evaluations)
         })

@@ -652,7 +652,7 @@ def _fit_lights(scene: Scene, image: Any, mask: Any, lights: int | str | None, *
     check_arguments(scene, seed=seed, threads=threads, polish=0, pixels_per_object=PIXELS_PER_OBJECT,
                     population=population or 40)
     target, use = objective(scene, image, mask, [])
-    budget = {"population": population or 40, "generations": generations or 120, "threads": threads}
+    budget = {"population": population, "generations": generations, "threads": threads}
     if lights == "auto":
         return choose_count(scene, target, seed=seed, mask=use, **budget)
     return fit_lights(scene, target, lights, seed=seed, mask=use, **budget)

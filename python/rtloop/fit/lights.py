@@ -1,6 +1,7 @@
 """The lights fit: any number of point, directional, sphere and rectangle lights, their geometry searched by L-SHADE
-and, per object and channel, each light's product (intensity x colour x albedo) and a constant solved in
-closed form (non-negative least squares; ``rust/fitness/lights.rs``). docs/methods.md, "Several lights".
+one light at a time and then together (:mod:`.lights_search`) and, per object and channel, each light's
+product (intensity x colour x albedo) and a constant solved in closed form (non-negative least squares;
+``rust/fitness/lights.rs``). docs/methods.md, "Several lights".
 
 ``fit(scene, image, lights=N)`` lands here for N > 1, or for a scene that already has several lights, a
 sphere light or a rectangle light; with ``lights="auto"`` the number is chosen from held-out pixels (:func:`choose_count`).
@@ -20,6 +21,7 @@ from .._pixels import edges
 from ..errors import RtloopError
 from ..scene import Scene, load_scene, scene_to_dict
 from .lights_errors import light_errors
+from .lights_search import Stages, staged
 
 #: Pixels compared per fit at most (a seeded sample of the objects' interiors).
 MAX_PIXELS = 6000
@@ -188,10 +190,11 @@ def _strongest_first(d: dict[str, Any], paths: list[str], x: list[float],
     return x, prods.tolist()
 
 
-def fit_lights(scene: Any, target: np.ndarray, count: int | None, *, seed: int = 0, population: int = 40,
-               generations: int = 120, threads: int | None = None, mask: np.ndarray | None = None,
+def fit_lights(scene: Any, target: np.ndarray, count: int | None, *, seed: int = 0, population: int | None = None,
+               generations: int | None = None, threads: int | None = None, mask: np.ndarray | None = None,
                errors: bool = True) -> LightsFit:
-    """Fit ``count`` lights (the scene's own number when None) to the linear float32 ``target``; with
+    """Fit ``count`` lights (the scene's own number when None) to the linear float32 ``target`` by the staged
+    search (:mod:`.lights_search`; ``population`` and ``generations`` set each light's own search); with
     ``errors``, each light's error bars (:mod:`.lights_errors`)."""
     scene = load_scene(scene)
     start = time.perf_counter()
@@ -199,8 +202,9 @@ def fit_lights(scene: Any, target: np.ndarray, count: int | None, *, seed: int =
     d, paths = with_lights(scene, have if count is None else count)
     work = load_scene(d)
     pixels = choose_pixels(work, target, seed, mask)
-    x, loss, products, evaluations = _native.fit_lights(work, target, paths, pixels, seed, population,
-                                                        generations, threads)
+    own = Stages().light
+    stages = Stages(light=(population or own[0], generations or own[1], own[2]))
+    x, loss, products, evaluations = staged(d, paths, target, pixels, seed, threads, stages)
     x, products = _strongest_first(d, paths, list(x), products)
     out, report = _split(d, x, paths, products)
     if errors:
