@@ -37,6 +37,23 @@ def ball_scene() -> dict:
     return copy.deepcopy(BALL_ON_FLOOR)
 
 
+#: The accuracy group (marker ``accuracy``): the files whose tests fit or render photos from an independent
+#: renderer (or real photos' stand-ins) and hold the result against their ground truth; slower than the unit
+#: tests. ``pytest -m "not accuracy"`` runs the unit tests alone; CI runs both.
+ACCURACY = frozenset({
+    "test_photos.py", "test_edges.py", "test_coat.py", "test_camera.py", "test_lights.py", "test_onephoto.py",
+    "test_noisy_jpeg_photos.py", "test_coverage.py", "test_hard_cases.py", "test_environment.py",
+    "test_interreflection.py", "test_highlights.py", "test_ambient_environment.py", "test_error_bars.py",
+    "test_render_reference.py", "test_light_distance.py", "test_residual_structure.py", "test_framing.py",
+})
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    for item in items:
+        if item.path.name in ACCURACY:
+            item.add_marker(pytest.mark.accuracy)
+
+
 def missing(what: str) -> None:
     """Skip a test whose input ``what`` is absent, or fail it under CI (``CI`` set, as .ci/run sets it)."""
     if os.environ.get("CI", "").lower() not in ("", "0", "false"):
