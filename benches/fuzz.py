@@ -263,9 +263,10 @@ JOB_IDS = ["a", "b-1", "keep", "results.jsonl", "../out", "/tmp", ".hidden", "",
            ".rtloop-batch.lock", "f0", 7]
 JOB_FIELDS = ["seed", "mask", "protocol", "population", "generations", "f", "cr", "norm", "space", "loss_space",
               "optimizer", "polish", "clip", "uncertainty", "pixels_per_object", "environment", "interreflection",
-              "highlights", "footprint", "framing", "vignetting", "tone", "response", "crop", "grey_card", "image",
+              "highlights", "footprint", "framing", "vignetting", "tone", "lights", "response", "crop", "grey_card",
+              "image",
               "bogus"]
-JOB_VALUES = [*ODD, "auto", "on", "off", "srgb", "linear", "paper", "l2", "bootstrap", "check", "correct", [1, 1], [2, "x"], [-0.3, -0.05], [0, 1e400],
+JOB_VALUES = [*ODD, "auto", "on", "off", "srgb", "linear", "paper", "l2", "bootstrap", "check", "correct", 2, 9, [1, 1], [2, "x"], [-0.3, -0.05], [0, 1e400],
               {"mask": "photo.png", "reflectance": 0.18}, {"mask": "../scene.json", "reflectance": 2}, 10**40]
 RAW_LINES = ["[" * 100_000 + "]" * 100_000, '{"id": "a", "id": "b", "scene": "s", "photo": "p"}', "{", "null",
              '{"id": "a", "seed": 1' + "0" * 5000 + "}", "# comment", "\ufeff{}", "\x00"]
@@ -532,6 +533,9 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
                                              (math.nan, 0.0), "0.1,0.2", None])
         if rng.random() < 0.2:
             opts["tone"] = rng.choice(["on", "on", "off", "srgb", None])
+        if opts["lights"] not in (None, 1) and rng.random() < 0.7:  # mostly the options the lights fit takes
+            for key in ("norm", "vignetting", "tone"):
+                opts.pop(key, None)
         if shape[:2] == (9, 12) and rng.random() < 0.1:
             flat = np.random.default_rng(rng.randrange(2**32)).uniform(-0.1, 1.2, (9, 12, 3))
             opts["flat_field"] = flat.astype(rng.choice([np.float32, np.float64, np.uint8]))

@@ -16,7 +16,7 @@ from rtloop import cli as fit_cli
 from rtloop.acquisition import PinholeCamera, parse_board
 from rtloop.acquisition._common import write_png16_srgb
 from rtloop.acquisition.synthetic import paste_board_on_floor
-from rtloop.batch import Job, fit_many
+from rtloop.batch import Job, fit_many, load_jobs
 from rtloop.cli import batch as batch_cli
 from rtloop.cli.scene import scene_main
 from test_acquisition_cli import BOARD, CARD, CAST, H, TRUE_SCENE, W
@@ -107,6 +107,51 @@ def test_job_lines_pass_the_camera_terms(tmp_path, capsys):
         assert job["fit_report"]["model"].get("camera") == one["fit_report"]["model"].get("camera"), name
     assert result_json(tmp_path / "fit")["fit_report"]["model"]["camera"]["terms"] == ["vignetting"]
     assert result_json(tmp_path / "off")["fit_report"]["model"].get("camera", {}).get("terms", []) == []
+    capsys.readouterr()
+
+
+LIGHTS = Path(__file__).resolve().parent / "fixtures" / "lights"
+
+
+def test_a_lights_job_writes_what_rtloop_fit_lights_writes(tmp_path, capsys):
+    """"lights" in a job line (or --lights for every job) takes the lights fit as rtloop-fit --lights does:
+    the same lights, error bars and products bit for bit, the lights fit's result.json, and a results.jsonl
+    line that lists the lights. A scene with a "lights" list takes it without the field."""
+    key_fill, window = LIGHTS / "key-fill-25", LIGHTS / "lamp-window"
+    for name, case, extra in (("two", key_fill, ["--lights", "2"]), ("listed", window, [])):
+        assert fit_cli.main([str(case / "scene_input.json"), str(case / "objective.png"), "--out",
+                             str(tmp_path / name), *extra, *FAST]) == 0
+    jobs = write_jobs(tmp_path / "jobs.jsonl", [
+        {"id": "two", "scene": str(key_fill / "scene_input.json"), "photo": str(key_fill / "objective.png"),
+         "lights": 2},
+        {"id": "listed", "scene": str(window / "scene_input.json"), "photo": str(window / "objective.png")}])
+    assert batch_cli.main(["--batch", str(jobs), "--out", str(tmp_path / "b"), "-q"]) == 0
+    records = {r["id"]: r for r in map(json.loads, (tmp_path / "b" / "results.jsonl").read_text().splitlines())}
+    for name, count in (("two", 2), ("listed", 2)):
+        one, job = result_json(tmp_path / name)["fit_report"], result_json(tmp_path / "b" / name)["fit_report"]
+        assert job["method"] == "lights" and len(job["lights"]) == count, name
+        assert job["lights"] == one["lights"] and job["products"] == one["products"], name
+        assert records[name]["status"] == "ok" and records[name]["lights"] == job["lights"], name
+        assert (tmp_path / "b" / name / "final.png").is_file()
+    capsys.readouterr()
+
+
+def test_a_lights_job_refuses_the_options_the_lights_fit_does_not_take(tmp_path, capsys):
+    """An option the lights fit would ignore (a norm, a camera term) is the job's one-line error naming it,
+    not a fit that drops it; a "lights" field of the wrong kind is the line's error."""
+    case = LIGHTS / "key-fill-25"
+    job = {"id": "l2", "scene": str(case / "scene_input.json"), "photo": str(case / "objective.png"),
+           "lights": "auto"}
+    jobs = write_jobs(tmp_path / "jobs.jsonl", [job | {"norm": "l2"}, job | {"id": "vig", "vignetting": "off"}])
+    assert batch_cli.main(["--batch", str(jobs), "--out", str(tmp_path / "b"), "--no-images", "-q"]) == 1
+    records = {r["id"]: r for r in map(json.loads, (tmp_path / "b" / "results.jsonl").read_text().splitlines())}
+    assert records["l2"]["status"] == "error" and records["l2"]["error"].startswith("norm: not taken by the lights")
+    assert records["vig"]["error"].startswith("vignetting: not taken by the lights")
+    assert not (tmp_path / "b" / "l2").exists()
+    for bad in (True, "two", 2.0, [2]):
+        write_jobs(tmp_path / "bad.jsonl", [job | {"lights": bad}])
+        with pytest.raises(rtloop.RtloopError, match=r"'lights' must be \"auto\" or a whole number"):
+            load_jobs(tmp_path / "bad.jsonl")
     capsys.readouterr()
 
 

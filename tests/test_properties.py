@@ -211,7 +211,7 @@ JOB_IDS = st.one_of(st.sampled_from(["a", "b-1", "keep", "results.jsonl", "../ou
                                      "..", "x" * 129, "ok.1"]), st.integers(-5, 5), st.text(max_size=6), JSON_VALUES)
 BATCH_FIELDS = ["seed", "mask", "protocol", "population", "generations", "f", "cr", "norm", "space", "loss_space",
                 "optimizer", "polish", "clip", "uncertainty", "pixels_per_object", "environment",
-                "interreflection", "highlights", "footprint", "framing", "vignetting", "tone", "response", "crop",
+                "interreflection", "highlights", "footprint", "framing", "vignetting", "tone", "lights", "response", "crop",
                 "grey_card", "image", "bogus"]
 
 
@@ -526,15 +526,22 @@ PHOTO_LIGHTS = rtloop.render(SMALL_LIGHTS)
 @PROPS
 @given(st.one_of(st.sampled_from([None, 1, 2, 3, "auto"]),
                  st.sampled_from([0, 9, -1, 2.0, "2", True, math.nan, [1]])),
-       st.booleans(), st.integers(0, 3))
-def test_the_lights_argument_fits_or_raises_rtloop_error(lights, listed, seed):
+       st.booleans(), st.integers(0, 3),
+       st.sampled_from([{}, {}, {"norm": "l2"}, {"norm": "l1"}, {"vignetting": "off"}, {"tone": "auto"},
+                        {"footprint": True}, {"uncertainty": "bootstrap"}, {"protocol": "paper"}]))
+def test_the_lights_argument_fits_or_raises_rtloop_error(lights, listed, seed, other):
+    """The lights fit runs, or refuses in one line; an argument it would ignore (one given other than its
+    default) is refused naming it, never dropped."""
+    ignored = {k: v for k, v in other.items() if (k, v) not in (("norm", "l1"), ("tone", "auto"))}
     try:
         with _quiet():
             result = rtloop.fit(SMALL_LIGHTS if listed else SMALL, PHOTO_LIGHTS if listed else PHOTO,
-                                lights=lights, seed=seed, population=4, generations=1, uncertainty=False)
+                                lights=lights, seed=seed, population=4, generations=1,
+                                **({"uncertainty": False} | other))
     except rtloop.RtloopError as e:
         assert "\n" not in str(e)
         return
+    assert not ignored or not hasattr(result, "lights"), f"the lights fit dropped {ignored}"
     if not hasattr(result, "lights"):
         assert lights in (None, 1) and not listed
         return

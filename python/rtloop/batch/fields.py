@@ -18,7 +18,7 @@ __all__ = ["FIT_OPTIONS", "OPTIONS", "READ_OPTIONS", "RESERVED", "check_id", "ch
 #: Per-job options passed on to :func:`rtloop.fit` (``loss_space`` is the CLI's name for ``space``).
 FIT_OPTIONS = ("protocol", "population", "generations", "f", "cr", "norm", "space", "optimizer", "polish",
                "clip", "uncertainty", "pixels_per_object", "environment", "interreflection",
-               "highlights", "footprint", "framing", "vignetting", "tone")
+               "highlights", "footprint", "framing", "vignetting", "tone", "lights")
 #: Per-job options of which files are read and how: :func:`rtloop.fit.files.load_inputs`.
 READ_OPTIONS = ("response", "crop", "grey_card")
 OPTIONS = FIT_OPTIONS + READ_OPTIONS
@@ -117,6 +117,13 @@ def _vignetting(value: Any, name: str) -> Any:
     raise ValueError(what)
 
 
+def _lights(value: Any, name: str) -> Any:
+    """"auto" or a whole number (1 to 8 is rtloop.fit's to check: a job error)."""
+    if value == "auto" and isinstance(value, str) or isinstance(value, int) and not isinstance(value, bool):
+        return value
+    raise ValueError('"auto" or a whole number of lights (1 to 8)')
+
+
 _NUMBER = _kind(int, float, what="a number")
 _WHOLE = _kind(int, what="a whole number")
 _TEXT = _kind(str, what="text")
@@ -128,7 +135,7 @@ _CHECKS: dict[str, Callable[[Any, str], Any]] = {
     "environment": _choice("auto", "on", "off"), "interreflection": _choice("auto", "on", "off"),
     "highlights": _choice("auto", "off"), "footprint": _choice("auto", "on", "off", True, False),
     "framing": _choice("check", "correct", "off"), "vignetting": _vignetting, "tone": _choice("auto", "on", "off"),
-    "response": _TEXT, "crop": _BOOL, "grey_card": _grey_card,
+    "lights": _lights, "response": _TEXT, "crop": _BOOL, "grey_card": _grey_card,
 }
 
 

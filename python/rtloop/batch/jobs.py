@@ -52,19 +52,23 @@ class Job:
 class JobResult:
     """What a job produced: ``status`` "ok" or "error" (then ``error`` holds the message), the fitted
     ``light`` (as in result.json), ``products`` and ``x``, the ``fitness``, and the job's ``seconds``.
-    ``fit`` is the full FitResult for in-process jobs (None on Ray and for failed jobs)."""
+    A lights fit's job (the ``lights`` option, or a scene with a ``lights`` list) records ``lights`` (each
+    light with its error bars, as result.json's ``fit_report.lights``) and its ``products`` (per object, per
+    light then the constant term, RGB); its ``light``, ``x`` and ``fitness`` are None.
+    ``fit`` is the full FitResult (or LightsFit) for in-process jobs (None on Ray and for failed jobs)."""
 
     id: str
     status: str
     hash: str
     seed: int = 0
     light: dict[str, Any] | None = None
-    products: dict[str, list[float]] | None = None
+    products: dict[str, Any] | None = None
     x: dict[str, float] | None = None
     fitness: float | None = None
     evaluations: int | None = None
     error: str | None = None
     seconds: float = 0.0
+    lights: list[dict[str, Any]] | None = None
     fit: Any = None
 
     @property
@@ -79,6 +83,7 @@ class JobResult:
             "id": self.id, "status": self.status, "hash": self.hash, "seed": self.seed, "light": self.light,
             "products": self.products, "x": self.x, "fitness": self.fitness, "evaluations": self.evaluations,
             "error": self.error, "seconds": round(self.seconds, 6),
+            **({"lights": self.lights} if self.lights is not None else {}),
         })
 
 
@@ -261,6 +266,7 @@ def run_job(job: Job, *, threads: int | None = None, options: dict[str, Any] | N
             may_replace(Path(out) / job.id)
         inputs = load_inputs(job.scene, job.photo, mask=job.mask, grey_card=card, **read)
         cold = inputs.scene
+        several = opts.get("lights") not in (None, 1) or "lights" in inputs.scene.to_dict()
         if warm:
             inputs.scene = _warm_scene(inputs.scene, warm, warm_fraction)
         log = None
@@ -268,7 +274,7 @@ def run_job(job: Job, *, threads: int | None = None, options: dict[str, Any] | N
             from ..cli.outputs import GenerationLog
 
             staged = staging_dir(Path(out) / job.id, "rtloop-tmp")
-            if images:
+            if images and not several:  # the lights fit logs no generations
                 log = GenerationLog(staged, inputs.scene, snapshot_every)
         try:
             result = fit_inputs(inputs, seed=job.seed, threads=threads, callback=log, **opts)
@@ -279,6 +285,9 @@ def run_job(job: Job, *, threads: int | None = None, options: dict[str, Any] | N
             from ..fit.bounds import restore_bounds
 
             result.scene = restore_bounds(result.scene, cold)
+        if several:
+            return _lights_result(job, digest, result, inputs, staged, out, images, final_scale, final_spp, opts,
+                                  keep_fit, t0)
         if staged is not None:
             _write_outputs(staged, Path(out), job, result, inputs, read, images, final_scale, final_spp)  # type: ignore[arg-type]
         return JobResult(job.id, "ok", digest, job.seed, light=_light(result.scene), products=result.products,
@@ -290,6 +299,24 @@ def run_job(job: Job, *, threads: int | None = None, options: dict[str, Any] | N
     finally:
         if staged is not None and os.path.lexists(staged):
             shutil.rmtree(staged, ignore_errors=True)
+
+
+def _lights_result(job: Job, digest: str, fit: Any, inputs: Any, staged: Path | None, out: Any, images: bool,
+                   scale: int, spp: int, opts: dict[str, Any], keep_fit: bool, t0: float) -> JobResult:
+    """A lights fit's job: its outputs written as ``rtloop-fit --lights`` writes them, and its record."""
+    from .._files import move_into_place
+    from ..cli.lights import lights_document, write_lights
+
+    asked = opts.get("lights")
+    if staged is not None:
+        write_lights(staged, fit, inputs.image, asked=asked, seed=job.seed, final_scale=scale, final_spp=spp,
+                     images=images)
+        mark(staged)
+        target = Path(out) / job.id
+        move_into_place(staged, target, may_replace(target), "rtloop")
+    report = lights_document(fit, asked=asked, seed=job.seed)["fit_report"]
+    return JobResult(job.id, "ok", digest, job.seed, products=report["products"], evaluations=fit.evaluations,
+                     seconds=time.perf_counter() - t0, lights=report["lights"], fit=fit if keep_fit else None)
 
 
 def _message(job: Job, e: BaseException) -> str:

@@ -21,6 +21,7 @@ from rtloop.fit.protocol import LIMITS, max_threads
 
 from .args import Parser, UsageError, generations, int_at_least, int_in, norm, vignetting
 from .fit import MAX_SIZE
+from .lights import lights_count
 
 __all__ = ["main"]
 
@@ -30,7 +31,8 @@ DESCRIPTION = """\
 Fit many photos: JOBS is a JSON-lines file, one job a line:
   {"id": "shot-001", "scene": "scene.json", "photo": "shot-001.png", "seed": 1}
 with optional "mask" and per-job fit options ("protocol", "population",
-"generations", "norm", "loss_space", "response", "crop", "footprint", ...);
+"generations", "norm", "loss_space", "response", "crop", "footprint",
+"lights", ...);
 relative paths are relative to JOBS. Each job is fitted as rtloop-fit fits
 its scene and photo: the mask and the grey card the scene names (written by
 rtloop-scene) are used unless the job gives "mask", or "grey_card" (false: none;
@@ -120,6 +122,10 @@ def _build_parser() -> Parser:
                    help="every job's lens falloff, as rtloop-fit's --vignetting (default auto)")
     p.add_argument("--tone-curve", choices=("auto", "on", "off"),
                    help="every job's tone-curve term, as rtloop-fit's --tone-curve (default auto)")
+    p.add_argument("--lights", type=lights_count, metavar="N|auto",
+                   help="every job's number of lights, as rtloop-fit's --lights (a job's own \"lights\" field "
+                   "wins); such a job writes the lights fit's result.json, and its results.jsonl line lists "
+                   "\"lights\" with their error bars")
     p.add_argument("--response", choices=("srgb", "linear"))
     p.add_argument("--final-scale", type=int_in(1, MAX_SIZE), default=4, metavar="K")
     p.add_argument("--final-spp", type=int_in(1, rtloop.MAX_SPP), default=16, metavar="S")
@@ -188,7 +194,7 @@ def _options(args: argparse.Namespace) -> dict[str, Any]:
                       ("norm", "norm"), ("loss_space", "space"), ("response", "response"),
                       ("environment", "environment"), ("interreflection", "interreflection"),
                       ("highlights", "highlights"), ("footprint", "footprint"), ("framing", "framing"),
-                      ("vignetting", "vignetting"), ("tone_curve", "tone")):
+                      ("vignetting", "vignetting"), ("tone_curve", "tone"), ("lights", "lights")):
         value = getattr(args, key)
         if value is not None:
             opts[name] = value

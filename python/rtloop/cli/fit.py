@@ -458,7 +458,7 @@ class _Run:
             def refuse(message: str) -> None:
                 raise _Failure(message)
 
-            return run_lights(args, inputs, tmp, refuse)
+            return run_lights(args, inputs, tmp, refuse, fit_options(args))
         truth = None
         if args.truth is not None:
             truth = rtloop.load_scene(args.truth)

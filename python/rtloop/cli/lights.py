@@ -19,15 +19,17 @@ from rtloop._files import write_json
 
 from .outputs import render_final
 
-__all__ = ["LIGHTS_HELP", "lights_count", "lights_summary", "run_lights", "uses_lights"]
+__all__ = ["LIGHTS_HELP", "lights_count", "lights_document", "lights_summary", "run_lights", "uses_lights",
+           "write_lights"]
 
 LIGHTS_HELP = (
     "fit several lights: N (1 to 8) lights, or 'auto' to choose how many from pixels the fit did not see "
     f"(one light, then one more while it cuts their error by {AUTO_GAIN:.0%}% or more, up to {AUTO_LIMIT}). "
     "Added lights are point lights searched in the first light's position box. A scene with a 'lights' "
     "list (several lights, a sphere or a rectangle light) takes this fit without the flag, its own lights "
-    "kept; --lights 1 on a one-light scene is the ordinary fit. Objects are taken as matte; result.json "
-    "lists each light with its error bars"
+    "kept; --lights 1 on a one-light scene is the ordinary fit. Objects are taken as matte, under the fit's "
+    "own loss: --norm, --loss-space, the term and camera flags are refused with it; result.json lists each "
+    "light with its error bars"
 )
 
 
@@ -59,18 +61,25 @@ def _round(v: Any) -> Any:
     return v
 
 
-def run_lights(args: argparse.Namespace, inputs: Any, tmp: Path, refuse: Any) -> Any:
+def run_lights(args: argparse.Namespace, inputs: Any, tmp: Path, refuse: Any, options: dict[str, Any]) -> Any:
     """Fit, then write result.json, objective.png and final.png into ``tmp``; returns the LightsFit.
-    ``refuse(message)`` raises the command's one-line failure for options this fit does not take."""
+    ``options`` are the command line's :func:`rtloop.fit` arguments (one the lights fit does not take, given
+    other than its default, is refused there); ``refuse(message)`` raises the command's one-line failure for
+    the options only the command has."""
     for flag, given in (("--truth", args.truth is not None),
                         ("--uncertainty bootstrap", args.uncertainty == "bootstrap"),
                         ("--generations N1,N2", isinstance(args.generations, tuple))):
         if given:
             refuse(f"{flag}: not with the lights fit (--lights, or a scene with a 'lights' list)")
-    gens = args.generations
-    fit = fit_inputs(inputs, seed=args.seed, threads=args.threads, lights=args.lights,
-                     population=args.population, generations=gens)
-    rtloop.save_image(tmp / "objective.png", inputs.image)
+    fit = fit_inputs(inputs, seed=args.seed, threads=args.threads, lights=args.lights, **options)
+    write_lights(tmp, fit, inputs.image, asked=args.lights, seed=args.seed, final_scale=args.final_scale,
+                 final_spp=args.final_spp, report=bool(args.report))
+    return fit
+
+
+def lights_document(fit: Any, *, asked: Any, seed: int) -> dict[str, Any]:
+    """result.json of a lights fit: the fitted scene and a ``fit_report`` listing each light with its error
+    bars, the products, and the held-out error per number of lights (``asked``: the ``lights`` argument)."""
     doc = dict(fit.scene.to_dict())
     doc["fit_report"] = {
         "method": "lights",
@@ -79,17 +88,26 @@ def run_lights(args: argparse.Namespace, inputs: Any, tmp: Path, refuse: Any) ->
         "loss": fit.loss,
         "evaluations": fit.evaluations,
         "seconds": fit.seconds,
-        "number_of_lights": {"asked": args.lights, "evidence": fit.evidence,
+        "number_of_lights": {"asked": asked, "evidence": fit.evidence,
                              "rule": f"a further light is kept when it lowers the held-out squared error by "
                                      f"{AUTO_GAIN:.0%} or more"},
-        "seed": args.seed,
+        "seed": seed,
     }
-    write_json(tmp / "result.json", doc)
-    final = render_final(fit.scene, args.final_scale, args.final_spp)
+    return doc
+
+
+def write_lights(tmp: Path, fit: Any, image: np.ndarray, *, asked: Any, seed: int, final_scale: int,
+                 final_spp: int, report: bool = False, images: bool = True) -> None:
+    """Write a lights fit's result.json and, with ``images``, objective.png (``image``) and final.png (and,
+    with ``report``, report.html) into ``tmp``: what ``rtloop-fit --lights`` and a batch's lights job write."""
+    write_json(tmp / "result.json", lights_document(fit, asked=asked, seed=seed))
+    if not images:
+        return
+    rtloop.save_image(tmp / "objective.png", image)
+    final = render_final(fit.scene, final_scale, final_spp)
     rtloop.save_image(tmp / "final.png", final)
-    if args.report:
-        rtloop.report(fit, tmp / "report.html", objective=inputs.image, final=final)
-    return fit
+    if report:
+        rtloop.report(fit, tmp / "report.html", objective=image, final=final)
 
 
 def _pm(v: Any, e: Any, unit: str = "") -> str:

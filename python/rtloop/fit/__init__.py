@@ -176,6 +176,7 @@ def fit(
     if lights not in (None, 1) or "lights" in scene.to_dict():
         if framing == "correct":
             raise RtloopError("framing: 'correct' fits a camera correction with one light, not with several")
+        lights_only(args)
         return _fit_lights(scene, image, mask, lights, seed=seed, threads=threads, population=population,
                            generations=generations)
     footprint = check_footprint(footprint)
@@ -640,6 +641,31 @@ def _encoding_check(work: Scene, stages: Stages, seed: int, target: np.ndarray, 
                         f"{decoded_ratio:.2g}x the rounding error against {ratio:.2g}x as given): pass linear "
                         "radiance, e.g. rtloop.load_image(path, scene) for a file, or rtloop.srgb_to_linear(array)")
     return out
+
+
+#: fit()'s arguments the lights fit has no use for: each must keep its default there (the lights fit takes
+#: the objects as matte, under its own loss, with no camera terms), so that none is silently dropped.
+_NOT_WITH_LIGHTS = ("protocol", "f", "cr", "clip", "pixels_per_object", "optimizer", "polish", "norm", "space",
+                    "environment", "interreflection", "highlights", "reference", "footprint", "vignetting", "tone",
+                    "flat_field")
+
+
+def lights_only(args: dict[str, Any]) -> None:
+    """Refuse, in one line naming it, an argument of ``fit()`` (``args``: its locals) that the lights fit
+    would ignore: one given other than its default, and a bootstrap (its error bars are a jackknife's)."""
+    import inspect
+
+    defaults = inspect.signature(fit).parameters
+    for name in _NOT_WITH_LIGHTS:
+        value, default = args[name], defaults[name].default
+        given = value is not None if default is None else not (type(value) is type(default) and value == default)
+        if given:
+            raise RtloopError(f"{name}: not taken by the lights fit (several lights, or a scene with a 'lights' "
+                              f"list: matte objects, its own loss, no camera terms); leave it at its default "
+                              f"({default!r})")
+    if args["uncertainty"] == "bootstrap":
+        raise RtloopError("uncertainty: 'bootstrap' is not taken by the lights fit (its error bars are a "
+                          "delete-a-tile jackknife's)")
 
 
 def _fit_lights(scene: Scene, image: Any, mask: Any, lights: int | str | None, *, seed: int, threads: int | None,
