@@ -168,7 +168,7 @@ def test_two_stage_fallback_accuracy(seed):
 
 
 def test_held_values_start_outside_their_bounds():
-    """Found by benches/fuzz.py (seed 8): a scene whose light colour and exposure start outside their fit
+    """Found by fuzz/fuzz.py (seed 8): a scene whose light colour and exposure start outside their fit
     bounds; held, they are brought inside them (they were reported at 660 and 918 for bounds [0.2, 1] and
     [0.3, 3]), and the products stay right."""
     truth = _truth(exposure=0.6)

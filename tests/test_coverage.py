@@ -1,4 +1,4 @@
-"""The error bars against the truth of the Mitsuba test photos (benches/coverage.py): the block sandwich (of
+"""The error bars against the truth of the Mitsuba test photos (studies/coverage.py): the block sandwich (of
 the fit's L1 norm, the median regression's) covers the true light and the true colour products on photos the
 model does not describe exactly (environment, bounce, gloss, lamp, noise, JPEG), and, with the default fit's
 pixel footprint, the true light and the colour products on the clean direct photos without inflating the
@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-BENCH = Path(__file__).resolve().parents[1] / "benches" / "coverage.py"
+BENCH = Path(__file__).resolve().parents[1] / "studies" / "coverage.py"
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +43,7 @@ def test_mismatch_photos_are_covered_within_one_sigma(rows):
     68 % for a calibrated normal: not hugely inflated). Gauss-Newton, which treats pixels as independent,
     covers far fewer within 3 than the sandwich: the test can fail. Measured with the footprint default,
     the noise-aware clip level and JPEG sRGB refit, the L1 sandwich and the shadow-edge / jump fix: see
-    benches/results/coverage.md for the figures."""
+    studies/results/coverage.md for the figures."""
     assert sum(r["class"] == "mismatch" for r in rows) == 34
     assert 0.40 <= _within(rows, "mismatch", "robust", 1) <= 0.90
     assert _within(rows, "mismatch", "gn", 3) < _within(rows, "mismatch", "robust", 3) - 0.15
@@ -57,7 +57,7 @@ def test_mismatch_photos_are_covered_within_three_sigma(rows):
     sandwich follows the fit's L1 norm (median regression: model error leaves large residuals of one sign
     over regions, which an L1 fit weighs by their density at zero, not their size): 91 %; the noise-aware
     clip level and JPEG sRGB refit (without it the noisy and JPEG fits were 545 and 85 mm off): 85 %.
-    Without all three: 83 % (benches/results/coverage.md)."""
+    Without all three: 83 % (studies/results/coverage.md)."""
     assert _within(rows, "mismatch", "robust", 3) >= 0.85
 
 
@@ -69,7 +69,7 @@ def test_mismatch_colour_products_are_covered_within_three_sigma(rows):
     Gauss-Newton, blind to correlated residuals, covers far fewer (the control, as for the light: at least 15
     points below the sandwich). Measured without the pixel footprint's shift in the robust sigma: 97 % and
     65 %, Gauss-Newton 61 % within 3 (52 % without the noise-aware clip level and the JPEG sRGB refit); with
-    the shift 98 % and 73 % (benches/results/coverage.md)."""
+    the shift 98 % and 73 % (studies/results/coverage.md)."""
     assert _within(rows, "mismatch", "robust", 3, products=True) >= 0.85
     assert 0.40 <= _within(rows, "mismatch", "robust", 1, products=True) <= 0.90
     assert (_within(rows, "mismatch", "gn", 3, products=True)

@@ -96,13 +96,17 @@ def test_docs_do_not_tell_the_projects_history():
     assert history_mentions(ROOT) == []
 
 
+#: Where figures are kept: speed (benches), accuracy studies and the fuzz campaign.
+RESULTS = ("benches/results", "studies/results", "fuzz/results")
+
+
 def test_results_files_do_not_tell_the_projects_history():
-    results = sorted((ROOT / "benches" / "results").rglob("*.md"))
+    results = sorted(p for d in RESULTS for p in (ROOT / d).rglob("*.md"))
     assert results and history_mentions(ROOT, results) == []
 
 
 def test_results_files_start_with_their_command():
-    for path in sorted((ROOT / "benches" / "results").rglob("*.md")):
+    for path in sorted(p for d in RESULTS for p in (ROOT / d).rglob("*.md")):
         first = path.read_text(encoding="utf-8").lstrip().splitlines()[0]
         assert re.search(r"`(python3? |PYTHONPATH=\S+ python3? |cargo )[^`]*`", first), (path, first)
 

@@ -1,4 +1,4 @@
-"""Defects benches/fuzz.py found, kept as regression cases."""
+"""Defects fuzz/fuzz.py found, kept as regression cases."""
 
 import pytest
 

@@ -131,7 +131,7 @@ def test_light_inside_the_sphere_or_under_the_floor_is_a_losing_candidate_not_a_
 
 @pytest.mark.parametrize("space", ["linear", "srgb"])
 def test_very_dim_photo(ball_scene, tmp_path, space):
-    """In both loss spaces. Measured (benches/loss_space.py, seeds 0-4): linear 4.4-5.1 mm and 0.30-0.34 %,
+    """In both loss spaces. Measured (studies/loss_space.py, seeds 0-4): linear 4.4-5.1 mm and 0.30-0.34 %,
     sRGB 7.5-7.6 mm and 0.47-0.48 %: comparing code values does not help with a quantised dim photo."""
     truth = ball_scene
     truth["light"]["intensity"] = 1.5  # brightest pixel about 0.03: a handful of 8-bit levels
@@ -179,7 +179,7 @@ def test_strong_noise(ball_scene, noise_seed):
 def test_jpeg_quality_50(ball_scene, tmp_path, space):
     """JPEG at quality 50 subsamples chroma and quantises the dark blue channel hardest: light to 3 cm,
     colours to the documented 2 % (see test_strong_noise; least squares alone was 7-8 % off), in both loss
-    spaces. Measured (benches/loss_space.py, seeds 0-4): light 15-17 mm in either; products 1.1-1.2 %
+    spaces. Measured (studies/loss_space.py, seeds 0-4): light 15-17 mm in either; products 1.1-1.2 %
     linear, 0.65-0.69 % sRGB, where JPEG's errors are uniform."""
     truth = ball_scene
     truth["image"] = {"width": 128, "height": 96}

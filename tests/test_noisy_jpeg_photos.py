@@ -1,5 +1,5 @@
 """Noisy and JPEG photos (the targets: light within 3 cm on every photo, median within 1.5 cm),
-made here from the clean direct Mitsuba photos of tests/fixtures/photos as benches/coverage.py makes them:
+made here from the clean direct Mitsuba photos of tests/fixtures/photos as studies/coverage.py makes them:
 2 % Gaussian noise (linear, seed 0, clipped to [0, 1]) and the PNG re-saved as JPEG quality 40 (Pillow's
 defaults: 4:2:0 chroma). Before the fix the default fit put the light of direct-low-left's noisy variant
 545 mm off (its clipped floor pixels, scattered below 1 by the noise, read as measurements by the
@@ -23,12 +23,12 @@ from rtloop.fit.products import products_of
 from rtloop.fit.goodness import CLIPPED_SIGMAS, clip_level, jpeg_blocking, noise_sigma
 
 PHOTOS = Path(__file__).parent / "fixtures" / "photos"
-BENCH = Path(__file__).resolve().parents[1] / "benches" / "coverage.py"
+BENCH = Path(__file__).resolve().parents[1] / "studies" / "coverage.py"
 DIRECT = sorted(p.name for p in PHOTOS.iterdir() if p.name.startswith("direct-") and (p / "objective.png").exists())
 
 
 def _coverage_bench():
-    """benches/coverage.py, whose ``photo_of`` makes the variants (one copy of how they are made)."""
+    """studies/coverage.py, whose ``photo_of`` makes the variants (one copy of how they are made)."""
     spec = importlib.util.spec_from_file_location("coverage_bench", BENCH)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

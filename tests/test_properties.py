@@ -438,7 +438,7 @@ def _board_photo(tmp_path_factory):
         import sys
         from pathlib import Path
 
-        sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benches"))
+        sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fuzz"))
         from fuzz import SCENE_BOARD, _board_photo as make
 
         path = tmp_path_factory.mktemp("board") / "photo.png"

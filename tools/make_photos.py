@@ -160,7 +160,7 @@ CASES: list[Case] = [
         ],
         seed=13,
     ),
-    # More clean direct photos (the model-exact class of benches/coverage.py): point light, diffuse balls on
+    # More clean direct photos (the model-exact class of studies/coverage.py): point light, diffuse balls on
     # a floor, no environment, no bounce; light positions, heights, colours and ball counts varied.
     Case(
         "direct-front-high",

@@ -13,7 +13,7 @@ in quadrature), and when the median pixel's residual exceeds DENSE_MEDIAN_Z of t
 in L2, on the pixels whose area shows one object only (a pixel straddling an outline is rendered at its
 centre, its error is the model's, not the photo's).
 
-Measured (benches/results/real_photos.md, docs/accuracy.md): on the real photos of the DiLiGenT ball (16-bit,
+Measured (studies/results/real_photos.md, docs/accuracy.md): on the real photos of the DiLiGenT ball (16-bit,
 96 lights) the L1 fit's median residual is 1.5-2.4 of the photo's errors and L2 lowers the mean
 light-direction error from 1.27 to 0.38 deg; on the Mitsuba photos of tests/fixtures/photos and the four
 reference scenes (8-bit, JPEG, noisy) it is 0.28-0.92 and L1 is kept. But on rtloop-scene's 16-bit

@@ -23,7 +23,7 @@ from typing import Any
 __all__ = ["LIGHT_DETERMINED", "LIGHT_SIGMA_MAX_M", "WIDEN_PER", "error_bars", "model_lacks"]
 
 #: The bars are widened by model_lacks / WIDEN_PER (at least 1). Chosen on the coverage fixtures
-#: (benches/coverage.py, camera class: vignetting and tone curves the model lacks): 3 left 3 of the 17
+#: (studies/coverage.py, camera class: vignetting and tone curves the model lacks): 3 left 3 of the 17
 #: judged photos' lights beyond 3 sigma, with a light sigma of 0.6 m; 2 none beyond, at most 0.42 m.
 WIDEN_PER = 2.0
 

@@ -10,7 +10,7 @@ with the Lambertian albedo that renders its base the same on average (scene.json
 fit's albedo approximates). Each fit runs in a fresh process (so a coat's tables are built as a user's
 first fit builds them), ``--runs`` times, builds alternating (the machine is shared: compare the fastest runs).
 
-    PYTHONPATH=python python benches/coat.py --runs 3 --baseline /tmp/base/python --out benches/results/coat.md
+    PYTHONPATH=python python studies/coat.py --runs 3 --baseline /tmp/base/python --out studies/results/coat.md
 """
 
 from __future__ import annotations
@@ -112,7 +112,7 @@ def main() -> int:
     head = ["| photo | build | terms | lobe | roughness | light (mm) | products vs diffuse (%) | "
             "products vs effective albedo (%) | time (ms, fastest / median) |", "|---|---|---|---|---|---|---|---|---|"]
     if a.out:
-        cmd = "PYTHONPATH=python python benches/coat.py " + " ".join(sys.argv[1:])
+        cmd = "PYTHONPATH=python python studies/coat.py " + " ".join(sys.argv[1:])
         a.out.write_text(f"`{cmd}`\n\n" + "\n".join(head + rows) + "\n")
     return 0
 

@@ -24,7 +24,7 @@ sigma reported.
 
 Usage (from the repository root, with the extension built)::
 
-    python benches/coverage.py [--footprint {auto,on,off}] [--bootstrap] [--classic] [--no-onephoto] [--json rows.json]
+    python studies/coverage.py [--footprint {auto,on,off}] [--bootstrap] [--classic] [--no-onephoto] [--json rows.json]
 
 ``--footprint`` sets the fit's footprint mode: "auto" (the default fit: its polish integrates pixels over
 their area at shadow edges and terminators), "on" (every search too), "off" (pixel centres).

@@ -13,9 +13,9 @@ with ``--per-light`` a row per light.
 
 Usage (from the repository root, with the extension built)::
 
-    python benches/real_photos.py DIR                      # all 96 lights, the defaults
-    python benches/real_photos.py DIR --step 6             # 16 lights (1, 7, ..., 91)
-    python benches/real_photos.py DIR --fit norm=l1 --fit norm=l2 --json out.json
+    python studies/real_photos.py DIR                      # all 96 lights, the defaults
+    python studies/real_photos.py DIR --step 6             # 16 lights (1, 7, ..., 91)
+    python studies/real_photos.py DIR --fit norm=l1 --fit norm=l2 --json out.json
 """
 
 from __future__ import annotations
@@ -119,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     normals = np.load(args.dir / "normal_gt.npy")
     variants: list[tuple[str, dict[str, Any]]] = [("rtloop defaults", {})]
     variants += [(" ".join(f"{k}={v}" for k, v in [kv]), dict([kv])) for kv in args.fit]
-    out: dict[str, Any] = {"command": " ".join(["python", "benches/real_photos.py", *sys.argv[1:]]),
+    out: dict[str, Any] = {"command": " ".join(["python", "studies/real_photos.py", *sys.argv[1:]]),
                            "machine": platform.processor() or platform.machine(), "methods": {}}
     rows = {"least squares (Lambertian, GT normals)": [baseline_case(c, normals) for c in cases]}
     for name, options in variants:

@@ -612,7 +612,7 @@ def main() -> int:
     ap.add_argument("--bound", type=float, default=60.0,
                     help="seconds past which one input counts as a hang (default 60)")
     ap.add_argument("--out", type=Path, metavar="FILE", help="also write the counts as markdown (e.g. "
-                    "benches/results/fuzz.md), headed by the command")
+                    "fuzz/results/fuzz.md), headed by the command")
     a = ap.parse_args()
     only = None if a.only is None else a.only.split(",")
     if only is not None and not set(only) <= set(SURFACES):
@@ -685,7 +685,7 @@ def main() -> int:
 
 
 def _write_markdown(path: Path, c: Counts, kinds: dict[str, int], bound: float) -> None:
-    command = " ".join(["python", "benches/fuzz.py", *sys.argv[1:]])
+    command = " ".join(["python", "fuzz/fuzz.py", *sys.argv[1:]])
     rows = [f"| {s} | {c.get(f'inputs_{s}', 0)} |" for s in SURFACES if c.get(f"inputs_{s}")]
     if not rows:
         rows = [f"| all (mixed) | {c.get('inputs', 0)} |"]
@@ -693,7 +693,7 @@ def _write_markdown(path: Path, c: Counts, kinds: dict[str, int], bound: float) 
         f"# The fuzz campaign (`{command}`)",
         "",
         f"Machine: {platform.machine()}, {os.cpu_count()} logical CPUs, shared. Every input is checked as"
-        " benches/fuzz.py's docstring says; a hang is an input that took more than"
+        " fuzz/fuzz.py's docstring says; a hang is an input that took more than"
         f" {bound:g} s.",
         "",
         "| surface | inputs |",

@@ -4,15 +4,15 @@ Every photo folder (made by ``tools/make_camera_photos.py``: Mitsuba renders thr
 non-sRGB tone curve with JPEG 90, or a Bayer mosaic with high-ISO noise, demosaic and JPEG 85) is fitted
 with ``rtloop.fit`` on its ``scene_input.json`` and ``objective.png`` loaded with ``rtloop.load_image``
 (extra ``fit()`` options from ``--option KEY=VALUE``), and scored against ``scene.json`` with
-``benches/photos.py``'s :func:`score` (``../shared/tools/score_result.py``'s measures).
+``studies/photos.py``'s :func:`score` (``../shared/tools/score_result.py``'s measures).
 
 Printed: a markdown table per photo: light error (cm), worst product error (%), the camera terms the fit
 chose, the goodness verdict, the light position's 1-sigma (cm) and the fit time (s).
 
 Usage (from the repository root, with the extension built)::
 
-    python benches/camera_photos.py
-    python benches/camera_photos.py --option camera=off --cases blue-ball-tone
+    python studies/camera_photos.py
+    python studies/camera_photos.py --option camera=off --cases blue-ball-tone
 """
 
 from __future__ import annotations
@@ -55,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     options = dict(o.split("=", 1) for o in args.option)
     rows = []
-    command = " ".join(["python benches/camera_photos.py", *(argv if argv is not None else sys.argv[1:])])
+    command = " ".join(["python studies/camera_photos.py", *(argv if argv is not None else sys.argv[1:])])
     print(f"# Camera-pipeline photos (`{command}`)\n")
     print("| photo | light (cm) | products (%) | products up to one scale (%) | camera terms | verdict | "
           "light sigma (cm) | time (s) |")

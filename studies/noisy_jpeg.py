@@ -1,5 +1,5 @@
 """Light error and fit time of the default fit on the clean direct Mitsuba photos and their noisy and JPEG
-variants (benches/coverage.py's: 2 % Gaussian noise, linear, seed 0, clipped to [0, 1]; the PNG re-saved as
+variants (studies/coverage.py's: 2 % Gaussian noise, linear, seed 0, clipped to [0, 1]; the PNG re-saved as
 JPEG quality 40 with Pillow's defaults, 4:2:0 chroma).
 
 Per case: the light error (mm), the worst colour product error (relative to the object's largest true
@@ -8,8 +8,8 @@ the least of ``--repeat`` runs; uncertainty on, as the default fit). To compare 
 each, alternating (``--rounds``: each case is fitted that many times, rounds interleaved with the other
 commit's by the caller), e.g.::
 
-    for r in 1 2; do PYTHONPATH=old/python python benches/noisy_jpeg.py --json old$r.json
-                     PYTHONPATH=new/python python benches/noisy_jpeg.py --json new$r.json; done
+    for r in 1 2; do PYTHONPATH=old/python python studies/noisy_jpeg.py --json old$r.json
+                     PYTHONPATH=new/python python studies/noisy_jpeg.py --json new$r.json; done
 """
 
 from __future__ import annotations

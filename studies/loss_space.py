@@ -13,10 +13,10 @@ the worst relative error of intensity x albedo over the objects are reported per
 
 Usage (from the repository root)::
 
-    python benches/loss_space.py                     # 5 seeds, all cases
-    python benches/loss_space.py --seeds 2 --out /tmp/ls
+    python studies/loss_space.py                     # 5 seeds, all cases
+    python studies/loss_space.py --seeds 2 --out /tmp/ls
 
-Writes ``loss_space.csv`` and ``loss_space.md`` to ``--out`` (default ``benches/results/``) and prints the
+Writes ``loss_space.csv`` and ``loss_space.md`` to ``--out`` (default ``studies/results/``) and prints the
 markdown.
 """
 
@@ -106,7 +106,7 @@ def synthetic_cases(tmp: Path) -> list[tuple[str, dict, Path, dict]]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=5, help="seeds per case and space (0, 1, ...)")
-    ap.add_argument("--out", type=Path, default=REPO / "benches" / "results", help="where to write CSV and markdown")
+    ap.add_argument("--out", type=Path, default=REPO / "studies" / "results", help="where to write CSV and markdown")
     ap.add_argument("--threads", type=int, default=None, help="threads for rtloop.fit (default: all)")
     args = ap.parse_args(argv)
     score = load_score() if SCORE_TOOL.is_file() else None

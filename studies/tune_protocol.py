@@ -8,12 +8,12 @@ error of intensity x albedo, evaluations and time are written to a CSV.
 
 This is how the default protocol's numbers (rtloop.fit.PROTOCOLS["rtloop"]) were chosen; the reference
 scenes in ../shared/scenes are left for benches/speed_vs_error.py to judge. Results of the run behind the
-default: benches/results/tune_protocol.md.
+default: studies/results/tune_protocol.md.
 
 Usage (from the repository root, after ``pip install .``; about 10 minutes on 2 cores)::
 
-    python benches/tune_protocol.py                      # the grid on the tuning set
-    python benches/tune_protocol.py --set-seed 777 --single 36 --double 12 --seeds 5 \
+    python studies/tune_protocol.py                      # the grid on the tuning set
+    python studies/tune_protocol.py --set-seed 777 --single 36 --double 12 --seeds 5 \
         --configs "16,16,200;12,16,150" --name validate  # a shortlist on an independent set
 """
 
@@ -39,7 +39,7 @@ from rtloop.fit import lit_pixel_counts
 
 REPO = Path(__file__).resolve().parents[1]
 BASE = REPO / "examples" / "yellow-ball" / "scene.json"
-OUT = REPO / "benches" / "results"
+OUT = REPO / "studies" / "results"
 SET_SEED = 20240611
 DAMAGE = ("clean", "noise0.02", "jpeg70")
 

@@ -13,8 +13,8 @@ gloss, lamp: the case name's prefix).
 
 Usage (from the repository root, with the extension built)::
 
-    python benches/photos.py
-    python benches/photos.py --json /tmp/photos.json --cases direct-side gloss-a010
+    python studies/photos.py
+    python studies/photos.py --json /tmp/photos.json --cases direct-side gloss-a010
 """
 
 from __future__ import annotations
