@@ -69,3 +69,27 @@ def test_a_far_light_over_a_lone_ball_has_a_direction_and_no_distance():
     out = _fit(truth, [0.0, 3.0, -2.0])
     assert not out["distance_determined"]
     assert out["direction_sigma_deg"] is not None
+
+
+def _far_light_sigma(box: float) -> dict:
+    """The Gauss-Newton direction sigma at the truth of a noisy photo of a lone ball under a light 24 m away,
+    the light's position free in a box of +-``box`` m."""
+    truth = copy.deepcopy(BALL_ON_FLOOR)
+    truth["objects"] = truth["objects"][:1]
+    truth["light"] = {"position": [12.0, 18.0, -9.0], "intensity": 70.0 * 24.0 ** 2 / 4.5 ** 2}
+    truth["fit"] = {"light.position": {"min": [-box, 0.5, -box], "max": [box, box, box]},
+                    "objects.ball.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]}}
+    photo = rtloop.render(truth)
+    photo = np.clip(photo + np.random.default_rng(5).normal(0, 0.004, photo.shape), 0, None).astype(np.float32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", rtloop.RtloopWarning)
+        return rtloop.estimate_uncertainty(rtloop.load_scene(truth), photo)["light_distance"]
+
+
+def test_a_far_lights_direction_sigma_does_not_depend_on_how_wide_its_box_is():
+    """The finite-difference step of a light's position is a small angle seen from the subject, not a
+    fraction of the box: a box of +-1000 m around a light 24 m away must give the direction sigma a box of
+    +-40 m gives (with steps of a thousandth of the box, 2 m at 24 m, it was several times off)."""
+    wide, tight = _far_light_sigma(1000.0), _far_light_sigma(40.0)
+    assert tight["direction_sigma_deg"] > 0
+    assert wide["direction_sigma_deg"] == pytest.approx(tight["direction_sigma_deg"], rel=0.05)
