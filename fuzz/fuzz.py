@@ -550,6 +550,8 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
             truth["exposure"] = truth.get("exposure", 1.0) * rng.uniform(0.3, 3.0)
             noise = np.random.default_rng(rng.randrange(2**32)).normal(0, rng.choice([0, 0.01, 0.05]), shape)
             arr = np.minimum(rtloop.render(truth), 1.0) + noise.astype(np.float32)
+            if rng.random() < 0.5:  # as a linear 16-bit file stores it: the default norm's L2 refit
+                arr = (np.round(np.clip(arr, 0.0, 1.0) * 65535) / 65535).astype(np.float32)
         res = rtloop.fit(scene, arr, protocol="rtloop", **opts)
         check_fit(res, scene, c)
     else:  # CLI arguments via main()

@@ -106,7 +106,7 @@ def _build_parser() -> Parser:
     p.add_argument("--protocol", choices=sorted(PROTOCOLS), help="every job's protocol (a job's own wins)")
     p.add_argument("--population", type=int_in(*LIMITS["population"]), metavar="N")
     p.add_argument("--generations", type=generations, metavar="N|N1,N2")
-    p.add_argument("--norm", type=norm, metavar="NORM", help="l1 (default), l2, huber or huber:H")
+    p.add_argument("--norm", type=norm, metavar="NORM", help="auto (default), l1, l2, huber or huber:H, as rtloop-fit's --norm")
     p.add_argument("--loss-space", choices=("auto", "linear", "srgb"))
     p.add_argument("--environment", choices=("auto", "on", "off"), help="the occluded environment term "
                    "(default auto: added when the photo shows it)")

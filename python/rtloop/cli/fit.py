@@ -186,11 +186,11 @@ def _build_parser() -> Parser:
                    "editors) or 'linear' (raw linear sensor counts)")
     p.add_argument("--crop", action="store_true",
                    help="centre-crop IMAGE to the scene's aspect ratio (otherwise they must match)")
-    p.add_argument("--norm", type=norm, default="l1", metavar="NORM",
-                   help="per-pixel penalty of the loss: l1 (the paper's, default), l2 (Gaussian noise), auto "
-                   "(l1, refitted in l2 when the l1 fit's residual exceeds the photo's own noise at most pixels; "
-                   "fit_report.model.norm says why; best on 16-bit photos of glossy balls), huber or huber:H "
-                   "(quadratic within H, linear beyond)")
+    p.add_argument("--norm", type=norm, default="auto", metavar="NORM",
+                   help="per-pixel penalty of the loss: auto (default: l1, refitted in l2 when IMAGE is a linear "
+                   "camera file, --response linear of a 16-bit or 8-bit PNG or TIFF or a RAW, and the l1 fit's "
+                   "residual exceeds its own noise at most pixels; fit_report.model.norm says why), l1 (the "
+                   "paper's), l2 (Gaussian noise), huber or huber:H (quadratic within H, linear beyond)")
     p.add_argument("--loss-space", choices=("auto", "linear", "srgb"), default="auto",
                    help="where --norm compares render and IMAGE: 'auto' (default: linear, and a JPEG that direct "
                    "light explains refitted in sRGB), 'linear' (radiance) or 'srgb' (both sRGB-encoded, as an "

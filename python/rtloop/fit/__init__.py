@@ -26,7 +26,7 @@ from .gauge import hold_gauges, release_gauges
 from .lights import LightsFit, check_lights, choose_count, fit_lights
 from .framing import check_framing, fit_reframed, framing_check, mismatch_verdict
 from .goodness import clip_level, encoded, goodness, jpeg_blocking, noise_sigma
-from .norm import dense_residual, norm_verdict, pixel_mask, representable_pixels
+from .norm import dense_residual, linear_file, norm_verdict, not_linear_verdict, pixel_mask, representable_pixels
 from .identifiability import identifiability as _identifiability
 from .inputs import check_footprint, check_norm, objective
 from .identifiability import lit_pixel_counts
@@ -88,7 +88,7 @@ def fit(
     polish: int | None = None,
     uncertainty: bool | str = True,
     mask: np.ndarray | None = None,
-    norm: str = "l1",
+    norm: str = "auto",
     space: str = "auto",
     environment: str = "auto",
     interreflection: str = "auto",
@@ -117,10 +117,11 @@ def fit(
     ("de" or "lshade") and ``polish`` (Nelder-Mead evaluations) override the protocol's search for the
     closed-form method. ``mask`` (bool (H, W), True = use) leaves out pixels the scene does not model
     (another object, a reflection, the photographer's shadow): they count in no loss and no solve.
-    ``norm`` penalises each pixel's difference: "l1" (the paper's, default), "l2" (maximum likelihood for
-    Gaussian noise), "huber" or "huber:H" (quadratic within H, default 0.02, linear beyond), "auto" (L1, refitted
-    in L2 on the pixels that show one object where the L1 fit's residual is dense against the photo's own
-    errors: :mod:`rtloop.fit.norm`, ``result.model["norm"]``). ``space`` is
+    ``norm`` penalises each pixel's difference: "auto" (default: L1, refitted in L2 on the pixels that show
+    one object where the photo is a linear camera file, a linear 16-bit or 8-bit PNG or TIFF or a developed
+    RAW, and the L1 fit's residual is dense against its own errors: :mod:`rtloop.fit.norm`,
+    ``result.model["norm"]``), "l1" (the paper's), "l2" (maximum likelihood for Gaussian noise), "huber" or
+    "huber:H" (quadratic within H, default 0.02, linear beyond). ``space`` is
     where it is taken: "linear" (radiance) or "srgb" (the sRGB encodings of the clipped render
     and of the image, as an 8-bit file stores them: a shadow's error counts as the file resolves it); the
     closed-form products stay least squares in linear space, the reported ones minimise the sRGB loss.
@@ -274,9 +275,11 @@ def fit(
 
         current = select(stages, model)
         if norm_mode == "auto" and space == "linear" and model.get("space", {}).get("used") != "srgb":
-            jpeg = blocking["error_codes"] if _is_jpeg(blocking) else [0.0, 0.0, 0.0]
-            render = _native.render(current, current.width, current.height, 1, footprint != "off")
-            chosen = norm_verdict(dense_residual(render, target, use, codes, sigma, jpeg, clip=clip))
+            if codes is None and not _is_jpeg(blocking) and linear_file(target):
+                render = _native.render(current, current.width, current.height, 1, footprint != "off")
+                chosen = norm_verdict(dense_residual(render, target, use, None, sigma, [0.0, 0.0, 0.0], clip=clip))
+            else:
+                chosen = not_linear_verdict()
             if chosen["used"] == "l2":  # refitted in L2 on the pixels that show one object only
                 before = scene.width * scene.height if use is None else int(use.size)
                 use = representable_pixels(scene, use)
@@ -552,8 +555,52 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
     model["terms"] += added
     if "specular" in added:
         model["specular_objects"] = names
+        lobe = model["evidence"]["specular"]
+        if lobe.get("lobe") == "blinn-phong" and "coat" in lobe:
+            coated = _coat_after_refit(work, added, names, candidate, where, float(sum(more.stages[-1].objectives)),
+                                       target, sub, n_sub, model_env, kw, refit, space, int(seeds[1]), lobe, bounce)
+            if coated is not None:
+                candidate, model_work, extra = coated
+                stages.stages += extra.stages
+                stages.evaluations += extra.evaluations
     # The user's bounds back (the search box was narrowed), with the freed lobes' bounds kept.
     return restore_bounds(candidate, model_work)
+
+
+def _coat_after_refit(work: Scene, added: list[str], names: list[str], fitted: Scene, where: list[str],
+                      fitted_loss: float, target: np.ndarray, sub: np.ndarray, n_sub: int, env: bool, kw: dict[str, Any],
+                      refit: Callable[[Scene, str], Stages | None], space: str, seed: int, lobe: dict[str, Any],
+                      bounce: bool) -> tuple[Scene, Scene, Stages] | None:
+    """The coat tried again at the light the Blinn-Phong refit found. The lobes were compared at the light
+    found without any (:func:`.coat.choose_lobe`), which a highlight pulls towards itself: there Blinn-Phong's
+    broader freedom can win, and its refit then ends degrees off on a coated ball (Mitsuba's roughplastic
+    balls of studies/results/linear_photos.md: 0.9-3.4 deg with Blinn-Phong, 0.02-0.07 deg with the coat).
+    At the refitted light both lobes are tested again by the same closed-form evidence; where the coat
+    explains the photo better there, the fit is made again with it from that light and kept when its loss
+    is lower. ``fitted`` is the Blinn-Phong refit's scene, ``fitted_loss`` its loss, ``where`` the paths of the
+    light and colours. Returns (scene, its model, the refit's stages), or None where Blinn-Phong stays; the
+    record goes in ``lobe["after_refit"]``."""
+    x = list(fitted.get_params(where))
+    base_work = with_interreflection(work) if "interreflection" in added else work
+    record: dict[str, Any] = {"roughness": lobe["coat"]["roughness"]}
+    lobe["after_refit"] = record
+    again = {"coat": {"roughness": lobe["coat"]["roughness"]}}
+    model_work = with_coat(base_work, names, again["coat"]["roughness"])
+    more = refit(narrowed(model_work.with_params(x, where), where, REFIT_FRACTION), space)
+    if more is None:
+        return None
+    if bounce:
+        more.frozen_bounce = BOUNCE_PASSES
+    candidate = more.projected(seed, environment=env, name="light+colour+coat (after the lobe's refit)",
+                               from_scene=not bounce)
+    record["loss_refit_coat"] = float(sum(more.stages[-1].objectives))
+    record["loss_refit_blinn_phong"] = fitted_loss
+    if record["loss_refit_coat"] >= record["loss_refit_blinn_phong"]:
+        record["kept"] = "blinn-phong"
+        return None
+    record["kept"] = "coat"
+    lobe.update(lobe="coat", roughness=again["coat"]["roughness"])
+    return candidate, model_work, more
 
 
 #: A photo whose JPEG blocks err by at least this many 8-bit codes (RMS, channel mean;
