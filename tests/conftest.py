@@ -7,6 +7,7 @@ import copy
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
@@ -35,6 +36,36 @@ BALL_ON_FLOOR = {
 def ball_scene() -> dict:
     """The paper's scene (sphere on a floor, one light) at 64x48, as a fresh dict."""
     return copy.deepcopy(BALL_ON_FLOOR)
+
+
+def wrong_start(truth: dict) -> dict:
+    """The truth's geometry with a wrong light and wrong colours (what a user would hand the fit)."""
+    start = copy.deepcopy(truth)
+    start["light"]["position"] = [0.0, 4.25, 0.0]
+    start["light"]["intensity"] = 20.0
+    for o in start["objects"]:
+        o["material"]["albedo"] = [0.5, 0.5, 0.5]
+    return start
+
+
+def scene_products(d: dict) -> dict[str, np.ndarray]:
+    """Each object's light colour x intensity x exposure x albedo, by name."""
+    light = np.array(d["light"]["color"]) * d["light"]["intensity"] * d.get("exposure", 1.0)
+    return {o["name"]: light * np.array(o["material"]["albedo"]) for o in d["objects"]}
+
+
+def sunlit(truth: dict, direction: list[float]) -> dict:
+    """Light ``truth`` (in place) by a directional light along ``direction``, its direction and intensity
+    free, and return the start a user would hand the fit: the light straight overhead, grey albedos."""
+    truth["light"] = {"type": "directional", "direction": direction, "intensity": 2.5}
+    truth["fit"].pop("light.position")
+    truth["fit"]["light.direction"] = {"min": [-1, 0.05, -1], "max": [1, 1, 1]}
+    truth["fit"]["light.intensity"] = {"min": 0.1, "max": 20}
+    start = copy.deepcopy(truth)
+    start["light"]["direction"] = [0.0, 1.0, 0.0]
+    for o in start["objects"]:
+        o["material"]["albedo"] = [0.5, 0.5, 0.5]
+    return start
 
 
 #: The accuracy group (marker ``accuracy``): the files whose tests fit or render photos from an independent
