@@ -4,6 +4,7 @@ under CI=true, where it must be present)."""
 from __future__ import annotations
 
 import copy
+import json
 import os
 from pathlib import Path
 
@@ -12,6 +13,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_SCENES = REPO.parent / "shared" / "scenes"
+EXAMPLE = REPO / "examples" / "yellow-ball"
 
 BALL_ON_FLOOR = {
     "image": {"width": 64, "height": 48},
@@ -36,6 +38,22 @@ BALL_ON_FLOOR = {
 def ball_scene() -> dict:
     """The paper's scene (sphere on a floor, one light) at 64x48, as a fresh dict."""
     return copy.deepcopy(BALL_ON_FLOOR)
+
+
+def example_scene(width: int, height: int) -> dict:
+    """The yellow-ball example (its camera, objects and fit section, its neutral start) at width x height."""
+    d = json.loads((EXAMPLE / "scene_input.json").read_text(encoding="utf-8"))
+    d["image"] = {"width": width, "height": height}
+    return d
+
+
+def example_truth(width: int, height: int) -> dict:
+    """``example_scene`` with a known light and albedos: what its test photos are rendered from."""
+    d = example_scene(width, height)
+    d["light"].update(position=[2.0, 4.0, -1.5], intensity=40.0)
+    d["objects"][0]["material"]["albedo"] = [0.8, 0.7, 0.1]
+    d["objects"][1]["material"]["albedo"] = [0.4, 0.5, 0.6]
+    return d
 
 
 def wrong_start(truth: dict) -> dict:
