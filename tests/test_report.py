@@ -25,6 +25,19 @@ W, H = 32, 24
 BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable", "chrome")
 
 
+def _fit_with_report(tmp_path: Path, capsys, final_scale: int, final_spp: int) -> Path:
+    """rtloop-fit --report (population 8, 3 generations, no snapshots) of the example scene on a render of its
+    truth, in tmp_path/fit, which it returns."""
+    scene_path, image_path, out = tmp_path / "scene.json", tmp_path / "objective.png", tmp_path / "fit"
+    scene_path.write_text(json.dumps(example_scene(W, H)), encoding="utf-8")
+    rtloop.save_image(image_path, rtloop.render(example_truth(W, H), footprint=True))
+    code = cli.main([str(scene_path), str(image_path), "--out", str(out), "--population", "8", "--generations",
+                     "3", "--final-scale", str(final_scale), "--final-spp", str(final_spp), "--snapshot-every", "0",
+                     "--report", "-q"])
+    assert code == 0, capsys.readouterr().err
+    return out
+
+
 @pytest.fixture
 def speed_png(tmp_path) -> Path:
     """A PNG the caller passes as the speed-against-error plot (a report reads no file of the repository)."""
@@ -270,12 +283,7 @@ def test_speed_plot_only_when_given(projected, tmp_path, monkeypatch, capsys):
     rep = rtloop.report(result, tmp_path / "r.html", generations=rows)
     assert "speed_vs_error.png" not in {p.name for p in rep.files}
     assert "Speed against error" not in rep.path.read_text(encoding="utf-8")
-    scene_path, image_path, out = tmp_path / "scene.json", tmp_path / "objective.png", tmp_path / "fit"
-    scene_path.write_text(json.dumps(example_scene(W, H)), encoding="utf-8")
-    rtloop.save_image(image_path, rtloop.render(example_truth(W, H), footprint=True))
-    code = cli.main([str(scene_path), str(image_path), "--out", str(out), "--population", "8", "--generations",
-                     "3", "--final-scale", "1", "--final-spp", "1", "--snapshot-every", "0", "--report", "-q"])
-    assert code == 0, capsys.readouterr().err
+    out = _fit_with_report(tmp_path, capsys, final_scale=1, final_spp=1)
     assert not (out / "report" / "speed_vs_error.png").exists()
     assert "Speed against error" not in (out / "report.html").read_text(encoding="utf-8")
 
@@ -534,12 +542,7 @@ def test_the_scene_picture_draws_the_light_and_its_error_ellipse(projected):
 
 def test_final_png_beside_the_photo(tmp_path, capsys):
     """rtloop-fit --report shows final.png (at --final-scale times the size), not the one-sample render."""
-    scene_path, image_path, out = tmp_path / "scene.json", tmp_path / "objective.png", tmp_path / "fit"
-    scene_path.write_text(json.dumps(example_scene(W, H)), encoding="utf-8")
-    rtloop.save_image(image_path, rtloop.render(example_truth(W, H), footprint=True))
-    code = cli.main([str(scene_path), str(image_path), "--out", str(out), "--population", "8", "--generations",
-                     "3", "--final-scale", "3", "--final-spp", "4", "--snapshot-every", "0", "--report", "-q"])
-    assert code == 0, capsys.readouterr().err
+    out = _fit_with_report(tmp_path, capsys, final_scale=3, final_spp=4)
     with Image.open(out / "report" / "fitted.png") as shown, Image.open(out / "final.png") as final:
         assert shown.size == final.size == (3 * W, 3 * H)
         assert np.array_equal(np.asarray(shown.convert("RGB")), np.asarray(final.convert("RGB")))
