@@ -4,13 +4,16 @@ under CI=true, where it must be present)."""
 from __future__ import annotations
 
 import copy
+import json
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_SCENES = REPO.parent / "shared" / "scenes"
+EXAMPLE = REPO / "examples" / "yellow-ball"
 
 BALL_ON_FLOOR = {
     "image": {"width": 64, "height": 48},
@@ -35,6 +38,52 @@ BALL_ON_FLOOR = {
 def ball_scene() -> dict:
     """The paper's scene (sphere on a floor, one light) at 64x48, as a fresh dict."""
     return copy.deepcopy(BALL_ON_FLOOR)
+
+
+def example_scene(width: int, height: int) -> dict:
+    """The yellow-ball example (its camera, objects and fit section, its neutral start) at width x height."""
+    d = json.loads((EXAMPLE / "scene_input.json").read_text(encoding="utf-8"))
+    d["image"] = {"width": width, "height": height}
+    return d
+
+
+def example_truth(width: int, height: int) -> dict:
+    """``example_scene`` with a known light and albedos: what its test photos are rendered from."""
+    d = example_scene(width, height)
+    d["light"].update(position=[2.0, 4.0, -1.5], intensity=40.0)
+    d["objects"][0]["material"]["albedo"] = [0.8, 0.7, 0.1]
+    d["objects"][1]["material"]["albedo"] = [0.4, 0.5, 0.6]
+    return d
+
+
+def wrong_start(truth: dict) -> dict:
+    """The truth's geometry with a wrong light and wrong colours (what a user would hand the fit)."""
+    start = copy.deepcopy(truth)
+    start["light"]["position"] = [0.0, 4.25, 0.0]
+    start["light"]["intensity"] = 20.0
+    for o in start["objects"]:
+        o["material"]["albedo"] = [0.5, 0.5, 0.5]
+    return start
+
+
+def scene_products(d: dict) -> dict[str, np.ndarray]:
+    """Each object's light colour x intensity x exposure x albedo, by name."""
+    light = np.array(d["light"]["color"]) * d["light"]["intensity"] * d.get("exposure", 1.0)
+    return {o["name"]: light * np.array(o["material"]["albedo"]) for o in d["objects"]}
+
+
+def sunlit(truth: dict, direction: list[float]) -> dict:
+    """Light ``truth`` (in place) by a directional light along ``direction``, its direction and intensity
+    free, and return the start a user would hand the fit: the light straight overhead, grey albedos."""
+    truth["light"] = {"type": "directional", "direction": direction, "intensity": 2.5}
+    truth["fit"].pop("light.position")
+    truth["fit"]["light.direction"] = {"min": [-1, 0.05, -1], "max": [1, 1, 1]}
+    truth["fit"]["light.intensity"] = {"min": 0.1, "max": 20}
+    start = copy.deepcopy(truth)
+    start["light"]["direction"] = [0.0, 1.0, 0.0]
+    for o in start["objects"]:
+        o["material"]["albedo"] = [0.5, 0.5, 0.5]
+    return start
 
 
 #: The accuracy group (marker ``accuracy``): the files whose tests fit or render photos from an independent

@@ -245,21 +245,11 @@ def test_jpeg(tmp_path: Path) -> None:
             np.testing.assert_allclose(encoded[y, x], rgb[y, x] / 255, atol=4 / 255)
 
 
-def test_bmp(tmp_path: Path) -> None:
-    rng = np.random.default_rng(4)
+@pytest.mark.parametrize(("name", "seed"), [("picture.bmp", 4), ("picture.tif", 5)], ids=["bmp", "tiff_8bit"])
+def test_lossless_8bit_formats(tmp_path: Path, name: str, seed: int) -> None:
+    rng = np.random.default_rng(seed)
     rgb = rng.integers(0, 256, size=(6, 9, 3), dtype=np.uint8)
-    path = tmp_path / "picture.bmp"
-    Image.fromarray(rgb, "RGB").save(path)
-
-    result = load_image(path, (9, 6))
-
-    np.testing.assert_allclose(result, srgb_to_linear(rgb / 255), rtol=1e-6, atol=1e-8)
-
-
-def test_tiff_8bit(tmp_path: Path) -> None:
-    rng = np.random.default_rng(5)
-    rgb = rng.integers(0, 256, size=(6, 9, 3), dtype=np.uint8)
-    path = tmp_path / "picture.tif"
+    path = tmp_path / name
     Image.fromarray(rgb, "RGB").save(path)
 
     result = load_image(path, (9, 6))

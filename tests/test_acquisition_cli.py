@@ -82,6 +82,11 @@ def run(main, capsys, *args) -> tuple[int, str, str]:
     return code, out.out, out.err
 
 
+def run_scene(capsys, photo, radius, *args) -> tuple[int, str, str]:
+    """``rtloop-scene PHOTO --board BOARD --ball-radius RADIUS ARGS...``, as ``run`` returns it."""
+    return run(scene_main, capsys, photo, "--board", BOARD, "--ball-radius", radius, *args)
+
+
 # --- help ---------------------------------------------------------------------------------------------
 
 
@@ -198,24 +203,9 @@ def test_calibrate_and_undistort_commands(tmp_path, capsys) -> None:
 def test_scene_command_end_to_end(tmp_path, capsys, photos) -> None:
     out = tmp_path / "scene"
     x, y, w, h = CARD
-    code, stdout, err = run(
-        scene_main,
-        capsys,
-        photos["photo"],
-        "--board",
-        BOARD,
-        "--ball-radius",
-        "80mm",
-        "--vfov",
-        "50",
-        "--objective",
-        photos["objective"],
-        "--grey-card",
-        f"{x + 5},{y + 5},{w - 10},{h - 10}",
-        "--width",
-        "64",
-        "--out",
-        out,
+    code, stdout, err = run_scene(
+        capsys, photos["photo"], "80mm", "--vfov", "50", "--objective", photos["objective"], "--grey-card",
+        f"{x + 5},{y + 5},{w - 10},{h - 10}", "--width", "64", "--out", out,
     )
     assert code == 0, err
     assert "rtloop-fit" in stdout
@@ -285,19 +275,7 @@ def test_scene_command_end_to_end(tmp_path, capsys, photos) -> None:
     assert code == 0 and (tmp_path / "fit" / "result.json").is_file()
 
     # An existing output directory is kept unless --force.
-    code, _, err = run(
-        scene_main,
-        capsys,
-        photos["photo"],
-        "--board",
-        BOARD,
-        "--ball-radius",
-        "0.08",
-        "--vfov",
-        "50",
-        "--out",
-        out,
-    )
+    code, _, err = run_scene(capsys, photos["photo"], "0.08", "--vfov", "50", "--out", out)
     assert code == 1 and "--force" in err
 
 
@@ -306,8 +284,8 @@ def test_scene_from_one_photo_masks_the_board(tmp_path, capsys, photos) -> None:
     and the grey card changed (found by comparing with the board-free render) and keeps the ball; the
     scene names it and rtloop-fit uses it with no --mask."""
     out = tmp_path / "scene"
-    code, _, err = run(
-        scene_main, capsys, photos["photo"], "--board", BOARD, "--ball-radius", "80mm", "--vfov", "50",
+    code, _, err = run_scene(
+        capsys, photos["photo"], "80mm", "--vfov", "50",
         "--grey-card", ",".join(map(str, CARD)), "--board-margin", "0", "--width", "64", "--out", out,
     )
     assert code == 0, err
@@ -352,19 +330,7 @@ def test_scene_command_with_a_calibration(tmp_path, capsys, photos) -> None:
             }
         )
     )
-    code, _, err = run(
-        scene_main,
-        capsys,
-        photos["photo"],
-        "--board",
-        BOARD,
-        "--ball-radius",
-        "0.08",
-        "--camera",
-        camera,
-        "--out",
-        tmp_path / "s",
-    )
+    code, _, err = run_scene(capsys, photos["photo"], "0.08", "--camera", camera, "--out", tmp_path / "s")
     assert code == 0, err
     scene = json.loads((tmp_path / "s" / "scene.json").read_text())
     assert scene["camera"]["vfov_deg"] == pytest.approx(50.0, abs=0.01)
@@ -386,18 +352,9 @@ def test_scene_command_errors(tmp_path, capsys, photos, which, extra, message) -
         str(photos["small"]) if e == "SMALL" else str(tmp_path / "nope.json") if e == "MISSING" else e
         for e in extra
     ]
-    code, _, err = run(
-        scene_main,
-        capsys,
-        photos[which],
-        "--board",
-        BOARD,
-        "--ball-radius",
-        "0.08",
-        *(["--vfov", "50"] if "--camera" not in extra else []),
-        *extra,
-        "--out",
-        tmp_path / "o",
+    code, _, err = run_scene(
+        capsys, photos[which], "0.08", *(["--vfov", "50"] if "--camera" not in extra else []), *extra,
+        "--out", tmp_path / "o",
     )
     assert code == 1
     assert message in err and err.startswith("rtloop-scene: error:")
@@ -410,19 +367,7 @@ def test_scene_command_without_a_ball(tmp_path, capsys) -> None:
     cam = PinholeCamera.from_scene_camera(TRUE_SCENE["camera"], 640, 480)
     path = tmp_path / "board-only.png"
     write_png16_srgb(path, board_view(spec, cam, background=0.4))
-    code, _, err = run(
-        scene_main,
-        capsys,
-        path,
-        "--board",
-        BOARD,
-        "--ball-radius",
-        "0.08",
-        "--vfov",
-        "50",
-        "--out",
-        tmp_path / "o",
-    )
+    code, _, err = run_scene(capsys, path, "0.08", "--vfov", "50", "--out", tmp_path / "o")
     assert code == 1 and "--ball X,Y,R" in err and "--ball-mask" in err
 
 
@@ -448,8 +393,8 @@ def test_scene_command_ball_hint_is_where_the_ball_is_looked_for(tmp_path, capsy
     if where != "on the ball":
         uv = uv + np.array([-150.0, 60.0])
     out = tmp_path / "scene"
-    code, _, err = run(scene_main, capsys, photos["photo"], "--board", BOARD, "--ball-radius", "80mm",
-                       "--vfov", "50", "--ball", f"{uv[0]:.0f},{uv[1]:.0f},{r:.0f}", "--out", out)
+    code, _, err = run_scene(capsys, photos["photo"], "80mm",
+                             "--vfov", "50", "--ball", f"{uv[0]:.0f},{uv[1]:.0f},{r:.0f}", "--out", out)
     if where == "on the ball":
         assert code == 0, err
         ball = json.loads((out / "scene.json").read_text())["objects"][0]
@@ -477,8 +422,7 @@ def _jpeg_with_exif(png: Path, path: Path, tags: dict[int, object]) -> Path:
 def test_scene_field_of_view_from_exif(tmp_path, capsys, photos, tags, focal_px) -> None:
     """With no --vfov/--camera the field of view is the EXIF focal length's (closed form)."""
     jpeg = _jpeg_with_exif(photos["photo"], tmp_path / "photo.jpg", tags)
-    code, _, err = run(scene_main, capsys, jpeg, "--board", BOARD, "--ball-radius", "80mm",
-                       "--objective", photos["objective"], "--out", tmp_path / "o")
+    code, _, err = run_scene(capsys, jpeg, "80mm", "--objective", photos["objective"], "--out", tmp_path / "o")
     assert code == 0, err
     acq = json.loads((tmp_path / "o" / "scene.json").read_text())
     assert acq["meta"]["acquisition"]["camera_model"] == "exif"
@@ -491,8 +435,7 @@ def test_scene_records_the_exif_exposure(tmp_path, capsys, photos) -> None:
     ISO 100: 1/125 s at f/8, ISO 400 is log2(64 x 125) - 2 = 10.97."""
     tags = {0xA405: 28, 0x829A: 1 / 125, 0x829D: 8.0, 0x8827: 400}
     jpeg = _jpeg_with_exif(photos["photo"], tmp_path / "photo.jpg", tags)
-    code, _, err = run(scene_main, capsys, jpeg, "--board", BOARD, "--ball-radius", "80mm",
-                       "--objective", photos["objective"], "--out", tmp_path / "o")
+    code, _, err = run_scene(capsys, jpeg, "80mm", "--objective", photos["objective"], "--out", tmp_path / "o")
     assert code == 0, err
     got = json.loads((tmp_path / "o" / "scene.json").read_text())["meta"]["acquisition"]["inputs"]["exposure"]
     assert got["exposure_time_s"] == pytest.approx(1 / 125) and got["f_number"] == 8.0 and got["iso"] == 400
@@ -512,8 +455,8 @@ def test_scene_without_exif_estimates_from_the_board_and_says_so(tmp_path, capsy
     write_png16_srgb(tmp_path / "photo.png", paste_board_on_floor(
         render, rtloop.object_ids(scene) == 1, 0.45, parse_board(BOARD), cam))
     write_png16_srgb(tmp_path / "objective.png", render)
-    code, out, err = run(scene_main, capsys, tmp_path / "photo.png", "--board", BOARD, "--ball-radius", "80mm",
-                         "--objective", tmp_path / "objective.png", "--out", tmp_path / "o")
+    code, out, err = run_scene(capsys, tmp_path / "photo.png", "80mm",
+                               "--objective", tmp_path / "objective.png", "--out", tmp_path / "o")
     assert code == 0, err
     assert "has no EXIF focal length" in out + err and "--vfov" in out + err
     written = json.loads((tmp_path / "o" / "scene.json").read_text())
@@ -560,7 +503,7 @@ def test_scene_refuses_a_head_on_board_without_a_field_of_view(tmp_path, capsys,
     )
     path = tmp_path / "head-on.png"
     write_png16_srgb(path, board_view(spec, cam, background=0.4))
-    code, _, err = run(scene_main, capsys, path, "--board", BOARD, "--ball-radius", "0.08", "--out", tmp_path / "o")
+    code, _, err = run_scene(capsys, path, "0.08", "--out", tmp_path / "o")
     assert code == 1 and len(err.strip().splitlines()) == 1
     assert "head-on" in err and "--vfov" in err and "EXIF" in err
 

@@ -13,26 +13,19 @@ from pathlib import Path
 import pytest
 
 import rtloop
+from conftest import example_scene
 from rtloop.batch import fit_many, job_hash, load_jobs
 from rtloop.batch.folder import LOCK, MARKER
 from rtloop.cli import batch as batch_cli
 
-REPO = Path(__file__).resolve().parents[1]
-EXAMPLE = REPO / "examples" / "yellow-ball"
 W, H = 32, 24
 TRUTHS = [([2.0, 4.0, -1.5], 40.0), ([2.5, 4.5, -1.0], 55.0), ([1.5, 3.5, -2.0], 30.0)]
-
-
-def scene_dict() -> dict:
-    d = json.loads((EXAMPLE / "scene_input.json").read_text(encoding="utf-8"))
-    d["image"] = {"width": W, "height": H}
-    return d
 
 
 @pytest.fixture
 def photos(tmp_path: Path) -> tuple[Path, list[Path]]:
     """A 32x24 scene and three photos of it rendered by rtloop from known lights."""
-    d = scene_dict()
+    d = example_scene(W, H)
     scene_path = tmp_path / "scene.json"
     scene_path.write_text(json.dumps(d), encoding="utf-8")
     paths = []

@@ -14,18 +14,14 @@ from pathlib import Path
 import pytest
 
 import rtloop
+from conftest import example_scene
 from rtloop.cli.outputs import GenerationLog
 from rtloop.fit.result import GenerationInfo
 from rtloop.uncertainty.bootstrap import REPLICATES, replicate_of
 
-REPO = Path(__file__).resolve().parents[1]
-EXAMPLE = REPO / "examples" / "yellow-ball"
-
 
 def scene_dict() -> dict:
-    d = json.loads((EXAMPLE / "scene_input.json").read_text(encoding="utf-8"))
-    d["image"] = {"width": 32, "height": 24}
-    return d
+    return example_scene(32, 24)
 
 
 @pytest.fixture(scope="module")

@@ -53,12 +53,19 @@ def _falloff(scene: rtloop.Scene, k1: float, k2: float) -> np.ndarray:
     return cos**4 * (1 + k1 * r2 + k2 * r2 * r2)
 
 
-@pytest.mark.parametrize("name", ["blue-ball-vignette", "orange-ball-vignette"])
-def test_vignetting_is_chosen_and_fitted_with_the_light(name):
+def _fit_choosing(name: str, term: str) -> tuple[rtloop.FitResult, dict, dict, dict]:
+    """The default fit of fixture ``name``, whose camera model must have chosen ``term`` alone: (result, its
+    camera model, the truth, the fixture's meta)."""
     scene, image, truth, meta = _load(FIXTURES / name)
     res = rtloop.fit(scene, image, uncertainty=False)
     cam = res.model["camera"]
-    assert cam["terms"] == ["vignetting"]
+    assert cam["terms"] == [term]
+    return res, cam, truth, meta
+
+
+@pytest.mark.parametrize("name", ["blue-ball-vignette", "orange-ball-vignette"])
+def test_vignetting_is_chosen_and_fitted_with_the_light(name):
+    res, cam, truth, meta = _fit_choosing(name, "vignetting")
     assert cam["evidence"]["vignetting"]["selected"] and not cam["evidence"]["tone"]["selected"]
     light, worst, _ = _errors(res, truth)
     # without the term: 7.7 and 119 cm, the floor's products 27 % and 52 % off
@@ -70,10 +77,7 @@ def test_vignetting_is_chosen_and_fitted_with_the_light(name):
 
 @pytest.mark.parametrize("name", ["blue-ball-tone", "orange-ball-tone"])
 def test_tone_curve_is_chosen_and_fitted_with_the_light(name):
-    scene, image, truth, _ = _load(FIXTURES / name)
-    res = rtloop.fit(scene, image, uncertainty=False)
-    cam = res.model["camera"]
-    assert cam["terms"] == ["tone"]
+    res, cam, truth, _ = _fit_choosing(name, "tone")
     light, _, scaled = _errors(res, truth)
     # without the term: 100 cm off, products 47 % and 39 % off; the curve's top (its scale) is weakly
     # determined, the colours relative to each other are

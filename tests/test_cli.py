@@ -18,32 +18,19 @@ import pytest
 from PIL import Image
 
 import rtloop
+from conftest import EXAMPLE, REPO, example_scene, example_truth
 from rtloop import cli
-
-REPO = Path(__file__).resolve().parents[1]
-EXAMPLE = REPO / "examples" / "yellow-ball"
 
 W, H = 32, 24
 OUTPUTS = ("result.json", "best_per_generation.csv", "final.png", "objective.png", "snapshots")
 
 
-def scene_dict() -> dict:
-    """The yellow-ball example's camera and objects at 32x24, with the example's fit section."""
-    d = json.loads((EXAMPLE / "scene_input.json").read_text(encoding="utf-8"))
-    d["image"] = {"width": W, "height": H}
-    return d
-
-
 @pytest.fixture
 def inputs(tmp_path: Path) -> tuple[Path, Path]:
     """(scene.json, objective.png) in tmp_path; the objective is rendered by rtloop from a known truth."""
-    d = scene_dict()
     scene_path = tmp_path / "scene.json"
-    scene_path.write_text(json.dumps(d), encoding="utf-8")
-    truth = json.loads(json.dumps(d))
-    truth["light"].update(position=[2.0, 4.0, -1.5], intensity=40.0)
-    truth["objects"][0]["material"]["albedo"] = [0.8, 0.7, 0.1]
-    truth["objects"][1]["material"]["albedo"] = [0.4, 0.5, 0.6]
+    scene_path.write_text(json.dumps(example_scene(W, H)), encoding="utf-8")
+    truth = example_truth(W, H)
     image_path = tmp_path / "objective.png"
     rtloop.save_image(image_path, rtloop.render(rtloop.load_scene(truth), footprint=True))
     return scene_path, image_path
@@ -326,7 +313,7 @@ def test_crop_and_linear_response(inputs, tmp_path, capsys):
 def test_bad_scene_file(inputs, tmp_path, capsys):
     _, image_path = inputs
     bad = tmp_path / "bad_scene.json"
-    d = scene_dict()
+    d = example_scene(W, H)
     d["objects"][0]["radius"] = -1
     bad.write_text(json.dumps(d), encoding="utf-8")
     out = tmp_path / "out"
@@ -757,7 +744,7 @@ def test_save_scene_round_trips_and_writes_whole_files(tmp_path):
     """save_scene writes what load_scene reads back identically (floats to the last bit: serde_json's
     float_roundtrip), from a Scene or a dict; a dict that is not valid JSON (NaN) is refused and leaves the
     file that was there as it was."""
-    scene = rtloop.load_scene(scene_dict())
+    scene = rtloop.load_scene(example_scene(W, H))
     d = scene.to_dict()
     d["light"]["position"] = [0.1, 1 / 3, 2.0000000000000004]  # decimals that need all 17 digits
     path = tmp_path / "s.json"

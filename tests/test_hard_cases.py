@@ -15,6 +15,7 @@ import pytest
 from PIL import Image
 
 import rtloop
+from conftest import sunlit
 from rtloop import _native
 
 
@@ -250,14 +251,7 @@ def test_directional_light_sun(ball_scene):
     """A far light (a sun) as a directional light: only its direction is searched, and recovered."""
     truth = ball_scene
     sun = np.array([0.6, 1.0, -0.4])
-    truth["light"] = {"type": "directional", "direction": list(sun), "intensity": 2.5}
-    truth["fit"].pop("light.position")
-    truth["fit"]["light.direction"] = {"min": [-1, 0.05, -1], "max": [1, 1, 1]}
-    truth["fit"]["light.intensity"] = {"min": 0.1, "max": 20}
-    start = copy.deepcopy(truth)
-    start["light"]["direction"] = [0.0, 1.0, 0.0]
-    for o in start["objects"]:
-        o["material"]["albedo"] = [0.5, 0.5, 0.5]
+    start = sunlit(truth, list(sun))
     result = rtloop.fit(start, _photo(truth), seed=12)
     fitted_dir = np.array(result.scene.to_dict()["light"]["direction"])
     angle = np.degrees(np.arccos(np.clip(fitted_dir @ sun / np.linalg.norm(sun), -1, 1)))

@@ -100,12 +100,18 @@ def test_snapshots_are_rendered_after_the_search_each_individual_once(tmp_path, 
         assert np.array_equal(got, want)
 
 
-def test_snapshots_render_each_distinct_individual_once(tmp_path, monkeypatch):
-    scene = glossy_scene()
-    base = [float(v) for v in scene.get_params()]
+def _render_passes(monkeypatch) -> list[int]:
+    """Count the batch renders: the list gets the number of scenes of every pass from now on."""
     passes: list[int] = []
     real = _native.render_many
     monkeypatch.setattr(_native, "render_many", lambda scenes: passes.append(len(scenes)) or real(scenes))
+    return passes
+
+
+def test_snapshots_render_each_distinct_individual_once(tmp_path, monkeypatch):
+    scene = glossy_scene()
+    base = [float(v) for v in scene.get_params()]
+    passes = _render_passes(monkeypatch)
     with GenerationLog(tmp_path, scene, 1) as log:
         for g in range(6):
             log(info("light", g, [base[0] + 0.1 * (g // 3), *base[1:]]))
@@ -116,9 +122,7 @@ def test_snapshots_render_each_distinct_individual_once(tmp_path, monkeypatch):
 def test_snapshots_in_passes_of_bounded_size(tmp_path, monkeypatch):
     scene = glossy_scene()
     base = [float(v) for v in scene.get_params()]
-    passes: list[int] = []
-    real = _native.render_many
-    monkeypatch.setattr(_native, "render_many", lambda scenes: passes.append(len(scenes)) or real(scenes))
+    passes = _render_passes(monkeypatch)
     monkeypatch.setattr(outputs, "_SNAPSHOT_PIXELS", 2 * scene.width * scene.height)
     with GenerationLog(tmp_path, scene, 1) as log:
         for g in range(5):

@@ -17,28 +17,25 @@ import pytest
 from PIL import Image
 
 import rtloop
+from conftest import REPO, example_scene, example_truth
 from rtloop import cli
 from rtloop.report import image_metrics, truth_errors
 
-REPO = Path(__file__).resolve().parents[1]
-EXAMPLE = REPO / "examples" / "yellow-ball"
 W, H = 32, 24
 BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable", "chrome")
 
 
-def scene_dict() -> dict:
-    """The yellow-ball example (its camera, objects and fit section) at 32x24, with its neutral start."""
-    d = json.loads((EXAMPLE / "scene_input.json").read_text(encoding="utf-8"))
-    d["image"] = {"width": W, "height": H}
-    return d
-
-
-def truth_dict() -> dict:
-    d = scene_dict()
-    d["light"].update(position=[2.0, 4.0, -1.5], intensity=40.0)
-    d["objects"][0]["material"]["albedo"] = [0.8, 0.7, 0.1]
-    d["objects"][1]["material"]["albedo"] = [0.4, 0.5, 0.6]
-    return d
+def _fit_with_report(tmp_path: Path, capsys, final_scale: int, final_spp: int) -> Path:
+    """rtloop-fit --report (population 8, 3 generations, no snapshots) of the example scene on a render of its
+    truth, in tmp_path/fit, which it returns."""
+    scene_path, image_path, out = tmp_path / "scene.json", tmp_path / "objective.png", tmp_path / "fit"
+    scene_path.write_text(json.dumps(example_scene(W, H)), encoding="utf-8")
+    rtloop.save_image(image_path, rtloop.render(example_truth(W, H), footprint=True))
+    code = cli.main([str(scene_path), str(image_path), "--out", str(out), "--population", "8", "--generations",
+                     "3", "--final-scale", str(final_scale), "--final-spp", str(final_spp), "--snapshot-every", "0",
+                     "--report", "-q"])
+    assert code == 0, capsys.readouterr().err
+    return out
 
 
 @pytest.fixture
@@ -51,14 +48,14 @@ def speed_png(tmp_path) -> Path:
 
 @pytest.fixture(scope="module")
 def photo() -> np.ndarray:
-    return np.minimum(rtloop.render(truth_dict(), footprint=True), 1.0)
+    return np.minimum(rtloop.render(example_truth(W, H), footprint=True), 1.0)
 
 
 @pytest.fixture(scope="module")
 def projected(photo):
     """A default-protocol fit (one stage, light+colour: colours in closed form) and its callback rows."""
     rows: list = []
-    result = rtloop.fit(scene_dict(), photo, seed=1, population=8, generations=6, callback=rows.append)
+    result = rtloop.fit(example_scene(W, H), photo, seed=1, population=8, generations=6, callback=rows.append)
     assert result.settings["method"] == "projected"
     return result, rows
 
@@ -67,7 +64,7 @@ def projected(photo):
 def two_stage(photo):
     """The paper protocol (light, then colour) with tiny budgets."""
     rows: list = []
-    result = rtloop.fit(scene_dict(), photo, protocol="paper", seed=2, population=6, generations=(4, 5),
+    result = rtloop.fit(example_scene(W, H), photo, protocol="paper", seed=2, population=6, generations=(4, 5),
                         callback=rows.append)
     return result, rows
 
@@ -102,7 +99,7 @@ def browse(browser: str, page: Path, profile: Path, *args: str) -> subprocess.Co
 def test_page_renders_in_a_headless_browser_with_every_image(projected, photo, tmp_path, speed_png):
     browser = find_browser()
     result, rows = projected
-    rep = rtloop.report(result, tmp_path / "report.html", objective=photo, truth=truth_dict(),
+    rep = rtloop.report(result, tmp_path / "report.html", objective=photo, truth=example_truth(W, H),
                         generations=rows, speed_plot=speed_png)
     page = rep.path.read_text(encoding="utf-8")
     n_images = page.count("<img ")
@@ -139,7 +136,7 @@ def test_page_renders_in_a_headless_browser_with_every_image(projected, photo, t
 
 def test_plotted_data_are_the_fit_history_projected(projected, photo, tmp_path):
     result, rows = projected
-    truth = truth_dict()
+    truth = example_truth(W, H)
     rep = rtloop.report(result, tmp_path / "r.html", objective=photo, truth=truth, generations=rows)
     assert rep.source == "generations"
     (stage,) = result.stages
@@ -231,7 +228,7 @@ def test_plotted_data_are_the_fit_history_two_stages(two_stage, tmp_path):
 def test_page_is_self_contained(projected, photo, tmp_path, speed_png):
     result, rows = projected
     out = tmp_path / "deep" / "report.html"
-    rep = rtloop.report(result, out, objective=photo, truth=truth_dict(), generations=rows,
+    rep = rtloop.report(result, out, objective=photo, truth=example_truth(W, H), generations=rows,
                         speed_plot=speed_png)
     assert rep.path == out and out.is_file()
     page = out.read_text(encoding="utf-8")
@@ -286,12 +283,7 @@ def test_speed_plot_only_when_given(projected, tmp_path, monkeypatch, capsys):
     rep = rtloop.report(result, tmp_path / "r.html", generations=rows)
     assert "speed_vs_error.png" not in {p.name for p in rep.files}
     assert "Speed against error" not in rep.path.read_text(encoding="utf-8")
-    scene_path, image_path, out = tmp_path / "scene.json", tmp_path / "objective.png", tmp_path / "fit"
-    scene_path.write_text(json.dumps(scene_dict()), encoding="utf-8")
-    rtloop.save_image(image_path, rtloop.render(truth_dict(), footprint=True))
-    code = cli.main([str(scene_path), str(image_path), "--out", str(out), "--population", "8", "--generations",
-                     "3", "--final-scale", "1", "--final-spp", "1", "--snapshot-every", "0", "--report", "-q"])
-    assert code == 0, capsys.readouterr().err
+    out = _fit_with_report(tmp_path, capsys, final_scale=1, final_spp=1)
     assert not (out / "report" / "speed_vs_error.png").exists()
     assert "Speed against error" not in (out / "report.html").read_text(encoding="utf-8")
 
@@ -317,7 +309,7 @@ def test_error_numbers_follow_their_formulas():
 
 def test_truth_errors(projected):
     result, _ = projected
-    truth = truth_dict()
+    truth = example_truth(W, H)
     err = truth_errors(result, truth)
     fitted = result.scene.to_dict()
     want = np.linalg.norm(np.subtract(fitted["light"]["position"], truth["light"]["position"]))
@@ -332,7 +324,7 @@ def test_truth_errors(projected):
     assert sorted(err["split_convention"]) == sorted(
         ["light.intensity"] + [f"objects.{o}.albedo.{c}" for o in ("ball", "floor") for c in "rgb"])
     assert err["errors"]["light.position.x"] == pytest.approx(result.x["light.position.x"] - 2.0)
-    other = truth_dict()
+    other = example_truth(W, H)
     other["objects"][0]["name"] = "sphere"
     with pytest.raises(rtloop.RtloopError, match="ball"):
         truth_errors(result, other)
@@ -343,7 +335,7 @@ def test_truth_errors(projected):
 def test_directional_light_uncertainty_is_one_line_in_degrees(projected, tmp_path):
     """A directional light's uncertainty: the two angles' sigmas (radians, marked so) and, on one row of
     the uncertainty table, the cone in degrees from result.uncertainty["light_direction"]."""
-    truth = truth_dict()
+    truth = example_truth(W, H)
     sun = np.array([0.6, 1.0, -0.4])
     truth["light"] = {"type": "directional", "direction": list(sun / np.linalg.norm(sun)), "intensity": 2.5}
     truth["fit"].pop("light.position")
@@ -396,11 +388,11 @@ def test_import_rtloop_does_not_import_matplotlib():
 
 def test_cli_report_and_truth(tmp_path, capsys, speed_png):
     scene_path = tmp_path / "scene.json"
-    scene_path.write_text(json.dumps(scene_dict()), encoding="utf-8")
+    scene_path.write_text(json.dumps(example_scene(W, H)), encoding="utf-8")
     truth_path = tmp_path / "truth.json"
-    truth_path.write_text(json.dumps(truth_dict()), encoding="utf-8")
+    truth_path.write_text(json.dumps(example_truth(W, H)), encoding="utf-8")
     image_path = tmp_path / "objective.png"
-    rtloop.save_image(image_path, rtloop.render(truth_dict(), footprint=True))
+    rtloop.save_image(image_path, rtloop.render(example_truth(W, H), footprint=True))
     out = tmp_path / "fit"
     code = cli.main([str(scene_path), str(image_path), "--out", str(out), "--population", "8",
                      "--generations", "5", "--final-scale", "1", "--final-spp", "1", "--report",
@@ -447,7 +439,7 @@ def test_cli_report_and_truth(tmp_path, capsys, speed_png):
     assert html_text.count("<td>split convention</td>") == 7 and "Split convention:" in html_text
 
     # A truth that does not match the scene is one clear line, before any fitting.
-    bad = truth_dict()
+    bad = example_truth(W, H)
     bad["objects"][1]["name"] = "ground"
     bad_path = tmp_path / "bad.json"
     bad_path.write_text(json.dumps(bad), encoding="utf-8")
@@ -472,7 +464,7 @@ def test_cli_report_and_truth(tmp_path, capsys, speed_png):
 def test_the_bootstrap_column_when_the_fit_ran_it(photo, tmp_path):
     """A fit with uncertainty="bootstrap": the uncertainty table gets a third sigma column naming the
     refits and their cost, with the bootstrap's value for the light coordinates; without it, no column."""
-    result = rtloop.fit(scene_dict(), photo, seed=1, population=8, generations=6, uncertainty="bootstrap")
+    result = rtloop.fit(example_scene(W, H), photo, seed=1, population=8, generations=6, uncertainty="bootstrap")
     boot = result.uncertainty["bootstrap"]
     page = rtloop.report(result, tmp_path / "r.html").path.read_text(encoding="utf-8")
     assert f"block bootstrap: {boot['replicates']} refits" in page
@@ -498,7 +490,7 @@ def test_the_page_opens_with_the_answer(projected, photo, tmp_path):
     """The first section: the light's position in mm with its 1σ in mm (the block sandwich's), the
     products with their 1σ in %, the truth's errors, the verdict, and the picture of the scene."""
     result, rows = projected
-    rep = rtloop.report(result, tmp_path / "r.html", objective=photo, truth=truth_dict(), generations=rows)
+    rep = rtloop.report(result, tmp_path / "r.html", objective=photo, truth=example_truth(W, H), generations=rows)
     page = rep.path.read_text(encoding="utf-8")
     headings = re.findall(r"<h2>(.*?)</h2>", page)
     assert headings[:2] == ["The answer", "Photo, fit and difference"]
@@ -550,12 +542,7 @@ def test_the_scene_picture_draws_the_light_and_its_error_ellipse(projected):
 
 def test_final_png_beside_the_photo(tmp_path, capsys):
     """rtloop-fit --report shows final.png (at --final-scale times the size), not the one-sample render."""
-    scene_path, image_path, out = tmp_path / "scene.json", tmp_path / "objective.png", tmp_path / "fit"
-    scene_path.write_text(json.dumps(scene_dict()), encoding="utf-8")
-    rtloop.save_image(image_path, rtloop.render(truth_dict(), footprint=True))
-    code = cli.main([str(scene_path), str(image_path), "--out", str(out), "--population", "8", "--generations",
-                     "3", "--final-scale", "3", "--final-spp", "4", "--snapshot-every", "0", "--report", "-q"])
-    assert code == 0, capsys.readouterr().err
+    out = _fit_with_report(tmp_path, capsys, final_scale=3, final_spp=4)
     with Image.open(out / "report" / "fitted.png") as shown, Image.open(out / "final.png") as final:
         assert shown.size == final.size == (3 * W, 3 * H)
         assert np.array_equal(np.asarray(shown.convert("RGB")), np.asarray(final.convert("RGB")))
@@ -564,7 +551,7 @@ def test_final_png_beside_the_photo(tmp_path, capsys):
 
 def test_values_in_mm_and_percent(projected, tmp_path):
     result, rows = projected
-    page = rtloop.report(result, tmp_path / "r.html", truth=truth_dict(), generations=rows).path.read_text(
+    page = rtloop.report(result, tmp_path / "r.html", truth=example_truth(W, H), generations=rows).path.read_text(
         encoding="utf-8")
     x = result.x["light.position.x"]
     row = cells(page, "light.position.x")

@@ -11,6 +11,7 @@ import pytest
 
 import rtloop
 import rtloop.uncertainty as uncertainty_module
+from conftest import scene_products, sunlit, wrong_start
 from rtloop.uncertainty import estimate_uncertainty
 
 LIGHT = ["light.position.x", "light.position.y", "light.position.z"]
@@ -21,25 +22,10 @@ pytestmark = pytest.mark.filterwarnings(
     "ignore:image.* of the values are negative:rtloop.errors.RtloopWarning")
 
 
-def _start(truth: dict) -> dict:
-    """The truth's geometry with a wrong light and wrong colours (what a user would hand the fit)."""
-    start = copy.deepcopy(truth)
-    start["light"]["position"] = [0.0, 4.25, 0.0]
-    start["light"]["intensity"] = 20.0
-    for o in start["objects"]:
-        o["material"]["albedo"] = [0.5, 0.5, 0.5]
-    return start
-
-
 def _photo(clean: np.ndarray, sigma: float, noise_seed: int) -> np.ndarray:
     """rtloop's render plus Gaussian noise of standard deviation ``sigma``, saturated at 1 like a camera."""
     noise = np.random.default_rng(noise_seed).normal(0.0, 1.0, clean.shape)
     return np.minimum(clean + sigma * noise, 1.0).astype(np.float32)
-
-
-def _truth_products(truth: dict) -> dict[str, np.ndarray]:
-    light = np.array(truth["light"]["color"]) * truth["light"]["intensity"] * truth.get("exposure", 1.0)
-    return {o["name"]: light * np.array(o["material"]["albedo"]) for o in truth["objects"]}
 
 
 def test_sigma_matches_the_spread_over_noise_realisations(ball_scene):
@@ -56,8 +42,8 @@ def test_sigma_matches_the_spread_over_noise_realisations(ball_scene):
     """
     truth = ball_scene
     clean = rtloop.render(truth)
-    start = _start(truth)
-    want = np.array(truth["light"]["position"] + [_truth_products(truth)["ball"][0]])
+    start = wrong_start(truth)
+    want = np.array(truth["light"]["position"] + [scene_products(truth)["ball"][0]])
     names = LIGHT + ["products.ball.r"]
     fitted, sigmas = [], []
     for k in range(20):
@@ -91,7 +77,7 @@ def _glossy(truth: dict) -> tuple[dict, dict]:
     truth["objects"][0]["material"].update(specular=0.3, shininess=30.0)
     truth["fit"]["objects.ball.specular"] = {"min": 0, "max": 1}
     truth["fit"]["objects.ball.shininess"] = {"min": 1, "max": 100}
-    start = _start(truth)
+    start = wrong_start(truth)
     start["objects"][0]["material"].update(specular=0.1, shininess=10.0)
     return truth, start
 
@@ -117,7 +103,7 @@ def test_glossy_sigma_matches_the_spread_over_noise_realisations(ball_scene):
     clean = rtloop.render(truth)
     assert (clean >= 1).any(axis=2).sum() > 40, "the highlight saturates"
     names = LIGHT + GLOSSY
-    p = _truth_products(truth)
+    p = scene_products(truth)
     want = np.array(truth["light"]["position"] + [70.0 * 0.3, 30.0, *p["ball"], p["floor"][1]])
     fitted, sigmas = [], []
     for k in range(20):
@@ -165,7 +151,7 @@ def test_a_highlight_of_known_strength_uses_the_scene_parameters(ball_scene):
 def test_sigma_scales_linearly_with_the_noise_level(ball_scene):
     truth = ball_scene
     clean = rtloop.render(truth)
-    start = _start(truth)
+    start = wrong_start(truth)
     out = {}
     for level in (0.01, 0.04):
         photo = _photo(clean, level, noise_seed=5)  # the same noise pattern, scaled
@@ -182,7 +168,7 @@ def test_a_hidden_sphere_is_not_determined(ball_scene):
     truth["fit"]["objects.hidden.albedo"] = {"min": [0, 0, 0], "max": [1, 1, 1]}
     assert not (rtloop.object_ids(truth) == 2).any(), "the ball hides the sphere behind it"
     photo = _photo(rtloop.render(truth), 0.01, noise_seed=3)
-    result = rtloop.fit(_start(truth), photo, seed=1)
+    result = rtloop.fit(wrong_start(truth), photo, seed=1)
     u = estimate_uncertainty(result, photo)
     for c in "rgb":
         assert u["sigma"][f"products.hidden.{c}"] is None
@@ -206,7 +192,7 @@ def test_intensity_against_albedo_is_reported_when_scene_parameters_are_asked_fo
     undetermined combination is left free, not held fixed)."""
     truth = ball_scene
     photo = _photo(rtloop.render(truth), 0.01, noise_seed=4)
-    result = rtloop.fit(_start(truth), photo, seed=1)
+    result = rtloop.fit(wrong_start(truth), photo, seed=1)
     assert result.identifiability["degenerate"]
     own = estimate_uncertainty(result, photo, params="scene")
     products = estimate_uncertainty(result, photo)
@@ -232,7 +218,7 @@ def test_seed_spread_is_the_optimiser_not_the_data(ball_scene):
     """
     truth = ball_scene
     clean = rtloop.render(truth, footprint=True)  # as the default fit models pixels
-    start = _start(truth)
+    start = wrong_start(truth)
     for level in (0.0, 0.01):
         photo = _photo(clean, level, noise_seed=7)
         fitted, sigmas, warnings = [], [], []
@@ -272,7 +258,7 @@ def test_the_fits_render_at_the_optimum_serves_the_estimate(ball_scene):
     render the products' reparametrised scene: the same image to float32 rounding, so on a noisy photo the
     same sigma to 1e-5 relative (the robust sandwich, whose block sums cancel at the optimum, to 1e-3)."""
     photo = _photo(rtloop.render(ball_scene), 0.01, noise_seed=7)
-    result = rtloop.fit(_start(ball_scene), photo, seed=0, uncertainty=False)
+    result = rtloop.fit(wrong_start(ball_scene), photo, seed=0, uncertainty=False)
     assert result.identifiability["degenerate"]  # the products' scene: a reparametrised render
     own = estimate_uncertainty(result, photo)
     shared = estimate_uncertainty(result, photo, render=rtloop.render(result.scene))
@@ -285,14 +271,7 @@ def test_the_fits_render_at_the_optimum_serves_the_estimate(ball_scene):
 def _sun(truth: dict) -> tuple[dict, dict]:
     """The ball scene under a directional light (a sun), and the start a user would hand the fit."""
     sun = np.array([0.6, 1.0, -0.4])
-    truth["light"] = {"type": "directional", "direction": list(sun / np.linalg.norm(sun)), "intensity": 2.5}
-    truth["fit"].pop("light.position")
-    truth["fit"]["light.direction"] = {"min": [-1, 0.05, -1], "max": [1, 1, 1]}
-    truth["fit"]["light.intensity"] = {"min": 0.1, "max": 20}
-    start = copy.deepcopy(truth)
-    start["light"]["direction"] = [0.0, 1.0, 0.0]
-    for o in start["objects"]:
-        o["material"]["albedo"] = [0.5, 0.5, 0.5]
+    start = sunlit(truth, list(sun / np.linalg.norm(sun)))
     return truth, start
 
 
@@ -461,7 +440,7 @@ def test_robust_sigma_holds_under_correlated_noise(ball_scene):
 
     truth = ball_scene
     clean = rtloop.render(truth)
-    start = _start(truth)
+    start = wrong_start(truth)
     fitted, gn, robust = [], [], []
     for k in range(16):
         white = np.random.default_rng(300 + k).normal(0.0, 1.0, clean.shape)
@@ -492,7 +471,7 @@ def test_a_mask_leaves_its_pixels_out_of_the_estimate(ball_scene):
     h, w = photo.shape[:2]
     mask = np.zeros((h, w), bool)
     mask[:, : w // 2] = True  # the left half, with part of the ball and its shadow
-    result = rtloop.fit(_start(truth), photo, seed=2, mask=mask, uncertainty=False)
+    result = rtloop.fit(wrong_start(truth), photo, seed=2, mask=mask, uncertainty=False)
     spoiled = photo.copy()
     spoiled[:, w // 2 :] = np.random.default_rng(9).uniform(0, 1, spoiled[:, w // 2 :].shape)
     a = estimate_uncertainty(result, photo, mask=mask)
@@ -526,7 +505,7 @@ def test_bootstrap_sigma_matches_the_spread_under_correlated_noise(ball_scene):
     sandwich's ratio is 1.34, with white noise 0.75 (1.27 and 0.88 with the least-squares form)."""
     truth = ball_scene
     clean = rtloop.render(truth)
-    start = _start(truth)
+    start = wrong_start(truth)
     fitted, prods, gn, boot, boot_p = [], [], [], [], []
     pnames = [f"products.ball.{c}" for c in "rg"]
     for k in range(16):
@@ -552,7 +531,7 @@ def test_bootstrap_sigma_matches_the_spread_under_correlated_noise(ball_scene):
 def test_bootstrap_is_deterministic_for_a_seed(ball_scene):
     """The same seed gives the same bootstrap on 1 and 2 threads; another seed draws other blocks."""
     photo = _blurred_photo(rtloop.render(ball_scene), 0)
-    start = _start(ball_scene)
+    start = wrong_start(ball_scene)
     a = rtloop.fit(start, photo, seed=3, threads=1, uncertainty="bootstrap").uncertainty["bootstrap"]
     b = rtloop.fit(start, photo, seed=3, threads=2, uncertainty="bootstrap").uncertainty["bootstrap"]
     c = rtloop.fit(start, photo, seed=4, uncertainty="bootstrap").uncertainty["bootstrap"]
@@ -566,7 +545,7 @@ def test_bootstrap_holds_the_footprint_shift(ball_scene):
     error) for the light and every product, and the light as a whole is the largest axis of the replicates'
     covariance plus the shift's outer product."""
     photo = _blurred_photo(rtloop.render(ball_scene), 0)
-    result = rtloop.fit(_start(ball_scene), photo, seed=3, uncertainty="bootstrap")
+    result = rtloop.fit(wrong_start(ball_scene), photo, seed=3, uncertainty="bootstrap")
     b, shift = result.uncertainty["bootstrap"], result.uncertainty["robust"]["footprint_shift"]
     names = LIGHT + [f"products.{o}.{c}" for o in ("ball", "floor") for c in "rgb"]
     assert b["shift_included"] == names and all(shift[n] != 0.0 for n in names)
@@ -583,7 +562,7 @@ def test_uncertainty_modes(ball_scene):
     """True and "default" are the same estimate without a bootstrap; False and "off" none; other values are
     refused with the parameter named."""
     photo = _blurred_photo(rtloop.render(ball_scene), 1)
-    start = _start(ball_scene)
+    start = wrong_start(ball_scene)
     d = rtloop.fit(start, photo, uncertainty="default").uncertainty
     t = rtloop.fit(start, photo, uncertainty=True).uncertainty
     for u in (d, t):
@@ -606,7 +585,7 @@ def test_product_sigma_is_propagated_in_the_scene_parametrization(ball_scene):
     Whether that product is well fixed is the Jacobian's matter, checked against the spread of refits in
     test_interreflection_sigma_matches_the_spread_over_noise_realisations."""
     photo = _photo(rtloop.render(ball_scene), 0.01, 5)
-    fixed = _start(ball_scene)
+    fixed = wrong_start(ball_scene)
     fixed["light"]["intensity"] = 70.0
     del fixed["fit"]["light.intensity"]
     u = rtloop.fit(fixed, photo).uncertainty
@@ -617,7 +596,7 @@ def test_product_sigma_is_propagated_in_the_scene_parametrization(ball_scene):
             assert u["robust"]["product_sigma"][f"products.{o}.{c}"] == pytest.approx(
                 70.0 * u["robust"]["sigma"][f"objects.{o}.albedo.{c}"])
     truth = {**ball_scene, "interreflection": True}
-    result = rtloop.fit({**_start(ball_scene), "interreflection": True}, _photo(rtloop.render(truth), 0.01, 6))
+    result = rtloop.fit({**wrong_start(ball_scene), "interreflection": True}, _photo(rtloop.render(truth), 0.01, 6))
     u = result.uncertainty
     assert u["parametrization"] == "scene"
     i = result.x["light.intensity"]
@@ -695,7 +674,7 @@ def test_interreflection_sigma_matches_the_spread_over_noise_realisations(ball_s
     names = ["light.intensity"] + [f"objects.ball.albedo.{c}" for c in "rgb"] + LIGHT
     values, sigmas, products, product_sigmas = [], [], [], []
     for k in range(24):
-        result = rtloop.fit({**_start(ball_scene), "interreflection": True}, _photo(clean, 0.01, 100 + k),
+        result = rtloop.fit({**wrong_start(ball_scene), "interreflection": True}, _photo(clean, 0.01, 100 + k),
                             seed=100 + k)
         u = result.uncertainty
         assert u["parametrization"] == "scene"
@@ -795,7 +774,7 @@ def test_the_sandwich_follows_the_fits_norm(ball_scene):
     over 4 draws; least squares 1.0-1.6x, measured 1.22-1.29: the noisier sandwich floored at Gauss-Newton).
     With H at half (Powell's estimate without the factor 2 the sign scores need) the L1 ratio is about 2.5."""
     clean = rtloop.render(ball_scene)
-    start = _start(ball_scene)
+    start = wrong_start(ball_scene)
     for norm, top in (("l1", 1.7), ("l2", 1.6)):
         ratios = []
         for k in range(4):
@@ -850,11 +829,11 @@ def test_footprint_shift_covers_an_area_averaged_photo(ball_scene, monkeypatch, 
     truth["image"] = {"width": 128, "height": 96}
     truth["light"]["position"] = light
     photo = rtloop.render(truth, 128, 96, 256)
-    result = rtloop.fit(_start(truth), photo, seed=1)
+    result = rtloop.fit(wrong_start(truth), photo, seed=1)
     u = result.uncertainty
     shift, sigma = u["robust"]["footprint_shift"], u["robust"]["product_sigma"]
     err, left = 0.0, 0.0
-    for o, tp in _truth_products(truth).items():
+    for o, tp in scene_products(truth).items():
         for c, ch in enumerate("rgb"):
             e = result.products[o][c] - tp[c]
             assert abs(e) <= 2.0 * sigma[f"products.{o}.{ch}"], (o, ch, e, sigma[f"products.{o}.{ch}"])
@@ -864,6 +843,6 @@ def test_footprint_shift_covers_an_area_averaged_photo(ball_scene, monkeypatch, 
     if light == [-3.0, 2.0, 2.0]:
         monkeypatch.setattr(uncertainty_module, "FOOTPRINT_BIAS", False)
         u = estimate_uncertainty(result, photo)
-        z = [abs(result.products["ball"][c] - _truth_products(truth)["ball"][c]) / u["robust"]["product_sigma"][
+        z = [abs(result.products["ball"][c] - scene_products(truth)["ball"][c]) / u["robust"]["product_sigma"][
             f"products.ball.{ch}"] for c, ch in enumerate("rgb")]
         assert max(z) > 10.0, z

@@ -10,8 +10,9 @@ try:
     import io
     import math
     import textwrap
-    from collections.abc import Sequence
+    from collections.abc import Callable, Sequence
     from pathlib import Path
+    from typing import Any
 
     import numpy as np
     from PIL import Image
@@ -68,20 +69,36 @@ Run 'rtloop-acquire COMMAND --help' for each command's options.
 """
 
 
+def _command(
+    sub: Any, name: str, handler: Callable[[argparse.Namespace], int], *, help: str, description: str,
+    epilog: str | None = None,
+) -> argparse.ArgumentParser:
+    """The subcommand ``name``, run by ``handler``, with ``description`` dedented as its help text."""
+    parser = sub.add_parser(
+        name, help=help, formatter_class=formatter(), description=textwrap.dedent(description), epilog=epilog
+    )
+    parser.set_defaults(handler=handler)
+    return parser
+
+
+def _out(parser: argparse.ArgumentParser, metavar: str, help: str | None = None) -> None:
+    """The subcommand's required ``--out``/``-o``: the file it writes."""
+    parser.add_argument("--out", "-o", required=True, metavar=metavar, help=help)
+
+
 def _build_acquire_parser() -> Parser:
     p = Parser(prog="rtloop-acquire", description=ACQUIRE_DESCRIPTION, formatter_class=formatter())
     sub = p.add_subparsers(title="commands", metavar="COMMAND")
 
-    b = sub.add_parser(
-        "board",
+    b = _command(
+        sub, "board", _cmd_board,
         help="write a printable ChArUco board",
-        formatter_class=formatter(),
-        description=textwrap.dedent("""\
+        description="""\
             Write a ChArUco board as a PNG to print, and its description as JSON (same name,
             .json) for --board of the other commands. Print at 100% scale ("actual size"),
             glue it flat to something rigid, then measure a square with a ruler: if it is
             not exactly the size asked for, put the measured size (in metres) into the JSON's
-            "square_m" and scale "marker_m" the same way."""),
+            "square_m" and scale "marker_m" the same way.""",
     )
     b.add_argument("--board", default=DEFAULT_BOARD, help=BOARD_HELP + f" (default {DEFAULT_BOARD})")
     b.add_argument("--dpi", type=positive_int, default=300, help="printer resolution (default 300)")
@@ -92,21 +109,19 @@ def _build_acquire_parser() -> Parser:
         metavar="LENGTH",
         help="white margin around the board (default 10mm)",
     )
-    b.add_argument("--out", "-o", required=True, metavar="BOARD.png", help="the image to write")
-    b.set_defaults(handler=_cmd_board)
+    _out(b, "BOARD.png", "the image to write")
 
-    c = sub.add_parser(
-        "capture",
+    c = _command(
+        sub, "capture", _cmd_capture,
         help="take an averaged 16-bit photo from a camera",
-        formatter_class=formatter(),
-        description=textwrap.dedent("""\
+        description="""\
             Capture a photo through OpenCV's VideoCapture: read --warmup frames so automatic
             exposure and white balance settle, lock both at the settled values (or at
             --exposure / --wb-temperature), average --frames frames (noise falls as 1/sqrt(N);
             keep the scene still), and write a 16-bit PNG plus OUT.json with every setting and
             whether each lock took. Locking depends on the camera and backend: the JSON and the
             warnings say 'locked', 'requested' (not confirmed) or 'unsupported'. The PNG keeps
-            the camera's encoding (load it with --response srgb, the default, for webcams)."""),
+            the camera's encoding (load it with --response srgb, the default, for webcams).""",
         epilog="example:\n  rtloop-acquire capture --device 0 --size 1920x1080 --frames 32 --out scene.png",
     )
     c.add_argument(
@@ -145,21 +160,19 @@ def _build_acquire_parser() -> Parser:
         action="store_false",
         help="leave automatic white balance on",
     )
-    c.add_argument("--out", "-o", required=True, metavar="PHOTO.png", help="the 16-bit PNG to write")
-    c.set_defaults(handler=_cmd_capture)
+    _out(c, "PHOTO.png", "the 16-bit PNG to write")
 
-    k = sub.add_parser(
-        "calibrate",
+    k = _command(
+        sub, "calibrate", _cmd_calibrate,
         help="measure the camera from photos of a board",
-        formatter_class=formatter(),
-        description=textwrap.dedent("""\
+        description="""\
             Calibrate the camera (cv2.calibrateCamera) from several photos of a ChArUco board or
             a chessboard: focal lengths, principal point, radial and tangential distortion. Use
             the same camera, zoom, focus and resolution as for the scene photo. Take 10 to 20
             photos from different angles (tilted up to about 45 degrees), the board covering a
             good part of the frame and, across the set, reaching every corner. Photos in which
             the board is not found are skipped (and listed); at least 3 must remain. A good
-            calibration has an RMS reprojection error below about 0.5 px."""),
+            calibration has an RMS reprojection error below about 0.5 px.""",
         epilog=(
             "example:\n  rtloop-acquire calibrate calib/*.png --board board.json --out camera.json\n"
             "  rtloop-acquire calibrate shots/*.jpg --board chess:10x7,25mm --out camera.json"
@@ -178,24 +191,21 @@ def _build_acquire_parser() -> Parser:
     k.add_argument(
         "--zero-tangent", action="store_true", help="assume no tangential distortion (p1 = p2 = 0)"
     )
-    k.add_argument("--out", "-o", required=True, metavar="CAMERA.json", help="the calibration to write")
-    k.set_defaults(handler=_cmd_calibrate)
+    _out(k, "CAMERA.json", "the calibration to write")
 
-    u = sub.add_parser(
-        "undistort",
+    u = _command(
+        sub, "undistort", _cmd_undistort,
         help="resample a photo into the scene's ideal pinhole camera",
-        formatter_class=formatter(),
-        description=textwrap.dedent("""\
+        description="""\
             Remove the lens distortion, make the pixels square and move the principal point to the
             centre, so the photo is what the scene format's camera sees; prints its vertical field
             of view. Writes a 16-bit sRGB PNG (read by rtloop with the default --response srgb).
-            rtloop-scene does this itself when given --camera."""),
+            rtloop-scene does this itself when given --camera.""",
     )
     u.add_argument("photo", metavar="PHOTO")
     u.add_argument("--camera", required=True, metavar="CAMERA.json", help="from 'rtloop-acquire calibrate'")
     u.add_argument("--response", default="srgb", help=RESPONSE_HELP)
-    u.add_argument("--out", "-o", required=True, metavar="OUT.png")
-    u.set_defaults(handler=_cmd_undistort)
+    _out(u, "OUT.png")
     return p
 
 
