@@ -121,6 +121,28 @@ pub(crate) fn projected(
     .unwrap()
 }
 
+/// [`projected`] with every object's (matte) products bounded to [0, 200] in each channel.
+pub(crate) fn matte_projected(
+    scene: &Scene,
+    layout: ParamLayout,
+    target: &[f32],
+    clip: bool,
+) -> Fitness {
+    let bounds = vec![[(0.0, 200.0); 3]; scene.objects.len()];
+    projected(scene, layout, target, Projection::matte(bounds), clip)
+}
+
+/// [`Objective::evaluate_alone`] of `x` (one candidate spread over the pool) on a pool of `threads`.
+pub(crate) fn alone_on(f: &Fitness, x: &[f64], threads: usize) -> f64 {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    let mut alone = [0.0];
+    pool.install(|| f.evaluate_alone(x, &mut alone));
+    alone[0]
+}
+
 pub(crate) fn random_candidate(rng: &mut Rng, layout: &ParamLayout) -> Vec<f64> {
     layout
         .bounds
