@@ -122,3 +122,15 @@ pub fn assert_on_the_corner(best: &[f64], v: f64, tol: f64) {
     );
     assert!(v - expected < tol, "objective {v}, expected {expected}");
 }
+
+/// `f()` run inside a fresh pool of `threads` threads (checked to be that many).
+pub fn on_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(|| {
+        assert_eq!(rayon::current_num_threads(), threads);
+        f()
+    })
+}

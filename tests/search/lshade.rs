@@ -17,7 +17,7 @@ use rtloop::search::{
 
 use crate::defs::{
     ackley, assert_best_monotone, assert_on_the_corner, beyond_the_box, bits, busy_rastrigin,
-    distance, griewank, rastrigin, rosenbrock, sphere, BOX,
+    distance, griewank, on_threads, rastrigin, rosenbrock, sphere, BOX,
 };
 use crate::test_functions as lib;
 
@@ -628,14 +628,9 @@ fn polish_improves_an_unconverged_result_and_reports_it() {
 type History = (Vec<(Vec<u64>, u64, usize, usize)>, Vec<u64>, u64, usize);
 
 fn history_on_threads(threads: usize, c: &LshadeConfig) -> History {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
     let obj = busy_rastrigin;
     let bounds = [(-5.0, 3.0); 6];
-    pool.install(|| {
-        assert_eq!(rayon::current_num_threads(), threads);
+    on_threads(threads, || {
         let mut hist = Vec::new();
         let res = minimize(&obj, &bounds, c, |r: &GenerationReport| {
             hist.push((

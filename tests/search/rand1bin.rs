@@ -6,7 +6,7 @@
 
 use crate::defs::{
     assert_best_monotone, assert_on_the_corner, beyond_the_box, bits, busy_rastrigin, distance,
-    rastrigin, rosenbrock, sphere, BOX,
+    on_threads, rastrigin, rosenbrock, sphere, BOX,
 };
 use rtloop::search::rand1bin::minimize;
 use rtloop::search::{replaces, DeConfig, DeResult, GenerationReport, Objective};
@@ -254,14 +254,9 @@ fn dimension_with_min_equal_max_stays_fixed() {
 type History = (Vec<(Vec<u64>, Vec<u64>, usize)>, Vec<u64>, Vec<u64>);
 
 fn history_on_threads(threads: usize, seed: u64) -> History {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
     let obj = busy_rastrigin;
     let bounds = [(-5.0, 3.0); 6];
-    pool.install(|| {
-        assert_eq!(rayon::current_num_threads(), threads);
+    on_threads(threads, || {
         let mut hist = Vec::new();
         let res = minimize(
             &obj,
