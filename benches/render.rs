@@ -8,12 +8,16 @@
 //!
 //! Throughput is printed in elements/s where an element is one candidate-pixel (CPPS).
 
+#[path = "../tests/common/targets.rs"]
+mod targets;
+
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use rayon::prelude::*;
 use rtloop::{
     render, search, search::Objective, DeConfig, Fitness, LossKind, ParamLayout, Projection, Scene,
     Space,
 };
+use targets::{clipped_render, random_candidate};
 
 fn scene() -> Scene {
     let path = concat!(
@@ -26,25 +30,7 @@ fn scene() -> Scene {
 
 fn population(layout: &ParamLayout, n: usize) -> Vec<Vec<f64>> {
     let mut rng = search::Rng::new(1);
-    (0..n)
-        .map(|_| {
-            layout
-                .bounds
-                .iter()
-                .map(|&(lo, hi)| lo + (hi - lo) * rng.uniform())
-                .collect()
-        })
-        .collect()
-}
-
-/// The objective: `scene`'s own render, saturated at 1.
-fn objective(scene: &Scene) -> Vec<f32> {
-    render(scene, None, None, 1)
-        .unwrap()
-        .rgb
-        .iter()
-        .map(|v| v.min(1.0))
-        .collect()
+    (0..n).map(|_| random_candidate(&mut rng, layout)).collect()
 }
 
 /// Ten candidates of `fitness` at `x` in a row inside `pool` (of `threads`), as the polish runs them.
@@ -81,7 +67,7 @@ fn bench(c: &mut Criterion) {
     });
     g.finish();
 
-    let target = objective(&scene);
+    let target = clipped_render(&scene);
     let stage1 = vec!["light.position".to_string(), "light.intensity".to_string()];
     let position = vec!["light.position".to_string()];
     let bounds = vec![[(0.0, 400.0); 3]; scene.objects.len()];
@@ -200,7 +186,7 @@ fn bench(c: &mut Criterion) {
         .expect("the example has a sphere");
     glossy.objects[ball].material.specular = 0.3;
     glossy.objects[ball].material.shininess = 40.0;
-    let glossy_target = objective(&glossy);
+    let glossy_target = clipped_render(&glossy);
     let mut lobe = Projection::matte(vec![[(0.0, 400.0); 3]; glossy.objects.len()]);
     lobe.specular[ball] = (0.0, 400.0);
     let fitness = Fitness::new(
@@ -229,7 +215,7 @@ fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("bounce");
     let mut bounced = scene.clone();
     bounced.interreflection = true;
-    let bounced_target = objective(&bounced);
+    let bounced_target = clipped_render(&bounced);
     let mut fitness = Fitness::new(
         &bounced,
         layout.clone(),

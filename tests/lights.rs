@@ -18,6 +18,21 @@ fn plane_scene(lights: &str) -> String {
     )
 }
 
+/// Each pixel of `scene` whose centre sees an object: its index (row-major) and the point seen, in f64.
+fn seen_points(scene: &Scene) -> Vec<(usize, DVec3)> {
+    let geo = Geometry::new(scene);
+    let mut seen = Vec::new();
+    for j in 0..scene.height {
+        for i in 0..scene.width {
+            let s = geo.primary(i as f32 + 0.5, j as f32 + 0.5, scene.width, scene.height);
+            if s.object != u32::MAX {
+                seen.push(((j * scene.width + i) as usize, s.position.as_dvec3()));
+            }
+        }
+    }
+    seen
+}
+
 /// Each pixel of a floor lit by a point light, a sphere light (unoccluded: a point light's irradiance)
 /// and a directional light is exposure x albedo/pi x the sum of their irradiances, computed here in f64.
 #[test]
@@ -31,41 +46,28 @@ fn lights_add_up_on_a_plane_as_the_inverse_square_law_says() {
     let scene = Scene::from_json(&text).unwrap();
     assert_eq!(scene.light_count(), 3);
     let img = render(&scene, None, None, 1).unwrap();
-    let geo = Geometry::new(&scene);
     let albedo = DVec3::new(0.6, 0.4, 0.2);
     let n = DVec3::Y;
     let (mut worst, mut count) = (0.0f64, 0);
-    for j in 0..scene.height {
-        for i in 0..scene.width {
-            let s = geo.primary(i as f32 + 0.5, j as f32 + 0.5, scene.width, scene.height);
-            if s.object == u32::MAX {
-                continue;
-            }
-            let p = DVec3::new(
-                s.position.x as f64,
-                s.position.y as f64,
-                s.position.z as f64,
-            );
-            let mut e = DVec3::ZERO;
-            for l in scene.all_lights() {
-                let colour = DVec3::from_array(l.color) * l.intensity;
-                e += colour
-                    * match l.direction {
-                        Some(d) => n.dot(DVec3::from_array(d).normalize()).max(0.0),
-                        None => {
-                            let d = DVec3::from_array(l.position) - p;
-                            n.dot(d).max(0.0) / d.length().powi(3)
-                        }
-                    };
-            }
-            let want = albedo / std::f64::consts::PI * e;
-            let k = 3 * (j * scene.width + i) as usize;
-            for c in 0..3 {
-                let got = img.rgb[k + c] as f64;
-                worst = worst.max((got - want[c]).abs() / want[c]);
-            }
-            count += 1;
+    for (pixel, p) in seen_points(&scene) {
+        let mut e = DVec3::ZERO;
+        for l in scene.all_lights() {
+            let colour = DVec3::from_array(l.color) * l.intensity;
+            e += colour
+                * match l.direction {
+                    Some(d) => n.dot(DVec3::from_array(d).normalize()).max(0.0),
+                    None => {
+                        let d = DVec3::from_array(l.position) - p;
+                        n.dot(d).max(0.0) / d.length().powi(3)
+                    }
+                };
         }
+        let want = albedo / std::f64::consts::PI * e;
+        for c in 0..3 {
+            let got = img.rgb[3 * pixel + c] as f64;
+            worst = worst.max((got - want[c]).abs() / want[c]);
+        }
+        count += 1;
     }
     assert!(count > 100);
     assert!(worst < 1e-5, "largest relative error {worst}");
@@ -193,7 +195,6 @@ fn a_rectangle_light_gives_the_integrated_irradiance() {
     );
     let scene = Scene::from_json(&text).unwrap();
     let img = render(&scene, None, None, 1).unwrap();
-    let geo = Geometry::new(&scene);
     let r = scene.light.rect.unwrap();
     let normal = DVec3::from_array(r.normal);
     let up = DVec3::from_array(r.up);
@@ -203,19 +204,12 @@ fn a_rectangle_light_gives_the_integrated_irradiance() {
     );
     let centre = DVec3::from_array(scene.light.position);
     let (mut worst, mut count) = (0.0f64, 0);
-    for j in 0..scene.height {
-        for i in 0..scene.width {
-            let s = geo.primary(i as f32 + 0.5, j as f32 + 0.5, scene.width, scene.height);
-            if s.object == u32::MAX {
-                continue;
-            }
-            let p = s.position.as_dvec3();
-            let e = 30.0 * rect_reference(p, DVec3::Y, centre, u, v, normal, 300);
-            let want = 0.6 / std::f64::consts::PI * e;
-            let got = img.rgb[3 * (j * scene.width + i) as usize] as f64;
-            worst = worst.max((got - want).abs() / want);
-            count += 1;
-        }
+    for (pixel, p) in seen_points(&scene) {
+        let e = 30.0 * rect_reference(p, DVec3::Y, centre, u, v, normal, 300);
+        let want = 0.6 / std::f64::consts::PI * e;
+        let got = img.rgb[3 * pixel] as f64;
+        worst = worst.max((got - want).abs() / want);
+        count += 1;
     }
     assert!(count > 100);
     assert!(worst < 0.01, "largest relative error {worst}");

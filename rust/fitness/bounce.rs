@@ -163,11 +163,7 @@ impl Kernel {
             .map(|g| {
                 g.gathers
                     .par_iter()
-                    .map(|gth| {
-                        let mut e = Vec::new();
-                        gth.light::<AVX2>(&light, &mut e, c.parallel);
-                        Compact::new(gth, &e)
-                    })
+                    .map(|gth| Compact::lit::<AVX2>(gth, &light, c.parallel))
                     .collect()
             })
             .collect();
@@ -194,11 +190,7 @@ impl Kernel {
             .iter()
             .map(|gths| {
                 gths.iter()
-                    .map(|gth| {
-                        let mut e = Vec::new();
-                        gth.light::<AVX2>(&light, &mut e, c.parallel);
-                        Compact::new(gth, &e)
-                    })
+                    .map(|gth| Compact::lit::<AVX2>(gth, &light, c.parallel))
                     .collect()
             })
             .collect();
@@ -254,25 +246,14 @@ impl Kernel {
                     col.fill(0.0);
                     for ((gth, cg), folds) in g.gathers.iter().zip(&gathered[gi]).zip(&folded[gi]) {
                         let pk = solved.products[gth.sender][c] as f32;
-                        let ek = solved
-                            .environment
-                            .get(gth.sender)
-                            .map_or(0.0, |e| e[c] as f32);
-                        for (j, &i) in cg.pixels.iter().enumerate() {
-                            col[i as usize] += pk * cg.a[j] + ek * cg.s[j];
-                        }
+                        let ek = solved.environment_at(gth.sender, c) as f32;
+                        add_terms(col, &cg.pixels, (pk, &cg.a), (ek, &cg.s));
                         // The sender's own bounce: its albedo P_k·u/g_c times the light on its table.
                         let second = (u / w[c]) as f32 * pk;
                         for fold in folds {
                             let pt = second * solved.products[fold.sender][c] as f32;
-                            let et = second
-                                * solved
-                                    .environment
-                                    .get(fold.sender)
-                                    .map_or(0.0, |e| e[c] as f32);
-                            for (j, &i) in cg.pixels.iter().enumerate() {
-                                col[i as usize] += pt * fold.a[j] + et * fold.s[j];
-                            }
+                            let et = second * solved.environment_at(fold.sender, c) as f32;
+                            add_terms(col, &cg.pixels, (pt, &fold.a), (et, &fold.s));
                         }
                     }
                     let obj = g.object?;
@@ -288,7 +269,7 @@ impl Kernel {
                         [
                             solved.products[obj][c],
                             solved.specular[obj] * w[c],
-                            solved.environment.get(obj).map_or(0.0, |e| e[c]),
+                            solved.environment_at(obj, c),
                         ],
                         w[c],
                         sat,
@@ -388,7 +369,7 @@ impl Kernel {
                 let gt = if E::ENCODES { &g.te } else { &g.t };
                 let sky = proj.sky(obj, g);
                 let pc = solved.products[obj][c] as f32;
-                let ec = solved.environment.get(obj).map_or(0.0, |e| e[c]) as f32;
+                let ec = solved.environment_at(obj, c) as f32;
                 let qw = (solved.specular[obj] * w[c]) as f32;
                 let ac = &ab_all[c * n_px + o0..][..n];
                 let mut sum = 0.0f32;
@@ -421,6 +402,14 @@ impl Kernel {
     }
 }
 
+/// Adds p·a[j] + e·s[j] to `col` at each receiving pixel `pixels[j]`, for `(p, a)` and `(e, s)`.
+#[inline(always)]
+fn add_terms(col: &mut [f32], pixels: &[u32], (p, a): (f32, &[f32]), (e, s): (f32, &[f32])) {
+    for (j, &i) in pixels.iter().enumerate() {
+        col[i as usize] += p * a[j] + e * s[j];
+    }
+}
+
 /// One gather for one candidate, summed per receiving pixel: Σ form·e (the unit light the sender's points
 /// get) and Σ form·S (their sky view), and for a sphere sender the (pixel, table point, Σ form) of its
 /// table lookups; a round of the fixed point then costs per pixel, not per point.
@@ -432,6 +421,17 @@ struct Compact {
 }
 
 impl Compact {
+    /// [`Compact::new`] of `gth` with the unit light `light` gives its points (`Gather::light`).
+    fn lit<const AVX2: bool>(
+        gth: &super::pixels::Gather,
+        light: &Light,
+        parallel: bool,
+    ) -> Compact {
+        let mut e = Vec::new();
+        gth.light::<AVX2>(light, &mut e, parallel);
+        Compact::new(gth, &e)
+    }
+
     fn new(gth: &super::pixels::Gather, e: &[f32]) -> Compact {
         let sky = &gth.points.sky;
         let mut c = Compact {

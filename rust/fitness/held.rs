@@ -164,7 +164,7 @@ impl Kernel {
             t: std::array::from_fn(|ch| &gt[ch][r.clone()]),
             pc: std::array::from_fn(|ch| out.products[obj][ch] as f32),
             qw: std::array::from_fn(|ch| (out.specular[obj] * w(ch)) as f32),
-            ec: std::array::from_fn(|ch| out.environment.get(obj).map_or(0.0, |e| e[ch]) as f32),
+            ec: std::array::from_fn(|ch| out.environment_at(obj, ch) as f32),
             top,
             norm: self.norm,
             enc,

@@ -153,6 +153,18 @@ pub(crate) fn irradiance_exact(g: &Group, r: std::ops::Range<usize>, light: &Lig
     }
 }
 
+/// The segment x(t) = p + t·d, t in [0, 1], d = l - p, against the sphere |x - c|² = r²: a = |d|² and
+/// b = (p - c)·d, the terms `segment_meets_sphere` takes.
+#[inline(always)]
+fn segment_to_sphere(p: [f32; 3], l: [f32; 3], c: [f32; 3]) -> (f32, f32) {
+    let dx = l[0] - p[0];
+    let dy = l[1] - p[1];
+    let dz = l[2] - p[2];
+    let a = dx * dx + dy * dy + dz * dz;
+    let b = (p[0] - c[0]) * dx + (p[1] - c[1]) * dy + (p[2] - c[2]) * dz;
+    (a, b)
+}
+
 /// Zero `e` where the segment from the pixel to the light is blocked by another object.
 #[inline(always)]
 pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mut [f32]) {
@@ -190,12 +202,7 @@ pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mu
         let [cx, cy, cz] = s.center;
         if g.spread.is_empty() {
             for i in 0..n {
-                // Segment x(t) = p + t·d, t in [0, 1], d = L - p; sphere |x - c|² = r².
-                let dx = lx - px[i];
-                let dy = ly - py[i];
-                let dz = lz - pz[i];
-                let a = dx * dx + dy * dy + dz * dz;
-                let b = (px[i] - cx) * dx + (py[i] - cy) * dy + (pz[i] - cz) * dz;
+                let (a, b) = segment_to_sphere([px[i], py[i], pz[i]], [lx, ly, lz], [cx, cy, cz]);
                 let hit = segment_meets_sphere::<true>(a, b, cc[i]);
                 e[i] = if hit { 0.0 } else { e[i] };
             }
@@ -209,11 +216,7 @@ pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mu
         let mut span = (u32::MAX, 0u32);
         let rad = s.radius;
         for i in 0..n {
-            let dx = lx - px[i];
-            let dy = ly - py[i];
-            let dz = lz - pz[i];
-            let a = dx * dx + dy * dy + dz * dz;
-            let b = (px[i] - cx) * dx + (py[i] - cy) * dy + (pz[i] - cz) * dz;
+            let (a, b) = segment_to_sphere([px[i], py[i], pz[i]], [lx, ly, lz], [cx, cy, cz]);
             let hit = segment_meets_sphere::<true>(a, b, cc[i]);
             let w = spread[i];
             let close = (b * b - a * cc[i]).abs() < a * w * (2.0 * rad + w);

@@ -366,6 +366,14 @@ pub struct Solved {
     pub lit: Vec<usize>,
 }
 
+impl Solved {
+    /// Object `k`'s environment product in channel `c`; 0 without an environment term.
+    #[inline(always)]
+    pub(crate) fn environment_at(&self, k: usize, c: usize) -> f64 {
+        self.environment.get(k).map_or(0.0, |e| e[c])
+    }
+}
+
 /// Pixels per unit of work of the projected kernel: its sums are taken per run of `CHUNK` pixels and the
 /// runs added in order, so that a parallel evaluation gives the serial one's value bit for bit.
 pub const CHUNK: usize = 8 * BLOCK;

@@ -10,15 +10,23 @@ use crate::params::ParamLayout;
 use crate::scene::Scene;
 use crate::stage::StageResult;
 
-fn target_vec(scene: &Scene, target: &PyReadonlyArray3<'_, f32>) -> PyResult<Vec<f32>> {
-    let shape = target.shape();
+/// Checks that `shape` is the image shape of `scene`, (H, W, 3); else a value error whose message
+/// `mismatch(shape, H, W)` writes.
+pub(super) fn check_image_shape(
+    scene: &Scene,
+    shape: &[usize],
+    mismatch: impl FnOnce(&[usize], u32, u32) -> String,
+) -> PyResult<()> {
     if shape != [scene.height as usize, scene.width as usize, 3] {
-        return Err(Error::Value(format!(
-            "objective image has shape {shape:?}; the scene needs ({}, {}, 3)",
-            scene.height, scene.width
-        ))
-        .into());
+        return Err(Error::Value(mismatch(shape, scene.height, scene.width)).into());
     }
+    Ok(())
+}
+
+fn target_vec(scene: &Scene, target: &PyReadonlyArray3<'_, f32>) -> PyResult<Vec<f32>> {
+    check_image_shape(scene, target.shape(), |shape, h, w| {
+        format!("objective image has shape {shape:?}; the scene needs ({h}, {w}, 3)")
+    })?;
     Ok(target.as_slice()?.to_vec())
 }
 

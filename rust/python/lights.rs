@@ -3,6 +3,7 @@
 use numpy::{PyReadonlyArray1, PyReadonlyArray3, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
+use super::fitness::check_image_shape;
 use super::pool::detach_in_pool;
 use super::scene::PyScene;
 use crate::error::Error;
@@ -19,14 +20,9 @@ fn lights_fitness(
     pixels: &PyReadonlyArray1<'_, u32>,
 ) -> PyResult<LightsFitness> {
     let s = &scene.get().0;
-    let shape = image.shape();
-    if shape != [s.height as usize, s.width as usize, 3] {
-        return Err(Error::Value(format!(
-            "image: expected shape ({}, {}, 3), got {shape:?}",
-            s.height, s.width
-        ))
-        .into());
-    }
+    check_image_shape(s, image.shape(), |shape, h, w| {
+        format!("image: expected shape ({h}, {w}, 3), got {shape:?}")
+    })?;
     let layout = ParamLayout::new(s, paths)?;
     Ok(LightsFitness::new(
         s,

@@ -164,21 +164,19 @@ mod tests {
     use super::*;
     use crate::scene::Camera;
 
-    /// The fraction of an n x n grid of sub-pixel points where alpha u + beta v < s.
-    fn counted(s: f32, alpha: f32, beta: f32, n: usize) -> f32 {
-        let mut lit = 0;
-        for i in 0..n {
-            for j in 0..n {
+    /// The centres (u, v) of an n x n grid of sub-pixels over the pixel [-0.5, 0.5]^2, row by row.
+    fn sub_pixels(n: usize) -> impl Iterator<Item = (f32, f32)> {
+        (0..n).flat_map(move |i| {
+            (0..n).map(move |j| {
                 let u = (i as f32 + 0.5) / n as f32 - 0.5;
                 let v = (j as f32 + 0.5) / n as f32 - 0.5;
-                lit += usize::from(alpha * u + beta * v < s);
-            }
-        }
-        lit as f32 / (n * n) as f32
+                (u, v)
+            })
+        })
     }
 
-    #[test]
-    fn box_edge_matches_counting_sub_pixels() {
+    /// Calls `f(alpha, beta, s)` for each of a few edge slopes and offsets s = -0.84 .. 0.84.
+    fn each_edge(mut f: impl FnMut(f32, f32, f32)) {
         for &(alpha, beta) in &[
             (1.0, 0.0),
             (0.3, 0.7),
@@ -187,46 +185,47 @@ mod tests {
             (2.0, 1e-9),
         ] {
             for k in -12..=12 {
-                let s = k as f32 * 0.07;
-                let (f, c) = (box_edge(s, alpha, beta), counted(s, alpha, beta, 800));
-                assert!(
-                    (f - c).abs() < 4e-3,
-                    "s {s} alpha {alpha} beta {beta}: {f} vs {c}"
-                );
+                f(alpha, beta, k as f32 * 0.07);
             }
         }
+    }
+
+    /// The fraction of an n x n grid of sub-pixel points where alpha u + beta v < s.
+    fn counted(s: f32, alpha: f32, beta: f32, n: usize) -> f32 {
+        let lit = sub_pixels(n)
+            .filter(|&(u, v)| alpha * u + beta * v < s)
+            .count();
+        lit as f32 / (n * n) as f32
+    }
+
+    #[test]
+    fn box_edge_matches_counting_sub_pixels() {
+        each_edge(|alpha, beta, s| {
+            let (f, c) = (box_edge(s, alpha, beta), counted(s, alpha, beta, 800));
+            assert!(
+                (f - c).abs() < 4e-3,
+                "s {s} alpha {alpha} beta {beta}: {f} vs {c}"
+            );
+        });
         assert_eq!(box_edge(0.1, 0.0, 0.0), 1.0);
         assert_eq!(box_edge(-0.1, 0.0, 0.0), 0.0);
     }
 
     #[test]
     fn box_ramp_matches_averaging_sub_pixels() {
-        for &(alpha, beta) in &[
-            (1.0, 0.0),
-            (0.3, 0.7),
-            (-0.9, 0.2),
-            (0.5, -0.5),
-            (2.0, 1e-9),
-        ] {
-            for k in -12..=12 {
-                let c = k as f32 * 0.07;
-                let n = 600;
-                let mut sum = 0.0f64;
-                for i in 0..n {
-                    for j in 0..n {
-                        let u = (i as f32 + 0.5) / n as f32 - 0.5;
-                        let v = (j as f32 + 0.5) / n as f32 - 0.5;
-                        sum += (c + alpha * u + beta * v).max(0.0) as f64;
-                    }
-                }
-                let mean = (sum / (n * n) as f64) as f32;
-                let f = box_ramp(c, alpha, beta);
-                assert!(
-                    (f - mean).abs() < 1e-4,
-                    "c {c} alpha {alpha} beta {beta}: {f} vs {mean}"
-                );
+        each_edge(|alpha, beta, c| {
+            let n = 600;
+            let mut sum = 0.0f64;
+            for (u, v) in sub_pixels(n) {
+                sum += (c + alpha * u + beta * v).max(0.0) as f64;
             }
-        }
+            let mean = (sum / (n * n) as f64) as f32;
+            let f = box_ramp(c, alpha, beta);
+            assert!(
+                (f - mean).abs() < 1e-4,
+                "c {c} alpha {alpha} beta {beta}: {f} vs {mean}"
+            );
+        });
         assert_eq!(box_ramp(0.3, 0.0, 0.0), 0.3);
         assert_eq!(box_ramp(-0.3, 0.0, 0.0), 0.0);
     }

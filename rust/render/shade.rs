@@ -161,38 +161,44 @@ impl ShadeParams {
     /// Tabulate, for every sphere, the light the other objects bounce onto it (see `bounce::TABLE`), for
     /// the current parameters: the senders' second bounce that `shade` adds.
     pub fn prepare_bounce(&mut self, shapes: &[PShape]) {
-        self.tables.clear();
-        if !self.interreflection {
-            return;
-        }
         let mut points = Vec::new();
-        let tables: Vec<_> = shapes
-            .iter()
-            .enumerate()
-            .map(|(k, shape)| match *shape {
-                PShape::Sphere { center, radius } => {
-                    let at = table_points(center, radius);
-                    let light = at
+        self.prepare_tables(shapes, |p, k, at| {
+            at.iter()
+                .map(|&(y, n)| {
+                    gather(y, n, k, shapes, &mut points);
+                    points
                         .iter()
-                        .map(|&(y, n)| {
-                            gather(y, n, k, shapes, &mut points);
-                            points
-                                .iter()
-                                .map(|g| g.form * sender_radiance(g, self, shapes))
-                                .fold(Vec3A::ZERO, |a, b| a + b)
-                        })
-                        .collect();
-                    (at, light)
-                }
-                PShape::Plane { .. } | PShape::Mesh(_) => (Vec::new(), Vec::new()),
-            })
-            .collect();
-        self.tables = tables;
+                        .map(|g| g.form * sender_radiance(g, p, shapes))
+                        .fold(Vec3A::ZERO, |a, b| a + b)
+                })
+                .collect()
+        });
     }
 
     /// [`ShadeParams::prepare_bounce`] from a render's cached gathers (`bounce::Gathered`, built for
     /// `shapes`): the same tables.
     pub fn prepare_bounce_cached(&mut self, shapes: &[PShape], cache: &Gathered) {
+        self.prepare_tables(shapes, |p, k, _| {
+            cache
+                .table(k)
+                .iter()
+                .map(|points| {
+                    points
+                        .iter()
+                        .map(|c| c.point.form * sender_radiance_cached(c, p, shapes))
+                        .fold(Vec3A::ZERO, |a, b| a + b)
+                })
+                .collect()
+        });
+    }
+
+    /// Rebuild `tables` (emptied first; left empty without interreflection): for every sphere `k`, its
+    /// table points and the light `light(self, k, points)` gives at each; nothing for other shapes.
+    fn prepare_tables(
+        &mut self,
+        shapes: &[PShape],
+        mut light: impl FnMut(&Self, usize, &[(Vec3A, Vec3A)]) -> Vec<Vec3A>,
+    ) {
         self.tables.clear();
         if !self.interreflection {
             return;
@@ -203,16 +209,7 @@ impl ShadeParams {
             .map(|(k, shape)| match *shape {
                 PShape::Sphere { center, radius } => {
                     let at = table_points(center, radius);
-                    let light = cache
-                        .table(k)
-                        .iter()
-                        .map(|points| {
-                            points
-                                .iter()
-                                .map(|c| c.point.form * sender_radiance_cached(c, self, shapes))
-                                .fold(Vec3A::ZERO, |a, b| a + b)
-                        })
-                        .collect();
+                    let light = light(self, k, &at);
                     (at, light)
                 }
                 PShape::Plane { .. } | PShape::Mesh(_) => (Vec::new(), Vec::new()),

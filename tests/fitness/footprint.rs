@@ -48,13 +48,30 @@ pub(crate) fn edge_scene(light: [f64; 3], sun: bool) -> Scene {
               {{"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0],
                 "material": {{"albedo": [0.6, 0.6, 0.6]}}}}],
             "fit": {{"{}": {{"min": -9, "max": 9}}}}}}"#,
-        if sun {
-            "light.direction"
-        } else {
-            "light.position"
-        }
+        light_path(sun)
     ))
     .unwrap()
+}
+
+/// The light's parameter an [`edge_scene`] searches: the direction of a sun, else the position.
+fn light_path(sun: bool) -> &'static str {
+    if sun {
+        "light.direction"
+    } else {
+        "light.position"
+    }
+}
+
+/// The layout searching the light of `scene` ([`edge_scene`] of `light` and `sun`) and the light's true
+/// value there.
+fn searched_light(scene: &Scene, light: [f64; 3], sun: bool) -> (ParamLayout, Vec<f64>) {
+    let layout = ParamLayout::new(scene, &[light_path(sun).to_string()]).unwrap();
+    let x = if sun {
+        light.to_vec()
+    } else {
+        scene.light.position.to_vec()
+    };
+    (layout, x)
 }
 
 #[test]
@@ -102,17 +119,7 @@ fn pixel_footprint_matches_a_supersampled_render_at_shadow_edges_and_terminators
             "{light:?}: only {} edge pixels",
             edges.len()
         );
-        let path = if sun {
-            "light.direction"
-        } else {
-            "light.position"
-        };
-        let layout = ParamLayout::new(&scene, &[path.to_string()]).unwrap();
-        let x = if sun {
-            light.to_vec()
-        } else {
-            scene.light.position.to_vec()
-        };
+        let (layout, x) = searched_light(&scene, light, sun);
         let err = |f: Fitness| f.channel_losses(&x).iter().sum::<f64>() / (3 * edges.len()) as f64;
         let make = |footprint: bool| {
             with_or_without_footprint(
@@ -151,17 +158,7 @@ fn footprint_render_is_what_the_footprint_fitness_models() {
         let target = rtloop::render::render_with(&scene, None, None, 1, true)
             .unwrap()
             .rgb;
-        let path = if sun {
-            "light.direction"
-        } else {
-            "light.position"
-        };
-        let layout = ParamLayout::new(&scene, &[path.to_string()]).unwrap();
-        let x = if sun {
-            light.to_vec()
-        } else {
-            scene.light.position.to_vec()
-        };
+        let (layout, x) = searched_light(&scene, light, sun);
         let f =
             Fitness::with_pixel_footprint(&scene, layout, &target, None, LossKind::L1, false, None)
                 .unwrap();
@@ -195,12 +192,7 @@ fn a_footprint_fitness_at_pixel_centres_is_the_plain_fitness_bit_for_bit() {
             },
             sun,
         );
-        let path = if sun {
-            "light.direction"
-        } else {
-            "light.position"
-        };
-        let layout = ParamLayout::new(&scene, &[path.to_string()]).unwrap();
+        let layout = ParamLayout::new(&scene, &[light_path(sun).to_string()]).unwrap();
         let target = clipped_render(&edge_scene(
             if sun {
                 [0.6, 0.55, 0.25]

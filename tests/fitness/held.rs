@@ -14,14 +14,7 @@ fn held_bounce_alone_gives_the_serial_value_on_any_thread_count() {
         scene.interreflection = true;
         let target = clipped_render(&scene);
         let layout = ParamLayout::new(&scene, &["light.position".to_string()]).unwrap();
-        let bounds = vec![[(0.0, 200.0); 3]; scene.objects.len()];
-        let mut f = projected(
-            &scene,
-            layout.clone(),
-            &target,
-            Projection::matte(bounds),
-            true,
-        );
+        let mut f = matte_projected(&scene, layout.clone(), &target, true);
         assert!(f.freeze_bounce(None), "a bounce to hold");
         let mut xs: Vec<Vec<f64>> = (0..4)
             .map(|_| random_candidate(&mut rng, &layout))
@@ -32,13 +25,8 @@ fn held_bounce_alone_gives_the_serial_value_on_any_thread_count() {
             f.evaluate(x, &mut serial);
             assert!(serial[0].is_finite() && serial[0] >= 0.0);
             for threads in [1, 2, 3] {
-                let pool = rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .build()
-                    .unwrap();
-                let mut alone = [0.0];
-                pool.install(|| f.evaluate_alone(x, &mut alone));
-                assert_eq!(serial[0].to_bits(), alone[0].to_bits(), "threads={threads}");
+                let alone = alone_on(&f, x, threads);
+                assert_eq!(serial[0].to_bits(), alone.to_bits(), "threads={threads}");
             }
             let mut above = [0.0];
             f.evaluate_bounded(x, &mut above, serial[0] * 1.5 + 1.0);

@@ -70,14 +70,7 @@ fn projected_kernel_matches_the_plain_solve() {
         let scene = random_scene(&mut rng, 1 + trial % 3, false, false);
         let target: Vec<f32> = clipped_render(&scene);
         let layout = ParamLayout::new(&scene, &["light.position".to_string()]).unwrap();
-        let bounds = vec![[(0.0, 200.0); 3]; scene.objects.len()];
-        let f = projected(
-            &scene,
-            layout.clone(),
-            &target,
-            Projection::matte(bounds),
-            true,
-        );
+        let f = matte_projected(&scene, layout.clone(), &target, true);
         for _ in 0..6 {
             let x = random_candidate(&mut rng, &layout);
             let (a, b) = (f.channel_losses(&x), f.reference_channel_losses(&x));
@@ -123,14 +116,7 @@ fn one_candidate_alone_gives_the_serial_value_bit_for_bit_on_any_thread_count() 
             glossy_fitness(scene, &target)
         } else {
             let layout = ParamLayout::new(scene, &["light.position".to_string()]).unwrap();
-            let bounds = vec![[(0.0, 200.0); 3]; scene.objects.len()];
-            let f = projected(
-                scene,
-                layout.clone(),
-                &target,
-                Projection::matte(bounds),
-                true,
-            );
+            let f = matte_projected(scene, layout.clone(), &target, true);
             (f, layout)
         };
         let mut xs: Vec<Vec<f64>> = (0..5)
@@ -148,18 +134,12 @@ fn one_candidate_alone_gives_the_serial_value_bit_for_bit_on_any_thread_count() 
                 f.evaluate(x, &mut serial);
                 assert!(serial[0].is_finite());
                 for threads in [1, 2, 3, 5] {
-                    let pool = rayon::ThreadPoolBuilder::new()
-                        .num_threads(threads)
-                        .build()
-                        .unwrap();
-                    let mut alone = [0.0];
-                    pool.install(|| f.evaluate_alone(x, &mut alone));
+                    let alone = alone_on(&f, x, threads);
                     assert_eq!(
                         serial[0].to_bits(),
-                        alone[0].to_bits(),
-                        "{space:?} threads={threads} x={x:?}: {} vs {}",
+                        alone.to_bits(),
+                        "{space:?} threads={threads} x={x:?}: {} vs {alone}",
                         serial[0],
-                        alone[0]
                     );
                 }
             }

@@ -6,6 +6,8 @@
 
 #[path = "../common/mod.rs"]
 mod common;
+#[path = "../common/targets.rs"]
+mod targets;
 
 use common::Oracle;
 use rtloop::fitness::SATURATED;
@@ -20,6 +22,7 @@ mod projected;
 mod refine;
 mod simd;
 mod srgb;
+pub(crate) use targets::{clipped_render, random_candidate};
 #[allow(unused_imports)]
 use {footprint::*, held::*, kernel::*, lobe::*, projected::*, refine::*, simd::*, srgb::*};
 
@@ -91,16 +94,6 @@ pub(crate) fn fitness(
     Fitness::new(scene, layout.clone(), target, None, kind, clip, None).unwrap()
 }
 
-/// The scene's render as the fitness models pixels (the footprint), clipped at 1 as a photo saturates.
-pub(crate) fn clipped_render(scene: &Scene) -> Vec<f32> {
-    render(scene, None, None, 1)
-        .unwrap()
-        .rgb
-        .iter()
-        .map(|v| v.min(1.0))
-        .collect()
-}
-
 /// The closed-form (projected) fitness of `layout` over the whole image.
 pub(crate) fn projected(
     scene: &Scene,
@@ -121,12 +114,26 @@ pub(crate) fn projected(
     .unwrap()
 }
 
-pub(crate) fn random_candidate(rng: &mut Rng, layout: &ParamLayout) -> Vec<f64> {
-    layout
-        .bounds
-        .iter()
-        .map(|&(lo, hi)| lo + (hi - lo) * rng.uniform())
-        .collect()
+/// [`projected`] with every object's (matte) products bounded to [0, 200] in each channel.
+pub(crate) fn matte_projected(
+    scene: &Scene,
+    layout: ParamLayout,
+    target: &[f32],
+    clip: bool,
+) -> Fitness {
+    let bounds = vec![[(0.0, 200.0); 3]; scene.objects.len()];
+    projected(scene, layout, target, Projection::matte(bounds), clip)
+}
+
+/// [`Objective::evaluate_alone`] of `x` (one candidate spread over the pool) on a pool of `threads`.
+pub(crate) fn alone_on(f: &Fitness, x: &[f64], threads: usize) -> f64 {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    let mut alone = [0.0];
+    pool.install(|| f.evaluate_alone(x, &mut alone));
+    alone[0]
 }
 
 /// Relative difference with a floor: the losses are sums over ~7000 pixels x 3 channels of f32 terms.

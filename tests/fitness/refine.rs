@@ -2,14 +2,10 @@
 
 use super::*;
 
-#[test]
-fn refined_products_minimise_the_loss_and_undo_the_saturation_bias() {
-    // The paper's scene: the ball's red saturates over much of its lit side. Noise pulls half of those
-    // pixels below 1, where least squares fits them as unsaturated, and pushes some unsaturated pixels up
-    // to 1, where it drops them: red comes out low. The refined products count saturated pixels
-    // one-sidedly and keep the clip exact (a pixel the model saturates costs a constant). Bias: the mean
-    // error over realisations.
-    let scene = Scene::from_json(
+/// The paper's scene: a ball whose red saturates over much of its lit side, on a floor; the light's
+/// position searched.
+fn saturated_ball() -> Scene {
+    Scene::from_json(
         r#"{"image": {"width": 128, "height": 96},
             "camera": {"position": [0, 1.6, -6], "look_at": [0, 0.8, 0], "vfov_deg": 35},
             "light": {"position": [2.5, 4.5, -1.0], "intensity": 70},
@@ -20,7 +16,30 @@ fn refined_products_minimise_the_loss_and_undo_the_saturation_bias() {
                "material": {"albedo": [0.6, 0.6, 0.6]}}],
             "fit": {"light.position": {"min": [-8, 0.5, -8], "max": [8, 8, 8]}}}"#,
     )
-    .unwrap();
+    .unwrap()
+}
+
+/// `clean` clipped at 1 with approximately normal noise (a sum of uniforms), sigma 0.05, on the saturated
+/// photo (as compression or processing noise would be), so half the saturated pixels read below 1;
+/// clamped to [0, 1].
+fn noisy_saturated(clean: &[f32], rng: &mut Rng) -> Vec<f32> {
+    clean
+        .iter()
+        .map(|&v| {
+            let z: f64 = (0..12).map(|_| rng.uniform()).sum::<f64>() - 6.0;
+            (v.min(1.0) + 0.05 * z as f32).clamp(0.0, 1.0)
+        })
+        .collect()
+}
+
+#[test]
+fn refined_products_minimise_the_loss_and_undo_the_saturation_bias() {
+    // The paper's scene: the ball's red saturates over much of its lit side. Noise pulls half of those
+    // pixels below 1, where least squares fits them as unsaturated, and pushes some unsaturated pixels up
+    // to 1, where it drops them: red comes out low. The refined products count saturated pixels
+    // one-sidedly and keep the clip exact (a pixel the model saturates costs a constant). Bias: the mean
+    // error over realisations.
+    let scene = saturated_ball();
     let clean = render(&scene, None, None, 1).unwrap().rgb;
     let layout = ParamLayout::new(&scene, &["light.position".to_string()]).unwrap();
     let x = scene.light.position.to_vec();
@@ -29,15 +48,7 @@ fn refined_products_minimise_the_loss_and_undo_the_saturation_bias() {
     let runs = 8;
     let (mut ls_bias, mut ref_bias) = ([[0.0f64; 3]; 2], [[0.0f64; 3]; 2]);
     for _ in 0..runs {
-        let target: Vec<f32> = clean
-            .iter()
-            .map(|&v| {
-                // Approximately normal (a sum of uniforms), sigma 0.05, on the saturated photo (as
-                // compression or processing noise would be), so half the saturated pixels read below 1.
-                let z: f64 = (0..12).map(|_| rng.uniform()).sum::<f64>() - 6.0;
-                (v.min(1.0) + 0.05 * z as f32).clamp(0.0, 1.0)
-            })
-            .collect();
+        let target = noisy_saturated(&clean, &mut rng);
         let proj = Projection::matte(vec![[(0.0, 400.0); 3]; 2]);
         let f = projected(&scene, layout.clone(), &target, proj, true);
         let ls = f.solved(&x);
@@ -69,18 +80,7 @@ fn a_clip_level_below_the_noise_takes_the_least_squares_bias_off_the_search() {
     // by the least-squares products, so their bias moves the light; with the clip level at 1 - 3 sigma
     // (`set_saturated`, what `goodness.clip_level` gives such a photo) the pixels the noise scattered
     // below 1 are left out of the solve as possibly clipped.
-    let scene = Scene::from_json(
-        r#"{"image": {"width": 128, "height": 96},
-            "camera": {"position": [0, 1.6, -6], "look_at": [0, 0.8, 0], "vfov_deg": 35},
-            "light": {"position": [2.5, 4.5, -1.0], "intensity": 70},
-            "objects": [
-              {"name": "ball", "shape": "sphere", "center": [0, 1, 0], "radius": 1,
-               "material": {"albedo": [0.8, 0.7, 0.1]}},
-              {"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0],
-               "material": {"albedo": [0.6, 0.6, 0.6]}}],
-            "fit": {"light.position": {"min": [-8, 0.5, -8], "max": [8, 8, 8]}}}"#,
-    )
-    .unwrap();
+    let scene = saturated_ball();
     let clean = render(&scene, None, None, 1).unwrap().rgb;
     let layout = ParamLayout::new(&scene, &["light.position".to_string()]).unwrap();
     let x = scene.light.position.to_vec();
@@ -89,13 +89,7 @@ fn a_clip_level_below_the_noise_takes_the_least_squares_bias_off_the_search() {
     let runs = 8;
     let (mut at_default, mut at_level) = (0.0f64, 0.0f64);
     for _ in 0..runs {
-        let target: Vec<f32> = clean
-            .iter()
-            .map(|&v| {
-                let z: f64 = (0..12).map(|_| rng.uniform()).sum::<f64>() - 6.0;
-                (v.min(1.0) + 0.05 * z as f32).clamp(0.0, 1.0)
-            })
-            .collect();
+        let target = noisy_saturated(&clean, &mut rng);
         let proj = Projection::matte(vec![[(0.0, 400.0); 3]; 2]);
         let mut f = projected(&scene, layout.clone(), &target, proj, true);
         at_default += (f.solved(&x).products[0][0] / want - 1.0) / runs as f64;

@@ -29,14 +29,7 @@ fn scalar_and_avx2_paths_agree() {
         let light = ParamLayout::new(&scene, &["light.position".to_string()]).unwrap();
         let mut fits = vec![(direct, &layout)];
         if !specular && !ambient {
-            let bounds = vec![[(0.0, 200.0); 3]; scene.objects.len()];
-            let solved = projected(
-                &scene,
-                light.clone(),
-                &target,
-                Projection::matte(bounds),
-                true,
-            );
+            let solved = matte_projected(&scene, light.clone(), &target, true);
             fits.push((solved, &light));
         }
         for (mut f, layout) in fits {

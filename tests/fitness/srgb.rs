@@ -118,14 +118,7 @@ fn projected_srgb_loss_matches_the_plain_solve_and_vanishes_at_the_truth() {
                 .map(|&v| if clip { v.min(1.0) } else { v })
                 .collect();
             for norm in [Norm::L1, Norm::L2, Norm::Huber(0.01)] {
-                let bounds = vec![[(0.0, 200.0); 3]; scene.objects.len()];
-                let mut f = projected(
-                    &scene,
-                    layout.clone(),
-                    &target,
-                    Projection::matte(bounds),
-                    clip,
-                );
+                let mut f = matte_projected(&scene, layout.clone(), &target, clip);
                 f.set_norm(norm);
                 f.set_space(Space::Srgb);
                 for _ in 0..3 {

@@ -4,6 +4,8 @@
 
 use std::f64::consts::{E, PI};
 
+use rtloop::search::GenerationReport;
+
 /// Sphere: sum x_i^2, minimum 0 at the origin.
 pub fn sphere(x: &[f64]) -> f64 {
     x.iter().map(|v| v * v).sum()
@@ -65,4 +67,70 @@ pub fn busy_rastrigin(x: &[f64]) -> f64 {
 /// The bit patterns of `v`, to compare results bit for bit.
 pub fn bits(v: &[f64]) -> Vec<u64> {
     v.iter().map(|x| x.to_bits()).collect()
+}
+
+/// A generation callback that asserts the best value never gets worse from one generation to the next and
+/// is the minimum of the population's values; it never stops the search.
+pub fn assert_best_monotone() -> impl FnMut(&GenerationReport) -> bool {
+    let mut last = f64::INFINITY;
+    move |r: &GenerationReport| {
+        let v = r.best_objectives[0];
+        assert!(
+            v <= last,
+            "generation {}: best got worse ({last} -> {v})",
+            r.generation
+        );
+        // The best really is the minimum of the population.
+        let min = r
+            .objectives
+            .iter()
+            .map(|o| o[0])
+            .fold(f64::INFINITY, f64::min);
+        assert_eq!(v, min);
+        last = v;
+        true
+    }
+}
+
+/// A box whose corner (3, 3, 3, -2) is the constrained optimum of [`beyond_the_box`].
+pub const BOX: [(f64, f64); 4] = [(-5.0, 3.0), (-5.0, 3.0), (-5.0, 3.0), (-2.0, 4.0)];
+
+/// The constrained optimum of [`beyond_the_box`] in [`BOX`].
+pub const CORNER: [f64; 4] = [3.0, 3.0, 3.0, -2.0];
+
+/// sum (x_i - t_i)^2 with t = (10, 10, 10, -10): its minimum lies outside [`BOX`], whose corner
+/// [`CORNER`] has the least value within it, 3 * 7^2 + 8^2 = 211.
+pub fn beyond_the_box(x: &[f64]) -> f64 {
+    x.iter()
+        .zip(&[10.0, 10.0, 10.0, -10.0])
+        .map(|(v, t)| (v - t).powi(2))
+        .sum::<f64>()
+}
+
+/// Asserts that a search of [`beyond_the_box`] in [`BOX`] ended on [`CORNER`] (within 1e-6) with value `v`
+/// no less than the corner's and within `tol` of it.
+pub fn assert_on_the_corner(best: &[f64], v: f64, tol: f64) {
+    let expected = beyond_the_box(&CORNER);
+    assert_eq!(expected, 211.0);
+    assert!(
+        distance(best, &CORNER) < 1e-6,
+        "best {best:?} should sit on the corner {CORNER:?}"
+    );
+    assert!(
+        v >= expected,
+        "nothing inside the box beats the corner: {v}"
+    );
+    assert!(v - expected < tol, "objective {v}, expected {expected}");
+}
+
+/// `f()` run inside a fresh pool of `threads` threads (checked to be that many).
+pub fn on_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(|| {
+        assert_eq!(rayon::current_num_threads(), threads);
+        f()
+    })
 }

@@ -16,7 +16,8 @@ use rtloop::search::{
 };
 
 use crate::defs::{
-    ackley, bits, busy_rastrigin, distance, griewank, rastrigin, rosenbrock, sphere,
+    ackley, assert_best_monotone, assert_on_the_corner, beyond_the_box, bits, busy_rastrigin,
+    distance, griewank, on_threads, rastrigin, rosenbrock, sphere, BOX,
 };
 use crate::test_functions as lib;
 
@@ -240,31 +241,15 @@ fn every_individual_stays_within_bounds_and_fixed_dimensions_stay_fixed() {
 #[test]
 fn optimum_outside_the_box_ends_on_the_corner() {
     // Minimum of sum (x_i - t_i)^2 lies outside the box; the constrained optimum is the corner.
-    let target = [10.0, 10.0, 10.0, -10.0];
-    let bounds = [(-5.0, 3.0), (-5.0, 3.0), (-5.0, 3.0), (-2.0, 4.0)];
-    let obj = move |x: &[f64]| {
-        x.iter()
-            .zip(&target)
-            .map(|(v, t)| (v - t).powi(2))
-            .sum::<f64>()
-    };
-    let corner = [3.0, 3.0, 3.0, -2.0];
-    let expected = 3.0 * 49.0 + 64.0;
     for seed in [1, 2] {
         for polish in [0, 200] {
             let c = LshadeConfig {
                 polish_evaluations: polish,
                 ..cfg(8_000, seed)
             };
-            let res = run(&obj, &bounds, &c);
-            assert_within(&res.best, &bounds, "best");
-            let v = res.best_objectives[0];
-            assert!(
-                v >= expected,
-                "nothing inside the box beats the corner: {v}"
-            );
-            assert!(v - expected < 1e-6, "objective {v}, expected {expected}");
-            assert!(distance(&res.best, &corner) < 1e-6, "{:?}", res.best);
+            let res = run(&beyond_the_box, &BOX, &c);
+            assert_within(&res.best, &BOX, "best");
+            assert_on_the_corner(&res.best, res.best_objectives[0], 1e-6);
         }
     }
 }
@@ -401,23 +386,11 @@ fn callback_can_stop_early_and_the_polish_is_then_skipped() {
 
 #[test]
 fn best_is_monotone_and_is_the_population_minimum() {
-    let mut last = f64::INFINITY;
     minimize(
         &ackley,
         &[(-32.768, 32.768); 6],
         &cfg(12_000, 9),
-        |r: &GenerationReport| {
-            let v = r.best_objectives[0];
-            assert!(v <= last, "generation {}: {last} -> {v}", r.generation);
-            let min = r
-                .objectives
-                .iter()
-                .map(|o| o[0])
-                .fold(f64::INFINITY, f64::min);
-            assert_eq!(v, min);
-            last = v;
-            true
-        },
+        assert_best_monotone(),
     )
     .unwrap();
 }
@@ -655,14 +628,9 @@ fn polish_improves_an_unconverged_result_and_reports_it() {
 type History = (Vec<(Vec<u64>, u64, usize, usize)>, Vec<u64>, u64, usize);
 
 fn history_on_threads(threads: usize, c: &LshadeConfig) -> History {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
     let obj = busy_rastrigin;
     let bounds = [(-5.0, 3.0); 6];
-    pool.install(|| {
-        assert_eq!(rayon::current_num_threads(), threads);
+    on_threads(threads, || {
         let mut hist = Vec::new();
         let res = minimize(&obj, &bounds, c, |r: &GenerationReport| {
             hist.push((

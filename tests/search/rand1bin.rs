@@ -4,7 +4,10 @@
 //! Expected values come from the test functions' definitions (their known minima), never from earlier
 //! runs. Run with `cargo test --test search rand1bin`.
 
-use crate::defs::{bits, busy_rastrigin, distance, rastrigin, rosenbrock, sphere};
+use crate::defs::{
+    assert_best_monotone, assert_on_the_corner, beyond_the_box, bits, busy_rastrigin, distance,
+    on_threads, rastrigin, rosenbrock, sphere, BOX,
+};
 use rtloop::search::rand1bin::minimize;
 use rtloop::search::{replaces, DeConfig, DeResult, GenerationReport, Objective};
 
@@ -200,30 +203,9 @@ fn every_individual_stays_within_bounds() {
 fn optimum_outside_the_box_ends_on_the_bound() {
     // Minimum of sum (x_i - 10)^2 is at 10 per dimension, outside [-5, 3]: the constrained optimum is the
     // corner at 3 with value 3 * 7^2 = 147. Dimension 3 wants -10 against a lower bound of -2.
-    let target = [10.0, 10.0, 10.0, -10.0];
-    let bounds = [(-5.0, 3.0), (-5.0, 3.0), (-5.0, 3.0), (-2.0, 4.0)];
-    let obj = move |x: &[f64]| {
-        x.iter()
-            .zip(&target)
-            .map(|(v, t)| (v - t).powi(2))
-            .sum::<f64>()
-    };
-    let corner = [3.0, 3.0, 3.0, -2.0];
-    let expected = obj(&corner); // 3 * 49 + 64
-    assert_eq!(expected, 211.0);
     for seed in [1, 2] {
-        let res = run_checking_bounds(&obj, &bounds, &cfg(30, 300, seed));
-        assert!(
-            distance(&res.best, &corner) < 1e-6,
-            "best {:?} should sit on the corner {corner:?}",
-            res.best
-        );
-        let v = res.best_objectives[0];
-        assert!(
-            v >= expected,
-            "nothing inside the box beats the corner: {v}"
-        );
-        assert!(v - expected < 1e-4, "objective {v}, expected {expected}");
+        let res = run_checking_bounds(&beyond_the_box, &BOX, &cfg(30, 300, seed));
+        assert_on_the_corner(&res.best, res.best_objectives[0], 1e-4);
     }
 }
 
@@ -272,14 +254,9 @@ fn dimension_with_min_equal_max_stays_fixed() {
 type History = (Vec<(Vec<u64>, Vec<u64>, usize)>, Vec<u64>, Vec<u64>);
 
 fn history_on_threads(threads: usize, seed: u64) -> History {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
     let obj = busy_rastrigin;
     let bounds = [(-5.0, 3.0); 6];
-    pool.install(|| {
-        assert_eq!(rayon::current_num_threads(), threads);
+    on_threads(threads, || {
         let mut hist = Vec::new();
         let res = minimize(
             &obj,
@@ -535,28 +512,11 @@ fn evaluation_count_matches_calls_to_the_objective() {
 #[test]
 fn best_is_monotone_over_generations() {
     let bounds = [(-5.0, 3.0); 4];
-    let mut last = f64::INFINITY;
     minimize(
         &rastrigin,
         &bounds,
         &cfg(30, 100, 9),
-        |r: &GenerationReport| {
-            let v = r.best_objectives[0];
-            assert!(
-                v <= last,
-                "generation {}: best got worse ({last} -> {v})",
-                r.generation
-            );
-            // The best really is the minimum of the population.
-            let min = r
-                .objectives
-                .iter()
-                .map(|o| o[0])
-                .fold(f64::INFINITY, f64::min);
-            assert_eq!(v, min);
-            last = v;
-            true
-        },
+        assert_best_monotone(),
     )
     .unwrap();
 }
