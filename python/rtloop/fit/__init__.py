@@ -556,9 +556,9 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
     if "specular" in added:
         model["specular_objects"] = names
         lobe = model["evidence"]["specular"]
-        if lobe.get("lobe") == "blinn-phong" and "coat" in lobe:
-            coated = _coat_after_refit(work, added, names, candidate, where, float(sum(more.stages[-1].objectives)),
-                                       target, sub, n_sub, model_env, kw, refit, space, int(seeds[1]), lobe, bounce)
+        if lobe.get("lobe") == "blinn-phong" and "coat" in lobe and not bounce:
+            coated = _coat_after_refit(work, names, candidate, where, float(sum(more.stages[-1].objectives)),
+                                       model_env, refit, space, int(seeds[1]), lobe)
             if coated is not None:
                 candidate, model_work, extra = coated
                 stages.stages += extra.stages
@@ -567,39 +567,36 @@ def _select_terms(scene: Scene, work: Scene, stages: Stages, seeds: np.ndarray, 
     return restore_bounds(candidate, model_work)
 
 
-def _coat_after_refit(work: Scene, added: list[str], names: list[str], fitted: Scene, where: list[str],
-                      fitted_loss: float, target: np.ndarray, sub: np.ndarray, n_sub: int, env: bool, kw: dict[str, Any],
-                      refit: Callable[[Scene, str], Stages | None], space: str, seed: int, lobe: dict[str, Any],
-                      bounce: bool) -> tuple[Scene, Scene, Stages] | None:
-    """The coat tried again at the light the Blinn-Phong refit found. The lobes were compared at the light
-    found without any (:func:`.coat.choose_lobe`), which a highlight pulls towards itself: there Blinn-Phong's
-    broader freedom can win, and its refit then ends degrees off on a coated ball (Mitsuba's roughplastic
-    balls of studies/results/linear_photos.md: 0.9-3.4 deg with Blinn-Phong, 0.02-0.07 deg with the coat).
-    At the refitted light both lobes are tested again by the same closed-form evidence; where the coat
-    explains the photo better there, the fit is made again with it from that light and kept when its loss
-    is lower. ``fitted`` is the Blinn-Phong refit's scene, ``fitted_loss`` its loss, ``where`` the paths of the
-    light and colours. Returns (scene, its model, the refit's stages), or None where Blinn-Phong stays; the
-    record goes in ``lobe["after_refit"]``."""
+def _coat_after_refit(work: Scene, names: list[str], fitted: Scene, where: list[str], fitted_loss: float,
+                      env: bool, refit: Callable[[Scene, str], Stages | None], space: str, seed: int,
+                      lobe: dict[str, Any]) -> tuple[Scene, Scene, Stages] | None:
+    """The coat tried again after Blinn-Phong's refit. The lobes were compared at the light found without
+    any (:func:`.coat.choose_lobe`), which a highlight pulls towards itself: there Blinn-Phong's broader
+    lobe can absorb the misplaced light and win, and its refit then ends degrees off on a coated ball
+    (Mitsuba's roughplastic balls of studies/results/linear_photos.md: 0.8-3.3 deg with Blinn-Phong,
+    0.02-0.07 deg with the coat given). So the fit is made once more with the coat (the roughness its
+    evidence found), in the refit's box around the light Blinn-Phong's refit found, and the coat is kept
+    when its loss is lower. ``fitted`` is the Blinn-Phong refit's scene, ``fitted_loss`` its loss, ``where``
+    the paths of the light and colours. Returns (scene, its model, the refit's stages), or None where
+    Blinn-Phong stays; the record goes in ``lobe["after_refit"]``. Not with the bounce (the coat's closed
+    form does not model it)."""
     x = list(fitted.get_params(where))
-    base_work = with_interreflection(work) if "interreflection" in added else work
-    record: dict[str, Any] = {"roughness": lobe["coat"]["roughness"]}
+    roughness = lobe["coat"]["roughness"]
+    record: dict[str, Any] = {"roughness": roughness}
     lobe["after_refit"] = record
-    again = {"coat": {"roughness": lobe["coat"]["roughness"]}}
-    model_work = with_coat(base_work, names, again["coat"]["roughness"])
+    model_work = with_coat(work, names, roughness)
     more = refit(narrowed(model_work.with_params(x, where), where, REFIT_FRACTION), space)
     if more is None:
         return None
-    if bounce:
-        more.frozen_bounce = BOUNCE_PASSES
     candidate = more.projected(seed, environment=env, name="light+colour+coat (after the lobe's refit)",
-                               from_scene=not bounce)
+                               from_scene=True)
     record["loss_refit_coat"] = float(sum(more.stages[-1].objectives))
     record["loss_refit_blinn_phong"] = fitted_loss
     if record["loss_refit_coat"] >= record["loss_refit_blinn_phong"]:
         record["kept"] = "blinn-phong"
         return None
     record["kept"] = "coat"
-    lobe.update(lobe="coat", roughness=again["coat"]["roughness"])
+    lobe.update(lobe="coat", roughness=roughness)
     return candidate, model_work, more
 
 
