@@ -182,6 +182,14 @@ def test_wrong_board_description_is_a_clear_error(views) -> None:
         estimate_floor_pose(image, parse_board("6x5,60mm,45mm"))
 
 
+def test_two_copies_of_the_board_in_view_is_a_clear_error(views) -> None:
+    truth, image = views[0]
+    two = np.concatenate([image, image], axis=1)  # the same board twice, side by side
+    with pytest.raises(AcquisitionError, match=r"markers 0, 1, .* seen twice: two copies of the board") as info:
+        estimate_floor_pose(two, SPEC, focal_px=truth.focal_px)
+    assert "does not match" not in str(info.value)
+
+
 @pytest.mark.parametrize(
     ("text", "message"),
     [

@@ -300,6 +300,17 @@ def detect_board(
             f"board is in view, sharp, not overexposed, and that --board matches the printed board "
             f"({spec.describe()})"
         )
+    if n_markers:
+        seen, twice = set(), set()
+        for marker in np.asarray(marker_ids).ravel().tolist():
+            (twice if marker in seen else seen).add(marker)
+        if twice:
+            listed = ", ".join(map(str, sorted(twice)[:8])) + (", ..." if len(twice) > 8 else "")
+            raise AcquisitionError(
+                f"{where}: the board's marker{'s' if len(twice) > 1 else ''} {listed} "
+                f"{'are' if len(twice) > 1 else 'is'} seen twice: two copies of the board are in view; show one "
+                "board (cover or remove the other)"
+            )
     if n == 0 and n_markers < 3:
         raise AcquisitionError(
             f"{where}: only {n_markers} ArUco marker(s) of the board seen, too few to place its corners; "
