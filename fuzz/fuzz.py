@@ -476,7 +476,37 @@ def _framing(rng: random.Random, c: Counts) -> None:
         c.bump("nan_or_inf")
 
 
-SURFACES = ("batch", "ids", "mesh", "insert", "exif", "strict", "framing", "coat")
+def fov_record(base: dict) -> dict:
+    """A scene's ``meta.acquisition.field_of_view`` as rtloop-scene writes it: the camera and the ball's
+    centre at one standard deviation either side of the field of view."""
+    cam, ball = base["camera"], base["objects"][0]
+    return {"vfov_deg": cam["vfov_deg"], "std_deg": 1.0, "alternates": [
+        {"vfov_deg": cam["vfov_deg"] + k, "camera": {**cam, "vfov_deg": cam["vfov_deg"] + k,
+                                                    "position": [v * (1 + 0.02 * k) for v in cam["position"]]},
+         "objects": {ball["name"]: {"center": [v + 0.01 * k for v in ball["center"]]}}} for k in (-1, 1)]}
+
+
+def _fov(rng: random.Random, c: Counts, tmp: Path) -> None:
+    """A scene file whose field-of-view record (rtloop-scene's, for a photo without EXIF) is mutated, fitted
+    from files as rtloop-fit fits it: the bars finite (or None) with the field of view carried, or one line."""
+    from rtloop.fit.files import fit_inputs, load_inputs
+
+    record = fov_record(BASE)
+    if rng.random() < 0.8:
+        record = mutate(rng, {"field_of_view": record}).get("field_of_view") if rng.random() < 0.9 else odd(rng)
+    path = tmp / "fov-scene.json"
+    path.write_text(json.dumps({**BASE, "meta": {"acquisition": {"field_of_view": record}}}))
+    res = fit_inputs(load_inputs(path, tmp / "photo.png"), seed=rng.randrange(100), population=8,
+                     generations=1, uncertainty=rng.random() < 0.8)
+    check_fit(res, BASE, c)
+    bars = (res.uncertainty or {}).get("bars") or {}
+    values = [v for v in (bars.get("sigma") or {}).values() if v is not None]
+    values += list(((bars.get("field_of_view") or {}).get("shift") or {}).values())
+    if not finite(values):
+        c.bump("nan_or_inf")
+
+
+SURFACES = ("batch", "ids", "mesh", "insert", "exif", "strict", "framing", "coat", "fov")
 
 
 def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None = None) -> None:
@@ -487,7 +517,7 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
         else:
             {"mesh": _mesh, "insert": _insert_cli, "exif": _exif, "strict": lambda r, t: _strict(r, c, t),
              "framing": lambda r, t: _framing(r, c),
-             "coat": lambda r, t: _coat(r, c)}[only](rng, tmp)
+             "coat": lambda r, t: _coat(r, c), "fov": lambda r, t: _fov(r, c, t)}[only](rng, tmp)
         c.bump("ok")
         return
     if rng.random() < 0.03:

@@ -239,6 +239,51 @@ def test_without_exif_the_light_from_the_refined_field_of_view(tmp_path, view):
     assert err < NO_EXIF_LIGHT_M, f"{view}: light {1000 * err:.1f} mm off"
 
 
+def _fit_no_exif(scene_dir: Path, out: Path, *extra: str) -> dict:
+    assert fit_cli.main([str(scene_dir / "scene.json"), str(scene_dir / "objective.png"), "--out", str(out),
+                         "--snapshot-every", "0", "--final-scale", "1", "--final-spp", "1", "-q", *extra]) == 0
+    return json.loads((out / "result.json").read_text())
+
+
+@pytest.mark.parametrize("view", [v for v in VIEWS if v != "overhead"])
+def test_without_exif_the_field_of_view_is_in_the_light_bars(tmp_path, view):
+    """Without EXIF, rtloop-scene records the scene at one board standard deviation of the field of view
+    either side, and rtloop-fit adds the light's shift between them to its bars: the true light within 3 of
+    them on every axis."""
+    photo = _without_exif(view, tmp_path)
+    assert scene_main(_scene_args(view, photo, tmp_path / "scene")) == 0
+    record = json.loads((tmp_path / "scene" / "scene.json").read_text())["meta"]["acquisition"]["field_of_view"]
+    assert len(record["alternates"]) == 2 and record["std_deg"] > 0
+    result = _fit_no_exif(tmp_path / "scene", tmp_path / "fit")
+    bars = result["fit_report"]["uncertainty"]["bars"]
+    carried = bars["field_of_view"]
+    assert carried["std_deg"] == record["std_deg"] and carried["light_shift_m"] > 0
+    axes = [f"light.position.{c}" for c in "xyz"]
+    err = np.abs(np.subtract(result["light"]["position"], _meta(view)["light"]["position"]))
+    sigma = np.array([bars["sigma"][a] for a in axes])
+    assert (err <= 3 * sigma).all(), (view, err, sigma)
+
+
+def test_the_carried_field_of_view_shift_matches_scenes_built_at_it(tmp_path):
+    """The light shift rtloop-fit carries from the recorded alternates agrees (within 25 %) with the light
+    moved by building the scene again with --vfov at one standard deviation either side and fitting each: the
+    alternates stand for what the field of view's error does to the whole acquisition. The long-lens view,
+    where the light moves most per degree."""
+    view = "low"
+    photo = _without_exif(view, tmp_path)
+    assert scene_main(_scene_args(view, photo, tmp_path / "scene")) == 0
+    scene = json.loads((tmp_path / "scene" / "scene.json").read_text())
+    vfov, std = scene["camera"]["vfov_deg"], scene["meta"]["acquisition"]["field_of_view"]["std_deg"]
+    carried = _fit_no_exif(tmp_path / "scene", tmp_path / "fit")["fit_report"]["uncertainty"]["bars"]["field_of_view"]
+    lights = []
+    for sign in (-1, 1):
+        folder = tmp_path / f"at{sign}"
+        assert scene_main(_scene_args(view, photo, folder, "--vfov", repr(vfov + sign * std))) == 0
+        lights.append(_fit_no_exif(folder, tmp_path / f"fit{sign}", "--uncertainty", "off")["light"]["position"])
+    rebuilt = 0.5 * float(np.linalg.norm(np.subtract(lights[1], lights[0])))
+    assert abs(carried["light_shift_m"] - rebuilt) <= 0.25 * rebuilt, (carried["light_shift_m"], rebuilt)
+
+
 def test_board_alone_uncertainty_covers_its_error(monkeypatch):
     """The refusals are warranted: with the 0.3 deg gate lifted, the board's own standard deviation of the
     field of view (from the calibration's covariance and reprojection residual) exceeds the target on every

@@ -618,3 +618,70 @@ def test_the_lights_flag_fits_or_exits_with_one_line(tmp_path_factory, value, li
         assert code in (1, 2), code
         lines = [line for line in err.getvalue().splitlines() if line]
         assert len(lines) == 1 and lines[0].startswith("rtloop-fit: error: "), lines
+
+
+def _fov_record() -> dict:
+    """SMALL's field-of-view record as rtloop-scene writes it: the camera and the ball at one standard
+    deviation either side."""
+    cam, ball = SMALL["camera"], SMALL["objects"][0]
+    return {"vfov_deg": cam["vfov_deg"], "std_deg": 1.0, "alternates": [
+        {"vfov_deg": cam["vfov_deg"] + k, "camera": {**cam, "vfov_deg": cam["vfov_deg"] + k},
+         "objects": {ball["name"]: {"center": [v + 0.01 * k for v in ball["center"]]}}} for k in (-1, 1)]}
+
+
+FOV_VALUES = st.one_of(NUMBERS, st.sampled_from([None, "x", [], {}, [0.1], [1, 2, 3], True, {"center": [0, 0, 0]}]))
+
+
+@st.composite
+def mutated_fov_records(draw) -> object:
+    """The field-of-view record with one to three of its values (at any depth) replaced or deleted, an
+    unknown object named, or the whole record replaced."""
+    record: object = _fov_record()
+    for _ in range(draw(st.integers(1, 3))):
+        if not isinstance(record, dict) or draw(st.integers(0, 9)) == 0:
+            return draw(FOV_VALUES)
+        path = draw(st.sampled_from([("vfov_deg",), ("std_deg",), ("alternates",), ("alternates", 0),
+                                     ("alternates", 1, "camera"), ("alternates", 0, "camera", "position"),
+                                     ("alternates", 1, "camera", "vfov_deg"), ("alternates", 0, "objects"),
+                                     ("alternates", 1, "objects", "ball"), ("alternates", 0, "objects", "ball",
+                                                                           "center")]))
+        node = record
+        try:
+            for k in path[:-1]:
+                node = node[k]
+            if draw(st.booleans()) and isinstance(node, dict):
+                node.pop(path[-1], None)
+            elif path[-1] == "objects" and draw(st.booleans()):
+                node[path[-1]] = {draw(st.sampled_from(["floor", "nope", ""])): {"center": [0.0, 0.1, 0.0]}}
+            else:
+                node[path[-1]] = draw(FOV_VALUES)
+        except (KeyError, IndexError, TypeError):
+            continue
+    return record
+
+
+@PROPS
+@given(mutated_fov_records())
+def test_a_mutated_field_of_view_record_fits_with_finite_bars_or_is_one_line(tmp_path_factory, record):
+    import contextlib
+    import io
+
+    from rtloop.cli.fit import main
+
+    work = tmp_path_factory.mktemp("fov")
+    (work / "scene.json").write_text(json.dumps({**SMALL, "meta": {"acquisition": {"field_of_view": record}}}))
+    rtloop.save_image(work / "photo.png", PHOTO)
+    argv = [str(work / "scene.json"), str(work / "photo.png"), "--out", str(work / "out"), "--population", "4",
+            "--generations", "1", "--final-scale", "1", "--final-spp", "1", "--snapshot-every", "0", "-q"]
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        code = main(argv)
+    if code == 0:
+        bars = json.loads((work / "out" / "result.json").read_text())["fit_report"]["uncertainty"]["bars"]
+        carried = bars.get("field_of_view")
+        assert all(v is None or math.isfinite(v) for v in bars["sigma"].values())
+        if carried is not None:
+            assert all(math.isfinite(v) for v in carried["shift"].values())
+    else:
+        lines = [line for line in err.getvalue().splitlines() if line]
+        assert code == 1 and len(lines) == 1 and "field_of_view" in lines[0], lines

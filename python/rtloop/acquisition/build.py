@@ -37,7 +37,7 @@ from .calibration import CameraIntrinsics, PinholeRemap
 from .camera import focal_from_vfov
 from .colour import ColourCorrection, colorchecker_correction, grey_card_balance
 from .exif import ExifFocal
-from .focal import refine_vfov_by_ball
+from .focal import field_of_view_record, refine_vfov_by_ball
 from .pose import VFOV_TARGET_DEG, FloorPose, estimate_floor_pose
 
 __all__ = ["AcquiredScene", "build_scene", "draw_overlay", "fit_section"]
@@ -292,9 +292,9 @@ def build_scene(
             "--vfov or --camera, or use a photo whose EXIF has the focal length")
         raise AcquisitionError(f"{exc} (the ball is looked for beside the board, not on it{loose})") from None
     refinement = None
+    locate = {"mask": mask, "resting": resting, "exclude": board_outline, "keep_off": (-bw / 2, bw / 2, -bh / 2, bh / 2)}
     if focal_source == "board" and (pose.vfov_std_deg or 0.0) > VFOV_TARGET_DEG:
         # the board alone fixes the field of view loosely: refined from the ball resting on the floor
-        locate = {"mask": mask, "resting": resting, "exclude": board_outline, "keep_off": (-bw / 2, bw / 2, -bh / 2, bh / 2)}
         found = (float(silhouette.centre_px[0]), float(silhouette.centre_px[1]), float(silhouette.radius_px))
         refinement = refine_vfov_by_ball(photo, spec, ball_radius, pose, found, locate=locate, where=where)
         if refinement is not None:
@@ -376,6 +376,10 @@ def build_scene(
         "photo_size": [w, h],
         "camera_model": focal_source,
         **({"focal_refinement": refinement.to_dict()} if refinement is not None else {}),
+        **({"field_of_view": field_of_view_record(
+            photo, spec, ball_radius, camera.vfov_deg, float(pose.vfov_std_deg), (
+                float(silhouette.centre_px[0]), float(silhouette.centre_px[1]), float(silhouette.radius_px)),
+            ball_name, locate=locate, where=where)} if focal_source == "board" and pose.vfov_std_deg else {}),
         **({"focal_from": exif.source} if focal_source == "exif" and exif is not None else {}),
         "colour": {k: v for k, v in correction.report().items() if k != "patch_corners_px"},
         "pose": pose.report(),

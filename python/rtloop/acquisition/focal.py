@@ -19,7 +19,7 @@ from .ball import locate_ball
 from .camera import focal_from_vfov
 from .pose import FloorPose, estimate_floor_pose
 
-__all__ = ["REACH_SIGMAS", "FocalRefinement", "refine_vfov_by_ball"]
+__all__ = ["REACH_SIGMAS", "FocalRefinement", "field_of_view_record", "refine_vfov_by_ball"]
 
 #: The grid reaches this many of the board's standard deviations either side of its estimate, at most
 #: REACH_MAX_DEG, in steps of a third of a standard deviation (at least STEP_MIN_DEG).
@@ -76,3 +76,28 @@ def refine_vfov_by_ball(photo: np.ndarray, spec: Any, radius: float, pose: Floor
         if a > 0:
             best = float(np.clip(-b / (2 * a), vs[i - 1], vs[i + 1]))
     return FocalRefinement(best, v0, std, grid)
+
+
+def field_of_view_record(photo: np.ndarray, spec: Any, radius: float, vfov_deg: float, std_deg: float,
+                         hint: tuple[float, float, float], ball_name: str, *, locate: dict[str, Any],
+                         where: str) -> dict[str, Any]:
+    """``meta.acquisition.field_of_view`` of a scene whose field of view the board gave (no EXIF, no
+    --vfov): the one used and the board's standard deviation, and the scene as rtloop-scene builds it at one
+    standard deviation either side (``alternates``: the camera and the ball's centre, posed on the board and
+    placed on the floor at that field of view), from which rtloop-fit carries the field of view's uncertainty
+    into the light's error bars. Without alternates (``why``) where the ball is not found at either side."""
+    record: dict[str, Any] = {"vfov_deg": float(vfov_deg), "std_deg": float(std_deg), "alternates": []}
+    h = photo.shape[0]
+    for v in (vfov_deg - std_deg, vfov_deg + std_deg):
+        try:
+            if not 3.0 <= v <= 150.0:
+                raise AcquisitionError(f"a field of view of {v:.2f} deg is outside 3-150 deg")
+            pose = estimate_floor_pose(photo, spec, focal_px=focal_from_vfov(v, h), focal_source="board", where=where)
+            _, sphere = locate_ball(photo, pose.camera, radius, hint=hint, where=where, **locate)
+        except AcquisitionError as e:
+            record["alternates"] = []
+            record["why"] = f"at {v:.2f} deg: {' '.join(str(e).split())}"
+            return record
+        record["alternates"].append({"vfov_deg": float(v), "camera": pose.camera.to_scene_camera(),
+                                     "objects": {ball_name: {"center": [float(c) for c in sphere.centre]}}})
+    return record

@@ -93,6 +93,11 @@ def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = 
         if reported.get("widened_by", 1.0) > 1.0:
             bars_note += (f", widened {reported['widened_by']:.2g}x for what the model lacks (a smooth residual "
                           f"{reported['model_lacks']:.2g}x the noise floor: see the goodness of fit)")
+    if bars_note and reported.get("field_of_view"):
+        fov = reported["field_of_view"]
+        moved = "" if fov.get("light_shift_m") is None else f"; the light moves {1e3 * fov['light_shift_m']:.3g} mm"
+        bars_note += (f"; plus the field of view's uncertainty (no EXIF: {fov['vfov_deg']:.2f} +- {fov['std_deg']:.2f} "
+                      f"deg from the board{moved} per sigma of it)")
     for name, value in result.x.items():
         row = f"  {name:<{width}}  {value:12.6g}"
         split = truth is not None and name in truth.get("split_convention", [])

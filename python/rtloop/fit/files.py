@@ -34,6 +34,9 @@ class Inputs:
     reference: tuple[np.ndarray, float] | None = None
     warnings: list[str] = field(default_factory=list)
     response: str = "srgb"
+    #: The field of view's uncertainty rtloop-scene recorded (``meta.acquisition.field_of_view``, checked:
+    #: :mod:`rtloop.uncertainty.field_of_view`), None where the scene has none.
+    field_of_view: dict[str, Any] | None = None
 
 
 def _acquisition(scene_path: str | os.PathLike[str]) -> dict[str, Any]:
@@ -99,7 +102,18 @@ def load_inputs(scene_path: str | os.PathLike[str], photo_path: str | os.PathLik
         image = rtloop.load_image(photo_path, scene, response=response, crop=crop)
         pixels = None if mask_path is None else rtloop.load_mask(mask_path, scene, crop=crop)
         reference = None if card is None else (rtloop.load_mask(card[0], scene, crop=crop), card[1])
-    return Inputs(scene, image, pixels, mask_path, reference, [str(w.message) for w in caught], response)
+    return Inputs(scene, image, pixels, mask_path, reference, [str(w.message) for w in caught], response,
+                  scene_field_of_view(scene_path, scene))
+
+
+def scene_field_of_view(scene_path: str | os.PathLike[str], scene: Any) -> dict[str, Any] | None:
+    """The field of view's uncertainty the scene records (``meta.acquisition.field_of_view``, written by
+    rtloop-scene for a photo without EXIF), checked; None where it records none."""
+    from ..uncertainty.field_of_view import check_field_of_view
+
+    spheres = {o.get("name") for o in scene.to_dict().get("objects", []) if o.get("shape") == "sphere"}
+    return check_field_of_view(_acquisition(scene_path).get("field_of_view"), spheres,
+                               f"{scene_path}: meta.acquisition.field_of_view")
 
 
 def fit_inputs(inputs: Inputs, *, seed: int = 0, threads: int | None = None, callback: Any = None,
@@ -115,7 +129,16 @@ def fit_inputs(inputs: Inputs, *, seed: int = 0, threads: int | None = None, cal
     flat = options.get("flat_field")
     if isinstance(flat, (tuple, list)):  # (path, response): the photo of a flat white target
         options["flat_field"] = rtloop.load_image(flat[0], inputs.scene, response=flat[1])
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RtloopWarning)
-        return rtloop.fit(inputs.scene, inputs.image, seed=seed, threads=threads, callback=callback,
-                          mask=inputs.mask, reference=inputs.reference, **options)
+    def run(scene: Any, **more: Any) -> Any:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RtloopWarning)
+            return rtloop.fit(scene, inputs.image, seed=seed, threads=threads, mask=inputs.mask,
+                              reference=inputs.reference, **{**options, **more})
+
+    result = run(inputs.scene, callback=callback)
+    if inputs.field_of_view is not None and getattr(result, "uncertainty", None):
+        from ..uncertainty.field_of_view import carry_field_of_view
+
+        carry_field_of_view(result, inputs.field_of_view,
+                            lambda d: run(rtloop.load_scene(d), uncertainty=False), inputs.scene.to_dict())
+    return result
