@@ -20,15 +20,15 @@ from ..errors import RtloopError, RtloopWarning
 from ..scene import Scene, load_scene
 from .constant import as_environment, compare_constant, declares_ambient
 from .bounds import at_bounds, narrowed, restore_bounds
-from .camera import check_camera, fit_through_camera
+from .camera import Camera, fit_through_camera
 from .coat import choose_lobe, with_coat
 from .gauge import hold_gauges, release_gauges
-from .lights import LightsFit, check_lights, choose_count, fit_lights
-from .framing import check_framing, fit_reframed, framing_check, mismatch_verdict
+from .lights import LightsFit, choose_count, fit_lights
+from .framing import fit_reframed, framing_check, mismatch_verdict
 from .goodness import clip_level, encoded, goodness, jpeg_blocking, noise_sigma
 from .norm import dense_residual, linear_file, norm_verdict, not_linear_verdict, pixel_mask, representable_pixels
 from .identifiability import identifiability as _identifiability
-from .inputs import check_footprint, check_norm, objective
+from .inputs import objective
 from .identifiability import lit_pixel_counts
 from .products import constant_term
 from .products import product_bounds as _product_bounds
@@ -41,16 +41,13 @@ from .protocol import (
     check_arguments,
     choose_method,
     searched_paths,
-    whole,
 )
+from .options import LightsOptions, check_options
 from .reference import check_reference, pin_to_reference
 from .result import FitResult, GenerationInfo, StageResult
 from .selection import (
     BOUNCE_PASSES,
     EXPLAINED,
-    check_environment,
-    check_highlights,
-    check_interreflection,
     closed_form_loss,
     environment_evidence,
     environment_given,
@@ -170,45 +167,16 @@ def fit(
     args = dict(locals())
     t0 = time.perf_counter()
     scene = load_scene(scene)
-    meshes = [o["name"] for o in scene.to_dict()["objects"] if o["shape"] == "mesh"]
-    if meshes:
-        raise RtloopError(f"fit: object {meshes[0]!r} is a mesh: meshes can be rendered and inserted, not fitted")
-    lights, framing = check_lights(lights), check_framing(framing)
-    if lights not in (None, 1) or "lights" in scene.to_dict():
-        if framing == "correct":
-            raise RtloopError("framing: 'correct' fits a camera correction with one light, not with several")
-        lights_only(args)
-        return _fit_lights(scene, image, mask, lights, seed=seed, threads=threads, population=population,
-                           generations=generations)
-    footprint = check_footprint(footprint)
-    if not (isinstance(uncertainty, bool) or isinstance(uncertainty, str) and uncertainty in ("default", "bootstrap", "off")):
-        raise RtloopError(f"uncertainty: must be True, False, 'default', 'bootstrap' or 'off' (got {uncertainty!r})")
-    if space not in ("auto", *LOSS_SPACES):
-        raise RtloopError(f"space: unknown loss space {space!r} (known: auto, {', '.join(LOSS_SPACES)})")
-    space_mode, space = space, "linear" if space == "auto" else space
-    norm_mode, norm = check_norm(norm)
-    b = budget(protocol, space, population, generations, f, cr)
-    env_mode = check_environment(environment)
-    check_highlights(highlights)
-    check_interreflection(interreflection)
-    check_arguments(scene, seed=seed, threads=threads, polish=polish, pixels_per_object=pixels_per_object,
-                    population=b.population)
-    # Every argument checked: the camera's terms and the framing's correction each fit through fit() again.
-    cam = check_camera(scene, vignetting, tone, flat_field)
-    if cam.active:
-        def once(img: np.ndarray, near: Scene | None = None) -> FitResult:
-            return fit(**{**args, "image": img, "vignetting": "off", "tone": "off", "flat_field": None,
-                          **({"scene": near} if near is not None else {})})
-
-        result = fit_through_camera(once, scene, *objective(scene, image, mask, []), cam)
-        result.seconds = time.perf_counter() - t0
-        return result
-    if framing == "correct":
-        return fit_reframed(fit, scene, image, mask, reference, dict(
-            protocol=protocol, seed=seed, population=population, generations=generations, f=f, cr=cr,
-            threads=threads, clip=clip, pixels_per_object=pixels_per_object, callback=callback,
-            optimizer=optimizer, polish=polish, uncertainty=uncertainty, norm=args["norm"], space=args["space"],
-            environment=environment, interreflection=interreflection, highlights=highlights, footprint=footprint))
+    options = check_options(scene, args, fit.__kwdefaults__)
+    if isinstance(options, LightsOptions):
+        return _fit_lights(scene, image, mask, options)
+    if options.camera.active:  # the camera's terms: each of their fits through fit() again
+        return _through_camera(args, scene, options.camera, t0)
+    if options.framing == "correct":  # the framing's correction: each of its fits through fit() again
+        return fit_reframed(fit, scene, image, mask, reference, options.reframed(args))
+    footprint, space_mode, space, norm_mode, norm = (options.footprint, options.space, options.first_space,
+                                                     options.norm, options.first_norm)
+    b, env_mode = options.budget_copy(), options.environment
     doubts: list[str] = []
     target, use = objective(scene, image, mask, doubts)
     if reference is not None:
@@ -687,42 +655,22 @@ def _encoding_check(work: Scene, stages: Stages, seed: int, target: np.ndarray, 
     return out
 
 
-#: fit()'s arguments the lights fit has no use for: each must keep its default there (the lights fit takes
-#: the objects as matte, under its own loss, with no camera terms), so that none is silently dropped.
-_NOT_WITH_LIGHTS = ("protocol", "f", "cr", "clip", "pixels_per_object", "optimizer", "polish", "norm", "space",
-                    "environment", "interreflection", "highlights", "reference", "footprint", "vignetting", "tone",
-                    "flat_field")
+def _through_camera(args: dict[str, Any], scene: Scene, camera: Camera, t0: float) -> FitResult:
+    """``fit()`` (``args``: its arguments) through the camera's terms (:func:`.camera.fit_through_camera`):
+    each fit with them off."""
+    def once(img: np.ndarray, near: Scene | None = None) -> FitResult:
+        return fit(**{**args, "image": img, "vignetting": "off", "tone": "off", "flat_field": None,
+                      **({"scene": near} if near is not None else {})})
+
+    result = fit_through_camera(once, scene, *objective(scene, args["image"], args["mask"], []), camera)
+    result.seconds = time.perf_counter() - t0
+    return result
 
 
-def lights_only(args: dict[str, Any]) -> None:
-    """Refuse, in one line naming it, an argument of ``fit()`` (``args``: its locals) that the lights fit
-    would ignore: one given other than its default, and a bootstrap (its error bars are a jackknife's)."""
-    import inspect
-
-    defaults = inspect.signature(fit).parameters
-    for name in _NOT_WITH_LIGHTS:
-        value, default = args[name], defaults[name].default
-        given = value is not None if default is None else not (type(value) is type(default) and value == default)
-        if given:
-            raise RtloopError(f"{name}: not taken by the lights fit (several lights, or a scene with a 'lights' "
-                              f"list: matte objects, its own loss, no camera terms); leave it at its default "
-                              f"({default!r})")
-    if args["uncertainty"] == "bootstrap":
-        raise RtloopError("uncertainty: 'bootstrap' is not taken by the lights fit (its error bars are a "
-                          "delete-a-tile jackknife's)")
-
-
-def _fit_lights(scene: Scene, image: Any, mask: Any, lights: int | str | None, *, seed: int, threads: int | None,
-                population: int | None, generations: Any) -> LightsFit:
+def _fit_lights(scene: Scene, image: Any, mask: Any, options: LightsOptions) -> LightsFit:
     """``fit()`` for several lights or a sphere light (:mod:`.lights`)."""
-    if population is not None:
-        whole("population", population, 4, 10_000)
-    if generations is not None:
-        whole("generations", generations, 1, 100_000)
-    check_arguments(scene, seed=seed, threads=threads, polish=0, pixels_per_object=PIXELS_PER_OBJECT,
-                    population=population or 40)
     target, use = objective(scene, image, mask, [])
-    budget = {"population": population, "generations": generations, "threads": threads}
-    if lights == "auto":
-        return choose_count(scene, target, seed=seed, mask=use, **budget)
-    return fit_lights(scene, target, lights, seed=seed, mask=use, **budget)
+    budget = {"population": options.population, "generations": options.generations, "threads": options.threads}
+    if options.lights == "auto":
+        return choose_count(scene, target, seed=options.seed, mask=use, **budget)
+    return fit_lights(scene, target, options.lights, seed=options.seed, mask=use, **budget)
