@@ -60,6 +60,11 @@ pub fn directional_irradiance(l: [f32; 3], n: [f32; 3]) -> f32 {
     (n[0] * l[0] + n[1] * l[1] + n[2] * l[2]).max(0.0)
 }
 
+/// The unit vector along `d`; straight up for a zero (or non-finite) candidate direction.
+pub fn unit_or_up(d: Vec3A) -> Vec3A {
+    d.try_normalize().unwrap_or(Vec3A::Y)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -13,7 +13,7 @@ use super::coat::Coat;
 use super::environment::sky_view;
 use super::footprint::{sphere_edge_lit, terminator_cos};
 use super::hit::{occluded, Surfel};
-use super::light::{incidence, irradiance};
+use super::light::{incidence, irradiance, unit_or_up};
 use super::lights::{sphere_visibility, unit_irradiance, Emitter, RectAxes};
 use super::shape::PShape;
 use crate::params::Target;
@@ -101,11 +101,6 @@ impl Clone for ShadeParams {
             self.coats.clone_from(&source.coats);
         }
     }
-}
-
-/// The unit vector along `d`; straight up for a zero (or non-finite) candidate direction.
-pub fn unit_or_up(d: Vec3A) -> Vec3A {
-    d.try_normalize().unwrap_or(Vec3A::Y)
 }
 
 /// Per object its coat, or empty when no object has one.
