@@ -7,10 +7,10 @@ use glam::Vec3A;
 use rayon::prelude::*;
 
 use super::pixels::{offset, Gather, Group, Light, SphereOccluder, BLOCK};
+use crate::geometry::sphere::segment_meets_sphere;
 use crate::render::brdf::lambert;
 use crate::render::footprint::{sphere_edge_lit, terminator_cos};
 use crate::render::light::{directional_irradiance, point_irradiance};
-use crate::render::shape::segment_meets_sphere;
 
 /// e = max(0, n·l) / d² (unit light), written into `e`; 0 for a light on the surface. On a sphere with
 /// a footprint, max(0, n·l) is its mean over the pixel where the terminator crosses it.

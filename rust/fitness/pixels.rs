@@ -5,10 +5,10 @@
 use glam::Vec3A;
 use rayon::prelude::*;
 
+use crate::geometry::sphere::sphere_power;
 use crate::render::bounce::{gather, nearest_table};
 use crate::render::environment::sky_view;
 use crate::render::footprint;
-use crate::render::shape::sphere_power;
 use crate::render::{CameraFrame, GBuffer, PShape, Surfel};
 
 /// The pixels one fit shades, and the (clipped model, objective) of those no free parameter changes.

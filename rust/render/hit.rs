@@ -5,7 +5,8 @@ use glam::Vec3A;
 use rayon::prelude::*;
 
 use super::camera::CameraFrame;
-use super::shape::{PShape, ShapeHit};
+use super::shape::PShape;
+use crate::geometry::ShapeHit;
 use crate::scene::Scene;
 
 /// The first hit of one camera sample: everything shading needs that the light and materials don't change.
