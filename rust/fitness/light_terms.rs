@@ -9,8 +9,8 @@ use rayon::prelude::*;
 use super::pixels::{offset, Gather, Group, Light, SphereOccluder, BLOCK};
 use crate::geometry::sphere::segment_meets_sphere;
 use crate::render::brdf::lambert;
-use crate::render::footprint::{sphere_edge_lit, terminator_cos};
-use crate::render::light::{directional_irradiance, point_irradiance};
+use crate::render::footprint::{near_sphere_edge, sphere_edge_lit, terminator_cos};
+use crate::render::light::{directional_irradiance, point_irradiance, point_irradiance_in, Lanes};
 
 /// e = max(0, n·l) / d² (unit light), written into `e`; 0 for a light on the surface. On a sphere with
 /// a footprint, max(0, n·l) is its mean over the pixel where the terminator crosses it.
@@ -155,9 +155,9 @@ pub(crate) fn irradiance_exact(g: &Group, r: std::ops::Range<usize>, light: &Lig
     }
 }
 
-/// AVX2 form of `irradiance`: 1/d³ from the hardware reciprocal square root refined by one Newton step
-/// (relative error about 1e-7, the same as the exact `nl / (d2 * sqrt(d2))` in f32), eight pixels at a
-/// time; the tail goes through the exact form.
+/// AVX2 form of `irradiance` for a point light: `point_irradiance_in` eight pixels at a time (correctly
+/// rounded square root and division, the same bits on every x86-64 CPU; the multiply-adds fused); the
+/// tail goes through the scalar form.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
@@ -171,40 +171,56 @@ pub(crate) unsafe fn irradiance_avx2(
     let n = e.len();
     let full = n - n % 8;
     let s = r.start;
-    let (lx, ly, lz) = (
-        _mm256_set1_ps(light.pos[0]),
-        _mm256_set1_ps(light.pos[1]),
-        _mm256_set1_ps(light.pos[2]),
-    );
-    let (tiny, big, zero) = (
-        _mm256_set1_ps(f32::MIN_POSITIVE),
-        _mm256_set1_ps(f32::MAX),
-        _mm256_setzero_ps(),
-    );
+    let l = light.pos.map(|v| _mm256_set1_ps(v));
     let mut i = 0;
     while i < full {
         let ld = |v: &Vec<f32>| _mm256_loadu_ps(v.as_ptr().add(s + i));
-        let dx = _mm256_sub_ps(lx, ld(&g.p[0]));
-        let dy = _mm256_sub_ps(ly, ld(&g.p[1]));
-        let dz = _mm256_sub_ps(lz, ld(&g.p[2]));
-        let d2 = _mm256_fmadd_ps(dz, dz, _mm256_fmadd_ps(dy, dy, _mm256_mul_ps(dx, dx)));
-        let nl = _mm256_fmadd_ps(
-            ld(&g.n[2]),
-            dz,
-            _mm256_fmadd_ps(ld(&g.n[1]), dy, _mm256_mul_ps(ld(&g.n[0]), dx)),
-        );
-        let nl = _mm256_max_ps(nl, zero);
-        // nl / (d2 sqrt(d2)), as `point_irradiance`: correctly rounded sqrt and division, the same bits
-        // on every x86-64 CPU (an rsqrt estimate differs between vendors, and so would every fit).
-        let v = _mm256_min_ps(
-            _mm256_div_ps(nl, _mm256_mul_ps(d2, _mm256_sqrt_ps(d2))),
-            big,
-        );
-        let ok = _mm256_cmp_ps::<_CMP_GT_OQ>(d2, tiny);
-        _mm256_storeu_ps(e.as_mut_ptr().add(i), _mm256_and_ps(v, ok));
+        let d: [__m256; 3] = std::array::from_fn(|c| _mm256_sub_ps(l[c], ld(&g.p[c])));
+        let nv: [__m256; 3] = std::array::from_fn(|c| ld(&g.n[c]));
+        _mm256_storeu_ps(e.as_mut_ptr().add(i), point_irradiance_in(d, nv));
         i += 8;
     }
     irradiance_exact(g, s + full..r.end, light, &mut e[full..]);
+}
+
+// The lanes of `irradiance_avx2`. SAFETY (every block): these run only inlined into `irradiance_avx2`,
+// which is only called once the CPU's AVX2 and FMA were checked.
+#[cfg(target_arch = "x86_64")]
+impl Lanes for std::arch::x86_64::__m256 {
+    #[inline(always)]
+    fn splat(v: f32) -> Self {
+        unsafe { std::arch::x86_64::_mm256_set1_ps(v) }
+    }
+    #[inline(always)]
+    fn mul(self, b: Self) -> Self {
+        unsafe { std::arch::x86_64::_mm256_mul_ps(self, b) }
+    }
+    #[inline(always)]
+    fn mul_add(self, b: Self, c: Self) -> Self {
+        unsafe { std::arch::x86_64::_mm256_fmadd_ps(self, b, c) }
+    }
+    #[inline(always)]
+    fn div(self, b: Self) -> Self {
+        unsafe { std::arch::x86_64::_mm256_div_ps(self, b) }
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        unsafe { std::arch::x86_64::_mm256_sqrt_ps(self) }
+    }
+    #[inline(always)]
+    fn max0(self) -> Self {
+        // the second operand where either is NaN, as f32::max's 0
+        unsafe { std::arch::x86_64::_mm256_max_ps(self, std::arch::x86_64::_mm256_setzero_ps()) }
+    }
+    #[inline(always)]
+    fn min(self, b: Self) -> Self {
+        unsafe { std::arch::x86_64::_mm256_min_ps(self, b) }
+    }
+    #[inline(always)]
+    fn where_above(self, x: Self, limit: Self) -> Self {
+        use std::arch::x86_64::*;
+        unsafe { _mm256_and_ps(self, _mm256_cmp_ps::<_CMP_GT_OQ>(x, limit)) }
+    }
 }
 
 /// The segment x(t) = p + t·d, t in [0, 1], d = l - p, against the sphere |x - c|² = r²: a = |d|² and
@@ -262,9 +278,8 @@ pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mu
             }
             continue;
         }
-        // With a footprint, a pixel the edge may cross keeps its light here and gets its lit fraction
-        // below: the line's distance h from the centre within the footprint's reach w of the radius,
-        // |h² - r²| = |b² - ac| / a < 2rw + w² (w bounds the line's move, (1 - t) x footprint).
+        // With a footprint, a pixel the edge may cross (`near_sphere_edge`) keeps its light here and gets
+        // its lit fraction below.
         let spread = &g.spread[r.start..][..n];
         let mut near = [0u32; BLOCK];
         let mut span = (u32::MAX, 0u32);
@@ -272,9 +287,7 @@ pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mu
         for i in 0..n {
             let (a, b) = segment_to_sphere([px[i], py[i], pz[i]], [lx, ly, lz], [cx, cy, cz]);
             let hit = segment_meets_sphere::<true>(a, b, cc[i]);
-            let w = spread[i];
-            let close = (b * b - a * cc[i]).abs() < a * w * (2.0 * rad + w);
-            let edge = close & (b < 0.0) & (a + b > 0.0) & (e[i] > 0.0);
+            let edge = near_sphere_edge::<true>(a, b, cc[i], spread[i], rad) & (e[i] > 0.0);
             mark(edge, i, &mut near, &mut span);
             e[i] = if hit & !edge { 0.0 } else { e[i] };
         }
@@ -361,7 +374,7 @@ pub(crate) fn shadow_directional(g: &Group, r: std::ops::Range<usize>, d: [f32; 
             // As for a point light (`shadow`), with a = 1 and the ray's whole move.
             let edge = footprint && {
                 let w = g.spread[r.start + i];
-                ((b * b - cc[i]).abs() < w * (2.0 * s.radius + w)) & (b < 0.0) & (e[i] > 0.0)
+                near_sphere_edge::<false>(1.0, b, cc[i], w, s.radius) & (e[i] > 0.0)
             };
             mark(edge, i, &mut near, &mut span);
             e[i] = if hit & !edge { 0.0 } else { e[i] };

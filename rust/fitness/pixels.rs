@@ -257,7 +257,7 @@ pub(crate) fn gathers(
                         normal: g.normal,
                         view: g.normal,
                         object: g.sender as u32,
-                        eps: 64.0 * f32::EPSILON * scale,
+                        eps: Surfel::eps_at(scale),
                     });
                 }
             }
