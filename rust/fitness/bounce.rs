@@ -35,18 +35,12 @@ impl<E: Encoding + Send + Sync> Simd for Projected<'_, E> {
     type Output = [f64; 3];
     #[inline(always)]
     fn run<const AVX2: bool>(self) -> [f64; 3] {
-        let Projected {
-            k,
-            c,
-            proj,
-            mode,
-            out,
-            s,
-            enc,
-        } = self;
+        let (k, proj) = (self.k, self.proj);
         match &proj.gauge {
-            Some(gauge) => k.projected_bounce::<AVX2, E>(c, proj, gauge, mode, out, s, enc),
-            None => k.projected_direct::<AVX2, E>(c, proj, out, s, enc),
+            Some(gauge) => k.projected_bounce::<AVX2, E>(
+                self.c, proj, gauge, self.mode, self.out, self.s, self.enc,
+            ),
+            None => k.projected_direct::<AVX2, E>(self.c, proj, self.out, self.s, self.enc),
         }
     }
 }

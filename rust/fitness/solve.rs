@@ -42,7 +42,7 @@ pub(crate) fn environment_lane_sums<const AVX2: bool>(
     #[cfg(target_arch = "x86_64")]
     if AVX2 {
         // SAFETY: `AVX2` is only true on the path dispatched after checking the CPU's features.
-        s = unsafe { environment_lanes_avx2(&col[..full], b, v, t, sat, specular) };
+        s = unsafe { environment_lanes_avx2([&col[..full], b, v, t], sat, specular) };
         i = full;
     }
     let mut add = |l: usize, i: usize| {
@@ -568,17 +568,14 @@ mod tests {
     }
 }
 
-/// The lane sums of [`environment_lane_sums`] over whole runs of `SUM_LANES` (4) pixels, in f64, each
+/// The lane sums of [`environment_lane_sums`] (its `col`, `b`, `v` and `t` in that order) over whole runs of `SUM_LANES` (4) pixels, in f64, each
 /// lane and each sum the scalar loop's operations in its order (so the same values); with `specular` false
 /// the lobe's four sums (whose factor is 0) are left at 0.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[inline]
 pub(crate) unsafe fn environment_lanes_avx2(
-    col: &[f32],
-    b: &[f32],
-    v: &[f32],
-    t: &[f32],
+    [col, b, v, t]: [&[f32]; 4],
     sat: f32,
     specular: bool,
 ) -> [[f64; 4]; 9] {

@@ -13,16 +13,12 @@ use super::ShapeHit;
 /// The nearest hit with `t` in (`tmin`, `tmax`) of the ray `origin + t·dir` (unit `dir`) on the sphere.
 #[inline]
 pub fn intersect(
-    center: Vec3A,
-    radius: f32,
-    origin: Vec3A,
-    dir: Vec3A,
-    tmin: f32,
-    tmax: f32,
+    (center, radius): (Vec3A, f32),
+    (origin, dir): (Vec3A, Vec3A),
+    (tmin, tmax): (f32, f32),
 ) -> Option<ShapeHit> {
     let oc = origin - center;
-    let b = oc.dot(dir);
-    let f = oc - b * dir; // from the centre to the closest point of the line
+    let (b, f) = closest(oc, dir);
     let r2 = radius * radius;
     let disc = r2 - f.length_squared();
     if disc < 0.0 {
@@ -59,16 +55,11 @@ pub fn intersect(
 /// True if the open segment `origin + t·dir` (unit `dir`), `t` in (`tmin`, `tmax`), meets the sphere.
 #[inline]
 pub fn hits_segment(
-    center: Vec3A,
-    radius: f32,
-    origin: Vec3A,
-    dir: Vec3A,
-    tmin: f32,
-    tmax: f32,
+    (center, radius): (Vec3A, f32),
+    (origin, dir): (Vec3A, Vec3A),
+    (tmin, tmax): (f32, f32),
 ) -> bool {
-    let oc = origin - center;
-    let b = oc.dot(dir);
-    let f = oc - b * dir;
+    let (b, f) = closest(origin - center, dir);
     let disc = radius * radius - f.length_squared();
     if disc < 0.0 {
         return false;
@@ -77,6 +68,14 @@ pub fn hits_segment(
     // The chord is t in [-b - sq, -b + sq]; it overlaps (tmin, tmax)?
     let (t0, t1) = (-b - sq, -b + sq);
     t1 > tmin && t0 < tmax
+}
+
+/// b = oc·d and f = oc - b·d for the offset `oc` from the centre and the unit `dir`: the line's closest
+/// point to the centre, from it.
+#[inline(always)]
+fn closest(oc: Vec3A, dir: Vec3A) -> (f32, Vec3A) {
+    let b = oc.dot(dir);
+    (b, oc - b * dir)
 }
 
 /// |oc|² - r² for the offset `oc` from a sphere's centre (the power of the point), factored to keep its

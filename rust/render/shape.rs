@@ -56,7 +56,7 @@ impl PShape {
         match *self {
             PShape::Mesh(ref m) => m.intersect(origin, dir, tmin, tmax),
             PShape::Sphere { center, radius } => {
-                sphere::intersect(center, radius, origin, dir, tmin, tmax)
+                sphere::intersect((center, radius), (origin, dir), (tmin, tmax))
             }
             PShape::Plane { point, normal } => {
                 let denom = normal.dot(dir);
@@ -82,7 +82,7 @@ impl PShape {
     pub fn hits_segment(&self, origin: Vec3A, dir: Vec3A, tmin: f32, tmax: f32) -> bool {
         match *self {
             PShape::Sphere { center, radius } => {
-                sphere::hits_segment(center, radius, origin, dir, tmin, tmax)
+                sphere::hits_segment((center, radius), (origin, dir), (tmin, tmax))
             }
             PShape::Plane { .. } => self.intersect(origin, dir, tmin, tmax).is_some(),
             PShape::Mesh(ref m) => m.hits_segment(origin, dir, tmin, tmax),
