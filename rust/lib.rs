@@ -4,6 +4,7 @@
 
 pub mod error;
 pub mod fitness;
+pub mod geometry;
 pub mod params;
 pub mod photo;
 pub mod render;

@@ -911,8 +911,8 @@ fn well_shaped(v: &[DVec3; 3]) -> bool {
     (v[1] - v[0]).cross(v[2] - v[0]).length() >= 1e-3 * edge * edge
 }
 
-fn mesh_of(tris: &[[DVec3; 3]]) -> Option<rtloop::render::mesh::Mesh> {
-    rtloop::render::mesh::Mesh::new(tris, None)
+fn mesh_of(tris: &[[DVec3; 3]]) -> Option<rtloop::geometry::mesh::Mesh> {
+    rtloop::geometry::mesh::Mesh::new(tris, None)
 }
 
 proptest! {

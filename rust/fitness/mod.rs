@@ -28,13 +28,14 @@ use crate::render::{shade, GBuffer, Geometry, PShape, ShadeParams, Surfel};
 use crate::scene::Scene;
 use crate::search::Objective;
 pub use blocker::{constant_term, projection_blocker};
+pub use held::Frozen;
 pub use kernel::{Candidate, Kernel};
 pub use line_min::{encoded_line_min, l1_line_min, EncodedTerm};
 use loss::penalty_sums;
 pub use loss::{Norm, Space, SrgbLut, SATURATED};
 pub use pixels::Sky;
 pub use pixels::{interior, interior_by, ActivePixels};
-pub use projected::{Projection, Solved};
+pub use projected::{Gauge, Projection, Solved};
 pub use simd::{path as simd_path, scalar_paths};
 pub use solve::{closed_form, fallback_sums, solve_object, SolveSums};
 
@@ -89,21 +90,21 @@ pub struct Fitness {
     /// and its scratch. [`Fitness::refined`] at the same `x` refines from it instead of solving it again
     /// (the same inputs: the same values); cleared by every setting that changes the loss.
     held_solve: Option<(Vec<f64>, Solved, Vec<f32>)>,
+    /// How the search's candidates take the bounce, where the projection has one.
+    bounce: bounce::Mode,
 }
 
 /// The gauge bounds of the bounce from the scene's fit section: u = 1/intensity over the intensity's
 /// bounds (its value when fixed), and each object's largest albedo (its value when fixed).
-fn gauge_bounds(scene: &Scene) -> bounce::Gauge {
+fn gauge_bounds(scene: &Scene) -> projected::Gauge {
     let bounds = |t: Target| scene.fit.iter().find(|f| f.target == t);
     let (ilo, ihi) = match bounds(Target::LightIntensity) {
         Some(f) => (f.min[0], f.max[0]),
         None => (scene.light.intensity, scene.light.intensity),
     };
     let inv = |i: f64| if i > 0.0 { 1.0 / i } else { f64::MAX };
-    bounce::Gauge {
+    projected::Gauge {
         u: (inv(ihi), inv(ilo)),
-        rounds: bounce::SEARCH_ROUNDS,
-        frozen: None,
         albedo_max: (0..scene.objects.len())
             .map(|k| match bounds(Target::Albedo(k)) {
                 Some(f) => [f.max[0], f.max[1], f.max[2]],
@@ -189,6 +190,7 @@ impl Fitness {
             constant: self.constant,
             projection: self.projection.clone(),
             held_solve: None, // solved with the footprint: not this model's
+            bounce: self.bounce.clone(),
         }
     }
 
@@ -393,6 +395,7 @@ impl Fitness {
             active,
             projection,
             held_solve: None,
+            bounce: bounce::Mode::SEARCH,
         })
     }
 
@@ -414,13 +417,9 @@ impl Fitness {
     /// [`Kernel::refine`]) and the per-channel loss there; the least-squares products of `solved` are
     /// what the search uses, these are what a fit reports. `None` for other losses.
     pub fn refined(&self, x: &[f64]) -> Option<(Solved, [f64; 3])> {
-        let mut proj = self.projection.clone()?;
-        if let Some(g) = &mut proj.gauge {
-            // the full bounce at the found light, also where the search held it (`freeze_bounce`)
-            g.rounds = bounce::FINAL_ROUNDS;
-            g.frozen = None;
-        }
-        let proj = &proj;
+        let proj = self.projection.as_ref()?;
+        // the full bounce at the found light, also where the search held it (`freeze_bounce`)
+        let full = &bounce::Mode::FULL;
         let (mut solved, scratch) = match &self.held_solve {
             // the full fixed point already solved here, where the bounce was last held
             Some((at, solved, scratch)) if at.as_slice() == x => (solved.clone(), scratch.clone()),
@@ -435,7 +434,8 @@ impl Fitness {
                     // small for it
                     parallel: proj.gauge.is_some(),
                 };
-                self.kernel.projected(c, proj, &mut solved, &mut scratch);
+                self.kernel
+                    .projected(c, proj, full, &mut solved, &mut scratch);
                 (solved, scratch)
             }
         };
@@ -448,19 +448,17 @@ impl Fitness {
 
     /// With interreflection (the projected loss): hold the bounce at candidate `x` (`None`: the scene's own
     /// values; the products and gauge solved there, [`bounce::FINAL_ROUNDS`]) while candidates are
-    /// ranked ([`bounce::Frozen`]): each then costs a direct candidate's factors and one solve of its
+    /// ranked ([`Frozen`]): each then costs a direct candidate's factors and one solve of its
     /// products (0.18-0.26 ms on one core against 3.5 ms for the full bounce). [`Fitness::refined`], what
     /// a stage reports, still solves the full bounce at its light. Returns whether there is a bounce to
     /// hold (false: the fitness is unchanged).
     pub fn freeze_bounce(&mut self, x: Option<&[f64]>) -> bool {
-        let Some(mut proj) = self.projection.clone() else {
+        let Some(proj) = &self.projection else {
             return false;
         };
-        let Some(g) = &mut proj.gauge else {
+        let Some(g) = &proj.gauge else {
             return false;
         };
-        g.rounds = bounce::FINAL_ROUNDS;
-        g.frozen = None;
         let u_lo = g.u.0;
         let p = match x {
             Some(x) => self.params(x),
@@ -473,7 +471,8 @@ impl Fitness {
             bound: f64::INFINITY,
             parallel: true, // the same value, over the pool
         };
-        self.kernel.projected(c, &proj, &mut solved, &mut scratch);
+        self.kernel
+            .projected(c, proj, &bounce::Mode::FULL, &mut solved, &mut scratch);
         // scratch: [a | b | a'_r | a'_g | a'_b], a'_c = a + (u/g_c)·B_c
         let n = self.kernel.pixels();
         let bounce = (0..3)
@@ -482,13 +481,11 @@ impl Fitness {
                 (0..n).map(move |i| s[(2 + c) * n + i] - s[i])
             })
             .collect();
-        let frozen = bounce::Frozen {
+        let frozen = Frozen {
             bounce,
             u: solved.gauge.unwrap_or(u_lo),
         };
-        if let Some(live) = self.projection.as_mut().and_then(|p| p.gauge.as_mut()) {
-            live.frozen = Some(std::sync::Arc::new(frozen));
-        }
+        self.bounce.frozen = Some(std::sync::Arc::new(frozen));
         // `refined` at this candidate (a pass that ends where it started) takes this solve: `proj` is the
         // projection `refined` builds (the full bounce's rounds, nothing held), the candidate the same.
         self.held_solve = x.map(|x| (x.to_vec(), solved, scratch));
@@ -496,17 +493,17 @@ impl Fitness {
     }
 
     /// The bounce [`Fitness::freeze_bounce`] holds, if any.
-    pub fn frozen_bounce(&self) -> Option<std::sync::Arc<bounce::Frozen>> {
-        self.projection.as_ref()?.gauge.as_ref()?.frozen.clone()
+    pub fn frozen_bounce(&self) -> Option<std::sync::Arc<Frozen>> {
+        self.projection.as_ref()?.gauge.as_ref()?;
+        self.bounce.frozen.clone()
     }
 
     /// Hold `frozen` (another fitness's [`Fitness::frozen_bounce`] over the same pixels, e.g. the
     /// footprint fitness's for the pixel-centre one of the same set-up) while candidates are ranked.
-    pub fn hold_bounce(&mut self, frozen: std::sync::Arc<bounce::Frozen>) {
-        if let Some(live) = self.projection.as_mut().and_then(|p| p.gauge.as_mut()) {
-            if frozen.bounce.len() == 3 * self.kernel.pixels() {
-                live.frozen = Some(frozen);
-            }
+    pub fn hold_bounce(&mut self, frozen: std::sync::Arc<Frozen>) {
+        let bounced = self.projection.as_ref().is_some_and(|p| p.gauge.is_some());
+        if bounced && frozen.bounce.len() == 3 * self.kernel.pixels() {
+            self.bounce.frozen = Some(frozen);
         }
     }
 
@@ -590,7 +587,9 @@ impl Fitness {
             parallel,
         };
         let mut acc = match &self.projection {
-            Some(proj) => self.kernel.projected(c, proj, solved, irradiance),
+            Some(proj) => self
+                .kernel
+                .projected(c, proj, &self.bounce, solved, irradiance),
             None => self.kernel.l1(c),
         };
         for c in 0..3 {
