@@ -186,20 +186,10 @@ impl Fitness {
         scene: &Scene,
         layout: ParamLayout,
         target: &[f32],
-        spec: FitnessSpec,
+        mut spec: FitnessSpec,
     ) -> Result<Fitness> {
-        let FitnessSpec {
-            pixels,
-            loss: kind,
-            clip,
-            projection,
-            footprint,
-            solve_margin,
-            norm,
-            space,
-            saturated,
-        } = spec;
-        let pixels = pixels.as_deref();
+        let (kind, clip, footprint) = (spec.loss, spec.clip, spec.footprint);
+        let pixels = spec.pixels.as_deref();
         if !scene.single_point_light() {
             return Err(Error::Invalid(
                 "this fitness models one point or directional light; a scene with several lights or a \
@@ -252,7 +242,7 @@ impl Fitness {
         };
         let mut base = ShadeParams::new(scene);
         let projection = if kind == LossKind::L1Projected {
-            let mut proj = projection.ok_or_else(|| {
+            let mut proj = spec.projection.take().ok_or_else(|| {
                 Error::Invalid("the projected loss needs product bounds for every object".into())
             })?;
             let n = scene.objects.len();
@@ -350,7 +340,7 @@ impl Fitness {
             background,
             scene.objects.len(),
             camera,
-            solve_margin,
+            spec.solve_margin,
         );
         // The occluded environment costs a sky view factor per pixel only where the model has it.
         let environment = match &projection {
@@ -386,9 +376,9 @@ impl Fitness {
             projection,
             held_solve: None,
         };
-        fitness.set_norm(norm);
-        fitness.set_space(space);
-        if let Some(level) = saturated {
+        fitness.set_norm(spec.norm);
+        fitness.set_space(spec.space);
+        if let Some(level) = spec.saturated {
             fitness.set_saturated(level);
         }
         Ok(fitness)
