@@ -69,6 +69,51 @@ impl LossKind {
     }
 }
 
+/// How a [`Fitness`] compares a candidate with the objective: which pixels, which loss, and how pixel
+/// values are modelled and penalised. `FitnessSpec::default()` is the whole image, the direct loss
+/// ([`LossKind::L1`]) on clipped values at pixel centres, L1 in linear space; set the fields that differ
+/// with `FitnessSpec { loss: LossKind::L1Projected, projection: Some(..), ..Default::default() }`.
+#[derive(Clone, Debug)]
+pub struct FitnessSpec {
+    /// The pixel indices the loss counts (`None`: all pixels).
+    pub pixels: Option<Vec<u32>>,
+    pub loss: LossKind,
+    /// Rendered values clamped to [0, 1] before comparison, as a camera or an 8/16-bit file would.
+    pub clip: bool,
+    /// The bounds of the closed-form unknowns: required by [`LossKind::L1Projected`], unused otherwise.
+    pub projection: Option<Projection>,
+    /// Each pixel integrated over its area where a sphere's shadow edge or its terminator crosses it
+    /// (`render::footprint`), as a camera integrates it (`render_with` renders the same model).
+    pub footprint: bool,
+    /// The closed-form products are informed only by pixels that every pixel within this Chebyshev
+    /// distance shows the same object ([`interior_by`]; 0: the 4-neighbours). The loss still counts every
+    /// pixel.
+    pub solve_margin: usize,
+    /// The penalty of a pixel difference ([`Fitness::set_norm`]).
+    pub norm: Norm,
+    /// Where values are compared ([`Fitness::set_space`]).
+    pub space: Space,
+    /// The level from which objective values count as possibly clipped ([`Fitness::set_saturated`];
+    /// `None`: [`SATURATED`]).
+    pub saturated: Option<f32>,
+}
+
+impl Default for FitnessSpec {
+    fn default() -> FitnessSpec {
+        FitnessSpec {
+            pixels: None,
+            loss: LossKind::L1,
+            clip: true,
+            projection: None,
+            footprint: false,
+            solve_margin: 0,
+            norm: Norm::L1,
+            space: Space::Linear,
+            saturated: None,
+        }
+    }
+}
+
 pub struct Fitness {
     pub layout: ParamLayout,
     /// Let `evaluate_bounded` stop early (on by default; off to measure full evaluations).
@@ -136,80 +181,16 @@ fn with_scratch<R>(f: impl FnOnce(&mut Scratch) -> R) -> R {
 }
 
 impl Fitness {
-    /// `target` is the objective in linear RGB at the scene's size (row-major, 3 floats per pixel).
-    /// `pixels` restricts the loss to those pixel indices (all pixels when `None`). With `clip`, rendered
-    /// values are clamped to [0, 1] before comparison, as a camera or an 8/16-bit file would.
+    /// The fitness of `layout`'s parameters against `target`, the objective in linear RGB at the scene's
+    /// size (row-major, 3 floats per pixel), compared as `spec` says ([`FitnessSpec`]).
     pub fn new(
         scene: &Scene,
         layout: ParamLayout,
         target: &[f32],
-        pixels: Option<&[u32]>,
-        kind: LossKind,
-        clip: bool,
-        projection: Option<Projection>,
+        mut spec: FitnessSpec,
     ) -> Result<Fitness> {
-        Fitness::with_solve_margin(
-            scene, layout, target, pixels, kind, clip, projection, false, 0,
-        )
-    }
-
-    /// [`Fitness::new`] with each pixel integrated over its area where a sphere's shadow edge or its
-    /// terminator crosses it (`render::footprint`), as a camera integrates it (`render_with` renders the
-    /// same model).
-    pub fn with_pixel_footprint(
-        scene: &Scene,
-        layout: ParamLayout,
-        target: &[f32],
-        pixels: Option<&[u32]>,
-        kind: LossKind,
-        clip: bool,
-        projection: Option<Projection>,
-    ) -> Result<Fitness> {
-        Fitness::with_solve_margin(
-            scene, layout, target, pixels, kind, clip, projection, true, 0,
-        )
-    }
-
-    /// This fitness with pixels shaded at their centres, as [`Fitness::new`] builds it, from one built
-    /// [`Fitness::with_pixel_footprint`] without redoing its geometry: a search and its polish can then
-    /// take the two models for the price of one set-up.
-    pub fn at_pixel_centres(&self) -> Fitness {
-        Fitness {
-            layout: self.layout.clone(),
-            early_exit: self.early_exit,
-            kernel: self.kernel.at_pixel_centres(),
-            base: self.base.clone(),
-            shapes: self.shapes.clone(),
-            active: ActivePixels {
-                footprint: Vec::new(),
-                ..self.active.clone()
-            },
-            kind: self.kind,
-            clip: self.clip,
-            shadows: self.shadows,
-            constant: self.constant,
-            projection: self.projection.clone(),
-            held_solve: None, // solved with the footprint: not this model's
-            bounce: self.bounce.clone(),
-        }
-    }
-
-    /// [`Fitness::new`] (or, with `footprint`, [`Fitness::with_pixel_footprint`]) whose closed-form
-    /// products are informed only by pixels that every pixel within `solve_margin` (Chebyshev distance)
-    /// shows the same object ([`interior_by`]; 0: the 4-neighbours, as `new` builds it). The loss still
-    /// counts every pixel.
-    #[allow(clippy::too_many_arguments)]
-    pub fn with_solve_margin(
-        scene: &Scene,
-        layout: ParamLayout,
-        target: &[f32],
-        pixels: Option<&[u32]>,
-        kind: LossKind,
-        clip: bool,
-        projection: Option<Projection>,
-        footprint: bool,
-        solve_margin: usize,
-    ) -> Result<Fitness> {
+        let (kind, clip, footprint) = (spec.loss, spec.clip, spec.footprint);
+        let pixels = spec.pixels.as_deref();
         if !scene.single_point_light() {
             return Err(Error::Invalid(
                 "this fitness models one point or directional light; a scene with several lights or a \
@@ -262,7 +243,7 @@ impl Fitness {
         };
         let mut base = ShadeParams::new(scene);
         let projection = if kind == LossKind::L1Projected {
-            let mut proj = projection.ok_or_else(|| {
+            let mut proj = spec.projection.take().ok_or_else(|| {
                 Error::Invalid("the projected loss needs product bounds for every object".into())
             })?;
             let n = scene.objects.len();
@@ -360,7 +341,7 @@ impl Fitness {
             background,
             scene.objects.len(),
             camera,
-            solve_margin,
+            spec.solve_margin,
         );
         // The occluded environment costs a sky view factor per pixel only where the model has it.
         let environment = match &projection {
@@ -373,7 +354,7 @@ impl Fitness {
             }
             None => Sky::None,
         };
-        Ok(Fitness {
+        let mut fitness = Fitness {
             layout,
             early_exit: true,
             base,
@@ -396,7 +377,37 @@ impl Fitness {
             projection,
             held_solve: None,
             bounce: bounce::Mode::SEARCH,
-        })
+        };
+        fitness.set_norm(spec.norm);
+        fitness.set_space(spec.space);
+        if let Some(level) = spec.saturated {
+            fitness.set_saturated(level);
+        }
+        Ok(fitness)
+    }
+
+    /// This fitness with pixels shaded at their centres (as [`Fitness::new`] builds it without
+    /// [`FitnessSpec::footprint`]) from one built with the footprint, without redoing its geometry: a search
+    /// and its polish can then take the two models for the price of one set-up.
+    pub fn at_pixel_centres(&self) -> Fitness {
+        Fitness {
+            layout: self.layout.clone(),
+            early_exit: self.early_exit,
+            kernel: self.kernel.at_pixel_centres(),
+            base: self.base.clone(),
+            shapes: self.shapes.clone(),
+            active: ActivePixels {
+                footprint: Vec::new(),
+                ..self.active.clone()
+            },
+            kind: self.kind,
+            clip: self.clip,
+            shadows: self.shadows,
+            constant: self.constant,
+            projection: self.projection.clone(),
+            held_solve: None, // solved with the footprint: not this model's
+            bounce: self.bounce.clone(),
+        }
     }
 
     /// The closed-form products (object x channel) for candidate light `x` (`L1Projected` only).
