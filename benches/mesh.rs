@@ -5,7 +5,7 @@ use std::collections::HashMap;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::{DVec3, Vec3A};
-use rtloop::render::mesh::Mesh;
+use rtloop::geometry::mesh::Mesh;
 
 /// The unit icosphere subdivided `levels` times (20·4^levels triangles).
 fn icosphere(levels: u32) -> Vec<[DVec3; 3]> {

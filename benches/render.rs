@@ -14,8 +14,8 @@ mod targets;
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use rayon::prelude::*;
 use rtloop::{
-    render, search, search::Objective, DeConfig, Fitness, LossKind, ParamLayout, Projection, Scene,
-    Space,
+    render, search, search::Objective, DeConfig, Fitness, FitnessSpec, LossKind, ParamLayout,
+    Projection, Scene, Space,
 };
 use targets::{clipped_render, random_candidate};
 
@@ -108,10 +108,11 @@ fn bench(c: &mut Criterion) {
             &scene,
             layout.clone(),
             &target,
-            None,
-            *kind,
-            true,
-            pb.clone(),
+            FitnessSpec {
+                loss: *kind,
+                projection: pb.clone(),
+                ..Default::default()
+            },
         )
         .unwrap();
         fitness.set_space(*space);
@@ -146,10 +147,11 @@ fn bench(c: &mut Criterion) {
             &scene,
             layout.clone(),
             &target,
-            None,
-            LossKind::L1Projected,
-            true,
-            Some(matte.clone()),
+            FitnessSpec {
+                loss: LossKind::L1Projected,
+                projection: Some(matte.clone()),
+                ..Default::default()
+            },
         )
         .unwrap()
     };
@@ -193,10 +195,11 @@ fn bench(c: &mut Criterion) {
         &glossy,
         layout.clone(),
         &glossy_target,
-        None,
-        LossKind::L1Projected,
-        true,
-        Some(lobe),
+        FitnessSpec {
+            loss: LossKind::L1Projected,
+            projection: Some(lobe),
+            ..Default::default()
+        },
     )
     .unwrap();
     let truth = glossy.light.position.to_vec();
@@ -220,13 +223,14 @@ fn bench(c: &mut Criterion) {
         &bounced,
         layout.clone(),
         &bounced_target,
-        None,
-        LossKind::L1Projected,
-        true,
-        Some(Projection::matte(vec![
-            [(0.0, 400.0); 3];
-            bounced.objects.len()
-        ])),
+        FitnessSpec {
+            loss: LossKind::L1Projected,
+            projection: Some(Projection::matte(vec![
+                [(0.0, 400.0); 3];
+                bounced.objects.len()
+            ])),
+            ..Default::default()
+        },
     )
     .unwrap();
     let truth = bounced.light.position.to_vec();
@@ -255,10 +259,10 @@ fn bench(c: &mut Criterion) {
             &scene,
             layout.clone(),
             &target,
-            None,
-            LossKind::L1,
-            true,
-            None,
+            FitnessSpec {
+                loss: LossKind::L1,
+                ..Default::default()
+            },
         )
         .unwrap();
         fitness.early_exit = early;

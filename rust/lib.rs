@@ -3,7 +3,9 @@
 //! `python` feature adds a thin PyO3 layer (`rust/python/`).
 
 pub mod error;
+pub mod fit;
 pub mod fitness;
+pub mod geometry;
 pub mod params;
 pub mod photo;
 pub mod render;
@@ -23,7 +25,7 @@ mod python;
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 pub use error::{Error, Result};
-pub use fitness::{Fitness, LossKind, Norm, Projection, Space};
+pub use fitness::{Fitness, FitnessSpec, LossKind, Norm, Projection, Space};
 pub use params::ParamLayout;
 pub use render::{render, GBuffer, Image};
 pub use scene::Scene;

@@ -10,7 +10,7 @@ use rtloop::render::brdf::specular_scale;
 use rtloop::render::shape::PShape;
 use rtloop::search::Objective;
 use rtloop::search::Rng;
-use rtloop::{render, Fitness, GBuffer, LossKind, ParamLayout, Projection, Scene};
+use rtloop::{render, Fitness, FitnessSpec, GBuffer, LossKind, ParamLayout, Projection, Scene};
 use serde_json::Value;
 
 const SCENE: &str = r#"{"image": {"width": 16, "height": 12},
@@ -779,7 +779,7 @@ proptest! {
         let mut candidate = scene.clone();
         layout.apply(&mut candidate, &x);
         let pixels = decided_pixels(&candidate);
-        let f = Fitness::new(&scene, layout, &target, Some(&pixels), LossKind::L1, clip, None).unwrap();
+        let f = Fitness::new(&scene, layout, &target, FitnessSpec { pixels: Some(pixels.clone()), loss: LossKind::L1, clip, ..Default::default() }).unwrap();
         let mut out = [0.0];
         f.evaluate(&x, &mut out);
         let image = render(&candidate, None, None, 1).unwrap().rgb;
@@ -840,7 +840,7 @@ proptest! {
         let g = GBuffer::new(&rtloop::render::Geometry::new(&scene), scene.width, scene.height);
         let pixels: Vec<u32> = decided_pixels(&scene).into_iter()
             .filter(|&i| rtloop::fitness::interior(&g, i as usize)).collect();
-        let f = Fitness::new(&scene, layout, &target, Some(&pixels), LossKind::L1Projected, false, Some(proj))
+        let f = Fitness::new(&scene, layout, &target, FitnessSpec { pixels: Some(pixels.clone()), loss: LossKind::L1Projected, clip: false, projection: Some(proj), ..Default::default() })
             .unwrap();
         let truth = scene.light.position;
         let loss: f64 = f.channel_losses(&truth).iter().sum();
@@ -911,8 +911,8 @@ fn well_shaped(v: &[DVec3; 3]) -> bool {
     (v[1] - v[0]).cross(v[2] - v[0]).length() >= 1e-3 * edge * edge
 }
 
-fn mesh_of(tris: &[[DVec3; 3]]) -> Option<rtloop::render::mesh::Mesh> {
-    rtloop::render::mesh::Mesh::new(tris, None)
+fn mesh_of(tris: &[[DVec3; 3]]) -> Option<rtloop::geometry::mesh::Mesh> {
+    rtloop::geometry::mesh::Mesh::new(tris, None)
 }
 
 proptest! {

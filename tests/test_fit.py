@@ -111,7 +111,9 @@ def test_identifiability_is_detected_and_only_products_are_claimed(ball_scene):
 
 def test_ambient_light_makes_intensity_and_albedo_separable(ball_scene):
     scene = _native.Scene(json.dumps({**ball_scene, "ambient": [0.05, 0.05, 0.05]}))
-    result_ident = rtloop.fit.__globals__["_identifiability"](scene, scene.fit_paths)
+    from rtloop.fit.identifiability import identifiability
+
+    result_ident = identifiability(scene, scene.fit_paths)
     assert result_ident["degenerate"] is False
 
 

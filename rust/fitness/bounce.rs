@@ -11,39 +11,61 @@
 //! the pool; the search's candidates, with the bounce held ([`Frozen`], `held`), are spread over the pool
 //! for a lone candidate and stop early above their bound, as direct candidates do.
 
+use super::held::Frozen;
 use super::kernel::{Candidate, Kernel};
-use super::loss::Encoding;
+use super::loss::{Encoding, Identity, Space, SrgbLut};
 use super::pixels::{Light, BLOCK};
-use super::projected::{Projection, Solved};
-
+use super::projected::{Gauge, Projection, Solved};
+use super::simd::{self, Simd};
 use super::solve::{environment_lane_sums, SolveSums};
 use rayon::prelude::*;
 
-/// The gauge's bounds for the bounce: u = 1/intensity from the intensity's range, and each object's
-/// largest albedo per channel (ρ = P·u/g_c may not exceed it).
+/// [`Kernel::projected`] for [`simd::dispatch`], one build per encoding.
+struct Projected<'a, E> {
+    k: &'a Kernel,
+    c: Candidate<'a>,
+    proj: &'a Projection,
+    mode: &'a Mode,
+    out: &'a mut Solved,
+    s: &'a mut Vec<f32>,
+    enc: E,
+}
+
+impl<E: Encoding + Send + Sync> Simd for Projected<'_, E> {
+    type Output = [f64; 3];
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) -> [f64; 3] {
+        let (k, proj) = (self.k, self.proj);
+        match &proj.gauge {
+            Some(gauge) => k.projected_bounce::<AVX2, E>(
+                self.c, proj, gauge, self.mode, self.out, self.s, self.enc,
+            ),
+            None => k.projected_direct::<AVX2, E>(self.c, proj, self.out, self.s, self.enc),
+        }
+    }
+}
+
+/// How the bounce is solved per candidate: the fixed point's rounds of (gauge, products) after the
+/// bounce-free solve ([`SEARCH_ROUNDS`] while the search ranks lights, [`FINAL_ROUNDS`] for the reported
+/// products), or the bounce held ([`Frozen`]) while the search ranks lights.
 #[derive(Clone, Debug)]
-pub struct Gauge {
-    pub u: (f64, f64),
-    pub albedo_max: Vec<[f64; 3]>,
-    /// Fixed-point rounds of (gauge, products) after the bounce-free solve: [`SEARCH_ROUNDS`] while the
-    /// search ranks lights, [`FINAL_ROUNDS`] for the reported products.
+pub struct Mode {
     pub rounds: usize,
-    /// The bounce held while the search ranks lights ([`Frozen`]); `None`: solved per candidate.
+    /// The bounce held while the search ranks lights; `None`: solved per candidate.
     pub frozen: Option<std::sync::Arc<Frozen>>,
 }
 
-/// The bounce solved once, at a reference candidate (the full fixed point, [`FINAL_ROUNDS`]), and held:
-/// per pixel and channel the term (u/g_c)·B_c that [`Kernel::projected_bounce`] adds to the diffuse factor
-/// a, so that a candidate costs a direct one's factors and one solve of its products given a + that term.
-/// Near the reference the bounce changes far less than the direct light (it is a few per cent of a
-/// pixel, and its light comes from the whole floor): a search from a bounce-free fit's light ranks
-/// lights by this, and the result's products (and loss) are the full bounce's at the found light.
-#[derive(Clone, Debug)]
-pub struct Frozen {
-    /// (u/g_c)·B_c at pixel i (in the kernel's pixel order): `bounce[c * pixels + i]`.
-    pub bounce: Vec<f32>,
-    /// The gauge solved at the reference.
-    pub u: f64,
+impl Mode {
+    /// The search's fixed point, solved per candidate.
+    pub const SEARCH: Mode = Mode {
+        rounds: SEARCH_ROUNDS,
+        frozen: None,
+    };
+    /// The full fixed point (what a fit reports), solved per candidate.
+    pub const FULL: Mode = Mode {
+        rounds: FINAL_ROUNDS,
+        frozen: None,
+    };
 }
 
 /// The gauge converges linearly (the products first absorb part of the bounce); every third round
@@ -105,14 +127,61 @@ fn gauge_sums(px: GaugeTerms, [pc, qw, ec]: [f64; 3], w: f64, sat: f32) -> (f64,
 }
 
 impl Kernel {
-    /// [`Kernel::projected`] with the bounce (`proj.gauge` set). `scratch` ends as
+    /// The closed form for candidate `c`: per object the products within `proj`'s bounds and the
+    /// per-channel loss at them ([`Kernel::projected_direct`]); with the bounce (`proj.gauge` set) as
+    /// `mode` says ([`Kernel::projected_bounce`]). `scratch` holds the per-pixel factors between the
+    /// passes.
+    pub fn projected(
+        &self,
+        c: Candidate,
+        proj: &Projection,
+        mode: &Mode,
+        out: &mut Solved,
+        scratch: &mut Vec<f32>,
+    ) -> [f64; 3] {
+        let avx2 = simd::detected();
+        let (k, s) = (self, scratch);
+        match self.space {
+            Space::Linear => simd::dispatch(
+                Projected {
+                    k,
+                    c,
+                    proj,
+                    mode,
+                    out,
+                    s,
+                    enc: Identity,
+                },
+                avx2,
+            ),
+            Space::Srgb => {
+                let enc = SrgbLut::get();
+                simd::dispatch(
+                    Projected {
+                        k,
+                        c,
+                        proj,
+                        mode,
+                        out,
+                        s,
+                        enc,
+                    },
+                    avx2,
+                )
+            }
+        }
+    }
+
+    /// The closed form with the bounce (`proj.gauge` set). `scratch` ends as
     /// [a | b | a'_r | a'_g | a'_b] per pixel: unit-light diffuse and specular factors, and the diffuse
     /// columns with the bounce folded in, which [`Kernel::refine`] uses.
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn projected_bounce<const AVX2: bool, E: Encoding + Send + Sync>(
         &self,
         c: Candidate,
         proj: &Projection,
         gauge: &Gauge,
+        mode: &Mode,
         out: &mut Solved,
         scratch: &mut Vec<f32>,
         enc: E,
@@ -146,7 +215,7 @@ impl Kernel {
             .collect();
         let w: [f64; 3] = std::array::from_fn(|c| proj.weight[c] as f64);
         let runs = self.runs(&light, p, proj, (sat, top));
-        if let Some(f) = &gauge.frozen {
+        if let Some(f) = &mode.frozen {
             return self.projected_held::<AVX2, E>(c, proj, f, &runs, out, scratch, enc);
         }
         // Pass 1: each sender's light at its points (every gather at once), the factors (runs of blocks
@@ -234,7 +303,7 @@ impl Kernel {
         }
         let lens: Vec<usize> = self.groups.iter().map(|g| g.len()).collect();
         let no_sky = vec![0.0f32; lens.iter().copied().max().unwrap_or(0)];
-        for round in 0..gauge.rounds {
+        for round in 0..mode.rounds {
             // B_o,c per pixel into a'_c (as B for now) and, while it is at hand, the gauge's sums over the
             // object's channel ([`gauge_sums`]), every (group, channel) at once.
             let solved = &*out;

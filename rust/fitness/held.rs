@@ -2,13 +2,26 @@
 //! folded into its diffuse column, its products and its loss (`bounce` solves the full fixed point that
 //! is held).
 
-use super::bounce::Frozen;
 use super::kernel::{Candidate, Kernel};
-use super::loss::{Encoding, Norm, LANES};
-use super::projected::{Projection, Run, Solved, CHUNK};
+use super::loss::Encoding;
+use super::projected::{ColumnsLoss, Projection, Run, Solved, CHUNK};
 use super::simd::{self, Simd};
 use super::solve::{environment_lane_sums, SolveSums, SUM_LANES};
 use rayon::prelude::*;
+
+/// The bounce solved once, at a reference candidate (the full fixed point, `bounce::FINAL_ROUNDS`), and held:
+/// per pixel and channel the term (u/g_c)·B_c that [`Kernel::projected_bounce`] adds to the diffuse factor
+/// a, so that a candidate costs a direct one's factors and one solve of its products given a + that term.
+/// Near the reference the bounce changes far less than the direct light (it is a few per cent of a
+/// pixel, and its light comes from the whole floor): a search from a bounce-free fit's light ranks
+/// lights by this, and the result's products (and loss) are the full bounce's at the found light.
+#[derive(Clone, Debug)]
+pub struct Frozen {
+    /// (u/g_c)·B_c at pixel i (in the kernel's pixel order): `bounce[c * pixels + i]`.
+    pub bounce: Vec<f32>,
+    /// The gauge solved at the reference.
+    pub u: f64,
+}
 
 impl Kernel {
     /// [`Kernel::projected_bounce`] with the bounce held ([`Frozen`]): per object, its unit-light factors,
@@ -153,11 +166,11 @@ impl Kernel {
         out: &Solved,
         top: f32,
         enc: E,
-    ) -> HeldLoss<'a, E> {
+    ) -> ColumnsLoss<'a, E> {
         let at = o0 + r.start..o0 + r.end;
         let gt = if E::ENCODES { &g.te } else { &g.t };
         let w = |ch: usize| proj.weight[ch] as f64;
-        HeldLoss {
+        ColumnsLoss {
             cols: std::array::from_fn(|ch| &cols[ch][at.clone()]),
             b: &b_all[at.clone()],
             sky: proj.sky(obj, g).map(|v| &v[r.clone()]),
@@ -249,75 +262,5 @@ impl Simd for HeldRun<'_, '_> {
             }
         }
         sums
-    }
-}
-
-/// Pass 2 of [`Kernel::projected_held`] over one run, for [`simd::dispatch`]: per channel
-/// Σ penalty(enc(min(P_c·a'_c + Q·w_c·b + E_c·v, top)) - t_c), in `LANES` partial sums.
-/// Also the plain closed form's pass 2 where an object has an environment column or a lobe (`cols` its
-/// unit-light factor thrice).
-pub(crate) struct HeldLoss<'a, E> {
-    pub(crate) cols: [&'a [f32]; 3],
-    pub(crate) b: &'a [f32],
-    pub(crate) sky: Option<&'a [f32]>,
-    pub(crate) t: [&'a [f32]; 3],
-    pub(crate) pc: [f32; 3],
-    pub(crate) qw: [f32; 3],
-    pub(crate) ec: [f32; 3],
-    pub(crate) top: f32,
-    pub(crate) norm: Norm,
-    pub(crate) enc: E,
-}
-
-impl<E: Encoding> HeldLoss<'_, E> {
-    #[inline(always)]
-    fn sum(&self, f: impl Fn(f32) -> f32) -> [f64; 3] {
-        let (b, top, enc) = (self.b, self.top, self.enc);
-        let n = b.len();
-        let zeros = [0.0f32; CHUNK];
-        // no sky: E_c·0 adds +0 to a value >= +0 (products and factors are non-negative): the same value
-        let v = self.sky.map_or(&zeros[..n], |v| &v[..n]);
-        let full = if !E::ENCODES || top <= 1.0 {
-            n - n % LANES
-        } else {
-            0
-        };
-        let mut out = [0.0f64; 3];
-        for ch in 0..3 {
-            let (col, t) = (&self.cols[ch][..n], &self.t[ch][..n]);
-            let (pc, qw, ec) = (self.pc[ch], self.qw[ch], self.ec[ch]);
-            let mut lanes = [0.0f32; LANES];
-            // whole runs of LANES as fixed-size chunks (no bounds checks: the loop vectorises)
-            let runs = col[..full]
-                .chunks_exact(LANES)
-                .zip(b[..full].chunks_exact(LANES))
-                .zip(v[..full].chunks_exact(LANES))
-                .zip(t[..full].chunks_exact(LANES));
-            for (((c8, b8), v8), t8) in runs {
-                for l in 0..LANES {
-                    let m = pc * c8[l] + qw * b8[l] + ec * v8[l];
-                    lanes[l] += f(enc.unit(m.min(top)) - t8[l]);
-                }
-            }
-            for (j, i) in (full..n).enumerate() {
-                let m = pc * col[i] + qw * b[i] + ec * v[i];
-                lanes[j % LANES] += f(enc.any(m.min(top)) - t[i]);
-            }
-            out[ch] = lanes.iter().sum::<f32>() as f64;
-        }
-        out
-    }
-}
-
-impl<E: Encoding> Simd for HeldLoss<'_, E> {
-    type Output = [f64; 3];
-    #[inline(always)]
-    fn run<const AVX2: bool>(self) -> [f64; 3] {
-        match self.norm {
-            // one closure per norm with the norm a constant, so each loop vectorises on its own
-            Norm::L1 => self.sum(|d| Norm::L1.penalty(d)),
-            Norm::L2 => self.sum(|d| Norm::L2.penalty(d)),
-            Norm::Huber(h) => self.sum(move |d| Norm::Huber(h).penalty(d)),
-        }
     }
 }

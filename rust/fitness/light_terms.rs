@@ -1,14 +1,16 @@
 //! The per-block light terms of a group of active pixels: the irradiance max(0, n·l)/d² (at pixel centres,
 //! or over a pixel's footprint where a sphere's terminator crosses it) and the shadow factor of the
 //! group's possible occluders (soft where a shadow's edge crosses a pixel), for a point and a directional
-//! light. The AVX2 irradiance is in `simd.rs`, which this dispatches to.
+//! light. The point light's irradiance has a scalar and an AVX2 form.
 
 use glam::Vec3A;
+use rayon::prelude::*;
 
-use super::pixels::{offset, Group, Light, SphereOccluder, BLOCK};
-use crate::render::footprint::{sphere_edge_lit, terminator_cos};
-use crate::render::light::{directional_irradiance, point_irradiance};
-use crate::render::shape::segment_meets_sphere;
+use super::pixels::{offset, Gather, Group, Light, SphereOccluder, BLOCK};
+use crate::geometry::sphere::segment_meets_sphere;
+use crate::render::brdf::lambert;
+use crate::render::footprint::{near_sphere_edge, sphere_edge_lit, terminator_cos};
+use crate::render::light::{directional_irradiance, point_irradiance, point_irradiance_in, Lanes};
 
 /// e = max(0, n·l) / d² (unit light), written into `e`; 0 for a light on the surface. On a sphere with
 /// a footprint, max(0, n·l) is its mean over the pixel where the terminator crosses it.
@@ -126,7 +128,7 @@ fn irradiance_centre<const AVX2: bool>(
     #[cfg(target_arch = "x86_64")]
     if AVX2 {
         // SAFETY: `AVX2` is only true on the path dispatched after checking the CPU's features.
-        unsafe { super::simd::irradiance_avx2(g, r, light, e) };
+        unsafe { irradiance_avx2(g, r, light, e) };
         return;
     }
     irradiance_exact(g, r, light, e);
@@ -150,6 +152,74 @@ pub(crate) fn irradiance_exact(g: &Group, r: std::ops::Range<usize>, light: &Lig
     for i in 0..n {
         let d = [lx - px[i], ly - py[i], lz - pz[i]];
         e[i] = point_irradiance(d, [nx[i], ny[i], nz[i]]);
+    }
+}
+
+/// AVX2 form of `irradiance` for a point light: `point_irradiance_in` eight pixels at a time (correctly
+/// rounded square root and division, the same bits on every x86-64 CPU; the multiply-adds fused); the
+/// tail goes through the scalar form.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+pub(crate) unsafe fn irradiance_avx2(
+    g: &Group,
+    r: std::ops::Range<usize>,
+    light: &Light,
+    e: &mut [f32],
+) {
+    use std::arch::x86_64::*;
+    let n = e.len();
+    let full = n - n % 8;
+    let s = r.start;
+    let l = light.pos.map(|v| _mm256_set1_ps(v));
+    let mut i = 0;
+    while i < full {
+        let ld = |v: &Vec<f32>| _mm256_loadu_ps(v.as_ptr().add(s + i));
+        let d: [__m256; 3] = std::array::from_fn(|c| _mm256_sub_ps(l[c], ld(&g.p[c])));
+        let nv: [__m256; 3] = std::array::from_fn(|c| ld(&g.n[c]));
+        _mm256_storeu_ps(e.as_mut_ptr().add(i), point_irradiance_in(d, nv));
+        i += 8;
+    }
+    irradiance_exact(g, s + full..r.end, light, &mut e[full..]);
+}
+
+// The lanes of `irradiance_avx2`. SAFETY (every block): these run only inlined into `irradiance_avx2`,
+// which is only called once the CPU's AVX2 and FMA were checked.
+#[cfg(target_arch = "x86_64")]
+impl Lanes for std::arch::x86_64::__m256 {
+    #[inline(always)]
+    fn splat(v: f32) -> Self {
+        unsafe { std::arch::x86_64::_mm256_set1_ps(v) }
+    }
+    #[inline(always)]
+    fn mul(self, b: Self) -> Self {
+        unsafe { std::arch::x86_64::_mm256_mul_ps(self, b) }
+    }
+    #[inline(always)]
+    fn mul_add(self, b: Self, c: Self) -> Self {
+        unsafe { std::arch::x86_64::_mm256_fmadd_ps(self, b, c) }
+    }
+    #[inline(always)]
+    fn div(self, b: Self) -> Self {
+        unsafe { std::arch::x86_64::_mm256_div_ps(self, b) }
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        unsafe { std::arch::x86_64::_mm256_sqrt_ps(self) }
+    }
+    #[inline(always)]
+    fn max0(self) -> Self {
+        // the second operand where either is NaN, as f32::max's 0
+        unsafe { std::arch::x86_64::_mm256_max_ps(self, std::arch::x86_64::_mm256_setzero_ps()) }
+    }
+    #[inline(always)]
+    fn min(self, b: Self) -> Self {
+        unsafe { std::arch::x86_64::_mm256_min_ps(self, b) }
+    }
+    #[inline(always)]
+    fn where_above(self, x: Self, limit: Self) -> Self {
+        use std::arch::x86_64::*;
+        unsafe { _mm256_and_ps(self, _mm256_cmp_ps::<_CMP_GT_OQ>(x, limit)) }
     }
 }
 
@@ -208,9 +278,8 @@ pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mu
             }
             continue;
         }
-        // With a footprint, a pixel the edge may cross keeps its light here and gets its lit fraction
-        // below: the line's distance h from the centre within the footprint's reach w of the radius,
-        // |h² - r²| = |b² - ac| / a < 2rw + w² (w bounds the line's move, (1 - t) x footprint).
+        // With a footprint, a pixel the edge may cross (`near_sphere_edge`) keeps its light here and gets
+        // its lit fraction below.
         let spread = &g.spread[r.start..][..n];
         let mut near = [0u32; BLOCK];
         let mut span = (u32::MAX, 0u32);
@@ -218,9 +287,7 @@ pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mu
         for i in 0..n {
             let (a, b) = segment_to_sphere([px[i], py[i], pz[i]], [lx, ly, lz], [cx, cy, cz]);
             let hit = segment_meets_sphere::<true>(a, b, cc[i]);
-            let w = spread[i];
-            let close = (b * b - a * cc[i]).abs() < a * w * (2.0 * rad + w);
-            let edge = close & (b < 0.0) & (a + b > 0.0) & (e[i] > 0.0);
+            let edge = near_sphere_edge::<true>(a, b, cc[i], spread[i], rad) & (e[i] > 0.0);
             mark(edge, i, &mut near, &mut span);
             e[i] = if hit & !edge { 0.0 } else { e[i] };
         }
@@ -307,7 +374,7 @@ pub(crate) fn shadow_directional(g: &Group, r: std::ops::Range<usize>, d: [f32; 
             // As for a point light (`shadow`), with a = 1 and the ray's whole move.
             let edge = footprint && {
                 let w = g.spread[r.start + i];
-                ((b * b - cc[i]).abs() < w * (2.0 * s.radius + w)) & (b < 0.0) & (e[i] > 0.0)
+                near_sphere_edge::<false>(1.0, b, cc[i], w, s.radius) & (e[i] > 0.0)
             };
             mark(edge, i, &mut near, &mut span);
             e[i] = if hit & !edge { 0.0 } else { e[i] };
@@ -323,3 +390,33 @@ pub(crate) fn shadow_directional(g: &Group, r: std::ops::Range<usize>, d: [f32; 
         }
     }
 }
+
+impl Gather {
+    /// The unit-light diffuse factor (irradiance / π, shadowed) at every point, into `e`; with
+    /// `parallel`, runs of [`GATHER_LIGHT_RUN`] points spread over the current pool (each point's value
+    /// is its own: the same either way).
+    #[inline(always)]
+    pub(crate) fn light<const AVX2: bool>(&self, light: &Light, e: &mut Vec<f32>, parallel: bool) {
+        e.resize(self.points.len(), 0.0);
+        let blocks = |first: usize, e: &mut [f32]| {
+            for (k, e) in e.chunks_mut(BLOCK).enumerate() {
+                let r = first + k * BLOCK..first + k * BLOCK + e.len();
+                irradiance::<AVX2>(&self.points, r.clone(), light, e);
+                shadow(&self.points, r, light, e);
+                for v in e.iter_mut() {
+                    *v = lambert(*v);
+                }
+            }
+        };
+        if parallel {
+            e.par_chunks_mut(GATHER_LIGHT_RUN)
+                .enumerate()
+                .for_each(|(k, e)| blocks(k * GATHER_LIGHT_RUN, e));
+        } else {
+            blocks(0, e);
+        }
+    }
+}
+
+/// Points per parallel run of [`Gather::light`] (whole blocks, as the serial loop takes them).
+const GATHER_LIGHT_RUN: usize = 16 * BLOCK;

@@ -3,6 +3,7 @@
 //! two-stage kernel.
 
 use super::pixels::{Group, Light};
+use crate::render::brdf::{self, unit_or_zero};
 use crate::render::coat::Coat;
 use crate::render::light::incidence;
 use glam::Vec3A;
@@ -51,9 +52,9 @@ pub(crate) fn coat_factors(
 }
 
 /// max(0, n·h) for each pixel of the block `r` into `out` (h the half vector of the unit directions to
-/// the light, `light::toward`, and to the eye): the cosine whose power is `brdf::blinn_phong`, over the
-/// block in lanes. The same operations in the same order as glam's `normalize_or_zero` and `dot` (x² + y²,
-/// then + z²; the reciprocal length 1 / sqrt), so each value is the renderer's to the bit.
+/// the light, `light::toward`, and to the eye): `brdf::half_cos`, the cosine whose power is
+/// `brdf::blinn_phong`, over the block in lanes; the direction to a point light is `brdf::unit_or_zero`,
+/// as glam's `normalize_or_zero` in `light::toward` (x² + y², then + z²; the reciprocal length 1 / sqrt).
 #[inline(always)]
 pub(crate) fn half_cos<'a>(
     g: &'a Group,
@@ -65,32 +66,18 @@ pub(crate) fn half_cos<'a>(
     let col = |v: &'a [Vec<f32>; 3], c: usize| -> &'a [f32] { &v[c][r.start..][..n] };
     let (nx, ny, nz) = (col(&g.n, 0), col(&g.n, 1), col(&g.n, 2));
     let (vx, vy, vz) = (col(&g.v, 0), col(&g.v, 1), col(&g.v, 2));
-    #[inline(always)]
-    fn unit(x: f32, y: f32, z: f32) -> [f32; 3] {
-        let rcp = 1.0 / ((x * x + y * y) + z * z).sqrt();
-        if rcp.is_finite() && rcp > 0.0 {
-            [x * rcp, y * rcp, z * rcp]
-        } else {
-            [0.0; 3]
-        }
-    }
-    #[inline(always)]
-    fn cos(l: [f32; 3], v: [f32; 3], n: [f32; 3]) -> f32 {
-        let h = unit(l[0] + v[0], l[1] + v[1], l[2] + v[2]);
-        ((n[0] * h[0] + n[1] * h[1]) + n[2] * h[2]).max(0.0)
-    }
     match light.dir {
         Some(l) => {
             for i in 0..n {
-                out[i] = cos(l, [vx[i], vy[i], vz[i]], [nx[i], ny[i], nz[i]]);
+                out[i] = brdf::half_cos([nx[i], ny[i], nz[i]], l, [vx[i], vy[i], vz[i]]);
             }
         }
         None => {
             let (px, py, pz) = (col(&g.p, 0), col(&g.p, 1), col(&g.p, 2));
             let [lx, ly, lz] = light.pos;
             for i in 0..n {
-                let l = unit(lx - px[i], ly - py[i], lz - pz[i]);
-                out[i] = cos(l, [vx[i], vy[i], vz[i]], [nx[i], ny[i], nz[i]]);
+                let l = unit_or_zero(lx - px[i], ly - py[i], lz - pz[i]);
+                out[i] = brdf::half_cos([nx[i], ny[i], nz[i]], l, [vx[i], vy[i], vz[i]]);
             }
         }
     }

@@ -28,13 +28,14 @@ use crate::render::{shade, GBuffer, Geometry, PShape, ShadeParams, Surfel};
 use crate::scene::Scene;
 use crate::search::Objective;
 pub use blocker::{constant_term, projection_blocker};
+pub use held::Frozen;
 pub use kernel::{Candidate, Kernel};
 pub use line_min::{encoded_line_min, l1_line_min, EncodedTerm};
 use loss::penalty_sums;
 pub use loss::{Norm, Space, SrgbLut, SATURATED};
 pub use pixels::Sky;
 pub use pixels::{interior, interior_by, ActivePixels};
-pub use projected::{Projection, Solved};
+pub use projected::{Gauge, Projection, Solved};
 pub use simd::{path as simd_path, scalar_paths};
 pub use solve::{closed_form, fallback_sums, solve_object, SolveSums};
 
@@ -68,6 +69,51 @@ impl LossKind {
     }
 }
 
+/// How a [`Fitness`] compares a candidate with the objective: which pixels, which loss, and how pixel
+/// values are modelled and penalised. `FitnessSpec::default()` is the whole image, the direct loss
+/// ([`LossKind::L1`]) on clipped values at pixel centres, L1 in linear space; set the fields that differ
+/// with `FitnessSpec { loss: LossKind::L1Projected, projection: Some(..), ..Default::default() }`.
+#[derive(Clone, Debug)]
+pub struct FitnessSpec {
+    /// The pixel indices the loss counts (`None`: all pixels).
+    pub pixels: Option<Vec<u32>>,
+    pub loss: LossKind,
+    /// Rendered values clamped to [0, 1] before comparison, as a camera or an 8/16-bit file would.
+    pub clip: bool,
+    /// The bounds of the closed-form unknowns: required by [`LossKind::L1Projected`], unused otherwise.
+    pub projection: Option<Projection>,
+    /// Each pixel integrated over its area where a sphere's shadow edge or its terminator crosses it
+    /// (`render::footprint`), as a camera integrates it (`render_with` renders the same model).
+    pub footprint: bool,
+    /// The closed-form products are informed only by pixels that every pixel within this Chebyshev
+    /// distance shows the same object ([`interior_by`]; 0: the 4-neighbours). The loss still counts every
+    /// pixel.
+    pub solve_margin: usize,
+    /// The penalty of a pixel difference ([`Fitness::set_norm`]).
+    pub norm: Norm,
+    /// Where values are compared ([`Fitness::set_space`]).
+    pub space: Space,
+    /// The level from which objective values count as possibly clipped ([`Fitness::set_saturated`];
+    /// `None`: [`SATURATED`]).
+    pub saturated: Option<f32>,
+}
+
+impl Default for FitnessSpec {
+    fn default() -> FitnessSpec {
+        FitnessSpec {
+            pixels: None,
+            loss: LossKind::L1,
+            clip: true,
+            projection: None,
+            footprint: false,
+            solve_margin: 0,
+            norm: Norm::L1,
+            space: Space::Linear,
+            saturated: None,
+        }
+    }
+}
+
 pub struct Fitness {
     pub layout: ParamLayout,
     /// Let `evaluate_bounded` stop early (on by default; off to measure full evaluations).
@@ -89,21 +135,21 @@ pub struct Fitness {
     /// and its scratch. [`Fitness::refined`] at the same `x` refines from it instead of solving it again
     /// (the same inputs: the same values); cleared by every setting that changes the loss.
     held_solve: Option<(Vec<f64>, Solved, Vec<f32>)>,
+    /// How the search's candidates take the bounce, where the projection has one.
+    bounce: bounce::Mode,
 }
 
 /// The gauge bounds of the bounce from the scene's fit section: u = 1/intensity over the intensity's
 /// bounds (its value when fixed), and each object's largest albedo (its value when fixed).
-fn gauge_bounds(scene: &Scene) -> bounce::Gauge {
+fn gauge_bounds(scene: &Scene) -> projected::Gauge {
     let bounds = |t: Target| scene.fit.iter().find(|f| f.target == t);
     let (ilo, ihi) = match bounds(Target::LightIntensity) {
         Some(f) => (f.min[0], f.max[0]),
         None => (scene.light.intensity, scene.light.intensity),
     };
     let inv = |i: f64| if i > 0.0 { 1.0 / i } else { f64::MAX };
-    bounce::Gauge {
+    projected::Gauge {
         u: (inv(ihi), inv(ilo)),
-        rounds: bounce::SEARCH_ROUNDS,
-        frozen: None,
         albedo_max: (0..scene.objects.len())
             .map(|k| match bounds(Target::Albedo(k)) {
                 Some(f) => [f.max[0], f.max[1], f.max[2]],
@@ -135,79 +181,16 @@ fn with_scratch<R>(f: impl FnOnce(&mut Scratch) -> R) -> R {
 }
 
 impl Fitness {
-    /// `target` is the objective in linear RGB at the scene's size (row-major, 3 floats per pixel).
-    /// `pixels` restricts the loss to those pixel indices (all pixels when `None`). With `clip`, rendered
-    /// values are clamped to [0, 1] before comparison, as a camera or an 8/16-bit file would.
+    /// The fitness of `layout`'s parameters against `target`, the objective in linear RGB at the scene's
+    /// size (row-major, 3 floats per pixel), compared as `spec` says ([`FitnessSpec`]).
     pub fn new(
         scene: &Scene,
         layout: ParamLayout,
         target: &[f32],
-        pixels: Option<&[u32]>,
-        kind: LossKind,
-        clip: bool,
-        projection: Option<Projection>,
+        mut spec: FitnessSpec,
     ) -> Result<Fitness> {
-        Fitness::with_solve_margin(
-            scene, layout, target, pixels, kind, clip, projection, false, 0,
-        )
-    }
-
-    /// [`Fitness::new`] with each pixel integrated over its area where a sphere's shadow edge or its
-    /// terminator crosses it (`render::footprint`), as a camera integrates it (`render_with` renders the
-    /// same model).
-    pub fn with_pixel_footprint(
-        scene: &Scene,
-        layout: ParamLayout,
-        target: &[f32],
-        pixels: Option<&[u32]>,
-        kind: LossKind,
-        clip: bool,
-        projection: Option<Projection>,
-    ) -> Result<Fitness> {
-        Fitness::with_solve_margin(
-            scene, layout, target, pixels, kind, clip, projection, true, 0,
-        )
-    }
-
-    /// This fitness with pixels shaded at their centres, as [`Fitness::new`] builds it, from one built
-    /// [`Fitness::with_pixel_footprint`] without redoing its geometry: a search and its polish can then
-    /// take the two models for the price of one set-up.
-    pub fn at_pixel_centres(&self) -> Fitness {
-        Fitness {
-            layout: self.layout.clone(),
-            early_exit: self.early_exit,
-            kernel: self.kernel.at_pixel_centres(),
-            base: self.base.clone(),
-            shapes: self.shapes.clone(),
-            active: ActivePixels {
-                footprint: Vec::new(),
-                ..self.active.clone()
-            },
-            kind: self.kind,
-            clip: self.clip,
-            shadows: self.shadows,
-            constant: self.constant,
-            projection: self.projection.clone(),
-            held_solve: None, // solved with the footprint: not this model's
-        }
-    }
-
-    /// [`Fitness::new`] (or, with `footprint`, [`Fitness::with_pixel_footprint`]) whose closed-form
-    /// products are informed only by pixels that every pixel within `solve_margin` (Chebyshev distance)
-    /// shows the same object ([`interior_by`]; 0: the 4-neighbours, as `new` builds it). The loss still
-    /// counts every pixel.
-    #[allow(clippy::too_many_arguments)]
-    pub fn with_solve_margin(
-        scene: &Scene,
-        layout: ParamLayout,
-        target: &[f32],
-        pixels: Option<&[u32]>,
-        kind: LossKind,
-        clip: bool,
-        projection: Option<Projection>,
-        footprint: bool,
-        solve_margin: usize,
-    ) -> Result<Fitness> {
+        let (kind, clip, footprint) = (spec.loss, spec.clip, spec.footprint);
+        let pixels = spec.pixels.as_deref();
         if !scene.single_point_light() {
             return Err(Error::Invalid(
                 "this fitness models one point or directional light; a scene with several lights or a \
@@ -260,7 +243,7 @@ impl Fitness {
         };
         let mut base = ShadeParams::new(scene);
         let projection = if kind == LossKind::L1Projected {
-            let mut proj = projection.ok_or_else(|| {
+            let mut proj = spec.projection.take().ok_or_else(|| {
                 Error::Invalid("the projected loss needs product bounds for every object".into())
             })?;
             let n = scene.objects.len();
@@ -358,7 +341,7 @@ impl Fitness {
             background,
             scene.objects.len(),
             camera,
-            solve_margin,
+            spec.solve_margin,
         );
         // The occluded environment costs a sky view factor per pixel only where the model has it.
         let environment = match &projection {
@@ -371,7 +354,7 @@ impl Fitness {
             }
             None => Sky::None,
         };
-        Ok(Fitness {
+        let mut fitness = Fitness {
             layout,
             early_exit: true,
             base,
@@ -393,7 +376,38 @@ impl Fitness {
             active,
             projection,
             held_solve: None,
-        })
+            bounce: bounce::Mode::SEARCH,
+        };
+        fitness.set_norm(spec.norm);
+        fitness.set_space(spec.space);
+        if let Some(level) = spec.saturated {
+            fitness.set_saturated(level);
+        }
+        Ok(fitness)
+    }
+
+    /// This fitness with pixels shaded at their centres (as [`Fitness::new`] builds it without
+    /// [`FitnessSpec::footprint`]) from one built with the footprint, without redoing its geometry: a search
+    /// and its polish can then take the two models for the price of one set-up.
+    pub fn at_pixel_centres(&self) -> Fitness {
+        Fitness {
+            layout: self.layout.clone(),
+            early_exit: self.early_exit,
+            kernel: self.kernel.at_pixel_centres(),
+            base: self.base.clone(),
+            shapes: self.shapes.clone(),
+            active: ActivePixels {
+                footprint: Vec::new(),
+                ..self.active.clone()
+            },
+            kind: self.kind,
+            clip: self.clip,
+            shadows: self.shadows,
+            constant: self.constant,
+            projection: self.projection.clone(),
+            held_solve: None, // solved with the footprint: not this model's
+            bounce: self.bounce.clone(),
+        }
     }
 
     /// The closed-form products (object x channel) for candidate light `x` (`L1Projected` only).
@@ -414,13 +428,9 @@ impl Fitness {
     /// [`Kernel::refine`]) and the per-channel loss there; the least-squares products of `solved` are
     /// what the search uses, these are what a fit reports. `None` for other losses.
     pub fn refined(&self, x: &[f64]) -> Option<(Solved, [f64; 3])> {
-        let mut proj = self.projection.clone()?;
-        if let Some(g) = &mut proj.gauge {
-            // the full bounce at the found light, also where the search held it (`freeze_bounce`)
-            g.rounds = bounce::FINAL_ROUNDS;
-            g.frozen = None;
-        }
-        let proj = &proj;
+        let proj = self.projection.as_ref()?;
+        // the full bounce at the found light, also where the search held it (`freeze_bounce`)
+        let full = &bounce::Mode::FULL;
         let (mut solved, scratch) = match &self.held_solve {
             // the full fixed point already solved here, where the bounce was last held
             Some((at, solved, scratch)) if at.as_slice() == x => (solved.clone(), scratch.clone()),
@@ -435,7 +445,8 @@ impl Fitness {
                     // small for it
                     parallel: proj.gauge.is_some(),
                 };
-                self.kernel.projected(c, proj, &mut solved, &mut scratch);
+                self.kernel
+                    .projected(c, proj, full, &mut solved, &mut scratch);
                 (solved, scratch)
             }
         };
@@ -448,19 +459,17 @@ impl Fitness {
 
     /// With interreflection (the projected loss): hold the bounce at candidate `x` (`None`: the scene's own
     /// values; the products and gauge solved there, [`bounce::FINAL_ROUNDS`]) while candidates are
-    /// ranked ([`bounce::Frozen`]): each then costs a direct candidate's factors and one solve of its
+    /// ranked ([`Frozen`]): each then costs a direct candidate's factors and one solve of its
     /// products (0.18-0.26 ms on one core against 3.5 ms for the full bounce). [`Fitness::refined`], what
     /// a stage reports, still solves the full bounce at its light. Returns whether there is a bounce to
     /// hold (false: the fitness is unchanged).
     pub fn freeze_bounce(&mut self, x: Option<&[f64]>) -> bool {
-        let Some(mut proj) = self.projection.clone() else {
+        let Some(proj) = &self.projection else {
             return false;
         };
-        let Some(g) = &mut proj.gauge else {
+        let Some(g) = &proj.gauge else {
             return false;
         };
-        g.rounds = bounce::FINAL_ROUNDS;
-        g.frozen = None;
         let u_lo = g.u.0;
         let p = match x {
             Some(x) => self.params(x),
@@ -473,7 +482,8 @@ impl Fitness {
             bound: f64::INFINITY,
             parallel: true, // the same value, over the pool
         };
-        self.kernel.projected(c, &proj, &mut solved, &mut scratch);
+        self.kernel
+            .projected(c, proj, &bounce::Mode::FULL, &mut solved, &mut scratch);
         // scratch: [a | b | a'_r | a'_g | a'_b], a'_c = a + (u/g_c)·B_c
         let n = self.kernel.pixels();
         let bounce = (0..3)
@@ -482,13 +492,11 @@ impl Fitness {
                 (0..n).map(move |i| s[(2 + c) * n + i] - s[i])
             })
             .collect();
-        let frozen = bounce::Frozen {
+        let frozen = Frozen {
             bounce,
             u: solved.gauge.unwrap_or(u_lo),
         };
-        if let Some(live) = self.projection.as_mut().and_then(|p| p.gauge.as_mut()) {
-            live.frozen = Some(std::sync::Arc::new(frozen));
-        }
+        self.bounce.frozen = Some(std::sync::Arc::new(frozen));
         // `refined` at this candidate (a pass that ends where it started) takes this solve: `proj` is the
         // projection `refined` builds (the full bounce's rounds, nothing held), the candidate the same.
         self.held_solve = x.map(|x| (x.to_vec(), solved, scratch));
@@ -496,17 +504,17 @@ impl Fitness {
     }
 
     /// The bounce [`Fitness::freeze_bounce`] holds, if any.
-    pub fn frozen_bounce(&self) -> Option<std::sync::Arc<bounce::Frozen>> {
-        self.projection.as_ref()?.gauge.as_ref()?.frozen.clone()
+    pub fn frozen_bounce(&self) -> Option<std::sync::Arc<Frozen>> {
+        self.projection.as_ref()?.gauge.as_ref()?;
+        self.bounce.frozen.clone()
     }
 
     /// Hold `frozen` (another fitness's [`Fitness::frozen_bounce`] over the same pixels, e.g. the
     /// footprint fitness's for the pixel-centre one of the same set-up) while candidates are ranked.
-    pub fn hold_bounce(&mut self, frozen: std::sync::Arc<bounce::Frozen>) {
-        if let Some(live) = self.projection.as_mut().and_then(|p| p.gauge.as_mut()) {
-            if frozen.bounce.len() == 3 * self.kernel.pixels() {
-                live.frozen = Some(frozen);
-            }
+    pub fn hold_bounce(&mut self, frozen: std::sync::Arc<Frozen>) {
+        let bounced = self.projection.as_ref().is_some_and(|p| p.gauge.is_some());
+        if bounced && frozen.bounce.len() == 3 * self.kernel.pixels() {
+            self.bounce.frozen = Some(frozen);
         }
     }
 
@@ -590,7 +598,9 @@ impl Fitness {
             parallel,
         };
         let mut acc = match &self.projection {
-            Some(proj) => self.kernel.projected(c, proj, solved, irradiance),
+            Some(proj) => self
+                .kernel
+                .projected(c, proj, &self.bounce, solved, irradiance),
             None => self.kernel.l1(c),
         };
         for c in 0..3 {

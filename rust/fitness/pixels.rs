@@ -1,16 +1,15 @@
-//! The active pixels in structure-of-arrays form: grouped by object, each group with its objective,
-//! its possible occluders' light-independent terms, and the per-block light terms (irradiance, shadow,
-//! lobe) an evaluation computes.
+//! The active pixels in structure-of-arrays form: grouped by object, each group with its objective and
+//! its possible occluders' light-independent terms (the per-block light terms an evaluation computes
+//! from them are `light_terms`' and `lobe`'s).
 
 use glam::Vec3A;
 use rayon::prelude::*;
 
-use super::light_terms::{irradiance, shadow};
+use crate::geometry::sphere::sphere_power;
 use crate::render::bounce::{gather, nearest_table};
 use crate::render::environment::sky_view;
 use crate::render::footprint;
-use crate::render::shape::sphere_power;
-use crate::render::{brdf, CameraFrame, GBuffer, PShape, Surfel};
+use crate::render::{CameraFrame, GBuffer, PShape, Surfel};
 
 /// The pixels one fit shades, and the (clipped model, objective) of those no free parameter changes.
 #[derive(Clone, Debug, Default)]
@@ -218,36 +217,6 @@ pub(crate) struct Gather {
     pub(crate) table: Vec<u32>,
 }
 
-impl Gather {
-    /// The unit-light diffuse factor (irradiance / π, shadowed) at every point, into `e`; with
-    /// `parallel`, runs of [`GATHER_LIGHT_RUN`] points spread over the current pool (each point's value
-    /// is its own: the same either way).
-    #[inline(always)]
-    pub(crate) fn light<const AVX2: bool>(&self, light: &Light, e: &mut Vec<f32>, parallel: bool) {
-        e.resize(self.points.len(), 0.0);
-        let blocks = |first: usize, e: &mut [f32]| {
-            for (k, e) in e.chunks_mut(BLOCK).enumerate() {
-                let r = first + k * BLOCK..first + k * BLOCK + e.len();
-                irradiance::<AVX2>(&self.points, r.clone(), light, e);
-                shadow(&self.points, r, light, e);
-                for v in e.iter_mut() {
-                    *v = brdf::lambert(*v);
-                }
-            }
-        };
-        if parallel {
-            e.par_chunks_mut(GATHER_LIGHT_RUN)
-                .enumerate()
-                .for_each(|(k, e)| blocks(k * GATHER_LIGHT_RUN, e));
-        } else {
-            blocks(0, e);
-        }
-    }
-}
-
-/// Points per parallel run of [`Gather::light`] (whole blocks, as the serial loop takes them).
-const GATHER_LIGHT_RUN: usize = 16 * BLOCK;
-
 /// Pixels per parallel run of [`gathers`].
 const GATHER_RUN: usize = 256;
 
@@ -288,7 +257,7 @@ pub(crate) fn gathers(
                         normal: g.normal,
                         view: g.normal,
                         object: g.sender as u32,
-                        eps: 64.0 * f32::EPSILON * scale,
+                        eps: Surfel::eps_at(scale),
                     });
                 }
             }

@@ -3,36 +3,16 @@
 
 use rayon::prelude::*;
 
-use super::bounce::Gauge;
-use super::held::HeldLoss;
 use super::kernel::{Candidate, Kernel};
 use super::light_terms::{irradiance, shadow};
 use super::lobe::{coat_factors, half_cos};
-use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, LANES};
+use super::loss::{rgb_loss_in, Encoding, Norm, LANES};
 use super::pixels::{Group, Light, BLOCK};
 use super::simd::{self, Simd};
 use super::solve::{
     environment_lane_sums, fallback_sums, solve_object, solve_object_env, SolveSums,
 };
 use crate::render::brdf::{lambert, specular_per_lambert};
-
-/// [`Kernel::projected`] for [`simd::dispatch`], one build per encoding.
-struct Projected<'a, E> {
-    k: &'a Kernel,
-    c: Candidate<'a>,
-    proj: &'a Projection,
-    out: &'a mut Solved,
-    s: &'a mut Vec<f32>,
-    enc: E,
-}
-
-impl<E: Encoding + Send + Sync> Simd for Projected<'_, E> {
-    type Output = [f64; 3];
-    #[inline(always)]
-    fn run<const AVX2: bool>(self) -> [f64; 3] {
-        self.k.projected_generic::<AVX2, E>(self)
-    }
-}
 
 impl Kernel {
     /// Variable projection for a scene without ambient light: for the light `p`, the per-object,
@@ -44,72 +24,21 @@ impl Kernel {
     /// (for one candidate alone, as a local polish evaluates them; the early exit at `bound` is then
     /// skipped). Either way every sum is taken run by run and the runs are added in order, so the result
     /// is the same bit for bit, serial or parallel, on any number of threads.
-    pub fn projected(
+    #[inline(always)]
+    pub(crate) fn projected_direct<const AVX2: bool, E: Encoding + Send + Sync>(
         &self,
         c: Candidate,
         proj: &Projection,
         out: &mut Solved,
         scratch: &mut Vec<f32>,
+        enc: E,
     ) -> [f64; 3] {
-        let avx2 = simd::detected();
-        let (k, s) = (self, scratch);
-        match self.space {
-            Space::Linear => simd::dispatch(
-                Projected {
-                    k,
-                    c,
-                    proj,
-                    out,
-                    s,
-                    enc: Identity,
-                },
-                avx2,
-            ),
-            Space::Srgb => {
-                let enc = SrgbLut::get();
-                simd::dispatch(
-                    Projected {
-                        k,
-                        c,
-                        proj,
-                        out,
-                        s,
-                        enc,
-                    },
-                    avx2,
-                )
-            }
-        }
-    }
-
-    #[inline(always)]
-    fn projected_generic<const AVX2: bool, E: Encoding + Send + Sync>(
-        &self,
-        job: Projected<'_, E>,
-    ) -> [f64; 3] {
-        let Projected {
-            c:
-                Candidate {
-                    params: p,
-                    clip,
-                    bound,
-                    parallel,
-                },
-            proj,
-            out,
-            s: scratch,
-            enc,
-            ..
-        } = job;
-        if let Some(gauge) = &proj.gauge {
-            let c = Candidate {
-                params: p,
-                clip,
-                bound,
-                parallel,
-            };
-            return self.projected_bounce::<AVX2, E>(c, proj, gauge, out, scratch, enc);
-        }
+        let Candidate {
+            params: p,
+            clip,
+            bound,
+            parallel,
+        } = c;
         let light = Light {
             pos: p.light_position.to_array(),
             dir: p.light_direction.map(|d| d.to_array()),
@@ -306,6 +235,14 @@ impl Kernel {
             on: run.specular && q > 0.0,
         }
     }
+}
+
+/// The gauge's bounds for the bounce (`fitness::bounce`): u = 1/intensity from the intensity's range, and
+/// each object's largest albedo per channel (ρ = P·u/g_c may not exceed it).
+#[derive(Clone, Debug)]
+pub struct Gauge {
+    pub u: (f64, f64),
+    pub albedo_max: Vec<[f64; 3]>,
 }
 
 /// What the closed-form solve may choose, per object: the bounds of its diffuse products
@@ -526,7 +463,7 @@ impl Run<'_> {
             let t = [&gt[0][r.clone()], &gt[1][r.clone()], &gt[2][r.clone()]];
             let sums: [f64; 3] = if self.sky.is_some() || q_on {
                 // enc(min(P_c·e + Q·w_c·b + E_c·v, top)), in LANES partial sums as the bounce's pass 2
-                HeldLoss {
+                ColumnsLoss {
                     cols: [e; 3],
                     b: &b[i0..i0 + len],
                     sky: self.sky.map(|v| &v[r.clone()]),
@@ -564,6 +501,76 @@ pub(crate) struct Products {
     qw: [f32; 3],
     ek: [f32; 3],
     on: bool,
+}
+
+/// Pass 2 over one run where an object has an environment column or a lobe (`cols` its unit-light factor
+/// thrice), or a held bounce (`cols` the diffuse columns a'_c, `Kernel::projected_held`), for
+/// [`simd::dispatch`]: per channel Σ penalty(enc(min(P_c·a'_c + Q·w_c·b + E_c·v, top)) - t_c), in `LANES`
+/// partial sums.
+pub(crate) struct ColumnsLoss<'a, E> {
+    pub(crate) cols: [&'a [f32]; 3],
+    pub(crate) b: &'a [f32],
+    pub(crate) sky: Option<&'a [f32]>,
+    pub(crate) t: [&'a [f32]; 3],
+    pub(crate) pc: [f32; 3],
+    pub(crate) qw: [f32; 3],
+    pub(crate) ec: [f32; 3],
+    pub(crate) top: f32,
+    pub(crate) norm: Norm,
+    pub(crate) enc: E,
+}
+
+impl<E: Encoding> ColumnsLoss<'_, E> {
+    #[inline(always)]
+    fn sum(&self, f: impl Fn(f32) -> f32) -> [f64; 3] {
+        let (b, top, enc) = (self.b, self.top, self.enc);
+        let n = b.len();
+        let zeros = [0.0f32; CHUNK];
+        // no sky: E_c·0 adds +0 to a value >= +0 (products and factors are non-negative): the same value
+        let v = self.sky.map_or(&zeros[..n], |v| &v[..n]);
+        let full = if !E::ENCODES || top <= 1.0 {
+            n - n % LANES
+        } else {
+            0
+        };
+        let mut out = [0.0f64; 3];
+        for ch in 0..3 {
+            let (col, t) = (&self.cols[ch][..n], &self.t[ch][..n]);
+            let (pc, qw, ec) = (self.pc[ch], self.qw[ch], self.ec[ch]);
+            let mut lanes = [0.0f32; LANES];
+            // whole runs of LANES as fixed-size chunks (no bounds checks: the loop vectorises)
+            let runs = col[..full]
+                .chunks_exact(LANES)
+                .zip(b[..full].chunks_exact(LANES))
+                .zip(v[..full].chunks_exact(LANES))
+                .zip(t[..full].chunks_exact(LANES));
+            for (((c8, b8), v8), t8) in runs {
+                for l in 0..LANES {
+                    let m = pc * c8[l] + qw * b8[l] + ec * v8[l];
+                    lanes[l] += f(enc.unit(m.min(top)) - t8[l]);
+                }
+            }
+            for (j, i) in (full..n).enumerate() {
+                let m = pc * col[i] + qw * b[i] + ec * v[i];
+                lanes[j % LANES] += f(enc.any(m.min(top)) - t[i]);
+            }
+            out[ch] = lanes.iter().sum::<f32>() as f64;
+        }
+        out
+    }
+}
+
+impl<E: Encoding> Simd for ColumnsLoss<'_, E> {
+    type Output = [f64; 3];
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) -> [f64; 3] {
+        match self.norm {
+            // one closure per norm with the norm a constant, so each loop vectorises on its own
+            Norm::L1 => self.sum(|d| Norm::L1.penalty(d)),
+            Norm::L2 => self.sum(|d| Norm::L2.penalty(d)),
+            Norm::Huber(h) => self.sum(move |d| Norm::Huber(h).penalty(d)),
+        }
+    }
 }
 
 /// [`Run::factors`] of one run for [`simd::dispatch`] (a task of the thread pool).
@@ -619,7 +626,7 @@ pub(crate) fn normal_equations<const AVX2: bool>(e: &[f32], t: &[f32], sat: f32)
     #[cfg(target_arch = "x86_64")]
     if AVX2 {
         // SAFETY: `AVX2` is only true on the path dispatched after checking the CPU's features.
-        (a, b) = unsafe { super::simd::normal_equation_lanes_avx2(&e[..full], &t[..full], sat) };
+        (a, b) = unsafe { normal_equation_lanes_avx2(&e[..full], &t[..full], sat) };
     } else {
         normal_equation_lanes(&e[..full], &t[..full], sat, &mut a, &mut b);
     }
@@ -650,4 +657,30 @@ pub(crate) fn normal_equation_lanes(
             b[j] += if keep { x[j] * x[j] } else { 0.0 };
         }
     }
+}
+
+/// The lane sums of [`normal_equations`] over whole runs of `LANES` pixels.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+pub(crate) unsafe fn normal_equation_lanes_avx2(
+    e: &[f32],
+    t: &[f32],
+    sat: f32,
+) -> ([f32; LANES], [f32; LANES]) {
+    use std::arch::x86_64::*;
+    let (mut a, mut b) = (_mm256_setzero_ps(), _mm256_setzero_ps());
+    let satv = _mm256_set1_ps(sat);
+    for (x, y) in e.chunks_exact(LANES).zip(t.chunks_exact(LANES)) {
+        let (x, y) = (_mm256_loadu_ps(x.as_ptr()), _mm256_loadu_ps(y.as_ptr()));
+        // Where t >= sat (or t = +inf) both factors become 0: the lane adds 0, as the scalar select.
+        let keep = _mm256_cmp_ps::<_CMP_LT_OQ>(y, satv);
+        let (x, y) = (_mm256_and_ps(x, keep), _mm256_and_ps(y, keep));
+        a = _mm256_add_ps(a, _mm256_mul_ps(x, y));
+        b = _mm256_add_ps(b, _mm256_mul_ps(x, x));
+    }
+    let (mut sa, mut sb) = ([0.0f32; LANES], [0.0f32; LANES]);
+    _mm256_storeu_ps(sa.as_mut_ptr(), a);
+    _mm256_storeu_ps(sb.as_mut_ptr(), b);
+    (sa, sb)
 }

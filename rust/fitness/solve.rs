@@ -24,7 +24,7 @@ pub(crate) const SUM_LANES: usize = 4;
 /// specular factor, `v` the sky view, `t` the objective; pixels at or above `sat` left out), `SUM_LANES` at
 /// a time in f64 (their order fixed: the same values on any machine and either path), in the order saa,
 /// sab, sbb, sya, syb, sav, svv, syv, svb. `specular` false: `b` is all 0 and its four sums are 0 (not
-/// summed). With `AVX2` the whole runs of four go through `simd::environment_lanes_avx2`.
+/// summed). With `AVX2` the whole runs of four go through `environment_lanes_avx2`.
 #[inline(always)]
 pub(crate) fn environment_lane_sums<const AVX2: bool>(
     col: &[f32],
@@ -42,7 +42,7 @@ pub(crate) fn environment_lane_sums<const AVX2: bool>(
     #[cfg(target_arch = "x86_64")]
     if AVX2 {
         // SAFETY: `AVX2` is only true on the path dispatched after checking the CPU's features.
-        s = unsafe { super::simd::environment_lanes_avx2(&col[..full], b, v, t, sat, specular) };
+        s = unsafe { environment_lanes_avx2([&col[..full], b, v, t], sat, specular) };
         i = full;
     }
     let mut add = |l: usize, i: usize| {
@@ -566,4 +566,48 @@ mod tests {
         );
         assert_eq!(ek, [0.01; 3]);
     }
+}
+
+/// The lane sums of [`environment_lane_sums`] (its `col`, `b`, `v` and `t` in that order) over whole runs of `SUM_LANES` (4) pixels, in f64, each
+/// lane and each sum the scalar loop's operations in its order (so the same values); with `specular` false
+/// the lobe's four sums (whose factor is 0) are left at 0.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+pub(crate) unsafe fn environment_lanes_avx2(
+    [col, b, v, t]: [&[f32]; 4],
+    sat: f32,
+    specular: bool,
+) -> [[f64; 4]; 9] {
+    use std::arch::x86_64::*;
+    let mut s = [_mm256_setzero_pd(); 9];
+    let satv = _mm_set1_ps(sat);
+    let n = col.len() - col.len() % 4;
+    let mut i = 0;
+    while i < n {
+        let y = _mm_loadu_ps(t[i..i + 4].as_ptr());
+        // Where t >= sat (or t = +inf) every value becomes 0, as the scalar select.
+        let keep = _mm_cmplt_ps(y, satv);
+        let a = _mm256_cvtps_pd(_mm_and_ps(_mm_loadu_ps(col[i..i + 4].as_ptr()), keep));
+        let yv = _mm256_cvtps_pd(_mm_and_ps(y, keep));
+        let vv = _mm256_cvtps_pd(_mm_and_ps(_mm_loadu_ps(v[i..i + 4].as_ptr()), keep));
+        s[0] = _mm256_add_pd(s[0], _mm256_mul_pd(a, a));
+        s[3] = _mm256_add_pd(s[3], _mm256_mul_pd(yv, a));
+        s[5] = _mm256_add_pd(s[5], _mm256_mul_pd(a, vv));
+        s[6] = _mm256_add_pd(s[6], _mm256_mul_pd(vv, vv));
+        s[7] = _mm256_add_pd(s[7], _mm256_mul_pd(yv, vv));
+        if specular {
+            let bv = _mm256_cvtps_pd(_mm_and_ps(_mm_loadu_ps(b[i..i + 4].as_ptr()), keep));
+            s[1] = _mm256_add_pd(s[1], _mm256_mul_pd(a, bv));
+            s[2] = _mm256_add_pd(s[2], _mm256_mul_pd(bv, bv));
+            s[4] = _mm256_add_pd(s[4], _mm256_mul_pd(yv, bv));
+            s[8] = _mm256_add_pd(s[8], _mm256_mul_pd(vv, bv));
+        }
+        i += 4;
+    }
+    let mut out = [[0.0f64; 4]; 9];
+    for (o, v) in out.iter_mut().zip(s) {
+        _mm256_storeu_pd(o.as_mut_ptr(), v);
+    }
+    out
 }

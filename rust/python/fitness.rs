@@ -5,7 +5,7 @@ use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray3, PyUntypedArrayMethods}
 use pyo3::prelude::*;
 
 use crate::error::Error;
-use crate::fitness::{Fitness, LossKind, Norm, Projection, Space};
+use crate::fitness::{Fitness, FitnessSpec, LossKind, Norm, Projection, Space};
 use crate::params::ParamLayout;
 use crate::scene::Scene;
 use crate::stage::StageResult;
@@ -33,20 +33,10 @@ fn target_vec(scene: &Scene, target: &PyReadonlyArray3<'_, f32>) -> PyResult<Vec
 /// A fitness's arguments, read from Python (with the GIL, every check that names an argument done):
 /// [`FitnessArgs::build`] then builds it without the GIL, inside the call's worker pool.
 pub(crate) struct FitnessArgs {
-    /// The searched parameters of `paths`.
+    /// The searched parameters of `paths`, with their bounds.
     pub(crate) layout: ParamLayout,
-    /// The search bounds of `paths`.
-    pub(crate) bounds: Vec<(f64, f64)>,
-    target: Vec<f32>,
-    pixels: Option<Vec<u32>>,
-    kind: LossKind,
-    clip: bool,
-    projection: Option<Projection>,
-    norm: Norm,
-    space: Space,
-    footprint: bool,
-    saturated: Option<f32>,
-    solve_margin: usize,
+    pub(crate) target: Vec<f32>,
+    pub(crate) spec: FitnessSpec,
 }
 
 /// The arguments of the fitness of `paths` against `target` (see [`FitnessArgs`]).
@@ -67,7 +57,6 @@ pub(crate) fn fitness_args(
 ) -> PyResult<FitnessArgs> {
     let space = Space::parse(space).map_err(Error::Invalid)?;
     let layout = ParamLayout::new(scene, paths)?;
-    let bounds = layout.bounds.clone();
     let target = target_vec(scene, target)?;
     let pixels: Option<Vec<u32>> = match pixels {
         Some(p) => Some(p.as_slice()?.to_vec()),
@@ -118,40 +107,25 @@ pub(crate) fn fitness_args(
     }
     Ok(FitnessArgs {
         layout,
-        bounds,
         target,
-        pixels,
-        kind,
-        clip,
-        projection,
-        norm,
-        space,
-        footprint,
-        saturated,
-        solve_margin,
+        spec: FitnessSpec {
+            pixels,
+            loss: kind,
+            clip,
+            projection,
+            footprint,
+            solve_margin,
+            norm,
+            space,
+            saturated,
+        },
     })
 }
 
 impl FitnessArgs {
     /// The fitness (its geometry, pixel groups and the bounce's gathers spread over the current pool).
     pub(crate) fn build(self, scene: &Scene) -> crate::error::Result<Fitness> {
-        let mut fitness = Fitness::with_solve_margin(
-            scene,
-            self.layout,
-            &self.target,
-            self.pixels.as_deref(),
-            self.kind,
-            self.clip,
-            self.projection,
-            self.footprint,
-            self.solve_margin,
-        )?;
-        fitness.set_norm(self.norm);
-        fitness.set_space(self.space);
-        if let Some(level) = self.saturated {
-            fitness.set_saturated(level);
-        }
-        Ok(fitness)
+        Fitness::new(scene, self.layout, &self.target, self.spec)
     }
 }
 

@@ -9,8 +9,8 @@ use super::fitness::{fitness_args, Generation, OptimizeResult};
 use super::pool::detach_in_pool;
 use super::scene::PyScene;
 use crate::error::Error;
-use crate::search::{lshade::LshadeConfig, Budget, Method, Objective};
-use crate::stage::run_stage;
+use crate::fit::{run_passes, PassOptions};
+use crate::search::{Budget, Method, Objective};
 
 /// Objective values of each row of `population` (N, D): float64 (N, n_objectives). `norm` is the
 /// per-pixel penalty ("l1", "l2", "huber", "huber:H"), `space` where it compares values ("linear" or
@@ -57,11 +57,11 @@ pub(super) fn evaluate<'py>(
         solve_margin,
     )?;
     let pop = population.as_array();
-    if pop.ncols() != args.bounds.len() {
+    if pop.ncols() != args.layout.bounds.len() {
         return Err(Error::Value(format!(
             "population has {} columns; {} parameters",
             pop.ncols(),
-            args.bounds.len()
+            args.layout.bounds.len()
         ))
         .into());
     }
@@ -97,8 +97,8 @@ pub(super) fn evaluate<'py>(
 /// ranks lights with the bounce held at the scene's own values (`Fitness::freeze_bounce`; each evaluation
 /// then costs a direct one's), the result's products and loss are the full bounce's at the found light;
 /// `frozen_bounce=N` > 1 adds up to N - 1 passes, each holding the bounce at the light the previous found and
-/// polishing from there ([`REPASS_POLISH`], as the first pass's own polish then), a third and later one only
-/// while the previous pass moved the light by more than [`REPASS_TOL`] (the held bounce's fixed point).
+/// polishing from there, a third and later one only while the previous pass moved the light (the held
+/// bounce's fixed point; `fit::PassOptions::passes`).
 /// `x0`: a point (one value per searched parameter, clamped to their bounds) that L-SHADE's initial
 /// population holds, so that a search refining it never ends worse than it (method "lshade" only).
 /// Returns an `OptimizeResult`.
@@ -140,9 +140,6 @@ pub(super) fn optimize<'py>(
     x0: Option<Vec<f64>>,
 ) -> PyResult<OptimizeResult> {
     let scene = &scene.get().0;
-    // Where only the polish takes the pixel footprint, the search's fitness is the polish's at pixel
-    // centres (one set-up for both).
-    let only_polish = polish_footprint && !footprint;
     let args = fitness_args(
         scene,
         &paths,
@@ -153,50 +150,10 @@ pub(super) fn optimize<'py>(
         product_bounds,
         norm,
         space,
-        footprint || only_polish,
+        footprint,
         saturated,
         solve_margin,
     )?;
-    let bounds = args.bounds.clone();
-    if let Some(x0) = &x0 {
-        if x0.len() != bounds.len() || x0.iter().any(|v| !v.is_finite()) {
-            return Err(Error::Invalid(format!(
-                "x0: needs {} finite values, one per searched parameter ({}) (got {:?})",
-                bounds.len(),
-                args.layout.names.join(", "),
-                x0
-            ))
-            .into());
-        }
-    }
-    // The light's searched parameters: where the bounce is held depends on them alone (a lobe's shininess
-    // shapes no diffuse bounce), so a pass's move is measured on them (on every parameter if none is).
-    let names = &args.layout.names;
-    let light_dims: Vec<bool> = if names.iter().any(|n| n.starts_with("light.")) {
-        names.iter().map(|n| n.starts_with("light.")).collect()
-    } else {
-        vec![true; names.len()]
-    };
-    // The bounce held for the search and the polish alike (a polish on the full bounce would cost the
-    // full fixed point per evaluation).
-    fn freeze(
-        fitness: &mut crate::Fitness,
-        finer: &mut Option<crate::Fitness>,
-        at: Option<&[f64]>,
-    ) -> bool {
-        // One fixed point for both: the footprint fitness's bounce, held for the pixel-centre search as
-        // well (the same pixels; the bounce differs between the two only through their products).
-        match finer.as_mut() {
-            Some(f) => {
-                let held = f.freeze_bounce(at);
-                if let Some(frozen) = f.frozen_bounce() {
-                    fitness.hold_bounce(frozen);
-                }
-                held
-            }
-            None => fitness.freeze_bounce(at),
-        }
-    }
     let budget = Budget {
         population,
         generations,
@@ -207,166 +164,54 @@ pub(super) fn optimize<'py>(
         polish,
         polish_tol,
     };
+    let options = PassOptions {
+        passes: frozen_bounce,
+        polish_footprint,
+        start: x0,
+        with_products: with_products && callback.is_some(),
+    };
     let mut error: Option<PyErr> = None;
     let mut history = Vec::new();
     let result = detach_in_pool(py, threads, || {
         let method = Method::named(method, &budget)?;
-        let built = args.build(scene)?;
-        let (mut fitness, mut finer) = if only_polish {
-            (built.at_pixel_centres(), Some(built))
-        } else {
-            (built, None)
-        };
-        let passes = if frozen_bounce > 0 && freeze(&mut fitness, &mut finer, None) {
-            frozen_bounce
-        } else {
-            1
-        };
-        let with_products = with_products && callback.is_some();
-        let (mut done, mut generations) = (0, 0);
-        let mut last: Option<crate::stage::StageResult> = None;
-        let mut box_ = bounds.clone();
-        for pass in 0..passes {
-            if let Some(prev) = &last {
-                // the bounce held again, at the light the previous pass found
-                freeze(&mut fitness, &mut finer, Some(&prev.x));
-                done += prev.evaluations;
-                generations += prev.generations + 1;
-                box_ = box_
-                    .iter()
-                    .zip(&prev.x)
-                    .map(|(&(lo, hi), &x)| {
-                        let h = 0.5 * REPASS_BOX * (hi - lo);
-                        ((x - h).max(lo), (x + h).min(hi))
-                    })
-                    .collect();
-            }
-            let (done, generations) = (done, generations);
-            // A later pass polishes from the light the previous one found (its population would only
-            // find the same basin again); a method without a polish searches as the first pass did.
-            let polishes = match &method {
-                Method::Lshade(cfg) if cfg.polish_evaluations > 0 => Some(cfg),
-                _ => None,
-            };
-            if let (Some(prev), Some(cfg)) = (&last, polishes) {
-                let x_tol = cfg.polish_x_tol;
-                let evaluations = repass_polish(cfg.polish_evaluations);
-                let mut stage = crate::stage::polish_stage(
-                    &fitness,
-                    finer.as_ref(),
-                    &box_,
-                    &prev.x,
-                    REPASS_STEP,
-                    evaluations,
-                    x_tol,
-                )?;
-                // Another pass holds the bounce where this one ended, unless it barely moved the light
-                // from where this one held it: the passes have reached the held bounce's fixed point.
-                let moved = (0..bounds.len()).any(|i| {
-                    let (lo, hi) = bounds[i];
-                    light_dims[i] && (stage.x[i] - prev.x[i]).abs() > REPASS_TOL * (hi - lo)
+        run_passes(
+            scene,
+            args.layout,
+            &args.target,
+            args.spec,
+            &method,
+            &options,
+            |rep| {
+                history.push(Generation {
+                    generation: rep.generation,
+                    best: rep.best.to_vec(),
+                    objectives: rep.best_objectives.to_vec(),
+                    evaluations: rep.evaluations,
                 });
-                if pass + 1 < passes && moved {
-                    last = Some(stage);
-                    continue;
-                }
-                stage.refine(&fitness, finer.as_ref());
-                last = Some(stage);
-                break;
-            }
-            // A first pass that others follow polishes with the repasses' share of the budget: its light
-            // only says where the next pass holds the bounce, and that pass polishes from there.
-            let first_of_many = match &method {
-                Method::Lshade(cfg) if passes > 1 => Some(Method::Lshade(LshadeConfig {
-                    polish_evaluations: repass_polish(cfg.polish_evaluations),
-                    ..cfg.clone()
-                })),
-                _ => None,
-            };
-            let stage = run_stage(
-                &fitness,
-                finer.as_ref(),
-                &box_,
-                first_of_many.as_ref().unwrap_or(&method),
-                x0.as_deref(),
-                with_products,
-                // a pass that another follows gives only its light (the next holds the bounce there)
-                pass + 1 == passes,
-                |rep| {
-                    history.push(Generation {
-                        generation: generations + rep.generation,
-                        best: rep.best.to_vec(),
-                        objectives: rep.best_objectives.to_vec(),
-                        evaluations: done + rep.evaluations,
-                    });
-                    let Some(cb) = &callback else { return true };
-                    let products: Option<Vec<Vec<f64>>> = rep
-                        .products
-                        .as_ref()
-                        .map(|rows| rows.iter().map(|r| r.to_vec()).collect());
-                    Python::attach(|py| {
-                        let best = PyArray1::from_slice(py, rep.best);
-                        let objectives = rep.best_objectives.to_vec();
-                        match cb.call1(
-                            py,
-                            (
-                                generations + rep.generation,
-                                best,
-                                objectives,
-                                done + rep.evaluations,
-                                products,
-                            ),
-                        ) {
-                            Ok(v) => !v.bind(py).is(&*pyo3::types::PyBool::new(py, false)),
-                            Err(e) => {
-                                error = Some(e);
-                                false
-                            }
+                let Some(cb) = &callback else { return true };
+                let products: Option<Vec<Vec<f64>>> = rep
+                    .products
+                    .as_ref()
+                    .map(|rows| rows.iter().map(|r| r.to_vec()).collect());
+                Python::attach(|py| {
+                    let best = PyArray1::from_slice(py, rep.best);
+                    let objectives = rep.best_objectives.to_vec();
+                    match cb.call1(
+                        py,
+                        (rep.generation, best, objectives, rep.evaluations, products),
+                    ) {
+                        Ok(v) => !v.bind(py).is(&*pyo3::types::PyBool::new(py, false)),
+                        Err(e) => {
+                            error = Some(e);
+                            false
                         }
-                    })
-                },
-            )?;
-            let stopped = stage.stop == crate::search::StopReason::Callback;
-            last = Some(stage);
-            if stopped {
-                break;
-            }
-        }
-        let mut result = last.expect("at least one pass");
-        result.evaluations += done;
-        result.generations += generations;
-        Ok::<_, crate::error::Error>(result)
+                    }
+                })
+            },
+        )
     })??;
     if let Some(e) = error {
         return Err(e);
     }
     Ok(OptimizeResult { result, history })
 }
-
-/// `optimize(frozen_bounce=N)`: each pass after the first searches this fraction of the previous pass's
-/// box (per dimension, centred on its light, inside it): a pass moves the light by the change in the
-/// held bounce, centimetres where the box spans metres.
-const REPASS_BOX: f64 = 0.1;
-/// A pass after the first is a Nelder–Mead polish from the previous pass's light (`stage::polish_stage`)
-/// with this fraction of the polish budget, its initial simplex [`REPASS_STEP`] of the pass's box: on 14
-/// bounce photos (the 6 test photos and 8 held-out ones) the mean light error 6.56 -> 6.55 mm (max 19.8
-/// -> 19.5) against a full search (population and polish) per pass, for a third fewer evaluations.
-/// The first pass's own polish takes the same fraction where passes follow it: on 25 bounce, lamp and
-/// environment photos (11 test photos, 14 held out) the mean light error 8.84 -> 8.78 mm and the mean
-/// worst product error 2.03 -> 1.95 %, for half the polish's evaluations (60 or 107 per bounce photo: a
-/// quarter of the budget instead gave 9.02 mm, the median 5.7 -> 7.4 mm; none, 46.5 mm, the search's
-/// best too coarse a start).
-const REPASS_POLISH: f64 = 0.5;
-const REPASS_STEP: f64 = 0.25;
-
-/// The polish evaluations of a pass that other passes follow or precede ([`REPASS_POLISH`] of the
-/// method's).
-fn repass_polish(evaluations: usize) -> usize {
-    (evaluations as f64 * REPASS_POLISH).ceil() as usize
-}
-/// `optimize(frozen_bounce=N)`: a pass after the second runs only where the previous pass moved some
-/// searched parameter of the light by more than this fraction of its range (the search box's; a lobe's
-/// shininess, which the diffuse bounce does not depend on, does not count): each pass holds the
-/// bounce at the light the previous found, a fixed-point iteration that contracts the move about
-/// threefold per pass; a light the first fit put far off (a term it lacked) takes three or four.
-const REPASS_TOL: f64 = 1e-3;

@@ -33,8 +33,28 @@ pub fn specular_per_lambert(shininess: f32) -> f32 {
 /// max(0, n·h)^s with h the half vector of the unit directions to the light `l` and to the eye `v`.
 #[inline(always)]
 pub fn blinn_phong(n: Vec3A, l: Vec3A, v: Vec3A, shininess: f32) -> f32 {
-    let h = (l + v).normalize_or_zero();
-    n.dot(h).max(0.0).powf(shininess)
+    half_cos(n.to_array(), l.to_array(), v.to_array()).powf(shininess)
+}
+
+/// max(0, n·h), the lobe's cosine before its power: h the half vector of the unit directions to the
+/// light `l` and to the eye `v`, n·h summed as (x + y) + z. The fitness kernel calls it per pixel in its
+/// lane loops.
+#[inline(always)]
+pub fn half_cos(n: [f32; 3], l: [f32; 3], v: [f32; 3]) -> f32 {
+    let h = unit_or_zero(l[0] + v[0], l[1] + v[1], l[2] + v[2]);
+    ((n[0] * h[0] + n[1] * h[1]) + n[2] * h[2]).max(0.0)
+}
+
+/// (x, y, z) over its length, the length as (x² + y²) + z² and its reciprocal 1/sqrt; zero where that
+/// reciprocal is not finite and positive (no length, or too short to divide by).
+#[inline(always)]
+pub fn unit_or_zero(x: f32, y: f32, z: f32) -> [f32; 3] {
+    let rcp = 1.0 / ((x * x + y * y) + z * z).sqrt();
+    if rcp.is_finite() && rcp > 0.0 {
+        [x * rcp, y * rcp, z * rcp]
+    } else {
+        [0.0; 3]
+    }
 }
 
 #[cfg(test)]

@@ -94,6 +94,25 @@ pub fn sphere_edge_lit(
     box_edge(h - radius, alpha, beta)
 }
 
+/// Whether the line from a point towards the light passes a sphere's centre closest between the two,
+/// from a = |d|² and b = (p - c)·d (d from the point `p` towards the light, `c` the centre): t = -b/a > 0
+/// and, for a point light (`BOUNDED`, the segment to it), t < 1. Where [`sphere_edge_lit`] applies.
+#[inline(always)]
+pub fn edge_between<const BOUNDED: bool>(a: f32, b: f32) -> bool {
+    (b < 0.0) & (!BOUNDED | (a + b > 0.0))
+}
+
+/// Whether a pixel whose footprint reaches `w` from its centre may cross the shadow edge of a sphere of
+/// `radius`, from a = |d|², b = (p - c)·d and the power c = |p - c|² - r² (the terms of
+/// `geometry::sphere::segment_meets_sphere`): the edge lies between the point and the light
+/// ([`edge_between`]) and the line's distance h from the centre is within w of the radius,
+/// |h² - r²| = |b² - ac| / a < 2rw + w² (w bounds the line's move across the pixel).
+#[inline(always)]
+pub fn near_sphere_edge<const BOUNDED: bool>(a: f32, b: f32, c: f32, w: f32, radius: f32) -> bool {
+    let close = (b * b - a * c).abs() < a * w * (2.0 * radius + w);
+    close & edge_between::<BOUNDED>(a, b)
+}
+
 /// The pixel mean of max(0, n·l) on a sphere of `radius` (unit `n`, unit `l` towards the light,
 /// footprint `du`, `dv`): across the pixel the normal turns by x / radius, so n·l by l·x / radius.
 #[inline(always)]

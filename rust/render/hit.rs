@@ -5,7 +5,8 @@ use glam::Vec3A;
 use rayon::prelude::*;
 
 use super::camera::CameraFrame;
-use super::shape::{PShape, ShapeHit};
+use super::shape::PShape;
+use crate::geometry::ShapeHit;
 use crate::scene::Scene;
 
 /// The first hit of one camera sample: everything shading needs that the light and materials don't change.
@@ -30,6 +31,20 @@ impl Surfel {
         object: u32::MAX,
         eps: 0.0,
     };
+
+    /// The shadow ray's start `eps` of a point whose coordinates (and its shape's) are of size `scale`:
+    /// the rounding error of a hit point there.
+    #[inline]
+    pub fn eps_at(scale: f32) -> f32 {
+        64.0 * f32::EPSILON * scale
+    }
+
+    /// The open range (tmin, tmax) of the shadow ray from this point to a light `dist` away: from `eps`
+    /// to just short of the light.
+    #[inline]
+    pub fn shadow_range(&self, dist: f32) -> (f32, f32) {
+        (self.eps, dist * (1.0 - 4.0 * f32::EPSILON))
+    }
 }
 
 /// The scene's fixed geometry in working form.
@@ -83,7 +98,7 @@ pub fn closest_hit(shapes: &[PShape], origin: Vec3A, dir: Vec3A) -> Surfel {
                 normal,
                 view: -dir,
                 object: k as u32,
-                eps: 64.0 * f32::EPSILON * scale,
+                eps: Surfel::eps_at(scale),
             }
         }
     }
@@ -96,8 +111,7 @@ pub fn closest_hit(shapes: &[PShape], origin: Vec3A, dir: Vec3A) -> Surfel {
 /// Meshes (two-sided: their normal already faces the viewer) are.
 #[inline]
 pub fn occluded(s: &Surfel, to_light: Vec3A, dist: f32, shapes: &[PShape]) -> bool {
-    let tmin = s.eps;
-    let tmax = dist * (1.0 - 4.0 * f32::EPSILON);
+    let (tmin, tmax) = s.shadow_range(dist);
     // A mesh need not be convex: it may shadow itself, so its own triangles are tested from `eps` on.
     shapes.iter().enumerate().any(|(k, sh)| {
         (k as u32 != s.object || matches!(sh, PShape::Mesh(_)))

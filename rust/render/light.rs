@@ -43,14 +43,73 @@ pub fn toward(position: Vec3A, direction: Option<Vec3A>, p: Vec3A) -> Vec3A {
 /// light's irradiance; 0 for a light on the surface.
 #[inline(always)]
 pub fn point_irradiance(d: [f32; 3], n: [f32; 3]) -> f32 {
-    let [dx, dy, dz] = d;
-    let d2 = dx * dx + dy * dy + dz * dz;
-    let nl = (n[0] * dx + n[1] * dy + n[2] * dz).max(0.0);
-    let v = (nl / (d2 * d2.sqrt())).min(f32::MAX);
-    if d2 > f32::MIN_POSITIVE {
+    point_irradiance_in(d, n)
+}
+
+/// [`point_irradiance`] on one value or on lanes of values (the fitness kernel's AVX2 form): the sums
+/// (x·x + y·y) + z·z, the correctly rounded square root and division, the same operations in the same
+/// order for both (a lane's multiply-add is fused).
+#[inline(always)]
+pub fn point_irradiance_in<T: Lanes>([dx, dy, dz]: [T; 3], n: [T; 3]) -> T {
+    let d2 = dz.mul_add(dz, dy.mul_add(dy, dx.mul(dx)));
+    let nl = n[2].mul_add(dz, n[1].mul_add(dy, n[0].mul(dx))).max0();
+    let v = nl.div(d2.mul(d2.sqrt())).min(T::splat(f32::MAX));
+    v.where_above(d2, T::splat(f32::MIN_POSITIVE))
+}
+
+/// The arithmetic of [`point_irradiance_in`]: on `f32`, and on a vector of lanes.
+pub trait Lanes: Copy {
+    fn splat(v: f32) -> Self;
+    fn mul(self, b: Self) -> Self;
+    /// self·b + c: rounded twice on `f32` (Rust does not fuse it), once on lanes (a fused multiply-add).
+    fn mul_add(self, b: Self, c: Self) -> Self;
+    fn div(self, b: Self) -> Self;
+    fn sqrt(self) -> Self;
+    /// max(self, 0), 0 for NaN.
+    fn max0(self) -> Self;
+    /// min(self, b), b for NaN.
+    fn min(self, b: Self) -> Self;
+    /// self where `x` > `limit`, else 0.
+    fn where_above(self, x: Self, limit: Self) -> Self;
+}
+
+impl Lanes for f32 {
+    #[inline(always)]
+    fn splat(v: f32) -> f32 {
         v
-    } else {
-        0.0
+    }
+    #[inline(always)]
+    fn mul(self, b: f32) -> f32 {
+        self * b
+    }
+    #[inline(always)]
+    fn mul_add(self, b: f32, c: f32) -> f32 {
+        // (c + self·b, as x·x + y·y is summed: IEEE addition is commutative)
+        self * b + c
+    }
+    #[inline(always)]
+    fn div(self, b: f32) -> f32 {
+        self / b
+    }
+    #[inline(always)]
+    fn sqrt(self) -> f32 {
+        f32::sqrt(self)
+    }
+    #[inline(always)]
+    fn max0(self) -> f32 {
+        self.max(0.0)
+    }
+    #[inline(always)]
+    fn min(self, b: f32) -> f32 {
+        f32::min(self, b)
+    }
+    #[inline(always)]
+    fn where_above(self, x: f32, limit: f32) -> f32 {
+        if x > limit {
+            self
+        } else {
+            0.0
+        }
     }
 }
 
@@ -58,6 +117,11 @@ pub fn point_irradiance(d: [f32; 3], n: [f32; 3]) -> f32 {
 #[inline(always)]
 pub fn directional_irradiance(l: [f32; 3], n: [f32; 3]) -> f32 {
     (n[0] * l[0] + n[1] * l[1] + n[2] * l[2]).max(0.0)
+}
+
+/// The unit vector along `d`; straight up for a zero (or non-finite) candidate direction.
+pub fn unit_or_up(d: Vec3A) -> Vec3A {
+    d.try_normalize().unwrap_or(Vec3A::Y)
 }
 
 #[cfg(test)]

@@ -16,7 +16,7 @@
 use glam::Vec3A;
 
 use super::hit::{occluded, Surfel};
-use super::light::{incidence, irradiance};
+use super::light::{incidence, irradiance, unit_or_up};
 use super::shape::PShape;
 use crate::scene::PointLight;
 
@@ -67,7 +67,7 @@ impl Emitter {
         let v3 = |a: [f64; 3]| glam::DVec3::from_array(a).as_vec3a();
         Emitter {
             position: v3(l.position),
-            direction: l.direction.map(|d| super::shade::unit_or_up(v3(d))),
+            direction: l.direction.map(|d| unit_or_up(v3(d))),
             intensity: l.intensity as f32,
             color: v3(l.color),
             radius: l.radius as f32,

@@ -17,7 +17,6 @@ pub mod footprint;
 pub mod hit;
 pub mod light;
 pub mod lights;
-pub mod mesh;
 pub mod shade;
 pub mod shape;
 

@@ -11,9 +11,9 @@ use super::bounce::{gather, nearest_table, table_points, CachedPoint, GatherPoin
 use super::brdf::{blinn_phong, lambert, specular_scale};
 use super::coat::Coat;
 use super::environment::sky_view;
-use super::footprint::{sphere_edge_lit, terminator_cos};
+use super::footprint::{edge_between, sphere_edge_lit, terminator_cos};
 use super::hit::{occluded, Surfel};
-use super::light::{incidence, irradiance};
+use super::light::{incidence, irradiance, unit_or_up};
 use super::lights::{sphere_visibility, unit_irradiance, Emitter, RectAxes};
 use super::shape::PShape;
 use crate::params::Target;
@@ -101,11 +101,6 @@ impl Clone for ShadeParams {
             self.coats.clone_from(&source.coats);
         }
     }
-}
-
-/// The unit vector along `d`; straight up for a zero (or non-finite) candidate direction.
-pub fn unit_or_up(d: Vec3A) -> Vec3A {
-    d.try_normalize().unwrap_or(Vec3A::Y)
 }
 
 /// Per object its coat, or empty when no object has one.
@@ -308,7 +303,7 @@ fn sender_radiance_with(
             normal: g.normal,
             view: g.normal,
             object: g.sender as u32,
-            eps: 64.0 * f32::EPSILON * (g.position.abs().max_element() + shapes[g.sender].scale()),
+            eps: Surfel::eps_at(g.position.abs().max_element() + shapes[g.sender].scale()),
         };
         if ndotl > 0.0 && !occluded(&at, dir, dist, shapes) {
             l += (p.light_rgb * lambert(m.albedo) * irradiance(ndotl, falloff))
@@ -553,7 +548,7 @@ fn visible_fraction(
         Some(d) => (d, 0.0),
         None => (p.light_position, 1.0),
     };
-    let (tmin, tmax) = (s.eps, dist * (1.0 - 4.0 * f32::EPSILON));
+    let (tmin, tmax) = s.shadow_range(dist);
     let mut lit = 1.0;
     for (k, sh) in shapes.iter().enumerate() {
         if k as u32 == s.object && !matches!(sh, PShape::Mesh(_)) {
@@ -562,8 +557,13 @@ fn visible_fraction(
         if let PShape::Sphere { center, radius } = *sh {
             // Where the closest approach of the line to the centre lies between point and light.
             let d = to - point * s.position;
-            let t = -(s.position - center).dot(d) / d.length_squared();
-            if t > 0.0 && (point == 0.0 || t < 1.0) {
+            let (a, b) = (d.length_squared(), (s.position - center).dot(d));
+            let between = if point == 0.0 {
+                edge_between::<false>(a, b)
+            } else {
+                edge_between::<true>(a, b)
+            };
+            if between {
                 let (pa, ta, ca) = (s.position.to_array(), to.to_array(), center.to_array());
                 lit *= sphere_edge_lit(pa, axes, ta, point, ca, radius);
                 continue;

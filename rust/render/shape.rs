@@ -1,16 +1,13 @@
-//! Ray–shape intersection in `f32`, written to stay accurate far from the origin and at grazing angles.
-//!
-//! The sphere test never forms the textbook discriminant `b² - c` (which cancels catastrophically when
-//! the sphere is small and far away, e.g. a telephoto view); it measures the squared distance from the
-//! centre to the ray's line directly, `r² - |oc - (oc·d)d|²`, and takes the roots in the stable form
-//! `q = -b - sign(b)·√disc`, `t0 = c/q`, `t1 = q`. The hit point is returned relative to the centre as
-//! `f ∓ √disc·d`, so normals stay accurate even when `t` is large.
+//! The renderer's shapes (spheres, planes, meshes) and their ray tests; the sphere's and the mesh's are
+//! `geometry`'s.
 
 use std::sync::Arc;
 
 use glam::Vec3A;
 
-use super::mesh::Mesh;
+use crate::geometry::mesh::Mesh;
+use crate::geometry::sphere;
+use crate::geometry::ShapeHit;
 use crate::scene::Shape;
 
 /// A shape in the renderer's working form.
@@ -27,16 +24,6 @@ pub enum PShape {
     },
     /// A triangle mesh with its BVH (world space, two-sided).
     Mesh(Arc<Mesh>),
-}
-
-/// A ray–shape hit: distance along the (unit) ray and the outward/geometric normal.
-#[derive(Clone, Copy, Debug)]
-pub struct ShapeHit {
-    pub t: f32,
-    /// Hit point; for spheres computed as centre + local offset.
-    pub position: Vec3A,
-    /// Unit normal (outward for spheres; the plane's own normal, not yet flipped toward the viewer).
-    pub normal: Vec3A,
 }
 
 impl PShape {
@@ -69,40 +56,7 @@ impl PShape {
         match *self {
             PShape::Mesh(ref m) => m.intersect(origin, dir, tmin, tmax),
             PShape::Sphere { center, radius } => {
-                let oc = origin - center;
-                let b = oc.dot(dir);
-                let f = oc - b * dir; // from the centre to the closest point of the line
-                let r2 = radius * radius;
-                let disc = r2 - f.length_squared();
-                if disc < 0.0 {
-                    return None;
-                }
-                let sq = disc.sqrt();
-                let c = sphere_power(oc, radius);
-                let q = if b > 0.0 { -b - sq } else { -b + sq };
-                let (t0, t1) = if q == 0.0 {
-                    (0.0, 0.0)
-                } else {
-                    let (a, b2) = (c / q, q);
-                    if a <= b2 {
-                        (a, b2)
-                    } else {
-                        (b2, a)
-                    }
-                };
-                let (t, local) = if t0 > tmin && t0 < tmax {
-                    (t0, f - sq * dir)
-                } else if t1 > tmin && t1 < tmax {
-                    (t1, f + sq * dir)
-                } else {
-                    return None;
-                };
-                let normal = local / radius;
-                Some(ShapeHit {
-                    t,
-                    position: center + local,
-                    normal: normal.normalize_or(normal),
-                })
+                sphere::intersect((center, radius), (origin, dir), (tmin, tmax))
             }
             PShape::Plane { point, normal } => {
                 let denom = normal.dot(dir);
@@ -128,45 +82,12 @@ impl PShape {
     pub fn hits_segment(&self, origin: Vec3A, dir: Vec3A, tmin: f32, tmax: f32) -> bool {
         match *self {
             PShape::Sphere { center, radius } => {
-                let oc = origin - center;
-                let b = oc.dot(dir);
-                let f = oc - b * dir;
-                let disc = radius * radius - f.length_squared();
-                if disc < 0.0 {
-                    return false;
-                }
-                let sq = disc.sqrt();
-                // The chord is t in [-b - sq, -b + sq]; it overlaps (tmin, tmax)?
-                let (t0, t1) = (-b - sq, -b + sq);
-                t1 > tmin && t0 < tmax
+                sphere::hits_segment((center, radius), (origin, dir), (tmin, tmax))
             }
             PShape::Plane { .. } => self.intersect(origin, dir, tmin, tmax).is_some(),
             PShape::Mesh(ref m) => m.hits_segment(origin, dir, tmin, tmax),
         }
     }
-}
-
-/// |oc|² - r² for the offset `oc` from a sphere's centre (the power of the point), factored to keep its
-/// relative accuracy near the surface.
-#[inline(always)]
-pub fn sphere_power(oc: Vec3A, radius: f32) -> f32 {
-    let l = oc.length();
-    (l - radius) * (l + radius)
-}
-
-/// Whether the segment x(t) = p + t·d, t in (0, 1) (in (0, ∞) without `BOUNDED`), meets a sphere, from
-/// a = |d|², b = (p - c)·d and the power c = |p - c|² - r²: the roots (-b ± √(b² - ac))/a are real, the
-/// far one is > 0 and (bounded) the near one < 1. Branch-free, for the fitness kernel's lane loops.
-#[inline(always)]
-pub fn segment_meets_sphere<const BOUNDED: bool>(a: f32, b: f32, c: f32) -> bool {
-    let disc = b * b - a * c;
-    let far_positive = (b < 0.0) | (c < 0.0);
-    if !BOUNDED {
-        return (disc >= 0.0) & far_positive;
-    }
-    let ab = a + b;
-    let near_below_one = (ab > 0.0) | (disc > ab * ab);
-    (disc >= 0.0) & far_positive & near_below_one
 }
 
 /// Test scenes' shapes: the floor y = 0 and a sphere of `radius` centred at height `y` above the origin.
@@ -187,6 +108,7 @@ pub(crate) fn ball_over_floor(y: f32, radius: f32) -> [PShape; 2] {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::sphere::{segment_meets_sphere, sphere_power};
     use glam::DVec3;
 
     fn sphere(c: [f32; 3], r: f32) -> PShape {

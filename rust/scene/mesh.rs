@@ -8,7 +8,7 @@ use glam::DVec3;
 
 use super::{MAX_MAGNITUDE, V3};
 use crate::error::{Error, Result};
-use crate::render::mesh::Mesh;
+use crate::geometry::mesh::Mesh;
 
 /// `file` as written, resolved against `base` (the scene file's folder; the current directory when
 /// `None`) and made absolute.

@@ -65,7 +65,7 @@ pub enum Shape {
         file: String,
         position: V3,
         scale: f64,
-        mesh: Arc<crate::render::mesh::Mesh>,
+        mesh: Arc<crate::geometry::mesh::Mesh>,
     },
 }
 

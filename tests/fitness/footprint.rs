@@ -4,26 +4,6 @@ use super::*;
 
 /// A ball resting on the floor with a second, smaller ball in its shadow, under `light` (a point light's
 /// position, or a directional light's direction with `sun`).
-/// `Fitness::with_pixel_footprint` or `Fitness::new`, as `footprint` says.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn with_or_without_footprint(
-    footprint: bool,
-    scene: &Scene,
-    layout: &ParamLayout,
-    target: &[f32],
-    pixels: Option<&[u32]>,
-    kind: LossKind,
-    clip: bool,
-    proj: Option<Projection>,
-) -> Fitness {
-    let ctor = if footprint {
-        Fitness::with_pixel_footprint
-    } else {
-        Fitness::new
-    };
-    ctor(scene, layout.clone(), target, pixels, kind, clip, proj).unwrap()
-}
-
 pub(crate) fn edge_scene(light: [f64; 3], sun: bool) -> Scene {
     let light = if sun {
         format!(
@@ -122,16 +102,13 @@ fn pixel_footprint_matches_a_supersampled_render_at_shadow_edges_and_terminators
         let (layout, x) = searched_light(&scene, light, sun);
         let err = |f: Fitness| f.channel_losses(&x).iter().sum::<f64>() / (3 * edges.len()) as f64;
         let make = |footprint: bool| {
-            with_or_without_footprint(
+            let spec = FitnessSpec {
+                pixels: Some(edges.clone()),
+                clip: false,
                 footprint,
-                &scene,
-                &layout,
-                &fine,
-                Some(&edges),
-                LossKind::L1,
-                false,
-                None,
-            )
+                ..Default::default()
+            };
+            Fitness::new(&scene, layout.clone(), &fine, spec).unwrap()
         };
         let (with, without) = (err(make(true)), err(make(false)));
         let mean: f64 = edges
@@ -159,9 +136,18 @@ fn footprint_render_is_what_the_footprint_fitness_models() {
             .unwrap()
             .rgb;
         let (layout, x) = searched_light(&scene, light, sun);
-        let f =
-            Fitness::with_pixel_footprint(&scene, layout, &target, None, LossKind::L1, false, None)
-                .unwrap();
+        let f = Fitness::new(
+            &scene,
+            layout,
+            &target,
+            FitnessSpec {
+                loss: LossKind::L1,
+                clip: false,
+                footprint: true,
+                ..Default::default()
+            },
+        )
+        .unwrap();
         let loss: f64 = f.channel_losses(&x).iter().sum();
         let total: f64 = target.iter().map(|&v| v as f64).sum();
         assert!(loss < 1e-5 * total, "{light:?}: {loss} against {total}");
@@ -204,16 +190,13 @@ fn a_footprint_fitness_at_pixel_centres_is_the_plain_fitness_bit_for_bit() {
         let proj = Projection::matte(vec![[(0.0, 50.0); 3]; scene.objects.len()]);
         for (kind, proj) in [(LossKind::L1, None), (LossKind::L1Projected, Some(proj))] {
             let make = |footprint: bool| {
-                with_or_without_footprint(
+                let spec = FitnessSpec {
+                    loss: kind,
+                    projection: proj.clone(),
                     footprint,
-                    &scene,
-                    &layout,
-                    &target,
-                    None,
-                    kind,
-                    true,
-                    proj.clone(),
-                )
+                    ..Default::default()
+                };
+                Fitness::new(&scene, layout.clone(), &target, spec).unwrap()
             };
             let (plain, fine) = (make(false), make(true));
             let centres = fine.at_pixel_centres();

@@ -98,16 +98,17 @@ fn solve_margin_keeps_the_pixels_whose_neighbourhood_shows_their_object() {
     );
     // margin 40: no pixel of the 96 x 72 image passes: every object falls back to its 4-neighbour interior
     for margin in [0, 2, 40] {
-        let f = Fitness::with_solve_margin(
+        let f = Fitness::new(
             &scene,
             layout.clone(),
             &target,
-            None,
-            LossKind::L1Projected,
-            false,
-            Some(proj.clone()),
-            false,
-            margin,
+            FitnessSpec {
+                loss: LossKind::L1Projected,
+                clip: false,
+                projection: Some(proj.clone()),
+                solve_margin: margin,
+                ..Default::default()
+            },
         )
         .unwrap();
         let solved = f.solved(&truth);

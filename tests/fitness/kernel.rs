@@ -165,16 +165,16 @@ pub(crate) fn bounce_fitness(
     footprint: bool,
 ) -> Fitness {
     let bounds = vec![[(0.0, 200.0); 3]; scene.objects.len()];
-    Fitness::with_solve_margin(
+    Fitness::new(
         scene,
         layout.clone(),
         target,
-        None,
-        LossKind::L1Projected,
-        true,
-        Some(Projection::matte(bounds)),
-        footprint,
-        0,
+        FitnessSpec {
+            loss: LossKind::L1Projected,
+            projection: Some(Projection::matte(bounds)),
+            footprint,
+            ..Default::default()
+        },
     )
     .unwrap()
 }

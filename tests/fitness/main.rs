@@ -12,7 +12,7 @@ mod targets;
 use common::Oracle;
 use rtloop::fitness::SATURATED;
 use rtloop::search::{Objective, Rng};
-use rtloop::{render, Fitness, LossKind, Norm, ParamLayout, Projection, Scene};
+use rtloop::{render, Fitness, FitnessSpec, LossKind, Norm, ParamLayout, Projection, Scene};
 
 mod footprint;
 mod held;
@@ -91,7 +91,17 @@ pub(crate) fn fitness(
     kind: LossKind,
     clip: bool,
 ) -> Fitness {
-    Fitness::new(scene, layout.clone(), target, None, kind, clip, None).unwrap()
+    Fitness::new(
+        scene,
+        layout.clone(),
+        target,
+        FitnessSpec {
+            loss: kind,
+            clip,
+            ..Default::default()
+        },
+    )
+    .unwrap()
 }
 
 /// The closed-form (projected) fitness of `layout` over the whole image.
@@ -106,10 +116,12 @@ pub(crate) fn projected(
         scene,
         layout,
         target,
-        None,
-        LossKind::L1Projected,
-        clip,
-        Some(proj),
+        FitnessSpec {
+            loss: LossKind::L1Projected,
+            clip,
+            projection: Some(proj),
+            ..Default::default()
+        },
     )
     .unwrap()
 }

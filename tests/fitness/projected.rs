@@ -18,10 +18,11 @@ fn projected_fitness_refuses_what_projection_blocker_refuses() {
             &scene,
             layout,
             &target,
-            None,
-            LossKind::L1Projected,
-            true,
-            Some(Projection::matte(bounds)),
+            FitnessSpec {
+                loss: LossKind::L1Projected,
+                projection: Some(Projection::matte(bounds)),
+                ..Default::default()
+            },
         );
         // Ambient light is the closed form's constant column: the blocker allows it, and a projection
         // without that column is refused, naming it.
@@ -53,10 +54,12 @@ fn ambient_is_the_closed_forms_constant_column() {
             &scene,
             layout,
             &target,
-            None,
-            LossKind::L1Projected,
-            false,
-            Some(proj),
+            FitnessSpec {
+                loss: LossKind::L1Projected,
+                clip: false,
+                projection: Some(proj),
+                ..Default::default()
+            },
         )
         .unwrap();
         let solved = f.solved(&scene.light.position);

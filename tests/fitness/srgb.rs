@@ -356,10 +356,12 @@ fn refined_srgb_products_minimise_the_srgb_loss() {
             &scene,
             position,
             &target,
-            Some(&interior),
-            LossKind::L1Projected,
-            true,
-            Some(Projection::matte(vec![[(0.0, 400.0); 3]; 2])),
+            FitnessSpec {
+                pixels: Some(interior.clone()),
+                loss: LossKind::L1Projected,
+                projection: Some(Projection::matte(vec![[(0.0, 400.0); 3]; 2])),
+                ..Default::default()
+            },
         )
         .unwrap();
         proj.set_norm(norm);
@@ -380,10 +382,11 @@ fn refined_srgb_products_minimise_the_srgb_loss() {
             &scene,
             albedos,
             &target,
-            Some(&interior),
-            LossKind::L1,
-            true,
-            None,
+            FitnessSpec {
+                pixels: Some(interior.clone()),
+                loss: LossKind::L1,
+                ..Default::default()
+            },
         )
         .unwrap();
         plain.set_norm(norm);

@@ -134,10 +134,11 @@ def dense_residual(render: np.ndarray, target: np.ndarray, use: np.ndarray | Non
             "threshold": DENSE_MEDIAN_Z}
 
 
-def representable_pixels(scene: Any, use: np.ndarray | None) -> np.ndarray:
+def representable_pixels(scene: Any, use: np.ndarray | None, ids: np.ndarray | None = None) -> np.ndarray:
     """The pixel indices of ``use`` (None: all) whose 4-neighbours show the same object (or background):
-    the pixels the model renders as the camera integrates them."""
-    ids = np.asarray(_native.object_ids(scene))
+    the pixels the model renders as the camera integrates them. ``ids``: ``scene``'s object ids where the
+    caller has them."""
+    ids = np.asarray(_native.object_ids(scene)) if ids is None else ids
     inside = np.flatnonzero(~edges(ids).ravel())
     if use is not None:
         inside = np.intersect1d(inside, np.asarray(use, np.int64))

@@ -79,6 +79,11 @@ class Stages:
         #: scene's parameters (one solve per generation); False: the scene's own values stand for them.
         self.products_per_generation = True
 
+    def add(self, more: Stages) -> None:
+        """Count the stages and evaluations of ``more`` (a refit's) as this fit's."""
+        self.stages += more.stages
+        self.evaluations += more.evaluations
+
     def run(self, name: str, stage_scene: Scene, paths: list[str], loss: str, pixels: np.ndarray | None,
             generations: int, stage_seed: int, product_bounds: np.ndarray | None = None,
             method: str = "de", polish: int = 0, polish_tol: float | None = None,

@@ -1,9 +1,9 @@
-//! Triangle meshes in the renderer: Möller–Trumbore ray–triangle tests over a binary BVH (median split
+//! Triangle meshes: Möller–Trumbore ray–triangle tests over a binary BVH (median split
 //! on the longest centroid axis), for camera rays (`intersect`) and shadow rays (`hits_segment`).
 
 use glam::{DVec3, Vec3A};
 
-use super::shape::ShapeHit;
+use super::ShapeHit;
 
 /// Triangles per leaf at most.
 const LEAF: usize = 4;
