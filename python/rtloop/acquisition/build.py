@@ -37,7 +37,7 @@ from .calibration import CameraIntrinsics, PinholeRemap
 from .camera import focal_from_vfov
 from .colour import ColourCorrection, colorchecker_correction, grey_card_balance
 from .exif import ExifFocal
-from .focal import field_of_view_record, refine_vfov_by_ball
+from .focal import field_of_view_record, refine_vfov_by_ball, scan_vfov_for_ball
 from .pose import VFOV_TARGET_DEG, FloorPose, estimate_floor_pose
 
 __all__ = ["AcquiredScene", "build_scene", "draw_overlay", "fit_section"]
@@ -272,43 +272,46 @@ def build_scene(
             )
         if remap is not None:
             mask = remap.mask(mask if mask.ndim == 2 else mask.max(axis=2))
-    board_outline = _board_outline_px(pose)
     bw, bh = spec.size_m
+    locate = {"mask": mask, "resting": resting, "exclude": _board_outline_px(pose),
+              "keep_off": (-bw / 2, bw / 2, -bh / 2, bh / 2)}
+    loose = focal_source == "board" and (pose.vfov_std_deg or 0.0) > VFOV_TARGET_DEG
+    scanned = None
     try:
-        silhouette, sphere = locate_ball(
-            photo,
-            camera,
-            ball_radius,
-            hint=hint,
-            mask=mask,
-            resting=resting,
-            exclude=board_outline,
-            keep_off=(-bw / 2, bw / 2, -bh / 2, bh / 2),
-            where=where,
-        )
+        silhouette, sphere = locate_ball(photo, camera, ball_radius, hint=hint, where=where, **locate)
     except AcquisitionError as exc:
-        loose = "" if focal_source != "board" else (
-            f"; the field of view is the board's alone, {camera.vfov_deg:.1f} +- {pose.vfov_std_deg:.2f} deg: give "
-            "--vfov or --camera, or use a photo whose EXIF has the focal length")
-        raise AcquisitionError(f"{exc} (the ball is looked for beside the board, not on it{loose})") from None
+        # a loose board's estimate can be far off (a board seen face-on): the ball tried at other fields of view
+        scanned = scan_vfov_for_ball(photo, spec, ball_radius, locate=locate, where=where) if loose else None
+        if scanned is None:
+            why = "" if focal_source != "board" else (
+                f"; the field of view is the board's alone, {camera.vfov_deg:.1f} +- {pose.vfov_std_deg:.2f} deg"
+                f"{' (nor at any from 8 to 100 deg)' if loose else ''}: give "
+                "--vfov or --camera, or use a photo whose EXIF has the focal length")
+            raise AcquisitionError(f"{exc} (the ball is looked for beside the board, not on it{why})") from None
+        hint = scanned[1]
     refinement = None
-    locate = {"mask": mask, "resting": resting, "exclude": board_outline, "keep_off": (-bw / 2, bw / 2, -bh / 2, bh / 2)}
-    if focal_source == "board" and (pose.vfov_std_deg or 0.0) > VFOV_TARGET_DEG:
+    if loose:
         # the board alone fixes the field of view loosely: refined from the ball resting on the floor
-        found = (float(silhouette.centre_px[0]), float(silhouette.centre_px[1]), float(silhouette.radius_px))
-        refinement = refine_vfov_by_ball(photo, spec, ball_radius, pose, found, locate=locate, where=where)
-        if refinement is not None:
-            std = pose.vfov_std_deg
-            pose = estimate_floor_pose(photo, spec, focal_px=focal_from_vfov(refinement.vfov_deg, h),
-                                       focal_source="board", where=where)
+        found = hint if scanned is not None else (
+            float(silhouette.centre_px[0]), float(silhouette.centre_px[1]), float(silhouette.radius_px))
+        refinement = refine_vfov_by_ball(photo, spec, ball_radius, pose, found, locate=locate, where=where,
+                                         centre=None if scanned is None else scanned[0])
+        chosen = refinement.vfov_deg if refinement is not None else None if scanned is None else scanned[0]
+        if chosen is not None:
+            std, board_vfov = pose.vfov_std_deg, camera.vfov_deg
+            pose = estimate_floor_pose(photo, spec, focal_px=focal_from_vfov(chosen, h), focal_source="board",
+                                       where=where)
             pose.vfov_std_deg = std
             camera = pose.camera
             locate["exclude"] = _board_outline_px(pose)
             silhouette, sphere = locate_ball(photo, camera, ball_radius, hint=found, where=where, **locate)
+            how = "refined from the ball resting on the floor to" if refinement is not None else (
+                "the ball resting on the floor found best at")
             notes[:] = [n for n in notes if "no EXIF focal length" not in n]
-            notes.append(loose_view_warning(where, refinement.board_vfov_deg, std, camera.focal_px, h)
-                         .replace("; give --vfov", f"; refined from the ball resting on the floor to "
-                                  f"{refinement.vfov_deg:.2f} deg (where its outline fits best); give --vfov"))
+            notes.append(loose_view_warning(where, board_vfov, std, camera.focal_px, h)
+                         .replace("; give --vfov", f"; {how} {chosen:.2f} deg (where its outline fits best)"
+                                  f"{'' if scanned is None else ', not found at the board' + chr(39) + 's estimate'}"
+                                  "; give --vfov"))
     if silhouette.rms_px > 1.0:
         notes.append(
             f"the ball's outline fits its edge points with {silhouette.rms_px:.2f} px RMS (more than 1 px); "
