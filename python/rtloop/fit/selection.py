@@ -28,6 +28,7 @@ __all__ = [
     "EXPLAINED",
     "HIGHLIGHT_MODES",
     "MIN_GAIN",
+    "SHININESS_BEYOND",
     "SHININESS_TRIALS",
     "check_environment",
     "check_highlights",
@@ -56,8 +57,13 @@ HIGHLIGHT_MODES = ("auto", "off")
 #: Blinn-Phong exponents tried at the found light to see whether a lobe explains the photo (from a broad
 #: sheen to a tight highlight, a factor of about 3 apart); the refit then searches the shininess.
 SHININESS_TRIALS = (10.0, 30.0, 100.0, 300.0, 1000.0)
+#: Tried too, in turn, while the tightest exponent tried so far is the best: a polished ball's highlight is
+#: tighter than SHININESS_TRIALS reach, and a lobe too broad for it pulls the light towards the highlight's
+#: centre of mass.
+SHININESS_BEYOND = (3000.0, 10000.0)
 #: The bounds a freed lobe gets: specular in [0, 1]; shininess within a factor SHININESS_SPAN of the best
-#: trial (the trials' spacing: the refit searches between the neighbouring trials), inside [1, 2000].
+#: trial (the trials' spacing: the refit searches between the neighbouring trials), inside SHININESS_RANGE,
+#: whose top is twice the tightest of SHININESS_TRIALS unless one of SHININESS_BEYOND was the best.
 SPECULAR_RANGE = (0.0, 1.0)
 SHININESS_RANGE = (1.0, 2000.0)
 SHININESS_SPAN = 3.2
@@ -212,9 +218,11 @@ def highlight_candidates(scene: Scene) -> list[str]:
 
 def with_highlights(scene: Scene, names: list[str], shininess: float) -> Scene:
     """``scene`` with the specular and shininess of ``names`` freed (SPECULAR_RANGE; the shininess within
-    SHININESS_SPAN of ``shininess``, inside SHININESS_RANGE), the shininess at ``shininess``."""
+    SHININESS_SPAN of ``shininess``, inside SHININESS_RANGE unless ``shininess`` is beyond SHININESS_TRIALS),
+    the shininess at ``shininess``."""
     lo = max(SHININESS_RANGE[0], shininess / SHININESS_SPAN)
-    hi = min(SHININESS_RANGE[1], shininess * SHININESS_SPAN)
+    hi = shininess * SHININESS_SPAN if shininess > SHININESS_TRIALS[-1] else min(SHININESS_RANGE[1],
+                                                                                shininess * SHININESS_SPAN)
     changes: dict[str, tuple[Any, Any]] = {}
     for n in names:
         changes[f"objects.{n}.specular"] = SPECULAR_RANGE
@@ -233,18 +241,27 @@ def highlight_evidence(scene: Scene, names: list[str], paths: list[str], x: list
     shininess) and the verdict (as :func:`environment_evidence`). Returns the evidence and the shininess."""
     glossy = with_highlights(scene, names, SHININESS_TRIALS[0])
     gpaths = paths + [f"objects.{n}.shininess" for n in names]
-    rows = [list(x) + [s] * len(names) for s in SHININESS_TRIALS]
-    # With a bounce, the trials share one: held where the first is (the light does not move between them,
-    # and a lobe's shininess shapes no diffuse bounce), so each costs a direct candidate's solve instead of
-    # the bounce's fixed point.
-    with_lobe = closed_form_loss(glossy, gpaths, rows, target, pixels, environment=environment, clip=clip,
-                                 norm=norm, space=space, threads=threads, saturated=saturated,
-                                 frozen_bounce=interreflection_given(glossy))
+
+    def losses(trials: tuple[float, ...]) -> list[float]:
+        rows = [list(x) + [s] * len(names) for s in trials]
+        # With a bounce, the trials share one: held where the first is (the light does not move between
+        # them, and a lobe's shininess shapes no diffuse bounce), so each costs a direct candidate's solve
+        # instead of the bounce's fixed point.
+        return [float(v) for v in closed_form_loss(
+            glossy, gpaths, rows, target, pixels, environment=environment, clip=clip, norm=norm, space=space,
+            threads=threads, saturated=saturated, frozen_bounce=interreflection_given(glossy))]
+
+    tried, with_lobe = list(SHININESS_TRIALS), losses(SHININESS_TRIALS)
+    for beyond in SHININESS_BEYOND:
+        if int(np.argmin(with_lobe)) != len(tried) - 1:
+            break
+        tried.append(beyond)
+        with_lobe += losses((beyond,))
     k = int(np.argmin(with_lobe))
-    ev = _verdict(base, float(with_lobe[k]), active_pixels, 2 * len(names), norm, nested=True)
-    ev["shininess_tried"] = list(SHININESS_TRIALS)
-    ev["loss_per_shininess"] = [float(v) for v in with_lobe]
-    return ev, SHININESS_TRIALS[k]
+    ev = _verdict(base, with_lobe[k], active_pixels, 2 * len(names), norm, nested=True)
+    ev["shininess_tried"] = tried
+    ev["loss_per_shininess"] = with_lobe
+    return ev, tried[k]
 
 
 def check_interreflection(mode: Any) -> str:
