@@ -5,7 +5,6 @@
 use glam::Vec3A;
 use rayon::prelude::*;
 
-use crate::geometry::sphere::sphere_power;
 use crate::render::bounce::{gather, nearest_table};
 use crate::render::environment::sky_view;
 use crate::render::footprint;
@@ -138,8 +137,6 @@ pub const BLOCK: usize = 64;
 pub(crate) struct SphereOccluder {
     pub(crate) center: [f32; 3],
     pub(crate) radius: f32,
-    /// |p - c|² - r² per pixel of the group.
-    pub(crate) c: Vec<f32>,
 }
 
 #[derive(Clone)]
@@ -494,10 +491,6 @@ pub(crate) fn group(
                         PShape::Sphere { center, radius } => g.spheres.push(SphereOccluder {
                             center: center.to_array(),
                             radius,
-                            c: idx
-                                .iter()
-                                .map(|&i| sphere_power(surfels[i].position - center, radius))
-                                .collect(),
                         }),
                         PShape::Plane { point, normal } => g.planes.push(PlaneOccluder {
                             normal: normal.to_array(),
