@@ -7,6 +7,7 @@ use glam::Vec3A;
 use rayon::prelude::*;
 
 use super::pixels::{offset, Gather, Group, Light, SphereOccluder, BLOCK};
+use crate::geometry::plane;
 use crate::geometry::sphere::{line_to_sphere, segment_meets_sphere, Chord};
 use crate::render::brdf::lambert;
 use crate::render::footprint::{near_sphere_edge, sphere_edge_lit, terminator_cos};
@@ -298,7 +299,11 @@ pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mu
             + pl.normal[2] * (lz - pl.point[2]);
         let side = &pl.side[r.start..][..n];
         for i in 0..n {
-            e[i] = if side[i] * side_l < 0.0 { 0.0 } else { e[i] };
+            e[i] = if plane::crosses(side[i], side_l) {
+                0.0
+            } else {
+                e[i]
+            };
         }
     }
 }
@@ -384,7 +389,11 @@ pub(crate) fn shadow_directional(g: &Group, r: std::ops::Range<usize>, d: [f32; 
         let side_l = pl.normal[0] * d[0] + pl.normal[1] * d[1] + pl.normal[2] * d[2];
         let side = &pl.side[r.start..][..n];
         for i in 0..n {
-            e[i] = if side[i] * side_l < 0.0 { 0.0 } else { e[i] };
+            e[i] = if plane::crosses(side[i], side_l) {
+                0.0
+            } else {
+                e[i]
+            };
         }
     }
 }

@@ -1,13 +1,12 @@
-//! The renderer's shapes (spheres, planes, meshes) and their ray tests; the sphere's and the mesh's are
-//! `geometry`'s.
+//! The renderer's shapes (spheres, planes, meshes) and their ray tests, which are `geometry`'s.
 
 use std::sync::Arc;
 
 use glam::Vec3A;
 
 use crate::geometry::mesh::Mesh;
-use crate::geometry::sphere;
 use crate::geometry::ShapeHit;
+use crate::geometry::{plane, sphere};
 use crate::scene::Shape;
 
 /// A shape in the renderer's working form.
@@ -59,20 +58,7 @@ impl PShape {
                 sphere::intersect((center, radius), (origin, dir), (tmin, tmax))
             }
             PShape::Plane { point, normal } => {
-                let denom = normal.dot(dir);
-                if denom.abs() < 1e-12 {
-                    return None; // parallel: no hit (or the whole line, which has measure zero)
-                }
-                let t = normal.dot(point - origin) / denom;
-                if t > tmin && t < tmax {
-                    Some(ShapeHit {
-                        t,
-                        position: origin + t * dir,
-                        normal,
-                    })
-                } else {
-                    None
-                }
+                plane::intersect((point, normal), (origin, dir), (tmin, tmax))
             }
         }
     }
@@ -84,7 +70,9 @@ impl PShape {
             PShape::Sphere { center, radius } => {
                 sphere::hits_segment((center, radius), (origin, dir), (tmin, tmax))
             }
-            PShape::Plane { .. } => self.intersect(origin, dir, tmin, tmax).is_some(),
+            PShape::Plane { point, normal } => {
+                plane::hits_segment((point, normal), (origin, dir), (tmin, tmax))
+            }
             PShape::Mesh(ref m) => m.hits_segment(origin, dir, tmin, tmax),
         }
     }
