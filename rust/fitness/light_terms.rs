@@ -6,7 +6,7 @@
 use glam::Vec3A;
 use rayon::prelude::*;
 
-use super::pixels::{offset, Gather, Group, Light, SphereOccluder, BLOCK};
+use super::pixels::{offset, Gather, Group, Light, PlaneOccluder, SphereOccluder, BLOCK};
 use crate::geometry::plane;
 use crate::geometry::sphere::{line_to_sphere, segment_meets_sphere, Chord};
 use crate::render::brdf::lambert;
@@ -297,14 +297,18 @@ pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mu
         let side_l = pl.normal[0] * (lx - pl.point[0])
             + pl.normal[1] * (ly - pl.point[1])
             + pl.normal[2] * (lz - pl.point[2]);
-        let side = &pl.side[r.start..][..n];
-        for i in 0..n {
-            e[i] = if plane::crosses(side[i], side_l) {
-                0.0
-            } else {
-                e[i]
-            };
-        }
+        plane_shadow(pl, r.start, side_l, e);
+    }
+}
+
+/// Zero `e` (the pixels of a block from `start`) where plane `pl` lies between the pixel and the light:
+/// the pixel's side and `side_l`, the light's (for a directional light, n·d: the side the ray heads to),
+/// differ in sign.
+#[inline(always)]
+fn plane_shadow(pl: &PlaneOccluder, start: usize, side_l: f32, e: &mut [f32]) {
+    let side = &pl.side[start..][..e.len()];
+    for (e, &s) in e.iter_mut().zip(side) {
+        *e = if plane::crosses(s, side_l) { 0.0 } else { *e };
     }
 }
 
@@ -387,14 +391,7 @@ pub(crate) fn shadow_directional(g: &Group, r: std::ops::Range<usize>, d: [f32; 
     for pl in &g.planes {
         // The ray heads towards the plane's other side when n·d and the pixel's side differ in sign.
         let side_l = pl.normal[0] * d[0] + pl.normal[1] * d[1] + pl.normal[2] * d[2];
-        let side = &pl.side[r.start..][..n];
-        for i in 0..n {
-            e[i] = if plane::crosses(side[i], side_l) {
-                0.0
-            } else {
-                e[i]
-            };
-        }
+        plane_shadow(pl, r.start, side_l, e);
     }
 }
 
