@@ -296,7 +296,13 @@ pub(crate) fn gathers(
                     .collect(),
                 PShape::Plane { .. } | PShape::Mesh(_) => Vec::new(),
             };
-            let mut g = group(&pts, &zeros, &solve, &[], shapes, shadows, sky, false);
+            let pixels = PixelSet {
+                surfels: &pts,
+                targets: &zeros,
+                solve: &solve,
+                footprint: &[],
+            };
+            let mut g = group(pixels, shapes, shadows, sky, false);
             Gather {
                 sender: k,
                 pixel,
@@ -348,22 +354,45 @@ pub(super) fn offset(l: [f32; 3], point: f32, p: [f32; 3]) -> [f32; 3] {
     ]
 }
 
-/// The active pixels grouped by object (background last), row-major inside a group, as structures of
-/// arrays with their occluders' light-independent terms (`shadows`: the scene can shadow at all).
-/// `solve[i]` says whether pixel i may inform the closed-form products; `footprint[i]` (all pixels, or
-/// none) its footprint axes; each object's pixels carry the factor of `sky` (none, the sky view, or 1
-/// for ambient light), with `bounce` their gathers.
-#[allow(clippy::too_many_arguments)]
+/// The pixels a kernel groups: each one's first hit and objective, whether it may inform the closed-form
+/// products, and its footprint axes (all pixels, or none: shadow edges at pixel centres).
+#[derive(Clone, Copy)]
+pub struct PixelSet<'a> {
+    pub surfels: &'a [Surfel],
+    pub targets: &'a [Vec3A],
+    pub solve: &'a [bool],
+    pub footprint: &'a [[Vec3A; 2]],
+}
+
+impl ActivePixels {
+    /// These pixels as a kernel groups them.
+    pub fn set(&self) -> PixelSet<'_> {
+        PixelSet {
+            surfels: &self.surfels,
+            targets: &self.targets,
+            solve: &self.solve,
+            footprint: &self.footprint,
+        }
+    }
+}
+
+/// The `pixels` grouped by object (background last), row-major inside a group, as structures of arrays
+/// with their occluders' light-independent terms (`shadows`: the scene can shadow at all); each
+/// object's pixels carry the factor of `sky` (none, the sky view, or 1 for ambient light), with
+/// `bounce` their gathers.
 pub(crate) fn group(
-    surfels: &[Surfel],
-    targets: &[Vec3A],
-    solve: &[bool],
-    footprint: &[[Vec3A; 2]],
+    pixels: PixelSet,
     shapes: &[PShape],
     shadows: bool,
     sky: Sky,
     bounce: bool,
 ) -> Vec<Group> {
+    let PixelSet {
+        surfels,
+        targets,
+        solve,
+        footprint,
+    } = pixels;
     // Pixels grouped by object (background last), row-major inside a group: a counting sort.
     let slot = |o: u32| {
         if o == u32::MAX {
