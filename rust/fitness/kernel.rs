@@ -8,7 +8,7 @@ use glam::Vec3A;
 use super::light_terms::{irradiance, shadow};
 use super::lobe::{coat_factors, half_cos};
 use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, SATURATED};
-use super::pixels::{gathers, group, Gather, Group, Light, Sky, BLOCK};
+use super::pixels::{gathers, group, Gather, Group, Light, PixelSet, Sky, BLOCK};
 use super::simd::{self, Simd};
 use crate::render::bounce::{table_points, TABLE};
 use crate::render::brdf::{lambert, specular_scale};
@@ -31,23 +31,16 @@ pub struct Kernel {
 }
 
 impl Kernel {
-    /// `surfels` and `targets` are the active pixels; `shapes` the scene's shapes.
-    /// `solve[i]` says whether pixel i may inform the closed-form products (see `projected`);
-    /// `footprint[i]` its footprint axes (empty: shadow edges at pixel centres); `sky` is the
+    /// `pixels` are the active pixels ([`PixelSet`]); `shapes` the scene's shapes; `sky` is the
     /// constant-radiance term modelled (see [`Sky`]: each pixel's factor for it is kept).
     pub fn new(
-        surfels: &[Surfel],
-        targets: &[Vec3A],
-        solve: &[bool],
-        footprint: &[[Vec3A; 2]],
+        pixels: PixelSet,
         shapes: &[PShape],
         shadows: bool,
         sky: Sky,
         bounce: bool,
     ) -> Kernel {
-        let groups = group(
-            surfels, targets, solve, footprint, shapes, shadows, sky, bounce,
-        );
+        let groups = group(pixels, shapes, shadows, sky, bounce);
         let tables = if bounce {
             shapes
                 .iter()
@@ -61,9 +54,7 @@ impl Kernel {
                                 normal,
                                 view: normal,
                                 object: k as u32,
-                                eps: 64.0
-                                    * f32::EPSILON
-                                    * (position.abs().max_element() + shape.scale()),
+                                eps: Surfel::eps_at(position.abs().max_element() + shape.scale()),
                             })
                             .collect();
                         let idx: Vec<usize> = (0..at.len()).collect();
@@ -80,7 +71,7 @@ impl Kernel {
             norm: Norm::L1,
             space: Space::Linear,
             groups,
-            pixels: surfels.len(),
+            pixels: pixels.surfels.len(),
             saturated: SATURATED,
         }
     }

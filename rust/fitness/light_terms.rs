@@ -6,8 +6,9 @@
 use glam::Vec3A;
 use rayon::prelude::*;
 
-use super::pixels::{offset, Gather, Group, Light, SphereOccluder, BLOCK};
-use crate::geometry::sphere::segment_meets_sphere;
+use super::pixels::{offset, Gather, Group, Light, PlaneOccluder, SphereOccluder, BLOCK};
+use crate::geometry::plane;
+use crate::geometry::sphere::{line_to_sphere, segment_meets_sphere, Chord};
 use crate::render::brdf::lambert;
 use crate::render::footprint::{near_sphere_edge, sphere_edge_lit, terminator_cos};
 use crate::render::light::{directional_irradiance, point_irradiance, point_irradiance_in, Lanes};
@@ -223,16 +224,16 @@ impl Lanes for std::arch::x86_64::__m256 {
     }
 }
 
-/// The segment x(t) = p + t·d, t in [0, 1], d = l - p, against the sphere |x - c|² = r²: a = |d|² and
-/// b = (p - c)·d, the terms `segment_meets_sphere` takes.
+/// The segment x(t) = p + t·d, t in [0, 1], d = l - p, against the sphere of centre `c` and squared
+/// radius `r2`: a = |d|² and the line's chord, the terms `segment_meets_sphere` takes.
 #[inline(always)]
-fn segment_to_sphere(p: [f32; 3], l: [f32; 3], c: [f32; 3]) -> (f32, f32) {
-    let dx = l[0] - p[0];
-    let dy = l[1] - p[1];
-    let dz = l[2] - p[2];
-    let a = dx * dx + dy * dy + dz * dz;
-    let b = (p[0] - c[0]) * dx + (p[1] - c[1]) * dy + (p[2] - c[2]) * dz;
-    (a, b)
+fn segment_to_sphere(p: [f32; 3], l: [f32; 3], c: [f32; 3], r2: f32) -> (f32, Chord) {
+    let d = [l[0] - p[0], l[1] - p[1], l[2] - p[2]];
+    let a = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+    (
+        a,
+        line_to_sphere([p[0] - c[0], p[1] - c[1], p[2] - c[2]], d, a, r2),
+    )
 }
 
 /// Zero `e` where the segment from the pixel to the light is blocked by another object.
@@ -268,12 +269,11 @@ pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mu
         {
             continue;
         }
-        let cc = &s.c[r.start..][..n];
-        let [cx, cy, cz] = s.center;
+        let (c, r2) = (s.center, s.radius * s.radius);
         if g.spread.is_empty() {
             for i in 0..n {
-                let (a, b) = segment_to_sphere([px[i], py[i], pz[i]], [lx, ly, lz], [cx, cy, cz]);
-                let hit = segment_meets_sphere::<true>(a, b, cc[i]);
+                let (a, chord) = segment_to_sphere([px[i], py[i], pz[i]], light.pos, c, r2);
+                let hit = segment_meets_sphere(chord, a, (0.0, 1.0));
                 e[i] = if hit { 0.0 } else { e[i] };
             }
             continue;
@@ -285,9 +285,9 @@ pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mu
         let mut span = (u32::MAX, 0u32);
         let rad = s.radius;
         for i in 0..n {
-            let (a, b) = segment_to_sphere([px[i], py[i], pz[i]], [lx, ly, lz], [cx, cy, cz]);
-            let hit = segment_meets_sphere::<true>(a, b, cc[i]);
-            let edge = near_sphere_edge::<true>(a, b, cc[i], spread[i], rad) & (e[i] > 0.0);
+            let (a, chord) = segment_to_sphere([px[i], py[i], pz[i]], light.pos, c, r2);
+            let hit = segment_meets_sphere(chord, a, (0.0, 1.0));
+            let edge = near_sphere_edge::<true>(a, chord, spread[i], rad) & (e[i] > 0.0);
             mark(edge, i, &mut near, &mut span);
             e[i] = if hit & !edge { 0.0 } else { e[i] };
         }
@@ -297,10 +297,18 @@ pub(crate) fn shadow(g: &Group, r: std::ops::Range<usize>, light: &Light, e: &mu
         let side_l = pl.normal[0] * (lx - pl.point[0])
             + pl.normal[1] * (ly - pl.point[1])
             + pl.normal[2] * (lz - pl.point[2]);
-        let side = &pl.side[r.start..][..n];
-        for i in 0..n {
-            e[i] = if side[i] * side_l < 0.0 { 0.0 } else { e[i] };
-        }
+        plane_shadow(pl, r.start, side_l, e);
+    }
+}
+
+/// Zero `e` (the pixels of a block from `start`) where plane `pl` lies between the pixel and the light:
+/// the pixel's side and `side_l`, the light's (for a directional light, n·d: the side the ray heads to),
+/// differ in sign.
+#[inline(always)]
+fn plane_shadow(pl: &PlaneOccluder, start: usize, side_l: f32, e: &mut [f32]) {
+    let side = &pl.side[start..][..e.len()];
+    for (e, &s) in e.iter_mut().zip(side) {
+        *e = if plane::crosses(s, side_l) { 0.0 } else { *e };
     }
 }
 
@@ -362,19 +370,18 @@ pub(crate) fn shadow_directional(g: &Group, r: std::ops::Range<usize>, d: [f32; 
         &g.p[2][r.start..][..n],
     );
     for s in &g.spheres {
-        let cc = &s.c[r.start..][..n];
-        let [cx, cy, cz] = s.center;
+        let ([cx, cy, cz], r2) = (s.center, s.radius * s.radius);
         let mut near = [0u32; BLOCK];
         let mut span = (u32::MAX, 0u32);
         let footprint = !g.spread.is_empty();
         for i in 0..n {
-            // |d| = 1: blocked when the far root of t² + 2bt + c = 0 is positive.
-            let b = (px[i] - cx) * d[0] + (py[i] - cy) * d[1] + (pz[i] - cz) * d[2];
-            let hit = segment_meets_sphere::<false>(1.0, b, cc[i]);
+            // |d| = 1: the ray t in (0, inf).
+            let chord = line_to_sphere([px[i] - cx, py[i] - cy, pz[i] - cz], d, 1.0, r2);
+            let hit = segment_meets_sphere(chord, 1.0, (0.0, f32::INFINITY));
             // As for a point light (`shadow`), with a = 1 and the ray's whole move.
             let edge = footprint && {
                 let w = g.spread[r.start + i];
-                near_sphere_edge::<false>(1.0, b, cc[i], w, s.radius) & (e[i] > 0.0)
+                near_sphere_edge::<false>(1.0, chord, w, s.radius) & (e[i] > 0.0)
             };
             mark(edge, i, &mut near, &mut span);
             e[i] = if hit & !edge { 0.0 } else { e[i] };
@@ -384,10 +391,7 @@ pub(crate) fn shadow_directional(g: &Group, r: std::ops::Range<usize>, d: [f32; 
     for pl in &g.planes {
         // The ray heads towards the plane's other side when n·d and the pixel's side differ in sign.
         let side_l = pl.normal[0] * d[0] + pl.normal[1] * d[1] + pl.normal[2] * d[2];
-        let side = &pl.side[r.start..][..n];
-        for i in 0..n {
-            e[i] = if side[i] * side_l < 0.0 { 0.0 } else { e[i] };
-        }
+        plane_shadow(pl, r.start, side_l, e);
     }
 }
 

@@ -34,7 +34,7 @@ pub use line_min::{encoded_line_min, l1_line_min, EncodedTerm};
 use loss::penalty_sums;
 pub use loss::{Norm, Space, SrgbLut, SATURATED};
 pub use pixels::Sky;
-pub use pixels::{interior, interior_by, ActivePixels};
+pub use pixels::{interior, interior_by, ActivePixels, PixelSet};
 pub use projected::{Gauge, Projection, Solved};
 pub use simd::{path as simd_path, scalar_paths};
 pub use solve::{closed_form, fallback_sums, solve_object, SolveSums};
@@ -359,10 +359,7 @@ impl Fitness {
             early_exit: true,
             base,
             kernel: Kernel::new(
-                &active.surfels,
-                &active.targets,
-                &active.solve,
-                &active.footprint,
+                active.set(),
                 &geometry.shapes,
                 scene.can_occlude(),
                 environment,

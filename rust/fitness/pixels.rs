@@ -5,7 +5,6 @@
 use glam::Vec3A;
 use rayon::prelude::*;
 
-use crate::geometry::sphere::sphere_power;
 use crate::render::bounce::{gather, nearest_table};
 use crate::render::environment::sky_view;
 use crate::render::footprint;
@@ -138,8 +137,6 @@ pub const BLOCK: usize = 64;
 pub(crate) struct SphereOccluder {
     pub(crate) center: [f32; 3],
     pub(crate) radius: f32,
-    /// |p - c|² - r² per pixel of the group.
-    pub(crate) c: Vec<f32>,
 }
 
 #[derive(Clone)]
@@ -299,7 +296,13 @@ pub(crate) fn gathers(
                     .collect(),
                 PShape::Plane { .. } | PShape::Mesh(_) => Vec::new(),
             };
-            let mut g = group(&pts, &zeros, &solve, &[], shapes, shadows, sky, false);
+            let pixels = PixelSet {
+                surfels: &pts,
+                targets: &zeros,
+                solve: &solve,
+                footprint: &[],
+            };
+            let mut g = group(pixels, shapes, shadows, sky, false);
             Gather {
                 sender: k,
                 pixel,
@@ -351,22 +354,45 @@ pub(super) fn offset(l: [f32; 3], point: f32, p: [f32; 3]) -> [f32; 3] {
     ]
 }
 
-/// The active pixels grouped by object (background last), row-major inside a group, as structures of
-/// arrays with their occluders' light-independent terms (`shadows`: the scene can shadow at all).
-/// `solve[i]` says whether pixel i may inform the closed-form products; `footprint[i]` (all pixels, or
-/// none) its footprint axes; each object's pixels carry the factor of `sky` (none, the sky view, or 1
-/// for ambient light), with `bounce` their gathers.
-#[allow(clippy::too_many_arguments)]
+/// The pixels a kernel groups: each one's first hit and objective, whether it may inform the closed-form
+/// products, and its footprint axes (all pixels, or none: shadow edges at pixel centres).
+#[derive(Clone, Copy)]
+pub struct PixelSet<'a> {
+    pub surfels: &'a [Surfel],
+    pub targets: &'a [Vec3A],
+    pub solve: &'a [bool],
+    pub footprint: &'a [[Vec3A; 2]],
+}
+
+impl ActivePixels {
+    /// These pixels as a kernel groups them.
+    pub fn set(&self) -> PixelSet<'_> {
+        PixelSet {
+            surfels: &self.surfels,
+            targets: &self.targets,
+            solve: &self.solve,
+            footprint: &self.footprint,
+        }
+    }
+}
+
+/// The `pixels` grouped by object (background last), row-major inside a group, as structures of arrays
+/// with their occluders' light-independent terms (`shadows`: the scene can shadow at all); each
+/// object's pixels carry the factor of `sky` (none, the sky view, or 1 for ambient light), with
+/// `bounce` their gathers.
 pub(crate) fn group(
-    surfels: &[Surfel],
-    targets: &[Vec3A],
-    solve: &[bool],
-    footprint: &[[Vec3A; 2]],
+    pixels: PixelSet,
     shapes: &[PShape],
     shadows: bool,
     sky: Sky,
     bounce: bool,
 ) -> Vec<Group> {
+    let PixelSet {
+        surfels,
+        targets,
+        solve,
+        footprint,
+    } = pixels;
     // Pixels grouped by object (background last), row-major inside a group: a counting sort.
     let slot = |o: u32| {
         if o == u32::MAX {
@@ -494,10 +520,6 @@ pub(crate) fn group(
                         PShape::Sphere { center, radius } => g.spheres.push(SphereOccluder {
                             center: center.to_array(),
                             radius,
-                            c: idx
-                                .iter()
-                                .map(|&i| sphere_power(surfels[i].position - center, radius))
-                                .collect(),
                         }),
                         PShape::Plane { point, normal } => g.planes.push(PlaneOccluder {
                             normal: normal.to_array(),

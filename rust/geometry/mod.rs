@@ -1,9 +1,10 @@
 //! The shapes' geometry below both the scene format and the renderer: the hit record, the ray–sphere
-//! tests and triangle meshes with their BVH. It knows nothing of scenes or shading.
+//! and ray–plane tests and triangle meshes with their BVH. It knows nothing of scenes or shading.
 
 use glam::Vec3A;
 
 pub mod mesh;
+pub mod plane;
 pub mod sphere;
 
 /// A ray–shape hit: distance along the (unit) ray and the outward/geometric normal.

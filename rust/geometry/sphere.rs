@@ -2,7 +2,8 @@
 //!
 //! The sphere test never forms the textbook discriminant `b² - c` (which cancels catastrophically when
 //! the sphere is small and far away, e.g. a telephoto view); it measures the squared distance from the
-//! centre to the ray's line directly, `r² - |oc - (oc·d)d|²`, and takes the roots in the stable form
+//! centre to the ray's line directly, `r² - |oc - (oc·d)d|²` ([`line_to_sphere`], which every sphere test
+//! here and in the fitness kernel's shadow lanes starts from), and takes the roots in the stable form
 //! `q = -b - sign(b)·√disc`, `t0 = c/q`, `t1 = q`. The hit point is returned relative to the centre as
 //! `f ∓ √disc·d`, so normals stay accurate even when `t` is large.
 
@@ -18,9 +19,10 @@ pub fn intersect(
     (tmin, tmax): (f32, f32),
 ) -> Option<ShapeHit> {
     let oc = origin - center;
-    let (b, f) = closest(oc, dir);
-    let r2 = radius * radius;
-    let disc = r2 - f.length_squared();
+    let Chord { b, mid, disc } =
+        line_to_sphere(oc.to_array(), dir.to_array(), 1.0, radius * radius);
+    // f = oc - b·d (unit `dir`: mid = -b), the line's closest point to the centre, from it.
+    let f = oc + mid * dir;
     if disc < 0.0 {
         return None;
     }
@@ -59,23 +61,46 @@ pub fn hits_segment(
     (origin, dir): (Vec3A, Vec3A),
     (tmin, tmax): (f32, f32),
 ) -> bool {
-    let (b, f) = closest(origin - center, dir);
-    let disc = radius * radius - f.length_squared();
-    if disc < 0.0 {
-        return false;
-    }
-    let sq = disc.sqrt();
-    // The chord is t in [-b - sq, -b + sq]; it overlaps (tmin, tmax)?
-    let (t0, t1) = (-b - sq, -b + sq);
-    t1 > tmin && t0 < tmax
+    let (oc, d) = ((origin - center).to_array(), dir.to_array());
+    segment_meets_sphere(
+        line_to_sphere(oc, d, 1.0, radius * radius),
+        1.0,
+        (tmin, tmax),
+    )
 }
 
-/// b = oc·d and f = oc - b·d for the offset `oc` from the centre and the unit `dir`: the line's closest
-/// point to the centre, from it.
+/// The line x(t) = p + t·d against a sphere: b = (p - c)·d, the middle of the chord t = -b/a (a = |d|²)
+/// and `disc` = r² - h², h the line's distance from the centre.
+#[derive(Clone, Copy, Debug)]
+pub struct Chord {
+    pub b: f32,
+    pub mid: f32,
+    pub disc: f32,
+}
+
+/// The [`Chord`] of the line x(t) = p + t·d, from the offset `oc` = p - c of its start from the centre,
+/// `d`, a = |d|² and r². h is measured directly as |oc + mid·d| (never as the difference b² - ac of two
+/// large terms, which cancels when the sphere is small and far); the chord is mid ± √(disc/a) where
+/// disc ≥ 0. Per component, so the fitness kernel's lane loops call it per lane.
 #[inline(always)]
-fn closest(oc: Vec3A, dir: Vec3A) -> (f32, Vec3A) {
-    let b = oc.dot(dir);
-    (b, oc - b * dir)
+pub fn line_to_sphere(oc: [f32; 3], d: [f32; 3], a: f32, r2: f32) -> Chord {
+    let b = oc[0] * d[0] + oc[1] * d[1] + oc[2] * d[2];
+    let s = b / a;
+    let f = [oc[0] - s * d[0], oc[1] - s * d[1], oc[2] - s * d[2]];
+    Chord {
+        b,
+        mid: -s,
+        disc: r2 - (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]),
+    }
+}
+
+/// Whether the open segment t in (`tmin`, `tmax`) of a line meets a sphere, from the line's [`Chord`]
+/// and a = |d|²: the chord is real and overlaps the range. Branch-free: the one sphere occlusion test, of
+/// the renderer's shadow rays and of the fitness kernel's lanes.
+#[inline(always)]
+pub fn segment_meets_sphere(c: Chord, a: f32, (tmin, tmax): (f32, f32)) -> bool {
+    let half = (c.disc / a).sqrt();
+    (c.disc >= 0.0) & (c.mid + half > tmin) & (c.mid - half < tmax)
 }
 
 /// |oc|² - r² for the offset `oc` from a sphere's centre (the power of the point), factored to keep its
@@ -84,19 +109,4 @@ fn closest(oc: Vec3A, dir: Vec3A) -> (f32, Vec3A) {
 pub fn sphere_power(oc: Vec3A, radius: f32) -> f32 {
     let l = oc.length();
     (l - radius) * (l + radius)
-}
-
-/// Whether the segment x(t) = p + t·d, t in (0, 1) (in (0, ∞) without `BOUNDED`), meets a sphere, from
-/// a = |d|², b = (p - c)·d and the power c = |p - c|² - r²: the roots (-b ± √(b² - ac))/a are real, the
-/// far one is > 0 and (bounded) the near one < 1. Branch-free, for the fitness kernel's lane loops.
-#[inline(always)]
-pub fn segment_meets_sphere<const BOUNDED: bool>(a: f32, b: f32, c: f32) -> bool {
-    let disc = b * b - a * c;
-    let far_positive = (b < 0.0) | (c < 0.0);
-    if !BOUNDED {
-        return (disc >= 0.0) & far_positive;
-    }
-    let ab = a + b;
-    let near_below_one = (ab > 0.0) | (disc > ab * ab);
-    (disc >= 0.0) & far_positive & near_below_one
 }

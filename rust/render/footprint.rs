@@ -4,6 +4,8 @@
 
 use glam::Vec3A;
 
+use crate::geometry::sphere::Chord;
+
 use super::camera::CameraFrame;
 use super::hit::Surfel;
 use super::shape::PShape;
@@ -103,14 +105,13 @@ pub fn edge_between<const BOUNDED: bool>(a: f32, b: f32) -> bool {
 }
 
 /// Whether a pixel whose footprint reaches `w` from its centre may cross the shadow edge of a sphere of
-/// `radius`, from a = |d|², b = (p - c)·d and the power c = |p - c|² - r² (the terms of
-/// `geometry::sphere::segment_meets_sphere`): the edge lies between the point and the light
-/// ([`edge_between`]) and the line's distance h from the centre is within w of the radius,
-/// |h² - r²| = |b² - ac| / a < 2rw + w² (w bounds the line's move across the pixel).
+/// `radius`, from a = |d|² and the line's [`Chord`] (`geometry::sphere::line_to_sphere`): the edge lies
+/// between the point and the light ([`edge_between`]) and the line's distance h from the centre is within
+/// w of the radius, |r² - h²| < 2rw + w² (w bounds the line's move across the pixel).
 #[inline(always)]
-pub fn near_sphere_edge<const BOUNDED: bool>(a: f32, b: f32, c: f32, w: f32, radius: f32) -> bool {
-    let close = (b * b - a * c).abs() < a * w * (2.0 * radius + w);
-    close & edge_between::<BOUNDED>(a, b)
+pub fn near_sphere_edge<const BOUNDED: bool>(a: f32, c: Chord, w: f32, radius: f32) -> bool {
+    let close = c.disc.abs() < w * (2.0 * radius + w);
+    close & edge_between::<BOUNDED>(a, c.b)
 }
 
 /// The pixel mean of max(0, n·l) on a sphere of `radius` (unit `n`, unit `l` towards the light,

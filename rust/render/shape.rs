@@ -1,13 +1,12 @@
-//! The renderer's shapes (spheres, planes, meshes) and their ray tests; the sphere's and the mesh's are
-//! `geometry`'s.
+//! The renderer's shapes (spheres, planes, meshes) and their ray tests, which are `geometry`'s.
 
 use std::sync::Arc;
 
 use glam::Vec3A;
 
 use crate::geometry::mesh::Mesh;
-use crate::geometry::sphere;
 use crate::geometry::ShapeHit;
+use crate::geometry::{plane, sphere};
 use crate::scene::Shape;
 
 /// A shape in the renderer's working form.
@@ -59,20 +58,7 @@ impl PShape {
                 sphere::intersect((center, radius), (origin, dir), (tmin, tmax))
             }
             PShape::Plane { point, normal } => {
-                let denom = normal.dot(dir);
-                if denom.abs() < 1e-12 {
-                    return None; // parallel: no hit (or the whole line, which has measure zero)
-                }
-                let t = normal.dot(point - origin) / denom;
-                if t > tmin && t < tmax {
-                    Some(ShapeHit {
-                        t,
-                        position: origin + t * dir,
-                        normal,
-                    })
-                } else {
-                    None
-                }
+                plane::intersect((point, normal), (origin, dir), (tmin, tmax))
             }
         }
     }
@@ -84,7 +70,9 @@ impl PShape {
             PShape::Sphere { center, radius } => {
                 sphere::hits_segment((center, radius), (origin, dir), (tmin, tmax))
             }
-            PShape::Plane { .. } => self.intersect(origin, dir, tmin, tmax).is_some(),
+            PShape::Plane { point, normal } => {
+                plane::hits_segment((point, normal), (origin, dir), (tmin, tmax))
+            }
             PShape::Mesh(ref m) => m.hits_segment(origin, dir, tmin, tmax),
         }
     }
@@ -108,7 +96,7 @@ pub(crate) fn ball_over_floor(y: f32, radius: f32) -> [PShape; 2] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::sphere::{segment_meets_sphere, sphere_power};
+    use crate::geometry::sphere::{line_to_sphere, segment_meets_sphere};
     use glam::DVec3;
 
     fn sphere(c: [f32; 3], r: f32) -> PShape {
@@ -132,6 +120,8 @@ mod tests {
         (t > 0.0).then(|| (t, (o + t * d - c) / r))
     }
 
+    /// The fitness kernel's form (t in (0, 1) along d = l - p, a = |d|²; the ray t in (0, inf) for a
+    /// directional light) decides as the renderer's unit-direction segment does.
     #[test]
     fn segment_test_agrees_with_the_ray_test() {
         let s = sphere([0.0, 1.0, 0.0], 0.5);
@@ -143,19 +133,22 @@ mod tests {
             ([0.0, 0.0, 0.0], [0.0, 0.2, 0.0]),
             ([3.0, 0.0, 0.0], [0.0, 2.0, 0.0]),
             ([0.0, 3.0, 0.0], [0.0, 4.0, 0.0]),
+            ([0.0, 3.0, 0.0], [0.0, -4.0, 0.0]),
         ] {
             let (p, l) = (Vec3A::from_array(p), Vec3A::from_array(l));
-            let d = l - p;
-            let (a, b, c) = (
-                d.length_squared(),
-                (p - center).dot(d),
-                sphere_power(p - center, radius),
-            );
+            let (d, oc, r2) = (l - p, (p - center).to_array(), radius * radius);
+            let a = d.length_squared();
+            let chord = line_to_sphere(oc, d.to_array(), a, r2);
             let want = s.hits_segment(p, d.normalize(), 0.0, d.length());
-            assert_eq!(segment_meets_sphere::<true>(a, b, c), want, "{p} -> {l}");
+            assert_eq!(
+                segment_meets_sphere(chord, a, (0.0, 1.0)),
+                want,
+                "{p} -> {l}"
+            );
             let ray = s.hits_segment(p, d.normalize(), 0.0, f32::INFINITY);
-            let (b1, c1) = ((p - center).dot(d.normalize()), c);
-            assert_eq!(segment_meets_sphere::<false>(1.0, b1, c1), ray, "{p} ray");
+            let unit = line_to_sphere(oc, d.normalize().to_array(), 1.0, r2);
+            let got = segment_meets_sphere(unit, 1.0, (0.0, f32::INFINITY));
+            assert_eq!(got, ray, "{p} ray");
         }
     }
 
