@@ -30,20 +30,18 @@ import numpy as np
 
 import rtloop
 
-from ._common import AcquisitionError, check_image, jsonable, to_display_bgr8
-from .ball import BallSilhouette, SpherePlacement, locate_ball, silhouette_polyline
+from ._common import AcquisitionError, check_image, jsonable
+from .ball import BallSilhouette, SpherePlacement, locate_ball
 from .boards import BoardSpec, parse_board
 from .calibration import CameraIntrinsics, PinholeRemap
 from .camera import focal_from_vfov
 from .colour import ColourCorrection, colorchecker_correction, grey_card_balance
 from .exif import ExifFocal
 from .focal import field_of_view_record, refine_vfov_by_ball, scan_vfov_for_ball
+from .overlay import OVERLAY_MAX_SIDE, _board_outline_px, draw_overlay  # noqa: F401 (re-exported)
 from .pose import VFOV_TARGET_DEG, FloorPose, estimate_floor_pose
 
 __all__ = ["AcquiredScene", "build_scene", "draw_overlay", "fit_section"]
-
-#: Longest side of the overlay image (pixels); larger photos are drawn scaled down.
-OVERLAY_MAX_SIDE = 1600
 
 
 @dataclass
@@ -118,27 +116,14 @@ def loose_view_warning(where: str, vfov_deg: float, vfov_std_deg: float, focal_p
 
 
 def build_scene(
-    photo: np.ndarray,
-    board: BoardSpec | str | dict,
-    ball_radius: float,
-    *,
-    intrinsics: CameraIntrinsics | None = None,
-    vfov_deg: float | None = None,
-    exif: ExifFocal | None = None,
-    objective: np.ndarray | None = None,
-    colour: str | tuple | ColourCorrection | None = None,
-    ball_hint: tuple[float, float, float] | None = None,
-    ball_mask: np.ndarray | None = None,
-    resting: bool = True,
-    width: int = 160,
-    light_range: float = 2.0,
+    photo: np.ndarray, board: BoardSpec | str | dict, ball_radius: float, *,
+    intrinsics: CameraIntrinsics | None = None, vfov_deg: float | None = None, exif: ExifFocal | None = None,
+    objective: np.ndarray | None = None, colour: str | tuple | ColourCorrection | None = None,
+    ball_hint: tuple[float, float, float] | None = None, ball_mask: np.ndarray | None = None,
+    resting: bool = True, width: int = 160, light_range: float = 2.0,
     names: tuple[str, str] = ("ball", "floor"),
-    board_margin: float | None = None,
-    card_reflectance: float | None = None,
-    room: bool = True,
-    where: str = "photo",
-    objective_where: str = "objective",
-    strict: bool = False,
+    board_margin: float | None = None, card_reflectance: float | None = None, room: bool = True,
+    where: str = "photo", objective_where: str = "objective", strict: bool = False,
 ) -> AcquiredScene:
     """Build the scene from one photo (board + ball on the floor), optionally fitting another.
 
@@ -175,6 +160,85 @@ def build_scene(
     Raises:
         AcquisitionError: any step failed; the message says which and what to do.
     """
+    photo, objective, spec = _check_inputs(
+        photo, objective, board, width, light_range, colour, card_reflectance, where, objective_where
+    )
+    h, w = photo.shape[:2]
+    same, notes = objective is photo, []
+    correction, photo, objective = _correct_colour(photo, objective, same, colour, where)
+    remap, focal, focal_source, photo, objective = _camera_model(
+        photo, objective, same, intrinsics, vfov_deg, exif, where
+    )
+    pose = _pose_camera(photo, spec, focal, focal_source, where, strict, notes, h)
+    mask, hint = _ball_mask_and_hint(ball_mask, ball_hint, remap, w, h)
+    silhouette, sphere, locate, scanned = _locate_ball(
+        photo, pose, spec, ball_radius, hint, mask, resting, focal_source, where
+    )
+    pose, silhouette, sphere, refinement = _refine_field_of_view(
+        photo, spec, ball_radius, pose, silhouette, sphere, locate, focal_source, where, notes, h, scanned
+    )
+    _ball_notes(silhouette, sphere, ball_radius, resting, notes)
+    scene = _scene_dict(objective, pose, sphere.centre, ball_radius, width, light_range, names, room, w, h)
+    scene["meta"] = {"acquisition": jsonable(_acquisition_report(
+        photo, spec, pose, silhouette, sphere, correction, ball_radius, refinement, locate,
+        focal_source, exif, intrinsics, names[0], where, notes, w, h,
+    ))}
+    rtloop.load_scene(scene)  # validates: a failure here is a bug, not bad input
+    overlay = draw_overlay(photo, scene, pose, silhouette)
+    unmodelled, card = _masks(
+        scene, pose, spec, correction, remap, photo, same, board_margin, card_reflectance, w, h
+    )
+    return AcquiredScene(
+        scene, objective, photo, pose, silhouette, sphere, correction, overlay, notes, unmodelled, card
+    )
+
+
+def _masks(
+    scene: dict[str, Any],
+    pose: FloorPose,
+    spec: BoardSpec,
+    correction: ColourCorrection,
+    remap: PinholeRemap | None,
+    photo: np.ndarray,
+    same: bool,
+    board_margin: float | None,
+    card_reflectance: float | None,
+    w: int,
+    h: int,
+) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Step 6, the masks: what the scene models of the photo to fit, when that is the board photo
+    (``same``), and the grey card's pixels, when its reflectance is known (then recorded in the scene's
+    ``meta.acquisition.grey_card``). Returns both, None where not made."""
+    unmodelled = None
+    if same:  # the board is in the photo to fit: leave it (and the colour target) out of the fit
+        margin = spec.square_m if board_margin is None else float(board_margin)
+        if not (math.isfinite(margin) and margin >= 0):
+            raise AcquisitionError(f"board margin must be 0 or more metres (got {board_margin})")
+        unmodelled = unmodelled_mask(pose, margin, correction, remap, w, h, photo)
+    card = None
+    if card_reflectance is not None:
+        card = card_pixels(correction.details["rect"], remap, w, h)
+        scene["meta"]["acquisition"]["grey_card"] = {
+            "reflectance": float(card_reflectance),
+            "rect_px": list(correction.details["rect"]),
+        }
+    return unmodelled, card
+
+
+def _check_inputs(
+    photo: np.ndarray,
+    objective: np.ndarray | None,
+    board: BoardSpec | str | dict,
+    width: int,
+    light_range: float,
+    colour: str | tuple | ColourCorrection | None,
+    card_reflectance: float | None,
+    where: str,
+    objective_where: str,
+) -> tuple[np.ndarray, np.ndarray, BoardSpec]:
+    """Check :func:`build_scene`'s arguments: the photos (the objective defaults to the photo itself, the
+    same object), the scene's width, the light's range, the board and the grey card's reflectance. Returns
+    the checked photo, objective and board."""
     photo = check_image(photo, where)
     h, w = photo.shape[:2]
     if objective is None:
@@ -192,7 +256,6 @@ def build_scene(
     if not (math.isfinite(light_range) and 0.25 <= light_range <= 100):
         raise AcquisitionError(f"light range must be between 0.25 and 100 (got {light_range}); 2 is typical")
     spec = parse_board(board)
-    notes: list[str] = []
     if card_reflectance is not None:
         if not (math.isfinite(card_reflectance) and 0 < card_reflectance <= 1):
             raise AcquisitionError(
@@ -207,8 +270,18 @@ def build_scene(
                 "a grey card reflectance needs the card in the photo to fit: leave out --objective (the board "
                 "and the card are masked out of the fit), or leave the card in the second photo and fit that"
             )
+    return photo, objective, spec
 
-    # 1. Colour, measured on the photo as given, applied in linear light.
+
+def _correct_colour(
+    photo: np.ndarray,
+    objective: np.ndarray,
+    same: bool,
+    colour: str | tuple | ColourCorrection | None,
+    where: str,
+) -> tuple[ColourCorrection, np.ndarray, np.ndarray]:
+    """Step 1, colour: measured on the photo as given, applied in linear light to the photo and the
+    objective (``same``: the objective is the photo). Returns the correction and both photos."""
     if colour is None:
         correction = ColourCorrection.identity()
     elif isinstance(colour, ColourCorrection):
@@ -217,12 +290,25 @@ def build_scene(
         correction = colorchecker_correction(photo, where=where)
     else:
         correction = grey_card_balance(photo, colour, where=where)
-    same = objective is photo
     if correction.source != "none":
         photo = correction.apply(photo)
         objective = photo if same else correction.apply(objective)
+    return correction, photo, objective
 
-    # 2. The camera model.
+
+def _camera_model(
+    photo: np.ndarray,
+    objective: np.ndarray,
+    same: bool,
+    intrinsics: CameraIntrinsics | None,
+    vfov_deg: float | None,
+    exif: ExifFocal | None,
+    where: str,
+) -> tuple[PinholeRemap | None, float | None, str, np.ndarray, np.ndarray]:
+    """Step 2, the camera model: with a calibration, undistort both photos to a pinhole; else the focal
+    length from the given field of view, from EXIF, or none (the board estimates it). Returns the remap
+    (None without a calibration), the focal length in pixels, where it came from, and both photos."""
+    h, w = photo.shape[:2]
     remap = None
     if intrinsics is not None:
         remap = PinholeRemap(intrinsics, w, h, where)
@@ -239,8 +325,21 @@ def build_scene(
         focal, focal_source = exif.focal_px, "exif"
     else:
         focal, focal_source = None, "board"
+    return remap, focal, focal_source, photo, objective
 
-    # 3. The board: camera and floor.
+
+def _pose_camera(
+    photo: np.ndarray,
+    spec: BoardSpec,
+    focal: float | None,
+    focal_source: str,
+    where: str,
+    strict: bool,
+    notes: list[str],
+    h: int,
+) -> FloorPose:
+    """Step 3, the board: the camera's pose and the floor, with notes on a focal length from the board
+    alone and on a poor reprojection appended to ``notes`` (``h``: the photo's height)."""
     pose = estimate_floor_pose(photo, spec, focal_px=focal, focal_source=focal_source, where=where, strict=strict)
     camera = pose.camera
     if focal_source == "board" and pose.vfov_std_deg is not None and pose.vfov_std_deg > VFOV_TARGET_DEG:
@@ -257,8 +356,18 @@ def build_scene(
             "than 1 px): "
             "is the lens distortion calibrated, and does the board lie flat?"
         )
+    return pose
 
-    # 4. The ball.
+
+def _ball_mask_and_hint(
+    ball_mask: np.ndarray | None,
+    ball_hint: tuple[float, float, float] | None,
+    remap: PinholeRemap | None,
+    w: int,
+    h: int,
+) -> tuple[np.ndarray | None, tuple[float, float, float] | None]:
+    """The ball's mask and hint (pixels of the photo as given) moved into the undistorted photo; the mask
+    must have the photo's size."""
     hint = ball_hint
     if hint is not None and remap is not None:
         p = remap.points(np.array([[hint[0], hint[1]]]))[0]
@@ -272,11 +381,29 @@ def build_scene(
             )
         if remap is not None:
             mask = remap.mask(mask if mask.ndim == 2 else mask.max(axis=2))
+    return mask, hint
+
+
+def _locate_ball(
+    photo: np.ndarray,
+    pose: FloorPose,
+    spec: BoardSpec,
+    ball_radius: float,
+    hint: tuple[float, float, float] | None,
+    mask: np.ndarray | None,
+    resting: bool,
+    focal_source: str,
+    where: str,
+) -> tuple[BallSilhouette | None, SpherePlacement | None, dict[str, Any], tuple[float, Any] | None]:
+    """Step 4, the ball: its outline and the sphere, looked for beside the board. Returns them, the
+    search's settings (mask, resting, the board's outline to exclude, the board's area to keep off) and,
+    where a loose board's estimate shows no ball, the field of view and outline where it was found instead
+    (:func:`scan_vfov_for_ball`; the outline and sphere are then None)."""
+    camera = pose.camera
     bw, bh = spec.size_m
     locate = {"mask": mask, "resting": resting, "exclude": _board_outline_px(pose),
               "keep_off": (-bw / 2, bw / 2, -bh / 2, bh / 2)}
     loose = focal_source == "board" and (pose.vfov_std_deg or 0.0) > VFOV_TARGET_DEG
-    scanned = None
     try:
         silhouette, sphere = locate_ball(photo, camera, ball_radius, hint=hint, where=where, **locate)
     except AcquisitionError as exc:
@@ -288,30 +415,58 @@ def build_scene(
                 f"{' (nor at any from 8 to 100 deg)' if loose else ''}: give "
                 "--vfov or --camera, or use a photo whose EXIF has the focal length")
             raise AcquisitionError(f"{exc} (the ball is looked for beside the board, not on it{why})") from None
-        hint = scanned[1]
-    refinement = None
-    if loose:
-        # the board alone fixes the field of view loosely: refined from the ball resting on the floor
-        found = hint if scanned is not None else (
-            float(silhouette.centre_px[0]), float(silhouette.centre_px[1]), float(silhouette.radius_px))
-        refinement = refine_vfov_by_ball(photo, spec, ball_radius, pose, found, locate=locate, where=where,
-                                         centre=None if scanned is None else scanned[0])
-        chosen = refinement.vfov_deg if refinement is not None else None if scanned is None else scanned[0]
-        if chosen is not None:
-            std, board_vfov = pose.vfov_std_deg, camera.vfov_deg
-            pose = estimate_floor_pose(photo, spec, focal_px=focal_from_vfov(chosen, h), focal_source="board",
-                                       where=where)
-            pose.vfov_std_deg = std
-            camera = pose.camera
-            locate["exclude"] = _board_outline_px(pose)
-            silhouette, sphere = locate_ball(photo, camera, ball_radius, hint=found, where=where, **locate)
-            how = "refined from the ball resting on the floor to" if refinement is not None else (
-                "the ball resting on the floor found best at")
-            notes[:] = [n for n in notes if "no EXIF focal length" not in n]
-            notes.append(loose_view_warning(where, board_vfov, std, camera.focal_px, h)
-                         .replace("; give --vfov", f"; {how} {chosen:.2f} deg (where its outline fits best)"
-                                  f"{'' if scanned is None else ', not found at the board' + chr(39) + 's estimate'}"
-                                  "; give --vfov"))
+        return None, None, locate, scanned
+    return silhouette, sphere, locate, None
+
+
+def _refine_field_of_view(
+    photo: np.ndarray,
+    spec: BoardSpec,
+    ball_radius: float,
+    pose: FloorPose,
+    silhouette: BallSilhouette | None,
+    sphere: SpherePlacement | None,
+    locate: dict[str, Any],
+    focal_source: str,
+    where: str,
+    notes: list[str],
+    h: int,
+    scanned: tuple[float, Any] | None = None,
+) -> tuple[FloorPose, BallSilhouette, SpherePlacement, Any]:
+    """Step 4b, the field of view: when the board alone fixes it loosely (``focal_source`` "board", a spread
+    over ``VFOV_TARGET_DEG``), refined from the ball resting on the floor (the grid centred where
+    ``scanned`` found it, if given); the pose and the ball again at the refined focal length
+    (``locate["exclude"]`` updated) and the field-of-view note replaced in ``notes``. Returns the pose, the
+    ball and the refinement (None when not refined, and then the rest as given)."""
+    if not (focal_source == "board" and (pose.vfov_std_deg or 0.0) > VFOV_TARGET_DEG):
+        return pose, silhouette, sphere, None
+    found = scanned[1] if scanned is not None else (
+        float(silhouette.centre_px[0]), float(silhouette.centre_px[1]), float(silhouette.radius_px))
+    refinement = refine_vfov_by_ball(photo, spec, ball_radius, pose, found, locate=locate, where=where,
+                                     centre=None if scanned is None else scanned[0])
+    chosen = refinement.vfov_deg if refinement is not None else None if scanned is None else scanned[0]
+    if chosen is not None:
+        std, board_vfov = pose.vfov_std_deg, pose.camera.vfov_deg
+        pose = estimate_floor_pose(photo, spec, focal_px=focal_from_vfov(chosen, h), focal_source="board",
+                                   where=where)
+        pose.vfov_std_deg = std
+        locate["exclude"] = _board_outline_px(pose)
+        silhouette, sphere = locate_ball(photo, pose.camera, ball_radius, hint=found, where=where, **locate)
+        how = "refined from the ball resting on the floor to" if refinement is not None else (
+            "the ball resting on the floor found best at")
+        found_where = "" if scanned is None else ", not found at the board's estimate"
+        notes[:] = [n for n in notes if "no EXIF focal length" not in n]
+        notes.append(loose_view_warning(where, board_vfov, std, pose.camera.focal_px, h)
+                     .replace("; give --vfov", f"; {how} {chosen:.2f} deg (where its outline fits best)"
+                              f"{found_where}; give --vfov"))
+    return pose, silhouette, sphere, refinement
+
+
+def _ball_notes(
+    silhouette: BallSilhouette, sphere: SpherePlacement, ball_radius: float, resting: bool, notes: list[str]
+) -> None:
+    """Notes on a poorly fitted or poorly seen outline, and on a free ball that does not rest on the
+    floor, appended to ``notes``."""
     if silhouette.rms_px > 1.0:
         notes.append(
             f"the ball's outline fits its edge points with {silhouette.rms_px:.2f} px RMS (more than 1 px); "
@@ -328,12 +483,28 @@ def build_scene(
             "it does not rest on the floor, or the radius or the board is off"
         )
 
-    # 5. The scene.
+
+def _scene_dict(
+    objective: np.ndarray,
+    pose: FloorPose,
+    centre: np.ndarray,
+    ball_radius: float,
+    width: int,
+    light_range: float,
+    names: tuple[str, str],
+    room: bool,
+    w: int,
+    h: int,
+) -> dict[str, Any]:
+    """Step 5, the scene (``names``: the ball's and the floor's, which must differ): camera, floor,
+    sphere, a first guess of the light (above the ball, at an intensity that renders a white surface facing
+    it as bright as the objective's brightest pixels) and the ``fit`` section; with ``room``, the
+    environment and the interreflection too."""
     ball_name, floor_name = names
     if ball_name == floor_name:
         raise AcquisitionError("the ball and the floor need different names")
+    camera = pose.camera
     height = max(1, round(width * h / w))
-    centre = sphere.centre
     s = max(float(np.linalg.norm(camera.position - centre)), 4 * ball_radius)
     light_pos = np.array([centre[0], min(s, light_range * s), centre[2]])
     lum = objective @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
@@ -375,6 +546,32 @@ def build_scene(
     if room:
         scene["interreflection"] = True
         scene["fit"]["environment"] = {"min": [0.0, 0.0, 0.0], "max": [ROOM_LIGHT_MAX] * 3}
+    return scene
+
+
+def _acquisition_report(
+    photo: np.ndarray,
+    spec: BoardSpec,
+    pose: FloorPose,
+    silhouette: BallSilhouette,
+    sphere: SpherePlacement,
+    correction: ColourCorrection,
+    ball_radius: float,
+    refinement: Any,
+    locate: dict[str, Any],
+    focal_source: str,
+    exif: ExifFocal | None,
+    intrinsics: CameraIntrinsics | None,
+    ball_name: str,
+    where: str,
+    notes: list[str],
+    w: int,
+    h: int,
+) -> dict[str, Any]:
+    """The scene's ``meta.acquisition``: the photo's size, the camera model and where its focal length
+    came from, the colour correction, the pose, the ball, notes on the world and the fit, the warnings
+    (``notes`` itself) and the calibration used."""
+    camera = pose.camera
     report = {
         "photo_size": [w, h],
         "camera_model": focal_source,
@@ -403,25 +600,7 @@ def build_scene(
     }
     if intrinsics is not None:
         report["calibration"] = {"rms_px": intrinsics.rms_px, "image_size": list(intrinsics.image_size)}
-    scene["meta"] = {"acquisition": jsonable(report)}
-    rtloop.load_scene(scene)  # validates: a failure here is a bug, not bad input
-    overlay = draw_overlay(photo, scene, pose, silhouette)
-    unmodelled = None
-    if same:  # the board is in the photo to fit: leave it (and the colour target) out of the fit
-        margin = spec.square_m if board_margin is None else float(board_margin)
-        if not (math.isfinite(margin) and margin >= 0):
-            raise AcquisitionError(f"board margin must be 0 or more metres (got {board_margin})")
-        unmodelled = unmodelled_mask(pose, margin, correction, remap, w, h, photo)
-    card = None
-    if card_reflectance is not None:
-        card = card_pixels(correction.details["rect"], remap, w, h)
-        scene["meta"]["acquisition"]["grey_card"] = {
-            "reflectance": float(card_reflectance),
-            "rect_px": list(correction.details["rect"]),
-        }
-    return AcquiredScene(
-        scene, objective, photo, pose, silhouette, sphere, correction, overlay, notes, unmodelled, card
-    )
+    return report
 
 
 def card_pixels(rect: Any, remap: PinholeRemap | None, w: int, h: int) -> np.ndarray:
@@ -506,102 +685,3 @@ def _remapped_rect(rect: Any, remap: PinholeRemap) -> list[int]:
     x0, y0 = np.floor(p.min(axis=0)).astype(int)
     x1, y1 = np.ceil(p.max(axis=0)).astype(int)
     return [int(x0), int(y0), int(x1 - x0), int(y1 - y0)]
-
-
-def _board_outline_px(pose: FloorPose) -> np.ndarray:
-    bw, bh = pose.board.size_m
-    corners = np.array([[0, 0, 0], [bw, 0, 0], [bw, bh, 0], [0, bh, 0]], dtype=float)
-    return pose.camera.project(pose.board_to_world(corners))
-
-
-def draw_overlay(
-    photo: np.ndarray,
-    scene: dict[str, Any],
-    pose: FloorPose,
-    silhouette: BallSilhouette,
-) -> np.ndarray:
-    """The photo with the board's corners, outline and world axes, the ball's edge points and fitted
-    outline, and the ball's outline as rendered from ``scene`` (rtloop.object_ids)."""
-    h, w = photo.shape[:2]
-    scale = min(1.0, OVERLAY_MAX_SIDE / max(w, h))
-    ow, oh = max(1, round(w * scale)), max(1, round(h * scale))
-    img = cv2.resize(photo, (ow, oh), interpolation=cv2.INTER_AREA) if scale < 1 else photo
-    lum = img @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
-    top = float(np.percentile(lum, 99.0))
-    if 0 < top < 0.5:
-        img = img * (0.8 / top)  # brighten a dark photo, for seeing only
-    out = to_display_bgr8(img)
-    sx, sy = ow / w, oh / h
-    lw = max(1, round(max(ow, oh) / 800))
-
-    def px(points: np.ndarray) -> np.ndarray:
-        p = np.asarray(points, dtype=float).reshape(-1, 2)
-        q = np.column_stack([(p[:, 0] + 0.5) * sx - 0.5, (p[:, 1] + 0.5) * sy - 0.5])
-        return np.round(q * 16).astype(np.int32)  # 4 fractional bits for cv2's shift=4
-
-    # Rendered silhouette of the scene's ball (what rtloop will render); drawn last, below.
-    ids = rtloop.object_ids(scene, ow, oh)
-    ball_index = next(i for i, o in enumerate(scene["objects"]) if o["shape"] == "sphere")
-    ball_region = (ids == ball_index).astype(np.uint8)
-    contours, _ = cv2.findContours(ball_region, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-
-    # Board: outline, corners found, world axes at the origin (x red, y = up green, z blue).
-    cam = pose.camera
-    outline = _board_outline_px(pose)
-    cv2.polylines(out, [px(outline)], True, (0, 255, 255), lw, cv2.LINE_AA, shift=4)
-    for p in px(pose.detection.image_points):
-        cv2.circle(out, tuple(int(v) for v in p), 3 * 16 * lw // 2, (0, 200, 0), lw, cv2.LINE_AA, shift=4)
-    length = 0.5 * min(pose.board.size_m)
-    axes = cam.project(np.array([[0, 0, 0], [length, 0, 0], [0, length, 0], [0, 0, length]], dtype=float))
-    if np.isfinite(axes).all():
-        o = tuple(int(v) for v in px(axes[0])[0])
-        for end, colour, label in (
-            (axes[1], (0, 0, 255), "x"),
-            (axes[2], (0, 255, 0), "y (up)"),
-            (axes[3], (255, 0, 0), "z"),
-        ):
-            e = tuple(int(v) for v in px(end)[0])
-            cv2.arrowedLine(out, o, e, colour, 2 * lw, cv2.LINE_AA, shift=4, tipLength=0.15)
-            cv2.putText(
-                out,
-                label,
-                (e[0] // 16 + 4, e[1] // 16 - 4),
-                cv2.FONT_HERSHEY_SIMPLEX,
-                0.5 * lw,
-                colour,
-                lw,
-                cv2.LINE_AA,
-            )
-
-    # Ball: the edge points used and the fitted outline.
-    for p in px(silhouette.edge_points):
-        cv2.circle(out, tuple(int(v) for v in p), 16 * lw, (0, 0, 255), -1, cv2.LINE_AA, shift=4)
-    cv2.polylines(
-        out, [px(silhouette_polyline(silhouette, 360))], True, (255, 255, 0), lw, cv2.LINE_AA, shift=4
-    )
-
-    # The rendered outline last, dashed, so the fitted outline under it stays visible.
-    for contour in contours:
-        pts = contour.reshape(-1, 2)
-        dash = max(4, 6 * lw)
-        for start in range(0, len(pts), 2 * dash):
-            seg = pts[start : start + dash + 1]
-            if len(seg) > 1:
-                cv2.polylines(out, [seg.reshape(-1, 1, 2)], False, (255, 0, 255), lw + 1, cv2.LINE_AA)
-
-    legend = [
-        ("board corners found", (0, 200, 0)),
-        ("board outline (from the pose)", (0, 255, 255)),
-        ("ball edge points", (0, 0, 255)),
-        ("ball outline fitted", (255, 255, 0)),
-        ("ball as rtloop renders the scene (dashed)", (255, 0, 255)),
-    ]
-    font, size = cv2.FONT_HERSHEY_SIMPLEX, 0.5 * lw
-    box_w = max(cv2.getTextSize(text, font, size, lw)[0][0] for text, _ in legend) + 12 * lw
-    box = out[: 18 * lw * len(legend) + 8 * lw, :box_w]
-    box[:] = (box * 0.35).astype(np.uint8)  # darken behind the legend
-    y = 18 * lw
-    for text, colour in legend:
-        cv2.putText(out, text, (6 * lw, y), font, size, colour, lw, cv2.LINE_AA)
-        y += 18 * lw
-    return out

@@ -251,6 +251,49 @@ def capture_photo(
     if not source.isOpened():
         raise AcquisitionError("camera: not open; check the device index or path")
     notes: list[str] = []
+    backend = _backend_name(source)
+    say(f"warming up: {warmup} frames")
+    for i in range(warmup):
+        _read(source, f"warm-up frame {i + 1}")
+    locks = _lock_controls(source, lock_exposure, exposure, lock_white_balance, wb_temperature, backend, notes)
+    for _ in range(settle_frames):
+        _read(source, "settling frame")
+
+    say(f"averaging {frames} frames")
+    start = time.monotonic()
+    acc, acc_sq, means, shape, dtype = _accumulate_frames(source, frames)
+    seconds = time.monotonic() - start
+    image, full, noise, drift, clipped = _frame_statistics(acc, acc_sq, means, frames, dtype, notes)
+    properties = _readable_properties(source)
+    for note in notes:
+        say(f"warning: {note}")
+    settings = {
+        "created": _dt.datetime.now().astimezone().isoformat(timespec="seconds"),
+        "device": device if isinstance(device, (int, str)) or device is None else str(device),
+        "backend": backend,
+        "frame": _frame_record(shape, dtype),
+        "frames_averaged": frames,
+        "warmup_frames": warmup,
+        "capture_seconds": seconds,
+        "encoding": (
+            "the camera's own (usually sRGB for webcams): the mean of the frames scaled to 16 bits; "
+            "load with the camera's response (rtloop's default 'srgb' for most webcams)"
+        ),
+        "locks": locks,
+        "properties": properties,
+        "brightness_drift": drift,
+        "clipped_fraction": clipped,
+        "noise_per_frame_16bit": noise * 65535.0 / full if math.isfinite(noise) else None,
+        "noise_after_averaging_16bit": noise * 65535.0 / full / math.sqrt(frames)
+        if math.isfinite(noise)
+        else None,
+        "warnings": notes,
+    }
+    return CaptureResult(image, settings, notes)
+
+
+def _backend_name(source: FrameSource) -> str:
+    """The capture backend's name (``getBackendName``), "" when the source has none or it fails."""
     backend = ""
     get_backend = getattr(source, "getBackendName", None)
     if callable(get_backend):
@@ -258,9 +301,20 @@ def capture_photo(
             backend = str(get_backend())
         except cv2.error:
             backend = ""
-    say(f"warming up: {warmup} frames")
-    for i in range(warmup):
-        _read(source, f"warm-up frame {i + 1}")
+    return backend
+
+
+def _lock_controls(
+    source: FrameSource,
+    lock_exposure: bool,
+    exposure: float | None,
+    lock_white_balance: bool,
+    wb_temperature: float | None,
+    backend: str,
+    notes: list[str],
+) -> dict[str, Any]:
+    """Lock the exposure and the white balance as asked; a note appended to ``notes`` for each lock the
+    camera refused or did not confirm. Returns the outcome per control."""
     locks: dict[str, Any] = {}
     if lock_exposure or exposure is not None:
         locks["exposure"] = _lock_exposure(source, exposure)
@@ -284,15 +338,16 @@ def capture_photo(
                 f"{result.get('exposure_read_back', result.get('temperature_read_back'))}); "
                 "check that the photos agree in brightness and colour"
             )
-    for _ in range(settle_frames):
-        _read(source, "settling frame")
+    return locks
 
-    say(f"averaging {frames} frames")
+
+def _accumulate_frames(source: FrameSource, frames: int) -> tuple[np.ndarray, np.ndarray, list[float], Any, Any]:
+    """Read ``frames`` frames (all of one size and type). Returns their sum and sum of squares (float64),
+    the mean of each frame, the frames' shape and dtype."""
     acc = None
     acc_sq = None
     means = []
     shape = dtype = None
-    start = time.monotonic()
     for i in range(frames):
         frame = _read(source, f"frame {i + 1} of {frames}")
         if shape is None:
@@ -309,8 +364,16 @@ def capture_photo(
         acc += f64
         acc_sq += f64 * f64
         means.append(float(f64.mean()))
-    seconds = time.monotonic() - start
     assert acc is not None and acc_sq is not None and shape is not None and dtype is not None
+    return acc, acc_sq, means, shape, dtype
+
+
+def _frame_statistics(
+    acc: np.ndarray, acc_sq: np.ndarray, means: list[float], frames: int, dtype: Any, notes: list[str]
+) -> tuple[np.ndarray, float, float, float, float]:
+    """The averaged frame as 16 bits, the frames' full scale, the mean noise per frame (nan from one
+    frame), the brightness drift and the clipped fraction; notes on drift and clipping appended to
+    ``notes``."""
     full = 255.0 if dtype == np.uint8 else 65535.0
     mean = acc / frames
     image = np.clip(np.round(mean * (65535.0 / full)), 0, 65535).astype(np.uint16)
@@ -327,6 +390,11 @@ def capture_photo(
     clipped = float(np.mean(mean >= full - 0.5))
     if clipped > 0.001:
         notes.append(f"{clipped:.2%} of the samples are clipped at white: lower the exposure")
+    return image, full, noise, drift, clipped
+
+
+def _readable_properties(source: FrameSource) -> dict[str, float]:
+    """Every reported camera property the source can read (finite, not -1)."""
     properties = {}
     for key, prop in _REPORTED.items():
         try:
@@ -335,37 +403,18 @@ def capture_photo(
             continue
         if math.isfinite(v) and v != -1:
             properties[key] = v
-    for note in notes:
-        say(f"warning: {note}")
-    settings = {
-        "created": _dt.datetime.now().astimezone().isoformat(timespec="seconds"),
-        "device": device if isinstance(device, (int, str)) or device is None else str(device),
-        "backend": backend,
-        "frame": {
-            "width": int(shape[1]),
-            "height": int(shape[0]),
-            "channels": 1 if len(shape) == 2 else int(shape[2]),
-            "bits": 8 if dtype == np.uint8 else 16,
-            "order": "grey" if len(shape) == 2 else "BGR",
-        },
-        "frames_averaged": frames,
-        "warmup_frames": warmup,
-        "capture_seconds": seconds,
-        "encoding": (
-            "the camera's own (usually sRGB for webcams): the mean of the frames scaled to 16 bits; "
-            "load with the camera's response (rtloop's default 'srgb' for most webcams)"
-        ),
-        "locks": locks,
-        "properties": properties,
-        "brightness_drift": drift,
-        "clipped_fraction": clipped,
-        "noise_per_frame_16bit": noise * 65535.0 / full if math.isfinite(noise) else None,
-        "noise_after_averaging_16bit": noise * 65535.0 / full / math.sqrt(frames)
-        if math.isfinite(noise)
-        else None,
-        "warnings": notes,
+    return properties
+
+
+def _frame_record(shape: Any, dtype: Any) -> dict[str, Any]:
+    """The frame's size, channels, bits and channel order, for the report."""
+    return {
+        "width": int(shape[1]),
+        "height": int(shape[0]),
+        "channels": 1 if len(shape) == 2 else int(shape[2]),
+        "bits": 8 if dtype == np.uint8 else 16,
+        "order": "grey" if len(shape) == 2 else "BGR",
     }
-    return CaptureResult(image, settings, notes)
 
 
 def save_capture(result: CaptureResult, path: str | os.PathLike[str]) -> tuple[str, str]:

@@ -194,37 +194,8 @@ def colorchecker_correction(image: np.ndarray, *, where: str = "photo") -> Colou
             f"({cv2.__version__}) does not have; install opencv-contrib-python-headless, or use a grey "
             "card (--grey-card X,Y,W,H) instead"
         )
-    lum = img @ _LUMA.astype(np.float32)
-    top = float(np.percentile(lum, 99.5)) or 1.0
-    bgr = to_display_bgr8(img / max(top, 1e-6))
-    detector = cv2.mcc.CCheckerDetector_create()
-    detector.setColorChartType(cv2.mcc.MCC24)  # the default is not set in some OpenCV builds
-    if not detector.process(bgr, 1):
-        raise AcquisitionError(
-            f"{where}: no ColorChecker (24-patch Classic) found; it must be flat, evenly lit, fill at least "
-            "about 1/10 of the photo's width, and not be glared; or use --grey-card"
-        )
-    checker = detector.getBestColorChecker()
-    corners = np.asarray(checker.getColorCharts(), dtype=np.float32).reshape(-1, 4, 2)
-    if len(corners) != 24:
-        raise AcquisitionError(
-            f"{where}: the ColorChecker detector returned {len(corners)} patches, expected 24"
-        )
-    measured = np.empty((24, 3))
-    clipped = np.zeros(24, bool)
-    h, w = img.shape[:2]
-    for i, quad in enumerate(corners):
-        centre = quad.mean(axis=0)
-        inner = centre + 0.6 * (quad - centre)  # keep the middle of the patch
-        mask = np.zeros((h, w), np.uint8)
-        cv2.fillConvexPoly(mask, np.round(inner * 16).astype(np.int32), 1, lineType=cv2.LINE_8, shift=4)
-        pix = img[mask.astype(bool)]
-        if len(pix) < 4:
-            raise AcquisitionError(
-                f"{where}: ColorChecker patch {i + 1} is too small in the photo; move closer"
-            )
-        measured[i] = pix.mean(axis=0)
-        clipped[i] = np.mean(np.any(pix >= 0.995, axis=1)) > 0.02
+    checker, corners = _detect_colorchecker(img, where)
+    measured, clipped = _measure_patches(img, corners, where)
     target = _srgb8_to_linear(COLORCHECKER_SRGB8)
     use = ~clipped
     if use.sum() < 12:
@@ -261,3 +232,46 @@ def colorchecker_correction(image: np.ndarray, *, where: str = "photo") -> Colou
             "patch_corners_px": corners.tolist(),
         },
     )
+
+
+def _detect_colorchecker(img: np.ndarray, where: str) -> tuple[Any, np.ndarray]:
+    """The ColorChecker ``cv2.mcc`` finds in the photo (shown to it scaled to its 99.5th percentile) and
+    its 24 patches' corners, float32 (24, 4, 2)."""
+    lum = img @ _LUMA.astype(np.float32)
+    top = float(np.percentile(lum, 99.5)) or 1.0
+    bgr = to_display_bgr8(img / max(top, 1e-6))
+    detector = cv2.mcc.CCheckerDetector_create()
+    detector.setColorChartType(cv2.mcc.MCC24)  # the default is not set in some OpenCV builds
+    if not detector.process(bgr, 1):
+        raise AcquisitionError(
+            f"{where}: no ColorChecker (24-patch Classic) found; it must be flat, evenly lit, fill at least "
+            "about 1/10 of the photo's width, and not be glared; or use --grey-card"
+        )
+    checker = detector.getBestColorChecker()
+    corners = np.asarray(checker.getColorCharts(), dtype=np.float32).reshape(-1, 4, 2)
+    if len(corners) != 24:
+        raise AcquisitionError(
+            f"{where}: the ColorChecker detector returned {len(corners)} patches, expected 24"
+        )
+    return checker, corners
+
+
+def _measure_patches(img: np.ndarray, corners: np.ndarray, where: str) -> tuple[np.ndarray, np.ndarray]:
+    """The mean linear RGB of the middle of each patch (24, 3), and whether each patch is clipped (more
+    than 2 % of its pixels at white in any channel)."""
+    measured = np.empty((24, 3))
+    clipped = np.zeros(24, bool)
+    h, w = img.shape[:2]
+    for i, quad in enumerate(corners):
+        centre = quad.mean(axis=0)
+        inner = centre + 0.6 * (quad - centre)  # keep the middle of the patch
+        mask = np.zeros((h, w), np.uint8)
+        cv2.fillConvexPoly(mask, np.round(inner * 16).astype(np.int32), 1, lineType=cv2.LINE_8, shift=4)
+        pix = img[mask.astype(bool)]
+        if len(pix) < 4:
+            raise AcquisitionError(
+                f"{where}: ColorChecker patch {i + 1} is too small in the photo; move closer"
+            )
+        measured[i] = pix.mean(axis=0)
+        clipped[i] = np.mean(np.any(pix >= 0.995, axis=1)) > 0.02
+    return measured, clipped

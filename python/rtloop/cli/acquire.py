@@ -89,7 +89,15 @@ def _out(parser: argparse.ArgumentParser, metavar: str, help: str | None = None)
 def _build_acquire_parser() -> Parser:
     p = Parser(prog="rtloop-acquire", description=ACQUIRE_DESCRIPTION, formatter_class=formatter())
     sub = p.add_subparsers(title="commands", metavar="COMMAND")
+    _add_board_command(sub)
+    _add_capture_command(sub)
+    _add_calibrate_command(sub)
+    _add_undistort_command(sub)
+    return p
 
+
+def _add_board_command(sub: Any) -> None:
+    """The ``board`` command: write a printable ChArUco board."""
     b = _command(
         sub, "board", _cmd_board,
         help="write a printable ChArUco board",
@@ -111,6 +119,9 @@ def _build_acquire_parser() -> Parser:
     )
     _out(b, "BOARD.png", "the image to write")
 
+
+def _add_capture_command(sub: Any) -> None:
+    """The ``capture`` command: an averaged 16-bit photo from a camera."""
     c = _command(
         sub, "capture", _cmd_capture,
         help="take an averaged 16-bit photo from a camera",
@@ -162,6 +173,9 @@ def _build_acquire_parser() -> Parser:
     )
     _out(c, "PHOTO.png", "the 16-bit PNG to write")
 
+
+def _add_calibrate_command(sub: Any) -> None:
+    """The ``calibrate`` command: measure the camera from photos of a board."""
     k = _command(
         sub, "calibrate", _cmd_calibrate,
         help="measure the camera from photos of a board",
@@ -193,6 +207,9 @@ def _build_acquire_parser() -> Parser:
     )
     _out(k, "CAMERA.json", "the calibration to write")
 
+
+def _add_undistort_command(sub: Any) -> None:
+    """The ``undistort`` command: resample a photo into the scene's ideal pinhole camera."""
     u = _command(
         sub, "undistort", _cmd_undistort,
         help="resample a photo into the scene's ideal pinhole camera",
@@ -206,7 +223,6 @@ def _build_acquire_parser() -> Parser:
     u.add_argument("--camera", required=True, metavar="CAMERA.json", help="from 'rtloop-acquire calibrate'")
     u.add_argument("--response", default="srgb", help=RESPONSE_HELP)
     _out(u, "OUT.png")
-    return p
 
 
 def acquire_main(argv: Sequence[str] | None = None) -> int:

@@ -19,7 +19,7 @@ import threading
 import time
 from pathlib import Path
 from collections.abc import Iterator
-from typing import Any, TextIO
+from typing import Any
 
 import numpy as np
 
@@ -30,11 +30,12 @@ from rtloop.fit.files import fit_inputs, load_inputs
 from rtloop.fit.lights import LightsFit
 from rtloop.fit.protocol import LIMITS, max_threads
 from rtloop.report import truth_errors, truth_values
-from rtloop.uncertainty.bootstrap import STAGE as BOOTSTRAP, replicate_of
+from rtloop.uncertainty.bootstrap import replicate_of
 
 from .args import Parser, UsageError, float_in, generations, int_at_least, int_in, norm, vignetting
 from .lights import LIGHTS_HELP, lights_count, lights_summary, run_lights, uses_lights
 from .outputs import GenerationLog, input_paths, render_final, write_result
+from .progress import _Progress
 from .summary import duration as _duration, summary as _summary
 
 __all__ = ["main"]
@@ -164,6 +165,16 @@ def _build_parser() -> Parser:
     p.add_argument("scene", metavar="SCENE", help="scene JSON file; its 'fit' section chooses the free parameters")
     p.add_argument("image", metavar="IMAGE", help="the photo to fit (PNG, JPEG, BMP, TIFF, ...)")
     p.add_argument("--out", "-o", metavar="DIR", required=True, help="output directory (created)")
+    _add_search_args(p)
+    _add_photo_args(p)
+    _add_model_args(p)
+    _add_lens_args(p)
+    _add_output_args(p)
+    return p
+
+
+def _add_search_args(p: Parser) -> None:
+    """The search: protocol, population, generations, differential evolution's F and CR, seed, threads."""
     p.add_argument(
         "--protocol", choices=sorted(PROTOCOLS), default="rtloop",
         help=_protocol_help(),
@@ -181,6 +192,10 @@ def _build_parser() -> Parser:
                    help="random seed; the result is the same for any --threads (default 0)")
     p.add_argument("--threads", type=int_in(1, max_threads()), metavar="N",
                    help="worker threads (default: all cores)")
+
+
+def _add_photo_args(p: Parser) -> None:
+    """How the photo is read and compared: response, crop, norm, loss space."""
     p.add_argument("--response", choices=("srgb", "linear"), default="srgb",
                    help="how IMAGE's stored values relate to light: 'srgb' (default, cameras and image "
                    "editors) or 'linear' (raw linear sensor counts)")
@@ -195,6 +210,10 @@ def _build_parser() -> Parser:
                    help="where --norm compares render and IMAGE: 'auto' (default: linear, and a JPEG that direct "
                    "light explains refitted in sRGB), 'linear' (radiance) or 'srgb' (both sRGB-encoded, as an "
                    "8-bit file stores them: an error in the shadows counts as the file and the eye resolve it)")
+
+
+def _add_model_args(p: Parser) -> None:
+    """What the model holds and checks: environment, interreflection, pixel footprint, error bars, highlights, framing."""
     p.add_argument("--environment", choices=("auto", "on", "off"), default="auto",
                    help="the occluded environment term (a room's light from every direction, darker under and "
                    "between the objects): 'auto' (default) adds it when the photo shows it and says why in "
@@ -224,6 +243,10 @@ def _build_parser() -> Parser:
                    "or more off (a cropped, rotated or resized photo, or a wrong field of view), 'correct' "
                    "resamples IMAGE into the scene's framing by the roll, zoom and shift its outlines give and "
                    "fits again (objective.png is then the resampled photo), 'off'")
+
+
+def _add_lens_args(p: Parser) -> None:
+    """The lens and the pixels used: vignetting, a flat field, the tone curve, the mask."""
     p.add_argument("--vignetting", type=vignetting, default="auto", metavar="auto|on|off|K1,K2",
                    help="the lens's falloff cos^4 x (1 + k1 r^2 + k2 r^4) (r = 1 at the corner): 'auto' (default) "
                    "fits it with the light when held-out pixels show it, 'on', 'off', or K1,K2 to give it "
@@ -239,6 +262,10 @@ def _build_parser() -> Parser:
                    help="an image of IMAGE's size (or the scene's): white where the scene models the photo, "
                    "black where it does not (another object, a reflection); black pixels are left out of the fit (default: the mask the scene names, "
                    "which rtloop-scene writes to leave the board out)")
+
+
+def _add_output_args(p: Parser) -> None:
+    """What is written and shown: snapshots, final.png, --force, the report, the truth, lights, quiet."""
     p.add_argument("--snapshot-every", type=int_at_least(0, "a whole number >= 0"), default=5, metavar="N",
                    help="render the best individual every N generations of every stage into snapshots/ "
                    "(default 5; 0 disables)")
@@ -259,99 +286,6 @@ def _build_parser() -> Parser:
                    "fitted values and draw the truth in the report")
     p.add_argument("--lights", type=lights_count, metavar="N|auto", help=LIGHTS_HELP)
     p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
-    return p
-
-
-# --- progress --------------------------------------------------------------------------------------------
-
-
-class _Progress:
-    """Progress lines on stderr: one per stage start, then every 10 generations (or one updating line
-    on a terminal)."""
-
-    EVERY = 10
-    TTY_INTERVAL = 0.1
-
-    def __init__(self, stream: TextIO, enabled: bool, generations: tuple[int, int]):
-        self.stream = stream
-        self.enabled = enabled
-        self.tty = enabled and bool(getattr(stream, "isatty", lambda: False)())
-        self.generations = generations
-        self.start = time.perf_counter()
-        self.stage: str | None = None
-        self.stages = 0
-        self.open_line = 0  # length of the unfinished \r line, if any
-        self.last_draw = 0.0
-
-    def total(self, stage: str) -> int:
-        return self.generations[0] if stage.startswith("light") else self.generations[1]
-
-    def message(self, text: str) -> None:
-        if not self.enabled:
-            return
-        self.end_line()
-        print(text, file=self.stream, flush=True)
-
-    def end_line(self) -> None:
-        if self.open_line:
-            self.stream.write("\n")
-            self.stream.flush()
-            self.open_line = 0
-
-    def generation(self, info: Any) -> None:
-        if not self.enabled:
-            return
-        total = self.total(info.stage)
-        # The closed-form stages (the fit, and a refit with the terms the photo selected or in sRGB, named
-        # "light+colour+..." and "light+colour (srgb)") search with L-SHADE: the budget is population x (N + 1)
-        # evaluations over more, shrinking generations (plus a polish, logged as one more), so no generation
-        # count is known.
-        counted = not info.stage.startswith("light+colour")
-        if info.stage != self.stage:
-            self.stage = info.stage
-            self.stages += 1
-            what = f"{total} generations" if counted else "L-SHADE, then a Nelder-Mead polish"
-            self.message(f"stage {self.stages} '{info.stage}': {what}")
-        now = time.perf_counter()
-        of = f"/{total}" if counted else ""
-        line = (
-            f"  {info.stage}  gen {info.generation}{of}  best {info.fitness:.6g}  "
-            f"evals {info.evaluations}  {_duration(now - self.start)}"
-        )
-        last = counted and info.generation >= total
-        if self.tty:
-            if last or info.generation == 0 or now - self.last_draw >= self.TTY_INTERVAL:
-                pad = max(0, self.open_line - len(line))
-                self.stream.write("\r" + line + " " * pad)
-                self.stream.flush()
-                self.open_line = len(line)
-                self.last_draw = now
-                if last:
-                    self.end_line()
-        elif info.generation % self.EVERY == 0 or last:
-            print(line, file=self.stream, flush=True)
-
-    def refit(self, replicate: int, replicates: int, generation: int) -> None:
-        """A generation of the block bootstrap's refit ``replicate`` of ``replicates``: a line as each refit
-        starts (on a terminal one updating line)."""
-        if not self.enabled:
-            return
-        if self.stage != BOOTSTRAP:
-            self.stage = BOOTSTRAP
-            self.stages += 1
-            self.message(f"stage {self.stages} '{BOOTSTRAP}': {replicates} closed-form refits on resampled "
-                         "image blocks (--uncertainty bootstrap)")
-        now = time.perf_counter()
-        line = f"  {BOOTSTRAP}  refit {replicate}/{replicates}  gen {generation}  {_duration(now - self.start)}"
-        if self.tty:
-            if generation == 0 or now - self.last_draw >= self.TTY_INTERVAL:
-                pad = max(0, self.open_line - len(line))
-                self.stream.write("\r" + line + " " * pad)
-                self.stream.flush()
-                self.open_line = len(line)
-                self.last_draw = now
-        elif generation == 0:
-            print(line, file=self.stream, flush=True)
 
 
 # --- output directory ------------------------------------------------------------------------------------
@@ -436,17 +370,8 @@ class _Run:
     def __call__(self, tmp: Path) -> Any:
         """Load, fit and write everything into ``tmp``; returns the FitResult."""
         args = self.args
-        _check_order(args.scene, args.image)
-        with _cli_words():
-            inputs = load_inputs(args.scene, args.image, mask=args.mask, response=args.response, crop=args.crop)
+        inputs = _load(args)
         scene, image = inputs.scene, inputs.image
-        k = args.final_scale
-        if max(scene.width, scene.height) * k > MAX_SIZE:
-            raise _Failure(f"--final-scale {k}: final.png would be {scene.width * k}x{scene.height * k}, more "
-                           f"than {MAX_SIZE} pixels on a side; use --final-scale "
-                           f"{max(1, MAX_SIZE // max(scene.width, scene.height))} or less")
-        for w in inputs.warnings:
-            print(f"{PROG}: warning: {' '.join(w.split())}", file=sys.stderr)
         self.check_stop()
         names = scene.param_names()
         if not names:
@@ -459,15 +384,7 @@ class _Run:
                 raise _Failure(message)
 
             return run_lights(args, inputs, tmp, refuse, fit_options(args))
-        truth = None
-        if args.truth is not None:
-            truth = rtloop.load_scene(args.truth)
-            try:
-                truth_values(scene, truth)
-            except rtloop.RtloopError as e:
-                raise _Failure(f"{args.truth}: does not match {args.scene}: {e}") from None
-        if args.speed_plot is not None and not args.speed_plot.is_file():
-            raise _Failure(f"--speed-plot: {args.speed_plot}: no such file")
+        truth = _load_truth(args, scene)
         self.progress.message(
             f"{PROG}: fitting {len(names)} parameters of {args.scene} to {args.image} "
             f"({scene.width}x{scene.height}, {args.protocol} protocol)"
@@ -494,14 +411,18 @@ class _Run:
         self.progress.end_line()
         for w in result.warnings:
             print(f"{PROG}: warning: {w}", file=sys.stderr)
-        good = result.goodness or {}
-        if (good.get("ratio") or 0.0) >= good.get("explained_below", float("inf")) or \
-                (good.get("framing") or {}).get("mismatch"):
-            print(f"{PROG}: warning: {good['verdict']}", file=sys.stderr)
-            if good.get("diagnosis"):
-                print(f"{PROG}: residual by object: {good['diagnosis']}", file=sys.stderr)
+        _warn_goodness(result.goodness or {})
         self.check_stop()
 
+        self._write(tmp, result, inputs, image, truth, rows)
+        return result
+
+    def _write(self, tmp: Path, result: Any, inputs: Any, image: np.ndarray, truth: Any,
+               rows: list[tuple[str, int, float, np.ndarray]]) -> None:
+        """Write the fit's results into ``tmp``: result.json and the rest, the objective as the fit saw it
+        (reframed with --framing correct), final.png, and with --report the page; the truth's errors kept."""
+        args = self.args
+        scene = inputs.scene
         write_result(tmp, result, input_paths(args.scene, args.image, args.response, args.crop, inputs.mask_path))
         if getattr(result, "reframed", None) is not None:  # --framing correct: the photo as the fit saw it
             image = result.reframed[0]
@@ -521,7 +442,47 @@ class _Run:
             rtloop.report(result, tmp / "report.html", objective=image, truth=truth, generations=rows,
                           speed_plot=args.speed_plot, final=final)
             self.check_stop()
-        return result
+
+
+def _load(args: argparse.Namespace) -> Any:
+    """The scene, the photo and the mask (:func:`load_inputs`), checked for the size of final.png; the
+    loading's warnings printed."""
+    _check_order(args.scene, args.image)
+    with _cli_words():
+        inputs = load_inputs(args.scene, args.image, mask=args.mask, response=args.response, crop=args.crop)
+    scene = inputs.scene
+    k = args.final_scale
+    if max(scene.width, scene.height) * k > MAX_SIZE:
+        raise _Failure(f"--final-scale {k}: final.png would be {scene.width * k}x{scene.height * k}, more "
+                       f"than {MAX_SIZE} pixels on a side; use --final-scale "
+                       f"{max(1, MAX_SIZE // max(scene.width, scene.height))} or less")
+    for w in inputs.warnings:
+        print(f"{PROG}: warning: {' '.join(w.split())}", file=sys.stderr)
+    return inputs
+
+
+def _load_truth(args: argparse.Namespace, scene: Any) -> Any:
+    """The true scene of --truth (None without it), checked against the scene; --speed-plot checked."""
+    truth = None
+    if args.truth is not None:
+        truth = rtloop.load_scene(args.truth)
+        try:
+            truth_values(scene, truth)
+        except rtloop.RtloopError as e:
+            raise _Failure(f"{args.truth}: does not match {args.scene}: {e}") from None
+    if args.speed_plot is not None and not args.speed_plot.is_file():
+        raise _Failure(f"--speed-plot: {args.speed_plot}: no such file")
+    return truth
+
+
+def _warn_goodness(good: dict[str, Any]) -> None:
+    """A warning with the verdict (and the residual by object) where the model does not explain the photo
+    or the framing does not match."""
+    if (good.get("ratio") or 0.0) >= good.get("explained_below", float("inf")) or \
+            (good.get("framing") or {}).get("mismatch"):
+        print(f"{PROG}: warning: {good['verdict']}", file=sys.stderr)
+        if good.get("diagnosis"):
+            print(f"{PROG}: residual by object: {good['diagnosis']}", file=sys.stderr)
 
 
 def _error(message: str) -> None:

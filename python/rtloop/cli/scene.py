@@ -125,6 +125,23 @@ def _build_scene_parser() -> Parser:
     )
     p.add_argument("--out", "-o", required=True, metavar="DIR", help="output directory (created)")
     p.add_argument("--force", action="store_true", help="replace DIR if it exists and is not empty")
+    _add_camera_args(p)
+    _add_photos_args(p)
+    _add_colour_args(p)
+    _add_ball_args(p)
+    _add_scene_args(p)
+    p.add_argument(
+        "--truth",
+        metavar="SCENE.json",
+        help="the true scene (a rendered example's scene.json): print the errors of the camera, the field "
+        "of view and the ball against it",
+    )
+    p.set_defaults(handler=_cmd_scene)
+    return p
+
+
+def _add_camera_args(p: Parser) -> None:
+    """The camera's options: a calibration or the field of view, and how strictly the board may fix it."""
     g = p.add_argument_group("camera")
     cam = g.add_mutually_exclusive_group()
     cam.add_argument("--camera", metavar="CAMERA.json", help="calibration from 'rtloop-acquire calibrate'")
@@ -141,6 +158,10 @@ def _build_scene_parser() -> Parser:
         help="without EXIF, --vfov or --camera: refuse a board that fixes the vertical field of view more "
         "loosely than +-0.3 deg (default: use it and warn with its spread)",
     )
+
+
+def _add_photos_args(p: Parser) -> None:
+    """The photos' options: the photo to fit, and how to read the photos."""
     g = p.add_argument_group("photos")
     g.add_argument(
         "--objective",
@@ -162,6 +183,10 @@ def _build_scene_parser() -> Parser:
         metavar="CODE",
         help="raw data: the code value of saturation (e.g. 4095 for 12-bit data in a 16-bit TIFF)",
     )
+
+
+def _add_colour_args(p: Parser) -> None:
+    """The colour options: a grey card (and its reflectance) or a ColorChecker."""
     g = p.add_argument_group("colour")
     col = g.add_mutually_exclusive_group()
     col.add_argument(
@@ -180,6 +205,10 @@ def _build_scene_parser() -> Parser:
         "rtloop-fit then reports absolute albedos and the light's intensity in W/sr (card.png, "
         "meta.acquisition.grey_card)",
     )
+
+
+def _add_ball_args(p: Parser) -> None:
+    """The ball's options: where to look for it, whether it rests on the floor, the board's margin, the names."""
     g = p.add_argument_group("ball")
     g.add_argument(
         "--ball",
@@ -205,6 +234,10 @@ def _build_scene_parser() -> Parser:
     )
     g.add_argument("--ball-name", default="ball", help="the sphere's name in the scene (default ball)")
     g.add_argument("--floor-name", default="floor", help="the plane's name in the scene (default floor)")
+
+
+def _add_scene_args(p: Parser) -> None:
+    """The scene's options: its width, the light's search box, and the room's light."""
     g = p.add_argument_group("scene")
     g.add_argument(
         "--width",
@@ -226,14 +259,6 @@ def _build_scene_parser() -> Parser:
         "every direction (the environment, free in the fit section) and light bouncing between the ball "
         "and the floor (\"interreflection\": true)",
     )
-    p.add_argument(
-        "--truth",
-        metavar="SCENE.json",
-        help="the true scene (a rendered example's scene.json): print the errors of the camera, the field "
-        "of view and the ball against it",
-    )
-    p.set_defaults(handler=_cmd_scene)
-    return p
 
 
 def scene_main(argv: Sequence[str] | None = None) -> int:
@@ -250,21 +275,7 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         check_out_dir(out, args.force, inputs)
     except OutputDirError as e:
         raise AcquisitionError(str(e)) from None
-    load = {"response": args.response, "black_level": args.black_level, "white_level": args.white_level}
-    photo = load_photo(args.photo, **load)
-    objective = load_photo(args.objective, **load) if args.objective else None
-    intrinsics = CameraIntrinsics.load(args.camera) if args.camera else None
-    exif = None
-    if intrinsics is None and args.vfov is None:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", RtloopWarning)
-            exif = exif_focal(args.photo, photo.shape[1], photo.shape[0])
-        for w in caught:
-            info(f"rtloop-scene: warning: {' '.join(str(w.message).split())}")
-    mask = None
-    if args.ball_mask:
-        m = load_photo(args.ball_mask, response="linear")
-        mask = m.max(axis=2) > 0.5
+    photo, objective, intrinsics, exif, mask = _load_inputs(args)
     colour: Any = "colorchecker" if args.colorchecker else args.grey_card
     acq = build_scene(
         photo,
@@ -288,6 +299,37 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         objective_where=args.objective or args.photo,
         strict=args.strict,
     )
+    _record_inputs(acq, args)
+    _write_outputs(out, acq)
+    _print_summary(out, acq, args)
+    return 0
+
+
+def _load_inputs(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray | None, CameraIntrinsics | None, Any,
+                                                   np.ndarray | None]:
+    """The photo, the objective, the calibration, the photo's EXIF focal length (without --camera or --vfov;
+    its warnings printed) and the ball's mask, as the arguments give them."""
+    load = {"response": args.response, "black_level": args.black_level, "white_level": args.white_level}
+    photo = load_photo(args.photo, **load)
+    objective = load_photo(args.objective, **load) if args.objective else None
+    intrinsics = CameraIntrinsics.load(args.camera) if args.camera else None
+    exif = None
+    if intrinsics is None and args.vfov is None:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", RtloopWarning)
+            exif = exif_focal(args.photo, photo.shape[1], photo.shape[0])
+        for w in caught:
+            info(f"rtloop-scene: warning: {' '.join(str(w.message).split())}")
+    mask = None
+    if args.ball_mask:
+        m = load_photo(args.ball_mask, response="linear")
+        mask = m.max(axis=2) > 0.5
+    return photo, objective, intrinsics, exif, mask
+
+
+def _record_inputs(acq: Any, args: argparse.Namespace) -> None:
+    """Record the inputs (and the photo's EXIF exposure) in the scene's ``meta.acquisition``, and the mask
+    files beside it."""
     acq.scene["meta"]["acquisition"]["inputs"] = {
         "photo": os.path.abspath(args.photo),
         "objective": os.path.abspath(args.objective) if args.objective else None,
@@ -301,6 +343,11 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         acq.scene["meta"]["acquisition"]["mask"] = "mask.png"
     if acq.card is not None:  # and the card's pixels, where it measures the absolute albedos
         acq.scene["meta"]["acquisition"]["grey_card"]["mask"] = "card.png"
+
+
+def _write_outputs(out: Path, acq: Any) -> None:
+    """Write scene.json, the photos, the overlay and the masks into a staging folder, then move it to
+    ``out``; the staging folder is removed on any failure."""
     recover_leftovers(out)  # what killed runs left beside OUT
     tmp = staging_dir(out, "rtloop-scene")
     try:
@@ -316,6 +363,11 @@ def _cmd_scene(args: argparse.Namespace) -> int:
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def _print_summary(out: Path, acq: Any, args: argparse.Namespace) -> None:
+    """Print the warnings, what was written, the camera, the ball, the colour, the errors against
+    --truth, and the command to fit."""
     cam = acq.scene["camera"]
     ball = acq.scene["objects"][0]
     rep = acq.scene["meta"]["acquisition"]
@@ -344,7 +396,6 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         f"  rtloop-fit {shlex.quote(str(out / 'scene.json'))} {shlex.quote(str(out / 'objective.png'))} "
         f"--out {shlex.quote(str(out / 'fit'))}"
     )
-    return 0
 
 
 def truth_lines(scene: dict[str, Any], truth_path: str) -> list[str]:

@@ -24,13 +24,51 @@ def duration(seconds: float) -> str:
 
 def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = None,
              report: Path | None = None) -> str:
+    """What rtloop-fit prints after a fit: its cost, the model, the goodness of fit, the determined products
+    and absolute values, the fitted parameters with their error bars (and the truth's errors where known),
+    the light's distance, and where the results are."""
     stages = len(result.stages)
     lines = [
         f"{stages} stage{'s' if stages != 1 else ''}, {result.evaluations} evaluations, "
         + f"fit {duration(result.seconds)}, wall time {duration(wall)}"
     ]
     lines.extend(model_lines(result.model or {}, dict(result.scene.to_dict())))
-    good = result.goodness or {}
+    lines += _goodness_lines(result.goodness or {})
+    lines += _products_lines(result)
+    lines.append("")
+    lines.append(f"fitted parameters ({result.protocol} protocol, seed {result.seed}):")
+    width = max((len(n) for n in result.x), default=0)
+    if truth is not None:
+        lines.append(f"  {'':<{width}}  {'fitted':>12}  {'truth':>12}  {'error':>12}")
+    u = result.uncertainty or {}
+    robust = u.get("robust") or {}
+    reported = u.get("bars") or {}
+    bars, bars_note = _error_bars(u)
+    lines += _parameter_rows(result.x, width, truth, bars)
+    if bars_note:
+        lines.append(bars_note)
+    if not robust.get("why_none"):  # else the one line above says why there is none
+        lines += undetermined_lines(reported.get("not_determined") or {}, set(result.x))
+    lines += distance_lines((u.get("robust") or {}).get("light_distance") or u.get("light_distance"))
+    if truth is not None and truth.get("split_convention"):
+        lines.append("  (split): the photo fixes only the products of these, not each one: their errors "
+                     "say how the fit split the products (see the product errors below)")
+    if truth is not None:
+        if "light_position_m" in truth:
+            lines.append(f"light position error: {truth['light_position_m']:.4g} m")
+        if truth.get("product_relative"):
+            lines.append("product relative error: " + ", ".join(
+                f"{obj} {100 * rel:.3g}%" for obj, rel in truth["product_relative"].items()))
+    lines.append(f"results in {out}")
+    if report is not None:
+        lines.append(f"report: {report}")
+    return "\n".join(lines)
+
+
+def _goodness_lines(good: dict[str, Any]) -> list[str]:
+    """The goodness of fit's lines: its ratio to the noise floor and verdict, the residual by object, and a
+    framing correction."""
+    lines: list[str] = []
     if good.get("ratio") is not None:
         lines.append(f"goodness of fit: {good['ratio']:.2g}x the photo's noise floor: {good['verdict']}")
     elif good.get("verdict"):
@@ -44,6 +82,12 @@ def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = 
                      f"deg, zoomed {c['zoom_percent']:+.2f} %, shifted ({c['shift_px'][0]:+.2f}, "
                      f"{c['shift_px'][1]:+.2f}) px; outlines {before['outline_rms_px']:.2f} px off as given, "
                      f"{framing.get('outline_rms_px', float('nan')):.2f} px after)")
+    return lines
+
+
+def _products_lines(result: Any) -> list[str]:
+    """The determined products of a degenerate fit, and the absolute light and albedos from a grey card."""
+    lines: list[str] = []
     ident = result.identifiability or {}
     if ident.get("degenerate"):
         lines.append("")
@@ -63,12 +107,12 @@ def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = 
         w = max(len(n) for n in ref["albedos"])
         for obj, rgb in ref["albedos"].items():
             lines.append(f"  {obj:<{w}}  " + "  ".join(f"{v:8.4f}" for v in rgb))
-    lines.append("")
-    lines.append(f"fitted parameters ({result.protocol} protocol, seed {result.seed}):")
-    width = max((len(n) for n in result.x), default=0)
-    if truth is not None:
-        lines.append(f"  {'':<{width}}  {'fitted':>12}  {'truth':>12}  {'error':>12}")
-    u = result.uncertainty or {}
+    return lines
+
+
+def _error_bars(u: dict[str, Any]) -> tuple[dict[str, float], str | None]:
+    """The error bars to show by parameter (the reported bars, or the block sandwich's, and the bootstrap's
+    where it ran) and the line that says what they are (None: no line)."""
     boot = u.get("bootstrap") or {}
     robust = u.get("robust") or {}
     # the reported bars (the block sandwich's, widened by what the model lacks), or the bootstrap's where run
@@ -98,7 +142,15 @@ def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = 
         moved = "" if fov.get("light_shift_m") is None else f"; the light moves {1e3 * fov['light_shift_m']:.3g} mm"
         bars_note += (f"; plus the field of view's uncertainty (no EXIF: {fov['vfov_deg']:.2f} +- {fov['std_deg']:.2f} "
                       f"deg from the board{moved} per sigma of it)")
-    for name, value in result.x.items():
+    return bars, bars_note
+
+
+def _parameter_rows(x: dict[str, float], width: int, truth: dict[str, Any] | None,
+                    bars: dict[str, float]) -> list[str]:
+    """One line per fitted parameter: its value, the truth and the error where known, the error bar and the
+    error in sigmas."""
+    lines: list[str] = []
+    for name, value in x.items():
         row = f"  {name:<{width}}  {value:12.6g}"
         split = truth is not None and name in truth.get("split_convention", [])
         if truth is not None and name in truth["values"]:
@@ -109,24 +161,7 @@ def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = 
             if truth is not None and name in truth["errors"] and not split:
                 row += f" ({truth['errors'][name] / bars[name]:+.1f} sigma)"
         lines.append(row)
-    if bars_note:
-        lines.append(bars_note)
-    if not robust.get("why_none"):  # else the one line above says why there is none
-        lines += undetermined_lines(reported.get("not_determined") or {}, set(result.x))
-    lines += distance_lines((u.get("robust") or {}).get("light_distance") or u.get("light_distance"))
-    if truth is not None and truth.get("split_convention"):
-        lines.append("  (split): the photo fixes only the products of these, not each one: their errors "
-                     "say how the fit split the products (see the product errors below)")
-    if truth is not None:
-        if "light_position_m" in truth:
-            lines.append(f"light position error: {truth['light_position_m']:.4g} m")
-        if truth.get("product_relative"):
-            lines.append("product relative error: " + ", ".join(
-                f"{obj} {100 * rel:.3g}%" for obj, rel in truth["product_relative"].items()))
-    lines.append(f"results in {out}")
-    if report is not None:
-        lines.append(f"report: {report}")
-    return "\n".join(lines)
+    return lines
 
 
 def undetermined_lines(why: dict[str, str], shown: set[str]) -> list[str]:

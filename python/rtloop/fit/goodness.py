@@ -184,22 +184,7 @@ def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool 
     ratio = total / fl if fl > 0 else float("inf")
     per: dict[str, Any] = {}
     if ratio >= EXPLAINED_RATIO and math.isfinite(ratio):  # where the excess lies: only worth a look then
-        ids = np.asarray(_native.object_ids(scene)).reshape(-1)[keep]
-        for k, name in [*enumerate(scene.object_names), (-1, "background")]:
-            sel = ids == k
-            if sel.any():
-                r, f = float(resid[sel].sum(dtype=np.float64)), float(floor[sel].sum(dtype=np.float64))
-                per[name] = {"pixels": int(sel.sum()), "ratio": r / f if f > 0 else float("inf"),
-                             "share_of_excess": max(r - f, 0.0)}
-        excess = sum(v["share_of_excess"] for v in per.values())
-        for v in per.values():
-            v["share_of_excess"] = v["share_of_excess"] / excess if excess > 0 else 0.0
-        full_ids = np.asarray(_native.object_ids(scene)).reshape(-1)
-        parts = residual_structure(scene, np.asarray(target, np.float32).reshape(scene.height, scene.width, 3),
-                                   m.reshape(scene.height, scene.width, 3), keep, floor,
-                                   full_ids, list(scene.object_names))
-        for name, part in parts.items():
-            per[name]["structure"] = part
+        per = _per_object(scene, target, m, keep, resid, floor)
     out: dict[str, Any] = {"ratio": ratio, "loss": total, "floor": fl, "noise_sigma": [float(s) for s in sigma],
                            "jpeg_blocking": blocking,
                            "pixels": int(keep.sum()), "per_object": per, "explained_below": EXPLAINED_RATIO}
@@ -217,6 +202,31 @@ def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool 
                           "cover what it lacks; look at the difference image, and at a mask for what the scene "
                           "leaves out)")
     return out
+
+
+def _per_object(scene: Any, target: np.ndarray, m: np.ndarray, keep: np.ndarray, resid: np.ndarray,
+                floor: np.ndarray) -> dict[str, Any]:
+    """Per object (and the background) with a kept pixel: its pixels, its residual's ratio to its floor,
+    its share of the excess over the floor, and the structure of its residual (:func:`residual_structure`).
+    ``m``: the model's values (pixels, 3); ``resid`` and ``floor``: over the kept pixels."""
+    per: dict[str, Any] = {}
+    ids = np.asarray(_native.object_ids(scene)).reshape(-1)[keep]
+    for k, name in [*enumerate(scene.object_names), (-1, "background")]:
+        sel = ids == k
+        if sel.any():
+            r, f = float(resid[sel].sum(dtype=np.float64)), float(floor[sel].sum(dtype=np.float64))
+            per[name] = {"pixels": int(sel.sum()), "ratio": r / f if f > 0 else float("inf"),
+                         "share_of_excess": max(r - f, 0.0)}
+    excess = sum(v["share_of_excess"] for v in per.values())
+    for v in per.values():
+        v["share_of_excess"] = v["share_of_excess"] / excess if excess > 0 else 0.0
+    full_ids = np.asarray(_native.object_ids(scene)).reshape(-1)
+    parts = residual_structure(scene, np.asarray(target, np.float32).reshape(scene.height, scene.width, 3),
+                               m.reshape(scene.height, scene.width, 3), keep, floor,
+                               full_ids, list(scene.object_names))
+    for name, part in parts.items():
+        per[name]["structure"] = part
+    return per
 
 
 def _diagnosis(per: dict[str, Any]) -> tuple[dict[str, str], str]:

@@ -244,37 +244,9 @@ def report(
     names = scene.param_names()
     ident = result.identifiability or {}
 
-    true_vals = None
-    terr = None
-    if truth is not None:
-        terr = truth_errors(result, truth)
-        true_vals = np.array([terr["values"][n] for n in names], float)
-
-    if generations is not None:
-        rows = _rows_given(result, generations, names)
-        source, notes = "generations", []
-        freed = [n for n in names if n not in result.generation_names()]
-        if freed:
-            notes.append(f"{', '.join(freed)}: freed by the fit for its refit (the photo showed a highlight), so "
-                         "not among the generations' values; shown at the fitted value.")
-    else:
-        rows, notes = _rows_from_history(result)
-        source = "history"
-
-    heading = title or "rtloop fit report"
-    stamp = _dt.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")
-    page.add(
-        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
-        '<meta name="viewport" content="width=device-width, initial-scale=1">'
-        f"<title>{html.escape(heading)}</title><style>{_CSS}</style><script>{_CHECK}</script></head><body>"
-        f"<h1>{html.escape(heading)}</h1>"
-        f'<p class="sub">{html.escape(result.protocol)} protocol, '
-        f"{'L-SHADE' if result.settings.get('optimizer') == 'lshade' else 'differential evolution'}, "
-        f"seed {result.seed}, "
-        f"{result.evaluations} evaluations in {result.seconds:.2f} s · {scene.width}×{scene.height} · "
-        f"{html.escape(stamp)}</p>"
-    )
-
+    terr, true_vals = _truth(result, truth, names)
+    rows, source, notes = _generation_rows(result, generations, names)
+    _page_head(page, result, scene, title)
     info = answer(result, terr)
     truth_light = ([terr["values"][f"light.position.{c}"] for c in "xyz"]
                    if terr is not None and all(f"light.position.{c}" in terr["values"] for c in "xyz") else None)
@@ -291,13 +263,65 @@ def report(
     page.add(f'<p class="muted">rtloop {html.escape(_native.__version__)} · images also in '
              f"<code>{html.escape(folder.name)}/</code></p></body></html>\n")
 
+    _write_page(page, page_path, folder)
+    return Report(path=page_path, files=page.files, metrics=metrics, plots=plots, strip=strip, truth=terr,
+                  source=source, notes=notes, answer=info, views=views)
+
+
+def _truth(result: Any, truth: Any, names: list[str]) -> tuple[dict[str, Any] | None, np.ndarray | None]:
+    """The fit's errors against the true scene (:func:`truth_errors`) and the true values of the fit
+    parameters ``names``; both None without a truth."""
+    true_vals = None
+    terr = None
+    if truth is not None:
+        terr = truth_errors(result, truth)
+        true_vals = np.array([terr["values"][n] for n in names], float)
+    return terr, true_vals
+
+
+def _generation_rows(result: Any, generations: Iterable[Any] | None, names: list[str]
+                     ) -> tuple[list[GenerationRow], str, list[str]]:
+    """The best individual of every generation: the ``generations`` given, else rebuilt from the stages'
+    histories. Returns the rows, where they came from and notes on them."""
+    if generations is not None:
+        rows = _rows_given(result, generations, names)
+        source, notes = "generations", []
+        freed = [n for n in names if n not in result.generation_names()]
+        if freed:
+            notes.append(f"{', '.join(freed)}: freed by the fit for its refit (the photo showed a highlight), so "
+                         "not among the generations' values; shown at the fitted value.")
+    else:
+        rows, notes = _rows_from_history(result)
+        source = "history"
+    return rows, source, notes
+
+
+def _page_head(page: _Page, result: Any, scene: Scene, title: str | None) -> None:
+    """The page's head (style, the check script), its title and the line on the fit: protocol, optimizer,
+    seed, evaluations, time, size and when the page was made."""
+    heading = title or "rtloop fit report"
+    stamp = _dt.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")
+    page.add(
+        "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+        '<meta name="viewport" content="width=device-width, initial-scale=1">'
+        f"<title>{html.escape(heading)}</title><style>{_CSS}</style><script>{_CHECK}</script></head><body>"
+        f"<h1>{html.escape(heading)}</h1>"
+        f'<p class="sub">{html.escape(result.protocol)} protocol, '
+        f"{'L-SHADE' if result.settings.get('optimizer') == 'lshade' else 'differential evolution'}, "
+        f"seed {result.seed}, "
+        f"{result.evaluations} evaluations in {result.seconds:.2f} s · {scene.width}×{scene.height} · "
+        f"{html.escape(stamp)}</p>"
+    )
+
+
+def _write_page(page: _Page, page_path: Path, folder: Path) -> None:
+    """Remove the images of an earlier page that this one does not have from ``folder``, then write the
+    page."""
     written = {p.name for p in page.files}
     for old in folder.iterdir():
         if old.name not in written and _OURS.match(old.name) and old.is_file():
             old.unlink(missing_ok=True)
     write_bytes(page_path, "".join(page.parts).encode("utf-8"))
-    return Report(path=page_path, files=page.files, metrics=metrics, plots=plots, strip=strip, truth=terr,
-                  source=source, notes=notes, answer=info, views=views)
 
 
 def _answer_section(page: _Page, result: Any, info: dict[str, Any], truth_light: list[float] | None) -> dict[str, Any]:
@@ -531,6 +555,14 @@ def _fit_report_section(page: _Page, result: Any, terr: dict[str, Any] | None, i
           s["evaluations"], s["seconds"], s["fitness"]] for s in rep.get("stages", [])],
         numeric_from=3,
     ))
+    _identifiability_part(page, ident)
+    _reference_part(page, rep.get("reference"))
+    _products_part(page, rep.get("products") or {}, terr)
+    _uncertainty_part(page, getattr(result, "uncertainty", None) or rep.get("uncertainty"))
+
+
+def _identifiability_part(page: _Page, ident: dict[str, Any]) -> None:
+    """The fit report's identifiability: the note and the determined combinations of a degenerate fit."""
     page.add("<h3>Identifiability</h3>")
     if ident.get("degenerate"):
         if ident.get("note"):
@@ -540,64 +572,77 @@ def _fit_report_section(page: _Page, result: Any, terr: dict[str, Any] | None, i
                 f"<code>{html.escape(str(d))}</code>" for d in ident["determined"]) + "</p>")
     else:
         page.add('<p class="muted">Every fitted parameter is determined by the image separately.</p>')
-    ref = rep.get("reference")
-    if ref:
-        page.add(f"<h3>Absolute, from the {html.escape(str(ref['source']))} of reflectance "
-                 f"{_fmt(ref['reflectance'])} ({ref['pixels']} px)</h3>")
-        body = [["light intensity (W/sr)", _fmt(ref["light_intensity_w_sr"])],
-                *[[f"albedo {name} (R, G, B)", _fmt(a)] for name, a in ref["albedos"].items()],
-                ["gauge applied (R, G, B)", _fmt(ref["gauge"])]]
-        page.add(_table(["quantity", "value"], body))
-        if ref.get("warning"):
-            page.add(f'<p class="note">{html.escape(str(ref["warning"]))}</p>')
-    prods = rep.get("products") or {}
-    if prods:
-        page.add("<h3>Products (exposure × intensity × light colour × albedo), R, G, B</h3>")
-        if terr is not None:
-            body = [[obj, _fmt(p), _fmt(terr["products_true"].get(obj)), terr["product_relative"].get(obj)]
-                    for obj, p in prods.items()]
-            page.add(_table(["object", "fitted", "truth", "relative error"], body, numeric_from=3))
-        else:
-            body = [[obj, _fmt(p)] for obj, p in prods.items()]
-            page.add(_table(["object", "fitted"], body, numeric_from=2))
-    uncertainty = getattr(result, "uncertainty", None) or rep.get("uncertainty")
-    if uncertainty:
-        page.add("<h3>Uncertainty (1 sigma, Gauss-Newton at the optimum, from the residual)</h3>")
-        sigma = uncertainty.get("sigma", uncertainty) if isinstance(uncertainty, dict) else {}
-        robust = uncertainty.get("robust") if isinstance(uncertainty, dict) else None
-        rsig = robust.get("sigma", {}) if isinstance(robust, dict) else {}
-        body = [[f"{k} (rad)" if str(k) in _ANGLE_NAMES else str(k), "not determined" if v is None else _fmt(v),
-                 "not determined" if rsig.get(k) is None else _fmt(rsig[k])]
-                for k, v in sigma.items()]
-        cone = uncertainty.get("light_direction") if isinstance(uncertainty, dict) else None
-        if isinstance(cone, dict):  # a directional light: its two angles (radians) as one cone, in degrees
-            line = ["light direction (angle, degrees)", "not determined", "not determined"]
-            if isinstance(robust, dict) and robust.get("light_direction_deg") is not None:
-                line[2] = f"{_fmt(robust['light_direction_deg'], 3)}° along the worse axis"
-            if cone.get("angle_deg") is not None and cone.get("rms_angle_deg") is not None:
-                line[1] = (f"{_fmt(cone['angle_deg'], 3)}° along the worse axis, "
-                           f"{_fmt(cone['rms_angle_deg'], 3)}° rms")
-            after = [i for i, row in enumerate(body) if row[0].startswith("light.direction.")]
-            body.insert(after[-1] + 1 if after else len(body), line)
-        if isinstance(robust, dict) and robust.get("light_position_m") is not None:
-            body.append(["light position (whole, m)", "", f"{_fmt(robust['light_position_m'], 3)} along the worse axis"])
-        heads = ["parameter", "sigma (Gauss-Newton)", "sigma (block sandwich: correlated residuals and the pixel footprint's shift)"]
-        boot = uncertainty.get("bootstrap") if isinstance(uncertainty, dict) else None
-        if isinstance(boot, dict) and boot.get("sigma"):  # the thorough mode: one more column
-            bsig = boot["sigma"]
-            for row in body:
-                name = row[0]
-                row.append(_fmt(bsig[name]) if bsig.get(name) is not None else
-                           (f"{_fmt(boot['light_position_m'], 3)} along the worse axis"
-                            if name.startswith("light position (whole") and boot.get("light_position_m") is not None
-                            else ""))
-            heads.append(f"sigma (block bootstrap: {boot.get('replicates')} refits, {_fmt(boot.get('ms'), 3)} ms)")
-        page.add(_table(heads, body))
-        for key, lead in (("why_none", "No block-sandwich error bars: "), ("smaller_blocks", "Block sandwich: ")):
-            if isinstance(robust, dict) and robust.get(key):
-                page.add(f"<p class='note'>{html.escape(lead + str(robust[key]))}</p>")
-        for w in (uncertainty.get("warnings", []) if isinstance(uncertainty, dict) else []):
-            page.add(f"<p class='note'>{html.escape(str(w))}</p>")
+
+
+def _reference_part(page: _Page, ref: dict[str, Any] | None) -> None:
+    """The fit report's absolute light intensity and albedos, from a reference of known reflectance."""
+    if not ref:
+        return
+    page.add(f"<h3>Absolute, from the {html.escape(str(ref['source']))} of reflectance "
+             f"{_fmt(ref['reflectance'])} ({ref['pixels']} px)</h3>")
+    body = [["light intensity (W/sr)", _fmt(ref["light_intensity_w_sr"])],
+            *[[f"albedo {name} (R, G, B)", _fmt(a)] for name, a in ref["albedos"].items()],
+            ["gauge applied (R, G, B)", _fmt(ref["gauge"])]]
+    page.add(_table(["quantity", "value"], body))
+    if ref.get("warning"):
+        page.add(f'<p class="note">{html.escape(str(ref["warning"]))}</p>')
+
+
+def _products_part(page: _Page, prods: dict[str, Any], terr: dict[str, Any] | None) -> None:
+    """The fit report's products, with the truth and the relative error where known (``terr``)."""
+    if not prods:
+        return
+    page.add("<h3>Products (exposure × intensity × light colour × albedo), R, G, B</h3>")
+    if terr is not None:
+        body = [[obj, _fmt(p), _fmt(terr["products_true"].get(obj)), terr["product_relative"].get(obj)]
+                for obj, p in prods.items()]
+        page.add(_table(["object", "fitted", "truth", "relative error"], body, numeric_from=3))
+    else:
+        body = [[obj, _fmt(p)] for obj, p in prods.items()]
+        page.add(_table(["object", "fitted"], body, numeric_from=2))
+
+
+def _uncertainty_part(page: _Page, uncertainty: Any) -> None:
+    """The fit report's uncertainty: sigma per parameter (Gauss-Newton, block sandwich, and block bootstrap
+    where it ran), a directional light's cone, the light's position as a whole, notes and warnings."""
+    if not uncertainty:
+        return
+    page.add("<h3>Uncertainty (1 sigma, Gauss-Newton at the optimum, from the residual)</h3>")
+    sigma = uncertainty.get("sigma", uncertainty) if isinstance(uncertainty, dict) else {}
+    robust = uncertainty.get("robust") if isinstance(uncertainty, dict) else None
+    rsig = robust.get("sigma", {}) if isinstance(robust, dict) else {}
+    body = [[f"{k} (rad)" if str(k) in _ANGLE_NAMES else str(k), "not determined" if v is None else _fmt(v),
+             "not determined" if rsig.get(k) is None else _fmt(rsig[k])]
+            for k, v in sigma.items()]
+    cone = uncertainty.get("light_direction") if isinstance(uncertainty, dict) else None
+    if isinstance(cone, dict):  # a directional light: its two angles (radians) as one cone, in degrees
+        line = ["light direction (angle, degrees)", "not determined", "not determined"]
+        if isinstance(robust, dict) and robust.get("light_direction_deg") is not None:
+            line[2] = f"{_fmt(robust['light_direction_deg'], 3)}° along the worse axis"
+        if cone.get("angle_deg") is not None and cone.get("rms_angle_deg") is not None:
+            line[1] = (f"{_fmt(cone['angle_deg'], 3)}° along the worse axis, "
+                       f"{_fmt(cone['rms_angle_deg'], 3)}° rms")
+        after = [i for i, row in enumerate(body) if row[0].startswith("light.direction.")]
+        body.insert(after[-1] + 1 if after else len(body), line)
+    if isinstance(robust, dict) and robust.get("light_position_m") is not None:
+        body.append(["light position (whole, m)", "", f"{_fmt(robust['light_position_m'], 3)} along the worse axis"])
+    heads = ["parameter", "sigma (Gauss-Newton)", "sigma (block sandwich: correlated residuals and the pixel footprint's shift)"]
+    boot = uncertainty.get("bootstrap") if isinstance(uncertainty, dict) else None
+    if isinstance(boot, dict) and boot.get("sigma"):  # the thorough mode: one more column
+        bsig = boot["sigma"]
+        for row in body:
+            name = row[0]
+            row.append(_fmt(bsig[name]) if bsig.get(name) is not None else
+                       (f"{_fmt(boot['light_position_m'], 3)} along the worse axis"
+                        if name.startswith("light position (whole") and boot.get("light_position_m") is not None
+                        else ""))
+        heads.append(f"sigma (block bootstrap: {boot.get('replicates')} refits, {_fmt(boot.get('ms'), 3)} ms)")
+    page.add(_table(heads, body))
+    for key, lead in (("why_none", "No block-sandwich error bars: "), ("smaller_blocks", "Block sandwich: ")):
+        if isinstance(robust, dict) and robust.get(key):
+            page.add(f"<p class='note'>{html.escape(lead + str(robust[key]))}</p>")
+    for w in (uncertainty.get("warnings", []) if isinstance(uncertainty, dict) else []):
+        page.add(f"<p class='note'>{html.escape(str(w))}</p>")
 
 
 def _insertion_section(page: _Page, insertion: Any) -> None:

@@ -12,7 +12,6 @@ pixels in :mod:`.pixels`, the decomposition is :mod:`.linalg`'s. See docs/uncert
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -22,6 +21,7 @@ from ..errors import RtloopError
 from ..fit.products import albedo_derivative, unit_environment_scene, unit_lobes_scene
 from ..scene import Scene, load_scene, scene_to_dict
 from .bars import error_bars
+from .covariance import _Covariance, _direction_cone, _product_sigma
 from .light import light_distance
 from .linalg import _svd_scaled
 from .pixels import UsedPixels, used_pixels
@@ -92,7 +92,33 @@ def estimate_uncertainty(
     covariance where those are the parameters.
     """
     scene: Scene = result.scene if hasattr(result, "scene") else load_scene(result)
-    ident = getattr(result, "identifiability", None)
+    target = _checked_target(scene, image, params)
+    d = scene_to_dict(scene)
+    space, wd, use_products = _parameter_space(scene, d, params, getattr(result, "identifiability", None))
+    warnings: list[str] = []
+    if render is not None and np.shape(render) != target.shape:
+        raise RtloopError(f"render: shape {np.shape(render)} does not match the scene's {target.shape}")
+    px, got, got_full, exact, unlit = _render_used(scene, space, wd, target, mask, render)
+    steps = _steps(space.names, space.scale, step)
+    raw0 = got["optimum"] if render is None else np.take(np.asarray(render, np.float32).reshape(-1, 3), px.idx,
+                                                          axis=0)
+    Jt, f0, kink, jump = _jacobian(space, wd, px, steps, clip, warnings, raw0, exact,
+                                   env_u=got.get("environment"), lobe_u=got.get("lobes"), unlit=unlit,
+                                   unlit_u=got.get("unlit"))
+    f0, r0 = _residual(result, scene, target, px.idx, f0, compared, clip)
+    drop, excluded, n_pix, n_res = _leave_out(Jt, r0, px, kink, jump)
+    rr = float(np.einsum("i,i->", r0, r0))  # not r0 @ r0: a threaded BLAS dot waits on the render's threads
+    fit = _covariance(Jt, space, rr, n_res, warnings)
+    out = _summary(space, fit, use_products, rr, n_res, n_pix, excluded, steps, warnings)
+    centre = got_full["optimum"] if render is None else np.asarray(render, np.float32)
+    _robust(out, result, scene, d, space, wd, fit, use_products, Jt, r0, f0, px.idx, drop, centre, rr)
+    out["bars"] = _bars(out, scene, d, getattr(result, "goodness", None), getattr(result, "products", None))
+    return out
+
+
+def _checked_target(scene: Scene, image: np.ndarray, params: str) -> np.ndarray:
+    """The objective as float64, checked against the scene's size and for finite values; ``params`` and
+    the scene's fit section checked too."""
     target = np.asarray(image, dtype=np.float64)
     if target.shape != (scene.height, scene.width, 3):
         raise RtloopError(
@@ -104,18 +130,36 @@ def estimate_uncertainty(
         raise RtloopError(f"params: must be 'auto', 'products' or 'scene' (got {params!r})")
     if not scene.fit_paths:
         raise RtloopError("fit: the scene's fit section names no free parameters")
+    return target
 
-    d = scene_to_dict(scene)
+
+def _parameter_space(
+    scene: Scene, d: dict[str, Any], params: str, ident: dict[str, Any] | None
+) -> tuple[_Space, dict[str, Any], bool]:
+    """The parameters the uncertainty is over: the products (asked for, or with ``"auto"`` where the scene
+    determines only products, as ``ident`` or the scene says) or the scene's fit parameters. Returns the
+    space, its work scene dict and whether the products were chosen."""
     why_not = _products_blocker(scene, d)
     if params == "products" and why_not:
         raise RtloopError(f"params: products do not describe this scene ({why_not})")
     degenerate = bool(ident["degenerate"]) if ident is not None else why_not is None
     use_products = params == "products" or (params == "auto" and why_not is None and degenerate)
     space, wd = _products_space(scene, d) if use_products else _scene_space(scene, d)
+    return space, wd, use_products
+
+
+def _render_used(
+    scene: Scene,
+    space: _Space,
+    wd: dict[str, Any],
+    target: np.ndarray,
+    mask: np.ndarray | None,
+    render: np.ndarray | None,
+) -> tuple[UsedPixels, dict[str, Any], dict[str, Any], bool, bool]:
+    """The used pixels, and the renders the Jacobian needs besides the unit light's, in the same pass: by
+    name at the used pixels and in full. Returns those and whether the albedo columns (``exact``) and the
+    light intensity's (``unlit``) are exact derivatives."""
     names = space.names
-    warnings: list[str] = []
-    if render is not None and np.shape(render) != target.shape:
-        raise RtloopError(f"render: shape {np.shape(render)} does not match the scene's {target.shape}")
     # The renders the Jacobian needs besides the unit light's, in the same pass: the fitted scene's (without
     # the fit's), the unit environment's, the specular lobes' and the scene's without its light (exact
     # columns; interreflection makes an object's pixels depend on the other objects' albedos, and its own
@@ -132,20 +176,36 @@ def estimate_uncertainty(
     px = used_pixels(space.work, wd, target, mask, also=list(also.values()))
     got = dict(zip(also, px.rendered))
     got_full = dict(zip(also, px.images))
-    steps = _steps(names, space.scale, step)
-    raw0 = got["optimum"] if render is None else np.take(np.asarray(render, np.float32).reshape(-1, 3), px.idx,
-                                                          axis=0)
-    Jt, f0, kink, jump = _jacobian(space, wd, px, steps, clip, warnings, raw0, exact,
-                                   env_u=got.get("environment"), lobe_u=got.get("lobes"), unlit=unlit,
-                                   unlit_u=got.get("unlit"))
+    return px, got, got_full, exact, unlit
+
+
+def _residual(
+    result: Any,
+    scene: Scene,
+    target: np.ndarray,
+    idx: np.ndarray,
+    f0: np.ndarray,
+    compared: np.ndarray | None,
+    clip: bool,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The model values the fit compared with the photo at the used pixels (flat; the footprint render for
+    a fit that took the pixel footprint, ``compared`` where given, else ``f0``) and the residual."""
     if compared is None and getattr(result, "settings", {}).get("footprint", "off") != "off":
         compared = _native.render(scene, scene.width, scene.height, 1, True)
     if compared is not None:
         if np.shape(compared) != target.shape:
             raise RtloopError(f"compared: shape {np.shape(compared)} does not match the scene's {target.shape}")
-        f0 = np.take(np.asarray(compared, np.float32).reshape(-1, 3), px.idx, axis=0)
+        f0 = np.take(np.asarray(compared, np.float32).reshape(-1, 3), idx, axis=0)
         f0 = (np.minimum(f0, np.float32(1.0)) if clip else f0).ravel()
-    r0 = np.subtract(f0, np.take(target.reshape(-1, 3), px.idx, axis=0).ravel(), dtype=np.float64)
+    r0 = np.subtract(f0, np.take(target.reshape(-1, 3), idx, axis=0).ravel(), dtype=np.float64)
+    return f0, r0
+
+
+def _leave_out(
+    Jt: np.ndarray, r0: np.ndarray, px: UsedPixels, kink: np.ndarray, jump: np.ndarray
+) -> tuple[np.ndarray, dict[str, int], int, int]:
+    """Zero the rows of the saturated channels and of the kink and jump pixels in ``Jt`` and ``r0`` (in
+    place). Returns the residuals left out (used, 3), the excluded counts, the pixels and residuals used."""
     n_kink = int(kink.sum())
     kink = kink | jump  # left out alike
     drop = px.sat_u | kink[:, None]  # residuals left out
@@ -163,8 +223,22 @@ def estimate_uncertainty(
     }
     n_pix = px.idx.size - int(kink.sum())
     n_res = 3 * n_pix - excluded["saturated_channels"]
-    rr = float(np.einsum("i,i->", r0, r0))  # not r0 @ r0: a threaded BLAS dot waits on the render's threads
-    fit = _covariance(Jt, space, rr, n_res, warnings)
+    return drop, excluded, n_pix, n_res
+
+
+def _summary(
+    space: _Space,
+    fit: _Covariance,
+    use_products: bool,
+    rr: float,
+    n_res: int,
+    n_pix: int,
+    excluded: dict[str, int],
+    steps: np.ndarray,
+    warnings: list[str],
+) -> dict[str, Any]:
+    """The Gauss-Newton part of :func:`estimate_uncertainty`'s answer, from the covariance ``fit`` and the
+    residual's sum of squares ``rr`` over ``n_res`` residuals; a warning for a noise-free fit."""
     dof = n_res - fit.rank
     rms = float(np.sqrt(rr / n_res)) if n_res else float("nan")
     if rms < 1e-6:
@@ -175,7 +249,7 @@ def estimate_uncertainty(
     out = {
         "method": "gauss-newton",
         "parametrization": "products" if use_products else "scene",
-        "names": names,
+        "names": space.names,
         "values": [float(v) for v in space.theta0],
         "sigma": fit.sigma,
         "correlation": fit.corr,
@@ -189,11 +263,35 @@ def estimate_uncertainty(
     }
     if space.direction is not None:
         out["light_direction"] = _direction_cone(space, fit)
+    return out
+
+
+def _robust(
+    out: dict[str, Any],
+    result: Any,
+    scene: Scene,
+    d: dict[str, Any],
+    space: _Space,
+    wd: dict[str, Any],
+    fit: _Covariance,
+    use_products: bool,
+    Jt: np.ndarray,
+    r0: np.ndarray,
+    f0: np.ndarray,
+    idx: np.ndarray,
+    drop: np.ndarray,
+    centre: np.ndarray,
+    rr: float,
+) -> None:
+    """Add to ``out`` the light's distance, the products' sigma and ``robust``: the block sandwich's
+    covariance (with the footprint's shift, from the pixel-centre render ``centre``) and the same
+    quantities from it."""
+    names = space.names
+    dof = out["dof"]
     s2 = rr / dof if dof > 0 else 0.0
-    centre = got_full["optimum"] if render is None else np.asarray(render, np.float32)
-    bias = _footprint_bias(centre, px.idx, f0, Jt, drop.ravel() if drop.any() else None, fit, s2) \
+    bias = _footprint_bias(centre, idx, f0, Jt, drop.ravel() if drop.any() else None, fit, s2) \
         if FOOTPRINT_BIAS else None
-    robust, robust_fit = block_sandwich(Jt, r0, px.idx, scene.width, fit, s2, names,
+    robust, robust_fit = block_sandwich(Jt, r0, idx, scene.width, fit, s2, names,
                                         block_side(scene.width, scene.height),
                                         norm=sandwich_norm(getattr(result, "settings", {})), bias=bias)
     if space.direction is not None:
@@ -206,8 +304,6 @@ def estimate_uncertainty(
     out["product_sigma"] = _product_sigma(space, wd, fit, use_products)
     robust["product_sigma"] = _product_sigma(space, wd, robust_fit, use_products)
     out["robust"] = robust
-    out["bars"] = _bars(out, scene, d, getattr(result, "goodness", None), getattr(result, "products", None))
-    return out
 
 
 def _bars(u: dict[str, Any], scene: Scene, d: dict[str, Any], goodness: dict[str, Any] | None,
@@ -236,47 +332,6 @@ def _footprint_bias(centre: np.ndarray, idx: np.ndarray, f0: np.ndarray, Jt: np.
         delta[dropped] = 0.0
     # not Jt @ delta: a threaded BLAS product waits on the render's threads (as the residual's sum)
     return (fit.cov / s2) @ np.einsum("ij,j->i", Jt, delta)[fit.idx_p]
-
-
-def _product_sigma(space: _Space, wd: dict[str, Any], fit: _Covariance | None, use_products: bool
-                   ) -> dict[str, float | None]:
-    """The sigma of every diffuse product exposure x intensity x colour_c x albedo_c (``products.<object>.<c>``)
-    from a covariance: the parameter's own where the products are the parameters, else propagated to first
-    order (the gradient of the product over exposure, intensity, colour and albedo through the covariance,
-    correlations with the light's position and between the factors included). None where a factor the product
-    depends on is free but not determined."""
-    names = space.names
-    out: dict[str, float | None] = {}
-    objects = [o["name"] for o in wd["objects"]]
-    if fit is None or fit.cov is None:
-        return {f"products.{o}.{c}": None for o in objects for c in "rgb"}
-    where = {int(k): a for a, k in enumerate(fit.idx_p)}
-    if use_products:
-        for o in objects:
-            for c in "rgb":
-                n = f"products.{o}.{c}"
-                k = names.index(n) if n in names else None
-                out[n] = (float(np.sqrt(max(fit.cov[where[k], where[k]], 0.0)))
-                          if k is not None and fit.determined[k] and k in where else None)
-        return out
-    light, e = wd["light"], float(wd["exposure"])
-    for oi, o in enumerate(wd["objects"]):
-        for ci, c in enumerate("rgb"):
-            factors = {"exposure": e, "light.intensity": float(light["intensity"]),
-                       f"light.color.{c}": float(light["color"][ci]),
-                       f"objects.{o['name']}.albedo.{c}": float(o["material"]["albedo"][ci])}
-            grad = np.zeros(fit.idx_p.size)
-            ok = True
-            for n in factors:
-                if n not in names:
-                    continue
-                k = names.index(n)
-                if not fit.determined[k] or k not in where:
-                    ok = False
-                    break
-                grad[where[k]] = float(np.prod([w for m, w in factors.items() if m != n])) / space.factor[k]
-            out[f"products.{o['name']}.{c}"] = float(np.sqrt(max(grad @ fit.cov @ grad, 0.0))) if ok else None
-    return out
 
 
 def _unlit_scene(d: dict[str, Any]) -> Scene:
@@ -309,7 +364,7 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
     derivatives (the unit-light render, scaled; the lobe alone; the light's share of the render, scaled),
     and a pixel is on the kink where that line crosses 1.
     """
-    work, paths, names, theta0, idx = space.work, space.paths, space.names, space.theta0, px.idx
+    names, theta0, idx = space.names, space.theta0, px.idx
     n = idx.size
     free_u = ~px.sat_u
     # The products' work scene renders the fitted image (to float32 rounding): the fit's own render serves.
@@ -325,91 +380,141 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
     # the Jacobian's transpose: one contiguous row per parameter (and a scratch row per object whose albedo
     # columns are rendered one-sided: Jt[:P], the rows above them, is still one contiguous block)
     Jt = np.zeros((P + n_objects, 3 * n))
-
-    def clipped(g: np.ndarray) -> np.ndarray:
-        """The used pixels' values ``g`` (float32, (used, 3)), min(g, 1) with ``clip``, flat, noting kink
-        pixels."""
-        if clip:
-            cross = (g >= 1.0) != clipped0
-            if cross.any():
-                kink[(cross & free_u).any(axis=1)] = True
-            g = np.minimum(g, np.float32(1.0))
-        return g.ravel()
-
-    f0 = clipped(raw0)
-    idx_u32, clipped0_flat, free_flat = idx.astype(np.uint32), clipped0.ravel(), free_u.ravel()
-    ids_u = np.take(px.ids.ravel(), idx)
-    unit_u = np.take(px.unit.ravel(), idx).astype(np.float64)
-    env_u = None if env_u is None else env_u[:, 0].astype(np.float64)  # grey: the red channel
-    lobe_u = None if lobe_u is None else lobe_u.astype(np.float64)
+    if clip:  # min(render, 1), noting kink pixels
+        cross = (raw0 >= 1.0) != clipped0
+        if cross.any():
+            kink[(cross & free_u).any(axis=1)] = True
+        f0 = np.minimum(raw0, np.float32(1.0)).ravel()
+    else:
+        f0 = raw0.ravel()
+    exact_at = _ExactAt(wd, px, raw0, clipped0, free_u, env_u, lobe_u, unlit_u)
     k_light = space.names.index("light.intensity") if unlit else -1
-    pixels_of: dict[int, tuple[np.ndarray, ...]] = {}  # by object index; -1: every object's
     rendered: list[tuple[Any, Any, float, int]] = []  # (up, down, denom, row) of the rendered columns
     for k in range(P):
         h = steps[k]
-        up_ok, down_ok = theta0[k] + h <= space.hi[k], theta0[k] - h >= space.lo[k]
-        tp, tm = theta0.copy(), theta0.copy()
-        if up_ok and down_ok or not (up_ok or down_ok):
-            tp[k] += h
-            tm[k] -= h
-            denom = 2 * h
-        elif up_ok:
-            tp[k] += h
-            denom = h
-        else:
-            tm[k] -= h
-            denom = h
+        tp, tm, denom, up_ok, down_ok = _steps_around(space, k, h)
         if (exact and k in space.albedo) or (lobe_u is not None and k in space.specular) or k == k_light:
-            if k in space.albedo:
-                o, c = space.albedo[k]
-                chans = slice(c, c + 1)
-            else:
-                o, chans = (space.specular[k] if k in space.specular else -1), slice(0, 3)
-            if o not in pixels_of:  # the object's used pixels, their render and clip state at the optimum
-                on = np.flatnonzero(ids_u == o if o >= 0 else ids_u >= 0)
-                pixels_of[o] = (on, raw0[on].astype(np.float64), clipped0[on], free_u[on])
-            on, base, was, free = pixels_of[o]
-            base, was, free = base[:, chans], was[:, chans], free[:, chans]  # views
-            if k in space.albedo:
-                slope = albedo_derivative(wd, c, unit_u[on], None if env_u is None else env_u[on])[:, None]
-            elif k in space.specular:  # d render / d specular: the lobe alone (albedo 0, specular 1)
-                slope = lobe_u[on]
-            else:  # d render / d intensity: the light's share of the render, per unit intensity
-                lit = base if unlit_u is None else base - unlit_u[on].astype(np.float64)
-                slope = lit / float(wd["light"]["intensity"])
-            slope = slope * space.factor[k]  # per unit of the parameter
-            moved = [t - theta0[k] for t in (tp[k], tm[k]) if t != theta0[k]]
-            if clip:
-                for dt in moved:
-                    hit = ((base + dt * slope >= 1.0) != was) & free
-                    kink[on[hit[:, 0] if hit.shape[1] == 1 else hit.any(axis=1)]] = True
-                slope = np.where(was, 0.0, slope)  # clipped at the optimum and on both sides: flat
-            if moved:
-                Jt[k].reshape(-1, 3)[on, chans] = slope
+            _exact_column(Jt, kink, space, k, tp[k], tm[k], exact_at, clip)
         else:  # the renders, the clip and the difference (float32 values, exact in float64) in the core
-            one_sided = bool(wd.get("interreflection", False) and (k in space.albedo or k in space.specular)
-                             and (up_ok or down_ok))
-            if one_sided and k in space.albedo:
-                # An albedo moves no edge and the bounce makes the image a low-degree polynomial in it (the
-                # sender's albedo times the receiver's): one side, against the optimum's render, errs by
-                # h f'' / 2f' relative, under 1e-3, at half the renders (the clip's kink checked on that
-                # side). Channel c of the image depends on channel c of the albedos alone, so one render
-                # moves all of an object's channels at once and each column is read from its own channel.
-                o, c = space.albedo[k]
-                by_object.setdefault(o, []).append((k, c, h if up_ok else -h))
-            else:
-                if one_sided:  # a specular, likewise one-sided (it acts on every channel: a render of its own)
-                    if up_ok:
-                        tm, denom = theta0.copy(), h
-                    else:
-                        tp, denom = theta0.copy(), h
-                up, down = (work.with_params(space.native(t), paths) if t[k] != theta0[k] else None
-                            for t in (tp, tm))
-                rendered.append((up, down, float(denom), k))
+            _queue_rendered(space, wd, k, h, tp, tm, denom, up_ok, down_ok, by_object, rendered)
         if theta0[k] <= space.lo[k] or theta0[k] >= space.hi[k]:
             warnings.append(
                 f"{names[k]}: at its bound ({theta0[k]:.6g}); the Gauss-Newton sigma assumes an interior optimum"
             )
+    _render_columns(Jt, space, by_object, rendered, f0, idx, clipped0, free_u, clip, kink, jump)
+    return Jt[:P], f0, kink, jump & ~kink
+
+
+def _steps_around(space: _Space, k: int, h: float) -> tuple[np.ndarray, np.ndarray, float, bool, bool]:
+    """The parameters moved by ``h`` up and down in parameter ``k`` (central; one-sided where a step would
+    cross a bound, the other side then left at the optimum), the difference's denominator, and whether each
+    side is within the bounds."""
+    theta0 = space.theta0
+    up_ok, down_ok = theta0[k] + h <= space.hi[k], theta0[k] - h >= space.lo[k]
+    tp, tm = theta0.copy(), theta0.copy()
+    if up_ok and down_ok or not (up_ok or down_ok):
+        tp[k] += h
+        tm[k] -= h
+        denom = 2 * h
+    elif up_ok:
+        tp[k] += h
+        denom = h
+    else:
+        tm[k] -= h
+        denom = h
+    return tp, tm, denom, up_ok, down_ok
+
+
+class _ExactAt:
+    """What the exact columns read at the used pixels: the object ids, the unit light's render, the unit
+    environment's (grey: the red channel) and the lobes' (float64), the render without the light, and per
+    object (-1: every object's) its used pixels with their render and clip state at the optimum."""
+
+    def __init__(self, wd: dict[str, Any], px: UsedPixels, raw0: np.ndarray, clipped0: np.ndarray,
+                 free_u: np.ndarray, env_u: np.ndarray | None, lobe_u: np.ndarray | None,
+                 unlit_u: np.ndarray | None) -> None:
+        self.wd, self.raw0, self.clipped0, self.free_u, self.unlit_u = wd, raw0, clipped0, free_u, unlit_u
+        self.ids_u = np.take(px.ids.ravel(), px.idx)
+        self.unit_u = np.take(px.unit.ravel(), px.idx).astype(np.float64)
+        self.env_u = None if env_u is None else env_u[:, 0].astype(np.float64)  # grey: the red channel
+        self.lobe_u = None if lobe_u is None else lobe_u.astype(np.float64)
+        self.pixels_of: dict[int, tuple[np.ndarray, ...]] = {}  # by object index; -1: every object's
+
+    def pixels(self, o: int) -> tuple[np.ndarray, ...]:
+        """Object ``o``'s used pixels, their render (float64) and clip state at the optimum, and which
+        channels are not saturated."""
+        if o not in self.pixels_of:  # the object's used pixels, their render and clip state at the optimum
+            on = np.flatnonzero(self.ids_u == o if o >= 0 else self.ids_u >= 0)
+            self.pixels_of[o] = (on, self.raw0[on].astype(np.float64), self.clipped0[on], self.free_u[on])
+        return self.pixels_of[o]
+
+
+def _exact_column(Jt: np.ndarray, kink: np.ndarray, space: _Space, k: int, tp_k: float, tm_k: float,
+                  at: _ExactAt, clip: bool) -> None:
+    """Parameter ``k``'s column as the exact derivative, into ``Jt[k]``: an albedo's from the unit light's
+    (and environment's) render, a specular's the lobe alone, the light intensity's the light's share of the
+    render; with ``clip``, pixels whose line crosses 1 within the steps to ``tp_k`` and ``tm_k`` noted in
+    ``kink``, and the channels clipped at the optimum flat."""
+    wd, theta0 = at.wd, space.theta0
+    if k in space.albedo:
+        o, c = space.albedo[k]
+        chans = slice(c, c + 1)
+    else:
+        o, chans = (space.specular[k] if k in space.specular else -1), slice(0, 3)
+    on, base, was, free = at.pixels(o)
+    base, was, free = base[:, chans], was[:, chans], free[:, chans]  # views
+    if k in space.albedo:
+        slope = albedo_derivative(wd, c, at.unit_u[on], None if at.env_u is None else at.env_u[on])[:, None]
+    elif k in space.specular:  # d render / d specular: the lobe alone (albedo 0, specular 1)
+        slope = at.lobe_u[on]
+    else:  # d render / d intensity: the light's share of the render, per unit intensity
+        lit = base if at.unlit_u is None else base - at.unlit_u[on].astype(np.float64)
+        slope = lit / float(wd["light"]["intensity"])
+    slope = slope * space.factor[k]  # per unit of the parameter
+    moved = [t - theta0[k] for t in (tp_k, tm_k) if t != theta0[k]]
+    if clip:
+        for dt in moved:
+            hit = ((base + dt * slope >= 1.0) != was) & free
+            kink[on[hit[:, 0] if hit.shape[1] == 1 else hit.any(axis=1)]] = True
+        slope = np.where(was, 0.0, slope)  # clipped at the optimum and on both sides: flat
+    if moved:
+        Jt[k].reshape(-1, 3)[on, chans] = slope
+
+
+def _queue_rendered(space: _Space, wd: dict[str, Any], k: int, h: float, tp: np.ndarray, tm: np.ndarray,
+                    denom: float, up_ok: bool, down_ok: bool, by_object: dict[int, list[tuple[int, int, float]]],
+                    rendered: list[tuple[Any, Any, float, int]]) -> None:
+    """Parameter ``k``'s column by finite differences of renders: queued in ``rendered`` (the scenes up and
+    down, the denominator, the row), or, for a one-sided albedo with interreflection, in ``by_object``."""
+    theta0 = space.theta0
+    one_sided = bool(wd.get("interreflection", False) and (k in space.albedo or k in space.specular)
+                     and (up_ok or down_ok))
+    if one_sided and k in space.albedo:
+        # An albedo moves no edge and the bounce makes the image a low-degree polynomial in it (the
+        # sender's albedo times the receiver's): one side, against the optimum's render, errs by
+        # h f'' / 2f' relative, under 1e-3, at half the renders (the clip's kink checked on that
+        # side). Channel c of the image depends on channel c of the albedos alone, so one render
+        # moves all of an object's channels at once and each column is read from its own channel.
+        o, c = space.albedo[k]
+        by_object.setdefault(o, []).append((k, c, h if up_ok else -h))
+    else:
+        if one_sided:  # a specular, likewise one-sided (it acts on every channel: a render of its own)
+            if up_ok:
+                tm, denom = theta0.copy(), h
+            else:
+                tp, denom = theta0.copy(), h
+        up, down = (space.work.with_params(space.native(t), space.paths) if t[k] != theta0[k] else None
+                    for t in (tp, tm))
+        rendered.append((up, down, float(denom), k))
+
+
+def _render_columns(Jt: np.ndarray, space: _Space, by_object: dict[int, list[tuple[int, int, float]]],
+                    rendered: list[tuple[Any, Any, float, int]], f0: np.ndarray, idx: np.ndarray,
+                    clipped0: np.ndarray, free_u: np.ndarray, clip: bool, kink: np.ndarray,
+                    jump: np.ndarray) -> None:
+    """Render the queued columns into ``Jt`` (kink and jump pixels noted), all in one pass over the used
+    pixels, with one render per object for its one-sided albedo columns."""
+    theta0, P = space.theta0, len(space.names)
     # One render per object for its one-sided albedo columns: the difference from the optimum (denominator
     # 1, exact) into a scratch row below the Jacobian's, then channel c of it divided by that channel's step
     # (negative for a step down): (f(θ - h) - f0) / -h is (f0 - f(θ - h)) / h to the last bit.
@@ -419,10 +524,11 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
         for k, _, signed_h in moves:
             t[k] += signed_h
         scratch[o] = P + len(scratch)
-        rendered.append((work.with_params(space.native(t), paths), None, 1.0, scratch[o]))
+        rendered.append((space.work.with_params(space.native(t), space.paths), None, 1.0, scratch[o]))
     if rendered:  # all their renders in one pass over the used pixels (the first hits found once)
         ups, downs, denoms, rows = (list(v) for v in zip(*rendered))
-        _native.fd_columns(ups, downs, denoms, rows, f0, idx_u32, clipped0_flat, free_flat, clip, kink, jump, Jt)
+        _native.fd_columns(ups, downs, denoms, rows, f0, idx.astype(np.uint32), clipped0.ravel(), free_u.ravel(),
+                           clip, kink, jump, Jt)
     for o, moves in by_object.items():
         diff = Jt[scratch[o]].reshape(-1, 3)
         for k, c, signed_h in moves:
@@ -430,20 +536,6 @@ def _jacobian(space: _Space, wd: dict[str, Any], px: UsedPixels, steps: np.ndarr
             col[:, c] = diff[:, c] / abs(signed_h)
             if signed_h < 0:
                 np.negative(col[:, c], out=col[:, c])
-    return Jt[:P], f0, kink, jump & ~kink
-
-
-@dataclass
-class _Covariance:
-    """The covariance of the determined parameters and what follows from it."""
-
-    sigma: dict[str, float | None]
-    corr: list[list[float | None]]
-    condition: float | None
-    rank: int
-    cov: np.ndarray | None  # over the parameters idx_p
-    determined: np.ndarray
-    idx_p: np.ndarray
 
 
 def _covariance(Jt: np.ndarray, space: _Space, rr: float, n_res: int, warnings: list[str]) -> _Covariance:
@@ -509,19 +601,6 @@ def _covariance(Jt: np.ndarray, space: _Space, rr: float, n_res: int, warnings: 
                     corr[idx_p[a]][idx_p[b]] = r[a][b]
     return _Covariance(sigma, corr, condition, rank, cov, determined, idx_p)
 
-
-def _direction_cone(space: _Space, fit: _Covariance) -> dict[str, Any]:
-    """A directional light's frame and its two angles' sigma as cone angles in degrees (None where an
-    angle is not determined)."""
-    k, dvec, u, v = space.direction
-    block: dict[str, Any] = {"direction": dvec.tolist(), "u": u.tolist(), "v": v.tolist(),
-                             "angle_deg": None, "rms_angle_deg": None}
-    if fit.cov is not None and fit.determined[k] and fit.determined[k + 1]:
-        at = [int(np.flatnonzero(fit.idx_p == k)[0]), int(np.flatnonzero(fit.idx_p == k + 1)[0])]
-        c2 = fit.cov[np.ix_(at, at)]
-        block["angle_deg"] = float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(c2)[-1], 0.0))))
-        block["rms_angle_deg"] = float(np.degrees(np.sqrt(max(np.trace(c2), 0.0))))
-    return block
 
 def _steps(names: list[str], scale: np.ndarray, step: float | dict[str, float] | None) -> np.ndarray:
     if isinstance(step, dict):

@@ -79,29 +79,8 @@ def block_bootstrap(result: Any, target: np.ndarray, use: np.ndarray | None, *, 
     d = scene_to_dict(scene)
     if d["light"].get("type", "point") != "point" or "light.position" not in scene.fit_paths:
         raise RtloopError("uncertainty: the bootstrap needs a point light whose position is fitted")
-    w, h = scene.width, scene.height
-    pix = np.arange(w * h, dtype=np.int64) if use is None else np.asarray(use, dtype=np.int64)
-    side = block_side(w, h)
-    y, x = np.divmod(pix, w)
-    bid = (y // side) * (-(-w // side)) + x // side
-    order = np.argsort(bid, kind="stable")
-    blocks, starts = np.unique(bid[order], return_index=True)
-    members = np.split(pix[order], starts[1:])
-    nb = len(blocks)
-
-    env = "environment" in result.model.get("terms", []) or "ambient" in result.model.get("terms", [])
-    work, _ = hold_gauges(scene, scene.fit_paths, target, None if use is None else np.asarray(use, np.uint32),
-                          bounce=bool(d.get("interreflection")))
-    where = searched_paths(work.fit_paths)
-    box = narrowed(work, where, BOX_FRACTION)
-    k = max(1.0, len(box.param_names(where)) / PROTOCOLS["rtloop"]["per_dimensions"])
-    b = budget("rtloop", settings.get("space", "linear"), round(REFIT_BUDGET[0] * k), round(REFIT_BUDGET[1] * k),
-               None, None)
-    choose_method(b, box, box.fit_paths, population=b.population, generations=b.generations, optimizer=None,
-                  polish=round(REFIT_BUDGET[2] * k * k))
-    if b.method != "projected":
-        raise RtloopError("uncertainty: the bootstrap refits the closed-form method, which this scene's fit "
-                          "section does not allow")
+    side, members, nb = _blocks(scene.width, scene.height, use)
+    env, box, b = _refit_setup(result, scene, d, target, use)
     ident = identifiability(box, box.fit_paths)
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xB007]))
     names = [f"light.position.{c}" for c in "xyz"]
@@ -131,7 +110,57 @@ def block_bootstrap(result: Any, target: np.ndarray, use: np.ndarray | None, *, 
                     "warnings": [f"the callback stopped the bootstrap in refit {k + 1} of {replicates}: no sigma"]}
         prods = products_of(refit)
         rows.append([*refit["light"]["position"], *(v for o in d["objects"] for v in prods[o["name"]])])
-    vals = np.array(rows, dtype=np.float64)
+    return _summary(np.array(rows, dtype=np.float64), names, shift, box, replicates, side, nb, seed, t0)
+
+
+def replicate_of(stage: str) -> tuple[int, int] | None:
+    """(R, N) of a bootstrap refit's stage name ``"bootstrap R/N"``; None for any other stage."""
+    head, _, count = stage.partition(" ")
+    done, _, total = count.partition("/")
+    if head != STAGE or not (done.isdigit() and total.isdigit()):
+        return None
+    return int(done), int(total)
+
+
+def _blocks(w: int, h: int, use: np.ndarray | None) -> tuple[int, list[np.ndarray], int]:
+    """The side of the square blocks the pixels ``use`` (indices; None: all of the w x h image) are drawn
+    in, each non-empty block's pixels (blocks in row order) and the number of blocks."""
+    pix = np.arange(w * h, dtype=np.int64) if use is None else np.asarray(use, dtype=np.int64)
+    side = block_side(w, h)
+    y, x = np.divmod(pix, w)
+    bid = (y // side) * (-(-w // side)) + x // side
+    order = np.argsort(bid, kind="stable")
+    blocks, starts = np.unique(bid[order], return_index=True)
+    members = np.split(pix[order], starts[1:])
+    return side, members, len(blocks)
+
+
+def _refit_setup(result: Any, scene: Scene, d: dict[str, Any], target: np.ndarray,
+                 use: np.ndarray | None) -> tuple[bool, Scene, Any]:
+    """What every refit shares: whether it fits the environment (or ambient) term, its scene (the fit's
+    with the gauges held and the light's bounds narrowed around the fit) and its budget (closed form)."""
+    settings = result.settings
+    env = "environment" in result.model.get("terms", []) or "ambient" in result.model.get("terms", [])
+    work, _ = hold_gauges(scene, scene.fit_paths, target, None if use is None else np.asarray(use, np.uint32),
+                          bounce=bool(d.get("interreflection")))
+    where = searched_paths(work.fit_paths)
+    box = narrowed(work, where, BOX_FRACTION)
+    k = max(1.0, len(box.param_names(where)) / PROTOCOLS["rtloop"]["per_dimensions"])
+    b = budget("rtloop", settings.get("space", "linear"), round(REFIT_BUDGET[0] * k), round(REFIT_BUDGET[1] * k),
+               None, None)
+    choose_method(b, box, box.fit_paths, population=b.population, generations=b.generations, optimizer=None,
+                  polish=round(REFIT_BUDGET[2] * k * k))
+    if b.method != "projected":
+        raise RtloopError("uncertainty: the bootstrap refits the closed-form method, which this scene's fit "
+                          "section does not allow")
+    return env, box, b
+
+
+def _summary(vals: np.ndarray, names: list[str], shift: dict[str, float | None] | None, box: Scene,
+             replicates: int, side: int, nb: int, seed: int, t0: float) -> dict[str, Any]:
+    """:func:`block_bootstrap`'s answer from the replicates' values ``vals`` (replicate x name), with the
+    shared ``shift`` in sigma and the light's covariance, and a warning where replicates reach the edge of
+    the light's search box."""
     sd = vals.std(axis=0, ddof=1)
     cov = np.cov(vals[:, :3], rowvar=False)
     delta = np.array([(shift or {}).get(n) if (shift or {}).get(n) is not None else np.nan for n in names])
@@ -153,15 +182,6 @@ def block_bootstrap(result: Any, target: np.ndarray, use: np.ndarray | None, *, 
             "values": {n: vals[:, i].tolist() for i, n in enumerate(names)},
             "shift_included": [n for n, k in zip(names, known) if k],
             "seconds": seconds, "ms": 1e3 * seconds, "warnings": warnings}
-
-
-def replicate_of(stage: str) -> tuple[int, int] | None:
-    """(R, N) of a bootstrap refit's stage name ``"bootstrap R/N"``; None for any other stage."""
-    head, _, count = stage.partition(" ")
-    done, _, total = count.partition("/")
-    if head != STAGE or not (done.isdigit() and total.isdigit()):
-        return None
-    return int(done), int(total)
 
 
 def _footprint_mode(recorded: object) -> str:

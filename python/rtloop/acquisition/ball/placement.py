@@ -233,21 +233,7 @@ def _search(
         return -1.0 if poly is None else score(poly, tol, cap)
 
     seeds = _seeds(image, feat, hint, mask, exclude, where)
-    starts = []
-    for cx, cy, r_px, _src in seeds:
-        ray = camera.rays(np.array([[cx, cy]]))[0]
-        if abs(ray[1]) < 1e-6:
-            continue
-        t = (height - camera.position[1]) / ray[1]
-        if t <= radius:
-            continue
-        start = camera.position + t * ray
-        starts.append((np.array([start[0], start[2]]), max(r_px, 3.0), _src))
-    if not starts:
-        raise AcquisitionError(
-            f"{where}: no ball found (no candidate circle on the floor in front of the camera); "
-            f"{_NO_BALL_HELP}"
-        )
+    starts = _floor_starts(seeds, camera, radius, height, where)
     # Coarse screening with a wide tolerance, then a pattern search on the best few.
     ranked = []
     for p0, r_px, src in starts:
@@ -278,6 +264,46 @@ def _search(
     # Of the outlines that lie on edges, the ball is the one whose inside looks most like a shaded sphere
     # rather than floor: its own shadow is an outline on edges too (seen from above, on a stronger one), but
     # holds flat floor, or floor with the ball's outline across it.
+    return _most_sphere_like(image, camera, radius, centre_of, hypotheses, where)
+
+
+def _floor_starts(
+    seeds: list[tuple[float, float, float, str]],
+    camera: PinholeCamera,
+    radius: float,
+    height: float,
+    where: str,
+) -> list[tuple[np.ndarray, float, str]]:
+    """Each seed circle's centre taken to the floor position (x, z) where a ball's centre at ``height``
+    would be, in front of the camera: ``(position, radius in pixels (at least 3), source)``."""
+    starts = []
+    for cx, cy, r_px, _src in seeds:
+        ray = camera.rays(np.array([[cx, cy]]))[0]
+        if abs(ray[1]) < 1e-6:
+            continue
+        t = (height - camera.position[1]) / ray[1]
+        if t <= radius:
+            continue
+        start = camera.position + t * ray
+        starts.append((np.array([start[0], start[2]]), max(r_px, 3.0), _src))
+    if not starts:
+        raise AcquisitionError(
+            f"{where}: no ball found (no candidate circle on the floor in front of the camera); "
+            f"{_NO_BALL_HELP}"
+        )
+    return starts
+
+
+def _most_sphere_like(
+    image: np.ndarray,
+    camera: PinholeCamera,
+    radius: float,
+    centre_of: Any,
+    hypotheses: list[tuple[float, np.ndarray, str]],
+    where: str,
+) -> tuple[np.ndarray, str, dict[str, Any]]:
+    """Of the distinct hypotheses ``(outline score, floor position, source)`` whose outlines lie on edges,
+    the one whose inside looks most like a shaded sphere: its floor position, source and scores."""
     accepted = []
     for v, p, src in hypotheses:
         if v >= MIN_OUTLINE_SCORE and not any(np.linalg.norm(p - q) < 0.05 * radius for _, _, q, _ in accepted):

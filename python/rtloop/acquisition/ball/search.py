@@ -182,21 +182,7 @@ def find_ball(
         r = sil.radius_px
         return _refit_near(_edge_image(image), sil, x, int(np.clip(2 * np.pi * r, 64, 720)), max(1.0, 0.02 * r))
     feat = _edge_image(image)
-    candidates: list[tuple[float, float, float, str]] = []
-    if mask is not None:
-        big = _mask_outline(mask, h, w, where)
-        (cx, cy), _r = cv2.minEnclosingCircle(big)
-        r = math.sqrt(cv2.contourArea(big) / math.pi)
-        candidates.append((cx, cy, r, "mask"))
-    elif hint is not None:
-        candidates.append((*_checked_hint(hint, h, w, where), "hint"))
-    else:
-        lo, hi = radius_range_px or (max(4.0, min(h, w) / 60), min(h, w) / 2)
-        candidates.extend((*c, "hough") for c in _hough_candidates(image, int(lo), math.ceil(hi)))
-        if exclude is not None and len(exclude) >= 3:
-            poly = np.asarray(exclude, np.float32).reshape(-1, 1, 2)
-            candidates = [c for c in candidates if cv2.pointPolygonTest(poly, (c[0], c[1]), False) < 0]
-        candidates = _dedupe(candidates)[:12]
+    candidates = _candidates(image, mask, hint, radius_range_px, exclude, where)
     best: BallSilhouette | None = None
     best_score = -1.0
     for cx, cy, r, source in candidates:
@@ -218,6 +204,35 @@ def find_ball(
         )
         raise AcquisitionError(f"{where}: no ball found ({found}); {_NO_BALL_HELP}")
     return best
+
+
+def _candidates(
+    image: np.ndarray,
+    mask: np.ndarray | None,
+    hint: tuple[float, float, float] | None,
+    radius_range_px: tuple[float, float] | None,
+    exclude: np.ndarray | None,
+    where: str,
+) -> list[tuple[float, float, float, str]]:
+    """The circles ``(x, y, radius, source)`` to fit the outline from: the mask's, else the hint, else up to
+    12 distinct Hough circles in the radius range whose centres are outside ``exclude``."""
+    h, w = image.shape[:2]
+    candidates: list[tuple[float, float, float, str]] = []
+    if mask is not None:
+        big = _mask_outline(mask, h, w, where)
+        (cx, cy), _r = cv2.minEnclosingCircle(big)
+        r = math.sqrt(cv2.contourArea(big) / math.pi)
+        candidates.append((cx, cy, r, "mask"))
+    elif hint is not None:
+        candidates.append((*_checked_hint(hint, h, w, where), "hint"))
+    else:
+        lo, hi = radius_range_px or (max(4.0, min(h, w) / 60), min(h, w) / 2)
+        candidates.extend((*c, "hough") for c in _hough_candidates(image, int(lo), math.ceil(hi)))
+        if exclude is not None and len(exclude) >= 3:
+            poly = np.asarray(exclude, np.float32).reshape(-1, 1, 2)
+            candidates = [c for c in candidates if cv2.pointPolygonTest(poly, (c[0], c[1]), False) < 0]
+        candidates = _dedupe(candidates)[:12]
+    return candidates
 
 
 def _dedupe(cands: list[tuple[float, float, float, str]]) -> list[tuple[float, float, float, str]]:
