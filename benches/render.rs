@@ -177,6 +177,42 @@ fn bench(c: &mut Criterion) {
     }
     g.finish();
 
+    // With the footprint (`FitnessSpec::footprint`): shadow edges, terminators and silhouettes over each
+    // pixel's area; one candidate as the polish evaluates it, and the set-up.
+    let mut g = c.benchmark_group("footprint");
+    let with_footprint = || {
+        Fitness::new(
+            &scene,
+            layout.clone(),
+            &target,
+            FitnessSpec {
+                loss: LossKind::L1Projected,
+                projection: Some(matte.clone()),
+                footprint: true,
+                ..Default::default()
+            },
+        )
+        .unwrap()
+    };
+    g.bench_function("projected fitness new footprint", |b| {
+        b.iter(with_footprint)
+    });
+    let fitness = with_footprint();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    g.bench_function("one candidate projected footprint threads=1", |b| {
+        b.iter(|| {
+            pool.install(|| {
+                let mut o = [0.0];
+                fitness.evaluate(&truth, &mut o);
+                o
+            })
+        })
+    });
+    g.finish();
+
     // The same sphere glossy (specular 0.3, shininess 40) against its own render: the closed form then
     // solves the lobe's strength too, and every candidate shades the lobe on the sphere's pixels.
     let mut g = c.benchmark_group("glossy");

@@ -20,6 +20,7 @@ pub mod loss;
 pub mod pixels;
 pub mod projected;
 pub mod refine;
+pub mod silhouette;
 mod simd;
 pub mod solve;
 
@@ -342,6 +343,8 @@ impl Fitness {
             scene.objects.len(),
             camera,
             spec.solve_margin,
+            // with the bounce each pixel keeps its centre's gathers: no sub-pixel samples
+            !scene.interreflection,
         );
         // The occluded environment costs a sky view factor per pixel only where the model has it.
         let environment = match &projection {
@@ -369,7 +372,7 @@ impl Fitness {
             kind,
             clip,
             shadows: scene.can_occlude(),
-            constant: penalty_sums(&active.fixed, Norm::L1, Space::Linear),
+            constant: penalty_sums(&active.counted_fixed(), Norm::L1, Space::Linear),
             active,
             projection,
             held_solve: None,
@@ -387,20 +390,34 @@ impl Fitness {
     /// [`FitnessSpec::footprint`]) from one built with the footprint, without redoing its geometry: a search
     /// and its polish can then take the two models for the price of one set-up.
     pub fn at_pixel_centres(&self) -> Fitness {
+        let active = self.active.at_pixel_centres();
+        let kernel = if self.kernel.silhouettes.is_some() {
+            // the silhouette pixels back in their groups: the groups `new` builds without the footprint
+            let mut k = Kernel::new(
+                active.set(),
+                &self.shapes,
+                self.shadows,
+                self.kernel.sky,
+                false,
+            );
+            k.norm = self.kernel.norm;
+            k.set_space(self.kernel.space());
+            k.saturated = self.kernel.saturated;
+            k
+        } else {
+            self.kernel.at_pixel_centres()
+        };
         Fitness {
             layout: self.layout.clone(),
             early_exit: self.early_exit,
-            kernel: self.kernel.at_pixel_centres(),
+            kernel,
             base: self.base.clone(),
             shapes: self.shapes.clone(),
-            active: ActivePixels {
-                footprint: Vec::new(),
-                ..self.active.clone()
-            },
+            constant: penalty_sums(&active.fixed, self.norm(), self.space()),
+            active,
             kind: self.kind,
             clip: self.clip,
             shadows: self.shadows,
-            constant: self.constant,
             projection: self.projection.clone(),
             held_solve: None, // solved with the footprint: not this model's
             bounce: self.bounce.clone(),
@@ -447,7 +464,10 @@ impl Fitness {
                 (solved, scratch)
             }
         };
-        let mut loss = self.kernel.refine(self.clip, proj, &mut solved, &scratch);
+        let loss = self.kernel.refine(self.clip, proj, &mut solved, &scratch);
+        let p = self.params(x);
+        let io = (&scratch[..], self.clip);
+        let mut loss = self.kernel.refine_outlines(&p, proj, &mut solved, io, loss);
         for c in 0..3 {
             loss[c] += self.constant[c];
         }
@@ -519,7 +539,7 @@ impl Fitness {
     pub fn set_norm(&mut self, norm: Norm) {
         self.held_solve = None;
         self.kernel.norm = norm;
-        self.constant = penalty_sums(&self.active.fixed, norm, self.space());
+        self.constant = penalty_sums(&self.active.counted_fixed(), norm, self.space());
     }
 
     pub fn norm(&self) -> Norm {
@@ -534,7 +554,7 @@ impl Fitness {
     pub fn set_space(&mut self, space: Space) {
         self.held_solve = None;
         self.kernel.set_space(space);
-        self.constant = penalty_sums(&self.active.fixed, self.norm(), space);
+        self.constant = penalty_sums(&self.active.counted_fixed(), self.norm(), space);
     }
 
     pub fn space(&self) -> Space {

@@ -8,7 +8,10 @@ use rayon::prelude::*;
 use crate::render::bounce::{gather, nearest_table};
 use crate::render::environment::sky_view;
 use crate::render::footprint;
+pub use crate::render::footprint::interior;
 use crate::render::{CameraFrame, GBuffer, PShape, Surfel};
+
+use super::silhouette::Silhouette;
 
 /// The pixels one fit shades, and the (clipped model, objective) of those no free parameter changes.
 #[derive(Clone, Debug, Default)]
@@ -23,6 +26,14 @@ pub struct ActivePixels {
     /// Per active pixel: its footprint on the surface it sees (`render::footprint::axes`), for shadow
     /// edges integrated over the pixel's area; empty when not asked for.
     pub footprint: Vec<[Vec3A; 2]>,
+    /// With the footprint, the pixels that straddle an object's outline
+    /// (`render::footprint::silhouette_samples`): each one's objective and sub-pixel first hits, in pixel
+    /// order; empty otherwise.
+    pub silhouettes: Vec<Silhouette>,
+    /// Per active pixel: is it one of `silhouettes` (then its group leaves it out)? Empty when none is.
+    pub outline: Vec<bool>,
+    /// Per fixed pair: is it one of `silhouettes` (then the constant loss leaves it out)? Empty when none is.
+    pub fixed_outline: Vec<bool>,
 }
 
 impl ActivePixels {
@@ -32,6 +43,9 @@ impl ActivePixels {
     /// pixel informs the closed-form products only when every pixel within this Chebyshev distance
     /// shows its own object ([`interior_by`]; 0: its 4-neighbours, [`interior`]); an object with no
     /// such pixel takes its 4-neighbour interior, and one with none of those all its pixels.
+    /// With `camera` and `outlines`, the pixels that straddle an outline and inform no product become
+    /// [`ActivePixels::silhouettes`].
+    #[allow(clippy::too_many_arguments)]
     pub fn select(
         gbuffer: &GBuffer,
         target: &[f32],
@@ -40,6 +54,7 @@ impl ActivePixels {
         objects: usize,
         camera: Option<(&CameraFrame, &[PShape])>,
         solve_margin: usize,
+        outlines: bool,
     ) -> ActivePixels {
         let mut a = ActivePixels::default();
         let (w, h) = (gbuffer.width, gbuffer.height);
@@ -96,21 +111,61 @@ impl ActivePixels {
                 }
             }
         }
+        if let (Some(camera), true) = (camera, outlines) {
+            a.outlines(gbuffer, pixels, background, camera);
+        }
         a
     }
-}
 
-/// Whether pixel `i` is off every silhouette: its 4-neighbours show its own object. A silhouette pixel
-/// mixes two surfaces in a photo; the closed-form solve leaves it out.
-pub fn interior(gbuffer: &GBuffer, i: usize) -> bool {
-    let (w, h) = (gbuffer.width as usize, gbuffer.height as usize);
-    let id = |x: usize, y: usize| gbuffer.surfels[y * w + x].object;
-    let (x, y) = (i % w, i / w);
-    let o = id(x, y);
-    (x == 0 || id(x - 1, y) == o)
-        && (x + 1 == w || id(x + 1, y) == o)
-        && (y == 0 || id(x, y - 1) == o)
-        && (y + 1 == h || id(x, y + 1) == o)
+    /// Mark the pixels on an outline (the active ones that inform no product, and the fixed background
+    /// ones) whose sub-pixel rays see more than one surface, and keep their samples.
+    fn outlines(
+        &mut self,
+        gbuffer: &GBuffer,
+        pixels: &[u32],
+        background: Option<Vec3A>,
+        (camera, shapes): (&CameraFrame, &[PShape]),
+    ) {
+        let mut outline = vec![false; self.surfels.len()];
+        let mut fixed_outline = vec![false; self.fixed.len()];
+        let (mut j, mut k) = (0, 0);
+        for &i in pixels {
+            let fixed = background.is_some() && gbuffer.surfels[i as usize].object == u32::MAX;
+            let (slot, target, free) = if fixed {
+                k += 1;
+                (&mut fixed_outline[k - 1], self.fixed[k - 1].1, true)
+            } else {
+                j += 1;
+                (&mut outline[j - 1], self.targets[j - 1], !self.solve[j - 1])
+            };
+            if !free {
+                continue;
+            }
+            if let Some(samples) =
+                footprint::silhouette_samples(camera, shapes, gbuffer, i as usize)
+            {
+                *slot = true;
+                self.silhouettes.push(Silhouette { target, samples });
+            }
+        }
+        if !self.silhouettes.is_empty() {
+            self.outline = outline;
+            self.fixed_outline = fixed_outline;
+        }
+    }
+
+    /// The fixed pairs the constant loss counts: all of them, less those on an outline.
+    pub fn counted_fixed(&self) -> Vec<(Vec3A, Vec3A)> {
+        if self.fixed_outline.is_empty() {
+            return self.fixed.clone();
+        }
+        self.fixed
+            .iter()
+            .zip(&self.fixed_outline)
+            .filter(|(_, &o)| !o)
+            .map(|(f, _)| *f)
+            .collect()
+    }
 }
 
 /// Whether every pixel within Chebyshev distance `margin` of pixel `i` (inside the image) shows its
@@ -301,6 +356,8 @@ pub(crate) fn gathers(
                 targets: &zeros,
                 solve: &solve,
                 footprint: &[],
+                outline: &[],
+                silhouettes: &[],
             };
             let mut g = group(pixels, shapes, shadows, sky, false);
             Gather {
@@ -355,13 +412,16 @@ pub(super) fn offset(l: [f32; 3], point: f32, p: [f32; 3]) -> [f32; 3] {
 }
 
 /// The pixels a kernel groups: each one's first hit and objective, whether it may inform the closed-form
-/// products, and its footprint axes (all pixels, or none: shadow edges at pixel centres).
+/// products, and its footprint axes (all pixels, or none: shadow edges at pixel centres); the pixels on
+/// an outline (`outline`, all or none) are left out of the groups, their samples in `silhouettes`.
 #[derive(Clone, Copy)]
 pub struct PixelSet<'a> {
     pub surfels: &'a [Surfel],
     pub targets: &'a [Vec3A],
     pub solve: &'a [bool],
     pub footprint: &'a [[Vec3A; 2]],
+    pub outline: &'a [bool],
+    pub silhouettes: &'a [Silhouette],
 }
 
 impl ActivePixels {
@@ -372,6 +432,20 @@ impl ActivePixels {
             targets: &self.targets,
             solve: &self.solve,
             footprint: &self.footprint,
+            outline: &self.outline,
+            silhouettes: &self.silhouettes,
+        }
+    }
+
+    /// These pixels each at its centre (no footprint, no silhouette), as `select` picks them without the
+    /// footprint.
+    pub fn at_pixel_centres(&self) -> ActivePixels {
+        ActivePixels {
+            footprint: Vec::new(),
+            silhouettes: Vec::new(),
+            outline: Vec::new(),
+            fixed_outline: Vec::new(),
+            ..self.clone()
         }
     }
 }
@@ -392,7 +466,10 @@ pub(crate) fn group(
         targets,
         solve,
         footprint,
+        outline,
+        ..
     } = pixels;
+    let kept = |i: usize| outline.is_empty() || !outline[i];
     // Pixels grouped by object (background last), row-major inside a group: a counting sort.
     let slot = |o: u32| {
         if o == u32::MAX {
@@ -402,14 +479,16 @@ pub(crate) fn group(
         }
     };
     let mut count = vec![0usize; shapes.len() + 2];
-    for s in surfels {
-        count[slot(s.object) + 1] += 1;
+    for (i, s) in surfels.iter().enumerate() {
+        if kept(i) {
+            count[slot(s.object) + 1] += 1;
+        }
     }
     for k in 1..count.len() {
         count[k] += count[k - 1];
     }
-    let mut order = vec![0usize; surfels.len()];
-    for (i, s) in surfels.iter().enumerate() {
+    let mut order = vec![0usize; count[count.len() - 1]];
+    for (i, s) in surfels.iter().enumerate().filter(|&(i, _)| kept(i)) {
         let k = slot(s.object);
         order[count[k]] = i;
         count[k] += 1;

@@ -1,14 +1,71 @@
 //! The pixel footprint: a pixel's area on the surface it sees (`axes`), and the box filter a camera
-//! applies over it: the lit fraction at a straight shadow edge (`box_edge`) and the mean of a clamped
-//! cosine across a sphere's terminator (`box_ramp`).
+//! applies over it: the lit fraction at a straight shadow edge (`box_edge`), the mean of a clamped
+//! cosine across a sphere's terminator (`box_ramp`), and at an object's outline the first hits of a
+//! stratified grid of sub-pixel rays (`silhouette_samples`), whose shaded values a pixel averages.
 
 use glam::Vec3A;
 
 use crate::geometry::sphere::Chord;
 
 use super::camera::CameraFrame;
-use super::hit::Surfel;
+use super::hit::{closest_hit, GBuffer, Surfel};
 use super::shape::PShape;
+
+/// The sub-pixel rays per silhouette pixel ([`silhouette_offsets`]).
+pub const SILHOUETTE_SAMPLES: u32 = 16;
+
+/// Where the sub-pixel rays of a silhouette pixel cross it, in [0, 1)²: one in each cell of a 4 x 4 grid,
+/// shifted inside its cell so that no two share a column or a row of the 16 x 16 grid (the canonical
+/// multi-jittered pattern). A straight outline along a pixel row or column (a horizon) then cuts off a
+/// sixteenth per step, where the 4 x 4 grid's cell centres give quarters.
+pub fn silhouette_offsets() -> impl Iterator<Item = (f32, f32)> {
+    (0..4u8).flat_map(|j| {
+        (0..4u8).map(move |i| {
+            let (i, j) = (i as f32, j as f32);
+            ((i + (j + 0.5) / 4.0) / 4.0, (j + (i + 0.5) / 4.0) / 4.0)
+        })
+    })
+}
+
+/// Whether pixel `i` is off every silhouette: its 4-neighbours show its own object. A silhouette pixel
+/// mixes two surfaces in a photo; the closed-form solve leaves it out.
+pub fn interior(gbuffer: &GBuffer, i: usize) -> bool {
+    let (w, h) = (gbuffer.width as usize, gbuffer.height as usize);
+    let id = |x: usize, y: usize| gbuffer.surfels[y * w + x].object;
+    let (x, y) = (i % w, i / w);
+    let o = id(x, y);
+    (x == 0 || id(x - 1, y) == o)
+        && (x + 1 == w || id(x + 1, y) == o)
+        && (y == 0 || id(x, y - 1) == o)
+        && (y + 1 == h || id(x, y + 1) == o)
+}
+
+/// The first hits of the [`SILHOUETTE_SAMPLES`] sub-pixel rays of pixel `i` of `gbuffer` (the first hits
+/// at the pixel centres of the image `camera` sees of `shapes`), where the pixel straddles an outline: a
+/// 4-neighbour shows another object or the background ([`interior`]) and some sub-pixel ray sees another
+/// surface than the centre's. `None` elsewhere: the pixel is one surface, shaded at its centre (with its
+/// footprint). The pixel's value is the mean of its samples' values, each shaded as a pixel centre is
+/// (a miss takes the background).
+pub fn silhouette_samples(
+    camera: &CameraFrame,
+    shapes: &[PShape],
+    gbuffer: &GBuffer,
+    i: usize,
+) -> Option<Vec<Surfel>> {
+    if interior(gbuffer, i) {
+        return None;
+    }
+    let (w, h) = (gbuffer.width, gbuffer.height);
+    let (x, y) = ((i % w as usize) as f32, (i / w as usize) as f32);
+    let own = gbuffer.surfels[i].object;
+    let samples: Vec<Surfel> = silhouette_offsets()
+        .map(|(dx, dy)| {
+            let dir = camera.generate_ray(x + dx, y + dy, w, h);
+            closest_hit(shapes, camera.origin, dir)
+        })
+        .collect();
+    samples.iter().any(|s| s.object != own).then_some(samples)
+}
 
 /// The world vectors spanned by one pixel step in x and in y on the tangent plane of `s`, the first hit
 /// at the centre of pixel (`i`, `j`) of a `width` x `height` image; zero where the plane is seen edge-on

@@ -213,6 +213,9 @@ struct Frame {
     cache: Option<std::sync::Arc<bounce::Gathered>>,
     shadows: bool,
     footprint: bool,
+    /// With the footprint (and no bounce, whose gathers are the pixel centres'): the first hits at the
+    /// pixel centres, which tell the pixels on an outline (`footprint::silhouette_samples`).
+    outlines: Option<GBuffer>,
     offsets: Vec<(f32, f32)>,
     inv: f32, // 1 / the samples per pixel
     width: u32,
@@ -275,7 +278,10 @@ impl Frame {
         let footprint =
             footprint && shadows && !geometry.shapes.iter().any(|s| matches!(s, PShape::Mesh(_)));
         let key = bounce::geometry_key(&geometry, camera_key, (width, height));
+        let outlines =
+            (footprint && !params.interreflection).then(|| GBuffer::new(&geometry, width, height));
         Ok(Frame {
+            outlines,
             geometry,
             key,
             params,
@@ -292,6 +298,9 @@ impl Frame {
     /// Pixel (i, j): the mean of its samples, finite.
     #[inline(always)]
     fn pixel(&self, i: u32, j: u32) -> Vec3A {
+        if let Some(v) = self.outline(i, j) {
+            return v;
+        }
         let mut sum = Vec3A::ZERO;
         for &(dx, dy) in &self.offsets {
             let s = self
@@ -357,7 +366,22 @@ impl Frame {
         let (mut sc, mut sf) = (Vec3A::ZERO, Vec3A::ZERO);
         sc += c;
         sf += f;
-        (self.mean(sc), self.mean(sf))
+        let over = self.outline(i, j).unwrap_or_else(|| self.mean(sf));
+        (self.mean(sc), over)
+    }
+
+    /// With the footprint, pixel (i, j) where it straddles an outline: the mean of its sub-pixel samples
+    /// (`footprint::silhouette_samples`), each shaded as a pixel centre is; `None` elsewhere.
+    fn outline(&self, i: u32, j: u32) -> Option<Vec3A> {
+        let ids = self.outlines.as_ref()?;
+        let at = j as usize * self.width as usize + i as usize;
+        let g = &self.geometry;
+        let samples = footprint::silhouette_samples(&g.camera, &g.shapes, ids, at)?;
+        let mut sum = Vec3A::ZERO;
+        for s in &samples {
+            sum += shade::shade_pixel_cached(s, None, &self.params, &g.shapes, self.shadows, None);
+        }
+        Some((sum * (1.0 / samples.len() as f32)).min(Vec3A::splat(f32::MAX)))
     }
 
     /// [`Frame::sample`] without the footprint (one sample per pixel), the sky view kept in `sky`

@@ -214,3 +214,94 @@ fn a_footprint_fitness_at_pixel_centres_is_the_plain_fitness_bit_for_bit() {
         }
     }
 }
+
+/// The pixels of `ids` (a `w`-wide image) with a 4-neighbour that shows another object or the background.
+fn outline_pixels(ids: &[i32], w: usize) -> Vec<usize> {
+    let h = ids.len() / w;
+    (0..ids.len())
+        .filter(|&i| {
+            let (x, y) = (i % w, i / w);
+            (x > 0 && ids[i - 1] != ids[i])
+                || (x + 1 < w && ids[i + 1] != ids[i])
+                || (y > 0 && ids[i - w] != ids[i])
+                || (y + 1 < h && ids[i + w] != ids[i])
+        })
+        .collect()
+}
+
+#[test]
+fn silhouette_pixels_match_a_supersampled_render() {
+    // The reference integrates every pixel by brute force (a 32 x 32 grid of camera rays, the renderer's
+    // own shading per ray). On the pixels that straddle an outline (ball against floor, ball against
+    // ball, the floor's horizon against the background) the footprint render averages a 4 x 4 grid of
+    // sub-pixel rays: it must be far nearer the reference than the pixel-centre render, lit from the
+    // front, from behind (a rim on the outline) and by a sun.
+    for (light, sun) in [
+        ([2.5, 2.2, 0.8], false),
+        ([0.4, 1.6, 2.4], false),
+        ([0.7, 0.5, 0.2], true),
+    ] {
+        let scene = edge_scene(light, sun);
+        let w = scene.width as usize;
+        let fine = render(&scene, None, None, 1024).unwrap().rgb;
+        let centre = render(&scene, None, None, 1).unwrap().rgb;
+        let over = rtloop::render::render_with(&scene, None, None, 1, true)
+            .unwrap()
+            .rgb;
+        let outline = outline_pixels(&rtloop::render::object_ids(&scene, None, None), w);
+        assert!(
+            outline.len() > 150,
+            "{light:?}: {} outline pixels",
+            outline.len()
+        );
+        let err = |img: &[f32]| {
+            let sum: f64 = outline
+                .iter()
+                .flat_map(|&i| (0..3).map(move |c| 3 * i + c))
+                .map(|k| (img[k] - fine[k]).abs() as f64)
+                .sum();
+            sum / (3 * outline.len()) as f64
+        };
+        let (with, without) = (err(&over), err(&centre));
+        eprintln!("{light:?}: outline error {with:.5} with the footprint, {without:.5} at centres");
+        assert!(
+            with < 0.3 * without,
+            "{light:?}: outline error {with:.5} with the footprint, {without:.5} at centres"
+        );
+    }
+}
+
+#[test]
+fn the_closed_form_with_silhouettes_models_the_footprint_render() {
+    // The projected kernel solves the products on interior pixels and adds the outline pixels' sub-pixel
+    // means at them: against the footprint render of the true scene (unclipped) the loss vanishes at the
+    // true light, and the silhouettes are part of it (the pixel-centre model's loss is far above).
+    let (light, sun) = ([2.5, 2.2, 0.8], false);
+    let scene = edge_scene(light, sun);
+    let target = rtloop::render::render_with(&scene, None, None, 1, true)
+        .unwrap()
+        .rgb;
+    let (layout, x) = searched_light(&scene, light, sun);
+    let proj = Projection::matte(vec![[(0.0, 50.0); 3]; scene.objects.len()]);
+    let f = Fitness::new(
+        &scene,
+        layout,
+        &target,
+        FitnessSpec {
+            loss: LossKind::L1Projected,
+            projection: Some(proj),
+            clip: false,
+            footprint: true,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let loss: f64 = f.channel_losses(&x).iter().sum();
+    let centres: f64 = f.at_pixel_centres().channel_losses(&x).iter().sum();
+    let total: f64 = target.iter().map(|&v| v as f64).sum();
+    assert!(loss < 1e-5 * total, "{loss} against {total}");
+    assert!(centres > 100.0 * loss.max(1e-9), "{centres} against {loss}");
+    let (_, refined) = f.refined(&x).unwrap();
+    let refined: f64 = refined.iter().sum();
+    assert!(refined < 1e-5 * total, "refined: {refined} against {total}");
+}

@@ -1,0 +1,408 @@
+//! The pixels that straddle an object's outline, with the footprint: each one's model value is the mean
+//! of its sub-pixel samples (`render::footprint::silhouette_samples`, the renderer's own), every sample
+//! shaded as a pixel centre is (its own surface and object; a miss takes the background). A silhouette
+//! pixel mixes objects, so it leaves its object's group: its samples form groups of their own, whose
+//! values are summed into their pixels after the per-object blocks.
+
+use glam::Vec3A;
+
+use super::kernel::Kernel;
+use super::loss::{Encoding, Identity, Norm, Space, SrgbLut};
+use super::pixels::{group, Group, Light, PixelSet, Sky};
+use super::projected::{Products, Projection, Run, Solved};
+use crate::render::coat::Coat;
+use crate::render::footprint::SILHOUETTE_SAMPLES;
+use crate::render::{PShape, ShadeParams, Surfel};
+
+/// One pixel on an outline: its objective (linear RGB) and the first hits of its sub-pixel rays.
+#[derive(Clone, Debug)]
+pub struct Silhouette {
+    pub target: Vec3A,
+    pub samples: Vec<Surfel>,
+}
+
+/// One object's value at a sample, linear in its unit-light factors (`projected::Run::factors`): per
+/// channel `ambient` + `pc`·a + `qw`·b + `ec`·v (a the diffuse factor, b the lobe's or the coat's, v the
+/// sky view factor where `sky`).
+#[derive(Clone, Copy)]
+pub(crate) struct Linear<'a> {
+    pub(crate) ambient: [f32; 3],
+    pub(crate) pc: [f32; 3],
+    pub(crate) qw: [f32; 3],
+    pub(crate) ec: [f32; 3],
+    pub(crate) lobe: bool,
+    pub(crate) sky: bool,
+    pub(crate) shininess: f32,
+    pub(crate) coat: Option<&'a Coat>,
+}
+
+impl<'a> Linear<'a> {
+    /// Object `obj` under the direct model's parameters `p` (`Kernel::l1`).
+    pub(crate) fn direct(p: &'a ShadeParams, obj: usize) -> Linear<'a> {
+        let m = &p.materials[obj];
+        let rgb = p.light_rgb;
+        Linear {
+            ambient: std::array::from_fn(|c| p.exposure * m.albedo[c] * p.ambient[c]),
+            pc: std::array::from_fn(|c| p.exposure * rgb[c] * m.albedo[c]),
+            qw: std::array::from_fn(|c| p.exposure * rgb[c] * m.specular),
+            ec: std::array::from_fn(|c| p.exposure * m.albedo[c] * p.environment[c]),
+            lobe: (p.any_specular && m.specular > 0.0) || p.coat(obj).is_some(),
+            sky: p.environment != Vec3A::ZERO,
+            shininess: m.shininess,
+            coat: p.coat(obj),
+        }
+    }
+
+    /// Object `obj` at the closed-form products `s` (`Kernel::projected`; no ambient term: it is the
+    /// environment column's).
+    pub(crate) fn solved(
+        p: &'a ShadeParams,
+        proj: &Projection,
+        s: &Solved,
+        obj: usize,
+    ) -> Linear<'a> {
+        let q = s.specular[obj];
+        let on = proj.specular[obj].1 > 0.0;
+        Linear {
+            ambient: [0.0; 3],
+            pc: std::array::from_fn(|c| s.products[obj][c] as f32),
+            qw: std::array::from_fn(|c| (q * proj.weight[c] as f64) as f32),
+            ec: std::array::from_fn(|c| s.environment_at(obj, c) as f32),
+            lobe: on || p.coat(obj).is_some(),
+            sky: proj
+                .environment
+                .get(obj)
+                .is_some_and(|b| b.iter().any(|c| c.1 > 0.0)),
+            shininess: p.materials[obj].shininess,
+            coat: p.coat(obj),
+        }
+    }
+}
+
+/// The silhouette pixels of one fitness: their samples grouped by object, and their objectives.
+#[derive(Clone)]
+pub(crate) struct Silhouettes {
+    groups: Vec<Group>,
+    /// Per group, each sample's silhouette pixel.
+    pixel: Vec<Vec<u32>>,
+    /// Per silhouette pixel, its samples that see the background.
+    misses: Vec<f32>,
+    t: [Vec<f32>; 3],
+    /// The objective in the loss space (sRGB); empty in the linear space.
+    te: [Vec<f32>; 3],
+}
+
+impl Silhouettes {
+    /// The silhouette pixels `list` among `shapes` (`shadows`: the scene can shadow; `sky`: the constant
+    /// term modelled, as for every pixel); `None` where there are none.
+    pub(crate) fn new(
+        list: &[Silhouette],
+        shapes: &[PShape],
+        shadows: bool,
+        sky: Sky,
+    ) -> Option<Silhouettes> {
+        if list.is_empty() {
+            return None;
+        }
+        let mut misses = vec![0.0f32; list.len()];
+        let mut hits: Vec<(u32, u32, Surfel)> = Vec::new();
+        for (k, s) in list.iter().enumerate() {
+            for sample in &s.samples {
+                if sample.object == u32::MAX {
+                    misses[k] += 1.0;
+                } else {
+                    hits.push((sample.object, k as u32, *sample));
+                }
+            }
+        }
+        // By object, in pixel order inside one: the order `group` keeps.
+        hits.sort_by_key(|h| h.0);
+        let surfels: Vec<Surfel> = hits.iter().map(|h| h.2).collect();
+        let zeros = vec![Vec3A::ZERO; surfels.len()];
+        let solve = vec![false; surfels.len()];
+        let samples = PixelSet {
+            surfels: &surfels,
+            targets: &zeros,
+            solve: &solve,
+            footprint: &[],
+            outline: &[],
+            silhouettes: &[],
+        };
+        let groups = group(samples, shapes, shadows, sky, false);
+        let mut pixel = Vec::with_capacity(groups.len());
+        let mut at = 0;
+        for g in &groups {
+            pixel.push(hits[at..at + g.len()].iter().map(|h| h.1).collect());
+            at += g.len();
+        }
+        Some(Silhouettes {
+            groups,
+            pixel,
+            misses,
+            t: std::array::from_fn(|c| list.iter().map(|s| s.target[c]).collect()),
+            te: Default::default(),
+        })
+    }
+
+    /// Per object (of `objects`), its silhouette pixels with a sample `light` reaches (`model` as for
+    /// [`Silhouettes::loss`]).
+    pub(crate) fn lit<'m>(
+        &self,
+        light: &Light,
+        model: impl Fn(usize) -> Linear<'m>,
+        objects: usize,
+    ) -> Vec<usize> {
+        let mut lit = vec![0usize; objects];
+        let (mut e, mut b) = (Vec::new(), Vec::new());
+        for (g, pixel) in self.groups.iter().zip(&self.pixel) {
+            let Some(obj) = g.object else { continue };
+            let m = model(obj);
+            e.resize(g.len(), 0.0);
+            b.resize(g.len(), 0.0);
+            self.run(g, light, &m).factors::<false>(0, &mut e, &mut b);
+            let mut seen: Vec<u32> = pixel
+                .iter()
+                .zip(&e)
+                .filter(|(_, &a)| a > 0.0)
+                .map(|(&k, _)| k)
+                .collect();
+            seen.dedup();
+            lit[obj] += seen.len();
+        }
+        lit
+    }
+
+    /// Group `g`'s [`Run`] for the factors of `m` under `light`.
+    fn run<'r>(&self, g: &'r Group, light: &'r Light, m: &Linear<'r>) -> Run<'r> {
+        Run {
+            g,
+            light,
+            specular: m.lobe,
+            sky: (m.sky && !g.sky.is_empty()).then_some(&g.sky[..]),
+            shininess: m.shininess,
+            coat: m.coat,
+            sat: f32::INFINITY,
+            top: f32::INFINITY,
+            norm: Norm::L1,
+        }
+    }
+
+    /// Whether some sample sees object `k`.
+    fn has(&self, k: usize) -> bool {
+        self.groups.iter().any(|g| g.object == Some(k))
+    }
+
+    /// Compare in `space` (see `Kernel::set_space`).
+    pub(crate) fn set_space(&mut self, space: Space) {
+        let lut = SrgbLut::get();
+        self.te = match space {
+            Space::Linear => Default::default(),
+            Space::Srgb => {
+                std::array::from_fn(|c| self.t[c].iter().map(|&t| lut.encode(t)).collect())
+            }
+        };
+    }
+
+    /// Per channel Σ penalty(enc(min(mean, `top`)) - enc(objective)) over the silhouette pixels, the mean
+    /// over each pixel's samples: `model(object)`'s value under `light` (unit or not, as `model` takes
+    /// it) for a sample that sees an object, `background` for a miss.
+    pub(crate) fn loss<'m, const AVX2: bool, E: Encoding>(
+        &self,
+        light: &Light,
+        model: impl Fn(usize) -> Linear<'m>,
+        background: Vec3A,
+        (top, norm): (f32, Norm),
+        enc: E,
+    ) -> [f64; 3] {
+        let mut sum: [Vec<f32>; 3] =
+            std::array::from_fn(|c| self.misses.iter().map(|&m| m * background[c]).collect());
+        let (mut e, mut b) = (Vec::new(), Vec::new());
+        for (g, pixel) in self.groups.iter().zip(&self.pixel) {
+            let Some(obj) = g.object else { continue };
+            let m = model(obj);
+            e.resize(g.len(), 0.0);
+            b.resize(g.len(), 0.0);
+            let run = self.run(g, light, &m);
+            run.factors::<AVX2>(0, &mut e, &mut b);
+            for c in 0..3 {
+                for (j, &k) in pixel.iter().enumerate() {
+                    let mut v = m.ambient[c] + m.pc[c] * e[j] + m.qw[c] * b[j];
+                    if let Some(sky) = run.sky() {
+                        v += m.ec[c] * sky[j];
+                    }
+                    sum[c][k as usize] += v;
+                }
+            }
+        }
+        let w = 1.0 / SILHOUETTE_SAMPLES as f32;
+        let t = if E::ENCODES { &self.te } else { &self.t };
+        std::array::from_fn(|c| {
+            sum[c]
+                .iter()
+                .zip(&t[c])
+                .map(|(&s, &t)| norm.penalty(enc.any((s * w).min(top)) - t) as f64)
+                .sum()
+        })
+    }
+}
+
+impl Kernel {
+    /// The loss of the pixels on an outline (`fitness::silhouette`) at the products `solved` for the
+    /// light of `p` (zero without them).
+    pub(crate) fn silhouette_loss<const AVX2: bool, E: Encoding>(
+        &self,
+        p: &crate::render::ShadeParams,
+        proj: &Projection,
+        solved: &Solved,
+        top: f32,
+        enc: E,
+    ) -> [f64; 3] {
+        let Some(s) = &self.silhouettes else {
+            return [0.0; 3];
+        };
+        let light = Light {
+            pos: p.light_position.to_array(),
+            dir: p.light_direction.map(|d| d.to_array()),
+            rgb: [1.0; 3],
+        };
+        let bg = p.exposure * p.background;
+        s.loss::<AVX2, E>(
+            &light,
+            |obj| Linear::solved(p, proj, solved, obj),
+            bg,
+            (top, self.norm),
+            enc,
+        )
+    }
+
+    /// [`Kernel::silhouette_loss`] in this kernel's space (the scalar path).
+    pub(crate) fn silhouette_loss_here(
+        &self,
+        p: &ShadeParams,
+        proj: &Projection,
+        solved: &Solved,
+        top: f32,
+    ) -> [f64; 3] {
+        match self.space {
+            Space::Linear => self.silhouette_loss::<false, _>(p, proj, solved, top, Identity),
+            Space::Srgb => self.silhouette_loss::<false, _>(p, proj, solved, top, SrgbLut::get()),
+        }
+    }
+
+    /// After the refine (`scratch` the unit-light factors of `Kernel::projected`, `loss` the grouped
+    /// pixels' loss at `solved`): each object with silhouette samples takes the products that minimise
+    /// the whole loss, its grouped pixels' and the silhouette pixels' (each diffuse product in its
+    /// channel, then a lobe's over all three, four rounds where it has one: golden-section searches
+    /// over the bounds, each kept where it lowers the loss), and its silhouette pixels the light reaches
+    /// count as lit. Returns the whole loss.
+    pub(crate) fn refine_outlines(
+        &self,
+        p: &ShadeParams,
+        proj: &Projection,
+        solved: &mut Solved,
+        (scratch, clip): (&[f32], bool),
+        loss: [f64; 3],
+    ) -> [f64; 3] {
+        let Some(s) = &self.silhouettes else {
+            return loss;
+        };
+        let top = if clip { 1.0 } else { f32::INFINITY };
+        let light = Light {
+            pos: p.light_position.to_array(),
+            dir: p.light_direction.map(|d| d.to_array()),
+            rgb: [1.0; 3],
+        };
+        let sat = if clip { self.saturated } else { f32::INFINITY };
+        let (mut offset, mut grouped) = (0, loss);
+        for g in &self.groups {
+            let n = g.len();
+            let (a, b) = (
+                &scratch[offset..offset + n],
+                &scratch[self.pixels + offset..][..n],
+            );
+            offset += n;
+            let Some(k) = g.object.filter(|&k| s.has(k)) else {
+                continue;
+            };
+            let m = &p.materials[k];
+            let run = Run::of(
+                g,
+                k,
+                &light,
+                proj,
+                m.shininess,
+                p.coat(k),
+                (sat, top),
+                self.norm,
+            );
+            let own = |s: &Solved| {
+                let products = Products::of(s, proj, k, run.is_specular());
+                match self.space {
+                    Space::Linear => run.loss::<false, _>(0, a, b, products, Identity, None),
+                    Space::Srgb => run.loss::<false, _>(0, a, b, products, SrgbLut::get(), None),
+                }
+            };
+            let whole = |s: &Solved| {
+                let (o, e) = (own(s), self.silhouette_loss_here(p, proj, s, top));
+                [o[0] + e[0], o[1] + e[1], o[2] + e[2]]
+            };
+            let before = own(solved);
+            let glossy = proj.specular[k].1 > proj.specular[k].0 && run.is_specular();
+            for _ in 0..if glossy { 4 } else { 1 } {
+                for c in 0..3 {
+                    let set = move |s: &mut Solved, v: f64| s.products[k][c] = v;
+                    golden(solved, proj.diffuse[k][c], set, |s: &Solved| whole(s)[c]);
+                }
+                if glossy {
+                    let set = move |s: &mut Solved, v: f64| s.specular[k] = v;
+                    golden(solved, proj.specular[k], set, |s: &Solved| {
+                        whole(s).iter().sum()
+                    });
+                }
+            }
+            let after = own(solved);
+            for c in 0..3 {
+                grouped[c] += after[c] - before[c];
+            }
+        }
+        let lit = s.lit(
+            &light,
+            |obj| Linear::solved(p, proj, solved, obj),
+            solved.products.len(),
+        );
+        for (l, more) in solved.lit.iter_mut().zip(lit) {
+            *l += more;
+        }
+        let outline = self.silhouette_loss_here(p, proj, solved, top);
+        std::array::from_fn(|c| grouped[c] + outline[c])
+    }
+}
+
+/// The value in `bounds` that `set` gives `s` to minimise `loss` (golden-section search), kept where it
+/// lowers the loss.
+fn golden(
+    s: &mut Solved,
+    (mut lo, mut hi): (f64, f64),
+    set: impl Fn(&mut Solved, f64),
+    loss: impl Fn(&Solved) -> f64,
+) {
+    let before = loss(s);
+    let mut probe = s.clone();
+    let mut at = |v: f64| {
+        set(&mut probe, v);
+        loss(&probe)
+    };
+    let r = 0.5 * (5f64.sqrt() - 1.0);
+    for _ in 0..60 {
+        let (a, b) = (hi - r * (hi - lo), lo + r * (hi - lo));
+        if at(a) <= at(b) {
+            hi = b;
+        } else {
+            lo = a;
+        }
+    }
+    let best = 0.5 * (lo + hi);
+    if at(best) < before {
+        set(s, best);
+    }
+}
