@@ -578,3 +578,23 @@ impl Fold {
             .collect()
     }
 }
+
+/// The gauge bounds of the bounce from the scene's fit section: u = 1/intensity over the intensity's
+/// bounds (its value when fixed), and each object's largest albedo (its value when fixed).
+pub(crate) fn gauge_bounds(scene: &crate::scene::Scene) -> super::projected::Gauge {
+    let bounds = |t: crate::params::Target| scene.fit.iter().find(|f| f.target == t);
+    let (ilo, ihi) = match bounds(crate::params::Target::LightIntensity) {
+        Some(f) => (f.min[0], f.max[0]),
+        None => (scene.light.intensity, scene.light.intensity),
+    };
+    let inv = |i: f64| if i > 0.0 { 1.0 / i } else { f64::MAX };
+    super::projected::Gauge {
+        u: (inv(ihi), inv(ilo)),
+        albedo_max: (0..scene.objects.len())
+            .map(|k| match bounds(crate::params::Target::Albedo(k)) {
+                Some(f) => [f.max[0], f.max[1], f.max[2]],
+                None => scene.objects[k].material.albedo,
+            })
+            .collect(),
+    }
+}

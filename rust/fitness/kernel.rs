@@ -9,7 +9,6 @@ use super::light_terms::{irradiance, shadow};
 use super::lobe::{coat_factors, half_cos};
 use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, SATURATED};
 use super::pixels::{gathers, group, Gather, Group, Light, PixelSet, Sky, BLOCK};
-use super::silhouette::{Linear, Silhouettes};
 use super::simd::{self, Simd};
 use crate::render::bounce::{table_points, TABLE};
 use crate::render::brdf::{lambert, specular_scale};
@@ -29,8 +28,6 @@ pub struct Kernel {
     /// out and the refine counts them one-sidedly. [`SATURATED`] unless the photo's noise puts a clipped
     /// pixel's value further below 1 ([`Kernel::set_saturated`]).
     pub(crate) saturated: f32,
-    /// The pixels on an outline, each the mean of its sub-pixel samples (with the footprint).
-    pub(crate) silhouettes: Option<Silhouettes>,
     /// The constant-radiance term its pixels carry.
     pub(crate) sky: Sky,
 }
@@ -46,7 +43,6 @@ impl Kernel {
         bounce: bool,
     ) -> Kernel {
         let groups = group(pixels, shapes, shadows, sky, bounce);
-        let silhouettes = Silhouettes::new(pixels.silhouettes, shapes, shadows, sky);
         let tables = if bounce {
             shapes
                 .iter()
@@ -79,7 +75,6 @@ impl Kernel {
             groups,
             pixels: pixels.surfels.len(),
             saturated: SATURATED,
-            silhouettes,
             sky,
         }
     }
@@ -95,9 +90,18 @@ impl Kernel {
             pixels: self.pixels,
             tables: self.tables.clone(),
             saturated: self.saturated,
-            silhouettes: None,
             sky: self.sky,
         }
+    }
+
+    /// A kernel with this one's settings (norm, space, saturation level, constant term; no bounce) over
+    /// `pixels` of `shapes`.
+    pub fn regrouped(&self, pixels: PixelSet, shapes: &[PShape], shadows: bool) -> Kernel {
+        let mut k = Kernel::new(pixels, shapes, shadows, self.sky, false);
+        k.norm = self.norm;
+        k.set_space(self.space);
+        k.saturated = self.saturated;
+        k
     }
 
     /// Treat objective values at or above `level` (at most [`SATURATED`]) as possibly clipped: a noisy or
@@ -123,9 +127,6 @@ impl Kernel {
     /// once, and every model value per evaluation (see [`super::loss`]).
     pub fn set_space(&mut self, space: Space) {
         self.space = space;
-        if let Some(s) = &mut self.silhouettes {
-            s.set_space(space);
-        }
         let lut = SrgbLut::get();
         for g in &mut self.groups {
             g.te = match space {
@@ -276,20 +277,6 @@ impl Kernel {
                 if acc[0] + acc[1] + acc[2] > bound {
                     return acc;
                 }
-            }
-        }
-        if let Some(s) = &self.silhouettes {
-            let top = if clip { 1.0 } else { f32::INFINITY };
-            let bg = p.exposure * p.background;
-            let part = s.loss::<AVX2, E>(
-                &light,
-                |obj| Linear::direct(p, obj),
-                bg,
-                (top, self.norm),
-                enc,
-            );
-            for c in 0..3 {
-                acc[c] += part[c];
             }
         }
         acc

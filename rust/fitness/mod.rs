@@ -35,7 +35,7 @@ pub use line_min::{encoded_line_min, l1_line_min, EncodedTerm};
 use loss::penalty_sums;
 pub use loss::{Norm, Space, SrgbLut, SATURATED};
 pub use pixels::Sky;
-pub use pixels::{interior, interior_by, ActivePixels, PixelSet};
+pub use pixels::{interior, interior_by, ActivePixels, PixelSet, Silhouette};
 pub use projected::{Gauge, Projection, Solved};
 pub use simd::{path as simd_path, scalar_paths};
 pub use solve::{closed_form, fallback_sums, solve_object, SolveSums};
@@ -138,26 +138,8 @@ pub struct Fitness {
     held_solve: Option<(Vec<f64>, Solved, Vec<f32>)>,
     /// How the search's candidates take the bounce, where the projection has one.
     bounce: bounce::Mode,
-}
-
-/// The gauge bounds of the bounce from the scene's fit section: u = 1/intensity over the intensity's
-/// bounds (its value when fixed), and each object's largest albedo (its value when fixed).
-fn gauge_bounds(scene: &Scene) -> projected::Gauge {
-    let bounds = |t: Target| scene.fit.iter().find(|f| f.target == t);
-    let (ilo, ihi) = match bounds(Target::LightIntensity) {
-        Some(f) => (f.min[0], f.max[0]),
-        None => (scene.light.intensity, scene.light.intensity),
-    };
-    let inv = |i: f64| if i > 0.0 { 1.0 / i } else { f64::MAX };
-    projected::Gauge {
-        u: (inv(ihi), inv(ilo)),
-        albedo_max: (0..scene.objects.len())
-            .map(|k| match bounds(Target::Albedo(k)) {
-                Some(f) => [f.max[0], f.max[1], f.max[2]],
-                None => scene.objects[k].material.albedo,
-            })
-            .collect(),
-    }
+    /// With the footprint, the pixels on an outline (`silhouette`): each the mean of its sub-pixel rays.
+    outlines: Option<silhouette::Silhouettes>,
 }
 
 /// Per-thread scratch, reused across evaluations so the hot path never allocates.
@@ -313,7 +295,7 @@ impl Fitness {
                 ));
             }
             if scene.interreflection && scene.can_occlude() {
-                proj.gauge = Some(gauge_bounds(scene));
+                proj.gauge = Some(bounce::gauge_bounds(scene));
             }
             Some(proj)
         } else {
@@ -357,7 +339,15 @@ impl Fitness {
             }
             None => Sky::None,
         };
+        let shadows = scene.can_occlude();
+        let outlines = silhouette::Silhouettes::new(
+            &active.silhouettes,
+            &geometry.shapes,
+            shadows,
+            environment,
+        );
         let mut fitness = Fitness {
+            outlines,
             layout,
             early_exit: true,
             base,
@@ -371,7 +361,7 @@ impl Fitness {
             shapes: geometry.shapes,
             kind,
             clip,
-            shadows: scene.can_occlude(),
+            shadows,
             constant: penalty_sums(&active.counted_fixed(), Norm::L1, Space::Linear),
             active,
             projection,
@@ -391,21 +381,12 @@ impl Fitness {
     /// and its polish can then take the two models for the price of one set-up.
     pub fn at_pixel_centres(&self) -> Fitness {
         let active = self.active.at_pixel_centres();
-        let kernel = if self.kernel.silhouettes.is_some() {
+        let kernel = match &self.outlines {
             // the silhouette pixels back in their groups: the groups `new` builds without the footprint
-            let mut k = Kernel::new(
-                active.set(),
-                &self.shapes,
-                self.shadows,
-                self.kernel.sky,
-                false,
-            );
-            k.norm = self.kernel.norm;
-            k.set_space(self.kernel.space());
-            k.saturated = self.kernel.saturated;
-            k
-        } else {
-            self.kernel.at_pixel_centres()
+            Some(_) => self
+                .kernel
+                .regrouped(active.set(), &self.shapes, self.shadows),
+            None => self.kernel.at_pixel_centres(),
         };
         Fitness {
             layout: self.layout.clone(),
@@ -420,6 +401,7 @@ impl Fitness {
             shadows: self.shadows,
             projection: self.projection.clone(),
             held_solve: None, // solved with the footprint: not this model's
+            outlines: None,
             bounce: self.bounce.clone(),
         }
     }
@@ -464,10 +446,11 @@ impl Fitness {
                 (solved, scratch)
             }
         };
-        let loss = self.kernel.refine(self.clip, proj, &mut solved, &scratch);
-        let p = self.params(x);
-        let io = (&scratch[..], self.clip);
-        let mut loss = self.kernel.refine_outlines(&p, proj, &mut solved, io, loss);
+        let mut loss = self.kernel.refine(self.clip, proj, &mut solved, &scratch);
+        if let Some(o) = &self.outlines {
+            let (p, io) = (self.params(x), (&scratch[..], self.clip));
+            loss = o.refine(&self.kernel, (&p, proj), &mut solved, io, loss);
+        }
         for c in 0..3 {
             loss[c] += self.constant[c];
         }
@@ -554,6 +537,9 @@ impl Fitness {
     pub fn set_space(&mut self, space: Space) {
         self.held_solve = None;
         self.kernel.set_space(space);
+        if let Some(o) = &mut self.outlines {
+            o.set_space(space);
+        }
         self.constant = penalty_sums(&self.active.counted_fixed(), self.norm(), space);
     }
 
@@ -620,6 +606,18 @@ impl Fitness {
                 .projected(c, proj, &self.bounce, solved, irradiance),
             None => self.kernel.l1(c),
         };
+        // (a partial sum already above the bound stays so)
+        if let Some(o) = self
+            .outlines
+            .as_ref()
+            .filter(|_| acc.iter().sum::<f64>() <= kernel_bound)
+        {
+            let closed = self.projection.as_ref().map(|proj| (proj, &*solved));
+            let part = o.loss_of(&self.kernel, p, closed, self.clip);
+            for c in 0..3 {
+                acc[c] += part[c];
+            }
+        }
         for c in 0..3 {
             acc[c] += self.constant[c];
         }

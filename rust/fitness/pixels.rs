@@ -11,7 +11,13 @@ use crate::render::footprint;
 pub use crate::render::footprint::interior;
 use crate::render::{CameraFrame, GBuffer, PShape, Surfel};
 
-use super::silhouette::Silhouette;
+/// One pixel on an outline: its objective (linear RGB) and the first hits of its sub-pixel rays
+/// (`render::footprint::silhouette_samples`).
+#[derive(Clone, Debug)]
+pub struct Silhouette {
+    pub target: Vec3A,
+    pub samples: Vec<Surfel>,
+}
 
 /// The pixels one fit shades, and the (clipped model, objective) of those no free parameter changes.
 #[derive(Clone, Debug, Default)]
@@ -357,7 +363,6 @@ pub(crate) fn gathers(
                 solve: &solve,
                 footprint: &[],
                 outline: &[],
-                silhouettes: &[],
             };
             let mut g = group(pixels, shapes, shadows, sky, false);
             Gather {
@@ -413,7 +418,7 @@ pub(super) fn offset(l: [f32; 3], point: f32, p: [f32; 3]) -> [f32; 3] {
 
 /// The pixels a kernel groups: each one's first hit and objective, whether it may inform the closed-form
 /// products, and its footprint axes (all pixels, or none: shadow edges at pixel centres); the pixels on
-/// an outline (`outline`, all or none) are left out of the groups, their samples in `silhouettes`.
+/// an outline (`outline`, all or none) are left out of the groups (`fitness::silhouette` models them).
 #[derive(Clone, Copy)]
 pub struct PixelSet<'a> {
     pub surfels: &'a [Surfel],
@@ -421,7 +426,6 @@ pub struct PixelSet<'a> {
     pub solve: &'a [bool],
     pub footprint: &'a [[Vec3A; 2]],
     pub outline: &'a [bool],
-    pub silhouettes: &'a [Silhouette],
 }
 
 impl ActivePixels {
@@ -433,7 +437,6 @@ impl ActivePixels {
             solve: &self.solve,
             footprint: &self.footprint,
             outline: &self.outline,
-            silhouettes: &self.silhouettes,
         }
     }
 

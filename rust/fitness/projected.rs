@@ -157,10 +157,6 @@ impl Kernel {
                 }
             }
         }
-        let part = self.silhouette_loss::<AVX2, E>(p, proj, out, top, enc);
-        for c in 0..3 {
-            acc[c] += part[c];
-        }
         acc
     }
 
@@ -501,23 +497,10 @@ impl Run<'_> {
 /// the specular product per channel `qw`, and the environment products `ek` (objects with a column).
 #[derive(Clone, Copy)]
 pub(crate) struct Products {
-    pk: [f32; 3],
-    qw: [f32; 3],
-    ek: [f32; 3],
-    on: bool,
-}
-
-impl Products {
-    /// Object `k`'s products in `s` as pass 2 takes them (`specular`: its run has a lobe).
-    pub(crate) fn of(s: &Solved, proj: &Projection, k: usize, specular: bool) -> Products {
-        let q = s.specular[k];
-        Products {
-            pk: std::array::from_fn(|c| s.products[k][c] as f32),
-            qw: std::array::from_fn(|c| (q * proj.weight[c] as f64) as f32),
-            ek: std::array::from_fn(|c| s.environment_at(k, c) as f32),
-            on: specular && q > 0.0,
-        }
-    }
+    pub(crate) pk: [f32; 3],
+    pub(crate) qw: [f32; 3],
+    pub(crate) ek: [f32; 3],
+    pub(crate) on: bool,
 }
 
 /// Pass 2 over one run where an object has an environment column or a lobe (`cols` its unit-light factor

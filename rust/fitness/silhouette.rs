@@ -8,18 +8,11 @@ use glam::Vec3A;
 
 use super::kernel::Kernel;
 use super::loss::{Encoding, Identity, Norm, Space, SrgbLut};
-use super::pixels::{group, Group, Light, PixelSet, Sky};
+use super::pixels::{group, Group, Light, PixelSet, Silhouette, Sky};
 use super::projected::{Products, Projection, Run, Solved};
 use crate::render::coat::Coat;
 use crate::render::footprint::SILHOUETTE_SAMPLES;
 use crate::render::{PShape, ShadeParams, Surfel};
-
-/// One pixel on an outline: its objective (linear RGB) and the first hits of its sub-pixel rays.
-#[derive(Clone, Debug)]
-pub struct Silhouette {
-    pub target: Vec3A,
-    pub samples: Vec<Surfel>,
-}
 
 /// One object's value at a sample, linear in its unit-light factors (`projected::Run::factors`): per
 /// channel `ambient` + `pc`·a + `qw`·b + `ec`·v (a the diffuse factor, b the lobe's or the coat's, v the
@@ -126,7 +119,6 @@ impl Silhouettes {
             solve: &solve,
             footprint: &[],
             outline: &[],
-            silhouettes: &[],
         };
         let groups = group(samples, shapes, shadows, sky, false);
         let mut pixel = Vec::with_capacity(groups.len());
@@ -246,82 +238,67 @@ impl Silhouettes {
     }
 }
 
-impl Kernel {
-    /// The loss of the pixels on an outline (`fitness::silhouette`) at the products `solved` for the
-    /// light of `p` (zero without them).
-    pub(crate) fn silhouette_loss<const AVX2: bool, E: Encoding>(
-        &self,
-        p: &crate::render::ShadeParams,
-        proj: &Projection,
-        solved: &Solved,
-        top: f32,
-        enc: E,
-    ) -> [f64; 3] {
-        let Some(s) = &self.silhouettes else {
-            return [0.0; 3];
-        };
-        let light = Light {
-            pos: p.light_position.to_array(),
-            dir: p.light_direction.map(|d| d.to_array()),
-            rgb: [1.0; 3],
-        };
-        let bg = p.exposure * p.background;
-        s.loss::<AVX2, E>(
-            &light,
-            |obj| Linear::solved(p, proj, solved, obj),
-            bg,
-            (top, self.norm),
-            enc,
-        )
+/// The unit light at `p`'s light (the factors' light; its colour is the models').
+fn unit_light(p: &ShadeParams) -> Light {
+    Light {
+        pos: p.light_position.to_array(),
+        dir: p.light_direction.map(|d| d.to_array()),
+        rgb: [1.0; 3],
     }
+}
 
-    /// [`Kernel::silhouette_loss`] in this kernel's space (the scalar path).
-    pub(crate) fn silhouette_loss_here(
+impl Silhouettes {
+    /// The silhouette pixels' loss under candidate `p` in `kernel`'s norm and space: the direct model's
+    /// (`Kernel::l1`), or at the closed-form products `solved` of `proj` (`Kernel::projected`).
+    pub(crate) fn loss_of(
         &self,
+        kernel: &Kernel,
         p: &ShadeParams,
-        proj: &Projection,
-        solved: &Solved,
-        top: f32,
+        closed: Option<(&Projection, &Solved)>,
+        clip: bool,
     ) -> [f64; 3] {
-        match self.space {
-            Space::Linear => self.silhouette_loss::<false, _>(p, proj, solved, top, Identity),
-            Space::Srgb => self.silhouette_loss::<false, _>(p, proj, solved, top, SrgbLut::get()),
+        let top = if clip { 1.0 } else { f32::INFINITY };
+        let (light, bg, norm) = (unit_light(p), p.exposure * p.background, kernel.norm);
+        let model = |obj| match closed {
+            Some((proj, s)) => Linear::solved(p, proj, s, obj),
+            None => Linear::direct(p, obj),
+        };
+        match kernel.space {
+            Space::Linear => self.loss::<false, _>(&light, model, bg, (top, norm), Identity),
+            Space::Srgb => self.loss::<false, _>(&light, model, bg, (top, norm), SrgbLut::get()),
         }
     }
 
-    /// After the refine (`scratch` the unit-light factors of `Kernel::projected`, `loss` the grouped
-    /// pixels' loss at `solved`): each object with silhouette samples takes the products that minimise
-    /// the whole loss, its grouped pixels' and the silhouette pixels' (each diffuse product in its
-    /// channel, then a lobe's over all three, four rounds where it has one: golden-section searches
+    /// After `kernel`'s refine (`scratch` the unit-light factors of `Kernel::projected`, `loss` the
+    /// grouped pixels' loss at `solved`): each object with silhouette samples takes the products that
+    /// minimise the whole loss, its grouped pixels' and the silhouette pixels' (each diffuse product in
+    /// its channel, then a lobe's over all three, four rounds where it has one: golden-section searches
     /// over the bounds, each kept where it lowers the loss), and its silhouette pixels the light reaches
     /// count as lit. Returns the whole loss.
-    pub(crate) fn refine_outlines(
+    pub(crate) fn refine(
         &self,
-        p: &ShadeParams,
-        proj: &Projection,
+        kernel: &Kernel,
+        (p, proj): (&ShadeParams, &Projection),
         solved: &mut Solved,
         (scratch, clip): (&[f32], bool),
         loss: [f64; 3],
     ) -> [f64; 3] {
-        let Some(s) = &self.silhouettes else {
-            return loss;
-        };
         let top = if clip { 1.0 } else { f32::INFINITY };
-        let light = Light {
-            pos: p.light_position.to_array(),
-            dir: p.light_direction.map(|d| d.to_array()),
-            rgb: [1.0; 3],
+        let light = unit_light(p);
+        let sat = if clip {
+            kernel.saturated
+        } else {
+            f32::INFINITY
         };
-        let sat = if clip { self.saturated } else { f32::INFINITY };
         let (mut offset, mut grouped) = (0, loss);
-        for g in &self.groups {
+        for g in &kernel.groups {
             let n = g.len();
             let (a, b) = (
                 &scratch[offset..offset + n],
-                &scratch[self.pixels + offset..][..n],
+                &scratch[kernel.pixels + offset..][..n],
             );
             offset += n;
-            let Some(k) = g.object.filter(|&k| s.has(k)) else {
+            let Some(k) = g.object.filter(|&k| self.has(k)) else {
                 continue;
             };
             let m = &p.materials[k];
@@ -333,17 +310,17 @@ impl Kernel {
                 m.shininess,
                 p.coat(k),
                 (sat, top),
-                self.norm,
+                kernel.norm,
             );
             let own = |s: &Solved| {
-                let products = Products::of(s, proj, k, run.is_specular());
-                match self.space {
+                let products = products(s, proj, k, run.is_specular());
+                match kernel.space {
                     Space::Linear => run.loss::<false, _>(0, a, b, products, Identity, None),
                     Space::Srgb => run.loss::<false, _>(0, a, b, products, SrgbLut::get(), None),
                 }
             };
             let whole = |s: &Solved| {
-                let (o, e) = (own(s), self.silhouette_loss_here(p, proj, s, top));
+                let (o, e) = (own(s), self.loss_of(kernel, p, Some((proj, s)), clip));
                 [o[0] + e[0], o[1] + e[1], o[2] + e[2]]
             };
             let before = own(solved);
@@ -365,7 +342,7 @@ impl Kernel {
                 grouped[c] += after[c] - before[c];
             }
         }
-        let lit = s.lit(
+        let lit = self.lit(
             &light,
             |obj| Linear::solved(p, proj, solved, obj),
             solved.products.len(),
@@ -373,8 +350,20 @@ impl Kernel {
         for (l, more) in solved.lit.iter_mut().zip(lit) {
             *l += more;
         }
-        let outline = self.silhouette_loss_here(p, proj, solved, top);
+        let outline = self.loss_of(kernel, p, Some((proj, solved)), clip);
         std::array::from_fn(|c| grouped[c] + outline[c])
+    }
+}
+
+/// Object `k`'s products in `s` as the projected kernel's pass 2 takes them (`specular`: its run has a
+/// lobe).
+fn products(s: &Solved, proj: &Projection, k: usize, specular: bool) -> Products {
+    let q = s.specular[k];
+    Products {
+        pk: std::array::from_fn(|c| s.products[k][c] as f32),
+        qw: std::array::from_fn(|c| (q * proj.weight[c] as f64) as f32),
+        ek: std::array::from_fn(|c| s.environment_at(k, c) as f32),
+        on: specular && q > 0.0,
     }
 }
 
