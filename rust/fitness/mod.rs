@@ -345,7 +345,8 @@ impl Fitness {
             &geometry.shapes,
             shadows,
             environment,
-        );
+        )
+        .map(|o| o.products_from_outlines(spec.solve_margin == 0));
         let mut fitness = Fitness {
             outlines,
             layout,

@@ -10,6 +10,7 @@ use super::kernel::Kernel;
 use super::loss::{Encoding, Identity, Norm, Space, SrgbLut};
 use super::pixels::{group, Group, Light, PixelSet, Silhouette, Sky};
 use super::projected::{Products, Projection, Run, Solved};
+use super::simd::{self, Simd};
 use crate::render::coat::Coat;
 use crate::render::footprint::SILHOUETTE_SAMPLES;
 use crate::render::{PShape, ShadeParams, Surfel};
@@ -83,6 +84,9 @@ pub(crate) struct Silhouettes {
     t: [Vec<f32>; 3],
     /// The objective in the loss space (sRGB); empty in the linear space.
     te: [Vec<f32>; 3],
+    /// Whether the refine's products take the outline pixels' loss too (not where a JPEG's chroma mixes
+    /// colours across outlines, `FitnessSpec::solve_margin`).
+    refine: bool,
 }
 
 impl Silhouettes {
@@ -133,6 +137,7 @@ impl Silhouettes {
             misses,
             t: std::array::from_fn(|c| list.iter().map(|s| s.target[c]).collect()),
             te: Default::default(),
+            refine: true,
         })
     }
 
@@ -177,6 +182,11 @@ impl Silhouettes {
             top: f32::INFINITY,
             norm: Norm::L1,
         }
+    }
+
+    /// Whether the refine's products minimise the outline pixels' loss too (see [`Silhouettes::refine`]).
+    pub(crate) fn products_from_outlines(self, on: bool) -> Silhouettes {
+        Silhouettes { refine: on, ..self }
     }
 
     /// Whether some sample sees object `k`.
@@ -263,9 +273,36 @@ impl Silhouettes {
             Some((proj, s)) => Linear::solved(p, proj, s, obj),
             None => Linear::direct(p, obj),
         };
+        let avx2 = simd::detected();
+        let (s, light) = (self, &light);
         match kernel.space {
-            Space::Linear => self.loss::<false, _>(&light, model, bg, (top, norm), Identity),
-            Space::Srgb => self.loss::<false, _>(&light, model, bg, (top, norm), SrgbLut::get()),
+            Space::Linear => simd::dispatch(
+                Outline {
+                    s,
+                    light,
+                    model,
+                    bg,
+                    top,
+                    norm,
+                    enc: Identity,
+                },
+                avx2,
+            ),
+            Space::Srgb => {
+                let enc = SrgbLut::get();
+                simd::dispatch(
+                    Outline {
+                        s,
+                        light,
+                        model,
+                        bg,
+                        top,
+                        norm,
+                        enc,
+                    },
+                    avx2,
+                )
+            }
         }
     }
 
@@ -298,7 +335,7 @@ impl Silhouettes {
                 &scratch[kernel.pixels + offset..][..n],
             );
             offset += n;
-            let Some(k) = g.object.filter(|&k| self.has(k)) else {
+            let Some(k) = g.object.filter(|&k| self.refine && self.has(k)) else {
                 continue;
             };
             let m = &p.materials[k];
@@ -381,17 +418,43 @@ fn golden(
         set(&mut probe, v);
         loss(&probe)
     };
+    // each step keeps one of its two inner points (0.618 of the interval): 48 steps, 1e-10 of it
     let r = 0.5 * (5f64.sqrt() - 1.0);
-    for _ in 0..60 {
-        let (a, b) = (hi - r * (hi - lo), lo + r * (hi - lo));
-        if at(a) <= at(b) {
-            hi = b;
+    let (mut a, mut b) = (hi - r * (hi - lo), lo + r * (hi - lo));
+    let (mut fa, mut fb) = (at(a), at(b));
+    for _ in 0..48 {
+        if fa <= fb {
+            (hi, b, fb) = (b, a, fa);
+            a = hi - r * (hi - lo);
+            fa = at(a);
         } else {
-            lo = a;
+            (lo, a, fa) = (a, b, fb);
+            b = lo + r * (hi - lo);
+            fb = at(b);
         }
     }
     let best = 0.5 * (lo + hi);
     if at(best) < before {
         set(s, best);
+    }
+}
+
+/// [`Silhouettes::loss`] for [`simd::dispatch`].
+struct Outline<'a, F, E> {
+    s: &'a Silhouettes,
+    light: &'a Light,
+    model: F,
+    bg: Vec3A,
+    top: f32,
+    norm: Norm,
+    enc: E,
+}
+
+impl<'m, F: Fn(usize) -> Linear<'m>, E: Encoding> Simd for Outline<'_, F, E> {
+    type Output = [f64; 3];
+    #[inline(always)]
+    fn run<const AVX2: bool>(self) -> [f64; 3] {
+        let o = self;
+        o.s.loss::<AVX2, E>(o.light, o.model, o.bg, (o.top, o.norm), o.enc)
     }
 }
