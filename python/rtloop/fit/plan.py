@@ -61,7 +61,9 @@ def plan_fit(scene: Scene, options: FitOptions, photo: Observation) -> Plan:
                       generations=options.generations, optimizer=options.optimizer, polish=options.polish)
     check_arguments(scene, seed=options.seed, threads=options.threads, polish=b.polish,
                     pixels_per_object=options.pixels_per_object, population=b.population)  # the scaled budget too
-    footprint = ("polish" if b.method == "projected" else "off") if options.footprint == "auto" else options.footprint
+    # "auto": the closed form's polish; the fallback from it every stage (its two stages have no polish apart)
+    auto = "polish" if b.method == "projected" else ("on" if b.projection_unavailable else "off")
+    footprint = auto if options.footprint == "auto" else options.footprint
     settings = {**b.settings(), "clip": options.clip,
                 "masked_pixels": None if photo.use is None else int(scene.width * scene.height - photo.use.size),
                 "norm": options.first_norm, "space": options.first_space,
