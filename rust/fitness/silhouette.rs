@@ -150,23 +150,39 @@ impl Silhouettes {
         objects: usize,
     ) -> Vec<usize> {
         let mut lit = vec![0usize; objects];
+        self.each_group::<false, _>(light, model, |obj, _, _, pixel, e, _| {
+            let mut seen: Vec<u32> = pixel
+                .iter()
+                .zip(e)
+                .filter(|(_, &a)| a > 0.0)
+                .map(|(&k, _)| k)
+                .collect();
+            seen.dedup();
+            lit[obj] += seen.len();
+        });
+        lit
+    }
+
+    /// `f(object, model, run, pixels, a, b)` per group of samples: its object's `model`, its run under
+    /// `light`, each sample's silhouette pixel and unit-light factors.
+    fn each_group<'m, const AVX2: bool, F>(
+        &self,
+        light: &Light,
+        model: impl Fn(usize) -> Linear<'m>,
+        mut f: F,
+    ) where
+        F: FnMut(usize, &Linear, &Run, &[u32], &[f32], &[f32]),
+    {
         let (mut e, mut b) = (Vec::new(), Vec::new());
         for (g, pixel) in self.groups.iter().zip(&self.pixel) {
             let Some(obj) = g.object else { continue };
             let m = model(obj);
             e.resize(g.len(), 0.0);
             b.resize(g.len(), 0.0);
-            self.run(g, light, &m).factors::<false>(0, &mut e, &mut b);
-            let mut seen: Vec<u32> = pixel
-                .iter()
-                .zip(&e)
-                .filter(|(_, &a)| a > 0.0)
-                .map(|(&k, _)| k)
-                .collect();
-            seen.dedup();
-            lit[obj] += seen.len();
+            let run = self.run(g, light, &m);
+            run.factors::<AVX2>(0, &mut e, &mut b);
+            f(obj, &m, &run, pixel, &e, &b);
         }
-        lit
     }
 
     /// Group `g`'s [`Run`] for the factors of `m` under `light`.
@@ -218,14 +234,7 @@ impl Silhouettes {
     ) -> [f64; 3] {
         let mut sum: [Vec<f32>; 3] =
             std::array::from_fn(|c| self.misses.iter().map(|&m| m * background[c]).collect());
-        let (mut e, mut b) = (Vec::new(), Vec::new());
-        for (g, pixel) in self.groups.iter().zip(&self.pixel) {
-            let Some(obj) = g.object else { continue };
-            let m = model(obj);
-            e.resize(g.len(), 0.0);
-            b.resize(g.len(), 0.0);
-            let run = self.run(g, light, &m);
-            run.factors::<AVX2>(0, &mut e, &mut b);
+        self.each_group::<AVX2, _>(light, model, |_, m, run, pixel, e, b| {
             for c in 0..3 {
                 for (j, &k) in pixel.iter().enumerate() {
                     let mut v = m.ambient[c] + m.pc[c] * e[j] + m.qw[c] * b[j];
@@ -235,7 +244,7 @@ impl Silhouettes {
                     sum[c][k as usize] += v;
                 }
             }
-        }
+        });
         let w = 1.0 / SILHOUETTE_SAMPLES as f32;
         let t = if E::ENCODES { &self.te } else { &self.t };
         std::array::from_fn(|c| {
@@ -273,37 +282,33 @@ impl Silhouettes {
             Some((proj, s)) => Linear::solved(p, proj, s, obj),
             None => Linear::direct(p, obj),
         };
-        let avx2 = simd::detected();
-        let (s, light) = (self, &light);
         match kernel.space {
-            Space::Linear => simd::dispatch(
-                Outline {
-                    s,
-                    light,
-                    model,
-                    bg,
-                    top,
-                    norm,
-                    enc: Identity,
-                },
-                avx2,
-            ),
-            Space::Srgb => {
-                let enc = SrgbLut::get();
-                simd::dispatch(
-                    Outline {
-                        s,
-                        light,
-                        model,
-                        bg,
-                        top,
-                        norm,
-                        enc,
-                    },
-                    avx2,
-                )
-            }
+            Space::Linear => self.dispatched(&light, model, (bg, top, norm), Identity),
+            Space::Srgb => self.dispatched(&light, model, (bg, top, norm), SrgbLut::get()),
         }
+    }
+
+    /// [`Silhouettes::loss`] on the CPU's path ([`simd::dispatch`]).
+    fn dispatched<'m, E: Encoding>(
+        &self,
+        light: &Light,
+        model: impl Fn(usize) -> Linear<'m>,
+        (bg, top, norm): (Vec3A, f32, Norm),
+        enc: E,
+    ) -> [f64; 3] {
+        let s = self;
+        simd::dispatch(
+            Outline {
+                s,
+                light,
+                model,
+                bg,
+                top,
+                norm,
+                enc,
+            },
+            simd::detected(),
+        )
     }
 
     /// After `kernel`'s refine (`scratch` the unit-light factors of `Kernel::projected`, `loss` the
