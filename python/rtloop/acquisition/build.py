@@ -4,9 +4,9 @@
 
 1. colour: a white balance from a grey card, or a colour correction from a ColorChecker, measured
    in the photo and applied in linear light (to the photo and to a separate objective photo);
-2. the camera model: with a calibration, undistort the photos and re-centre the principal point
-   (the scene's camera is an ideal pinhole); with only a field of view, take the photo as a pinhole;
-   with neither, estimate the focal length from the board (less accurate);
+2. the camera model: with a calibration (or EXIF naming a lens Lensfun has a profile of), undistort the
+   photos (the scene's camera is an ideal pinhole); with only a field of view or EXIF's focal length,
+   take the photo as a pinhole; with neither, estimate the focal length from the board (less accurate);
 3. the board: camera pose and floor plane (the board's face is the floor, y = 0, +y up, metres);
 4. the ball: its outline, searched for as a ball of the given radius resting on the floor, and its
    centre fitted to the outline;
@@ -14,9 +14,7 @@
    (light position and intensity, both albedos) with bounds scaled to the scene;
 6. an overlay: the board's axes and corners, the ball's fitted outline and edge points, and the
    outline of the ball as rtloop renders the new scene (``rtloop.object_ids``), over the photo.
-
-The fit cannot move the sphere (``objects.*.center`` is not a fittable parameter in rtloop's scene
-format), so the sphere stays where the photo puts it; the overlay is the check that it lines up.
+The fit cannot move the sphere (``objects.*.center`` is not fittable), so the overlay is the check.
 """
 
 from __future__ import annotations
@@ -38,10 +36,13 @@ from .camera import focal_from_vfov
 from .colour import ColourCorrection, colorchecker_correction, grey_card_balance
 from .exif import ExifFocal
 from .focal import field_of_view_record, refine_vfov_by_ball, scan_vfov_for_ball
+from .lens_profile import LensProfile, LensRemap
 from .overlay import OVERLAY_MAX_SIDE, _board_outline_px, draw_overlay  # noqa: F401 (re-exported)
 from .pose import VFOV_TARGET_DEG, FloorPose, estimate_floor_pose
 
 __all__ = ["AcquiredScene", "build_scene", "draw_overlay", "fit_section"]
+
+Remap = PinholeRemap | LensRemap  # what moves the photo's pixels into the scene's pinhole camera
 
 
 @dataclass
@@ -118,6 +119,7 @@ def loose_view_warning(where: str, vfov_deg: float, vfov_std_deg: float, focal_p
 def build_scene(
     photo: np.ndarray, board: BoardSpec | str | dict, ball_radius: float, *,
     intrinsics: CameraIntrinsics | None = None, vfov_deg: float | None = None, exif: ExifFocal | None = None,
+    lens: LensProfile | None = None,
     objective: np.ndarray | None = None, colour: str | tuple | ColourCorrection | None = None,
     ball_hint: tuple[float, float, float] | None = None, ball_mask: np.ndarray | None = None,
     resting: bool = True, width: int = 160, light_range: float = 2.0,
@@ -135,6 +137,8 @@ def build_scene(
             full vertical field of view of an already distortion-free photo; else ``exif``, the focal
             length the photo's EXIF gives (:func:`rtloop.acquisition.exif.exif_focal`); none: estimated
             from the board, refused when the board is seen too nearly head-on for that.
+        lens: with ``exif``, the lens's profile (:func:`rtloop.acquisition.lens_profile.find_lens_profile`):
+            its distortion and vignetting are removed from both photos first.
         objective: the photo to fit, from the same camera position and settings (e.g. the same view
             with the board removed); default: ``photo``.
         colour: ``None``, ``"colorchecker"``, a grey-card rectangle ``(x, y, w, h)`` / ``"x,y,w,h"``
@@ -167,7 +171,7 @@ def build_scene(
     same, notes = objective is photo, []
     correction, photo, objective = _correct_colour(photo, objective, same, colour, where)
     remap, focal, focal_source, photo, objective = _camera_model(
-        photo, objective, same, intrinsics, vfov_deg, exif, where
+        photo, objective, same, intrinsics, vfov_deg, exif, lens, where
     )
     pose = _pose_camera(photo, spec, focal, focal_source, where, strict, notes, h)
     mask, hint = _ball_mask_and_hint(ball_mask, ball_hint, remap, w, h)
@@ -183,6 +187,8 @@ def build_scene(
         photo, spec, pose, silhouette, sphere, correction, ball_radius, refinement, locate,
         focal_source, exif, intrinsics, names[0], where, notes, w, h,
     ))}
+    if isinstance(remap, LensRemap):
+        scene["meta"]["acquisition"]["lens_profile"] = jsonable(remap.report())
     rtloop.load_scene(scene)  # validates: a failure here is a bug, not bad input
     overlay = draw_overlay(photo, scene, pose, silhouette)
     unmodelled, card = _masks(
@@ -198,7 +204,7 @@ def _masks(
     pose: FloorPose,
     spec: BoardSpec,
     correction: ColourCorrection,
-    remap: PinholeRemap | None,
+    remap: Remap | None,
     photo: np.ndarray,
     same: bool,
     board_margin: float | None,
@@ -303,11 +309,12 @@ def _camera_model(
     intrinsics: CameraIntrinsics | None,
     vfov_deg: float | None,
     exif: ExifFocal | None,
+    lens: LensProfile | None,
     where: str,
-) -> tuple[PinholeRemap | None, float | None, str, np.ndarray, np.ndarray]:
-    """Step 2, the camera model: with a calibration, undistort both photos to a pinhole; else the focal
-    length from the given field of view, from EXIF, or none (the board estimates it). Returns the remap
-    (None without a calibration), the focal length in pixels, where it came from, and both photos."""
+) -> tuple[Remap | None, float | None, str, np.ndarray, np.ndarray]:
+    """Step 2, the camera model: with a calibration (or EXIF and the lens's profile), both photos moved into a
+    pinhole; else the focal length from the given field of view, from EXIF, or none (the board estimates
+    it). Returns the remap (or None), the focal length in pixels, where it came from, and both photos."""
     h, w = photo.shape[:2]
     remap = None
     if intrinsics is not None:
@@ -321,6 +328,11 @@ def _camera_model(
                 f"vertical field of view must be between 1 and 170 degrees (got {vfov_deg})"
             )
         focal, focal_source = focal_from_vfov(vfov_deg, h), "given"
+    elif exif is not None and lens is not None:
+        remap = lens.remap(w, h, exif.focal_px)
+        photo = remap.correct(photo)
+        objective = photo if same else remap.correct(objective)
+        focal, focal_source = remap.focal_px, "exif"
     elif exif is not None:
         focal, focal_source = exif.focal_px, "exif"
     else:
@@ -362,7 +374,7 @@ def _pose_camera(
 def _ball_mask_and_hint(
     ball_mask: np.ndarray | None,
     ball_hint: tuple[float, float, float] | None,
-    remap: PinholeRemap | None,
+    remap: Remap | None,
     w: int,
     h: int,
 ) -> tuple[np.ndarray | None, tuple[float, float, float] | None]:
@@ -603,7 +615,7 @@ def _acquisition_report(
     return report
 
 
-def card_pixels(rect: Any, remap: PinholeRemap | None, w: int, h: int) -> np.ndarray:
+def card_pixels(rect: Any, remap: Remap | None, w: int, h: int) -> np.ndarray:
     """True inside the grey card's rectangle (x, y, w, h in the photo as given), 1 px in from its edges, at
     the objective's size."""
     x, y, rw, rh = rect
@@ -646,7 +658,7 @@ def unmodelled_mask(
     pose: FloorPose,
     margin_m: float,
     correction: ColourCorrection,
-    remap: PinholeRemap | None,
+    remap: Remap | None,
     w: int,
     h: int,
     photo: np.ndarray | None = None,
@@ -678,7 +690,7 @@ def unmodelled_mask(
     return drop == 0
 
 
-def _remapped_rect(rect: Any, remap: PinholeRemap) -> list[int]:
+def _remapped_rect(rect: Any, remap: Remap) -> list[int]:
     """The axis-aligned box, in the undistorted photo, of a rectangle of the photo as given."""
     x, y, rw, rh = rect
     p = remap.points(np.array([[x, y], [x + rw, y], [x + rw, y + rh], [x, y + rh]], float))

@@ -153,6 +153,14 @@ def _add_camera_args(p: Parser) -> None:
         "length, else from the board when it is seen at enough of an angle)",
     )
     g.add_argument(
+        "--lens-profile",
+        choices=("auto", "off"),
+        default="auto",
+        help="'auto' (default): where the photo's EXIF names its camera, lens and focal length and Lensfun's "
+        "database has that lens, remove its distortion and vignetting before the board and the ball are "
+        "measured (not with --camera or --vfov); 'off': take the photo as a pinhole's",
+    )
+    g.add_argument(
         "--strict",
         action="store_true",
         help="without EXIF, --vfov or --camera: refuse a board that fixes the vertical field of view more "
@@ -276,6 +284,7 @@ def _cmd_scene(args: argparse.Namespace) -> int:
     except OutputDirError as e:
         raise AcquisitionError(str(e)) from None
     photo, objective, intrinsics, exif, mask = _load_inputs(args)
+    lens = _lens_profile(args) if exif is not None and args.lens_profile == "auto" else None
     colour: Any = "colorchecker" if args.colorchecker else args.grey_card
     acq = build_scene(
         photo,
@@ -284,6 +293,7 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         intrinsics=intrinsics,
         vfov_deg=args.vfov,
         exif=exif,
+        lens=lens,
         objective=objective,
         colour=colour,
         ball_hint=args.ball,
@@ -325,6 +335,19 @@ def _load_inputs(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray | Non
         m = load_photo(args.ball_mask, response="linear")
         mask = m.max(axis=2) > 0.5
     return photo, objective, intrinsics, exif, mask
+
+
+def _lens_profile(args: argparse.Namespace) -> Any:
+    """The profile of the lens the photo's EXIF names (:mod:`rtloop.acquisition.lens_profile`), or None,
+    with a line saying why not when the EXIF names a camera."""
+    from ..acquisition.lens_profile import find_lens_profile, read_lens_exif
+
+    named = read_lens_exif(args.photo)
+    lens, why = find_lens_profile(named)
+    if lens is None and named is not None:
+        info(f"rtloop-scene: no lens profile ({why}): the photo is taken as a pinhole's; give --camera "
+             "(rtloop-acquire calibrate) if its lens distorts")
+    return lens
 
 
 def _record_inputs(acq: Any, args: argparse.Namespace) -> None:
@@ -387,6 +410,10 @@ def _print_summary(out: Path, acq: Any, args: argparse.Namespace) -> None:
         f"{ball['radius']:g} m; "
         f"outline fit {rep['ball']['rms_px']:.2f} px RMS over {rep['ball']['edge_points']} edge points"
     )
+    if "lens_profile" in rep:
+        lp = rep["lens_profile"]
+        done = " and ".join(k for k in ("distortion", "vignetting") if lp[k]) or "nothing"
+        print(f"  lens: {lp['lens']} at {lp['focal_mm']:g} mm; its profile ({lp['source']}) removed {done}")
     print(f"  colour: {rep['colour']['source']}")
     if args.truth:
         for line in truth_lines(acq.scene, args.truth):
