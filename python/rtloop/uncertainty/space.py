@@ -12,6 +12,8 @@ import numpy as np
 from ..fit.products import product_range, products_of, specular_product, specular_range
 from ..scene import Scene
 
+#: A linear parameter's (an albedo's, a product's, a specular's) scale is at most this times its value.
+LINEAR_SCALE = 10.0
 #: The scale of a direction angle (radians): the default step is STEP_FRACTION of it.
 ANGLE_SCALE = 1.0
 
@@ -178,6 +180,13 @@ def _space(
             albedo[i] = (objects[head + "."], "rgb".index(tail))
         elif name.endswith(".specular") and name[: -len("specular")] in objects:
             specular[i] = objects[name[: -len("specular")]]
+    # A linear parameter's column is exact (or rendered, with a bounce); its step says which pixels cross the
+    # clip within it. Bounds far wider than the value (a light of 3e5 W/sr with its intensity free over
+    # decades) would step the products by thousands of times themselves and put every pixel on the kink: at
+    # most LINEAR_SCALE times the value (a step of a hundredth of it: a float32 render's rounding stays at
+    # 1e-5 of a rendered column).
+    for k in (*albedo, *specular):
+        scale[k] = min(scale[k], max(LINEAR_SCALE * abs(values[k]), 1e-6 * scale[k]))
     names = [rename.get(name, name) for name in native]
     direction = None
     if "light.direction.x" in native:
