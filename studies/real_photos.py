@@ -74,8 +74,10 @@ def fit_case(case: Path, options: dict[str, Any], bars: bool = False) -> dict[st
     row = {"error_deg": angle_deg(light, truth), "ms": 1e3 * seconds, "terms": result.model.get("terms"),
            "norm": (result.model.get("norm") or {}).get("used", result.settings.get("norm"))}
     if bars:  # the reported bar on the direction: the block sandwich's, widened by what the model lacks
-        distance = ((result.uncertainty or {}).get("bars") or {}).get("light_distance") or {}
-        row["sigma_deg"] = distance.get("direction_sigma_deg")
+        bars = (result.uncertainty or {}).get("bars") or {}
+        distance = bars.get("light_distance") or {}
+        row.update(sigma_deg=distance.get("direction_sigma_deg"), model_lacks=bars.get("model_lacks"),
+                   distance_determined=distance.get("distance_determined"))
     return row
 
 
