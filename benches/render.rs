@@ -111,11 +111,12 @@ fn bench(c: &mut Criterion) {
             Some(Projection::matte(bounds)),
         ),
     ];
+    let at = &scene;
     let cases: Vec<_> = [(Space::Linear, ""), (Space::Srgb, " srgb")]
         .into_iter()
         .flat_map(|(space, suffix)| {
             losses.iter().map(move |(name, paths, kind, pb)| {
-                let layout = ParamLayout::new(&scene, paths).unwrap();
+                let layout = ParamLayout::new(at, paths).unwrap();
                 (format!("{name}{suffix}"), layout, *kind, pb.clone(), space)
             })
         })
