@@ -317,6 +317,18 @@ def job_line(rng: random.Random) -> str:
     return json.dumps(d)
 
 
+def run_quietly(main, argv: list[str]) -> tuple[int | str | None, str]:
+    """A command line's ``main(argv)`` with its stdout dropped: (exit status, what it wrote on stderr); argparse's
+    ``SystemExit`` is its exit status."""
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        try:
+            code = main(argv)
+        except SystemExit as e:
+            code = e.code
+    return code, err.getvalue()
+
+
 def _tree(root: Path) -> dict:
     return {str(p.relative_to(root)): p.read_bytes() if p.is_file() else None for p in sorted(root.rglob("*"))}
 
@@ -420,13 +432,7 @@ def _strict_cli(rng: random.Random, c: Counts, tmp: Path) -> None:
         flag = rng.choice(STRICT_FLAGS[1:])
         value = rng.choice([str(odd(rng)), "50", "0.08", "400,300,40", "x"])
         argv += [flag] if flag in ("--force", "--ball-free") else [flag, value]
-    err = io.StringIO()
-    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
-        try:
-            code = scene_main(argv)
-        except SystemExit as e:
-            code = e.code
-    text = err.getvalue()
+    code, text = run_quietly(scene_main, argv)
     c.bump(f"scene_exit_{code}")
     if code not in (0, 1, 2) or "Traceback" in text or (code == 1 and len(text.strip().splitlines()) != 1):
         c.bump("traceback_not_one_line")

@@ -3,9 +3,9 @@
 
 from __future__ import annotations
 
-from .._interrupt import interrupted_at_import
+from .._interrupt import importing
 
-try:
+with importing:  # a Ctrl-C while a console script starts: one line, exit 130
     import argparse
     import json
     import math
@@ -28,21 +28,9 @@ try:
     from ..acquisition.response import load_photo
     from .acquire import DEFAULT_BOARD
     from .args import (
-        BOARD_HELP,
-        RESPONSE_HELP,
-        Parser,
-        float_in,
-        formatter,
-        info,
-        length,
-        positive_float,
-        positive_int,
-        run_subcommands,
-        triple,
+        BOARD_HELP, RESPONSE_HELP, Parser, choice, flag, float_in, formatter, info, length, positive_float,
+        positive_int, run_subcommands, triple
     )
-except KeyboardInterrupt:
-    interrupted_at_import()  # a console script starting: one line, exit 130
-    raise
 
 __all__ = ["scene_main"]
 
@@ -124,7 +112,7 @@ def _build_scene_parser() -> Parser:
         help="the ball's radius: metres, or with mm/cm (measure the circumference and divide by 2 pi)",
     )
     p.add_argument("--out", "-o", required=True, metavar="DIR", help="output directory (created)")
-    p.add_argument("--force", action="store_true", help="replace DIR if it exists and is not empty")
+    flag(p, "--force", "replace DIR if it exists and is not empty")
     _add_camera_args(p)
     _add_photos_args(p)
     _add_colour_args(p)
@@ -152,20 +140,13 @@ def _add_camera_args(p: Parser) -> None:
         help="vertical field of view of a distortion-free photo, in degrees (default: from the photo's EXIF focal "
         "length, else from the board when it is seen at enough of an angle)",
     )
-    g.add_argument(
-        "--lens-profile",
-        choices=("auto", "off"),
-        default="auto",
-        help="'auto' (default): where the photo's EXIF names its camera, lens and focal length and Lensfun's "
-        "database has that lens, remove its distortion and vignetting before the board and the ball are "
-        "measured (not with --camera or --vfov); 'off': take the photo as a pinhole's",
-    )
-    g.add_argument(
-        "--strict",
-        action="store_true",
-        help="without EXIF, --vfov or --camera: refuse a board that fixes the vertical field of view more "
-        "loosely than +-0.3 deg (default: use it and warn with its spread)",
-    )
+    choice(g, "--lens-profile", ("auto", "off"),
+           "'auto' (default): where the photo's EXIF names its camera, lens and focal length and Lensfun's "
+           "database has that lens, remove its distortion and vignetting before the board and the ball are "
+           "measured (not with --camera or --vfov); 'off': take the photo as a pinhole's")
+    flag(g, "--strict",
+         "without EXIF, --vfov or --camera: refuse a board that fixes the vertical field of view more "
+         "loosely than +-0.3 deg (default: use it and warn with its spread)")
 
 
 def _add_photos_args(p: Parser) -> None:
@@ -200,11 +181,8 @@ def _add_colour_args(p: Parser) -> None:
     col.add_argument(
         "--grey-card", metavar="X,Y,W,H", help="white balance from a neutral card at this rectangle of PHOTO"
     )
-    col.add_argument(
-        "--colorchecker",
-        action="store_true",
-        help="colour correction from a ColorChecker Classic in PHOTO (OpenCV contrib's cv2.mcc)",
-    )
+    flag(col, "--colorchecker",
+         "colour correction from a ColorChecker Classic in PHOTO (OpenCV contrib's cv2.mcc)")
     g.add_argument(
         "--grey-card-reflectance",
         type=float_in(0.0, 1.0, True, "a reflectance in (0, 1], e.g. 0.18"),
@@ -227,11 +205,8 @@ def _add_ball_args(p: Parser) -> None:
     g.add_argument(
         "--ball-mask", metavar="MASK.png", help="an image of PHOTO's size, white on the ball, black elsewhere"
     )
-    g.add_argument(
-        "--ball-free",
-        action="store_true",
-        help="do not assume the ball rests on the floor: fit its centre's height too (less precise)",
-    )
+    flag(g, "--ball-free",
+         "do not assume the ball rests on the floor: fit its centre's height too (less precise)")
     g.add_argument(
         "--board-margin",
         type=float,
@@ -260,13 +235,10 @@ def _add_scene_args(p: Parser) -> None:
         metavar="FACTOR",
         help="the light's search box, in units of the camera's distance to the ball (default 2)",
     )
-    g.add_argument(
-        "--direct-only",
-        action="store_true",
-        help="a scene of direct light only; by default it also has what a room shows: a dim light from "
-        "every direction (the environment, free in the fit section) and light bouncing between the ball "
-        "and the floor (\"interreflection\": true)",
-    )
+    flag(g, "--direct-only",
+         "a scene of direct light only; by default it also has what a room shows: a dim light from "
+         "every direction (the environment, free in the fit section) and light bouncing between the ball "
+         "and the floor (\"interreflection\": true)")
 
 
 def scene_main(argv: Sequence[str] | None = None) -> int:
