@@ -1,5 +1,6 @@
-//! The lights fit's loss: any number of lights, point, directional or sphere, searched by position (or
-//! direction, and radius), each one linear column per object and channel.
+//! The lights fit's loss: any number of lights, point, directional, sphere or rectangle, searched by
+//! position (or direction, a sphere's radius, a rectangle's size), each one linear column per object and
+//! channel.
 //!
 //! For a matte scene a pixel of object o is, per channel c,
 //! `y = sum_l P[o][c][l] a_l(pixel) + K[o][c]`, with `a_l` light l's unit-intensity irradiance / pi at the
@@ -61,7 +62,7 @@ impl LightsFitness {
         }
         if let Some((path, _, _)) = layout.entries.iter().find(|(_, t, _)| t.is_linear()) {
             return Err(Error::Invalid(format!(
-                "the lights fit searches the lights' positions, directions and radii; {path} is solved in \
+                "the lights fit searches the lights' positions, directions, radii and sizes; {path} is solved in \
                  closed form"
             )));
         }

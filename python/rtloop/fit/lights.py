@@ -21,7 +21,7 @@ from .._pixels import edges
 from ..errors import RtloopError
 from ..scene import Scene, load_scene, scene_to_dict
 from .lights_errors import light_errors
-from .lights_search import Stages, staged
+from .lights_search import Stages, staged, path_width
 
 #: Pixels compared per fit at most (a seeded sample of the objects' interiors).
 MAX_PIXELS = 6000
@@ -64,7 +64,7 @@ def _geometric_path(d: dict[str, Any], light: dict[str, Any], index: int) -> lis
     name = light["name"]
     names = ["light.position", "light.direction"] if index == 0 else [f"lights.{name}.position",
                                                                       f"lights.{name}.direction"]
-    return [p for p in [*names, f"lights.{name}.radius"] if p in d["fit"]]
+    return [p for p in [*names, f"lights.{name}.radius", f"lights.{name}.size"] if p in d["fit"]]
 
 
 def _locate(path: str, lights: list[dict[str, Any]]) -> tuple[dict[str, Any], str]:
@@ -108,7 +108,7 @@ def with_lights(scene: Scene, count: int) -> tuple[dict[str, Any], list[str]]:
             fit[f"light.{key}"] = fit.pop(f"lights.{first['name']}.{key}")
     paths = [p for i, light in enumerate(lights) for p in _geometric_path(d, light, i)]
     if not paths:
-        raise RtloopError("lights: no light's position, direction or radius is free in the fit section")
+        raise RtloopError("lights: no light's position, direction, radius or size is free in the fit section")
     return d, paths
 
 
@@ -135,8 +135,8 @@ def _split(d: dict[str, Any], x: list[float], paths: list[str], products: list[l
     k = 0
     for p in paths:
         light, key = _locate(p, lights)
-        n = 1 if key == "radius" else 3
-        light[key] = x[k] if n == 1 else list(x[k:k + 3])
+        n = path_width(key)
+        light[key] = x[k] if n == 1 else list(x[k:k + n])
         k += n
     prods = np.asarray(products, float)  # objects x (lights + 1) x 3
     first = np.asarray(lights[0].get("color", [1, 1, 1]), float) * float(lights[0]["intensity"])
@@ -172,7 +172,7 @@ def _strongest_first(d: dict[str, Any], paths: list[str], x: list[float],
     for p in paths:
         light, key = _locate(p, lights)
         i = lights.index(light)
-        n = 1 if key == "radius" else 3
+        n = path_width(key)
         if not blocks or blocks[-1][0] != i:
             blocks.append((i, [], []))
         blocks[-1][1].append(key)
@@ -275,7 +275,7 @@ def _geometry(found: LightsFit, paths: list[str]) -> list[float]:
     for p in paths:
         light, key = _locate(p, found.lights)
         v = light[key]
-        x += [float(v)] if key == "radius" else [float(c) for c in v]
+        x += [float(v)] if path_width(key) == 1 else [float(c) for c in v]
     return x
 
 
