@@ -307,3 +307,66 @@ fn rectangle_fields_are_checked_and_round_trip() {
         "{diff}"
     );
 }
+
+/// A rectangle light's size set through a fit path: the working form (`ShadeParams::set`) holds the
+/// rectangle the scene with that size written holds (the first light's and a further light's), and the
+/// lights fit's closed form at a candidate size is the one at the scene with that size; a size path on
+/// a point light, or bounds outside (0, 100] m, is one line naming the fit entry.
+#[test]
+fn a_fitted_rectangle_size_is_the_written_size() {
+    use rtloop::fitness::lights::LightsFitness;
+    use rtloop::params::ParamLayout;
+    use rtloop::render::ShadeParams;
+    use rtloop::scene::Target;
+    let window = |size: &str, fit: &str| {
+        format!(
+            r#"{{"image": {{"width": 24, "height": 18}},
+            "camera": {{"position": [0, 3, -4], "look_at": [0, 0.3, 0], "vfov_deg": 50}},
+            "lights": [{{"name": "box", "type": "rectangle", "position": [-1.5, 1.5, -0.5], "size": {size},
+                         "normal": [1, -0.6, 0.3], "intensity": 8}},
+                       {{"name": "w", "type": "rectangle", "position": [1.8, 2, 0.5], "size": {size},
+                         "normal": [-1, -0.5, -0.2], "intensity": 10}}],
+            "objects": [{{"name": "ball", "shape": "sphere", "center": [0, 0.4, 0], "radius": 0.4}},
+                        {{"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0]}}],
+            "fit": {fit}}}"#
+        )
+    };
+    let fit = r#"{"lights.box.size": {"min": 0.1, "max": 3}, "lights.w.size": {"min": 0.1, "max": 3}}"#;
+    let base = Scene::from_json(&window("[1, 1]", fit)).unwrap();
+    let want = Scene::from_json(&window("[1.7, 0.4]", fit)).unwrap();
+    let mut p = ShadeParams::new(&base);
+    p.set(Target::Size(0), &[1.7, 0.4]);
+    p.set(Target::Size(1), &[1.7, 0.4]);
+    let q = ShadeParams::new(&want);
+    for (a, b) in [
+        (p.light_rect.unwrap(), q.light_rect.unwrap()),
+        (p.extra_lights[0].rect.unwrap(), q.extra_lights[0].rect.unwrap()),
+    ] {
+        for (x, y) in [(a.half_u, b.half_u), (a.half_v, b.half_v), (a.normal, b.normal)] {
+            assert!((x - y).length() <= 1e-6 * y.length(), "{x} vs {y}");
+        }
+    }
+    let paths = vec!["lights.box.size".to_string(), "lights.w.size".to_string()];
+    let layout = ParamLayout::new(&base, &paths).unwrap();
+    let target = render(&want, None, None, 1).unwrap().rgb;
+    let pixels: Vec<u32> = (0..24 * 18).collect();
+    let f = LightsFitness::new(&base, layout, &target, &pixels).unwrap();
+    let at = f.solve(&[1.7, 0.4, 1.7, 0.4]);
+    let off = f.solve(&[1.0, 1.0, 1.0, 1.0]);
+    assert!(at.loss < 1e-6 * off.loss, "{} vs {}", at.loss, off.loss);
+    for (fit, field) in [
+        (r#"{"lights.box.size": {"min": 0, "max": 3}}"#, r#"fit["lights.box.size"]"#),
+        (r#"{"lights.w.size": {"min": 0.5, "max": 101}}"#, r#"fit["lights.w.size"]"#),
+        (r#"{"lights.w.size": {"min": [0.5, 0.5, 0.5], "max": 2}}"#, r#"fit["lights.w.size"].min"#),
+        (r#"{"lights.w.size": {"min": 2, "max": 1}}"#, r#"fit["lights.w.size"]"#),
+    ] {
+        let msg = Scene::from_json(&window("[1, 1]", fit)).unwrap_err().to_string();
+        assert!(msg.contains(field) && !msg.contains('\n'), "{fit}: {msg}");
+    }
+    let point = plane_scene(
+        r#""lights": [{"name": "p", "position": [1, 3, 0], "intensity": 20}],
+        "fit": {"lights.p.size": {"min": 0.5, "max": 2}}"#,
+    );
+    let msg = Scene::from_json(&point).unwrap_err().to_string();
+    assert!(msg.contains("not a rectangle light") && msg.contains("lights.p.size"), "{msg}");
+}

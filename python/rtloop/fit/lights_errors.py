@@ -125,14 +125,17 @@ def curvature(d: dict[str, Any], paths: list[str], x: list[float], target: np.nd
     return H, loss / dof
 
 
-def covariance(H: np.ndarray, s2: float, span: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The independent-pixel covariance 2 s^2 H^-1 and the Hessian with its flat or concave directions
-    lifted, as the module says (``span``: the search ranges)."""
+def covariance(H: np.ndarray, s2: float, span: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The independent-pixel covariance 2 s^2 H^-1, the Hessian with its flat or concave directions
+    lifted, as the module says (``span``: the search ranges), and those directions (columns; none when
+    the Hessian is positive definite)."""
     w, v = np.linalg.eigh(0.5 * (H + H.T))
     # A flat or concave direction: as uncertain as the whole box (its variance the box's squared span).
     floor = 2 * s2 / float(span.max()) ** 2
-    w = np.maximum(w, floor if floor > 0 else 1e-300)
-    return (v / w) @ v.T * 2 * s2, (v * w) @ v.T
+    floor = floor if floor > 0 else 1e-300
+    flat = v[:, w < floor]
+    w = np.maximum(w, floor)
+    return (v / w) @ v.T * 2 * s2, (v * w) @ v.T, flat
 
 
 def _gradient(f: Callable[[np.ndarray], float], x: np.ndarray, h: np.ndarray) -> np.ndarray:
@@ -166,12 +169,17 @@ def tile_gradients(d: dict[str, Any], paths: list[str], x: list[float], target: 
     return out
 
 
-def jackknife(gradients: list[tuple[np.ndarray, tuple[int, int]]], hessian: np.ndarray) -> np.ndarray:
+def jackknife(gradients: list[tuple[np.ndarray, tuple[int, int]]], hessian: np.ndarray,
+              flat: np.ndarray | None = None) -> np.ndarray:
     """The delete-a-tile jackknife covariance of the geometry: without tile b the optimum moves by one
     Newton step, -H_b^-1 g_b, with g_b its gradient (:func:`tile_gradients`) and H_b the Hessian scaled to
     the other tiles' share. Residuals that are alike over a region (a shadow the model places a little off,
     a light's fall-off it misses) move the tiles' estimates together: this sees what the independent-pixel
-    curvature cannot."""
+    curvature cannot. Along the ``flat`` directions (columns; the Laplace term already gives them the whole
+    box) a Newton step means nothing: the moves are taken without them."""
+    if flat is not None and flat.size:
+        keep = np.eye(hessian.shape[0]) - flat @ flat.T
+        gradients = [(keep @ g, share) for g, share in gradients]
     moves = [-np.linalg.lstsq(hessian * kept / total, g, rcond=1e-12)[0] for g, (kept, total) in gradients]
     if len(moves) < 2:
         return np.zeros(hessian.shape)
@@ -185,8 +193,8 @@ def geometry_covariance(H: np.ndarray, s2: float, span: np.ndarray,
     """The sum of the two covariances over the ``free`` values (flags), the others held at the optimum
     (zero rows and columns)."""
     idx = np.flatnonzero(free)
-    cov, lifted = covariance(H[np.ix_(idx, idx)], s2, span[idx])
-    cov = cov + jackknife([(g[idx], share) for g, share in gradients], lifted)
+    cov, lifted, flat = covariance(H[np.ix_(idx, idx)], s2, span[idx])
+    cov = cov + jackknife([(g[idx], share) for g, share in gradients], lifted, flat)
     out = np.zeros(H.shape)
     out[np.ix_(idx, idx)] = cov
     return out
@@ -246,9 +254,10 @@ def _bars(d: dict[str, Any], paths: list[str], sd: np.ndarray, free: np.ndarray)
         bars = [float(v) if f else None for v, f in zip(sd[k:k + n], free[k:k + n])]
         out[i][f"{key}_error"] = bars[0] if n == 1 else bars
         if key == "size" and None in bars:
-            sides = " and ".join(side for side, b in zip(("width", "height"), bars) if b is None)
-            out[i]["size_note"] = (f"{sides} not determined: the photo does not fix it (its 1-sigma error bar "
-                                   f"would exceed {DETERMINED:.0%} of it); held at the fitted value for the "
-                                   "other error bars")
+            sides = [side for side, b in zip(("width", "height"), bars) if b is None]
+            it = "it" if len(sides) == 1 else "them"
+            out[i]["size_note"] = (f"{' and '.join(sides)} not determined: the photo does not fix {it} (a "
+                                   f"1-sigma error bar would exceed {DETERMINED:.0%} of the side); held at the "
+                                   "fitted value for the other error bars")
         k += n
     return out
