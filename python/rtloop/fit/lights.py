@@ -42,7 +42,8 @@ class LightsFit:
     scene: Scene
     #: Per light: name, kind, position or direction, radius (size and normal), intensity, colour, its share
     #: of the light, and the error bars (``position_error`` per axis in metres, ``direction_error``,
-    #: ``radius_error``, ``intensity_error``; None for the first light's intensity, which is held).
+    #: ``radius_error``, ``size_error`` (width, height; None for a side the photo does not fix, with
+    #: ``size_note`` saying so), ``intensity_error``; None for the first light's intensity, which is held).
     lights: list[dict[str, Any]]
     #: Per object: per light the RGB product intensity x colour x albedo, then the constant (ambient) term.
     products: dict[str, list[list[float]]]
@@ -277,6 +278,20 @@ def _geometry(found: LightsFit, paths: list[str]) -> list[float]:
         v = light[key]
         x += [float(v)] if path_width(key) == 1 else [float(c) for c in v]
     return x
+
+
+def size_text(light: dict[str, Any]) -> str:
+    """A rectangle light's size as the summary and the report write it (empty for another light): its
+    width and height, and where they were searched, each side's error bar or "not determined"."""
+    if "size" not in light:
+        return ""
+    w, h = light["size"]
+    text = f"{w:.3g} x {h:.3g} m"
+    bars = light.get("size_error")
+    if bars is None:
+        return text
+    sides = [f"{side} {'not determined' if b is None else f'+- {b:.2g} m'}" for side, b in zip(("width", "height"), bars)]
+    return f"{text} ({', '.join(sides)})"
 
 
 def check_lights(lights: Any) -> int | str | None:
