@@ -331,7 +331,8 @@ fn a_fitted_rectangle_size_is_the_written_size() {
             "fit": {fit}}}"#
         )
     };
-    let fit = r#"{"lights.box.size": {"min": 0.1, "max": 3}, "lights.w.size": {"min": 0.1, "max": 3}}"#;
+    let fit =
+        r#"{"lights.box.size": {"min": 0.1, "max": 3}, "lights.w.size": {"min": 0.1, "max": 3}}"#;
     let base = Scene::from_json(&window("[1, 1]", fit)).unwrap();
     let want = Scene::from_json(&window("[1.7, 0.4]", fit)).unwrap();
     let mut p = ShadeParams::new(&base);
@@ -340,9 +341,16 @@ fn a_fitted_rectangle_size_is_the_written_size() {
     let q = ShadeParams::new(&want);
     for (a, b) in [
         (p.light_rect.unwrap(), q.light_rect.unwrap()),
-        (p.extra_lights[0].rect.unwrap(), q.extra_lights[0].rect.unwrap()),
+        (
+            p.extra_lights[0].rect.unwrap(),
+            q.extra_lights[0].rect.unwrap(),
+        ),
     ] {
-        for (x, y) in [(a.half_u, b.half_u), (a.half_v, b.half_v), (a.normal, b.normal)] {
+        for (x, y) in [
+            (a.half_u, b.half_u),
+            (a.half_v, b.half_v),
+            (a.normal, b.normal),
+        ] {
             assert!((x - y).length() <= 1e-6 * y.length(), "{x} vs {y}");
         }
     }
@@ -355,12 +363,26 @@ fn a_fitted_rectangle_size_is_the_written_size() {
     let off = f.solve(&[1.0, 1.0, 1.0, 1.0]);
     assert!(at.loss < 1e-6 * off.loss, "{} vs {}", at.loss, off.loss);
     for (fit, field) in [
-        (r#"{"lights.box.size": {"min": 0, "max": 3}}"#, r#"fit["lights.box.size"]"#),
-        (r#"{"lights.w.size": {"min": 0.5, "max": 101}}"#, r#"fit["lights.w.size"]"#),
-        (r#"{"lights.w.size": {"min": [0.5, 0.5, 0.5], "max": 2}}"#, r#"fit["lights.w.size"].min"#),
-        (r#"{"lights.w.size": {"min": 2, "max": 1}}"#, r#"fit["lights.w.size"]"#),
+        (
+            r#"{"lights.box.size": {"min": 0, "max": 3}}"#,
+            r#"fit["lights.box.size"]"#,
+        ),
+        (
+            r#"{"lights.w.size": {"min": 0.5, "max": 101}}"#,
+            r#"fit["lights.w.size"]"#,
+        ),
+        (
+            r#"{"lights.w.size": {"min": [0.5, 0.5, 0.5], "max": 2}}"#,
+            r#"fit["lights.w.size"].min"#,
+        ),
+        (
+            r#"{"lights.w.size": {"min": 2, "max": 1}}"#,
+            r#"fit["lights.w.size"]"#,
+        ),
     ] {
-        let msg = Scene::from_json(&window("[1, 1]", fit)).unwrap_err().to_string();
+        let msg = Scene::from_json(&window("[1, 1]", fit))
+            .unwrap_err()
+            .to_string();
         assert!(msg.contains(field) && !msg.contains('\n'), "{fit}: {msg}");
     }
     let point = plane_scene(
@@ -368,5 +390,8 @@ fn a_fitted_rectangle_size_is_the_written_size() {
         "fit": {"lights.p.size": {"min": 0.5, "max": 2}}"#,
     );
     let msg = Scene::from_json(&point).unwrap_err().to_string();
-    assert!(msg.contains("not a rectangle light") && msg.contains("lights.p.size"), "{msg}");
+    assert!(
+        msg.contains("not a rectangle light") && msg.contains("lights.p.size"),
+        "{msg}"
+    );
 }
