@@ -1,4 +1,5 @@
-"""fuzz/fuzz.py's ``lights`` surface: the lights fit with a rectangle light's size free.
+"""fuzz/fuzz.py's ``lights`` surface: the lights fit with a rectangle light's size free (and at times a
+glossy object, its lobe one more column per light).
 
 The base scene's window (its centre and size free) fitted to a photo of the base with the window resized
 (or of a mutated scene), or the base with its size entry's bounds, or the window's own size, replaced by
@@ -33,6 +34,10 @@ def lights_size(rng: random.Random, c: Any, base: dict, mutate: Callable[[random
         next(light for light in scene["lights"] if light["name"] == "window")["size"] = odd(rng)
     elif which < 0.5:
         scene = mutate(rng, scene)
+    if rng.random() < 0.3:  # a glossy object: its lobe is one more column per light
+        material = scene["objects"][0].setdefault("material", {})
+        material["specular"] = rng.uniform(0.0, 2.0) if rng.random() < 0.8 else odd(rng)
+        material["shininess"] = rng.uniform(0.0, 200.0) if rng.random() < 0.8 else odd(rng)
     res = rtloop.fit(scene, photo, seed=rng.randrange(100), population=4, generations=1)
     check(res, scene, c)
     entry = scene["fit"].get("lights.window.size")
@@ -47,3 +52,6 @@ def lights_size(rng: random.Random, c: Any, base: dict, mutate: Callable[[random
                 c.bump("nan_or_inf")
         if None in light["size_error"] and "size_note" not in light:
             c.bump("wrong_ok")
+    for o in rtloop.scene_to_dict(res.scene)["objects"]:
+        if not (math.isfinite(o["material"]["specular"]) and o["material"]["specular"] >= 0):
+            c.bump("nan_or_inf")

@@ -33,6 +33,9 @@ AUTO_LIMIT = 3
 EDGE_SHARE = 0.1
 #: A further light is kept when it lowers the held-out squared error by this fraction at least.
 AUTO_GAIN = 0.25
+#: The most lights with a glossy object (``rust/fitness/lights.rs``'s MAX_GLOSSY_LIGHTS): two columns per
+#: light and the constant stay within the exhaustive non-negative least squares' reach.
+MAX_GLOSSY_LIGHTS = 4
 
 
 @dataclass
@@ -45,7 +48,8 @@ class LightsFit:
     #: ``radius_error``, ``size_error`` (width, height; None for a side the photo does not fix, with
     #: ``size_note`` saying so), ``intensity_error``; None for the first light's intensity, which is held).
     lights: list[dict[str, Any]]
-    #: Per object: per light the RGB product intensity x colour x albedo, then the constant (ambient) term.
+    #: Per object: per light the RGB product intensity x colour x albedo, then the constant (ambient) term,
+    #: then, where any object is glossy, per light the lobe's product intensity x colour x specular.
     products: dict[str, list[list[float]]]
     loss: float
     evaluations: int
@@ -85,6 +89,10 @@ def with_lights(scene: Scene, count: int) -> tuple[dict[str, Any], list[str]]:
         raise RtloopError(f"lights: objects.{coated[0]}.material.coat: the lights fit models Lambertian objects; "
                           "fit a coated object with one light")
     lights = _light_list(d)
+    glossy = [o["name"] for o in d["objects"] if o["material"].get("specular", 0.0) > 0]
+    if glossy and max(count, len(lights)) > MAX_GLOSSY_LIGHTS:
+        raise RtloopError(f"lights: objects.{glossy[0]}.specular: the lights fit takes a glossy object under at most "
+                          f"{MAX_GLOSSY_LIGHTS} lights (asked for {max(count, len(lights))})")
     if count < len(lights):
         raise RtloopError(f"lights: the scene has {len(lights)} lights; cannot fit fewer ({count})")
     first = lights[0]
@@ -139,7 +147,8 @@ def _split(d: dict[str, Any], x: list[float], paths: list[str], products: list[l
         n = path_width(key)
         light[key] = x[k] if n == 1 else list(x[k:k + n])
         k += n
-    prods = np.asarray(products, float)  # objects x (lights + 1) x 3
+    every = np.asarray(products, float)  # objects x (lights + 1 (+ lights where any is glossy)) x 3
+    prods = every[:, :len(lights) + 1]
     first = np.asarray(lights[0].get("color", [1, 1, 1]), float) * float(lights[0]["intensity"])
     albedo = prods[:, 0, :] / np.where(first > 0, first, 1.0)
     for o, a in zip(out["objects"], albedo):
@@ -159,8 +168,20 @@ def _split(d: dict[str, Any], x: list[float], paths: list[str], products: list[l
                        "share": float(prods[:, i, :].sum()) / total})
     for o, p in zip(out["objects"], prods):
         o["material"]["albedo"] = [float(v) for v in p[0] / np.where(first > 0, first, 1.0)]
+    if every.shape[1] > prods.shape[1]:
+        _write_specular(out, every[:, len(lights) + 1:])
     out["ambient"] = [0.0, 0.0, 0.0]
     return out, report
+
+
+def _write_specular(out: dict[str, Any], lobes: np.ndarray) -> None:
+    """Each glossy object's ``specular``: the least-squares ratio of its lobe products (``lobes``: objects x
+    lights x RGB) to the lights' intensity x colour as written."""
+    rgb = np.array([np.asarray(light.get("color", [1, 1, 1]), float) * float(light["intensity"])
+                    for light in out["lights"]])
+    for o, lobe in zip(out["objects"], lobes):
+        if o["material"].get("specular", 0.0) > 0:
+            o["material"]["specular"] = float((lobe * rgb).sum() / max(float((rgb ** 2).sum()), 1e-30))
 
 
 def _strongest_first(d: dict[str, Any], paths: list[str], x: list[float],
@@ -184,10 +205,12 @@ def _strongest_first(d: dict[str, Any], paths: list[str], x: list[float],
     if not alike:
         return x, products
     prods = np.asarray(products, float)
-    share = prods[:, :-1, :].sum(axis=(0, 2))
-    order = sorted(range(len(lights)), key=lambda i: -share[i])
+    n = len(lights)
+    share = prods[:, :n, :].sum(axis=(0, 2))
+    order = sorted(range(n), key=lambda i: -share[i])
     x = [v for i in order for v in blocks[i][2]]
-    prods = np.concatenate([prods[:, order, :], prods[:, -1:, :]], axis=1)
+    lobes = [prods[:, [n + 1 + i for i in order], :]] if prods.shape[1] > n + 1 else []
+    prods = np.concatenate([prods[:, order, :], prods[:, n:n + 1, :], *lobes], axis=1)
     return x, prods.tolist()
 
 

@@ -86,7 +86,8 @@ def lights_report(fit: Any, path: str | os.PathLike[str], *, objective: Any = No
     body = []
     for name, rows in fit.products.items():
         for k, row in enumerate(rows):
-            who = fit.lights[k]["name"] if k < n else "constant (ambient)"
+            who = fit.lights[k]["name"] if k < n else "constant (ambient)" if k == n else \
+                f"{fit.lights[k - n - 1]['name']} (its lobe)"
             body.append([name, who, *[float(v) for v in row]])
     page.add(_table(["object", "light", "R", "G", "B"], body, numeric_from=2))
     page.add(f'<p class="muted">rtloop {html.escape(_native.__version__)} · images also in '
