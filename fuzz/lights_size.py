@@ -34,7 +34,7 @@ def lights_size(rng: random.Random, c: Any, base: dict, mutate: Callable[[random
         next(light for light in scene["lights"] if light["name"] == "window")["size"] = odd(rng)
     elif which < 0.5:
         scene = mutate(rng, scene)
-    if rng.random() < 0.3:  # a glossy object: its lobe is one more column per light
+    if which >= 0.5 and rng.random() < 0.6:  # a glossy object: its lobe is one more column per light
         material = scene["objects"][0].setdefault("material", {})
         material["specular"] = rng.uniform(0.0, 2.0) if rng.random() < 0.8 else odd(rng)
         material["shininess"] = rng.uniform(0.0, 200.0) if rng.random() < 0.8 else odd(rng)
