@@ -64,6 +64,14 @@ def test_too_many_lights_for_a_glossy_object_is_one_line_naming_it():
     assert "\n" not in str(e.value)
 
 
+def test_a_free_shininess_is_refused_in_one_line_naming_it():
+    _, image, d = glossy_photo()
+    d["fit"]["objects.red.shininess"] = {"min": 1, "max": 100}
+    with pytest.raises(rtloop.RtloopError, match=r"objects\.red\.shininess") as e:
+        rtloop.fit(d, image, seed=0)
+    assert "\n" not in str(e.value)
+
+
 @settings(max_examples=12, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
 @given(st.floats(0.0, 5.0), st.floats(0.0, 500.0), st.integers(1, 3))
 def test_any_lobe_fits_finite_or_refuses_in_one_line(specular, shininess, lights):

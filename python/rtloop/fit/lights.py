@@ -89,6 +89,10 @@ def with_lights(scene: Scene, count: int) -> tuple[dict[str, Any], list[str]]:
         raise RtloopError(f"lights: objects.{coated[0]}.material.coat: the lights fit models Lambertian objects; "
                           "fit a coated object with one light")
     lights = _light_list(d)
+    shininess = [p for p in d["fit"] if p.startswith("objects.") and p.endswith(".shininess")]
+    if shininess:
+        raise RtloopError(f"lights: fit[{shininess[0]!r}]: the lights fit holds a lobe's shininess as the scene gives "
+                          "it; give it without a fit entry, or fit it with one light")
     glossy = [o["name"] for o in d["objects"] if o["material"].get("specular", 0.0) > 0]
     if glossy and max(count, len(lights)) > MAX_GLOSSY_LIGHTS:
         raise RtloopError(f"lights: objects.{glossy[0]}.specular: the lights fit takes a glossy object under at most "
