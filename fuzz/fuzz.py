@@ -3,7 +3,8 @@ main() in-process, batch job lines and ids via rtloop-fit --batch, mesh files, E
 rtloop-insert arguments, rtloop-scene's --strict refusal of a field of view estimated from the board alone)
 for a developer to run for minutes; prints the counts. ``--only SURFACE[,SURFACE...]`` runs only those
 surfaces (``batch``: job lines, ``ids``: job ids, ``mesh``, ``insert``, ``exif``, ``strict``, ``framing``: warped
-photos through fit()'s framing check and correction), each input on
+photos through fit()'s framing check and correction, ``lights``: the lights fit with a rectangle light's size
+free, fuzz/lights_size.py), each input on
 the next in turn; ``--out FILE`` also writes the counts per surface as markdown headed by the command.
 
 What counts as a finding, by kind: ``data loss`` (a batch that deleted, changed or wrote beside its folder,
@@ -39,6 +40,9 @@ import rtloop
 from rtloop.cli import batch as cli_batch
 from rtloop.cli import fit as cli_fit
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from lights_size import lights_size  # noqa: E402
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -71,7 +75,7 @@ def _fit_scenes(base: dict) -> list[dict]:
 
 def _lights_base(base: dict) -> dict:
     """The base under a `lights` list: its lamp, a sphere fill light, a sun and a window (a rectangle light),
-    with their paths freed."""
+    with their paths freed (the window's centre and size)."""
     d = copy.deepcopy(base)
     lamp = d.pop("light")
     d["lights"] = [{"name": "key", **lamp},
@@ -80,6 +84,7 @@ def _lights_base(base: dict) -> dict:
                    {"name": "window", "type": "rectangle", "position": [-3.0, 2.0, 1.0], "size": [1.5, 1.0],
                     "normal": [1.0, -0.3, -0.2], "up": [0.0, 1.0, 0.0], "intensity": 4.0}]
     d["fit"]["lights.window.position"] = {"min": [-5, 0.5, -3], "max": [-1, 4, 3]}
+    d["fit"]["lights.window.size"] = {"min": 0.3, "max": 3.0}
     d["fit"]["lights.fill.position"] = {"min": [-4, 0.5, -4], "max": [4, 6, 4]}
     d["fit"]["lights.fill.radius"] = {"min": 0.01, "max": 1.0}
     d["fit"]["lights.sun.intensity"] = {"min": 0, "max": 1}
@@ -543,7 +548,7 @@ def _fov(rng: random.Random, c: Counts, tmp: Path) -> None:
         c.bump("nan_or_inf")
 
 
-SURFACES = ("batch", "ids", "mesh", "insert", "exif", "strict", "framing", "coat", "fov", "lens")
+SURFACES = ("batch", "ids", "mesh", "insert", "exif", "strict", "framing", "coat", "fov", "lens", "lights")
 
 
 def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None = None) -> None:
@@ -555,7 +560,8 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
             {"mesh": _mesh, "insert": _insert_cli, "exif": _exif, "strict": lambda r, t: _strict(r, c, t),
              "framing": lambda r, t: _framing(r, c),
              "coat": lambda r, t: _coat(r, c), "fov": lambda r, t: _fov(r, c, t),
-             "lens": _lens}[only](rng, tmp)
+             "lens": _lens,
+             "lights": lambda r, t: lights_size(r, c, LIGHTS_BASE, mutate, odd, check_fit)}[only](rng, tmp)
         c.bump("ok")
         return
     if rng.random() < 0.03:

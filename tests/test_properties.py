@@ -482,7 +482,8 @@ def test_scene_with_strict_refuses_a_loose_board_estimate_in_one_line(tmp_path_f
         assert code == 1 and len(lines) == 1 and "0.3 deg needed with --strict" in lines[0]
 
 
-#: SMALL under a `lights` list: its light, a sphere fill light and a sun, their geometry free.
+#: SMALL under a `lights` list: its light, a sphere fill light, a sun and a window, their geometry free (the
+#: window's centre and size).
 SMALL_LIGHTS = copy.deepcopy(SMALL)
 SMALL_LIGHTS["lights"] = [{"name": "key", **SMALL_LIGHTS.pop("light")},
                           {"name": "fill", "type": "sphere", "position": [-2.0, 3.0, -1.0], "radius": 0.3,
@@ -494,6 +495,7 @@ SMALL_LIGHTS["fit"] = {k: v for k, v in SMALL_LIGHTS["fit"].items() if k != "lig
 SMALL_LIGHTS["fit"]["lights.fill.position"] = {"min": [-4, 0.5, -4], "max": [4, 6, 4]}
 SMALL_LIGHTS["fit"]["lights.fill.radius"] = {"min": 0.01, "max": 1.0}
 SMALL_LIGHTS["fit"]["lights.window.position"] = {"min": [-5, 0.5, -3], "max": [-1, 4, 3]}
+SMALL_LIGHTS["fit"]["lights.window.size"] = {"min": 0.3, "max": 3.0}
 
 LIGHT_FIELDS = [
     (("lights", 0, "position"), 3), (("lights", 0, "intensity"), 0), (("lights", 1, "position"), 3),
@@ -503,6 +505,7 @@ LIGHT_FIELDS = [
     (("fit", "lights.fill.radius", "min"), 0),
     (("lights", 3, "position"), 3), (("lights", 3, "size"), 2), (("lights", 3, "normal"), 3),
     (("lights", 3, "up"), 3), (("lights", 3, "intensity"), 0), (("fit", "lights.window.position", "max"), 3),
+    (("fit", "lights.window.size", "min"), 2), (("fit", "lights.window.size", "max"), 2),
 ]
 
 
@@ -547,6 +550,10 @@ def test_the_lights_argument_fits_or_raises_rtloop_error(lights, listed, seed, o
     for light in result.lights:
         assert all(math.isfinite(v) for v in light.get("position", light.get("direction", [])))
         assert math.isfinite(light["intensity"]) and light["intensity"] >= 0
+        if light["name"] == "window" and listed:  # its size searched within its bounds
+            assert all(0.3 <= v <= 3.0 for v in light["size"]), light["size"]
+            for bar in light.get("size_error", [None, None]):
+                assert bar is None or (math.isfinite(bar) and bar >= 0)
     assert all(math.isfinite(v) for rows in result.products.values() for row in rows for v in row)
 
 

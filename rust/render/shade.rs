@@ -244,6 +244,15 @@ impl ShadeParams {
             Target::ExtraColor(i) => self.extra_lights[i - 1].color = v3(),
             Target::Radius(0) => self.light_radius = v[0].max(0.0) as f32,
             Target::Radius(i) => self.extra_lights[i - 1].radius = v[0].max(0.0) as f32,
+            Target::Size(i) => {
+                let rect = match i {
+                    0 => &mut self.light_rect,
+                    _ => &mut self.extra_lights[i - 1].rect,
+                };
+                if let Some(r) = rect {
+                    *r = r.resized([v[0], v[1]]);
+                }
+            }
         }
         self.light_rgb = self.light_color * self.light_intensity;
     }

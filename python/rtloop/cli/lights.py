@@ -13,7 +13,7 @@ import numpy as np
 
 import rtloop
 from rtloop.fit.files import fit_inputs
-from rtloop.fit.lights import AUTO_GAIN, AUTO_LIMIT
+from rtloop.fit.lights import AUTO_GAIN, AUTO_LIMIT, size_text
 
 from rtloop._files import write_json
 
@@ -128,10 +128,12 @@ def lights_summary(fit: Any, out: Path, wall: float, duration: Any) -> str:
             else ("at " + _pm(light["position"], light.get("position_error"), " m"))
         extra = f", radius {_pm(light['radius'], light.get('radius_error'), ' m')}" if "radius" in light else ""
         if "size" in light:
-            extra += f", {light['size'][0]:g} x {light['size'][1]:g} m"
+            extra += f", {size_text(light)}"
         held = " (held: sets the albedos' scale)" if light.get("intensity_error") is None else ""
         lines.append(f"  {light['name']} ({light['kind']}) {where}{extra}, intensity "
                      f"{_pm(light['intensity'], light.get('intensity_error'))}{held}, {light['share']:.0%} of the light")
+        if "size_note" in light:
+            lines.append(f"    {light['name']}: {light['size_note']}")
     if fit.evidence:
         counts = ", ".join(f"{e['lights']}: {e['held_out']:.4g}" for e in fit.evidence)
         lines.append(f"held-out error per number of lights: {counts}; kept {len(fit.lights)} (a further light "

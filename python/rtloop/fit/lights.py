@@ -21,7 +21,7 @@ from .._pixels import edges
 from ..errors import RtloopError
 from ..scene import Scene, load_scene, scene_to_dict
 from .lights_errors import light_errors
-from .lights_search import Stages, staged
+from .lights_search import Stages, staged, path_width
 
 #: Pixels compared per fit at most (a seeded sample of the objects' interiors).
 MAX_PIXELS = 6000
@@ -33,6 +33,9 @@ AUTO_LIMIT = 3
 EDGE_SHARE = 0.1
 #: A further light is kept when it lowers the held-out squared error by this fraction at least.
 AUTO_GAIN = 0.25
+#: The most lights with a glossy object (``rust/fitness/lights.rs``'s MAX_GLOSSY_LIGHTS): two columns per
+#: light and the constant stay within the exhaustive non-negative least squares' reach.
+MAX_GLOSSY_LIGHTS = 4
 
 
 @dataclass
@@ -42,9 +45,11 @@ class LightsFit:
     scene: Scene
     #: Per light: name, kind, position or direction, radius (size and normal), intensity, colour, its share
     #: of the light, and the error bars (``position_error`` per axis in metres, ``direction_error``,
-    #: ``radius_error``, ``intensity_error``; None for the first light's intensity, which is held).
+    #: ``radius_error``, ``size_error`` (width, height; None for a side the photo does not fix, with
+    #: ``size_note`` saying so), ``intensity_error``; None for the first light's intensity, which is held).
     lights: list[dict[str, Any]]
-    #: Per object: per light the RGB product intensity x colour x albedo, then the constant (ambient) term.
+    #: Per object: per light the RGB product intensity x colour x albedo, then the constant (ambient) term,
+    #: then, where any object is glossy, per light the lobe's product intensity x colour x specular.
     products: dict[str, list[list[float]]]
     loss: float
     evaluations: int
@@ -64,7 +69,7 @@ def _geometric_path(d: dict[str, Any], light: dict[str, Any], index: int) -> lis
     name = light["name"]
     names = ["light.position", "light.direction"] if index == 0 else [f"lights.{name}.position",
                                                                       f"lights.{name}.direction"]
-    return [p for p in [*names, f"lights.{name}.radius"] if p in d["fit"]]
+    return [p for p in [*names, f"lights.{name}.radius", f"lights.{name}.size"] if p in d["fit"]]
 
 
 def _locate(path: str, lights: list[dict[str, Any]]) -> tuple[dict[str, Any], str]:
@@ -84,6 +89,14 @@ def with_lights(scene: Scene, count: int) -> tuple[dict[str, Any], list[str]]:
         raise RtloopError(f"lights: objects.{coated[0]}.material.coat: the lights fit models Lambertian objects; "
                           "fit a coated object with one light")
     lights = _light_list(d)
+    shininess = [p for p in d["fit"] if p.startswith("objects.") and p.endswith(".shininess")]
+    if shininess:
+        raise RtloopError(f"lights: fit[{shininess[0]!r}]: the lights fit holds a lobe's shininess as the scene gives "
+                          "it; give it without a fit entry, or fit it with one light")
+    glossy = [o["name"] for o in d["objects"] if o["material"].get("specular", 0.0) > 0]
+    if glossy and max(count, len(lights)) > MAX_GLOSSY_LIGHTS:
+        raise RtloopError(f"lights: objects.{glossy[0]}.specular: the lights fit takes a glossy object under at most "
+                          f"{MAX_GLOSSY_LIGHTS} lights (asked for {max(count, len(lights))})")
     if count < len(lights):
         raise RtloopError(f"lights: the scene has {len(lights)} lights; cannot fit fewer ({count})")
     first = lights[0]
@@ -108,7 +121,7 @@ def with_lights(scene: Scene, count: int) -> tuple[dict[str, Any], list[str]]:
             fit[f"light.{key}"] = fit.pop(f"lights.{first['name']}.{key}")
     paths = [p for i, light in enumerate(lights) for p in _geometric_path(d, light, i)]
     if not paths:
-        raise RtloopError("lights: no light's position, direction or radius is free in the fit section")
+        raise RtloopError("lights: no light's position, direction, radius or size is free in the fit section")
     return d, paths
 
 
@@ -135,10 +148,11 @@ def _split(d: dict[str, Any], x: list[float], paths: list[str], products: list[l
     k = 0
     for p in paths:
         light, key = _locate(p, lights)
-        n = 1 if key == "radius" else 3
-        light[key] = x[k] if n == 1 else list(x[k:k + 3])
+        n = path_width(key)
+        light[key] = x[k] if n == 1 else list(x[k:k + n])
         k += n
-    prods = np.asarray(products, float)  # objects x (lights + 1) x 3
+    every = np.asarray(products, float)  # objects x (lights + 1 (+ lights where any is glossy)) x 3
+    prods = every[:, :len(lights) + 1]
     first = np.asarray(lights[0].get("color", [1, 1, 1]), float) * float(lights[0]["intensity"])
     albedo = prods[:, 0, :] / np.where(first > 0, first, 1.0)
     for o, a in zip(out["objects"], albedo):
@@ -158,8 +172,20 @@ def _split(d: dict[str, Any], x: list[float], paths: list[str], products: list[l
                        "share": float(prods[:, i, :].sum()) / total})
     for o, p in zip(out["objects"], prods):
         o["material"]["albedo"] = [float(v) for v in p[0] / np.where(first > 0, first, 1.0)]
+    if every.shape[1] > prods.shape[1]:
+        _write_specular(out, every[:, len(lights) + 1:])
     out["ambient"] = [0.0, 0.0, 0.0]
     return out, report
+
+
+def _write_specular(out: dict[str, Any], lobes: np.ndarray) -> None:
+    """Each glossy object's ``specular``: the least-squares ratio of its lobe products (``lobes``: objects x
+    lights x RGB) to the lights' intensity x colour as written."""
+    rgb = np.array([np.asarray(light.get("color", [1, 1, 1]), float) * float(light["intensity"])
+                    for light in out["lights"]])
+    for o, lobe in zip(out["objects"], lobes):
+        if o["material"].get("specular", 0.0) > 0:
+            o["material"]["specular"] = float((lobe * rgb).sum() / max(float((rgb ** 2).sum()), 1e-30))
 
 
 def _strongest_first(d: dict[str, Any], paths: list[str], x: list[float],
@@ -172,7 +198,7 @@ def _strongest_first(d: dict[str, Any], paths: list[str], x: list[float],
     for p in paths:
         light, key = _locate(p, lights)
         i = lights.index(light)
-        n = 1 if key == "radius" else 3
+        n = path_width(key)
         if not blocks or blocks[-1][0] != i:
             blocks.append((i, [], []))
         blocks[-1][1].append(key)
@@ -183,10 +209,12 @@ def _strongest_first(d: dict[str, Any], paths: list[str], x: list[float],
     if not alike:
         return x, products
     prods = np.asarray(products, float)
-    share = prods[:, :-1, :].sum(axis=(0, 2))
-    order = sorted(range(len(lights)), key=lambda i: -share[i])
+    n = len(lights)
+    share = prods[:, :n, :].sum(axis=(0, 2))
+    order = sorted(range(n), key=lambda i: -share[i])
     x = [v for i in order for v in blocks[i][2]]
-    prods = np.concatenate([prods[:, order, :], prods[:, -1:, :]], axis=1)
+    lobes = [prods[:, [n + 1 + i for i in order], :]] if prods.shape[1] > n + 1 else []
+    prods = np.concatenate([prods[:, order, :], prods[:, n:n + 1, :], *lobes], axis=1)
     return x, prods.tolist()
 
 
@@ -275,8 +303,22 @@ def _geometry(found: LightsFit, paths: list[str]) -> list[float]:
     for p in paths:
         light, key = _locate(p, found.lights)
         v = light[key]
-        x += [float(v)] if key == "radius" else [float(c) for c in v]
+        x += [float(v)] if path_width(key) == 1 else [float(c) for c in v]
     return x
+
+
+def size_text(light: dict[str, Any]) -> str:
+    """A rectangle light's size as the summary and the report write it (empty for another light): its
+    width and height, and where they were searched, each side's error bar or "not determined"."""
+    if "size" not in light:
+        return ""
+    w, h = light["size"]
+    text = f"{w:.3g} x {h:.3g} m"
+    bars = light.get("size_error")
+    if bars is None:
+        return text
+    sides = [f"{side} {'not determined' if b is None else f'+- {b:.2g} m'}" for side, b in zip(("width", "height"), bars)]
+    return f"{text} ({', '.join(sides)})"
 
 
 def check_lights(lights: Any) -> int | str | None:
