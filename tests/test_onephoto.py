@@ -33,6 +33,7 @@ def _meta(view: str) -> dict:
 def _scene_args(view: str, photo: Path, out: Path, *extra: str) -> list[str]:
     meta = _meta(view)
     return [str(photo), "--board", meta["board"]["spec"], "--ball-radius", str(meta["ball"]["radius"]),
+            "--board-thickness", str(meta["board"]["thickness_m"]),
             "--grey-card", ",".join(map(str, meta["grey_card"]["rect_px"])),
             "--grey-card-reflectance", str(meta["grey_card"]["reflectance"]), "--out", str(out), *extra]
 
@@ -218,9 +219,7 @@ def test_without_exif_the_target_a_warning_or_one_line(tmp_path, capsys):
 NO_EXIF_LIGHT_M = 0.05
 
 
-@pytest.mark.parametrize("view", [pytest.param(v, marks=pytest.mark.xfail(
-    strict=True, reason="a long lens (32 deg): the ball's outline fixes the field of view to 0.8 deg, the light "
-    "6 cm off")) if v == "low" else v for v in VIEWS])
+@pytest.mark.parametrize("view", VIEWS)
 def test_without_exif_the_light_from_the_refined_field_of_view(tmp_path, view):
     """The field of view refined from the ball is nearer the truth than the board's own estimate (or within
     0.3 deg), and the light from rtloop-fit within NO_EXIF_LIGHT_M. Truth: the Mitsuba renders'."""
@@ -282,6 +281,26 @@ def test_the_carried_field_of_view_shift_matches_scenes_built_at_it(tmp_path):
         lights.append(_fit_no_exif(folder, tmp_path / f"fit{sign}", "--uncertainty", "off")["light"]["position"])
     rebuilt = 0.5 * float(np.linalg.norm(np.subtract(lights[1], lights[0])))
     assert abs(carried["light_shift_m"] - rebuilt) <= 0.25 * rebuilt, (carried["light_shift_m"], rebuilt)
+
+
+def test_the_board_corners_at_a_grazing_angle():
+    """Every view's board gives all but at most one of its 15 inner corners, to 0.25 px RMS of their true
+    projections (none a pixel off), the low view's foreshortened markers too (found in the photo enlarged where the photo itself
+    places fewer corners). Truth: the renders' cameras, the board lying board.thickness_m above their floor."""
+    from rtloop.acquisition.camera import PinholeCamera
+    from rtloop.acquisition.pose import estimate_floor_pose
+    from rtloop.acquisition.response import load_photo
+
+    for view in VIEWS:
+        meta = _meta(view)
+        photo = load_photo(FOLDERS[view] / "photo.png", response="srgb")
+        h, w = photo.shape[:2]
+        camera = PinholeCamera.from_scene_camera(meta["camera"], w, h)
+        pose = estimate_floor_pose(photo, meta["board"]["spec"], focal_px=camera.focal_px)
+        corners = pose.board_to_world(pose.detection.object_points.astype(float)) + [0, meta["board"]["thickness_m"], 0]
+        off = np.linalg.norm(pose.detection.image_points - camera.project(corners), axis=1)
+        rms = float(np.sqrt(np.mean(off**2)))
+        assert len(off) >= 14 and rms < 0.25 and off.max() < 1.0, (view, len(off), rms, off.max())
 
 
 def test_board_alone_uncertainty_covers_its_error(monkeypatch):

@@ -19,9 +19,10 @@ import numpy as np
 from ._common import AcquisitionError
 from .ball import locate_ball
 from .camera import focal_from_vfov
-from .pose import FloorPose, estimate_floor_pose
+from .pose import VFOV_TARGET_DEG, FloorPose, estimate_floor_pose
 
-__all__ = ["REACH_SIGMAS", "FocalRefinement", "field_of_view_record", "refine_vfov_by_ball", "scan_vfov_for_ball"]
+__all__ = ["REACH_SIGMAS", "FocalRefinement", "field_of_view_record", "loose_view_warning", "refine_or_rescan",
+           "refine_vfov_by_ball", "scan_vfov_for_ball"]
 
 #: The grid reaches this many of the board's standard deviations either side of its estimate, at most
 #: REACH_MAX_DEG, in steps of a third of a standard deviation (at least STEP_MIN_DEG).
@@ -46,9 +47,32 @@ class FocalRefinement:
     board_std_deg: float
     grid: list[tuple[float, float]]
 
+    @property
+    def bracketed(self) -> bool:
+        """Whether the best outline has a field of view tried on either side of it (else the minimum may
+        lie beyond the grid)."""
+        i = min(range(len(self.grid)), key=lambda k: self.grid[k][1])
+        return 0 < i < len(self.grid) - 1
+
+    @property
+    def best_rms_px(self) -> float:
+        return min(r for _, r in self.grid)
+
     def to_dict(self) -> dict[str, Any]:
         return {"vfov_deg": self.vfov_deg, "board_vfov_deg": self.board_vfov_deg, "board_std_deg": self.board_std_deg,
                 "grid": [[round(v, 4), round(r, 4)] for v, r in self.grid]}
+
+
+def loose_view_warning(where: str, vfov_deg: float, vfov_std_deg: float, focal_px: float, height: int) -> str:
+    """One line for a field of view the board fixes more loosely than ``VFOV_TARGET_DEG``: its spread and
+    the resulting spread of the focal length, which scales every distance the board's size gives (the
+    camera's, and so the ball's and the light's)."""
+    # d f / f = d vfov * (f^2 + h^2 / 4) / (f h)
+    rel = math.radians(vfov_std_deg) * (focal_px**2 + height**2 / 4) / (focal_px * height)
+    return (f"{where} has no EXIF focal length and the board fixes the vertical field of view only to "
+            f"{vfov_deg:.2f} +- {vfov_std_deg:.2f} deg ({VFOV_TARGET_DEG:g} wanted): the focal length, and with it "
+            f"the distances from the camera (the ball's, the light's), are uncertain by about +-{100 * rel:.1f} %; "
+            "give --vfov or --camera, or pass --strict to refuse such a view")
 
 
 def refine_vfov_by_ball(photo: np.ndarray, spec: Any, radius: float, pose: FloorPose, hint: tuple[float, float, float],
@@ -86,6 +110,29 @@ def refine_vfov_by_ball(photo: np.ndarray, spec: Any, radius: float, pose: Floor
         if a > 0:
             best = float(np.clip(-b / (2 * a), vs[i - 1], vs[i + 1]))
     return FocalRefinement(best, board, std, grid)
+
+
+def refine_or_rescan(photo: np.ndarray, spec: Any, radius: float, pose: FloorPose, hint: tuple[float, float, float],
+                     scanned: tuple[float, Any] | None, *, locate: dict[str, Any],
+                     where: str) -> tuple[FocalRefinement | None, tuple[float, Any] | None]:
+    """:func:`refine_vfov_by_ball` centred on the board's estimate (or on ``scanned``'s field of view where
+    given: ``(vfov, outline)`` from :func:`scan_vfov_for_ball`). Where the board's estimate gives no
+    minimum inside its grid (the best outline at the grid's end, or too few found: a board seen nearly
+    face-on can be far off and still show a poorer outline there), the wide scan is tried too and its
+    refinement kept where its best outline fits better. Returns the refinement and the scan used (or
+    None)."""
+    centre = None if scanned is None else scanned[0]
+    refinement = refine_vfov_by_ball(photo, spec, radius, pose, hint, locate=locate, where=where, centre=centre)
+    if scanned is not None or (refinement is not None and refinement.bracketed):
+        return refinement, scanned
+    rescanned = scan_vfov_for_ball(photo, spec, radius, locate=locate, where=where)
+    if rescanned is None:
+        return refinement, None
+    again = refine_vfov_by_ball(photo, spec, radius, pose, rescanned[1], locate=locate, where=where,
+                                centre=rescanned[0])
+    if again is not None and (refinement is None or again.best_rms_px < refinement.best_rms_px):
+        return again, rescanned
+    return refinement, None
 
 
 def scan_vfov_for_ball(photo: np.ndarray, spec: Any, radius: float, *, locate: dict[str, Any],
