@@ -178,9 +178,9 @@ def test_without_exif_the_target_a_warning_or_one_line(tmp_path, capsys):
     where the board alone fixes it that well; else a scene with one warning giving the board's spread and
     the field of view refined from the ball resting on the floor (the truth within 3 of the board's spreads,
     the ball within 3 of the distances' spread): a scene on every view, the overhead one too, whose board
-    seen face-on puts the field of view 25 deg (5 of its spreads) off and the ball out of reach there. With
-    --strict every view is the target or one line: on each of these the board's 15 corners (of a 6x4
-    board) fix the field of view no better than +-0.7 deg, so each is refused."""
+    seen face-on puts the field of view 20 deg (3 of its spreads) off and the ball's best outline out of its
+    reach there. With --strict every view is the target or one line: on each of these the board's 14-15
+    corners (of a 6x4 board) fix the field of view no better than +-0.69 deg, so each is refused."""
     built = 0
     for view in VIEWS:
         photo = _without_exif(view, tmp_path)
@@ -285,8 +285,9 @@ def test_the_carried_field_of_view_shift_matches_scenes_built_at_it(tmp_path):
 
 def test_the_board_corners_at_a_grazing_angle():
     """Every view's board gives all but at most one of its 15 inner corners, to 0.25 px RMS of their true
-    projections (none a pixel off), the low view's foreshortened markers too (found in the photo enlarged where the photo itself
-    places fewer corners). Truth: the renders' cameras, the board lying board.thickness_m above their floor."""
+    projections (none a pixel off), the low view's foreshortened markers too (found in the photo enlarged
+    where the photo itself places fewer corners). Truth: the renders' cameras, the board lying
+    board.thickness_m above their floor."""
     from rtloop.acquisition.camera import PinholeCamera
     from rtloop.acquisition.pose import estimate_floor_pose
     from rtloop.acquisition.response import load_photo
@@ -297,7 +298,8 @@ def test_the_board_corners_at_a_grazing_angle():
         h, w = photo.shape[:2]
         camera = PinholeCamera.from_scene_camera(meta["camera"], w, h)
         pose = estimate_floor_pose(photo, meta["board"]["spec"], focal_px=camera.focal_px)
-        corners = pose.board_to_world(pose.detection.object_points.astype(float)) + [0, meta["board"]["thickness_m"], 0]
+        lift = [0.0, meta["board"]["thickness_m"], 0.0]
+        corners = pose.board_to_world(pose.detection.object_points.astype(float)) + lift
         off = np.linalg.norm(pose.detection.image_points - camera.project(corners), axis=1)
         rms = float(np.sqrt(np.mean(off**2)))
         assert len(off) >= 14 and rms < 0.25 and off.max() < 1.0, (view, len(off), rms, off.max())
@@ -325,7 +327,7 @@ def test_board_alone_uncertainty_covers_its_error(monkeypatch):
         except rtloop.RtloopError:
             continue  # seen straight down: no estimate at all
         assert std > target, (view, std)
-        if std < 2.0:  # nearer degenerate (overhead: 5 deg) the linearised spread is only an order of size
+        if std < 2.0:  # nearer degenerate (overhead: 7 deg) the linearised spread is only an order of size
             estimated += 1
             vfov = math.degrees(2 * math.atan(h / 2 / f))
             assert abs(vfov - _meta(view)["camera"]["vfov_deg"]) <= 3 * std, (view, vfov, std)

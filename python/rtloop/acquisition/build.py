@@ -224,7 +224,8 @@ def _floor_height(board_thickness: float, ball_radius: float) -> float:
     """The floor's height under a board of ``board_thickness`` (metres) whose face is y = 0."""
     t = board_thickness
     if not (isinstance(t, (int, float)) and math.isfinite(t) and 0 <= t < ball_radius):
-        raise AcquisitionError(f"board thickness must be 0 or more metres and under the ball's radius (got {t})")
+        raise AcquisitionError(
+            f"board thickness must be 0 or more metres and under the ball's radius (got {t})")
     return -float(t)
 
 
@@ -406,7 +407,8 @@ def _locate_ball(
     (:func:`scan_vfov_for_ball`; the outline and sphere are then None)."""
     camera = pose.camera
     bw, bh = spec.size_m
-    locate = {"mask": mask, "resting": resting, "floor_height": floor_height, "exclude": _board_outline_px(pose),
+    locate = {"mask": mask, "resting": resting, "floor_height": floor_height,
+              "exclude": _board_outline_px(pose),
               "keep_off": (-bw / 2, bw / 2, -bh / 2, bh / 2)}
     loose = focal_source == "board" and (pose.vfov_std_deg or 0.0) > VFOV_TARGET_DEG
     try:

@@ -6,7 +6,8 @@ large or too small, too high or too low, for its place on the floor). The refine
 minimum of the outline's RMS residual over a grid, by a parabola through the best three. Where the ball is
 not found at the board's estimate (a board seen nearly face-on fixes the field of view worst of all), the
 fields of view of a wide geometric grid are tried first (:func:`scan_vfov_for_ball`) and the refinement is
-centred on the one whose outline fits best. docs/acquisition.md, "No EXIF"."""
+centred on the one whose outline fits best; so too where the grid at the board's estimate has no minimum
+inside it (:func:`refine_or_rescan`). docs/acquisition.md, "The field of view"."""
 
 from __future__ import annotations
 
@@ -21,8 +22,8 @@ from .ball import locate_ball
 from .camera import focal_from_vfov
 from .pose import VFOV_TARGET_DEG, FloorPose, estimate_floor_pose
 
-__all__ = ["REACH_SIGMAS", "FocalRefinement", "field_of_view_record", "loose_view_warning", "refine_or_rescan",
-           "refine_vfov_by_ball", "scan_vfov_for_ball"]
+__all__ = ["REACH_SIGMAS", "FocalRefinement", "field_of_view_record", "loose_view_warning",
+           "refine_or_rescan", "refine_vfov_by_ball", "scan_vfov_for_ball"]
 
 #: The grid reaches this many of the board's standard deviations either side of its estimate, at most
 #: REACH_MAX_DEG, in steps of a third of a standard deviation (at least STEP_MIN_DEG).
@@ -112,8 +113,9 @@ def refine_vfov_by_ball(photo: np.ndarray, spec: Any, radius: float, pose: Floor
     return FocalRefinement(best, board, std, grid)
 
 
-def refine_or_rescan(photo: np.ndarray, spec: Any, radius: float, pose: FloorPose, hint: tuple[float, float, float],
-                     scanned: tuple[float, Any] | None, *, locate: dict[str, Any],
+def refine_or_rescan(photo: np.ndarray, spec: Any, radius: float, pose: FloorPose,
+                     hint: tuple[float, float, float], scanned: tuple[float, Any] | None, *,
+                     locate: dict[str, Any],
                      where: str) -> tuple[FocalRefinement | None, tuple[float, Any] | None]:
     """:func:`refine_vfov_by_ball` centred on the board's estimate (or on ``scanned``'s field of view where
     given: ``(vfov, outline)`` from :func:`scan_vfov_for_ball`). Where the board's estimate gives no
@@ -122,7 +124,8 @@ def refine_or_rescan(photo: np.ndarray, spec: Any, radius: float, pose: FloorPos
     refinement kept where its best outline fits better. Returns the refinement and the scan used (or
     None)."""
     centre = None if scanned is None else scanned[0]
-    refinement = refine_vfov_by_ball(photo, spec, radius, pose, hint, locate=locate, where=where, centre=centre)
+    refinement = refine_vfov_by_ball(photo, spec, radius, pose, hint, locate=locate, where=where,
+                                     centre=centre)
     if scanned is not None or (refinement is not None and refinement.bracketed):
         return refinement, scanned
     rescanned = scan_vfov_for_ball(photo, spec, radius, locate=locate, where=where)

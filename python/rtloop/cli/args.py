@@ -146,7 +146,8 @@ def length_or_zero(text: str) -> float:
     except ValueError:
         v = float("nan")
     if not (math.isfinite(v) and v >= 0):
-        raise argparse.ArgumentTypeError(f"expected a length of 0 or more such as 0, 0.0005 or 0.5mm, got {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"expected a length of 0 or more such as 0, 0.0005 or 0.5mm, got {text!r}")
     return v
 
 

@@ -238,9 +238,9 @@ def _add_ball_args(p: Parser) -> None:
         type=length_or_zero,
         default=0.0,
         metavar="LENGTH",
-        help="how far the board's face lies above the floor the ball rests on: metres, or with mm/cm (default 0; "
-        "a board on card or foam: its thickness; without EXIF a millimetre moves the field of view refined from "
-        "the ball by up to half a degree)",
+        help="how far the board's face lies above the floor the ball rests on: metres, or with mm/cm "
+        "(default 0; a board on card or foam: its thickness; without EXIF a millimetre moves the field of "
+        "view refined from the ball by up to half a degree)",
     )
     g.add_argument("--ball-name", default="ball", help="the sphere's name in the scene (default ball)")
     g.add_argument("--floor-name", default="floor", help="the plane's name in the scene (default floor)")
