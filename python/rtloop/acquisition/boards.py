@@ -366,7 +366,7 @@ def _detect_charuco(grey: np.ndarray, spec: BoardSpec) -> tuple[Any, Any, Any, A
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     h, w = grey.shape
     x0, y0 = (int(max(0, math.floor(v))) for v in lo - (hi - lo))
-    x1, y1 = (int(min(n, math.ceil(v) + 1)) for n, v in zip((w, h), hi + (hi - lo)))
+    x1, y1 = (int(min(size, math.ceil(v) + 1)) for size, v in zip((w, h), hi + (hi - lo)))
     big = cv2.resize(grey[y0:y1, x0:x1], None, fx=UPSAMPLE, fy=UPSAMPLE, interpolation=cv2.INTER_CUBIC)
     corners, ids, marker_corners, marker_ids = detector.detectBoard(big)
     if ids is None or len(ids) <= n:

@@ -462,7 +462,8 @@ def _refine_field_of_view(
         silhouette, sphere = locate_ball(photo, pose.camera, ball_radius, hint=found, where=where, **locate)
         how = "refined from the ball resting on the floor to" if refinement is not None else (
             "the ball resting on the floor found best at")
-        found_where = "" if scanned is None else ", not found at the board's estimate"
+        found_where = "" if scanned is None else (
+            ", the ball not found, or found worse, near the board's estimate")
         notes[:] = [n for n in notes if "no EXIF focal length" not in n]
         notes.append(loose_view_warning(where, board_vfov, std, pose.camera.focal_px, h)
                      .replace("; give --vfov", f"; {how} {chosen:.2f} deg (where its outline fits best)"
