@@ -235,6 +235,37 @@ def _exif(rng: random.Random, tmp: Path) -> None:
     exif_exposure(tmp / "e.jpg")
 
 
+LENS_NAMES = ["Canon", "Canon EOS 600D", "EF-S18-55mm f/3.5-5.6 IS II", "NIKON CORPORATION", "NIKON D90",
+              "AF-S DX Nikkor 18-105mm f/3.5-5.6G ED VR", "OLYMPUS IMAGING CORP.", "E-M5", "", "\x00", "x" * 300]
+
+
+def _lens(rng: random.Random, tmp: Path) -> None:
+    """EXIF naming a camera and lens (real names, odd strings and numbers): a lens profile whose resampling is
+    finite, or None and a one-line reason."""
+    from PIL import Image
+
+    from rtloop.acquisition.lens_profile import find_lens_profile, read_lens_exif
+
+    pick = lambda: rng.choice(LENS_NAMES) if rng.random() < 0.7 else odd(rng)  # noqa: E731
+    exif = Image.Exif()
+    try:
+        exif[0x010F], exif[0x0110] = pick(), pick()
+        exif.get_ifd(0x8769).update({0xA434: pick(), 0x920A: rng.choice([18.0, 35.0, 105.0, odd(rng)]),
+                                     0x829D: rng.choice([3.5, 8.0, odd(rng)])})
+        Image.new("RGB", (12, 9)).save(tmp / "lens.png", exif=exif)
+    except Exception:  # noqa: BLE001 - a value Pillow cannot write
+        return
+    profile, why = find_lens_profile(read_lens_exif(tmp / "lens.png"))
+    if profile is None:
+        if not why or "\n" in why:
+            raise AssertionError(f"no profile and no one-line reason: {why!r}")
+        return
+    remap = profile.remap(12, 9, rng.choice([5.0, 12.0, 300.0]))
+    out = remap.correct(np.full((9, 12, 3), 0.5, np.float32))
+    if not (np.isfinite(out).all() and np.isfinite(remap.points(np.array([[0.0, 0.0], [11.0, 8.0]]))).all()):
+        raise AssertionError("lens profile: a non-finite resampling")
+
+
 def _insert_cli(rng: random.Random, tmp: Path) -> None:
     from rtloop.cli.insert import insert_main
 
@@ -284,6 +315,18 @@ def job_line(rng: random.Random) -> str:
     for key in rng.sample(JOB_FIELDS, rng.choice([0, 0, 1, 2, 3])):
         d[key] = copy.deepcopy(rng.choice(JOB_VALUES)) if rng.random() < 0.7 else odd(rng)
     return json.dumps(d)
+
+
+def run_quietly(main, argv: list[str]) -> tuple[int | str | None, str]:
+    """A command line's ``main(argv)`` with its stdout dropped: (exit status, what it wrote on stderr); argparse's
+    ``SystemExit`` is its exit status."""
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        try:
+            code = main(argv)
+        except SystemExit as e:
+            code = e.code
+    return code, err.getvalue()
 
 
 def _tree(root: Path) -> dict:
@@ -390,13 +433,7 @@ def _strict_cli(rng: random.Random, c: Counts, tmp: Path) -> None:
         flag = rng.choice(STRICT_FLAGS[1:])
         value = rng.choice([str(odd(rng)), "50", "0.08", "400,300,40", "x", "0", "0.5mm"])
         argv += [flag] if flag in ("--force", "--ball-free") else [flag, value]
-    err = io.StringIO()
-    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
-        try:
-            code = scene_main(argv)
-        except SystemExit as e:
-            code = e.code
-    text = err.getvalue()
+    code, text = run_quietly(scene_main, argv)
     c.bump(f"scene_exit_{code}")
     if code not in (0, 1, 2) or "Traceback" in text or (code == 1 and len(text.strip().splitlines()) != 1):
         c.bump("traceback_not_one_line")
@@ -507,7 +544,7 @@ def _fov(rng: random.Random, c: Counts, tmp: Path) -> None:
         c.bump("nan_or_inf")
 
 
-SURFACES = ("batch", "ids", "mesh", "insert", "exif", "strict", "framing", "coat", "fov")
+SURFACES = ("batch", "ids", "mesh", "insert", "exif", "strict", "framing", "coat", "fov", "lens")
 
 
 def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None = None) -> None:
@@ -518,7 +555,8 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
         else:
             {"mesh": _mesh, "insert": _insert_cli, "exif": _exif, "strict": lambda r, t: _strict(r, c, t),
              "framing": lambda r, t: _framing(r, c),
-             "coat": lambda r, t: _coat(r, c), "fov": lambda r, t: _fov(r, c, t)}[only](rng, tmp)
+             "coat": lambda r, t: _coat(r, c), "fov": lambda r, t: _fov(r, c, t),
+             "lens": _lens}[only](rng, tmp)
         c.bump("ok")
         return
     if rng.random() < 0.03:

@@ -59,6 +59,21 @@ def test_what_the_model_lacks_widens_the_bars_in_proportion():
     assert error_bars(_u(0.01, 0.1), {}, {}, {}, {"per_object": {}})["widened_by"] == 1.0
 
 
+def test_the_light_direction_bar_is_widened_alike_and_its_distance_judged_again():
+    """The direction and distance bars (``bars["light_distance"]``) are the sandwich's times the same widening;
+    a distance whose widened sigma passes 25 % of it is then not determined, with the reason."""
+    u = _u(0.01, 0.1)
+    u["robust"]["light_distance"].update(direction_sigma_deg=0.3, distance_sigma_m=0.4)
+    b = error_bars(u, {}, {}, {}, _goodness(12.0, 2.0))
+    widen = 6.0 / WIDEN_PER
+    assert b["light_distance"]["direction_sigma_deg"] == pytest.approx(0.3 * widen)
+    assert b["light_distance"]["distance_sigma_m"] == pytest.approx(0.4 * widen)
+    assert b["light_distance"]["distance_determined"] is False and "widened" in b["light_distance"]["why"]
+    assert u["robust"]["light_distance"]["direction_sigma_deg"] == 0.3  # the sandwich's own is kept
+    plain = error_bars(u, {}, {}, {}, None)["light_distance"]
+    assert plain["direction_sigma_deg"] == 0.3 and plain["distance_determined"] is True
+
+
 def _fit(case: str, tone: bool = False):
     scene = rtloop.load_scene(PHOTOS / case / "scene_input.json")
     photo = np.asarray(rtloop.load_image(PHOTOS / case / "objective.png", scene), np.float32)

@@ -248,7 +248,7 @@ def _fit_no_exif(scene_dir: Path, out: Path, *extra: str) -> dict:
 def test_without_exif_the_field_of_view_is_in_the_light_bars(tmp_path, view):
     """Without EXIF, rtloop-scene records the scene at one board standard deviation of the field of view
     either side, and rtloop-fit adds the light's shift between them to its bars: the true light within 3 of
-    them on every axis."""
+    them on every axis the bars determine (an axis they do not, the bars say why)."""
     photo = _without_exif(view, tmp_path)
     assert scene_main(_scene_args(view, photo, tmp_path / "scene")) == 0
     record = json.loads((tmp_path / "scene" / "scene.json").read_text())["meta"]["acquisition"]["field_of_view"]
@@ -257,10 +257,10 @@ def test_without_exif_the_field_of_view_is_in_the_light_bars(tmp_path, view):
     bars = result["fit_report"]["uncertainty"]["bars"]
     carried = bars["field_of_view"]
     assert carried["std_deg"] == record["std_deg"] and carried["light_shift_m"] > 0
-    axes = [f"light.position.{c}" for c in "xyz"]
     err = np.abs(np.subtract(result["light"]["position"], _meta(view)["light"]["position"]))
-    sigma = np.array([bars["sigma"][a] for a in axes])
-    assert (err <= 3 * sigma).all(), (view, err, sigma)
+    for c, e in zip("xyz", err):  # each axis within 3 of its sigma, or said not to be determined
+        sigma = bars["sigma"][f"light.position.{c}"]
+        assert bars["not_determined"][f"light.position.{c}"] if sigma is None else e <= 3 * sigma, (view, c, e, sigma)
 
 
 def test_the_carried_field_of_view_shift_matches_scenes_built_at_it(tmp_path):

@@ -81,14 +81,22 @@ def mutated_coats(draw) -> dict:
     return d
 
 
+def _loaded_or_one_line(d: dict, *names: str):
+    """The scene ``d`` loaded, or None after checking its SceneError is one line naming one of ``names`` (any
+    field: a non-empty first part before a colon)."""
+    try:
+        return rtloop.load_scene(d)
+    except rtloop.SceneError as e:
+        msg = str(e)
+        assert "\n" not in msg and (any(n in msg for n in names) if names else msg.split(":")[0]), msg
+        return None
+
+
 @PROPS
 @given(mutated_coats())
 def test_a_mutated_coat_loads_and_renders_finite_or_is_one_line_naming_it(d):
-    try:
-        scene = rtloop.load_scene(d)
-    except rtloop.SceneError as e:
-        msg = str(e)
-        assert "\n" not in msg and ("coat" in msg or "roughness" in msg), msg
+    scene = _loaded_or_one_line(d, "coat", "roughness")
+    if scene is None:
         return
     img = rtloop.render(scene, 8, 6)
     assert np.isfinite(img).all() and (img >= 0).all()
@@ -334,8 +342,6 @@ INSERT_FLAGS = st.lists(st.tuples(st.sampled_from(["--spp", "--response", "--out
 @settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
 @given(flags=INSERT_FLAGS)
 def test_insertion_arguments_exit_cleanly_and_write_only_into_out(tmp_path_factory, flags):
-    import contextlib
-    import io
     import json
     import os
 
@@ -353,11 +359,7 @@ def test_insertion_arguments_exit_cleanly_and_write_only_into_out(tmp_path_facto
     cwd = os.getcwd()
     os.chdir(work)
     try:
-        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-            try:
-                code = insert_main(argv)
-            except SystemExit as e:
-                code = e.code
+        code, _ = _fuzz().run_quietly(insert_main, argv)
     finally:
         os.chdir(cwd)
     assert code in (0, 1, 2)
@@ -431,19 +433,26 @@ def test_strict_passes_only_a_field_of_view_within_the_target_and_refuses_in_one
 _BOARD_PHOTO: dict = {}
 
 
+def _fuzz():
+    """fuzz/fuzz.py, the fuzz campaign, whose board photo and quiet command runner these tests share."""
+    import sys
+    from pathlib import Path
+
+    folder = str(Path(__file__).resolve().parents[1] / "fuzz")
+    if folder not in sys.path:
+        sys.path.insert(0, folder)
+    import fuzz
+
+    return fuzz
+
+
 def _board_photo(tmp_path_factory):
     """A photo without EXIF of a ball beside a board its corners fix the field of view of to +-0.45 deg
     (looser than the 0.3 deg target), made once."""
     if "path" not in _BOARD_PHOTO:
-        import sys
-        from pathlib import Path
-
-        sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fuzz"))
-        from fuzz import SCENE_BOARD, _board_photo as make
-
         path = tmp_path_factory.mktemp("board") / "photo.png"
-        make(path)
-        _BOARD_PHOTO.update(path=path, board=SCENE_BOARD)
+        _fuzz()._board_photo(path)
+        _BOARD_PHOTO.update(path=path, board=_fuzz().SCENE_BOARD)
     return _BOARD_PHOTO["path"], _BOARD_PHOTO["board"]
 
 
@@ -458,9 +467,6 @@ def test_scene_with_strict_refuses_a_loose_board_estimate_in_one_line(tmp_path_f
     --strict), 1 or 2 with one line; nothing is written beside --out. Any --board-thickness: a scene whose
     floor lies that far under the board, or one line (not under the ball's radius: naming the board's
     thickness)."""
-    import contextlib
-    import io
-
     from rtloop.cli.scene import scene_main
 
     photo, board = _board_photo(tmp_path_factory)
@@ -468,14 +474,9 @@ def test_scene_with_strict_refuses_a_loose_board_estimate_in_one_line(tmp_path_f
     argv = [str(photo), "--board", board, "--ball-radius", "0.08", "--out", str(work / "o"), "--width", "40"]
     argv += ["--strict"] * strict + (["--vfov", vfov] if vfov else []) + (["--ball", ball] if ball else [])
     argv += ["--board-thickness", thickness] if thickness else []
-    err = io.StringIO()
-    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
-        try:
-            code = scene_main(argv)
-        except SystemExit as e:
-            code = e.code
-    lines = err.getvalue().strip().splitlines()
-    assert code in (0, 1, 2) and "Traceback" not in err.getvalue()
+    code, text = _fuzz().run_quietly(scene_main, argv)
+    lines = text.strip().splitlines()
+    assert code in (0, 1, 2) and "Traceback" not in text
     assert set(p.name for p in work.iterdir()) <= {"o"}
     if code == 0:
         scene = json.loads((work / "o" / "scene.json").read_text())
@@ -521,10 +522,8 @@ def mutated_light_lists():
 @PROPS
 @given(mutated_light_lists())
 def test_a_mutated_light_list_loads_and_renders_finite_or_is_a_scene_error(d):
-    try:
-        scene = rtloop.load_scene(d)
-    except rtloop.SceneError as e:
-        assert "\n" not in str(e) and str(e).split(":")[0]
+    scene = _loaded_or_one_line(d)
+    if scene is None:
         return
     assert np.isfinite(rtloop.render(scene, 8, 6)).all()
 

@@ -74,33 +74,24 @@ impl Clone for ShadeParams {
         p
     }
 
-    /// Reuses `self.materials`' allocation: the fitness hot path calls this once per candidate.
+    /// Reuses the vectors' allocations: the fitness hot path calls this once per candidate.
     fn clone_from(&mut self, source: &Self) {
-        self.light_position = source.light_position;
-        self.light_direction = source.light_direction;
-        self.light_intensity = source.light_intensity;
-        self.light_color = source.light_color;
-        self.light_rgb = source.light_rgb;
-        self.light_radius = source.light_radius;
-        self.light_rect = source.light_rect;
-        if !source.extra_lights.is_empty() || !self.extra_lights.is_empty() {
-            self.extra_lights.clone_from(&source.extra_lights);
-        }
-        self.ambient = source.ambient;
-        self.environment = source.environment;
-        self.interreflection = source.interreflection;
-        self.background = source.background;
-        self.exposure = source.exposure;
-        self.any_specular = source.any_specular;
-        self.materials.clear();
-        self.materials.extend_from_slice(&source.materials);
-        if !source.tables.is_empty() || !self.tables.is_empty() {
-            self.tables.clone_from(&source.tables);
-        }
-        if !source.coats.is_empty() || !self.coats.is_empty() {
-            self.coats.clone_from(&source.coats);
-        }
+        *self = ShadeParams {
+            materials: refill(std::mem::take(&mut self.materials), &source.materials),
+            tables: refill(std::mem::take(&mut self.tables), &source.tables),
+            extra_lights: refill(std::mem::take(&mut self.extra_lights), &source.extra_lights),
+            coats: refill(std::mem::take(&mut self.coats), &source.coats),
+            ..*source
+        };
     }
+}
+
+/// `into` made a copy of `from` in `into`'s allocation (nothing to do when both are empty).
+fn refill<T: Clone>(mut into: Vec<T>, from: &Vec<T>) -> Vec<T> {
+    if !from.is_empty() || !into.is_empty() {
+        into.clone_from(from);
+    }
+    into
 }
 
 /// Per object its coat, or empty when no object has one.

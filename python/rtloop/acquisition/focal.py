@@ -18,12 +18,13 @@ from typing import Any
 import numpy as np
 
 from ._common import AcquisitionError
-from .ball import locate_ball
+from .ball import BallSilhouette, SpherePlacement, locate_ball
 from .camera import focal_from_vfov
+from .overlay import _board_outline_px
 from .pose import VFOV_TARGET_DEG, FloorPose, estimate_floor_pose
 
 __all__ = ["REACH_SIGMAS", "FocalRefinement", "field_of_view_record", "loose_view_warning",
-           "refine_or_rescan", "refine_vfov_by_ball", "scan_vfov_for_ball"]
+           "refine_field_of_view", "refine_or_rescan", "refine_vfov_by_ball", "scan_vfov_for_ball"]
 
 #: The grid reaches this many of the board's standard deviations either side of its estimate, at most
 #: REACH_MAX_DEG, in steps of a third of a standard deviation (at least STEP_MIN_DEG).
@@ -136,6 +137,51 @@ def refine_or_rescan(photo: np.ndarray, spec: Any, radius: float, pose: FloorPos
     if again is not None and (refinement is None or again.best_rms_px < refinement.best_rms_px):
         return again, rescanned
     return refinement, None
+
+
+def refine_field_of_view(
+    photo: np.ndarray,
+    spec: Any,
+    ball_radius: float,
+    pose: FloorPose,
+    silhouette: BallSilhouette | None,
+    sphere: SpherePlacement | None,
+    locate: dict[str, Any],
+    focal_source: str,
+    where: str,
+    notes: list[str],
+    h: int,
+    scanned: tuple[float, Any] | None = None,
+) -> tuple[FloorPose, BallSilhouette, SpherePlacement, Any]:
+    """Step 4b, the field of view: when the board alone fixes it loosely (``focal_source`` "board", a spread
+    over ``VFOV_TARGET_DEG``), refined from the ball resting on the floor (the grid centred where
+    ``scanned`` found it, if given); the pose and the ball again at the refined focal length
+    (``locate["exclude"]`` updated) and the field-of-view note replaced in ``notes``. Returns the pose, the
+    ball and the refinement (None when not refined, and then the rest as given)."""
+    if not (focal_source == "board" and (pose.vfov_std_deg or 0.0) > VFOV_TARGET_DEG):
+        return pose, silhouette, sphere, None
+    found = scanned[1] if scanned is not None else (
+        float(silhouette.centre_px[0]), float(silhouette.centre_px[1]), float(silhouette.radius_px))
+    refinement, scanned = refine_or_rescan(photo, spec, ball_radius, pose, found, scanned, locate=locate,
+                                           where=where)
+    found = scanned[1] if scanned is not None else found
+    chosen = refinement.vfov_deg if refinement is not None else None if scanned is None else scanned[0]
+    if chosen is not None:
+        std, board_vfov = pose.vfov_std_deg, pose.camera.vfov_deg
+        pose = estimate_floor_pose(photo, spec, focal_px=focal_from_vfov(chosen, h), focal_source="board",
+                                   where=where)
+        pose.vfov_std_deg = std
+        locate["exclude"] = _board_outline_px(pose)
+        silhouette, sphere = locate_ball(photo, pose.camera, ball_radius, hint=found, where=where, **locate)
+        how = "refined from the ball resting on the floor to" if refinement is not None else (
+            "the ball resting on the floor found best at")
+        found_where = "" if scanned is None else (
+            ", the ball not found, or found worse, near the board's estimate")
+        notes[:] = [n for n in notes if "no EXIF focal length" not in n]
+        notes.append(loose_view_warning(where, board_vfov, std, pose.camera.focal_px, h)
+                     .replace("; give --vfov", f"; {how} {chosen:.2f} deg (where its outline fits best)"
+                              f"{found_where}; give --vfov"))
+    return pose, silhouette, sphere, refinement
 
 
 def scan_vfov_for_ball(photo: np.ndarray, spec: Any, radius: float, *, locate: dict[str, Any],

@@ -49,7 +49,7 @@ def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = 
         lines.append(bars_note)
     if not robust.get("why_none"):  # else the one line above says why there is none
         lines += undetermined_lines(reported.get("not_determined") or {}, set(result.x))
-    lines += distance_lines((u.get("robust") or {}).get("light_distance") or u.get("light_distance"))
+    lines += distance_lines(reported.get("light_distance") or robust.get("light_distance") or u.get("light_distance"))
     if truth is not None and truth.get("split_convention"):
         lines.append("  (split): the photo fixes only the products of these, not each one: their errors "
                      "say how the fit split the products (see the product errors below)")
