@@ -377,7 +377,8 @@ def id_lines(rng: random.Random) -> list[str]:
     return [json.dumps({"id": i, "scene": "../scene.json", "photo": "../photo.png"}) for i in ids]
 
 
-STRICT_FLAGS = ["--strict", "--vfov", "--ball", "--ball-radius", "--ball-free", "--force", "--width"]
+STRICT_FLAGS = ["--strict", "--vfov", "--ball", "--ball-radius", "--ball-free", "--force", "--width",
+                "--board-thickness"]
 
 
 def _strict_estimate(rng: random.Random, c: Counts) -> None:
@@ -435,7 +436,7 @@ def _strict_cli(rng: random.Random, c: Counts, tmp: Path) -> None:
         argv.append("--strict")
     for _ in range(rng.randint(0, 2)):
         flag = rng.choice(STRICT_FLAGS[1:])
-        value = rng.choice([str(odd(rng)), "50", "0.08", "400,300,40", "x"])
+        value = rng.choice([str(odd(rng)), "50", "0.08", "400,300,40", "x", "0", "0.5mm"])
         argv += [flag] if flag in ("--force", "--ball-free") else [flag, value]
     code, text = run_quietly(scene_main, argv)
     c.bump(f"scene_exit_{code}")

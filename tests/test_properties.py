@@ -458,24 +458,33 @@ def _board_photo(tmp_path_factory):
 
 @settings(max_examples=12, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
 @given(strict=st.booleans(), vfov=st.sampled_from([None, "50", "0", "x", "nan", "170"]),
-       ball=st.sampled_from([None, "470,330,45", "x", "-1,2,3"]))
-def test_scene_with_strict_refuses_a_loose_board_estimate_in_one_line(tmp_path_factory, strict, vfov, ball):
+       ball=st.sampled_from([None, "470,330,45", "x", "-1,2,3"]),
+       thickness=st.sampled_from([None, "0", "0.5mm", "-1", "x", "nan", "0.08", "1e9"]))
+def test_scene_with_strict_refuses_a_loose_board_estimate_in_one_line(tmp_path_factory, strict, vfov, ball,
+                                                                       thickness):
     """rtloop-scene on a photo without EXIF whose board fixes the field of view only to +-0.45 deg: with
     --strict and no --vfov one line and no scene; otherwise exit 0 (a scene from the board alone only without
-    --strict), 1 or 2 with one line; nothing is written beside --out."""
+    --strict), 1 or 2 with one line; nothing is written beside --out. Any --board-thickness: a scene whose
+    floor lies that far under the board, or one line (not under the ball's radius: naming the board's
+    thickness)."""
     from rtloop.cli.scene import scene_main
 
     photo, board = _board_photo(tmp_path_factory)
     work = tmp_path_factory.mktemp("scene")
     argv = [str(photo), "--board", board, "--ball-radius", "0.08", "--out", str(work / "o"), "--width", "40"]
     argv += ["--strict"] * strict + (["--vfov", vfov] if vfov else []) + (["--ball", ball] if ball else [])
+    argv += ["--board-thickness", thickness] if thickness else []
     code, text = _fuzz().run_quietly(scene_main, argv)
     lines = text.strip().splitlines()
     assert code in (0, 1, 2) and "Traceback" not in text
     assert set(p.name for p in work.iterdir()) <= {"o"}
     if code == 0:
-        model = json.loads((work / "o" / "scene.json").read_text())["meta"]["acquisition"]["camera_model"]
-        assert not (strict and model == "board")
+        scene = json.loads((work / "o" / "scene.json").read_text())
+        assert not (strict and scene["meta"]["acquisition"]["camera_model"] == "board")
+        floor = next(o for o in scene["objects"] if o["shape"] == "plane")
+        assert floor["point"][1] == {None: 0.0, "0": 0.0, "0.5mm": -0.0005}[thickness]
+    elif code == 1 and thickness in ("0.08", "1e9") and not (strict and vfov is None) and ball != "-1,2,3":
+        assert len(lines) == 1 and "board thickness" in lines[0], lines
     else:
         assert len([ln for ln in lines if "error" in ln or "usage" in ln]) >= 1 and not (work / "o").exists()
     if strict and vfov is None and code != 2:

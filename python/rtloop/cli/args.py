@@ -147,6 +147,20 @@ def length(text: str) -> float:
     return v
 
 
+def length_or_zero(text: str) -> float:
+    """A length of 0 or more in metres, or with a unit: 0, 0.5mm, 0.05cm."""
+    try:
+        from ..acquisition.boards import length_m  # here: boards imports OpenCV
+
+        v = length_m(text)
+    except ValueError:
+        v = float("nan")
+    if not (math.isfinite(v) and v >= 0):
+        raise argparse.ArgumentTypeError(
+            f"expected a length of 0 or more such as 0, 0.0005 or 0.5mm, got {text!r}")
+    return v
+
+
 def triple(text: str) -> tuple[float, float, float]:
     """X,Y,R in pixels (a circle)."""
     try:

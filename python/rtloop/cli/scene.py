@@ -28,8 +28,8 @@ with importing:  # a Ctrl-C while a console script starts: one line, exit 130
     from ..acquisition.response import load_photo
     from .acquire import DEFAULT_BOARD
     from .args import (
-        BOARD_HELP, RESPONSE_HELP, Parser, choice, flag, float_in, formatter, info, length, positive_float,
-        positive_int, run_subcommands, triple
+        BOARD_HELP, RESPONSE_HELP, Parser, choice, flag, float_in, formatter, info, length, length_or_zero,
+        positive_float, positive_int, run_subcommands, triple
     )
 
 __all__ = ["scene_main"]
@@ -215,6 +215,15 @@ def _add_ball_args(p: Parser) -> None:
         help="the white paper around the board's squares, metres (default one square); with no --objective "
         "the board, this margin and the colour target are written to mask.png and left out of the fit",
     )
+    g.add_argument(
+        "--board-thickness",
+        type=length_or_zero,
+        default=0.0,
+        metavar="LENGTH",
+        help="how far the board's face lies above the floor the ball rests on: metres, or with mm/cm "
+        "(default 0; a board on card or foam: its thickness; without EXIF a millimetre moves the field of "
+        "view refined from the ball by up to half a degree)",
+    )
     g.add_argument("--ball-name", default="ball", help="the sphere's name in the scene (default ball)")
     g.add_argument("--floor-name", default="floor", help="the plane's name in the scene (default floor)")
 
@@ -276,6 +285,7 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         room=not args.direct_only,
         names=(args.ball_name, args.floor_name),
         board_margin=args.board_margin,
+        board_thickness=args.board_thickness,
         card_reflectance=args.grey_card_reflectance,
         where=args.photo,
         objective_where=args.objective or args.photo,
