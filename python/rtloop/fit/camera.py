@@ -525,4 +525,8 @@ def fit_through_camera(fit_once: Callable[..., Any], scene: Scene, image: np.nda
     record.update(terms=[term], **{term: params}, search={"light": [float(v) for v in light],
                                                            "renders": renders})
     result.model["camera"] = record
+    if term == "tone":  # the curve shares one scale with the colours: their level is not determined
+        from ..uncertainty.bars import tone_curve_products
+
+        tone_curve_products((result.uncertainty or {}).get("bars"))
     return result

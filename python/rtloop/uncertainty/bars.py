@@ -12,7 +12,8 @@ determine reported as not determined, with the reason, rather than as a sigma la
   where that distance is not determined; any other parameter (a product, the intensity, an albedo, an
   environment) whose sigma exceeds a uniform distribution's over its bounds (range / sqrt(12): the photo
   says no more than the bounds), or, for a product, its own value (a colour known to no better than 100 %).
-  Each gets ``sigma`` None and ``why``.
+  Each gets ``sigma`` None and ``why``. Where the fit took a tone curve, every colour product is not
+  determined (:func:`tone_curve_products`): the curve and the products share one scale.
 - **The light's direction and distance** (``light_distance``): the sandwich's, widened alike, the distance
   again not determined where its widened sigma exceeds :data:`~.light.DISTANCE_DETERMINED` of it; this is
   what a photo of a far light fixes when its coordinates are not determined.
@@ -25,7 +26,7 @@ from typing import Any
 
 from .light import DISTANCE_DETERMINED
 
-__all__ = ["LIGHT_DETERMINED", "LIGHT_SIGMA_MAX_M", "WIDEN_PER", "error_bars", "model_lacks"]
+__all__ = ["LIGHT_DETERMINED", "LIGHT_SIGMA_MAX_M", "WIDEN_PER", "error_bars", "model_lacks", "tone_curve_products"]
 
 #: The bars are widened by model_lacks / WIDEN_PER (at least 1): by the structured residual's own ratio to
 #: the noise floor. Measured with the synthetic coverage fixtures (studies/coverage.py: 78 of 81 judged
@@ -42,6 +43,10 @@ LIGHT_DETERMINED = 0.125
 LIGHT_SIGMA_MAX_M = 0.5
 
 _LIGHT = ("light.position.x", "light.position.y", "light.position.z")
+
+#: Why a colour product has no bar where the fit took a tone curve: the curve and the products share a scale.
+TONE_CURVE_PRODUCTS = ("a tone curve was fitted: it and the colours share one scale, so the photo fixes the colours' "
+                       "ratios, not their common level")
 
 
 def model_lacks(goodness: dict[str, Any] | None) -> float:
@@ -125,3 +130,13 @@ def widened_distance(distance: dict[str, Any], widen: float) -> dict[str, Any]:
                       f"model lacks) exceeds {DISTANCE_DETERMINED:.0%} of the distance ({r:.3g} m): the shading fixes "
                       "the light's direction, not how far it is")
     return out
+
+
+def tone_curve_products(bars: dict[str, Any] | None) -> None:
+    """Mark every colour product of ``bars`` (a fit's ``uncertainty["bars"]``) not determined, with the reason:
+    the fit took a tone curve (fit/camera.py), which shares one scale with the colours."""
+    if not bars:
+        return
+    for name in [n for n in bars.get("sigma", {}) if n.startswith("products.")]:
+        bars["sigma"][name] = None
+        bars.setdefault("not_determined", {})[name] = TONE_CURVE_PRODUCTS
