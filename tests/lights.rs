@@ -441,14 +441,25 @@ fn the_lights_fit_s_lobe_columns_explain_a_glossy_render() {
     for (l, rgb) in [(0, [20.0, 18.0, 16.0]), (1, [12.0, 13.5, 15.0])] {
         for c in 0..3 {
             let (want, got) = (rgb[c] * 0.5, ball[3 + l][c]);
-            assert!((got - want).abs() < 1e-3 * want, "light {l} channel {c}: {got} vs {want}");
+            assert!(
+                (got - want).abs() < 1e-3 * want,
+                "light {l} channel {c}: {got} vs {want}"
+            );
             let (want, got) = (rgb[c] * [0.6, 0.3, 0.2][c], ball[l][c]);
-            assert!((got - want).abs() < 1e-3 * want, "light {l} channel {c}: {got} vs {want}");
+            assert!(
+                (got - want).abs() < 1e-3 * want,
+                "light {l} channel {c}: {got} vs {want}"
+            );
         }
     }
     // the floor is matte: its lobe products are zero
     assert!(glossy.products[1][3..].iter().all(|p| *p == [0.0; 3]));
     let matte = solve(&Scene::from_json(&text(0.0)).unwrap());
     assert_eq!(matte.products[0].len(), 3);
-    assert!(matte.loss > 1e3 * glossy.loss.max(1e-12 * yy), "{} vs {}", matte.loss, glossy.loss);
+    assert!(
+        matte.loss > 1e3 * glossy.loss.max(1e-12 * yy),
+        "{} vs {}",
+        matte.loss,
+        glossy.loss
+    );
 }

@@ -172,7 +172,9 @@ impl LightsFitness {
                 ..*e
             };
             let lit = unit_irradiance(s, &unit, &self.shapes, true);
-            col[l] = lit.map_or(0.0, |(_, a)| (a * exposure * std::f32::consts::FRAC_1_PI) as f64);
+            col[l] = lit.map_or(0.0, |(_, a)| {
+                (a * exposure * std::f32::consts::FRAC_1_PI) as f64
+            });
             if let Some(sh) = shininess {
                 col[n + 1 + l] = lit.map_or(0.0, |(dir, a)| {
                     let lobe = specular_scale(1.0, sh) * blinn_phong(s.normal, dir, s.view, sh);
