@@ -124,7 +124,8 @@ def run_file(name: str, cls: str, folder: Path, variant: str, footprint: str | b
     the coat's diffuse ones)."""
     truth = json.loads((folder / "scene.json").read_text())
     if variant == "coat":
-        sys.path.insert(0, str(REPO / "tests"))
+        if str(REPO / "tests") not in sys.path:
+            sys.path.insert(0, str(REPO / "tests"))
         from scenes import matte_start
 
         scene, products_truth = rtloop.load_scene(matte_start(truth)), None
