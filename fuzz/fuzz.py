@@ -607,7 +607,7 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
             opts["vignetting"] = rng.choice(["on", "on", "off", (-0.3, -0.05), (0.0, 0.0), (-3.0, 0.0),
                                              (math.nan, 0.0), "0.1,0.2", None])
         if rng.random() < 0.2:
-            opts["tone"] = rng.choice(["on", "on", "off", "srgb", None])
+            opts["tone"] = rng.choice(["on", "on", "off", "linear", "srgb", None])
         if opts["lights"] not in (None, 1) and rng.random() < 0.7:  # mostly the options the lights fit takes
             for key in ("norm", "vignetting", "tone"):
                 opts.pop(key, None)

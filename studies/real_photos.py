@@ -2,8 +2,8 @@
 
 DIR is a folder made by ``../shared/tools/diligent/prepare_diligent.py --all --out DIR`` (read its README:
 the data is fetched, never committed). Each case ``DIR/L###/`` is fitted as a user would, with the defaults
-plus ``--response linear --mask``: ``rtloop.fit(scene_input, load_image(objective.png, response="linear"),
-mask=load_mask(mask.png))``, and scored by the angle between the fitted light's position (seen from the
+plus ``--response linear --mask``, through rtloop-fit's own code path (``rtloop.fit.files``: the photo
+read as linear and so declared, ``tone="linear"``), and scored by the angle between the fitted light's position (seen from the
 ball's centre at the origin) and ``truth.json``'s direction. Beside it, on the same pixels, the classical
 baseline: Lambertian least squares with the sphere's ground-truth normals (``DIR/normal_gt.npy``), the
 brightest 3 % and the attached shadows left out, Gauss-Newton on the direction.
@@ -25,13 +25,13 @@ import json
 import platform
 import sys
 import time
-import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 import rtloop
+from rtloop.fit.files import fit_inputs, load_inputs
 
 
 def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
@@ -61,14 +61,11 @@ def lambertian_direction(image: np.ndarray, mask: np.ndarray, normals: np.ndarra
 
 
 def fit_case(case: Path, options: dict[str, Any], bars: bool = False) -> dict[str, Any]:
-    scene = rtloop.load_scene(case / "scene_input.json")
-    photo = rtloop.load_image(case / "objective.png", scene, response="linear")
-    mask = rtloop.load_mask(case / "mask.png", scene)
+    inputs = load_inputs(case / "scene_input.json", case / "objective.png", mask=str(case / "mask.png"),
+                         response="linear")
     truth = np.asarray(json.loads((case / "truth.json").read_text())["direction"], float)
     t = time.perf_counter()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", rtloop.RtloopWarning)
-        result = rtloop.fit(scene, photo, mask=mask, **({} if bars else {"uncertainty": False}), **options)
+    result = fit_inputs(inputs, **({} if bars else {"uncertainty": False}), **options)
     seconds = time.perf_counter() - t
     light = np.asarray(result.scene.to_dict()["light"]["position"], float)
     row = {"error_deg": angle_deg(light, truth), "ms": 1e3 * seconds, "terms": result.model.get("terms"),

@@ -141,7 +141,7 @@ ARGS = st.fixed_dictionaries({}, optional={
                                       st.tuples(st.floats(-0.6, 0.2), st.floats(-0.3, 0.1))),
                             st.one_of(st.sampled_from(["x", None, 1.0, (1.0,), "0.1,0.2"]),
                                       st.tuples(NUMBERS, NUMBERS))),
-    "tone": _argument(st.sampled_from(["auto", "on", "off"]), st.sampled_from(["srgb", None, 1, "ON"])),
+    "tone": _argument(st.sampled_from(["auto", "on", "off", "linear"]), st.sampled_from(["srgb", None, 1, "ON"])),
     "flat_field": _argument(
         st.builds(lambda a, b: np.clip(np.full((12, 16, 3), a, np.float32) - b * np.linspace(
             0, 1, 16, dtype=np.float32)[None, :, None], 1e-3, None), st.floats(0.05, 0.95), st.floats(0, 0.04)),

@@ -256,8 +256,8 @@ def _add_lens_args(p: Parser) -> None:
                    "divides IMAGE (instead of --vignetting)")
     choice(p, "--tone-curve", ("auto", "on", "off"),
            "'auto' (default): where IMAGE is an 8-bit file whose tone curve is not sRGB (held-out "
-           "pixels show it), a monotone curve is fitted with the light; 'on', 'off'; --response linear "
-           "keeps the image linear (off)")
+           "pixels show it), a monotone curve is fitted with the light; 'on', 'off'; with --response linear "
+           "the image is declared linear: no curve, and no doubt that it is sRGB-encoded")
     p.add_argument("--mask", type=Path, metavar="PNG",
                    help="an image of IMAGE's size (or the scene's): white where the scene models the photo, "
                    "black where it does not (another object, a reflection); black pixels are left out of the fit (default: the mask the scene names, "

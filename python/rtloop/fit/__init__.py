@@ -132,7 +132,8 @@ def fit(
     ``vignetting``, ``tone``: the camera between the scene and the file (:mod:`.camera`, docs/camera.md):
     "auto" (default) fits the lens's falloff (cos^4 x (1 + k1 r^2 + k2 r^4)) or a monotone tone curve
     with the light where held-out pixels show it (a tone curve on 8-bit images only), "on", "off";
-    ``vignetting=(k1, k2)`` or ``flat_field`` (a linear photo of a flat white target, (H, W[, 3])) give
+    ``tone="linear"`` declares the image linear radiance (a RAW, a file read with ``response="linear"``,
+    as rtloop-fit does): no curve, and no doubt that it may be sRGB-encoded; ``vignetting=(k1, k2)`` or ``flat_field`` (a linear photo of a flat white target, (H, W[, 3])) give
     the falloff. ``result.model["camera"]`` records the terms and the evidence.
     """
     args, t0 = dict(locals()), time.perf_counter()
@@ -155,9 +156,11 @@ def fit(
 
 def _through_camera(args: dict[str, Any], scene: Scene, camera: Camera, t0: float) -> FitResult:
     """``fit()`` (``args``: its arguments) through the camera's terms (:func:`.camera.fit_through_camera`):
-    each fit with them off."""
+    each fit with them off (an image declared linear stays declared)."""
+    tone = "linear" if camera.tone == "linear" else "off"
+
     def once(img: np.ndarray, near: Scene | None = None) -> FitResult:
-        return fit(**{**args, "image": img, "vignetting": "off", "tone": "off", "flat_field": None,
+        return fit(**{**args, "image": img, "vignetting": "off", "tone": tone, "flat_field": None,
                       **({"scene": near} if near is not None else {})})
 
     result = fit_through_camera(once, scene, *objective(scene, args["image"], args["mask"], []), camera)

@@ -134,7 +134,7 @@ def _lights_options(scene: Scene, args: dict[str, Any], defaults: dict[str, Any]
     for name in NOT_WITH_LIGHTS:
         value, default = args[name], defaults[name]
         given = value is not None if default is None else not (type(value) is type(default) and value == default)
-        if given:
+        if given and not (name == "tone" and value == "linear"):  # it takes the image as linear
             raise RtloopError(f"{name}: not taken by the lights fit (several lights, or a scene with a 'lights' "
                               f"list: matte objects, its own loss, no camera terms); leave it at its default "
                               f"({default!r})")

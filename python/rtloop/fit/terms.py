@@ -118,12 +118,16 @@ class _Selection:
     def check_encoding(self, encoding: dict[str, Any] | None) -> None:
         """``model["encoding"]``: whether the image looks sRGB-encoded rather than linear. An encoding is
         within [0, 1]: an image beyond it is radiance, not sRGB codes. An image whose every value is an 8-bit
-        code's linear value (a PNG or JPEG as load_image decodes it) was decoded: linear. ``encoding``: the
+        code's linear value (a PNG or JPEG as load_image decodes it) was decoded: linear; an image declared
+        linear (``tone="linear"``) is not checked. ``encoding``: the
         first fit's check (the L1 one the check's gain was measured with), where this is a refit."""
         target = self.photo.target
         if encoding is not None:
             if encoding:
                 self.model["encoding"] = encoding
+        elif self.options.camera.tone == "linear":
+            self.model["encoding"] = {"suspect": False, "why": "declared linear (tone='linear', as a file read "
+                                                               "with response='linear'): not checked"}
         elif self.photo.codes is not None:
             self.model["encoding"] = {"suspect": False, "why": "its values are 8-bit sRGB codes decoded to linear "
                                                                "(as rtloop.load_image reads a PNG or JPEG): not checked"}
