@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -139,7 +140,8 @@ def clip_level(sigma: Any, blocking: dict[str, Any]) -> float:
 def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool = True,
              render: np.ndarray | None = None, sigma: np.ndarray | None = None,
              blocking: dict[str, Any] | None = None, encoding: np.ndarray | None = None,
-             codes: np.ndarray | None = None, split: bool = True, ids: np.ndarray | None = None) -> dict[str, Any]:
+             codes: np.ndarray | None = None, split: bool = True,
+             ids: Callable[[], np.ndarray] | None = None) -> dict[str, Any]:
     """The residual of ``scene``'s render against ``target`` (L1 over the used, unsaturated pixels) over
     its floor: per pixel and channel the larger of the 8-bit quantisation's mean error (a quarter code
     step) and the mean error of the measured noise (sigma x sqrt(2/pi)) and of a JPEG's blocks
@@ -149,8 +151,9 @@ def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool 
     :func:`noise_sigma`, :func:`jpeg_blocking` and :func:`encoded` when the caller has them, ``codes`` its
     8-bit codes (:func:`rtloop._srgb.codes8`) where it has them (the same numbers, looked up). ``split``:
     measure the structure of a residual between the floor and EXPLAINED_RATIO too (what the error bars
-    widen for); above it, it is always measured, with its causes. ``ids``: the object index per pixel where
-    the caller has it (:attr:`.observation.Observation.ids`)."""
+    widen for); above it, it is always measured, with its causes. ``ids``: where the caller traces the
+    object index per pixel once (:attr:`.observation.Observation.ids`), a function giving it, called only
+    where the residual is split by object."""
     if render is None:
         render = _native.render(scene, scene.width, scene.height, 1)
     model = np.minimum(render, np.float32(1.0)) if clip else render
@@ -210,13 +213,13 @@ def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool 
 
 
 def _per_object(scene: Any, target: np.ndarray, m: np.ndarray, keep: np.ndarray, resid: np.ndarray,
-                floor: np.ndarray, causes: bool = True, ids: np.ndarray | None = None) -> dict[str, Any]:
+                floor: np.ndarray, causes: bool = True, ids: Callable[[], np.ndarray] | None = None) -> dict[str, Any]:
     """Per object (and the background) with a kept pixel: its pixels, its residual's ratio to its floor,
     its share of the excess over the floor, and the structure of its residual (:func:`residual_structure`;
-    its causes only with ``causes``; ``ids`` the object index per pixel, None: traced here).
+    its causes only with ``causes``; ``ids`` gives the object index per pixel, None: traced here).
     ``m``: the model's values (pixels, 3); ``resid`` and ``floor``: over the kept pixels."""
     per: dict[str, Any] = {}
-    full_ids = np.asarray(_native.object_ids(scene) if ids is None else ids).reshape(-1)
+    full_ids = np.asarray(_native.object_ids(scene) if ids is None else ids()).reshape(-1)
     ids = full_ids[keep]
     for k, name in [*enumerate(scene.object_names), (-1, "background")]:
         sel = ids == k
