@@ -24,8 +24,9 @@ from .inputs import objective
 from .jpeg import JPEG_CHROMA_MARGIN
 from .lights import LightsFit, choose_count, fit_lights
 from .method import run_method
+from .more_lights import more_lights
 from .observation import observe
-from .options import LightsOptions, check_options
+from .options import NOT_WITH_LIGHTS, LightsOptions, check_options
 from .plan import plan_fit
 from .products import product_bounds as _product_bounds
 from .protocol import LOSS_SPACES, PIXELS_PER_OBJECT, PROTOCOLS
@@ -141,15 +142,18 @@ def fit(
     if isinstance(options, LightsOptions):
         return _fit_lights(scene, image, mask, options)
     if options.camera.active:  # the camera's terms: each of their fits through fit() again
-        return _through_camera(args, scene, options.camera, t0)
-    if options.framing == "correct":  # the framing's correction: each of its fits through fit() again
-        return fit_reframed(fit, scene, image, mask, reference, options.reframed(args))
-    photo = observe(scene, image, mask, reference, clip=clip)
-    plan = plan_fit(scene, options, photo)
-    fitted = run_method(options, photo, plan)
-    result, doubts = fit_result(fitted, options, photo, plan, t0)
-    analyse(result, options, fitted.photo, plan, doubts)
-    result.seconds = time.perf_counter() - t0
+        result = _through_camera(args, scene, options.camera, t0)
+    elif options.framing == "correct":  # the framing's correction: each of its fits through fit() again
+        result = fit_reframed(fit, scene, image, mask, reference, {**options.reframed(args), "lights": 1})
+    else:
+        photo = observe(scene, image, mask, reference, clip=clip)
+        plan = plan_fit(scene, options, photo)
+        fitted = run_method(options, photo, plan)
+        result, doubts = fit_result(fitted, options, photo, plan, t0)
+        analyse(result, options, fitted.photo, plan, doubts)
+        result.seconds = time.perf_counter() - t0
+    if lights is None:  # the default: a further light only where the photo asks for it
+        return more_lights(result, scene, image, mask, args, fit.__kwdefaults__, NOT_WITH_LIGHTS, t0)
     return result
 
 
@@ -157,7 +161,7 @@ def _through_camera(args: dict[str, Any], scene: Scene, camera: Camera, t0: floa
     """``fit()`` (``args``: its arguments) through the camera's terms (:func:`.camera.fit_through_camera`):
     each fit with them off."""
     def once(img: np.ndarray, near: Scene | None = None) -> FitResult:
-        return fit(**{**args, "image": img, "vignetting": "off", "tone": "off", "flat_field": None,
+        return fit(**{**args, "image": img, "vignetting": "off", "tone": "off", "flat_field": None, "lights": 1,
                       **({"scene": near} if near is not None else {})})
 
     result = fit_through_camera(once, scene, *objective(scene, args["image"], args["mask"], []), camera)
