@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -263,43 +264,47 @@ def choose_count(scene: Any, target: np.ndarray, *, seed: int = 0, limit: int = 
     """Fit one light, then one more while the pixels the fits did not see say the photo needs it
     (:func:`held_out_counts`), and the chosen count's error bars over all the chosen pixels."""
     scene = load_scene(scene)
-    best, pixels = held_out_counts(scene, target, seed=seed, limit=limit, mask=mask, **kw)
+    best, _, pixels = held_out_counts(scene, target, seed=seed, limit=limit, mask=mask, **kw)
+    assert best is not None
     attach_errors(scene, best, target, pixels, seed)
     return best
 
 
 def held_out_counts(scene: Scene, target: np.ndarray, *, seed: int = 0, limit: int = AUTO_LIMIT,
-                    mask: np.ndarray | None = None, min_share: float = 0.0,
-                    **kw: Any) -> tuple[LightsFit, np.ndarray]:
+                    mask: np.ndarray | None = None, first: Callable[[np.ndarray], float] | None = None,
+                    check: Callable[[LightsFit, int], dict[str, Any]] | None = None,
+                    **kw: Any) -> tuple[LightsFit | None, list[dict[str, Any]], np.ndarray]:
     """The count :func:`choose_count` keeps, without error bars, and the chosen pixels: each count is
     fitted on half the pixels (a seeded split) and scored on the other half; a further light is kept when
-    it lowers that held-out error by ``AUTO_GAIN`` of it at least, and every added light carries
-    ``min_share`` of the objects' diffuse light at least (a light whose diffuse products are 0 lights no
-    matte surface: what it explains is some other mismatch). The evidence is kept."""
+    it lowers that held-out error by ``AUTO_GAIN`` of it at least. The evidence is kept. ``first``: the
+    held-out error of the scene's own lights as some other fit has them (given the held-out pixels); the
+    count starts there, and where no further light is kept the answer is None. ``check(found, have)``:
+    the caller's further rule for a fit with added lights, its evidence (``"passes"``: whether it holds)."""
     have = len(_light_list(scene_to_dict(scene)))
     pixels = choose_pixels(scene, target, seed, mask)
     half = np.random.default_rng(seed + 1).permutation(pixels.size) % 2 == 0
     train, held = np.sort(pixels[half]), np.sort(pixels[~half])
     held = held[~steep(target, EDGE_SHARE)[held]]
     best, evidence = None, []
-    for count in range(have, max(limit, have) + 1):
+    if first is not None:
+        evidence.append({"lights": have, "held_out": float(first(held)), "pixels": int(held.size), "kept": True})
+    for count in range(have + len(evidence), max(limit, have) + 1):
         found = fit_lights(scene, target, count, seed=seed, mask=train, errors=False, **kw)
         d, paths = with_lights(scene, count)
         x = _geometry(found, paths)
         err, _ = _native.lights_solve(load_scene(d), target, paths, held, x)
         err = float(err)
-        least = min((light["share"] for light in found.lights[have:]), default=1.0)
-        keep = not evidence or err < (1.0 - AUTO_GAIN) * evidence[-1]["held_out"] and least >= min_share
-        evidence.append({"lights": count, "held_out": err, "pixels": int(held.size), "kept": bool(keep),
-                         **({"least_share": least} if min_share > 0 and count > have else {})})
+        more = check(found, have) if check is not None and count > have else {}
+        keep = not evidence or err < (1.0 - AUTO_GAIN) * evidence[-1]["held_out"] and more.get("passes", True)
+        evidence.append({"lights": count, "held_out": err, "pixels": int(held.size), "kept": bool(keep), **more})
         if not keep:
             break
         best = found
-        if count > have:
+        if len(evidence) > 1:
             evidence[-2]["kept"] = False
-    assert best is not None
-    best.evidence = evidence
-    return best, pixels
+    if best is not None:
+        best.evidence = evidence
+    return best, evidence, pixels
 
 
 def attach_errors(scene: Scene, found: LightsFit, target: np.ndarray, pixels: np.ndarray, seed: int) -> None:
