@@ -33,7 +33,7 @@ from rtloop.report import truth_errors, truth_values
 from rtloop.uncertainty.bootstrap import replicate_of
 
 from .args import Parser, UsageError, choice, float_in, generations, int_at_least, int_in, norm, vignetting
-from .lights import LIGHTS_HELP, lights_count, lights_summary, run_lights, uses_lights
+from .lights import LIGHTS_HELP, lights_count, lights_summary, run_lights, uses_lights, write_lights
 from .outputs import GenerationLog, input_paths, render_final, write_result
 from .progress import _Progress
 from .summary import duration as _duration, summary as _summary
@@ -406,9 +406,16 @@ class _Run:
                 rows.append((info.stage, info.generation, float(info.fitness), params))
                 self.progress.generation(info)
 
-            result = fit_inputs(inputs, seed=args.seed, threads=args.threads, callback=callback,
+            result = fit_inputs(inputs, seed=args.seed, threads=args.threads, callback=callback, lights=args.lights,
                                 **fit_options(args))
         self.progress.end_line()
+        if isinstance(result, LightsFit):  # the default fit kept a further light: the lights fit's outputs
+            if truth is not None:
+                print(f"{PROG}: warning: --truth: not compared: the fit kept {len(result.lights)} lights "
+                      "(see result.json's fit_report.number_of_lights)", file=sys.stderr)
+            write_lights(tmp, result, image, asked=args.lights, seed=args.seed, final_scale=args.final_scale,
+                         final_spp=args.final_spp, report=bool(args.report))
+            return result
         for w in result.warnings:
             print(f"{PROG}: warning: {w}", file=sys.stderr)
         _warn_goodness(result.goodness or {})

@@ -123,7 +123,10 @@ def fit(
     term tests stay at pixel centres.
     ``lights``: the number of lights to fit (1 to 8), or "auto" to choose it from held-out pixels (one
     light, then one more while it explains pixels the fit did not see: :func:`.lights.choose_count`).
-    None (default) or 1 for a one-light scene is the fit above; more lights, or a scene with a ``lights``
+    1 for a one-light scene is the fit above. None (default) is that fit too, and where it does not
+    explain the photo (its goodness of fit) further lights are tried and kept only where held-out pixels
+    ask for them (:mod:`.more_lights`): a kept light returns the lights fit, a refused one the fit above
+    with ``model["lights"]`` saying what was tried. More lights, or a scene with a ``lights``
     list of several lights or a sphere light, take the lights fit (:mod:`.lights`: matte objects, the
     lights' geometry searched and their products solved) and return a :class:`.lights.LightsFit`.
     ``framing``: whether the photo is framed as the scene's camera frames it (the objects' outlines against

@@ -277,8 +277,9 @@ def held_out_counts(scene: Scene, target: np.ndarray, *, seed: int = 0, limit: i
     """The count :func:`choose_count` keeps, without error bars, and the chosen pixels: each count is
     fitted on half the pixels (a seeded split) and scored on the other half; a further light is kept when
     it lowers that held-out error by ``AUTO_GAIN`` of it at least. The evidence is kept. ``first``: the
-    held-out error of the scene's own lights as some other fit has them (given the held-out pixels); the
-    count starts there, and where no further light is kept the answer is None. ``check(found, have)``:
+    held-out error of the scene's own lights as some other fit has them (given the held-out pixels): the
+    scene's own count scores the better of that and its own fit, and where no further light is kept the
+    answer is None. ``check(found, have)``:
     the caller's further rule for a fit with added lights, its evidence (``"passes"``: whether it holds)."""
     have = len(_light_list(scene_to_dict(scene)))
     pixels = choose_pixels(scene, target, seed, mask)
@@ -286,21 +287,22 @@ def held_out_counts(scene: Scene, target: np.ndarray, *, seed: int = 0, limit: i
     train, held = np.sort(pixels[half]), np.sort(pixels[~half])
     held = held[~steep(target, EDGE_SHARE)[held]]
     best, evidence = None, []
-    if first is not None:
-        evidence.append({"lights": have, "held_out": float(first(held)), "pixels": int(held.size), "kept": True})
-    for count in range(have + len(evidence), max(limit, have) + 1):
+    for count in range(have, max(limit, have) + 1):
         found = fit_lights(scene, target, count, seed=seed, mask=train, errors=False, **kw)
         d, paths = with_lights(scene, count)
         x = _geometry(found, paths)
         err, _ = _native.lights_solve(load_scene(d), target, paths, held, x)
         err = float(err)
         more = check(found, have) if check is not None and count > have else {}
+        if first is not None and count == have:  # the better of the two fits of the scene's own lights
+            more = {"lights_fit": err, "given_fit": float(first(held))}
+            err = min(err, more["given_fit"])
         keep = not evidence or err < (1.0 - AUTO_GAIN) * evidence[-1]["held_out"] and more.get("passes", True)
         evidence.append({"lights": count, "held_out": err, "pixels": int(held.size), "kept": bool(keep), **more})
         if not keep:
             break
-        best = found
-        if len(evidence) > 1:
+        best = found if first is None or count > have else None
+        if count > have:
             evidence[-2]["kept"] = False
     if best is not None:
         best.evidence = evidence
