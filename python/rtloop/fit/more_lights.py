@@ -42,12 +42,15 @@ MIN_ANGLE_DEG = 20.0
 def gate(result: FitResult) -> dict[str, Any]:
     """The test on the one-light fit: ``fires`` where its residual is at least EXPLAINED_RATIO times the
     photo's noise floor and some object's excess is smooth (``structured``: the objects whose residual
-    :mod:`.goodness` does not call texture or noise)."""
+    :mod:`.goodness` does not call texture or noise), unless the photo's framing does not match the scene's
+    camera (``goodness["framing"]``: the outlines are off, and that residual is the framing's)."""
     g = result.goodness or {}
     ratio = g.get("ratio")
     structured = sorted(name for name, what in (g.get("explained") or {}).items() if what != "texture/noise")
-    fires = ratio is not None and ratio >= EXPLAINED_RATIO and bool(structured)
-    return {"ratio": ratio, "explained_below": EXPLAINED_RATIO, "structured": structured, "fires": bool(fires)}
+    framing = bool((g.get("framing") or {}).get("mismatch"))
+    fires = ratio is not None and ratio >= EXPLAINED_RATIO and bool(structured) and not framing
+    return {"ratio": ratio, "explained_below": EXPLAINED_RATIO, "structured": structured,
+            **({"framing_mismatch": True} if framing else {}), "fires": bool(fires)}
 
 
 def _not_tried(result: FitResult, args: dict[str, Any], defaults: dict[str, Any],

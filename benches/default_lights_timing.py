@@ -1,0 +1,106 @@
+#!/usr/bin/env python3
+"""The default fit's cost now that it chooses how many lights: CPU seconds per ``rtloop.fit`` with its
+defaults (``threads=1``, seed 0) in this tree and in another (``--against``, a checkout whose ``python/``
+holds rtloop), runs interleaved (one fit of each tree in turn, each in a fresh process after one untimed
+fit), the least of ``--runs``. Photos: direct-side (one light, explained: no further light tried),
+key-fill-25 (a key and a fill: two lights kept) and, with ``--diligent DIR`` (a folder made by
+prepare_diligent.py), DiLiGenT's ball under light 1 (explained) and 47 (not explained: a further light tried
+and refused), read as studies/real_photos.py reads them. Replaces its own section of
+benches/results/lights.md.
+
+Usage: ``PYTHONPATH=python python3 benches/default_lights_timing.py --against ../main [--diligent DIR] [--runs N]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+import warnings
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+PHOTOS = {"direct-side": REPO / "tests" / "fixtures" / "photos" / "direct-side",
+          "key-fill-25": REPO / "tests" / "fixtures" / "lights" / "key-fill-25"}
+HEADING = "# `PYTHONPATH=python python3 benches/default_lights_timing.py"
+
+
+def child(folder: Path) -> None:
+    """One untimed fit, then one timed: prints its CPU seconds, the answer's kind and number of lights."""
+    import rtloop
+
+    warnings.simplefilter("ignore")
+    scene = rtloop.load_scene(folder / "scene_input.json")
+    kw = {}
+    if (folder / "mask.png").is_file():  # a DiLiGenT light: linear 16-bit, masked
+        image = rtloop.load_image(folder / "objective.png", scene, response="linear")
+        kw["mask"] = rtloop.load_mask(folder / "mask.png", scene)
+    else:
+        image = rtloop.load_image(folder / "objective.png", scene)
+    rtloop.fit(scene, image, seed=0, threads=1, **kw)
+    t = time.process_time()
+    result = rtloop.fit(scene, image, seed=0, threads=1, **kw)
+    seconds = time.process_time() - t
+    lights = len(result.lights) if hasattr(result, "lights") else 1
+    tried = bool(getattr(result, "gate", None) or (getattr(result, "model", {}) or {}).get("lights"))
+    print(json.dumps({"seconds": seconds, "lights": lights, "tried": tried}))
+
+
+def timed(tree: Path, folder: Path) -> dict:
+    env = {**os.environ, "PYTHONPATH": str(tree / "python")}
+    out = subprocess.run([sys.executable, __file__, "--child", str(folder)], env=env, check=True,
+                         capture_output=True, text=True).stdout
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--against", type=Path, help="the other checkout (its python/ holds rtloop)")
+    ap.add_argument("--diligent", type=Path, help="a folder made by prepare_diligent.py")
+    ap.add_argument("--runs", type=int, default=5)
+    ap.add_argument("--out", type=Path, default=REPO / "benches" / "results" / "lights.md")
+    ap.add_argument("--child", type=Path, help=argparse.SUPPRESS)
+    a = ap.parse_args(argv)
+    if a.child is not None:
+        child(a.child)
+        return 0
+    if a.against is None:
+        ap.error("--against DIR is required")
+    photos = dict(PHOTOS)
+    if a.diligent is not None:
+        photos.update({"DiLiGenT L001": a.diligent / "L001", "DiLiGenT L047": a.diligent / "L047"})
+    rows = []
+    for name, folder in photos.items():
+        best = {"this": None, "other": None}
+        for _ in range(a.runs):
+            for key, tree in (("other", a.against.resolve()), ("this", REPO)):
+                r = timed(tree, folder)
+                if best[key] is None or r["seconds"] < best[key]["seconds"]:
+                    best[key] = r
+        rows.append((name, best["other"], best["this"]))
+        print(name, best, file=sys.stderr)
+    command = f"{HEADING[3:]} --against {a.against}" + (f" --diligent {a.diligent}" if a.diligent else "") + \
+        (f" --runs {a.runs}" if a.runs != 5 else "")
+    lines = [f"# `{command}`", "",
+             f"The default fit (`rtloop.fit` with its defaults, its uncertainty included; `threads=1`, seed 0): CPU "
+             f"seconds, least of {a.runs} runs interleaved with the other tree, each in a fresh process after one "
+             f"untimed fit; {platform.machine()}, 2 cores shared with other jobs, Python {platform.python_version()}. "
+             "\"Other\" is the tree before the default chose how many lights (one light always).", "",
+             "| photo | other tree | this tree | this / other | lights (this tree) | further light tried |",
+             "|---|---|---|---|---|---|"]
+    for name, other, this in rows:
+        lines.append(f"| {name} | {other['seconds']:.3f} | {this['seconds']:.3f} | "
+                     f"{this['seconds'] / other['seconds']:.2f} | {this['lights']} | {'yes' if this['tried'] else 'no'} |")
+    text = a.out.read_text() if a.out.is_file() else ""
+    keep = text.split(HEADING)[0].rstrip("\n")
+    a.out.write_text((keep + "\n\n" if keep else "") + "\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
