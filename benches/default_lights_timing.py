@@ -8,7 +8,8 @@ prepare_diligent.py), DiLiGenT's ball under light 1 (explained) and 47 (not expl
 and refused), read as studies/real_photos.py reads them. Replaces its own section of
 benches/results/lights.md.
 
-Usage: ``PYTHONPATH=python python3 benches/default_lights_timing.py --against ../main [--diligent DIR] [--runs N]``.
+Usage: ``PYTHONPATH=python python3 benches/default_lights_timing.py --against ../main [--diligent DIR]
+[--runs N]``.
 """
 
 from __future__ import annotations
@@ -86,15 +87,17 @@ def main(argv: list[str] | None = None) -> int:
     command = f"{HEADING[3:]} --against {a.against}" + (f" --diligent {a.diligent}" if a.diligent else "") + \
         (f" --runs {a.runs}" if a.runs != 5 else "")
     lines = [f"# `{command}`", "",
-             f"The default fit (`rtloop.fit` with its defaults, its uncertainty included; `threads=1`, seed 0): CPU "
-             f"seconds, least of {a.runs} runs interleaved with the other tree, each in a fresh process after one "
-             f"untimed fit; {platform.machine()}, 2 cores shared with other jobs, Python {platform.python_version()}. "
-             "\"Other\" is the tree before the default chose how many lights (one light always).", "",
+             "The default fit (`rtloop.fit` with its defaults, its uncertainty included; `threads=1`, seed 0): "
+             f"CPU seconds, least of {a.runs} runs interleaved with the other tree, each in a fresh process after "
+             f"one untimed fit; {platform.machine()}, 2 cores shared with other jobs, Python "
+             f"{platform.python_version()}. \"Other\" is the tree before the default chose how many lights (one "
+             "light always).", "",
              "| photo | other tree | this tree | this / other | lights (this tree) | further light tried |",
              "|---|---|---|---|---|---|"]
     for name, other, this in rows:
+        tried = "yes" if this["tried"] else "no"
         lines.append(f"| {name} | {other['seconds']:.3f} | {this['seconds']:.3f} | "
-                     f"{this['seconds'] / other['seconds']:.2f} | {this['lights']} | {'yes' if this['tried'] else 'no'} |")
+                     f"{this['seconds'] / other['seconds']:.2f} | {this['lights']} | {tried} |")
     text = a.out.read_text() if a.out.is_file() else ""
     keep = text.split(HEADING)[0].rstrip("\n")
     a.out.write_text((keep + "\n\n" if keep else "") + "\n".join(lines) + "\n")

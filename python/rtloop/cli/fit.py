@@ -406,8 +406,8 @@ class _Run:
                 rows.append((info.stage, info.generation, float(info.fitness), params))
                 self.progress.generation(info)
 
-            result = fit_inputs(inputs, seed=args.seed, threads=args.threads, callback=callback, lights=args.lights,
-                                **fit_options(args))
+            result = fit_inputs(inputs, seed=args.seed, threads=args.threads, callback=callback,
+                                lights=args.lights, **fit_options(args))
         self.progress.end_line()
         if isinstance(result, LightsFit):  # the default fit kept a further light: the lights fit's outputs
             if truth is not None:

@@ -26,7 +26,7 @@ from .lights import LightsFit, choose_count, fit_lights
 from .method import run_method
 from .more_lights import more_lights
 from .observation import observe
-from .options import NOT_WITH_LIGHTS, LightsOptions, check_options
+from .options import LightsOptions, check_options
 from .plan import plan_fit
 from .products import product_bounds as _product_bounds
 from .protocol import LOSS_SPACES, PIXELS_PER_OBJECT, PROTOCOLS
@@ -156,7 +156,7 @@ def fit(
         analyse(result, options, fitted.photo, plan, doubts)
         result.seconds = time.perf_counter() - t0
     if lights is None:  # the default: a further light only where the photo asks for it
-        return more_lights(result, scene, image, mask, args, fit.__kwdefaults__, NOT_WITH_LIGHTS, t0)
+        return more_lights(result, scene, image, mask, args, fit.__kwdefaults__, t0)
     return result
 
 

@@ -298,7 +298,8 @@ def held_out_counts(scene: Scene, target: np.ndarray, *, seed: int = 0, limit: i
             more = {"lights_fit": err, "given_fit": float(first(held))}
             err = min(err, more["given_fit"])
         keep = not evidence or err < (1.0 - AUTO_GAIN) * evidence[-1]["held_out"] and more.get("passes", True)
-        evidence.append({"lights": count, "held_out": err, "pixels": int(held.size), "kept": bool(keep), **more})
+        evidence.append({"lights": count, "held_out": err, "pixels": int(held.size), "kept": bool(keep),
+                         **more})
         if not keep:
             break
         best = found if first is None or count > have else None

@@ -23,6 +23,7 @@ from ..scene import Scene, load_scene, scene_to_dict
 from .goodness import EXPLAINED_RATIO
 from .inputs import objective
 from .lights import AUTO_GAIN, AUTO_LIMIT, LightsFit, attach_errors, held_out_counts
+from .options import not_with_lights
 from .result import FitResult
 
 __all__ = ["MIN_ANGLE_DEG", "MIN_SHARE", "distinct", "gate", "more_lights"]
@@ -53,18 +54,16 @@ def gate(result: FitResult) -> dict[str, Any]:
             **({"framing_mismatch": True} if framing else {}), "fires": bool(fires)}
 
 
-def _not_tried(result: FitResult, args: dict[str, Any], defaults: dict[str, Any],
-               taken: tuple[str, ...]) -> str | None:
+def _not_tried(result: FitResult, args: dict[str, Any], defaults: dict[str, Any]) -> str | None:
     """Why the lights fit cannot take this call (an argument it does not take given, a camera term or a
     reframing the one-light fit applied to the photo), or None."""
-    for name in taken:
-        value, default = args[name], defaults[name]
-        if value is not None if default is None else not (type(value) is type(default) and value == default):
-            return f"{name} given, which the lights fit does not take"
+    name = not_with_lights(args, defaults)
+    if name is not None:
+        return f"{name} given, which the lights fit does not take"
     if args["uncertainty"] == "bootstrap":
         return "uncertainty 'bootstrap' asked, which the lights fit does not take"
     if (result.model.get("camera") or {}).get("terms") or result.reframed is not None:
-        return "the one-light fit corrected the photo (a camera term or its framing), which the lights fit does not"
+        return "the one-light fit corrected the photo (a camera term or its framing); the lights fit does not"
     return None
 
 
@@ -107,20 +106,21 @@ def distinct(found: LightsFit, have: int) -> dict[str, Any]:
     angle = min(float(np.degrees(np.arccos(np.clip(ways[i] @ ways[j], -1.0, 1.0))))
                 for i in range(have, len(ways)) for j in range(len(ways)) if j != i)
     share = min(float(light["share"]) for light in found.lights[have:])
-    return {"least_share": share, "least_angle_deg": angle, "passes": share >= MIN_SHARE and angle >= MIN_ANGLE_DEG}
+    passes = share >= MIN_SHARE and angle >= MIN_ANGLE_DEG
+    return {"least_share": share, "least_angle_deg": angle, "passes": passes}
 
 
 def more_lights(result: FitResult, scene: Scene, image: np.ndarray, mask: Any, args: dict[str, Any],
-                defaults: dict[str, Any], taken: tuple[str, ...], t0: float) -> FitResult | LightsFit:
+                defaults: dict[str, Any], t0: float) -> FitResult | LightsFit:
     """The default fit's answer: ``result`` (the one-light fit) unchanged where :func:`gate` does not fire;
     else further lights tried, and the lights fit returned where held-out pixels keep one (``args``:
-    fit()'s arguments, ``defaults`` its defaults, ``taken``: those the lights fit must see at their
-    defaults; ``t0``: when the fit began). The one-light fit is scored on the held-out pixels as it is
-    (all its pixels seen, its terms included: a further light must beat it, not a lights fit of one)."""
+    fit()'s arguments, ``defaults`` its defaults; ``t0``: when the fit began). A further light must beat
+    the better of the lights fit's one light and the one-light fit as it is, scored on the held-out pixels
+    (it saw them; its terms included)."""
     test = gate(result)
     if not test["fires"]:
         return result
-    why = _not_tried(result, args, defaults, taken)
+    why = _not_tried(result, args, defaults)
     found, evidence = None, []
     if why is None:
         try:
