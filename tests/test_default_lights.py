@@ -135,3 +135,14 @@ def test_the_command_line_writes_the_lights_the_default_keeps(tmp_path, capsys):
     capsys.readouterr()
     one = json.loads((tmp_path / "one" / "result.json").read_text())
     assert code == 0 and "light" in one and "lights" not in one["fit_report"]["model"]
+
+
+def test_the_summary_says_what_was_tried_and_why_one_light_stays():
+    from rtloop.cli.summary import _lights_lines
+
+    tried = {"tried": True, "why": "no further light ...", "evidence": [
+        {"lights": 1, "held_out": 0.0256, "kept": True}, {"lights": 2, "held_out": 0.568, "kept": False}]}
+    assert _lights_lines(tried) == ["a further light: tried, refused (held-out squared error per number of "
+                                    "lights 1: 0.0256, 2: 0.568): no further light ..."]
+    assert _lights_lines({"tried": False, "why": "norm given"}) == ["a further light: not tried (norm given)"]
+    assert _lights_lines(None) == []
