@@ -101,7 +101,11 @@ or a rectangle light), the lights fit: result.json's fit_report lists each light
 (position or direction, intensity, their error bars, its share of the light)
 and, with auto, the held-out error per number of lights; objective.png and
 final.png as above, and with --report a page of the lights and their evidence;
-no snapshots or CSV.
+no snapshots or CSV. Without --lights, a one-light fit that does not explain
+the photo tries further lights: one kept (on pixels the fit did not see) gives
+the lights fit's files, with the test and the evidence in fit_report's
+number_of_lights; none kept leaves the one-light files, fit_report.model.lights
+saying what was tried. --lights 1 fits one light only.
 
 Everything is written into a temporary directory beside DIR and moved into
 place when complete: a failed or interrupted run leaves no partial results. An
