@@ -4,7 +4,8 @@ rtloop-insert arguments, rtloop-scene's --strict refusal of a field of view esti
 for a developer to run for minutes; prints the counts. ``--only SURFACE[,SURFACE...]`` runs only those
 surfaces (``batch``: job lines, ``ids``: job ids, ``mesh``, ``insert``, ``exif``, ``strict``, ``framing``: warped
 photos through fit()'s framing check and correction, ``lights``: the lights fit with a rectangle light's size
-free, fuzz/lights_size.py), each input on
+free, fuzz/lights_size.py, ``default_lights``: the default fit's number of lights on photos with a second
+light, fuzz/default_lights.py), each input on
 the next in turn; ``--out FILE`` also writes the counts per surface as markdown headed by the command.
 
 What counts as a finding, by kind: ``data loss`` (a batch that deleted, changed or wrote beside its folder,
@@ -41,6 +42,7 @@ from rtloop.cli import batch as cli_batch
 from rtloop.cli import fit as cli_fit
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from default_lights import default_lights  # noqa: E402
 from lights_size import lights_size  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -549,7 +551,8 @@ def _fov(rng: random.Random, c: Counts, tmp: Path) -> None:
         c.bump("nan_or_inf")
 
 
-SURFACES = ("batch", "ids", "mesh", "insert", "exif", "strict", "framing", "coat", "fov", "lens", "lights")
+SURFACES = ("batch", "ids", "mesh", "insert", "exif", "strict", "framing", "coat", "fov", "lens", "lights",
+            "default_lights")
 
 
 def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None = None) -> None:
@@ -562,7 +565,9 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
              "framing": lambda r, t: _framing(r, c),
              "coat": lambda r, t: _coat(r, c), "fov": lambda r, t: _fov(r, c, t),
              "lens": _lens,
-             "lights": lambda r, t: lights_size(r, c, LIGHTS_BASE, mutate, odd, check_fit)}[only](rng, tmp)
+             "lights": lambda r, t: lights_size(r, c, LIGHTS_BASE, mutate, odd, check_fit),
+             "default_lights": lambda r, t: default_lights(r, c, FIT_SCENES, mutate, check_fit, finite),
+             }[only](rng, tmp)
         c.bump("ok")
         return
     if rng.random() < 0.03:

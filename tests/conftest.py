@@ -78,7 +78,7 @@ ACCURACY = frozenset({
     "test_noisy_jpeg_photos.py", "test_coverage.py", "test_hard_cases.py", "test_environment.py",
     "test_interreflection.py", "test_highlights.py", "test_ambient_environment.py", "test_error_bars.py",
     "test_render_reference.py", "test_light_distance.py", "test_residual_structure.py", "test_framing.py",
-    "test_linear_photos.py",
+    "test_linear_photos.py", "test_default_lights.py",
 })
 
 

@@ -33,7 +33,7 @@ from rtloop.report import truth_errors, truth_values
 from rtloop.uncertainty.bootstrap import replicate_of
 
 from .args import Parser, UsageError, choice, float_in, generations, int_at_least, int_in, norm, vignetting
-from .lights import LIGHTS_HELP, lights_count, lights_summary, run_lights, uses_lights
+from .lights import LIGHTS_HELP, lights_count, lights_summary, run_lights, uses_lights, write_lights
 from .outputs import GenerationLog, input_paths, render_final, write_result
 from .progress import _Progress
 from .summary import duration as _duration, summary as _summary
@@ -101,7 +101,11 @@ or a rectangle light), the lights fit: result.json's fit_report lists each light
 (position or direction, intensity, their error bars, its share of the light)
 and, with auto, the held-out error per number of lights; objective.png and
 final.png as above, and with --report a page of the lights and their evidence;
-no snapshots or CSV.
+no snapshots or CSV. Without --lights, a one-light fit that does not explain
+the photo tries further lights: one kept (on pixels the fit did not see) gives
+the lights fit's files, with the test and the evidence in fit_report's
+number_of_lights; none kept leaves the one-light files, fit_report.model.lights
+saying what was tried. --lights 1 fits one light only.
 
 Everything is written into a temporary directory beside DIR and moved into
 place when complete: a failed or interrupted run leaves no partial results. An
@@ -407,8 +411,15 @@ class _Run:
                 self.progress.generation(info)
 
             result = fit_inputs(inputs, seed=args.seed, threads=args.threads, callback=callback,
-                                **fit_options(args))
+                                lights=args.lights, **fit_options(args))
         self.progress.end_line()
+        if isinstance(result, LightsFit):  # the default fit kept a further light: the lights fit's outputs
+            if truth is not None:
+                print(f"{PROG}: warning: --truth: not compared: the fit kept {len(result.lights)} lights "
+                      "(see result.json's fit_report.number_of_lights)", file=sys.stderr)
+            write_lights(tmp, result, image, asked=args.lights, seed=args.seed, final_scale=args.final_scale,
+                         final_spp=args.final_spp, report=bool(args.report))
+            return result
         for w in result.warnings:
             print(f"{PROG}: warning: {w}", file=sys.stderr)
         _warn_goodness(result.goodness or {})

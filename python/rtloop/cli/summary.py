@@ -34,6 +34,7 @@ def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = 
     ]
     lines.extend(model_lines(result.model or {}, dict(result.scene.to_dict())))
     lines += _goodness_lines(result.goodness or {})
+    lines += _lights_lines((result.model or {}).get("lights"))
     lines += _products_lines(result)
     lines.append("")
     lines.append(f"fitted parameters ({result.protocol} protocol, seed {result.seed}):")
@@ -63,6 +64,17 @@ def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = 
     if report is not None:
         lines.append(f"report: {report}")
     return "\n".join(lines)
+
+
+def _lights_lines(tested: dict[str, Any] | None) -> list[str]:
+    """Where the one-light fit did not explain the photo: the further lights tried and why one light stays."""
+    if not tested:
+        return []
+    if not tested.get("tried"):
+        return [f"a further light: not tried ({tested['why']})"]
+    counts = ", ".join(f"{e['lights']}: {e['held_out']:.4g}" for e in tested["evidence"])
+    return [f"a further light: tried, refused (held-out squared error per number of lights {counts}): "
+            f"{tested['why']}"]
 
 
 def _goodness_lines(good: dict[str, Any]) -> list[str]:

@@ -24,6 +24,7 @@ from .inputs import objective
 from .jpeg import JPEG_CHROMA_MARGIN
 from .lights import LightsFit, choose_count, fit_lights
 from .method import run_method
+from .more_lights import more_lights
 from .observation import observe
 from .options import LightsOptions, check_options
 from .plan import plan_fit
@@ -122,7 +123,10 @@ def fit(
     term tests stay at pixel centres.
     ``lights``: the number of lights to fit (1 to 8), or "auto" to choose it from held-out pixels (one
     light, then one more while it explains pixels the fit did not see: :func:`.lights.choose_count`).
-    None (default) or 1 for a one-light scene is the fit above; more lights, or a scene with a ``lights``
+    1 for a one-light scene is the fit above. None (default) is that fit too, and where it does not
+    explain the photo (its goodness of fit) further lights are tried and kept only where held-out pixels
+    ask for them (:mod:`.more_lights`): a kept light returns the lights fit, a refused one the fit above
+    with ``model["lights"]`` saying what was tried. More lights, or a scene with a ``lights``
     list of several lights or a sphere light, take the lights fit (:mod:`.lights`: matte objects, the
     lights' geometry searched and their products solved) and return a :class:`.lights.LightsFit`.
     ``framing``: whether the photo is framed as the scene's camera frames it (the objects' outlines against
@@ -142,15 +146,18 @@ def fit(
     if isinstance(options, LightsOptions):
         return _fit_lights(scene, image, mask, options)
     if options.camera.active:  # the camera's terms: each of their fits through fit() again
-        return _through_camera(args, scene, options.camera, t0)
-    if options.framing == "correct":  # the framing's correction: each of its fits through fit() again
-        return fit_reframed(fit, scene, image, mask, reference, options.reframed(args))
-    photo = observe(scene, image, mask, reference, clip=clip)
-    plan = plan_fit(scene, options, photo)
-    fitted = run_method(options, photo, plan)
-    result, doubts = fit_result(fitted, options, photo, plan, t0)
-    analyse(result, options, fitted.photo, plan, doubts)
-    result.seconds = time.perf_counter() - t0
+        result = _through_camera(args, scene, options.camera, t0)
+    elif options.framing == "correct":  # the framing's correction: each of its fits through fit() again
+        result = fit_reframed(fit, scene, image, mask, reference, {**options.reframed(args), "lights": 1})
+    else:
+        photo = observe(scene, image, mask, reference, clip=clip)
+        plan = plan_fit(scene, options, photo)
+        fitted = run_method(options, photo, plan)
+        result, doubts = fit_result(fitted, options, photo, plan, t0)
+        analyse(result, options, fitted.photo, plan, doubts)
+        result.seconds = time.perf_counter() - t0
+    if lights is None:  # the default: a further light only where the photo asks for it
+        return more_lights(result, scene, image, mask, args, fit.__kwdefaults__, t0)
     return result
 
 
@@ -160,7 +167,7 @@ def _through_camera(args: dict[str, Any], scene: Scene, camera: Camera, t0: floa
     tone = "linear" if camera.tone == "linear" else "off"
 
     def once(img: np.ndarray, near: Scene | None = None) -> FitResult:
-        return fit(**{**args, "image": img, "vignetting": "off", "tone": tone, "flat_field": None,
+        return fit(**{**args, "image": img, "vignetting": "off", "tone": tone, "flat_field": None, "lights": 1,
                       **({"scene": near} if near is not None else {})})
 
     result = fit_through_camera(once, scene, *objective(scene, args["image"], args["mask"], []), camera)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -56,6 +57,9 @@ class LightsFit:
     seconds: float
     #: With ``lights="auto"``: per count tried, its held-out error and whether it was kept.
     evidence: list[dict[str, Any]] = field(default_factory=list)
+    #: From the default fit (``lights`` not given): the one-light fit's test that tried a further light
+    #: (:func:`.more_lights.gate`); None otherwise.
+    gate: dict[str, Any] | None = None
 
 
 def _light_list(d: dict[str, Any]) -> list[dict[str, Any]]:
@@ -257,10 +261,26 @@ def _attach_errors(report: list[dict[str, Any]], d: dict[str, Any], paths: list[
 
 def choose_count(scene: Any, target: np.ndarray, *, seed: int = 0, limit: int = AUTO_LIMIT,
                  mask: np.ndarray | None = None, **kw: Any) -> LightsFit:
-    """Fit one light, then one more while the pixels the fits did not see say the photo needs it: each
-    count is fitted on half the pixels (a seeded split) and scored on the other half; a further light is
-    kept when it lowers that held-out error by ``AUTO_GAIN`` of it at least. The evidence is kept."""
+    """Fit one light, then one more while the pixels the fits did not see say the photo needs it
+    (:func:`held_out_counts`), and the chosen count's error bars over all the chosen pixels."""
     scene = load_scene(scene)
+    best, _, pixels = held_out_counts(scene, target, seed=seed, limit=limit, mask=mask, **kw)
+    assert best is not None
+    attach_errors(scene, best, target, pixels, seed)
+    return best
+
+
+def held_out_counts(scene: Scene, target: np.ndarray, *, seed: int = 0, limit: int = AUTO_LIMIT,
+                    mask: np.ndarray | None = None, first: Callable[[np.ndarray], float] | None = None,
+                    check: Callable[[LightsFit, int], dict[str, Any]] | None = None,
+                    **kw: Any) -> tuple[LightsFit | None, list[dict[str, Any]], np.ndarray]:
+    """The count :func:`choose_count` keeps, without error bars, and the chosen pixels: each count is
+    fitted on half the pixels (a seeded split) and scored on the other half; a further light is kept when
+    it lowers that held-out error by ``AUTO_GAIN`` of it at least. The evidence is kept. ``first``: the
+    held-out error of the scene's own lights as some other fit has them (given the held-out pixels): the
+    scene's own count scores the better of that and its own fit, and where no further light is kept the
+    answer is None. ``check(found, have)``:
+    the caller's further rule for a fit with added lights, its evidence (``"passes"``: whether it holds)."""
     have = len(_light_list(scene_to_dict(scene)))
     pixels = choose_pixels(scene, target, seed, mask)
     half = np.random.default_rng(seed + 1).permutation(pixels.size) % 2 == 0
@@ -273,18 +293,27 @@ def choose_count(scene: Any, target: np.ndarray, *, seed: int = 0, limit: int = 
         x = _geometry(found, paths)
         err, _ = _native.lights_solve(load_scene(d), target, paths, held, x)
         err = float(err)
-        keep = not evidence or err < (1.0 - AUTO_GAIN) * evidence[-1]["held_out"]
-        evidence.append({"lights": count, "held_out": err, "pixels": int(held.size), "kept": bool(keep)})
+        more = check(found, have) if check is not None and count > have else {}
+        if first is not None and count == have:  # the better of the two fits of the scene's own lights
+            more = {"lights_fit": err, "given_fit": float(first(held))}
+            err = min(err, more["given_fit"])
+        keep = not evidence or err < (1.0 - AUTO_GAIN) * evidence[-1]["held_out"] and more.get("passes", True)
+        evidence.append({"lights": count, "held_out": err, "pixels": int(held.size), "kept": bool(keep),
+                         **more})
         if not keep:
             break
-        best = found
+        best = found if first is None or count > have else None
         if count > have:
             evidence[-2]["kept"] = False
-    assert best is not None
-    best.evidence = evidence
-    d, paths = with_lights(scene, len(best.lights))
-    _attach_errors(best.lights, d, paths, _geometry(best, paths), target, pixels, seed)
-    return best
+    if best is not None:
+        best.evidence = evidence
+    return best, evidence, pixels
+
+
+def attach_errors(scene: Scene, found: LightsFit, target: np.ndarray, pixels: np.ndarray, seed: int) -> None:
+    """``found``'s error bars over ``pixels`` (its lights' entries), as :func:`fit_lights` attaches them."""
+    d, paths = with_lights(scene, len(found.lights))
+    _attach_errors(found.lights, d, paths, _geometry(found, paths), target, pixels, seed)
 
 
 def steep(target: np.ndarray, share: float) -> np.ndarray:

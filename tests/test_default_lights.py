@@ -1,0 +1,148 @@
+"""The default fit's number of lights (:mod:`rtloop.fit.more_lights`): a one-light scene fitted without
+``lights`` keeps its one light where that explains the photo (the same answer as ``lights=1``, bit for
+bit), tries further lights only where it does not, and keeps one only on held-out evidence. Against the
+Mitsuba photos of tests/fixtures (their truth unseen by the fit)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import rtloop
+from rtloop.cli.fit import main
+from rtloop.fit.lights import LightsFit
+from rtloop.fit.more_lights import MIN_ANGLE_DEG, MIN_SHARE, distinct, gate
+
+FIXTURES = Path(__file__).resolve().parent / "fixtures"
+
+
+def photo(group: str, name: str) -> tuple[dict, np.ndarray, Path]:
+    folder = FIXTURES / group / name
+    truth = json.loads((folder / "scene.json").read_text())
+    return truth, rtloop.load_image(folder / "objective.png", rtloop.load_scene(truth)), folder / "scene_input.json"
+
+
+def without_seconds(value):
+    if isinstance(value, dict):
+        return {k: without_seconds(v) for k, v in value.items() if k != "seconds"}
+    if isinstance(value, list):
+        return [without_seconds(v) for v in value]
+    return value
+
+
+def same_fit(a: rtloop.FitResult, b: rtloop.FitResult, leave_out: tuple[str, ...] = ()) -> None:
+    ra, rb = without_seconds(a.report()), without_seconds(b.report())
+    for key in leave_out:
+        ra["model"].pop(key, None)
+    assert json.dumps(ra, sort_keys=True) == json.dumps(rb, sort_keys=True)
+    assert a.scene.to_dict() == b.scene.to_dict() and a.x == b.x
+
+
+def test_key_and_fill_are_both_found_by_the_default_fit():
+    truth, image, scene_input = photo("lights", "key-fill-25")
+    assert "light" in rtloop.load_scene(scene_input).to_dict()  # a one-light scene
+    res = rtloop.fit(scene_input, image, seed=0)
+    assert isinstance(res, LightsFit) and len(res.lights) == 2
+    assert res.gate["fires"] and res.gate["ratio"] >= res.gate["explained_below"] and res.gate["kept"] == 2
+    assert [e["lights"] for e in res.evidence if e["kept"]] == [2]
+    for j, want in enumerate(truth["lights"]):  # the key first (the strongest), then the fill
+        got = res.lights[j]
+        assert np.linalg.norm(np.subtract(got["position"], want["position"])) < (0.05 if j == 0 else 0.30)
+        for o in truth["objects"]:
+            p = np.asarray(o["material"]["albedo"]) * want["intensity"] * np.asarray(want["color"])
+            assert np.max(np.abs(np.asarray(res.products[o["name"]][j]) - p)) / p.max() < 0.05
+    bar = np.asarray(res.lights[1]["position_error"])
+    assert np.all(np.isfinite(bar)) and np.all(bar > 0)
+
+
+def test_a_one_light_photo_keeps_one_light_as_lights_1_does_bit_for_bit():
+    _, image, scene_input = photo("photos", "direct-side")
+    default = rtloop.fit(scene_input, image, seed=2)
+    one = rtloop.fit(scene_input, image, seed=2, lights=1)
+    assert isinstance(default, rtloop.FitResult) and not gate(default)["fires"]
+    assert "lights" not in default.model
+    same_fit(default, one)
+
+
+def test_lights_1_fits_one_light_where_the_default_finds_two():
+    _, image, scene_input = photo("lights", "key-fill-25")
+    one = rtloop.fit(scene_input, image, seed=0, lights=1)
+    assert isinstance(one, rtloop.FitResult) and "lights" not in one.model and gate(one)["fires"]
+
+
+def test_a_further_light_the_held_out_pixels_do_not_ask_for_is_refused():
+    """bounce-two-balls: one light and a bounce between the balls, which the one-light fit models and the
+    lights fit does not; its further light explains the training half only as well as the bounce does."""
+    _, image, scene_input = photo("photos", "bounce-two-balls")
+    default = rtloop.fit(scene_input, image, seed=0)
+    one = rtloop.fit(scene_input, image, seed=0, lights=1)
+    assert isinstance(default, rtloop.FitResult)
+    tested = default.model["lights"]
+    assert tested["fires"] and tested["tried"] and tested["kept"] == 1 and "why" in tested
+    first, second = tested["evidence"][:2]
+    assert first["kept"] and not second["kept"] and second["lights"] == 2
+    assert first["held_out"] == min(first["lights_fit"], first["given_fit"])
+    assert second["held_out"] >= 0.75 * first["held_out"] or not second["passes"]
+    same_fit(default, one, leave_out=("lights",))  # the one-light fit unchanged
+    json.dumps(default.report())  # the evidence is JSON
+
+
+def test_an_argument_the_lights_fit_does_not_take_means_no_further_light_is_tried():
+    _, image, scene_input = photo("lights", "key-fill-25")
+    res = rtloop.fit(scene_input, image, seed=0, norm="l1", uncertainty=False)
+    assert isinstance(res, rtloop.FitResult)
+    tested = res.model["lights"]
+    assert tested["fires"] and not tested["tried"] and tested["why"].startswith("norm given")
+
+
+class _Found:
+    """What :func:`distinct` reads of a lights fit: its scene and its lights."""
+
+    def __init__(self, lights: list[dict]):
+        d = json.loads((FIXTURES / "lights" / "key-fill-25" / "scene.json").read_text())
+        self.scene = rtloop.load_scene(d)
+        self.lights = lights
+
+
+@pytest.mark.parametrize("second, share, passes", [
+    ([-2.6, 2.4, -1.2], 0.2, True),     # the fill: 80 degrees from the key
+    ([-2.6, 2.4, -1.2], 0.0, False),    # no diffuse light: a lobe's only
+    ([2.3, 3.5, -2.0], 0.2, False),     # beside the key: one light's shape, not a second light
+])
+def test_an_added_light_must_light_the_objects_away_from_the_others(second, share, passes):
+    found = _Found([{"position": [2.0, 3.4, -1.8], "share": 1 - share}, {"position": second, "share": share}])
+    got = distinct(found, 1)
+    assert got["passes"] is passes
+    assert (got["least_share"] >= MIN_SHARE and got["least_angle_deg"] >= MIN_ANGLE_DEG) is passes
+
+
+def test_the_command_line_writes_the_lights_the_default_keeps(tmp_path, capsys):
+    folder = FIXTURES / "lights" / "key-fill-25"
+    out = tmp_path / "out"
+    code = main([str(folder / "scene_input.json"), str(folder / "objective.png"), "--out", str(out),
+                 "--final-scale", "1", "--final-spp", "1", "-q"])
+    printed = capsys.readouterr().out
+    assert code == 0
+    report = json.loads((out / "result.json").read_text())["fit_report"]
+    assert report["method"] == "lights" and len(report["lights"]) == 2
+    assert report["number_of_lights"]["asked"] is None and report["number_of_lights"]["gate"]["fires"]
+    assert "lights chosen from the photo" in printed
+    code = main([str(folder / "scene_input.json"), str(folder / "objective.png"), "--out", str(tmp_path / "one"),
+                 "--final-scale", "1", "--final-spp", "1", "-q", "--lights", "1"])
+    capsys.readouterr()
+    one = json.loads((tmp_path / "one" / "result.json").read_text())
+    assert code == 0 and "light" in one and "lights" not in one["fit_report"]["model"]
+
+
+def test_the_summary_says_what_was_tried_and_why_one_light_stays():
+    from rtloop.cli.summary import _lights_lines
+
+    tried = {"tried": True, "why": "no further light ...", "evidence": [
+        {"lights": 1, "held_out": 0.0256, "kept": True}, {"lights": 2, "held_out": 0.568, "kept": False}]}
+    assert _lights_lines(tried) == ["a further light: tried, refused (held-out squared error per number of "
+                                    "lights 1: 0.0256, 2: 0.568): no further light ..."]
+    assert _lights_lines({"tried": False, "why": "norm given"}) == ["a further light: not tried (norm given)"]
+    assert _lights_lines(None) == []
