@@ -271,15 +271,16 @@ def choose_count(scene: Any, target: np.ndarray, *, seed: int = 0, limit: int = 
 
 
 def held_out_counts(scene: Scene, target: np.ndarray, *, seed: int = 0, limit: int = AUTO_LIMIT,
-                    mask: np.ndarray | None = None, first: Callable[[np.ndarray], float] | None = None,
+                    mask: np.ndarray | None = None,
+                    first: Callable[[np.ndarray, np.ndarray], dict[str, float]] | None = None,
                     check: Callable[[LightsFit, int], dict[str, Any]] | None = None,
                     **kw: Any) -> tuple[LightsFit | None, list[dict[str, Any]], np.ndarray]:
     """The count :func:`choose_count` keeps, without error bars, and the chosen pixels: each count is
     fitted on half the pixels (a seeded split) and scored on the other half; a further light is kept when
     it lowers that held-out error by ``AUTO_GAIN`` of it at least. The evidence is kept. ``first``: the
-    held-out error of the scene's own lights as some other fit has them (given the held-out pixels): the
-    scene's own count scores the better of that and its own fit, and where no further light is kept the
-    answer is None. ``check(found, have)``:
+    held-out errors of the scene's own lights as some other fit has them (given the held-out and the
+    training pixels; a dict of named errors): the scene's own count scores the least of those and its own
+    fit, and where no further light is kept the answer is None. ``check(found, have)``:
     the caller's further rule for a fit with added lights, its evidence (``"passes"``: whether it holds)."""
     have = len(_light_list(scene_to_dict(scene)))
     pixels = choose_pixels(scene, target, seed, mask)
@@ -295,8 +296,8 @@ def held_out_counts(scene: Scene, target: np.ndarray, *, seed: int = 0, limit: i
         err = float(err)
         more = check(found, have) if check is not None and count > have else {}
         if first is not None and count == have:  # the better of the two fits of the scene's own lights
-            more = {"lights_fit": err, "given_fit": float(first(held))}
-            err = min(err, more["given_fit"])
+            more = {"lights_fit": err, **{k: float(v) for k, v in first(held, train).items()}}
+            err = min(more.values())
         keep = not evidence or err < (1.0 - AUTO_GAIN) * evidence[-1]["held_out"] and more.get("passes", True)
         evidence.append({"lights": count, "held_out": err, "pixels": int(held.size), "kept": bool(keep),
                          **more})

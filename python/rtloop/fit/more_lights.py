@@ -18,8 +18,10 @@ from typing import Any
 import numpy as np
 
 from .. import _native
+from .._srgb import encode
 from ..errors import RtloopError
 from ..scene import Scene, load_scene, scene_to_dict
+from .camera import KNOTS, nnls
 from .goodness import EXPLAINED_RATIO
 from .inputs import objective
 from .lights import AUTO_GAIN, AUTO_LIMIT, LightsFit, attach_errors, held_out_counts
@@ -84,14 +86,38 @@ def _trial_scene(scene: Scene, result: FitResult) -> Scene:
     return load_scene(d)
 
 
-def _held_out_error(result: FitResult, target: np.ndarray) -> Callable[[np.ndarray], float]:
-    """The one-light fit's squared error on given pixels (flat indices), its render clipped at 1 as the fit
-    compares it: every term it selected (room light, a bounce, a lobe) counts, which the lights fit lacks."""
-    def error(pixels: np.ndarray) -> float:
-        s = result.scene
-        render = np.minimum(np.asarray(_native.render(s, s.width, s.height, 1), np.float64), 1.0).reshape(-1, 3)
-        return float(((render[pixels] - target.reshape(-1, 3)[pixels]) ** 2).sum())
+def _held_out_error(result: FitResult, target: np.ndarray) -> Callable[[np.ndarray, np.ndarray],
+                                                                          dict[str, float]]:
+    """The one-light fit's squared errors on the held-out pixels (flat indices), its render clipped at 1 as
+    the fit compares it: every term it selected (room light, a bounce, a lobe) counts, which the lights fit
+    lacks. Twice: as rendered (``given_fit``), and through the monotone curve per channel that maps the
+    render to the photo best on the training pixels (``given_fit_tone``, :func:`monotone_error`): a camera
+    curve the model lacks makes a residual that a further light can soak up, but that the one light's
+    shading explains through a curve, where a further light's shading (from elsewhere) it cannot."""
+    s = result.scene
+    render = np.minimum(np.asarray(_native.render(s, s.width, s.height, 1), np.float64), 1.0).reshape(-1, 3)
+    photo = target.reshape(-1, 3).astype(np.float64)
+
+    def error(held: np.ndarray, train: np.ndarray) -> dict[str, float]:
+        return {"given_fit": float(((render[held] - photo[held]) ** 2).sum()),
+                "given_fit_tone": monotone_error(render, photo, train, held)}
     return error
+
+
+def monotone_error(render: np.ndarray, photo: np.ndarray, train: np.ndarray, held: np.ndarray) -> float:
+    """The squared error on ``held`` of the photo (N, 3) against g_c(render) per channel c, g_c the
+    non-decreasing piecewise-linear curve of the render's sRGB encoding (knots :data:`.camera.KNOTS`, a
+    non-negative offset and slopes: non-negative least squares) fitted on ``train``."""
+    def basis(v: np.ndarray) -> np.ndarray:
+        lo, hi = KNOTS[:-1], KNOTS[1:]
+        return np.hstack([np.ones((v.size, 1)), np.clip(v[:, None] - lo, 0.0, hi - lo)])
+
+    code = encode(np.clip(render, 0.0, 1.0))
+    total = 0.0
+    for c in range(3):
+        w = nnls(basis(code[train, c]), photo[train, c])
+        total += float(((basis(code[held, c]) @ w - photo[held, c]) ** 2).sum())
+    return total
 
 
 def distinct(found: LightsFit, have: int) -> dict[str, Any]:
