@@ -63,8 +63,9 @@ def held_out_loss(scene: Scene, paths: list[str], x: list[float], target: np.nda
     if pixels is None:
         pixels = np.arange(scene.width * scene.height, dtype=np.uint32)
     v = _native.held_out(scene, paths, target, np.asarray(x, dtype=np.float64),
-                         np.asarray(folds, dtype=np.uint8), pixels=np.asarray(pixels, dtype=np.uint32), clip=clip,
-                         threads=threads, product_bounds=product_bounds(scene, environment), norm=norm, space=space,
+                         np.ascontiguousarray(folds, dtype=np.uint8),
+                         pixels=np.ascontiguousarray(pixels, dtype=np.uint32), clip=clip, threads=threads,
+                         product_bounds=product_bounds(scene, environment), norm=norm, space=space,
                          saturated=saturated)
     return float(np.sum(v[:, 0]))
 
