@@ -50,7 +50,8 @@ def _photo(scene: rtloop.Scene) -> np.ndarray:
 
 def _held(scene, target, folds, pixels, **kw) -> np.ndarray:
     x = np.asarray(scene.get_params(PATHS), np.float64)
-    return _native.held_out(scene, PATHS, target, x, folds, pixels=pixels, product_bounds=product_bounds(scene), **kw)
+    return _native.held_out(scene, target, x, folds, PATHS, pixels=pixels, product_bounds=product_bounds(scene),
+                            **kw)
 
 
 def _reference(scene: rtloop.Scene, target: np.ndarray, folds: np.ndarray, pixels: np.ndarray) -> np.ndarray:

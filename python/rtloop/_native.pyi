@@ -119,10 +119,10 @@ def evaluate(
 ) -> npt.NDArray[np.float64]: ...
 def held_out(
     scene: Scene,
-    paths: list[str],
     target: npt.NDArray[np.float32],
     x: npt.NDArray[np.float64],
     folds: npt.NDArray[np.uint8],
+    paths: list[str],
     pixels: npt.NDArray[np.uint32] | None = None,
     clip: bool = True,
     threads: int | None = None,
@@ -131,7 +131,6 @@ def held_out(
     space: str = "linear",
     saturated: float | None = None,
     refine: bool = True,
-    frozen_bounce: bool = False,
 ) -> npt.NDArray[np.float64]: ...
 def optimize(
     scene: Scene,

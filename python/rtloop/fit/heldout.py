@@ -62,9 +62,8 @@ def held_out_loss(scene: Scene, paths: list[str], x: list[float], target: np.nda
     products (those minimising the fit's own loss, ``norm`` in ``space``) solved on the other folds."""
     if pixels is None:
         pixels = np.arange(scene.width * scene.height, dtype=np.uint32)
-    v = _native.held_out(scene, paths, target, np.asarray(x, dtype=np.float64),
-                         np.ascontiguousarray(folds, dtype=np.uint8),
-                         pixels=np.ascontiguousarray(pixels, dtype=np.uint32), clip=clip, threads=threads,
+    v = _native.held_out(scene, target, np.asarray(x, dtype=np.float64),
+                         np.ascontiguousarray(folds, dtype=np.uint8), paths, pixels=np.ascontiguousarray(pixels, dtype=np.uint32), clip=clip, threads=threads,
                          product_bounds=product_bounds(scene, environment), norm=norm, space=space,
                          saturated=saturated)
     return float(np.sum(v[:, 0]))
