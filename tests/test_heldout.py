@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 import rtloop
 from rtloop import _native
+from rtloop.cli.summary import model_lines
 from rtloop.fit.heldout import HELD_OUT_FOLDS, HELD_OUT_GAIN, block_folds
 from rtloop.fit.products import product_bounds
 
@@ -163,6 +164,8 @@ def test_a_band_along_the_outline_is_soaked_up_in_sample_but_not_predicted_on_he
     assert ev["selected_in_sample"] and ev["held_out"]["gain"] < HELD_OUT_GAIN
     assert not ev["selected"] and "environment" not in result.model["terms"]
     assert ev["held_out"]["loss_with"] > 0 and ev["held_out"]["loss_without"] > 0
+    assert any(line.startswith("    held out (5 folds of 8x8-pixel blocks)") and "at least 5% needed" in line
+               for line in model_lines(result.model, result.scene.to_dict()))
     _, err_on = _fit("rim", norm="l2", environment="on")
     assert err < 0.5 * err_on
 
