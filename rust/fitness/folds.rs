@@ -4,7 +4,6 @@
 
 use rayon::prelude::*;
 
-use super::bounce::Mode;
 use super::kernel::{Candidate, Kernel};
 use super::pixels::object_runs;
 use super::projected::Solved;
@@ -51,8 +50,8 @@ impl Fitness {
     /// products at candidate `x` solved on the active pixels outside fold k (with the pixels the solve
     /// always leaves out, silhouettes and saturated ones, left out as ever) and the loss of fold k's pixels
     /// at them, in this fitness's norm and space. `refine`: the products that minimise the fit's own loss on
-    /// those pixels ([`Fitness::refined`]'s, the full bounce's), else the least-squares products
-    /// ([`Fitness::solved`]'s). The folds are solved side by side, each in a fixed order: the same values on
+    /// those pixels (as [`Fitness::refined`] refines them), else the least-squares products
+    /// ([`Fitness::solved`]'s); with a bounce, its fixed point as the search solves it. The folds are solved side by side, each in a fixed order: the same values on
     /// any number of threads. The fixed background pixels (no parameter changes them) are left out.
     pub fn held_out(
         &self,
@@ -76,7 +75,8 @@ impl Fitness {
             )));
         }
         let p = self.params(x);
-        let mode = if refine { &Mode::FULL } else { &self.bounce };
+        // the bounce's fixed point as the search solves it (its rounds, or held where the search holds it)
+        let mode = &self.bounce;
         let clip = self.clip;
         let top = if clip { 1.0 } else { f64::INFINITY };
         Ok((0..count)

@@ -223,7 +223,7 @@ pub(super) fn optimize<'py>(
 /// the pixels (`pixels`, default all) split into folds by `folds` (uint8, one label per pixel of
 /// `pixels`; labels 0..K-1), and per fold the loss of its pixels at the products solved on the other folds' pixels, in the
 /// fit's `norm` and `space` (`Fitness::held_out`). `refine`: the products minimise the fit's own loss on
-/// those pixels (the full bounce's), else least squares (the search's bounce). The arguments
+/// those pixels, else least squares (a bounce's fixed point as `evaluate` solves it). The arguments
 /// otherwise as `evaluate`'s with `loss="l1_projected"`. Returns float64 (K, 2): per fold the held-out
 /// loss and its number of pixels (the fixed background's left out).
 #[pyfunction]

@@ -185,10 +185,11 @@ class _Selection:
                 model["evidence"][term] = ev
                 if ev["selected"]:
                     self.base = ev["loss_with"]
-                    known = ev["held_out"]["loss_with"]
-                    self.held = HeldOut(self.held.folds, lambda: known)
                     added.append(term)
                     self.add_term(term, ev, shininess)
+                    known = ev["held_out"].get("loss_with")
+                    self.held = (self.held_out(self.model_work, where, x, self.model_env) if known is None
+                                 else HeldOut(self.held.folds, lambda known=known: known))
         added.sort(key=TERM_ORDER.index)
         return added
 
@@ -201,18 +202,18 @@ class _Selection:
 
     def evidence(self, term: str, at: Scene, where: list[str], x: list[float]) -> tuple[dict[str, Any], float | None]:
         """``term``'s test at ``at`` (the model so far at the light found), and a lobe's best trial shininess."""
-        target, sub, base, kw = self.photo.target, self.sub, self.base, {**self.kw, "held": self.held}
+        target, sub, base, kw = self.photo.target, self.sub, self.base, self.kw
         n_sub, env, names = self.first.pixels // 4, self.model_env, self.names
         if term == "environment":
-            return environment_evidence(at, where, x, target, sub, base=base, active_pixels=n_sub, **kw), None
+            return environment_evidence(at, where, x, target, sub, base=base, active_pixels=n_sub, held=self.held,
+                                        **kw), None
         if term == "interreflection":
             return interreflection_evidence(at, where, x, target, sub, base=base, environment=env,
-                                            active_pixels=n_sub, **kw), None
+                                            active_pixels=n_sub, held=self.held, **kw), None
         ev, shininess = highlight_evidence(at, names, where, x, target, sub, base=base, environment=env,
                                            active_pixels=n_sub, **kw)
         if ev["selected"]:  # the coat against Blinn-Phong, by the same evidence (fit/coat.py)
-            choose_lobe(ev, at, names, where, x, target, sub, base=base, environment=env, active_pixels=n_sub,
-                        **self.kw)
+            choose_lobe(ev, at, names, where, x, target, sub, base=base, environment=env, active_pixels=n_sub, **kw)
         return ev, shininess
 
     def add_term(self, term: str, ev: dict[str, Any], shininess: float | None) -> None:
