@@ -264,7 +264,9 @@ def highlight_evidence(scene: Scene, names: list[str], paths: list[str], x: list
     ev = _verdict(base, with_lobe[k], active_pixels, 2 * len(names), norm, nested=True)
     # not judged on held-out pixels: a highlight is local (a tight lobe lights a few blocks), and products
     # fitted on the other blocks do not predict it (docs/methods.md, "Held-out pixels")
-    ev["held_out"] = {"skipped": "not measured: a highlight is local, so a lobe is judged in-sample"}
+    ev["selected_in_sample"] = ev["selected"]
+    ev["held_out"] = {"skipped": "not measured: a highlight is local, so a lobe is judged in-sample" if ev["selected"]
+                      else "not measured: the in-sample rule rejects the term"}
     ev["shininess_tried"] = tried
     ev["loss_per_shininess"] = with_lobe
     return ev, tried[k]
