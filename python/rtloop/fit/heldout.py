@@ -59,13 +59,14 @@ def held_out_loss(scene: Scene, paths: list[str], x: list[float], target: np.nda
                   saturated: float | None = None) -> float:
     """The closed form's held-out loss of ``scene`` at the values ``x`` of ``paths``, with or without the
     environment column: over the ``folds`` (one per pixel of ``pixels``), the loss of each fold's pixels at the
-    products (those minimising the fit's own loss, ``norm`` in ``space``) solved on the other folds."""
+    products (those minimising the fit's own loss, ``norm`` in ``space``: in linear L2 the least-squares
+    products, whose refine by bisection would cost more than the fit's test) solved on the other folds."""
     if pixels is None:
         pixels = np.arange(scene.width * scene.height, dtype=np.uint32)
     v = _native.held_out(scene, target, np.asarray(x, dtype=np.float64),
                          np.ascontiguousarray(folds, dtype=np.uint8), paths, pixels=np.ascontiguousarray(pixels, dtype=np.uint32), clip=clip, threads=threads,
                          product_bounds=product_bounds(scene, environment), norm=norm, space=space,
-                         saturated=saturated)
+                         saturated=saturated, refine=not (norm == "l2" and space == "linear"))
     return float(np.sum(v[:, 0]))
 
 
