@@ -23,6 +23,8 @@ pub struct ActivePixels {
     /// Per active pixel: its footprint on the surface it sees (`render::footprint::axes`), for shadow
     /// edges integrated over the pixel's area; empty when not asked for.
     pub footprint: Vec<[Vec3A; 2]>,
+    /// Per active pixel: its index in the image (row-major).
+    pub index: Vec<u32>,
 }
 
 impl ActivePixels {
@@ -50,6 +52,7 @@ impl ActivePixels {
                 Some(m) if s.object == u32::MAX => a.fixed.push((m, t)),
                 _ => {
                     a.surfels.push(s);
+                    a.index.push(i);
                     a.solve.push(interior_by(gbuffer, i as usize, solve_margin));
                     a.targets.push(t);
                     if let Some((cam, shapes)) = camera {
@@ -393,42 +396,11 @@ pub(crate) fn group(
         solve,
         footprint,
     } = pixels;
-    // Pixels grouped by object (background last), row-major inside a group: a counting sort.
-    let slot = |o: u32| {
-        if o == u32::MAX {
-            shapes.len()
-        } else {
-            o as usize
-        }
-    };
-    let mut count = vec![0usize; shapes.len() + 2];
-    for s in surfels {
-        count[slot(s.object) + 1] += 1;
-    }
-    for k in 1..count.len() {
-        count[k] += count[k - 1];
-    }
-    let mut order = vec![0usize; surfels.len()];
-    for (i, s) in surfels.iter().enumerate() {
-        let k = slot(s.object);
-        order[count[k]] = i;
-        count[k] += 1;
-    }
-    let mut runs = Vec::new();
-    let mut start = 0;
-    while start < order.len() {
-        let obj = surfels[order[start]].object;
-        let mut end = start;
-        while end < order.len() && surfels[order[end]].object == obj {
-            end += 1;
-        }
-        runs.push((obj, start..end));
-        start = end;
-    }
+    let runs = object_runs(surfels, shapes.len());
     // One group per object, built in parallel (each in order: the same groups on any pool).
     runs.into_par_iter()
-        .map(|(obj, range)| {
-            let idx = &order[range];
+        .map(|(obj, idx)| {
+            let idx = &idx[..];
             let col = |f: &dyn Fn(&Surfel) -> f32| {
                 idx.iter().map(|&i| f(&surfels[i])).collect::<Vec<f32>>()
             };
@@ -536,4 +508,42 @@ pub(crate) fn group(
             g
         })
         .collect()
+}
+
+/// The pixels `surfels` grouped by object (`shapes` objects; background last), row-major inside a group (a
+/// counting sort): per group its object (`u32::MAX`: the background) and its pixels' indices in order, as
+/// [`group`] orders the kernel's groups.
+pub(crate) fn object_runs(surfels: &[Surfel], shapes: usize) -> Vec<(u32, Vec<usize>)> {
+    let slot = |o: u32| {
+        if o == u32::MAX {
+            shapes
+        } else {
+            o as usize
+        }
+    };
+    let mut count = vec![0usize; shapes + 2];
+    for s in surfels {
+        count[slot(s.object) + 1] += 1;
+    }
+    for k in 1..count.len() {
+        count[k] += count[k - 1];
+    }
+    let mut order = vec![0usize; surfels.len()];
+    for (i, s) in surfels.iter().enumerate() {
+        let k = slot(s.object);
+        order[count[k]] = i;
+        count[k] += 1;
+    }
+    let mut runs = Vec::new();
+    let mut start = 0;
+    while start < order.len() {
+        let obj = surfels[order[start]].object;
+        let mut end = start;
+        while end < order.len() && surfels[order[end]].object == obj {
+            end += 1;
+        }
+        runs.push((obj, order[start..end].to_vec()));
+        start = end;
+    }
+    runs
 }

@@ -68,6 +68,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
             constant_term,
             optimize::evaluate,
             optimize::optimize,
+            optimize::held_out,
             uncertainty::fd_columns,
             uncertainty::block_scores,
             uncertainty::footprint_delta,

@@ -9,6 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from ..fit.heldout import HELD_OUT_GAIN
+
 __all__ = ["duration", "model_lines", "summary"]
 
 
@@ -203,6 +205,11 @@ def model_lines(model: dict[str, Any], fitted: dict[str, Any]) -> list[str]:
                      + (f"; at most {ev['loss_with_nested']:.4g} with its products' best" if ev.get("raised") else "")
                      + (f", BIC {-bic:+.4g}" if bic is not None else "")
                      + (f"; {100 * ev['earlier_gain']:+.1f}% before them)" if "earlier_gain" in ev else ")"))
+        held = ev.get("held_out") or {}
+        if "gain" in held:
+            lines.append(f"    held out ({held['folds']} folds of {held['block']}x{held['block']}-pixel blocks): "
+                         f"{held['loss_without']:.4g} -> {held['loss_with']:.4g} with it, {100 * held['gain']:+.1f}% "
+                         f"(at least {100 * HELD_OUT_GAIN:g}% needed)")
         if ev.get("lobe") == "coat":
             lines.append(f"    lobe: a clear coat (GGX roughness {ev['coat']['roughness']:.3g}, IOR {ev['coat']['ior']:g}), "
                          f"its loss {ev['coat']['loss_with']:.4g} against Blinn-Phong's {ev['blinn_phong']['loss_with']:.4g}")
