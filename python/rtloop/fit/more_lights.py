@@ -90,18 +90,39 @@ def _held_out_error(result: FitResult, target: np.ndarray) -> Callable[[np.ndarr
                                                                           dict[str, float]]:
     """The one-light fit's squared errors on the held-out pixels (flat indices), its render clipped at 1 as
     the fit compares it: every term it selected (room light, a bounce, a lobe) counts, which the lights fit
-    lacks. Twice: as rendered (``given_fit``), and through the monotone curve per channel that maps the
-    render to the photo best on the training pixels (``given_fit_tone``, :func:`monotone_error`): a camera
-    curve the model lacks makes a residual that a further light can soak up, but that the one light's
-    shading explains through a curve, where a further light's shading (from elsewhere) it cannot."""
+    lacks. Three times: as rendered (``given_fit``); through the monotone curve per channel that maps the
+    render to the photo best on the training pixels (``given_fit_tone``, :func:`monotone_error`); and times
+    the smooth field over the image that does (``given_fit_field``, :func:`field_error`). What the camera
+    does that the model lacks (its curve, a falloff or an exposure gradient across the frame) leaves a
+    smooth residual that a further light can soak up; the one light's shading explains it through a curve
+    or a field, where a further lamp's shading, from another direction and varying with the surfaces'
+    normals and shadows, it cannot."""
     s = result.scene
     render = np.minimum(np.asarray(_native.render(s, s.width, s.height, 1), np.float64), 1.0).reshape(-1, 3)
     photo = target.reshape(-1, 3).astype(np.float64)
 
     def error(held: np.ndarray, train: np.ndarray) -> dict[str, float]:
         return {"given_fit": float(((render[held] - photo[held]) ** 2).sum()),
-                "given_fit_tone": monotone_error(render, photo, train, held)}
+                "given_fit_tone": monotone_error(render, photo, train, held),
+                "given_fit_field": field_error(render, photo, train, held, s.width, s.height)}
     return error
+
+
+def field_error(render: np.ndarray, photo: np.ndarray, train: np.ndarray, held: np.ndarray, width: int,
+                height: int) -> float:
+    """The squared error on ``held`` of the photo (N, 3) against the render times a quadratic field over the
+    image per channel, 1, u, v, u^2, uv, v^2 in the image's coordinates (u, v in [-1, 1]), its six weights
+    the least squares on ``train``."""
+    def basis(pixels: np.ndarray, c: int) -> np.ndarray:
+        u = 2.0 * (pixels % width + 0.5) / width - 1.0
+        v = 2.0 * (pixels // width + 0.5) / height - 1.0
+        return render[pixels, c][:, None] * np.stack([np.ones_like(u), u, v, u * u, u * v, v * v], axis=1)
+
+    total = 0.0
+    for c in range(3):
+        w = np.linalg.lstsq(basis(train, c), photo[train, c], rcond=None)[0]
+        total += float(((basis(held, c) @ w - photo[held, c]) ** 2).sum())
+    return total
 
 
 def monotone_error(render: np.ndarray, photo: np.ndarray, train: np.ndarray, held: np.ndarray) -> float:
