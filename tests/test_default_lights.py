@@ -133,6 +133,9 @@ def test_the_command_line_writes_the_lights_the_default_keeps(tmp_path, capsys):
     assert report["method"] == "lights" and len(report["lights"]) == 2
     assert report["number_of_lights"]["asked"] is None and report["number_of_lights"]["gate"]["fires"]
     assert "lights chosen from the photo" in printed
+    # the one-light search the test started from is kept aside, not mixed with the lights fit's files
+    assert not (out / "snapshots").exists() and not (out / "best_per_generation.csv").exists()
+    assert (out / "one_light" / "best_per_generation.csv").is_file() and (out / "one_light" / "snapshots").is_dir()
     code = main([str(folder / "scene_input.json"), str(folder / "objective.png"), "--out", str(tmp_path / "one"),
                  "--final-scale", "1", "--final-spp", "1", "-q", "--lights", "1"])
     capsys.readouterr()

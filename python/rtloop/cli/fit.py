@@ -104,8 +104,9 @@ final.png as above, and with --report a page of the lights and their evidence;
 no snapshots or CSV. Without --lights, a one-light fit that does not explain
 the photo tries further lights: one kept (on pixels the fit did not see) gives
 the lights fit's files, with the test and the evidence in fit_report's
-number_of_lights; none kept leaves the one-light files, fit_report.model.lights
-saying what was tried. --lights 1 fits one light only.
+number_of_lights (the one-light search's CSV and snapshots in one_light/); none
+kept leaves the one-light files, fit_report.model.lights saying what was tried.
+--lights 1 fits one light only.
 
 Everything is written into a temporary directory beside DIR and moved into
 place when complete: a failed or interrupted run leaves no partial results. An
@@ -414,6 +415,7 @@ class _Run:
                                 lights=args.lights, **fit_options(args))
         self.progress.end_line()
         if isinstance(result, LightsFit):  # the default fit kept a further light: the lights fit's outputs
+            _set_aside_one_light_log(tmp)
             if truth is not None:
                 print(f"{PROG}: warning: --truth: not compared: the fit kept {len(result.lights)} lights "
                       "(see result.json's fit_report.number_of_lights)", file=sys.stderr)
@@ -484,6 +486,17 @@ def _load_truth(args: argparse.Namespace, scene: Any) -> Any:
     if args.speed_plot is not None and not args.speed_plot.is_file():
         raise _Failure(f"--speed-plot: {args.speed_plot}: no such file")
     return truth
+
+
+def _set_aside_one_light_log(out: Path) -> None:
+    """Where the default fit kept a further light: the one-light search's log (best_per_generation.csv,
+    snapshots/), which the test started from, moved into ``out``/one_light/, so that the top level holds
+    the lights fit's files alone."""
+    aside = out / "one_light"
+    aside.mkdir()
+    for name in ("best_per_generation.csv", "snapshots"):
+        if (out / name).exists():
+            (out / name).rename(aside / name)
 
 
 def _warn_goodness(good: dict[str, Any]) -> None:
