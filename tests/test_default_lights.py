@@ -183,3 +183,19 @@ def test_an_exposure_ramp_across_the_frame_is_not_taken_for_a_further_light():
     assert isinstance(result, rtloop.FitResult)
     one, two = result.model["lights"]["evidence"][:2]
     assert one["given_fit_field"] < two["held_out"] < one["given_fit"]
+
+
+def test_a_batch_job_sets_the_one_light_search_aside_as_rtloop_fit_does(tmp_path, capsys):
+    """A job fitted with the defaults whose photo keeps a further light: the job's folder holds the lights
+    fit's files, the one-light search's CSV and snapshots in one_light/, as rtloop-fit's does."""
+    folder = FIXTURES / "lights" / "key-fill-25"
+    jobs = tmp_path / "jobs.jsonl"
+    jobs.write_text(json.dumps({"id": "kf", "scene": str(folder / "scene_input.json"),
+                                "photo": str(folder / "objective.png")}) + "\n")
+    assert main(["--batch", str(jobs), "--out", str(tmp_path / "b"), "-q", "--final-scale", "1",
+                 "--final-spp", "1"]) == 0
+    capsys.readouterr()
+    job = tmp_path / "b" / "kf"
+    assert json.loads((job / "result.json").read_text())["fit_report"]["method"] == "lights"
+    assert not (job / "snapshots").exists() and not (job / "best_per_generation.csv").exists()
+    assert (job / "one_light" / "best_per_generation.csv").is_file()

@@ -282,7 +282,11 @@ def run_job(job: Job, *, threads: int | None = None, options: dict[str, Any] | N
         finally:
             if log is not None:
                 log.close()
-        several = several or isinstance(result, LightsFit)  # the default fit kept a further light
+        if isinstance(result, LightsFit) and log is not None:  # the default fit kept a further light
+            from ..cli.outputs import set_aside_one_light_log
+
+            set_aside_one_light_log(staged)  # type: ignore[arg-type]
+        several = several or isinstance(result, LightsFit)
         if warm:
             from ..fit.bounds import restore_bounds
 

@@ -34,7 +34,7 @@ from rtloop.uncertainty.bootstrap import replicate_of
 
 from .args import Parser, UsageError, choice, float_in, generations, int_at_least, int_in, norm, vignetting
 from .lights import LIGHTS_HELP, lights_count, lights_summary, run_lights, uses_lights, write_lights
-from .outputs import GenerationLog, input_paths, render_final, write_result
+from .outputs import GenerationLog, input_paths, render_final, set_aside_one_light_log, write_result
 from .progress import _Progress
 from .summary import duration as _duration, summary as _summary
 
@@ -415,7 +415,7 @@ class _Run:
                                 lights=args.lights, **fit_options(args))
         self.progress.end_line()
         if isinstance(result, LightsFit):  # the default fit kept a further light: the lights fit's outputs
-            _set_aside_one_light_log(tmp)
+            set_aside_one_light_log(tmp)
             if truth is not None:
                 print(f"{PROG}: warning: --truth: not compared: the fit kept {len(result.lights)} lights "
                       "(see result.json's fit_report.number_of_lights)", file=sys.stderr)
@@ -486,17 +486,6 @@ def _load_truth(args: argparse.Namespace, scene: Any) -> Any:
     if args.speed_plot is not None and not args.speed_plot.is_file():
         raise _Failure(f"--speed-plot: {args.speed_plot}: no such file")
     return truth
-
-
-def _set_aside_one_light_log(out: Path) -> None:
-    """Where the default fit kept a further light: the one-light search's log (best_per_generation.csv,
-    snapshots/), which the test started from, moved into ``out``/one_light/, so that the top level holds
-    the lights fit's files alone."""
-    aside = out / "one_light"
-    aside.mkdir()
-    for name in ("best_per_generation.csv", "snapshots"):
-        if (out / name).exists():
-            (out / name).rename(aside / name)
 
 
 def _warn_goodness(good: dict[str, Any]) -> None:
