@@ -22,6 +22,7 @@ from .._srgb import encode
 from ..errors import RtloopError
 from ..scene import Scene, load_scene, scene_to_dict
 from .camera import KNOTS, nnls
+from .framing import measure
 from .goodness import EXPLAINED_RATIO
 from .inputs import objective
 from .lights import AUTO_GAIN, AUTO_LIMIT, LightsFit, attach_errors, held_out_counts
@@ -45,13 +46,15 @@ MIN_ANGLE_DEG = 20.0
 def gate(result: FitResult) -> dict[str, Any]:
     """The test on the one-light fit: ``fires`` where its residual is at least EXPLAINED_RATIO times the
     photo's noise floor and some object's excess is smooth (``structured``: the objects whose residual
-    :mod:`.goodness` does not call texture or noise), unless the photo's framing does not match the scene's
-    camera (``goodness["framing"]``: the outlines are off, and that residual is the framing's)."""
+    :mod:`.goodness` does not call texture or noise). ``framing_mismatch``: the framing check found the
+    outlines off (``goodness["framing"]``), which a lamp the one light lacks can do too (its light on the
+    far side of a ball moves the outline's edges): a further light found is then kept only where the
+    outlines register against its render (:func:`more_lights`)."""
     g = result.goodness or {}
     ratio = g.get("ratio")
     structured = sorted(name for name, what in (g.get("explained") or {}).items() if what != "texture/noise")
     framing = bool((g.get("framing") or {}).get("mismatch"))
-    fires = ratio is not None and ratio >= EXPLAINED_RATIO and bool(structured) and not framing
+    fires = ratio is not None and ratio >= EXPLAINED_RATIO and bool(structured)
     return {"ratio": ratio, "explained_below": EXPLAINED_RATIO, "structured": structured,
             **({"framing_mismatch": True} if framing else {}), "fires": bool(fires)}
 
@@ -191,6 +194,18 @@ def more_lights(result: FitResult, scene: Scene, image: np.ndarray, mask: Any, a
         result.model["lights"] = record
         result.seconds = time.perf_counter() - t0
         return result
+    if test.get("framing_mismatch"):  # the outlines were off against the one light's render: and now?
+        s = found.scene
+        again, _ = measure(s, target, use, np.asarray(_native.render(s, s.width, s.height, 1), np.float32))
+        record["framing_with_lights"] = again
+        if again["mismatch"]:
+            record.update(kept=1, evidence=evidence, why=(
+                f"{len(found.lights)} lights were kept by the held-out pixels, but the objects' outlines lie "
+                f"{again['outline_rms_px']:.1f} px (RMS) off against their render too: the residual is the "
+                "framing's, not a lamp's; the one-light fit is kept"))
+            result.model["lights"] = record
+            result.seconds = time.perf_counter() - t0
+            return result
     attach_errors(trial, found, target, pixels, args["seed"])
     found.gate = {**record, "kept": len(found.lights)}
     found.seconds = time.perf_counter() - t0
