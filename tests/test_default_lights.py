@@ -212,3 +212,16 @@ def test_three_lamps_whose_outlines_the_one_light_misreads_are_found():
     lamps = [np.asarray(t["position"]) for t in truth["lights"]]
     for light in result.lights:
         assert min(np.linalg.norm(np.asarray(light["position"]) - p) for p in lamps) < 0.07
+
+
+def test_a_fill_the_one_light_takes_for_a_camera_curve_is_found():
+    """Key + fill at 50 %: the one-light fit explains the fill by a tone curve (the light metres off); the
+    further light is tried on the photo as it is, against the one light through the best monotone curve,
+    and kept: the key and the fill each within 5 cm (seed 0)."""
+    truth, image, scene_input = photo("lights", "key-fill-50")
+    one = rtloop.fit(scene_input, image, seed=0, uncertainty=False, lights=1)
+    assert one.model["camera"]["terms"]
+    result = rtloop.fit(scene_input, image, seed=0, uncertainty=False)
+    assert isinstance(result, LightsFit) and len(result.lights) == 2
+    for light, lamp in zip(result.lights, truth["lights"]):
+        assert np.linalg.norm(np.asarray(light["position"]) - np.asarray(lamp["position"])) < 0.05

@@ -60,16 +60,16 @@ def gate(result: FitResult) -> dict[str, Any]:
 
 
 def _not_tried(result: FitResult, args: dict[str, Any], defaults: dict[str, Any]) -> str | None:
-    """Why the lights fit cannot take this call (an argument it does not take given, a camera term or a
-    reframing the one-light fit applied to the photo) or should not (the image's values doubted: ``image:``
+    """Why the lights fit cannot take this call (an argument it does not take given, a photo the one-light
+    fit resampled into the scene's framing) or should not (the image's values doubted: ``image:``
     warnings), or None."""
     name = not_with_lights(args, defaults)
     if name is not None:
         return f"{name} given, which the lights fit does not take"
     if args["uncertainty"] == "bootstrap":
         return "uncertainty 'bootstrap' asked, which the lights fit does not take"
-    if (result.model.get("camera") or {}).get("terms") or result.reframed is not None:
-        return "the one-light fit corrected the photo (a camera term or its framing); the lights fit does not"
+    if result.reframed is not None:
+        return "the one-light fit resampled the photo into the scene's framing; the lights fit does not"
     doubted = [w for w in result.warnings if w.startswith("image:")]
     if doubted:  # e.g. an sRGB encoding passed as linear: its residual is the encoding's, not a lamp's
         return f"the image itself is doubted ({doubted[0].split(':', 2)[1].strip()}): no further light is tried"
