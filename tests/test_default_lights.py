@@ -227,3 +227,11 @@ def test_a_fill_the_one_light_takes_for_a_camera_curve_is_found():
     assert isinstance(result, LightsFit) and len(result.lights) == 2
     for light, lamp in zip(result.lights, truth["lights"]):
         assert np.linalg.norm(np.asarray(light["position"]) - np.asarray(lamp["position"])) < 0.05
+
+
+def test_the_lights_the_default_keeps_are_the_same_on_any_thread_count():
+    _, image, scene_input = photo("lights", "key-fill-25")
+    one, two = (rtloop.fit(scene_input, image, seed=3, threads=n, uncertainty=False) for n in (1, 2))
+    assert isinstance(one, LightsFit) and isinstance(two, LightsFit)
+    assert [light["position"] for light in one.lights] == [light["position"] for light in two.lights]
+    assert one.evidence == two.evidence

@@ -4,7 +4,7 @@
 the photo (its goodness ratio at or above EXPLAINED_RATIO, with a smooth residual on some object: a
 cheap test, the verdict the fit computes anyway: :func:`gate`), the lights fit tries a further light on half
 the pixels and keeps it only where the other half say so (:func:`.lights.held_out_counts`, ``"auto"``'s
-rule, up to AUTO_LIMIT lights). A kept light makes the result a :class:`.lights.LightsFit`; otherwise the
+rule, up to AUTO_LIMIT lights), against the one light through a camera's curve and field as well. A kept light makes the result a :class:`.lights.LightsFit`; otherwise the
 one-light result is returned unchanged, with the test and its evidence in ``result.model["lights"]``.
 docs/methods.md, "Several lights".
 """
@@ -169,8 +169,9 @@ def more_lights(result: FitResult, scene: Scene, image: np.ndarray, mask: Any, a
     """The default fit's answer: ``result`` (the one-light fit) unchanged where :func:`gate` does not fire;
     else further lights tried, and the lights fit returned where held-out pixels keep one (``args``:
     fit()'s arguments, ``defaults`` its defaults; ``t0``: when the fit began). A further light must beat
-    the better of the lights fit's one light and the one-light fit as it is, scored on the held-out pixels
-    (it saw them; its terms included)."""
+    the best of the lights fit's one light and the one-light fit as it is, through a curve and times a
+    field (:func:`_held_out_error`), scored on the held-out pixels (it saw them; its terms included); where
+    the framing check found the outlines off, they must register against the lights' render too."""
     test = gate(result)
     if not test["fires"]:
         return result
