@@ -235,3 +235,15 @@ def test_the_lights_the_default_keeps_are_the_same_on_any_thread_count():
     assert isinstance(one, LightsFit) and isinstance(two, LightsFit)
     assert [light["position"] for light in one.lights] == [light["position"] for light in two.lights]
     assert one.evidence == two.evidence
+
+
+def test_lights_at_the_photos_own_floor_end_the_search():
+    """Key + fill at 25 %, an 8-bit photo: two lights leave a held-out error within 1 / (1 - 25 %) of what
+    the photo's rounding and noise leave a perfect model, so no third light is fitted (it could not cut
+    the error by a quarter without fitting below that floor)."""
+    _, image, scene_input = photo("lights", "key-fill-25")
+    result = rtloop.fit(scene_input, image, seed=0, uncertainty=False)
+    assert isinstance(result, LightsFit) and len(result.lights) == 2
+    assert [e["lights"] for e in result.evidence] == [1, 2]
+    last = result.evidence[-1]
+    assert 0 < last["floor"] and last["held_out"] <= last["floor"] / 0.75

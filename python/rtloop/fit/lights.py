@@ -274,6 +274,7 @@ def held_out_counts(scene: Scene, target: np.ndarray, *, seed: int = 0, limit: i
                     mask: np.ndarray | None = None,
                     first: Callable[[np.ndarray, np.ndarray], dict[str, float]] | None = None,
                     check: Callable[[LightsFit, int], dict[str, Any]] | None = None,
+                    floor: Callable[[np.ndarray], float] | None = None,
                     **kw: Any) -> tuple[LightsFit | None, list[dict[str, Any]], np.ndarray]:
     """The count :func:`choose_count` keeps, without error bars, and the chosen pixels: each count is
     fitted on half the pixels (a seeded split) and scored on the other half; a further light is kept when
@@ -281,7 +282,10 @@ def held_out_counts(scene: Scene, target: np.ndarray, *, seed: int = 0, limit: i
     held-out errors of the scene's own lights as some other fit has them (given the held-out and the
     training pixels; a dict of named errors): the scene's own count scores the least of those and its own
     fit, and where no further light is kept the answer is None. ``check(found, have)``:
-    the caller's further rule for a fit with added lights, its evidence (``"passes"``: whether it holds)."""
+    the caller's further rule for a fit with added lights, its evidence (``"passes"``: whether it holds).
+    ``floor(held)``: the held-out error the photo's own rounding and noise leave (the expected squared
+    error of a perfect model): a count whose error is within floor / (1 - AUTO_GAIN) ends the search, as
+    no further light could cut it by AUTO_GAIN without fitting below that floor."""
     have = len(_light_list(scene_to_dict(scene)))
     pixels = choose_pixels(scene, target, seed, mask)
     half = np.random.default_rng(seed + 1).permutation(pixels.size) % 2 == 0
@@ -306,6 +310,10 @@ def held_out_counts(scene: Scene, target: np.ndarray, *, seed: int = 0, limit: i
         best = found if first is None or count > have else None
         if count > have:
             evidence[-2]["kept"] = False
+        at_floor = None if floor is None else float(floor(held))
+        if at_floor is not None and err <= at_floor / (1.0 - AUTO_GAIN):
+            evidence[-1]["floor"] = at_floor  # at the photo's own floor: no further light is tried
+            break
     if best is not None:
         best.evidence = evidence
     return best, evidence, pixels

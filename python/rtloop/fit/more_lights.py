@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from .. import _native
-from .._srgb import encode
+from .._srgb import codes8, decode, encode
 from ..errors import RtloopError
 from ..scene import Scene, load_scene, scene_to_dict
 from .camera import KNOTS, nnls
@@ -128,6 +128,24 @@ def field_error(render: np.ndarray, photo: np.ndarray, train: np.ndarray, held: 
     return total
 
 
+def _floor(result: FitResult, target: np.ndarray) -> Callable[[np.ndarray], float]:
+    """The squared error a perfect model leaves on given pixels: per pixel and channel the photo's noise
+    variance (the goodness's ``noise_sigma``) and, for 8-bit codes, the rounding's (the code step there
+    squared over 12)."""
+    sigma2 = np.square(np.asarray((result.goodness or {}).get("noise_sigma") or [0.0, 0.0, 0.0], np.float64))
+    codes = codes8(target)
+    if codes is None:
+        rounding = np.zeros((target.shape[0] * target.shape[1], 3))
+    else:
+        c = codes.reshape(-1, 3).astype(np.float64)
+        step = decode(np.minimum(c + 0.5, 255.0) / 255.0) - decode(np.maximum(c - 0.5, 0.0) / 255.0)
+        rounding = step * step / 12.0
+
+    def floor(pixels: np.ndarray) -> float:
+        return float((rounding[pixels] + sigma2).sum())
+    return floor
+
+
 def monotone_error(render: np.ndarray, photo: np.ndarray, train: np.ndarray, held: np.ndarray) -> float:
     """The squared error on ``held`` of the photo (N, 3) against g_c(render) per channel c, g_c the
     non-decreasing piecewise-linear curve of the render's sRGB encoding (knots :data:`.camera.KNOTS`, a
@@ -183,7 +201,7 @@ def more_lights(result: FitResult, scene: Scene, image: np.ndarray, mask: Any, a
             target, use = objective(scene, image, mask, [])
             found, evidence, pixels = held_out_counts(trial, target, seed=args["seed"], limit=AUTO_LIMIT, mask=use,
                                                       first=_held_out_error(result, target), check=distinct,
-                                                      threads=args["threads"])
+                                                      floor=_floor(result, target), threads=args["threads"])
         except RtloopError as e:  # a scene the lights fit does not take (a coat, a directional light, ...)
             why = str(e)
     record = {**test, "tried": why is None, "limit": AUTO_LIMIT, "gain": AUTO_GAIN, "min_share": MIN_SHARE,
