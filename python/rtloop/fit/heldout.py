@@ -64,7 +64,8 @@ def held_out_loss(scene: Scene, paths: list[str], x: list[float], target: np.nda
     if pixels is None:
         pixels = np.arange(scene.width * scene.height, dtype=np.uint32)
     v = _native.held_out(scene, target, np.asarray(x, dtype=np.float64),
-                         np.ascontiguousarray(folds, dtype=np.uint8), paths, pixels=np.ascontiguousarray(pixels, dtype=np.uint32), clip=clip, threads=threads,
+                         np.ascontiguousarray(folds, dtype=np.uint8), paths,
+                         pixels=np.ascontiguousarray(pixels, dtype=np.uint32), clip=clip, threads=threads,
                          product_bounds=product_bounds(scene, environment), norm=norm, space=space,
                          saturated=saturated, refine=not (norm == "l2" and space == "linear"))
     return float(np.sum(v[:, 0]))

@@ -292,6 +292,7 @@ def held_out_counts(scene: Scene, target: np.ndarray, *, seed: int = 0, limit: i
     train, held = np.sort(pixels[half]), np.sort(pixels[~half])
     held = held[~steep(target, EDGE_SHARE)[held]]
     best, evidence = None, []
+    at_floor = None if floor is None else float(floor(held))
     for count in range(have, max(limit, have) + 1):
         found = fit_lights(scene, target, count, seed=seed, mask=train, errors=False, **kw)
         d, paths = with_lights(scene, count)
@@ -310,7 +311,6 @@ def held_out_counts(scene: Scene, target: np.ndarray, *, seed: int = 0, limit: i
         best = found if first is None or count > have else None
         if count > have:
             evidence[-2]["kept"] = False
-        at_floor = None if floor is None else float(floor(held))
         if at_floor is not None and err <= at_floor / (1.0 - AUTO_GAIN):
             evidence[-1]["floor"] = at_floor  # at the photo's own floor: no further light is tried
             break

@@ -4,8 +4,9 @@
 the photo (its goodness ratio at or above EXPLAINED_RATIO, with a smooth residual on some object: a
 cheap test, the verdict the fit computes anyway: :func:`gate`), the lights fit tries a further light on half
 the pixels and keeps it only where the other half say so (:func:`.lights.held_out_counts`, ``"auto"``'s
-rule, up to AUTO_LIMIT lights), against the one light through a camera's curve and field as well. A kept light makes the result a :class:`.lights.LightsFit`; otherwise the
-one-light result is returned unchanged, with the test and its evidence in ``result.model["lights"]``.
+rule, up to AUTO_LIMIT lights), against the one light through a camera's curve and field as well. A kept
+light makes the result a :class:`.lights.LightsFit`; otherwise the one-light result is returned
+unchanged, with the test and its evidence in ``result.model["lights"]``.
 docs/methods.md, "Several lights".
 """
 
