@@ -33,6 +33,36 @@ fn population(layout: &ParamLayout, n: usize) -> Vec<Vec<f64>> {
     (0..n).map(|_| random_candidate(&mut rng, layout)).collect()
 }
 
+/// The fitness of `layout` against `target`: loss `loss`, closed-form products bounded by `projection`.
+fn fitness_of(
+    scene: &Scene,
+    layout: &ParamLayout,
+    target: &[f32],
+    loss: LossKind,
+    projection: Option<Projection>,
+) -> Fitness {
+    let spec = FitnessSpec {
+        loss,
+        projection,
+        ..Default::default()
+    };
+    Fitness::new(scene, layout.clone(), target, spec).unwrap()
+}
+
+/// A pool of one thread and one of every core, each with its thread count.
+fn pools() -> Vec<(usize, rayon::ThreadPool)> {
+    [1, rayon::current_num_threads()]
+        .into_iter()
+        .map(|threads| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            (threads, pool)
+        })
+        .collect()
+}
+
 /// Ten candidates of `fitness` at `x` in a row inside `pool` (of `threads`), as the polish runs them.
 fn ten_alone(
     g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
@@ -71,58 +101,34 @@ fn bench(c: &mut Criterion) {
     let stage1 = vec!["light.position".to_string(), "light.intensity".to_string()];
     let position = vec!["light.position".to_string()];
     let bounds = vec![[(0.0, 400.0); 3]; scene.objects.len()];
-    let cases = [
-        (
-            "stage1 l1",
-            ParamLayout::new(&scene, &stage1).unwrap(),
-            LossKind::L1,
-            None,
-            Space::Linear,
-        ),
+    // Each loss in linear light, then in sRGB.
+    let losses = [
+        ("stage1 l1", &stage1, LossKind::L1, None),
         (
             "projected",
-            ParamLayout::new(&scene, &position).unwrap(),
-            LossKind::L1Projected,
-            Some(Projection::matte(bounds.clone())),
-            Space::Linear,
-        ),
-        (
-            "stage1 l1 srgb",
-            ParamLayout::new(&scene, &stage1).unwrap(),
-            LossKind::L1,
-            None,
-            Space::Srgb,
-        ),
-        (
-            "projected srgb",
-            ParamLayout::new(&scene, &position).unwrap(),
+            &position,
             LossKind::L1Projected,
             Some(Projection::matte(bounds)),
-            Space::Srgb,
         ),
     ];
+    let at = &scene;
+    let cases: Vec<_> = [(Space::Linear, ""), (Space::Srgb, " srgb")]
+        .into_iter()
+        .flat_map(|(space, suffix)| {
+            losses.iter().map(move |(name, paths, kind, pb)| {
+                let layout = ParamLayout::new(at, paths).unwrap();
+                (format!("{name}{suffix}"), layout, *kind, pb.clone(), space)
+            })
+        })
+        .collect();
     let mut g = c.benchmark_group("population");
     g.throughput(Throughput::Elements(60 * pixels));
     for (name, layout, kind, pb, space) in &cases {
-        let mut fitness = Fitness::new(
-            &scene,
-            layout.clone(),
-            &target,
-            FitnessSpec {
-                loss: *kind,
-                projection: pb.clone(),
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let mut fitness = fitness_of(&scene, layout, &target, *kind, pb.clone());
         fitness.set_space(*space);
         let pop = population(layout, 60);
         let mut out = vec![0.0; 60];
-        for threads in [1, rayon::current_num_threads()] {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
+        for (threads, pool) in pools() {
             g.bench_function(format!("60 candidates {name} threads={threads}"), |b| {
                 b.iter(|| {
                     pool.install(|| {
@@ -143,27 +149,19 @@ fn bench(c: &mut Criterion) {
     let layout = ParamLayout::new(&scene, &position).unwrap();
     let matte = Projection::matte(vec![[(0.0, 400.0); 3]; scene.objects.len()]);
     let projected = || {
-        Fitness::new(
+        fitness_of(
             &scene,
-            layout.clone(),
+            &layout,
             &target,
-            FitnessSpec {
-                loss: LossKind::L1Projected,
-                projection: Some(matte.clone()),
-                ..Default::default()
-            },
+            LossKind::L1Projected,
+            Some(matte.clone()),
         )
-        .unwrap()
     };
     g.bench_function("projected fitness new", |b| b.iter(projected));
     let fitness = projected();
     let truth = scene.light.position.to_vec();
     g.bench_function("refined products", |b| b.iter(|| fitness.refined(&truth)));
-    for threads in [1, rayon::current_num_threads()] {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
+    for (threads, pool) in pools() {
         g.bench_function(format!("one candidate projected threads={threads}"), |b| {
             b.iter(|| {
                 pool.install(|| {
@@ -227,23 +225,15 @@ fn bench(c: &mut Criterion) {
     let glossy_target = clipped_render(&glossy);
     let mut lobe = Projection::matte(vec![[(0.0, 400.0); 3]; glossy.objects.len()]);
     lobe.specular[ball] = (0.0, 400.0);
-    let fitness = Fitness::new(
+    let fitness = fitness_of(
         &glossy,
-        layout.clone(),
+        &layout,
         &glossy_target,
-        FitnessSpec {
-            loss: LossKind::L1Projected,
-            projection: Some(lobe),
-            ..Default::default()
-        },
-    )
-    .unwrap();
+        LossKind::L1Projected,
+        Some(lobe),
+    );
     let truth = glossy.light.position.to_vec();
-    for threads in [1, rayon::current_num_threads()] {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
+    for (threads, pool) in pools() {
         ten_alone(&mut g, &pool, threads, &fitness, &truth);
     }
     g.finish();
@@ -255,27 +245,17 @@ fn bench(c: &mut Criterion) {
     let mut bounced = scene.clone();
     bounced.interreflection = true;
     let bounced_target = clipped_render(&bounced);
-    let mut fitness = Fitness::new(
+    let matte = Projection::matte(vec![[(0.0, 400.0); 3]; bounced.objects.len()]);
+    let mut fitness = fitness_of(
         &bounced,
-        layout.clone(),
+        &layout,
         &bounced_target,
-        FitnessSpec {
-            loss: LossKind::L1Projected,
-            projection: Some(Projection::matte(vec![
-                [(0.0, 400.0); 3];
-                bounced.objects.len()
-            ])),
-            ..Default::default()
-        },
-    )
-    .unwrap();
+        LossKind::L1Projected,
+        Some(matte),
+    );
     let truth = bounced.light.position.to_vec();
     let near: Vec<f64> = truth.iter().map(|v| v + 0.01).collect();
-    for threads in [1, rayon::current_num_threads()] {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
+    for (threads, pool) in pools() {
         g.bench_function(format!("full fixed point threads={threads}"), |b| {
             b.iter(|| pool.install(|| fitness.freeze_bounce(Some(&near))))
         });
@@ -291,16 +271,7 @@ fn bench(c: &mut Criterion) {
     g.sample_size(10);
     let layout = ParamLayout::new(&scene, &stage1).unwrap();
     for early in [false, true] {
-        let mut fitness = Fitness::new(
-            &scene,
-            layout.clone(),
-            &target,
-            FitnessSpec {
-                loss: LossKind::L1,
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let mut fitness = fitness_of(&scene, &layout, &target, LossKind::L1, None);
         fitness.early_exit = early;
         let cfg = DeConfig {
             population: 60,

@@ -3,7 +3,9 @@ main() in-process, batch job lines and ids via rtloop-fit --batch, mesh files, E
 rtloop-insert arguments, rtloop-scene's --strict refusal of a field of view estimated from the board alone)
 for a developer to run for minutes; prints the counts. ``--only SURFACE[,SURFACE...]`` runs only those
 surfaces (``batch``: job lines, ``ids``: job ids, ``mesh``, ``insert``, ``exif``, ``strict``, ``framing``: warped
-photos through fit()'s framing check and correction), each input on
+photos through fit()'s framing check and correction, ``lights``: the lights fit with a rectangle light's size
+free, fuzz/lights_size.py, ``default_lights``: the default fit's number of lights on photos with a second
+light, fuzz/default_lights.py), each input on
 the next in turn; ``--out FILE`` also writes the counts per surface as markdown headed by the command.
 
 What counts as a finding, by kind: ``data loss`` (a batch that deleted, changed or wrote beside its folder,
@@ -39,6 +41,10 @@ import rtloop
 from rtloop.cli import batch as cli_batch
 from rtloop.cli import fit as cli_fit
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from default_lights import default_lights  # noqa: E402
+from lights_size import lights_size  # noqa: E402
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -71,7 +77,7 @@ def _fit_scenes(base: dict) -> list[dict]:
 
 def _lights_base(base: dict) -> dict:
     """The base under a `lights` list: its lamp, a sphere fill light, a sun and a window (a rectangle light),
-    with their paths freed."""
+    with their paths freed (the window's centre and size)."""
     d = copy.deepcopy(base)
     lamp = d.pop("light")
     d["lights"] = [{"name": "key", **lamp},
@@ -80,6 +86,7 @@ def _lights_base(base: dict) -> dict:
                    {"name": "window", "type": "rectangle", "position": [-3.0, 2.0, 1.0], "size": [1.5, 1.0],
                     "normal": [1.0, -0.3, -0.2], "up": [0.0, 1.0, 0.0], "intensity": 4.0}]
     d["fit"]["lights.window.position"] = {"min": [-5, 0.5, -3], "max": [-1, 4, 3]}
+    d["fit"]["lights.window.size"] = {"min": 0.3, "max": 3.0}
     d["fit"]["lights.fill.position"] = {"min": [-4, 0.5, -4], "max": [4, 6, 4]}
     d["fit"]["lights.fill.radius"] = {"min": 0.01, "max": 1.0}
     d["fit"]["lights.sun.intensity"] = {"min": 0, "max": 1}
@@ -235,6 +242,37 @@ def _exif(rng: random.Random, tmp: Path) -> None:
     exif_exposure(tmp / "e.jpg")
 
 
+LENS_NAMES = ["Canon", "Canon EOS 600D", "EF-S18-55mm f/3.5-5.6 IS II", "NIKON CORPORATION", "NIKON D90",
+              "AF-S DX Nikkor 18-105mm f/3.5-5.6G ED VR", "OLYMPUS IMAGING CORP.", "E-M5", "", "\x00", "x" * 300]
+
+
+def _lens(rng: random.Random, tmp: Path) -> None:
+    """EXIF naming a camera and lens (real names, odd strings and numbers): a lens profile whose resampling is
+    finite, or None and a one-line reason."""
+    from PIL import Image
+
+    from rtloop.acquisition.lens_profile import find_lens_profile, read_lens_exif
+
+    pick = lambda: rng.choice(LENS_NAMES) if rng.random() < 0.7 else odd(rng)  # noqa: E731
+    exif = Image.Exif()
+    try:
+        exif[0x010F], exif[0x0110] = pick(), pick()
+        exif.get_ifd(0x8769).update({0xA434: pick(), 0x920A: rng.choice([18.0, 35.0, 105.0, odd(rng)]),
+                                     0x829D: rng.choice([3.5, 8.0, odd(rng)])})
+        Image.new("RGB", (12, 9)).save(tmp / "lens.png", exif=exif)
+    except Exception:  # noqa: BLE001 - a value Pillow cannot write
+        return
+    profile, why = find_lens_profile(read_lens_exif(tmp / "lens.png"))
+    if profile is None:
+        if not why or "\n" in why:
+            raise AssertionError(f"no profile and no one-line reason: {why!r}")
+        return
+    remap = profile.remap(12, 9, rng.choice([5.0, 12.0, 300.0]))
+    out = remap.correct(np.full((9, 12, 3), 0.5, np.float32))
+    if not (np.isfinite(out).all() and np.isfinite(remap.points(np.array([[0.0, 0.0], [11.0, 8.0]]))).all()):
+        raise AssertionError("lens profile: a non-finite resampling")
+
+
 def _insert_cli(rng: random.Random, tmp: Path) -> None:
     from rtloop.cli.insert import insert_main
 
@@ -286,6 +324,18 @@ def job_line(rng: random.Random) -> str:
     return json.dumps(d)
 
 
+def run_quietly(main, argv: list[str]) -> tuple[int | str | None, str]:
+    """A command line's ``main(argv)`` with its stdout dropped: (exit status, what it wrote on stderr); argparse's
+    ``SystemExit`` is its exit status."""
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        try:
+            code = main(argv)
+        except SystemExit as e:
+            code = e.code
+    return code, err.getvalue()
+
+
 def _tree(root: Path) -> dict:
     return {str(p.relative_to(root)): p.read_bytes() if p.is_file() else None for p in sorted(root.rglob("*"))}
 
@@ -329,7 +379,8 @@ def id_lines(rng: random.Random) -> list[str]:
     return [json.dumps({"id": i, "scene": "../scene.json", "photo": "../photo.png"}) for i in ids]
 
 
-STRICT_FLAGS = ["--strict", "--vfov", "--ball", "--ball-radius", "--ball-free", "--force", "--width"]
+STRICT_FLAGS = ["--strict", "--vfov", "--ball", "--ball-radius", "--ball-free", "--force", "--width",
+                "--board-thickness"]
 
 
 def _strict_estimate(rng: random.Random, c: Counts) -> None:
@@ -387,15 +438,9 @@ def _strict_cli(rng: random.Random, c: Counts, tmp: Path) -> None:
         argv.append("--strict")
     for _ in range(rng.randint(0, 2)):
         flag = rng.choice(STRICT_FLAGS[1:])
-        value = rng.choice([str(odd(rng)), "50", "0.08", "400,300,40", "x"])
+        value = rng.choice([str(odd(rng)), "50", "0.08", "400,300,40", "x", "0", "0.5mm"])
         argv += [flag] if flag in ("--force", "--ball-free") else [flag, value]
-    err = io.StringIO()
-    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
-        try:
-            code = scene_main(argv)
-        except SystemExit as e:
-            code = e.code
-    text = err.getvalue()
+    code, text = run_quietly(scene_main, argv)
     c.bump(f"scene_exit_{code}")
     if code not in (0, 1, 2) or "Traceback" in text or (code == 1 and len(text.strip().splitlines()) != 1):
         c.bump("traceback_not_one_line")
@@ -506,7 +551,8 @@ def _fov(rng: random.Random, c: Counts, tmp: Path) -> None:
         c.bump("nan_or_inf")
 
 
-SURFACES = ("batch", "ids", "mesh", "insert", "exif", "strict", "framing", "coat", "fov")
+SURFACES = ("batch", "ids", "mesh", "insert", "exif", "strict", "framing", "coat", "fov", "lens", "lights",
+            "default_lights")
 
 
 def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None = None) -> None:
@@ -517,7 +563,11 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
         else:
             {"mesh": _mesh, "insert": _insert_cli, "exif": _exif, "strict": lambda r, t: _strict(r, c, t),
              "framing": lambda r, t: _framing(r, c),
-             "coat": lambda r, t: _coat(r, c), "fov": lambda r, t: _fov(r, c, t)}[only](rng, tmp)
+             "coat": lambda r, t: _coat(r, c), "fov": lambda r, t: _fov(r, c, t),
+             "lens": _lens,
+             "lights": lambda r, t: lights_size(r, c, LIGHTS_BASE, mutate, odd, check_fit),
+             "default_lights": lambda r, t: default_lights(r, c, FIT_SCENES, mutate, check_fit, finite),
+             }[only](rng, tmp)
         c.bump("ok")
         return
     if rng.random() < 0.03:
@@ -562,7 +612,7 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
             opts["vignetting"] = rng.choice(["on", "on", "off", (-0.3, -0.05), (0.0, 0.0), (-3.0, 0.0),
                                              (math.nan, 0.0), "0.1,0.2", None])
         if rng.random() < 0.2:
-            opts["tone"] = rng.choice(["on", "on", "off", "srgb", None])
+            opts["tone"] = rng.choice(["on", "on", "off", "linear", "srgb", None])
         if opts["lights"] not in (None, 1) and rng.random() < 0.7:  # mostly the options the lights fit takes
             for key in ("norm", "vignetting", "tone"):
                 opts.pop(key, None)

@@ -33,21 +33,16 @@ CHILD = r'''
 import json, sys, time, copy
 import numpy as np
 sys.path.insert(0, sys.argv[1])
+sys.path.insert(1, sys.argv[5])
 import rtloop
+from scenes import matte_start
 from rtloop.fit.products import products_of
 from pathlib import Path
 kind, name = sys.argv[2], sys.argv[3]
 folder = Path(sys.argv[4]) / name
 truth = json.loads((folder / "scene.json").read_text())
 if kind == "coat":
-    d = copy.deepcopy(truth)
-    d["light"] = {"position": [0.0, 4.25, 0.0], "intensity": 50.0, "color": [1, 1, 1]}
-    for o in d["objects"]:
-        o["material"] = {"albedo": [0.5, 0.5, 0.5]}
-    d["fit"] = {"light.position": {"min": [-8, 0.5, -8], "max": [8, 8, 8]}, "light.intensity": {"min": 1, "max": 400},
-                "objects.ball.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]},
-                "objects.floor.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]}}
-    scene = rtloop.load_scene(d)
+    scene = rtloop.load_scene(matte_start(truth))
     diffuse = {**truth, "exposure": 1.0}
     effective = None
 else:
@@ -79,7 +74,7 @@ print(json.dumps({"light_mm": 1000 * float(np.linalg.norm(np.subtract(f["light"]
 
 def run(python_dir: str, kind: str, name: str) -> dict:
     folder = PHOTOS if kind == "photos" else COAT
-    out = subprocess.run([sys.executable, "-c", CHILD, python_dir, kind, name, str(folder)], capture_output=True,
+    out = subprocess.run([sys.executable, "-c", CHILD, python_dir, kind, name, str(folder), str(REPO / "tests")], capture_output=True,
                          text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 

@@ -11,7 +11,9 @@ intensity x colour x albedo, per object and channel: ``result.products`` against
 ``product_sigma``) the same. Unless ``--classic``, three classes more: "camera" (each direct photo through
 a lens's vignetting, an S-shaped tone curve, or with a finely textured floor), "ambient" (each environment
 photo with its scene declaring the room light as unoccluded ``ambient``, and tests/fixtures/ambient) and
-"onephoto" (tests/fixtures/onephoto: rtloop-scene, then the fit; the light only). Method "bars" is what the
+"onephoto" (tests/fixtures/onephoto: rtloop-scene, then the fit; the light only) and "files" (the camera-pipeline
+files of tests/fixtures/camera: Bayer mosaic with noise and demosaicing, a tone curve, vignetting, each as the
+camera wrote it; and the coated balls of tests/fixtures/coat from a matte start, the light only). Method "bars" is what the
 fit reports (``u["bars"]``: the sandwich widened by what the model lacks, a parameter it does not determine
 left out and counted as "not determined").
 
@@ -24,7 +26,8 @@ sigma reported.
 
 Usage (from the repository root, with the extension built)::
 
-    python studies/coverage.py [--footprint {auto,on,off}] [--bootstrap] [--classic] [--no-onephoto] [--json rows.json]
+    python studies/coverage.py [--footprint {auto,on,off}] [--bootstrap] [--classic] [--no-onephoto] [--only CLASS]
+                               [--json rows.json]
 
 ``--footprint`` sets the fit's footprint mode: "auto" (the default fit: its polish integrates pixels over
 their area at shadow edges and terminators), "on" (every search too), "off" (pixel centres).
@@ -52,6 +55,8 @@ REPO = Path(__file__).resolve().parents[1]
 FIXTURES = REPO / "tests" / "fixtures" / "photos"
 AMBIENT = REPO / "tests" / "fixtures" / "ambient"
 ONEPHOTO = REPO / "tests" / "fixtures" / "onephoto"
+CAMERA_FILES = REPO / "tests" / "fixtures" / "camera"
+COAT = REPO / "tests" / "fixtures" / "coat"
 LIGHT = [f"light.position.{c}" for c in "xyz"]
 
 
@@ -104,6 +109,31 @@ def run_onephoto(name: str, cls: str, folder: Path, variant: Any = None, footpri
         result = fit_inputs(load_inputs(out / "scene.json", out / "objective.png"), footprint=footprint,
                             uncertainty="bootstrap" if bootstrap else True)
     return _row(name, cls, result, np.asarray(meta["light"]["position"], float), None, bootstrap)
+
+
+def file_cases() -> list[tuple[str, str, Path, Any]]:
+    """The camera-pipeline files and the coated balls (class "files")."""
+    out = [(f.name, "files", f, "file") for f in sorted(CAMERA_FILES.iterdir()) if (f / "scene_input.json").exists()]
+    return out + [(f.name, "files", f, "coat") for f in sorted(COAT.iterdir()) if (f / "scene.json").exists()]
+
+
+def run_file(name: str, cls: str, folder: Path, variant: str, footprint: str | bool = "auto",
+             bootstrap: bool = False) -> dict[str, Any]:
+    """A camera-pipeline file fitted from its scene_input.json against its truth (light and products), or a
+    coated ball from the matte start a user writes (tests/scenes.py; the light only: the fit's products are
+    the coat's diffuse ones)."""
+    truth = json.loads((folder / "scene.json").read_text())
+    if variant == "coat":
+        if str(REPO / "tests") not in sys.path:
+            sys.path.insert(0, str(REPO / "tests"))
+        from scenes import matte_start
+
+        scene, products_truth = rtloop.load_scene(matte_start(truth)), None
+    else:
+        scene, products_truth = rtloop.load_scene(folder / "scene_input.json"), truth
+    result = rtloop.fit(scene, rtloop.load_image(folder / "objective.png", scene), footprint=footprint,
+                        uncertainty="bootstrap" if bootstrap else True)
+    return _row(name, cls, result, np.array(truth["light"]["position"], float), products_truth, bootstrap)
 
 
 #: The camera class's variants of a direct photo.
@@ -234,7 +264,7 @@ def _stats(rows: list[dict[str, Any]], z_key: str, s_key: str) -> tuple[int, int
     return int(z.size), int((~ok).sum()), float(np.mean(z[ok] <= 1)), float(np.mean(z[ok] <= 3)), ratio
 
 
-CLASSES = ("clean", "mismatch", "camera", "ambient", "onephoto")
+CLASSES = ("clean", "mismatch", "camera", "ambient", "onephoto", "files")
 
 
 def summary(rows: list[dict[str, Any]]) -> list[str]:
@@ -291,6 +321,7 @@ def main() -> int:
     parser.add_argument("--json", type=Path, help="write the rows here")
     parser.add_argument("--no-onephoto", action="store_true", help="leave out the one-photo views (rtloop-scene "
                         "then the fit on each 640x480 photo: about a minute in all)")
+    parser.add_argument("--only", choices=CLASSES, help="only this class of photos")
     parser.add_argument("--classic", action="store_true",
                         help="only the fixtures and their noise and JPEG variants (no camera or ambient class)")
     args = parser.parse_args()
@@ -302,10 +333,13 @@ def main() -> int:
     print("|---|---|---|---|---|---|---|---|" + ("---|" if boot else ""))
     keys = ["gn", "robust"] + (["boot"] if boot else []) + ["bars"]
     todo = cases(extra=not args.classic) + ([] if args.classic or args.no_onephoto else onephoto_cases())
+    todo += [] if args.classic else file_cases()
+    todo = [c for c in todo if args.only in (None, c[1])]
+    run = {"onephoto": run_onephoto, "files": run_file}
     for c in todo:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the noisy variants' negative-value warning
-            r = (run_onephoto if c[1] == "onephoto" else run_case)(*c, footprint=args.footprint, bootstrap=boot)
+            r = run.get(c[1], run_case)(*c, footprint=args.footprint, bootstrap=boot)
         rows.append(r)
         zl = " / ".join(_max(r[f"z_{k}"]) for k in keys)
         zp = " / ".join(_max(r[f"pz_{k}"]) for k in keys)

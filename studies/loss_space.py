@@ -45,24 +45,10 @@ REPO = Path(__file__).resolve().parents[1]
 SCENES = REPO.parent / "shared" / "scenes"
 SCORE_TOOL = REPO.parent / "shared" / "tools" / "score_result.py"
 SPACES = ("linear", "srgb")
+sys.path.insert(0, str(REPO / "tests"))
+from scenes import BALL_ON_FLOOR, centred_start  # noqa: E402
 
-BALL = {
-    "image": {"width": 128, "height": 96},
-    "camera": {"position": [0, 1.6, -6], "look_at": [0, 0.8, 0], "up": [0, 1, 0], "vfov_deg": 35},
-    "light": {"position": [2.5, 4.5, -1.0], "intensity": 70.0, "color": [1, 1, 1]},
-    "objects": [
-        {"name": "ball", "shape": "sphere", "center": [0, 1, 0], "radius": 1,
-         "material": {"albedo": [0.8, 0.7, 0.1]}},
-        {"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0],
-         "material": {"albedo": [0.6, 0.6, 0.6]}},
-    ],
-    "fit": {
-        "light.position": {"min": [-8, 0.5, -8], "max": [8, 8, 8]},
-        "light.intensity": {"min": 1, "max": 400},
-        "objects.ball.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]},
-        "objects.floor.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]},
-    },
-}
+BALL = {**copy.deepcopy(BALL_ON_FLOOR), "image": {"width": 128, "height": 96}}
 
 
 def load_score():
@@ -79,15 +65,6 @@ def through_file(linear: np.ndarray, fmt: str, **save: Any) -> bytes:
     return buf.getvalue()
 
 
-def neutral_start(truth: dict) -> dict:
-    start = copy.deepcopy(truth)
-    lo, hi = np.array(truth["fit"]["light.position"]["min"]), np.array(truth["fit"]["light.position"]["max"])
-    start["light"]["position"] = list((lo + hi) / 2)
-    for o in start["objects"]:
-        o["material"]["albedo"] = [0.5, 0.5, 0.5]
-    return start
-
-
 def synthetic_cases(tmp: Path) -> list[tuple[str, dict, Path, dict]]:
     """(name, start scene, photo path, truth) of the damaged self-rendered photos."""
     jpeg = copy.deepcopy(BALL)
@@ -99,7 +76,7 @@ def synthetic_cases(tmp: Path) -> list[tuple[str, dict, Path, dict]]:
                                             ("dim-png", dim, "PNG", ".png", {})):
         path = tmp / f"{name}{suffix}"
         path.write_bytes(through_file(np.minimum(rtloop.render(truth), 1.0), fmt, **save))
-        out.append((name, neutral_start(truth), path, truth))
+        out.append((name, centred_start(truth), path, truth))
     return out
 
 

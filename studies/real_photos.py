@@ -2,8 +2,8 @@
 
 DIR is a folder made by ``../shared/tools/diligent/prepare_diligent.py --all --out DIR`` (read its README:
 the data is fetched, never committed). Each case ``DIR/L###/`` is fitted as a user would, with the defaults
-plus ``--response linear --mask``: ``rtloop.fit(scene_input, load_image(objective.png, response="linear"),
-mask=load_mask(mask.png))``, and scored by the angle between the fitted light's position (seen from the
+plus ``--response linear --mask``, through rtloop-fit's own code path (``rtloop.fit.files``: the photo
+read as linear and so declared, ``tone="linear"``), and scored by the angle between the fitted light's position (seen from the
 ball's centre at the origin) and ``truth.json``'s direction. Beside it, on the same pixels, the classical
 baseline: Lambertian least squares with the sphere's ground-truth normals (``DIR/normal_gt.npy``), the
 brightest 3 % and the attached shadows left out, Gauss-Newton on the direction.
@@ -25,13 +25,13 @@ import json
 import platform
 import sys
 import time
-import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 import rtloop
+from rtloop.fit.files import fit_inputs, load_inputs
 
 
 def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
@@ -60,19 +60,29 @@ def lambertian_direction(image: np.ndarray, mask: np.ndarray, normals: np.ndarra
     return g / np.linalg.norm(g)
 
 
-def fit_case(case: Path, options: dict[str, Any]) -> dict[str, Any]:
-    scene = rtloop.load_scene(case / "scene_input.json")
-    photo = rtloop.load_image(case / "objective.png", scene, response="linear")
-    mask = rtloop.load_mask(case / "mask.png", scene)
+def fit_case(case: Path, options: dict[str, Any], bars: bool = False) -> dict[str, Any]:
+    inputs = load_inputs(case / "scene_input.json", case / "objective.png", mask=str(case / "mask.png"),
+                         response="linear")
     truth = np.asarray(json.loads((case / "truth.json").read_text())["direction"], float)
     t = time.perf_counter()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", rtloop.RtloopWarning)
-        result = rtloop.fit(scene, photo, mask=mask, uncertainty=False, **options)
+    result = fit_inputs(inputs, **({} if bars else {"uncertainty": False}), **options)
     seconds = time.perf_counter() - t
-    light = np.asarray(result.scene.to_dict()["light"]["position"], float)
-    return {"error_deg": angle_deg(light, truth), "ms": 1e3 * seconds, "terms": result.model.get("terms"),
-            "norm": (result.model.get("norm") or {}).get("used", result.settings.get("norm"))}
+    if isinstance(result, rtloop.FitResult):
+        light = np.asarray(result.scene.to_dict()["light"]["position"], float)
+        tested = result.model.get("lights") or {}
+        row = {"error_deg": angle_deg(light, truth), "ms": 1e3 * seconds, "terms": result.model.get("terms"),
+               "norm": (result.model.get("norm") or {}).get("used", result.settings.get("norm")), "lights": 1,
+               "lights_tried": bool(tested.get("tried"))}
+    else:  # the default fit kept a further light: the strongest one is scored
+        light = np.asarray(result.lights[0]["position"], float)
+        row = {"error_deg": angle_deg(light, truth), "ms": 1e3 * seconds, "terms": None, "norm": None,
+               "lights": len(result.lights), "lights_tried": True}
+    if bars:  # the reported bar on the direction: the block sandwich's, widened by what the model lacks
+        bars = (result.uncertainty or {}).get("bars") or {}
+        distance = bars.get("light_distance") or {}
+        row.update(sigma_deg=distance.get("direction_sigma_deg"), model_lacks=bars.get("model_lacks"),
+                   distance_determined=distance.get("distance_determined"))
+    return row
 
 
 def baseline_case(case: Path, normals: np.ndarray) -> dict[str, Any]:
@@ -87,8 +97,15 @@ def baseline_case(case: Path, normals: np.ndarray) -> dict[str, Any]:
 
 def summary(rows: list[dict[str, Any]]) -> dict[str, float]:
     e = np.array([r["error_deg"] for r in rows])
-    return {"n": int(e.size), "mean_deg": float(e.mean()), "median_deg": float(np.median(e)),
-            "max_deg": float(e.max()), "median_ms": float(np.median([r["ms"] for r in rows]))}
+    out = {"n": int(e.size), "mean_deg": float(e.mean()), "median_deg": float(np.median(e)),
+           "max_deg": float(e.max()), "median_ms": float(np.median([r["ms"] for r in rows]))}
+    if rows and "lights" in rows[0]:  # the default fit: photos where a further light was tried, and kept
+        out.update(lights_tried=sum(bool(r["lights_tried"]) for r in rows), lights_kept=sum(r["lights"] > 1 for r in rows))
+    if rows and "sigma_deg" in rows[0]:
+        z = np.array([r["error_deg"] / r["sigma_deg"] if r["sigma_deg"] else np.inf for r in rows])
+        out.update(within_3_sigma=float(np.mean(z <= 3.0)), median_z=float(np.median(z)),
+                   median_sigma_deg=float(np.median([r["sigma_deg"] or np.inf for r in rows])))
+    return out
 
 
 def parse_fit(text: str) -> tuple[str, Any]:
@@ -110,6 +127,9 @@ def main(argv: list[str] | None = None) -> int:
                    help="a variant: rtloop.fit keywords, e.g. norm=l1 (repeat for more variants; the defaults "
                    "always run)")
     p.add_argument("--per-light", action="store_true", help="a row per light as well")
+    p.add_argument("--bars", action="store_true",
+                   help="fit with the error bars (the default fit's uncertainty) and report how often the true "
+                   "direction lies within 3 sigma of the reported direction bar")
     p.add_argument("--json", type=Path, help="write every row and summary here")
     args = p.parse_args(argv)
     cases = sorted(c for c in args.dir.glob("L[0-9][0-9][0-9]") if c.is_dir())[:: max(1, args.step)]
@@ -123,14 +143,30 @@ def main(argv: list[str] | None = None) -> int:
                            "machine": platform.processor() or platform.machine(), "methods": {}}
     rows = {"least squares (Lambertian, GT normals)": [baseline_case(c, normals) for c in cases]}
     for name, options in variants:
-        rows[name] = [fit_case(c, options) for c in cases]
+        rows[name] = [fit_case(c, options, args.bars) for c in cases]
     print(f"DiLiGenT ball, {len(cases)} lights, --response linear --mask\n")
     print("| method | mean (deg) | median (deg) | max (deg) | time per fit (ms, median) |")
     print("|---|---:|---:|---:|---:|")
+    bars_lines: list[str] = []
+    tried_lines: list[str] = []
     for name, r in rows.items():
         s = summary(r)
         out["methods"][name] = {"summary": s, "rows": r}
         print(f"| {name} | {s['mean_deg']:.3f} | {s['median_deg']:.3f} | {s['max_deg']:.3f} | {s['median_ms']:.1f} |")
+        if "lights_tried" in s:
+            tried_lines.append(f"{name}: a further light tried on {s['lights_tried']} of {s['n']} photos, kept on "
+                               f"{s['lights_kept']}")
+        if "within_3_sigma" in s:
+            bars_lines.append(f"| {name} | {s['median_sigma_deg']:.3f} | {s['median_z']:.2f} | "
+                              f"{100 * s['within_3_sigma']:.0f} % |")
+    if tried_lines:
+        print("\n" + "\n".join(tried_lines))
+    if bars_lines:
+        print("\nThe reported direction bar (bars.light_distance: the block sandwich's, widened by what the model "
+              "lacks):\n")
+        print("| method | median sigma (deg) | median error / sigma | true direction within 3 sigma |")
+        print("|---|---:|---:|---:|")
+        print("\n".join(bars_lines))
     if args.per_light:
         names = list(rows)
         print("\n| light | " + " | ".join(names) + " |")

@@ -11,27 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from scenes import BALL_ON_FLOOR, centred_start, floor, matte_start, sphere  # noqa: F401
+
 REPO = Path(__file__).resolve().parents[1]
 SHARED_SCENES = REPO.parent / "shared" / "scenes"
 EXAMPLE = REPO / "examples" / "yellow-ball"
-
-BALL_ON_FLOOR = {
-    "image": {"width": 64, "height": 48},
-    "camera": {"position": [0, 1.6, -6], "look_at": [0, 0.8, 0], "up": [0, 1, 0], "vfov_deg": 35},
-    "light": {"position": [2.5, 4.5, -1.0], "intensity": 70.0, "color": [1, 1, 1]},
-    "objects": [
-        {"name": "ball", "shape": "sphere", "center": [0, 1, 0], "radius": 1,
-         "material": {"albedo": [0.8, 0.7, 0.1]}},
-        {"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0],
-         "material": {"albedo": [0.6, 0.6, 0.6]}},
-    ],
-    "fit": {
-        "light.position": {"min": [-8, 0.5, -8], "max": [8, 8, 8]},
-        "light.intensity": {"min": 1, "max": 400},
-        "objects.ball.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]},
-        "objects.floor.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]},
-    },
-}
 
 
 @pytest.fixture
@@ -94,7 +78,7 @@ ACCURACY = frozenset({
     "test_noisy_jpeg_photos.py", "test_coverage.py", "test_hard_cases.py", "test_environment.py",
     "test_interreflection.py", "test_highlights.py", "test_ambient_environment.py", "test_error_bars.py",
     "test_render_reference.py", "test_light_distance.py", "test_residual_structure.py", "test_framing.py",
-    "test_linear_photos.py",
+    "test_linear_photos.py", "test_default_lights.py",
 })
 
 

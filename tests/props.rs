@@ -108,7 +108,7 @@ const COAT_SCENE: &str = r#"{"image": {"width": 16, "height": 12},
           "objects.ball.roughness": {"min": 0.05, "max": 0.5},
           "objects.ball.specular": {"min": 0, "max": 2}}}"#;
 
-/// A scene with a rectangle light (a window) beside a lamp, the window's centre and intensity fitted.
+/// A scene with a rectangle light (a window) beside a lamp, the window's centre, size and intensity fitted.
 const WINDOW_SCENE: &str = r#"{"image": {"width": 16, "height": 12},
   "camera": {"position": [0, 1, -5], "look_at": [0, 0.5, 0], "vfov_deg": 40},
   "lights": [{"name": "lamp", "position": [2, 4, -2], "intensity": 50},
@@ -118,6 +118,7 @@ const WINDOW_SCENE: &str = r#"{"image": {"width": 16, "height": 12},
     {"name": "ball", "shape": "sphere", "center": [0, 0.5, 0], "radius": 0.5},
     {"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0]}],
   "fit": {"lights.window.position": {"min": [-5, 0.5, -5], "max": [5, 8, 5]},
+          "lights.window.size": {"min": [0.5, 0.4], "max": [3, 2]},
           "lights.window.intensity": {"min": 0, "max": 100}}}"#;
 
 /// Replace one value of `text` anywhere (or delete one key): the scene parses, or the error names the

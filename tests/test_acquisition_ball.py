@@ -6,6 +6,8 @@ ball finder is that scene camera, so the only error measured is the ball's.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 import pytest
 
@@ -17,107 +19,70 @@ from rtloop.acquisition import (
     locate_ball,
     place_sphere,
 )
+from conftest import floor, sphere
 
 W, H = 640, 480
 
-# camera position, look_at, vfov, ball centre (x, z), radius, light position, ambient, ball albedo, floor
+
+class Case(NamedTuple):
+    """A photo's scene: the camera, the ball resting on the floor at (x, z), one light, a grey ambient."""
+
+    camera: list[float]
+    look_at: list[float]
+    vfov: float
+    ball_xz: tuple[float, float]
+    radius: float
+    light: list[float]
+    ambient: float
+    albedo: list[float]
+    floor: float
+
+
 CASES = {
-    "yellow-front-light": (
-        [0.3, 0.7, -1.2],
-        [0, 0.05, 0],
-        50,
-        (0.15, 0.1),
-        0.1,
-        [0.8, 1.5, -0.3],
-        0.0,
-        [0.8, 0.6, 0.1],
-        0.5,
-    ),
-    "back-light-dark-shadow": (
-        [0.3, 0.7, -1.2],
-        [0, 0.05, 0],
-        50,
-        (0.15, 0.1),
-        0.1,
-        [-0.6, 1.2, 0.8],
-        0.03,
-        [0.8, 0.6, 0.1],
-        0.5,
-    ),
-    "paper-scene": (
-        [0, 1.6, -6],
-        [0, 0.8, 0],
-        35,
-        (0.0, 0.0),
-        1.0,
-        [2.5, 4.5, -1],
-        0.0,
-        [0.8, 0.7, 0.1],
-        0.6,
-    ),
-    "wide-angle-near-edge": (
-        [0.5, 0.45, -1.0],
-        [0, 0.1, 0],
-        70,
-        (-0.45, 0.05),
-        0.08,
-        [0.3, 1.2, -0.5],
-        0.02,
-        [0.2, 0.3, 0.8],
-        0.5,
-    ),
-    "grey-ball-grey-floor": (
-        [-0.8, 1.1, -1.4],
-        [0.1, 0, 0.1],
-        45,
-        (0.2, 0.3),
-        0.12,
-        [0.5, 1.6, -1.0],
-        0.05,
-        [0.6, 0.6, 0.6],
-        0.35,
-    ),
+    "yellow-front-light": Case([0.3, 0.7, -1.2], [0, 0.05, 0], 50, (0.15, 0.1), 0.1,
+                                light=[0.8, 1.5, -0.3], ambient=0.0, albedo=[0.8, 0.6, 0.1], floor=0.5),
+    "back-light-dark-shadow": Case([0.3, 0.7, -1.2], [0, 0.05, 0], 50, (0.15, 0.1), 0.1,
+                                    light=[-0.6, 1.2, 0.8], ambient=0.03, albedo=[0.8, 0.6, 0.1], floor=0.5),
+    "paper-scene": Case([0, 1.6, -6], [0, 0.8, 0], 35, (0.0, 0.0), 1.0,
+                         light=[2.5, 4.5, -1], ambient=0.0, albedo=[0.8, 0.7, 0.1], floor=0.6),
+    "wide-angle-near-edge": Case([0.5, 0.45, -1.0], [0, 0.1, 0], 70, (-0.45, 0.05), 0.08,
+                                  light=[0.3, 1.2, -0.5], ambient=0.02, albedo=[0.2, 0.3, 0.8], floor=0.5),
+    "grey-ball-grey-floor": Case([-0.8, 1.1, -1.4], [0.1, 0, 0.1], 45, (0.2, 0.3), 0.12,
+                                  light=[0.5, 1.6, -1.0], ambient=0.05, albedo=[0.6, 0.6, 0.6], floor=0.35),
 }
 
 
-def scene_for(case) -> dict:
-    pos, look, vfov, (bx, bz), r, light, amb, albedo, floor = case
+def scene_for(case: Case) -> dict:
+    (bx, bz), r = case.ball_xz, case.radius
     ball = np.array([bx, r, bz])
+    intensity = 2.5 * float(np.sum((np.array(case.light) - ball) ** 2))
     return {
         "image": {"width": W, "height": H},
-        "camera": {"position": pos, "look_at": look, "up": [0, 1, 0], "vfov_deg": vfov},
-        "light": {"position": light, "intensity": 2.5 * float(np.sum((np.array(light) - ball) ** 2))},
-        "ambient": [amb] * 3,
-        "objects": [
-            {
-                "name": "ball",
-                "shape": "sphere",
-                "center": ball.tolist(),
-                "radius": r,
-                "material": {"albedo": albedo},
-            },
-            {
-                "name": "floor",
-                "shape": "plane",
-                "point": [0, 0, 0],
-                "normal": [0, 1, 0],
-                "material": {"albedo": [floor] * 3},
-            },
-        ],
+        "camera": {"position": case.camera, "look_at": case.look_at, "up": [0, 1, 0], "vfov_deg": case.vfov},
+        "light": {"position": case.light, "intensity": intensity},
+        "ambient": [case.ambient] * 3,
+        "objects": [sphere("ball", ball.tolist(), r, case.albedo), floor([case.floor] * 3)],
     }
+
+
+def rendered(names, width: int, height: int, spp: int) -> dict[str, tuple[dict, np.ndarray]]:
+    """The scenes of the cases ``names`` at ``width`` x ``height`` and their renders."""
+    out = {}
+    for name in names:
+        scene = scene_for(CASES[name])
+        scene["image"] = {"width": width, "height": height}
+        out[name] = (scene, rtloop.render(scene, spp=spp))
+    return out
 
 
 @pytest.fixture(scope="module")
 def photos() -> dict[str, tuple[dict, np.ndarray]]:
-    out = {}
-    for name, case in CASES.items():
-        scene = scene_for(case)
-        out[name] = (scene, rtloop.render(scene, spp=9))
-    return out
+    return rendered(CASES, W, H, 9)
 
 
 def truth(scene: dict) -> tuple[PinholeCamera, np.ndarray, float]:
-    cam = PinholeCamera.from_scene_camera(scene["camera"], W, H)
+    """The camera of ``scene`` at its image size, and its ball's centre and radius."""
+    cam = PinholeCamera.from_scene_camera(scene["camera"], scene["image"]["width"], scene["image"]["height"])
     ball = scene["objects"][0]
     return cam, np.array(ball["center"]), ball["radius"]
 
@@ -237,18 +202,7 @@ BIG_CASES = ["yellow-front-light", "back-light-dark-shadow", "paper-scene"]
 
 @pytest.fixture(scope="module")
 def big_photos() -> dict[str, tuple[dict, np.ndarray]]:
-    out = {}
-    for name in BIG_CASES:
-        scene = scene_for(CASES[name])
-        scene["image"] = {"width": BIG_W, "height": BIG_H}
-        out[name] = (scene, rtloop.render(scene, spp=4))
-    return out
-
-
-def big_truth(scene: dict) -> tuple[PinholeCamera, np.ndarray, float]:
-    cam = PinholeCamera.from_scene_camera(scene["camera"], BIG_W, BIG_H)
-    ball = scene["objects"][0]
-    return cam, np.array(ball["center"]), ball["radius"]
+    return rendered(BIG_CASES, BIG_W, BIG_H, 4)
 
 
 @pytest.mark.parametrize("name", BIG_CASES)
@@ -256,7 +210,7 @@ def test_ball_in_a_12_mp_photo(big_photos, name: str) -> None:
     """The scenes of the small photos rendered at 4032 x 3024 (the paper scene's ball 800 px across): found
     and placed as well as at 640 x 480, by both finders, with the outline on the photo's own pixels."""
     scene, image = big_photos[name]
-    cam, centre, r = big_truth(scene)
+    cam, centre, r = truth(scene)
     distance = float(np.linalg.norm(centre - cam.position))
     silhouette, sphere = locate_ball(image, cam, r)
     assert (silhouette.width, silhouette.height) == (BIG_W, BIG_H)
@@ -273,7 +227,7 @@ def test_hint_mask_and_their_errors_in_a_12_mp_photo(big_photos) -> None:
     """A hint and a mask in the 12 MP photo's pixels seed the search there; a hint off the photo or a mask of
     another size is one line naming the photo's own size."""
     scene, image = big_photos["back-light-dark-shadow"]
-    cam, centre, r = big_truth(scene)
+    cam, centre, r = truth(scene)
     distance = float(np.linalg.norm(centre - cam.position))
     k = BIG_W / W
     uv = cam.project(centre[None, :])[0]

@@ -30,6 +30,7 @@ from rtloop.acquisition._common import to_detection_grey, write_png16_srgb
 from rtloop.acquisition.synthetic import board_view, paste_board_on_floor
 from rtloop.cli.acquire import acquire_main
 from rtloop.cli.scene import scene_main
+from conftest import floor, sphere
 
 W, H = 800, 600
 BOARD = "6x4,70mm,52mm,DICT_5X5_100"
@@ -40,22 +41,7 @@ TRUE_SCENE = {
     "camera": {"position": [0.25, 0.6, -0.8], "look_at": [0.08, 0.0, 0.05], "up": [0, 1, 0], "vfov_deg": 50},
     "light": {"position": [-0.5, 1.4, -0.6], "intensity": 4.0},
     "ambient": [0.03, 0.03, 0.03],
-    "objects": [
-        {
-            "name": "ball",
-            "shape": "sphere",
-            "center": [0.36, 0.08, 0.12],
-            "radius": 0.08,
-            "material": {"albedo": [0.8, 0.6, 0.1]},
-        },
-        {
-            "name": "floor",
-            "shape": "plane",
-            "point": [0, 0, 0],
-            "normal": [0, 1, 0],
-            "material": {"albedo": [0.45, 0.45, 0.45]},
-        },
-    ],
+    "objects": [sphere("ball", [0.36, 0.08, 0.12], 0.08, [0.8, 0.6, 0.1]), floor([0.45, 0.45, 0.45])],
 }
 
 

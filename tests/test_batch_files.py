@@ -136,6 +136,16 @@ def test_a_lights_job_writes_what_rtloop_fit_lights_writes(tmp_path, capsys):
     capsys.readouterr()
 
 
+def test_a_photo_read_as_linear_takes_the_lights_fit(tmp_path, capsys):
+    """--response linear declares the photo linear (``tone="linear"``), which the lights fit takes as it
+    takes every photo: not refused as a camera term it would ignore."""
+    case = LIGHTS / "key-fill-25"
+    assert fit_cli.main([str(case / "scene_input.json"), str(case / "objective.png"), "--response", "linear",
+                         "--lights", "2", "--out", str(tmp_path / "out"), *FAST]) == 0
+    assert len(result_json(tmp_path / "out")["fit_report"]["lights"]) == 2
+    capsys.readouterr()
+
+
 def test_a_lights_job_refuses_the_options_the_lights_fit_does_not_take(tmp_path, capsys):
     """An option the lights fit would ignore (a norm, a camera term) is the job's one-line error naming it,
     not a fit that drops it; a "lights" field of the wrong kind is the line's error."""

@@ -111,3 +111,19 @@ def test_the_report_lists_each_light_and_the_evidence(tmp_path, capsys):
         assert f"{np.linalg.norm(light['position_error']) * 100:.2f} cm" in page
     assert "How many lights" in page and page.count("<tr>") > 8
     assert (tmp_path / "out" / "report" / "difference.png").is_file()
+
+
+def test_a_fitted_size_is_written_with_its_error_bars(tmp_path, capsys):
+    """The softbox's size, free in its scene's fit section: result.json holds it with an error bar per side
+    (metres, within a quarter of the side), the summary and the report print them."""
+    code, result, out, _ = run(tmp_path, "lamp-softbox", "--report", "-q", capsys=capsys)
+    assert code == 0
+    softbox = result["fit_report"]["lights"][1]
+    want = truth("lamp-softbox")["lights"][1]["size"]
+    assert all(abs(s - w) < 0.2 * w for s, w in zip(softbox["size"], want)), softbox["size"]
+    assert all(0 < b < 0.25 * s for s, b in zip(softbox["size"], softbox["size_error"])), softbox
+    written = next(light for light in result["lights"] if light["name"] == "softbox")["size"]
+    assert np.allclose(written, softbox["size"], rtol=1e-5)  # the report rounds to 6 digits
+    assert "softbox (rectangle) at (" in out and "(width +- " in out and ", height +- " in out
+    page = (tmp_path / "out" / "report.html").read_text()
+    assert "(width ± " in page

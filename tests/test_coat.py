@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import rtloop
+from conftest import matte_start
 from rtloop.errors import RtloopError
 
 COAT = Path(__file__).parent / "fixtures" / "coat"
@@ -113,14 +114,7 @@ def _matte_input(name: str) -> tuple[rtloop.Scene, dict]:
     """What a user writes: the fixture's camera and geometry, a matte ball, a neutral light, the light and
     every albedo free (tools/make_photos.py's fit section)."""
     truth = rtloop.load_scene(_truth(name)).to_dict()
-    d = copy.deepcopy(_truth(name))
-    d["light"] = {"position": [0.0, 4.25, 0.0], "intensity": 50.0, "color": [1, 1, 1]}
-    for o in d["objects"]:
-        o["material"] = {"albedo": [0.5, 0.5, 0.5]}
-    d["fit"] = {"light.position": {"min": [-8, 0.5, -8], "max": [8, 8, 8]}, "light.intensity": {"min": 1, "max": 400},
-                "objects.ball.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]},
-                "objects.floor.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]}}
-    return rtloop.load_scene(d), truth
+    return rtloop.load_scene(matte_start(_truth(name))), truth
 
 
 @pytest.mark.parametrize("name", [c for c in CASES if abs(_truth(c)["objects"][0]["material"]["coat"]["ior"] - 1.49) < 1e-9])

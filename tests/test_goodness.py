@@ -273,3 +273,23 @@ def test_the_clip_level_of_a_photo_drowned_in_noise_stays_a_level_the_core_takes
     photo = rtloop.render(BALL_ON_FLOOR) + np.random.default_rng(0).normal(0, 0.6, (48, 64, 3)).astype(np.float32)
     result = rtloop.fit(BALL_ON_FLOOR, np.clip(photo, 0, None), generations=1, polish=5, uncertainty=False)
     assert result.settings["saturated"] == CLIP_LEVEL_FLOOR
+
+
+def test_structure_below_the_verdicts_threshold_is_measured_and_widens_the_bars():
+    """A residual 1-3x the floor is "explained" by the verdict, but its smooth part is still what the model
+    lacks: the photo of a fitted scene times a gentle brightness ramp (a 0.8 % tilt across the image, the
+    kind of smooth misfit a slightly wrong light leaves) has its structure measured per object, with no
+    diagnosis, and the error bars widen by it (uncertainty.bars.model_lacks); the same photo without the ramp
+    keeps the sandwich's bars."""
+    from rtloop.fit.goodness import goodness
+    from rtloop.uncertainty.bars import model_lacks
+
+    result = _fit("direct-side")
+    scene = result.scene
+    model = np.asarray(rtloop.render(scene), np.float32)
+    x = np.linspace(-1.0, 1.0, model.shape[1], dtype=np.float32)[None, :, None]
+    base = goodness(scene, model, None)
+    ramp = goodness(scene, model * (1.0 + 0.008 * x), None)
+    assert 1.0 < ramp["ratio"] < EXPLAINED_RATIO, ramp["ratio"]
+    assert ramp["verdict"] == "the model explains this photo to the noise level" and "diagnosis" not in ramp
+    assert model_lacks(ramp) > 1.0 > model_lacks(base), (model_lacks(ramp), model_lacks(base))

@@ -15,7 +15,7 @@ import pytest
 from PIL import Image
 
 import rtloop
-from conftest import sunlit
+from conftest import centred_start as _start, sunlit
 from rtloop import _native
 
 
@@ -33,15 +33,6 @@ def _product_err(result, truth: dict, skip: tuple[str, ...] = ()) -> float:
         got = fitted["light"]["intensity"] * np.array(f["material"]["albedo"])
         worst = max(worst, float(np.max(np.abs(got - want)) / np.max(want)))
     return worst
-
-
-def _start(truth: dict) -> dict:
-    start = copy.deepcopy(truth)
-    lo, hi = np.array(truth["fit"]["light.position"]["min"]), np.array(truth["fit"]["light.position"]["max"])
-    start["light"]["position"] = list((lo + hi) / 2)
-    for o in start["objects"]:
-        o["material"]["albedo"] = [0.5, 0.5, 0.5]
-    return start
 
 
 def _photo(truth: dict) -> np.ndarray:

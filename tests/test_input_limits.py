@@ -214,6 +214,20 @@ def test_an_srgb_encoded_float_image_is_doubted_and_a_linear_one_is_not(name):
     assert any("sRGB-encoded" in w for w in result.report()["warnings"])
 
 
+@pytest.mark.filterwarnings("ignore:fitted values at their fit bounds:rtloop.errors.RtloopWarning")
+def test_an_image_declared_linear_is_not_doubted():
+    """``tone="linear"`` (what rtloop-fit passes for a file read with --response linear) declares the values
+    linear radiance: the sRGB codes / 255 that the check above doubts raise no doubt and no extra fit."""
+    case = shared_case(shared_case_names()[0])
+    scene = rtloop.load_scene(case / "scene_input.json")
+    encoded = np.asarray(Image.open(case / "objective.png").convert("RGB"), np.float32) / 255
+    result = rtloop.fit(scene, encoded, uncertainty=False, tone="linear")
+    assert not [w for w in result.warnings if "sRGB-encoded" in w]
+    assert result.model["encoding"] == {"suspect": False, "why": result.model["encoding"]["why"]}
+    assert "declared linear" in result.model["encoding"]["why"]
+    assert "tone" not in result.model.get("camera", {}).get("terms", [])
+
+
 def test_a_photo_of_decoded_8_bit_codes_is_not_checked_for_an_encoding():
     """An image every value of which is an 8-bit sRGB code's linear value (a PNG as load_image reads it) was
     decoded, so it is linear: the encoding check's extra base fit is skipped (2.5 ms on a photo the base

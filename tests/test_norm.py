@@ -105,9 +105,12 @@ def _dense_photo():
     return _linear_file(truth * ramp + noise)
 
 
+# The photos below carry an exposure ramp across the frame that the model lacks; these tests are of the
+# norm, on one light (lights=1): whether a further light may stand in for such a ramp is
+# tests/test_default_lights.py's.
 def test_a_dense_residual_is_refitted_in_l2_on_the_pixels_that_show_one_object():
     scene = copy.deepcopy(BALL_ON_FLOOR)
-    result = _fit(scene, _dense_photo(), norm="auto")
+    result = _fit(scene, _dense_photo(), norm="auto", lights=1)
     chosen = result.model["norm"]
     assert chosen["used"] == "l2" and result.settings["norm"] == "l2"
     assert chosen["median_z"] >= DENSE_MEDIAN_Z
@@ -126,7 +129,7 @@ def test_the_same_dense_photo_as_an_srgb_file_keeps_l1_bit_for_bit():
     output) keeps the L1 fit."""
     scene = copy.deepcopy(BALL_ON_FLOOR)
     photo = _srgb_file(_dense_photo())
-    auto, l1 = _fit(scene, photo), _fit(scene, photo, norm="l1")
+    auto, l1 = _fit(scene, photo, lights=1), _fit(scene, photo, norm="l1", lights=1)
     assert auto.model["norm"]["used"] == "l1" and auto.model["norm"]["linear_file"] is False
     assert auto.x == l1.x
 

@@ -33,6 +33,7 @@ def _meta(view: str) -> dict:
 def _scene_args(view: str, photo: Path, out: Path, *extra: str) -> list[str]:
     meta = _meta(view)
     return [str(photo), "--board", meta["board"]["spec"], "--ball-radius", str(meta["ball"]["radius"]),
+            "--board-thickness", str(meta["board"]["thickness_m"]),
             "--grey-card", ",".join(map(str, meta["grey_card"]["rect_px"])),
             "--grey-card-reflectance", str(meta["grey_card"]["reflectance"]), "--out", str(out), *extra]
 
@@ -177,9 +178,9 @@ def test_without_exif_the_target_a_warning_or_one_line(tmp_path, capsys):
     where the board alone fixes it that well; else a scene with one warning giving the board's spread and
     the field of view refined from the ball resting on the floor (the truth within 3 of the board's spreads,
     the ball within 3 of the distances' spread): a scene on every view, the overhead one too, whose board
-    seen face-on puts the field of view 25 deg (5 of its spreads) off and the ball out of reach there. With
-    --strict every view is the target or one line: on each of these the board's 15 corners (of a 6x4
-    board) fix the field of view no better than +-0.7 deg, so each is refused."""
+    seen face-on puts the field of view 20 deg (3 of its spreads) off and the ball's best outline out of its
+    reach there. With --strict every view is the target or one line: on each of these the board's 14-15
+    corners (of a 6x4 board) fix the field of view no better than +-0.69 deg, so each is refused."""
     built = 0
     for view in VIEWS:
         photo = _without_exif(view, tmp_path)
@@ -218,9 +219,7 @@ def test_without_exif_the_target_a_warning_or_one_line(tmp_path, capsys):
 NO_EXIF_LIGHT_M = 0.05
 
 
-@pytest.mark.parametrize("view", [pytest.param(v, marks=pytest.mark.xfail(
-    strict=True, reason="a long lens (32 deg): the ball's outline fixes the field of view to 0.8 deg, the light "
-    "6 cm off")) if v == "low" else v for v in VIEWS])
+@pytest.mark.parametrize("view", VIEWS)
 def test_without_exif_the_light_from_the_refined_field_of_view(tmp_path, view):
     """The field of view refined from the ball is nearer the truth than the board's own estimate (or within
     0.3 deg), and the light from rtloop-fit within NO_EXIF_LIGHT_M. Truth: the Mitsuba renders'."""
@@ -249,7 +248,7 @@ def _fit_no_exif(scene_dir: Path, out: Path, *extra: str) -> dict:
 def test_without_exif_the_field_of_view_is_in_the_light_bars(tmp_path, view):
     """Without EXIF, rtloop-scene records the scene at one board standard deviation of the field of view
     either side, and rtloop-fit adds the light's shift between them to its bars: the true light within 3 of
-    them on every axis."""
+    them on every axis the bars determine (an axis they do not, the bars say why)."""
     photo = _without_exif(view, tmp_path)
     assert scene_main(_scene_args(view, photo, tmp_path / "scene")) == 0
     record = json.loads((tmp_path / "scene" / "scene.json").read_text())["meta"]["acquisition"]["field_of_view"]
@@ -258,10 +257,10 @@ def test_without_exif_the_field_of_view_is_in_the_light_bars(tmp_path, view):
     bars = result["fit_report"]["uncertainty"]["bars"]
     carried = bars["field_of_view"]
     assert carried["std_deg"] == record["std_deg"] and carried["light_shift_m"] > 0
-    axes = [f"light.position.{c}" for c in "xyz"]
     err = np.abs(np.subtract(result["light"]["position"], _meta(view)["light"]["position"]))
-    sigma = np.array([bars["sigma"][a] for a in axes])
-    assert (err <= 3 * sigma).all(), (view, err, sigma)
+    for c, e in zip("xyz", err):  # each axis within 3 of its sigma, or said not to be determined
+        sigma = bars["sigma"][f"light.position.{c}"]
+        assert bars["not_determined"][f"light.position.{c}"] if sigma is None else e <= 3 * sigma, (view, c, e, sigma)
 
 
 def test_the_carried_field_of_view_shift_matches_scenes_built_at_it(tmp_path):
@@ -282,6 +281,28 @@ def test_the_carried_field_of_view_shift_matches_scenes_built_at_it(tmp_path):
         lights.append(_fit_no_exif(folder, tmp_path / f"fit{sign}", "--uncertainty", "off")["light"]["position"])
     rebuilt = 0.5 * float(np.linalg.norm(np.subtract(lights[1], lights[0])))
     assert abs(carried["light_shift_m"] - rebuilt) <= 0.25 * rebuilt, (carried["light_shift_m"], rebuilt)
+
+
+def test_the_board_corners_at_a_grazing_angle():
+    """Every view's board gives all but at most one of its 15 inner corners, to 0.25 px RMS of their true
+    projections (none a pixel off), the low view's foreshortened markers too (found in the photo enlarged
+    where the photo itself places fewer corners). Truth: the renders' cameras, the board lying
+    board.thickness_m above their floor."""
+    from rtloop.acquisition.camera import PinholeCamera
+    from rtloop.acquisition.pose import estimate_floor_pose
+    from rtloop.acquisition.response import load_photo
+
+    for view in VIEWS:
+        meta = _meta(view)
+        photo = load_photo(FOLDERS[view] / "photo.png", response="srgb")
+        h, w = photo.shape[:2]
+        camera = PinholeCamera.from_scene_camera(meta["camera"], w, h)
+        pose = estimate_floor_pose(photo, meta["board"]["spec"], focal_px=camera.focal_px)
+        lift = [0.0, meta["board"]["thickness_m"], 0.0]
+        corners = pose.board_to_world(pose.detection.object_points.astype(float)) + lift
+        off = np.linalg.norm(pose.detection.image_points - camera.project(corners), axis=1)
+        rms = float(np.sqrt(np.mean(off**2)))
+        assert len(off) >= 14 and rms < 0.25 and off.max() < 1.0, (view, len(off), rms, off.max())
 
 
 def test_board_alone_uncertainty_covers_its_error(monkeypatch):
@@ -306,7 +327,7 @@ def test_board_alone_uncertainty_covers_its_error(monkeypatch):
         except rtloop.RtloopError:
             continue  # seen straight down: no estimate at all
         assert std > target, (view, std)
-        if std < 2.0:  # nearer degenerate (overhead: 5 deg) the linearised spread is only an order of size
+        if std < 2.0:  # nearer degenerate (overhead: 7 deg) the linearised spread is only an order of size
             estimated += 1
             vfov = math.degrees(2 * math.atan(h / 2 / f))
             assert abs(vfov - _meta(view)["camera"]["vfov_deg"]) <= 3 * std, (view, vfov, std)

@@ -81,14 +81,22 @@ def mutated_coats(draw) -> dict:
     return d
 
 
+def _loaded_or_one_line(d: dict, *names: str):
+    """The scene ``d`` loaded, or None after checking its SceneError is one line naming one of ``names`` (any
+    field: a non-empty first part before a colon)."""
+    try:
+        return rtloop.load_scene(d)
+    except rtloop.SceneError as e:
+        msg = str(e)
+        assert "\n" not in msg and (any(n in msg for n in names) if names else msg.split(":")[0]), msg
+        return None
+
+
 @PROPS
 @given(mutated_coats())
 def test_a_mutated_coat_loads_and_renders_finite_or_is_one_line_naming_it(d):
-    try:
-        scene = rtloop.load_scene(d)
-    except rtloop.SceneError as e:
-        msg = str(e)
-        assert "\n" not in msg and ("coat" in msg or "roughness" in msg), msg
+    scene = _loaded_or_one_line(d, "coat", "roughness")
+    if scene is None:
         return
     img = rtloop.render(scene, 8, 6)
     assert np.isfinite(img).all() and (img >= 0).all()
@@ -133,7 +141,7 @@ ARGS = st.fixed_dictionaries({}, optional={
                                       st.tuples(st.floats(-0.6, 0.2), st.floats(-0.3, 0.1))),
                             st.one_of(st.sampled_from(["x", None, 1.0, (1.0,), "0.1,0.2"]),
                                       st.tuples(NUMBERS, NUMBERS))),
-    "tone": _argument(st.sampled_from(["auto", "on", "off"]), st.sampled_from(["srgb", None, 1, "ON"])),
+    "tone": _argument(st.sampled_from(["auto", "on", "off", "linear"]), st.sampled_from(["srgb", None, 1, "ON"])),
     "flat_field": _argument(
         st.builds(lambda a, b: np.clip(np.full((12, 16, 3), a, np.float32) - b * np.linspace(
             0, 1, 16, dtype=np.float32)[None, :, None], 1e-3, None), st.floats(0.05, 0.95), st.floats(0, 0.04)),
@@ -334,8 +342,6 @@ INSERT_FLAGS = st.lists(st.tuples(st.sampled_from(["--spp", "--response", "--out
 @settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
 @given(flags=INSERT_FLAGS)
 def test_insertion_arguments_exit_cleanly_and_write_only_into_out(tmp_path_factory, flags):
-    import contextlib
-    import io
     import json
     import os
 
@@ -353,11 +359,7 @@ def test_insertion_arguments_exit_cleanly_and_write_only_into_out(tmp_path_facto
     cwd = os.getcwd()
     os.chdir(work)
     try:
-        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-            try:
-                code = insert_main(argv)
-            except SystemExit as e:
-                code = e.code
+        code, _ = _fuzz().run_quietly(insert_main, argv)
     finally:
         os.chdir(cwd)
     assert code in (0, 1, 2)
@@ -431,57 +433,66 @@ def test_strict_passes_only_a_field_of_view_within_the_target_and_refuses_in_one
 _BOARD_PHOTO: dict = {}
 
 
+def _fuzz():
+    """fuzz/fuzz.py, the fuzz campaign, whose board photo and quiet command runner these tests share."""
+    import sys
+    from pathlib import Path
+
+    folder = str(Path(__file__).resolve().parents[1] / "fuzz")
+    if folder not in sys.path:
+        sys.path.insert(0, folder)
+    import fuzz
+
+    return fuzz
+
+
 def _board_photo(tmp_path_factory):
     """A photo without EXIF of a ball beside a board its corners fix the field of view of to +-0.45 deg
     (looser than the 0.3 deg target), made once."""
     if "path" not in _BOARD_PHOTO:
-        import sys
-        from pathlib import Path
-
-        sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fuzz"))
-        from fuzz import SCENE_BOARD, _board_photo as make
-
         path = tmp_path_factory.mktemp("board") / "photo.png"
-        make(path)
-        _BOARD_PHOTO.update(path=path, board=SCENE_BOARD)
+        _fuzz()._board_photo(path)
+        _BOARD_PHOTO.update(path=path, board=_fuzz().SCENE_BOARD)
     return _BOARD_PHOTO["path"], _BOARD_PHOTO["board"]
 
 
 @settings(max_examples=12, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
 @given(strict=st.booleans(), vfov=st.sampled_from([None, "50", "0", "x", "nan", "170"]),
-       ball=st.sampled_from([None, "470,330,45", "x", "-1,2,3"]))
-def test_scene_with_strict_refuses_a_loose_board_estimate_in_one_line(tmp_path_factory, strict, vfov, ball):
+       ball=st.sampled_from([None, "470,330,45", "x", "-1,2,3"]),
+       thickness=st.sampled_from([None, "0", "0.5mm", "-1", "x", "nan", "0.08", "1e9"]))
+def test_scene_with_strict_refuses_a_loose_board_estimate_in_one_line(tmp_path_factory, strict, vfov, ball,
+                                                                       thickness):
     """rtloop-scene on a photo without EXIF whose board fixes the field of view only to +-0.45 deg: with
     --strict and no --vfov one line and no scene; otherwise exit 0 (a scene from the board alone only without
-    --strict), 1 or 2 with one line; nothing is written beside --out."""
-    import contextlib
-    import io
-
+    --strict), 1 or 2 with one line; nothing is written beside --out. Any --board-thickness: a scene whose
+    floor lies that far under the board, or one line (not under the ball's radius: naming the board's
+    thickness)."""
     from rtloop.cli.scene import scene_main
 
     photo, board = _board_photo(tmp_path_factory)
     work = tmp_path_factory.mktemp("scene")
     argv = [str(photo), "--board", board, "--ball-radius", "0.08", "--out", str(work / "o"), "--width", "40"]
     argv += ["--strict"] * strict + (["--vfov", vfov] if vfov else []) + (["--ball", ball] if ball else [])
-    err = io.StringIO()
-    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
-        try:
-            code = scene_main(argv)
-        except SystemExit as e:
-            code = e.code
-    lines = err.getvalue().strip().splitlines()
-    assert code in (0, 1, 2) and "Traceback" not in err.getvalue()
+    argv += ["--board-thickness", thickness] if thickness else []
+    code, text = _fuzz().run_quietly(scene_main, argv)
+    lines = text.strip().splitlines()
+    assert code in (0, 1, 2) and "Traceback" not in text
     assert set(p.name for p in work.iterdir()) <= {"o"}
     if code == 0:
-        model = json.loads((work / "o" / "scene.json").read_text())["meta"]["acquisition"]["camera_model"]
-        assert not (strict and model == "board")
+        scene = json.loads((work / "o" / "scene.json").read_text())
+        assert not (strict and scene["meta"]["acquisition"]["camera_model"] == "board")
+        floor = next(o for o in scene["objects"] if o["shape"] == "plane")
+        assert floor["point"][1] == {None: 0.0, "0": 0.0, "0.5mm": -0.0005}[thickness]
+    elif code == 1 and thickness in ("0.08", "1e9") and not (strict and vfov is None) and ball != "-1,2,3":
+        assert len(lines) == 1 and "board thickness" in lines[0], lines
     else:
         assert len([ln for ln in lines if "error" in ln or "usage" in ln]) >= 1 and not (work / "o").exists()
     if strict and vfov is None and code != 2:
         assert code == 1 and len(lines) == 1 and "0.3 deg needed with --strict" in lines[0]
 
 
-#: SMALL under a `lights` list: its light, a sphere fill light and a sun, their geometry free.
+#: SMALL under a `lights` list: its light, a sphere fill light, a sun and a window, their geometry free (the
+#: window's centre and size).
 SMALL_LIGHTS = copy.deepcopy(SMALL)
 SMALL_LIGHTS["lights"] = [{"name": "key", **SMALL_LIGHTS.pop("light")},
                           {"name": "fill", "type": "sphere", "position": [-2.0, 3.0, -1.0], "radius": 0.3,
@@ -493,6 +504,7 @@ SMALL_LIGHTS["fit"] = {k: v for k, v in SMALL_LIGHTS["fit"].items() if k != "lig
 SMALL_LIGHTS["fit"]["lights.fill.position"] = {"min": [-4, 0.5, -4], "max": [4, 6, 4]}
 SMALL_LIGHTS["fit"]["lights.fill.radius"] = {"min": 0.01, "max": 1.0}
 SMALL_LIGHTS["fit"]["lights.window.position"] = {"min": [-5, 0.5, -3], "max": [-1, 4, 3]}
+SMALL_LIGHTS["fit"]["lights.window.size"] = {"min": 0.3, "max": 3.0}
 
 LIGHT_FIELDS = [
     (("lights", 0, "position"), 3), (("lights", 0, "intensity"), 0), (("lights", 1, "position"), 3),
@@ -502,6 +514,7 @@ LIGHT_FIELDS = [
     (("fit", "lights.fill.radius", "min"), 0),
     (("lights", 3, "position"), 3), (("lights", 3, "size"), 2), (("lights", 3, "normal"), 3),
     (("lights", 3, "up"), 3), (("lights", 3, "intensity"), 0), (("fit", "lights.window.position", "max"), 3),
+    (("fit", "lights.window.size", "min"), 2), (("fit", "lights.window.size", "max"), 2),
 ]
 
 
@@ -512,10 +525,8 @@ def mutated_light_lists():
 @PROPS
 @given(mutated_light_lists())
 def test_a_mutated_light_list_loads_and_renders_finite_or_is_a_scene_error(d):
-    try:
-        scene = rtloop.load_scene(d)
-    except rtloop.SceneError as e:
-        assert "\n" not in str(e) and str(e).split(":")[0]
+    scene = _loaded_or_one_line(d)
+    if scene is None:
         return
     assert np.isfinite(rtloop.render(scene, 8, 6)).all()
 
@@ -548,6 +559,10 @@ def test_the_lights_argument_fits_or_raises_rtloop_error(lights, listed, seed, o
     for light in result.lights:
         assert all(math.isfinite(v) for v in light.get("position", light.get("direction", [])))
         assert math.isfinite(light["intensity"]) and light["intensity"] >= 0
+        if light["name"] == "window" and listed:  # its size searched within its bounds
+            assert all(0.3 <= v <= 3.0 for v in light["size"]), light["size"]
+            for bar in light.get("size_error", [None, None]):
+                assert bar is None or (math.isfinite(bar) and bar >= 0)
     assert all(math.isfinite(v) for rows in result.products.values() for row in rows for v in row)
 
 

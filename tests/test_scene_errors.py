@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import rtloop
+from conftest import BALL_ON_FLOOR, sphere
 
 
 def valid_scene() -> dict:
@@ -38,12 +39,7 @@ def valid_scene() -> dict:
                 "material": {"albedo": [0.5, 0.5, 0.5]},
             },
         ],
-        "fit": {
-            "light.position": {"min": [-8, 0.5, -8], "max": [8, 8, 8]},
-            "light.intensity": {"min": 1, "max": 400},
-            "objects.ball.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]},
-            "objects.floor.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]},
-        },
+        "fit": copy.deepcopy(BALL_ON_FLOOR["fit"]),
     }
 
 
@@ -225,15 +221,7 @@ def test_minimal_scene_gets_defaults():
         "image": {"width": 16, "height": 12},
         "camera": {"position": [0, 1, -5], "look_at": [0, 1, 0], "up": [0, 1, 0], "vfov_deg": 40},
         "light": {"position": [1, 4, -2], "intensity": 30},
-        "objects": [
-            {
-                "name": "ball",
-                "shape": "sphere",
-                "center": [0, 1, 0],
-                "radius": 1,
-                "material": {"albedo": [0.5, 0.4, 0.3]},
-            }
-        ],
+        "objects": [sphere("ball", [0, 1, 0], 1, [0.5, 0.4, 0.3])],
     }
     before = copy.deepcopy(minimal)
     sc = rtloop.load_scene(minimal)

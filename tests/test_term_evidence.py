@@ -21,7 +21,7 @@ def test_a_nested_term_never_raises_the_loss_and_the_raise_is_explained():
     products are solved in, the same column lowers the loss."""
     scene = rtloop.load_scene(LIGHTS / "key-fill-10" / "scene_input.json")
     photo = np.asarray(rtloop.load_image(LIGHTS / "key-fill-10" / "objective.png", scene), np.float32)
-    result = rtloop.fit(scene, photo, uncertainty=False)
+    result = rtloop.fit(scene, photo, uncertainty=False, lights=1)
     ev = result.model["evidence"]["environment"]
     assert ev["loss_with"] > ev["loss_without"]  # the raise this evidence must explain
     assert ev["nested"] is True and ev["raised"] is True and not ev["selected"]
@@ -45,7 +45,7 @@ def test_every_nested_term_on_the_light_photos_is_bounded_by_the_loss_without_it
     for case in ("key-fill-25", "soft-10"):
         scene = rtloop.load_scene(LIGHTS / case / "scene_input.json")
         photo = rtloop.load_image(LIGHTS / case / "objective.png", scene)
-        result = rtloop.fit(scene, photo, uncertainty=False)
+        result = rtloop.fit(scene, photo, uncertainty=False, lights=1)
         for term, ev in getattr(result, "model", {}).get("evidence", {}).items():
             if ev["nested"]:
                 assert ev["loss_with_nested"] <= ev["loss_without"], (case, term)

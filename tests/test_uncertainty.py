@@ -4,6 +4,7 @@ fitted values over noise realisations of one scene, the noise level, hidden obje
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 
 import numpy as np
@@ -847,3 +848,30 @@ def test_footprint_shift_covers_an_area_averaged_photo(ball_scene, monkeypatch, 
         z = [abs(result.products["ball"][c] - scene_products(truth)["ball"][c]) / u["robust"]["product_sigma"][
             f"products.ball.{ch}"] for c, ch in enumerate("rgb")]
         assert max(z) > 10.0, z
+
+
+@pytest.mark.parametrize("glossy", [False, True])
+def test_the_sigma_does_not_depend_on_how_wide_the_intensity_bounds_are(ball_scene, glossy):
+    """The same photo, the scene's light intensity free over [1, 400] or over [1, 4e8] (a user who does not
+    know it within decades): the products are the same, so their sigmas and the light's must be too, and the
+    pixels used almost the same (those within the step of the clip are left out: a step of at most a
+    hundredth of a product leaves out at most 1 % of them). Wide bounds once stepped each product by a
+    thousandth of its range, thousands of times the product itself, and left every pixel out as on the
+    clip's kink; with a free specular its product's bound (4e8 x 1) passed the scene format's limit and no
+    estimate was made at all."""
+    truth = ball_scene
+    truth["light"]["intensity"] = 130.0
+    start = wrong_start(truth)
+    if glossy:
+        truth, start = _glossy(truth)
+    photo = _photo(rtloop.render(truth), 0.01, noise_seed=5)
+    result = rtloop.fit(start, photo, seed=2)
+    narrow = estimate_uncertainty(result, photo)
+    wide_scene = result.scene.to_dict()
+    wide_scene["fit"]["light.intensity"] = {"min": 1.0, "max": 4e8}
+    wide = estimate_uncertainty(dataclasses.replace(result, scene=rtloop.load_scene(wide_scene)), photo)
+    assert wide["warnings"] == narrow["warnings"]
+    assert wide["excluded"]["clip_kink"] <= 0.01 * narrow["pixels"]
+    assert abs(wide["pixels"] - narrow["pixels"]) <= 0.01 * narrow["pixels"]
+    for name, s in narrow["sigma"].items():
+        assert s is not None and wide["sigma"][name] == pytest.approx(s, rel=0.02), name

@@ -4,12 +4,14 @@
 Each case is a small scene (balls on an infinite floor) under two or three lights: a key light and a fill
 of a given fraction of its power, three lamps, a lamp and a sphere light, one sphere light of 0.1-0.5 m
 (soft shadows), or a lamp beside a window (a 1.5 x 1 m rectangle light about 4 m away, radiance
-intensity x colour / area, one-sided) under a dim constant room light. It reuses ``make_photos.py``'s conventions and code (camera, floor, materials, sRGB
+intensity x colour / area, one-sided) or beside a 1.2 x 0.8 m softbox about 2 m away (its size free in the fit
+section: its soft shadows show it), the window under a dim constant room light. It reuses ``make_photos.py``'s conventions and code (camera, floor, materials, sRGB
 encoding, a sphere light's radiance I / (pi r^2)). For each case it writes ``OUT/NAME/``:
 
 ``scene.json``        the truth in rtloop's scene format (a ``lights`` list);
 ``scene_input.json``  what a user writes: the geometry, one neutral light, the fit section freeing the
-                      first light's position (and, for a sphere light, its radius) and every albedo;
+                      first light's position (and, for a sphere light, its radius) and every albedo, and a
+                      rectangle light's centre (and for the softbox its size);
 ``objective.png``     the photo, 128x96 8-bit sRGB;
 ``meta.json``         how it was made.
 
@@ -69,6 +71,14 @@ WINDOW = {"name": "window", "type": "rectangle", "position": WINDOW_CENTRE.tolis
 CASES.append({"name": "lamp-window", "description": "two balls under a lamp and a 1.5 x 1 m window about 4 m "
               "away, a dim constant room light", "lights": [KEY, WINDOW], "objects": TWO_BALLS, "seed": 60,
               "environment": [0.01, 0.01, 0.01]})
+
+SOFTBOX_CENTRE = np.array([-2.1, 1.5, -1.0])
+SOFTBOX_NORMAL = (np.array([0.0, 0.4, 0.0]) - SOFTBOX_CENTRE) / np.linalg.norm(np.array([0.0, 0.4, 0.0]) - SOFTBOX_CENTRE)
+SOFTBOX = {"name": "softbox", "type": "rectangle", "position": SOFTBOX_CENTRE.tolist(), "size": [1.2, 0.8],
+           "normal": SOFTBOX_NORMAL.tolist(), "up": [0.0, 1.0, 0.0], "intensity": 10.0, "color": [1.0, 0.96, 0.9]}
+CASES.append({"name": "lamp-softbox", "description": "two balls under a lamp and a 1.2 x 0.8 m softbox about "
+              "2 m away whose soft shadows show its size",
+              "lights": [KEY, SOFTBOX], "objects": TWO_BALLS, "seed": 61, "fit_size": True})
 
 
 def rectangle_frame(light: dict[str, Any]) -> np.ndarray:
@@ -151,6 +161,10 @@ def make(case: dict[str, Any], out: Path, spp: int) -> None:
             lights.append({**light, "position": [-3.0, 2.5, 0.0], "intensity": first["intensity"],
                            "color": [1.0, 1.0, 1.0]})
             fit[f"lights.{light['name']}.position"] = {"min": [-6.0, 0.5, -4.0], "max": [-1.0, 5.0, 4.0]}
+            if case.get("fit_size"):
+                # ... and, where the photo shows it, its size: a guess, fitted.
+                lights[-1]["size"] = [0.6, 0.6]
+                fit[f"lights.{light['name']}.size"] = {"min": 0.1, "max": 3.0}
     scene_input.update(lights=lights, objects=objects_json(case, mp.INPUT_ALBEDO), fit=fit)
     mp.write_json(folder / "scene.json", truth)
     mp.write_json(folder / "scene_input.json", scene_input)

@@ -49,6 +49,7 @@ BOARD = {"squares": [6, 4], "square_m": 0.1, "marker_m": 0.075, "dictionary": "D
 BOARD_SPEC = "6x4,100mm,75mm,DICT_5X5_100"
 PAPER, INK = 0.85, 0.04  # linear reflectances of the board's paper and of its black squares
 TEXTURE_PX_PER_SQUARE = 64
+BOARD_THICKNESS = 0.0005  # the board (with its paper) lies this far above the floor the ball rests on
 BALL_RADIUS = 0.1
 BALL_CENTRE = [0.56, BALL_RADIUS, 0.04]
 BALL_ALBEDO = [0.72, 0.28, 0.14]
@@ -144,8 +145,8 @@ def scene_dict(view: dict[str, Any], spp: int, seed: int) -> dict[str, Any]:
                  "bsdf": {"type": "diffuse", "reflectance": _rgb(BALL_ALBEDO)}},
         "floor": {"type": "rectangle", "to_world": _floor_rect(mi, [0.0, 0.0, 0.0], 1000.0, 1000.0),
                   "bsdf": {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": _rgb(FLOOR_ALBEDO)}}},
-        # the board (with its paper) 0.5 mm above the floor, the card 1 mm
-        "board": {"type": "rectangle", "to_world": _floor_rect(mi, [0.0, 0.0005, 0.0], *half),
+        # the board (with its paper) BOARD_THICKNESS above the floor, the card 1 mm
+        "board": {"type": "rectangle", "to_world": _floor_rect(mi, [0.0, BOARD_THICKNESS, 0.0], *half),
                   "bsdf": {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": {
                       "type": "bitmap", "bitmap": mi.Bitmap(tex[:, :, None]), "raw": True,
                       "filter_type": "bilinear", "wrap_mode": "clamp"}}}},
@@ -253,7 +254,8 @@ def make_view(view: dict[str, Any], out: Path, spp: int, seed: int) -> dict[str,
                   "distance_to_ball_m": round(float(np.linalg.norm(np.subtract(_light(view), BALL_CENTRE))), 3)},
         "environment_radiance": ENVIRONMENT,
         "floor_albedo": FLOOR_ALBEDO,
-        "board": {**BOARD, "spec": BOARD_SPEC, "paper_margin_m": BOARD["square_m"], "paper_reflectance": PAPER,
+        "board": {**BOARD, "spec": BOARD_SPEC, "paper_margin_m": BOARD["square_m"],
+                  "thickness_m": BOARD_THICKNESS, "paper_reflectance": PAPER,
                   "ink_reflectance": INK, "texture": "cv2.aruco.CharucoBoard.generateImage, borderBits 1"},
         "grey_card": {"reflectance": CARD_REFLECTANCE, "centre": CARD_CENTRE, "size_xz_m": CARD_SIZE,
                       "rect_px": card_rect(view)},

@@ -10,9 +10,9 @@ position and intensity and the objects' colours. See docs/scene-format.md for th
     result.scene          # the fitted scene
 """
 
-from ._interrupt import interrupted_at_import as _interrupted_at_import
+from ._interrupt import importing as _importing
 
-try:
+with _importing:  # a Ctrl-C while a console script starts: one line, exit 130
     import numpy as _np
 
     from . import _native
@@ -26,9 +26,6 @@ try:
     from .report import report
     from .scene import load_scene, save_scene, scene_to_dict
     from .uncertainty import estimate_uncertainty
-except KeyboardInterrupt:
-    _interrupted_at_import()  # a console script starting: one line, exit 130
-    raise
 
 __all__ = [
     "AcquisitionError",

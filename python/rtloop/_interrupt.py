@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 import sys
 
-__all__ = ["SCRIPTS", "interrupted_at_import"]
+__all__ = ["SCRIPTS", "importing", "interrupted_at_import"]
 
 #: The console scripts of pyproject.toml.
 SCRIPTS = ("rtloop-fit", "rtloop-scene", "rtloop-acquire", "rtloop-insert")
@@ -20,3 +20,19 @@ def interrupted_at_import() -> None:
         return
     print(f"{script}: interrupted", file=sys.stderr, flush=True)
     raise SystemExit(130) from None
+
+
+class _Importing:
+    """``with importing:`` around a console script module's imports: a Ctrl-C in them goes to
+    :func:`interrupted_at_import` (one line and exit 130 when a script is starting), else propagates."""
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, kind: type[BaseException] | None, value: BaseException | None, tb: object) -> bool:
+        if kind is not None and issubclass(kind, KeyboardInterrupt):
+            interrupted_at_import()
+        return False
+
+
+importing = _Importing()

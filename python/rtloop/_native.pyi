@@ -117,6 +117,21 @@ def evaluate(
     saturated: float | None = None,
     solve_margin: int = 0,
 ) -> npt.NDArray[np.float64]: ...
+def held_out(
+    scene: Scene,
+    target: npt.NDArray[np.float32],
+    x: npt.NDArray[np.float64],
+    folds: npt.NDArray[np.uint8],
+    paths: list[str],
+    pixels: npt.NDArray[np.uint32] | None = None,
+    clip: bool = True,
+    threads: int | None = None,
+    product_bounds: npt.NDArray[np.float64] | None = None,
+    norm: str = "l1",
+    space: str = "linear",
+    saturated: float | None = None,
+    refine: bool = True,
+) -> npt.NDArray[np.float64]: ...
 def optimize(
     scene: Scene,
     paths: list[str],

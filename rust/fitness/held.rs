@@ -97,24 +97,23 @@ impl Kernel {
                 &mut ag_all[range.clone()],
                 &mut ab_all[range.clone()],
             );
+            // Pass 1 over the run's chunks: on the pool (`par_chunks_mut`) or in order (`chunks_mut`).
+            macro_rules! pass1_over {
+                ($chunks:ident) => {
+                    a.$chunks(CHUNK)
+                        .zip(b.$chunks(CHUNK))
+                        .zip(ar.$chunks(CHUNK))
+                        .zip(ag.$chunks(CHUNK))
+                        .zip(ab.$chunks(CHUNK))
+                        .enumerate()
+                        .map(|(k, ((((a, b), r), gg), bb))| pass1(k, a, b, [r, gg, bb]))
+                        .collect()
+                };
+            }
             let parts: Vec<SolveSums> = if c.parallel {
-                a.par_chunks_mut(CHUNK)
-                    .zip(b.par_chunks_mut(CHUNK))
-                    .zip(ar.par_chunks_mut(CHUNK))
-                    .zip(ag.par_chunks_mut(CHUNK))
-                    .zip(ab.par_chunks_mut(CHUNK))
-                    .enumerate()
-                    .map(|(k, ((((a, b), r), gg), bb))| pass1(k, a, b, [r, gg, bb]))
-                    .collect()
+                pass1_over!(par_chunks_mut)
             } else {
-                a.chunks_mut(CHUNK)
-                    .zip(b.chunks_mut(CHUNK))
-                    .zip(ar.chunks_mut(CHUNK))
-                    .zip(ag.chunks_mut(CHUNK))
-                    .zip(ab.chunks_mut(CHUNK))
-                    .enumerate()
-                    .map(|(k, ((((a, b), r), gg), bb))| pass1(k, a, b, [r, gg, bb]))
-                    .collect()
+                pass1_over!(chunks_mut)
             };
             let mut sums = SolveSums::default();
             for part in &parts {

@@ -1,18 +1,24 @@
-//! The lights fit's loss: any number of lights, point, directional or sphere, searched by position (or
-//! direction, and radius), each one linear column per object and channel.
+//! The lights fit's loss: any number of lights, point, directional, sphere or rectangle, searched by
+//! position (or direction, a sphere's radius, a rectangle's size), each one linear column per object and
+//! channel.
 //!
 //! For a matte scene a pixel of object o is, per channel c,
 //! `y = sum_l P[o][c][l] a_l(pixel) + K[o][c]`, with `a_l` light l's unit-intensity irradiance / pi at the
 //! pixel (shadowed, a sphere light's soft shadow included: `render::lights::unit_irradiance`, the
 //! renderer's own formula) times the exposure, `P = intensity_l x colour_l[c] x albedo_o[c]` and `K` the
-//! constant term (ambient and environment light times the albedo). For each candidate the products and
-//! constants are the non-negative least-squares fit over the chosen pixels, object by object, so the
-//! search runs over the lights' geometry only. The loss is the sum of squared residuals.
+//! constant term (ambient and environment light times the albedo). An object with a Blinn–Phong lobe
+//! (`specular` > 0) has one more column per light, `b_l` = light l's unit-intensity irradiance times the
+//! lobe `render::brdf::specular_scale(1, s) x blinn_phong(n, l, v, s)` (its shininess s as the scene
+//! holds it) times the exposure, with the product `S = intensity_l x colour_l[c] x specular_o`. For each
+//! candidate the products and constants are the non-negative least-squares fit over the chosen pixels,
+//! object by object, so the search runs over the lights' geometry only. The loss is the sum of squared
+//! residuals.
 
 use glam::Vec3A;
 
 use crate::error::{Error, Result};
 use crate::params::ParamLayout;
+use crate::render::brdf::{blinn_phong, specular_scale};
 use crate::render::hit::Surfel;
 use crate::render::lights::{unit_irradiance, Emitter};
 use crate::render::{Geometry, PShape};
@@ -29,14 +35,22 @@ pub struct LightsFitness {
     starts: Vec<usize>,
     /// The photo's linear values at the chosen pixels, in the order of `surfels`.
     values: Vec<[f32; 3]>,
+    /// Per object: its lobe's shininess where it has a Blinn–Phong lobe (specular > 0).
+    lobes: Vec<Option<f32>>,
 }
+
+/// The most lights the closed form takes with a glossy object: its columns (two per light and the
+/// constant) stay within the exhaustive non-negative least squares' reach.
+pub const MAX_GLOSSY_LIGHTS: usize = 4;
 
 /// What the closed form found at one candidate.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LightsSolve {
     /// The sum of squared residuals.
     pub loss: f64,
-    /// Per object: per light, the RGB product P (intensity x colour x albedo); then the constant K.
+    /// Per object: per light, the RGB product P (intensity x colour x albedo); then the constant K; then,
+    /// where any object is glossy, per light the lobe's product S (intensity x colour x specular; zero
+    /// for a matte object).
     pub products: Vec<Vec<[f64; 3]>>,
 }
 
@@ -61,8 +75,20 @@ impl LightsFitness {
         }
         if let Some((path, _, _)) = layout.entries.iter().find(|(_, t, _)| t.is_linear()) {
             return Err(Error::Invalid(format!(
-                "the lights fit searches the lights' positions, directions and radii; {path} is solved in \
+                "the lights fit searches the lights' positions, directions, radii and sizes; {path} is solved in \
                  closed form"
+            )));
+        }
+        let lobes: Vec<Option<f32>> = scene
+            .objects
+            .iter()
+            .map(|o| (o.material.specular > 0.0).then_some(o.material.shininess as f32))
+            .collect();
+        if lobes.iter().any(Option::is_some) && scene.light_count() > MAX_GLOSSY_LIGHTS {
+            return Err(Error::Invalid(format!(
+                "the lights fit takes a glossy object (specular > 0) under at most {MAX_GLOSSY_LIGHTS} \
+                 lights (got {})",
+                scene.light_count()
             )));
         }
         let geo = Geometry::new(scene);
@@ -100,6 +126,7 @@ impl LightsFitness {
             surfels,
             starts,
             values,
+            lobes,
         })
     }
 
@@ -118,52 +145,80 @@ impl LightsFitness {
     /// The closed form at candidate `x`: products, constants and the loss.
     pub fn solve(&self, x: &[f64]) -> LightsSolve {
         let lights = self.emitters(x);
-        let k = lights.len() + 1; // one column per light and the constant
-        let exposure = self.scene.exposure as f32;
-        let mut col = vec![0.0f64; k];
+        let n = lights.len();
+        let glossy = self.lobes.iter().any(Option::is_some);
         let mut products = Vec::with_capacity(self.starts.len() - 1);
         let mut loss = 0.0;
         for o in 0..self.starts.len() - 1 {
-            let mut gram = vec![0.0f64; k * k];
-            let mut rhs = vec![[0.0f64; 3]; k];
-            let mut yy = [0.0f64; 3];
-            for p in self.starts[o]..self.starts[o + 1] {
-                let s = &self.surfels[p];
-                for (l, e) in lights.iter().enumerate() {
-                    let unit = Emitter {
-                        intensity: 1.0,
-                        color: Vec3A::ONE,
-                        ..*e
-                    };
-                    col[l] = unit_irradiance(s, &unit, &self.shapes, true).map_or(0.0, |(_, a)| {
-                        (a * exposure * std::f32::consts::FRAC_1_PI) as f64
-                    });
-                }
-                col[k - 1] = exposure as f64;
-                for a in 0..k {
-                    for b in 0..k {
-                        gram[a * k + b] += col[a] * col[b];
-                    }
-                    for c in 0..3 {
-                        rhs[a][c] += col[a] * self.values[p][c] as f64;
-                    }
-                }
-                for c in 0..3 {
-                    yy[c] += (self.values[p][c] as f64).powi(2);
-                }
-            }
-            let mut per = vec![[0.0f64; 3]; k];
-            for c in 0..3 {
-                let b: Vec<f64> = rhs.iter().map(|r| r[c]).collect();
-                let (sol, rss) = nnls(&gram, &b, yy[c], k);
-                loss += rss;
-                for a in 0..k {
-                    per[a][c] = sol[a];
-                }
+            let mut per = self.solve_object(o, &lights, &mut loss);
+            if glossy && per.len() == n + 1 {
+                per.resize(2 * n + 1, [0.0; 3]);
             }
             products.push(per);
         }
         LightsSolve { loss, products }
+    }
+
+    /// Object `o`'s columns at each of its pixels: per light its unit irradiance (/pi, times the
+    /// exposure), the constant, and for a glossy object per light its lobe.
+    fn columns(&self, p: usize, lights: &[Emitter], shininess: Option<f32>, col: &mut [f64]) {
+        let n = lights.len();
+        let exposure = self.scene.exposure as f32;
+        let s = &self.surfels[p];
+        for (l, e) in lights.iter().enumerate() {
+            let unit = Emitter {
+                intensity: 1.0,
+                color: Vec3A::ONE,
+                ..*e
+            };
+            let lit = unit_irradiance(s, &unit, &self.shapes, true);
+            col[l] = lit.map_or(0.0, |(_, a)| {
+                (a * exposure * std::f32::consts::FRAC_1_PI) as f64
+            });
+            if let Some(sh) = shininess {
+                col[n + 1 + l] = lit.map_or(0.0, |(dir, a)| {
+                    let lobe = specular_scale(1.0, sh) * blinn_phong(s.normal, dir, s.view, sh);
+                    (a * exposure * lobe) as f64
+                });
+            }
+        }
+        col[n] = exposure as f64;
+    }
+
+    /// Object `o`'s non-negative least squares, channel by channel: its products (per light, the
+    /// constant, then per light the lobe where it is glossy); each channel's residual sum of squares is
+    /// added to `loss`.
+    fn solve_object(&self, o: usize, lights: &[Emitter], loss: &mut f64) -> Vec<[f64; 3]> {
+        let shininess = self.lobes[o];
+        let k = lights.len() + 1 + if shininess.is_some() { lights.len() } else { 0 };
+        let mut col = vec![0.0f64; k];
+        let mut gram = vec![0.0f64; k * k];
+        let mut rhs = vec![[0.0f64; 3]; k];
+        let mut yy = [0.0f64; 3];
+        for p in self.starts[o]..self.starts[o + 1] {
+            self.columns(p, lights, shininess, &mut col);
+            for a in 0..k {
+                for b in 0..k {
+                    gram[a * k + b] += col[a] * col[b];
+                }
+                for c in 0..3 {
+                    rhs[a][c] += col[a] * self.values[p][c] as f64;
+                }
+            }
+            for c in 0..3 {
+                yy[c] += (self.values[p][c] as f64).powi(2);
+            }
+        }
+        let mut per = vec![[0.0f64; 3]; k];
+        for c in 0..3 {
+            let b: Vec<f64> = rhs.iter().map(|r| r[c]).collect();
+            let (sol, rss) = nnls(&gram, &b, yy[c], k);
+            *loss += rss;
+            for a in 0..k {
+                per[a][c] = sol[a];
+            }
+        }
+        per
     }
 }
 
@@ -211,7 +266,8 @@ fn solve_dense(g: &[f64], b: &[f64], k: usize) -> Option<Vec<f64>> {
 }
 
 /// Non-negative least squares from the normal equations (`gram` = AᵀA, `b` = Aᵀy, `yy` = yᵀy): every
-/// subset of the columns is tried (k is at most `MAX_LIGHTS` + 1), the best with all values >= 0 kept.
+/// subset of the columns is tried (k is at most `MAX_LIGHTS` + 1, or 2 `MAX_GLOSSY_LIGHTS` + 1), the best
+/// with all values >= 0 kept.
 /// Returns the solution and the residual sum of squares.
 pub fn nnls(gram: &[f64], b: &[f64], yy: f64, k: usize) -> (Vec<f64>, f64) {
     let mut best = (vec![0.0; k], yy);

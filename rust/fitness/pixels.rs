@@ -32,6 +32,8 @@ pub struct ActivePixels {
     /// Per active pixel: its footprint on the surface it sees (`render::footprint::axes`), for shadow
     /// edges integrated over the pixel's area; empty when not asked for.
     pub footprint: Vec<[Vec3A; 2]>,
+    /// Per active pixel: its index in the image (row-major).
+    pub index: Vec<u32>,
     /// With the footprint, the pixels that straddle an object's outline
     /// (`render::footprint::silhouette_samples`): each one's objective and sub-pixel first hits, in pixel
     /// order; empty otherwise.
@@ -71,6 +73,7 @@ impl ActivePixels {
                 Some(m) if s.object == u32::MAX => a.fixed.push((m, t)),
                 _ => {
                     a.surfels.push(s);
+                    a.index.push(i);
                     a.solve.push(interior_by(gbuffer, i as usize, solve_margin));
                     a.targets.push(t);
                     if let Some((cam, shapes)) = camera {
@@ -472,45 +475,11 @@ pub(crate) fn group(
         outline,
         ..
     } = pixels;
-    let kept = |i: usize| outline.is_empty() || !outline[i];
-    // Pixels grouped by object (background last), row-major inside a group: a counting sort.
-    let slot = |o: u32| {
-        if o == u32::MAX {
-            shapes.len()
-        } else {
-            o as usize
-        }
-    };
-    let mut count = vec![0usize; shapes.len() + 2];
-    for (i, s) in surfels.iter().enumerate() {
-        if kept(i) {
-            count[slot(s.object) + 1] += 1;
-        }
-    }
-    for k in 1..count.len() {
-        count[k] += count[k - 1];
-    }
-    let mut order = vec![0usize; count[count.len() - 1]];
-    for (i, s) in surfels.iter().enumerate().filter(|&(i, _)| kept(i)) {
-        let k = slot(s.object);
-        order[count[k]] = i;
-        count[k] += 1;
-    }
-    let mut runs = Vec::new();
-    let mut start = 0;
-    while start < order.len() {
-        let obj = surfels[order[start]].object;
-        let mut end = start;
-        while end < order.len() && surfels[order[end]].object == obj {
-            end += 1;
-        }
-        runs.push((obj, start..end));
-        start = end;
-    }
+    let runs = object_runs(surfels, outline, shapes.len());
     // One group per object, built in parallel (each in order: the same groups on any pool).
     runs.into_par_iter()
-        .map(|(obj, range)| {
-            let idx = &order[range];
+        .map(|(obj, idx)| {
+            let idx = &idx[..];
             let col = |f: &dyn Fn(&Surfel) -> f32| {
                 idx.iter().map(|&i| f(&surfels[i])).collect::<Vec<f32>>()
             };
@@ -618,4 +587,49 @@ pub(crate) fn group(
             g
         })
         .collect()
+}
+
+/// The pixels `surfels` grouped by object (`shapes` objects; background last), row-major inside a group (a
+/// counting sort): per group its object (`u32::MAX`: the background) and its pixels' indices in order, as
+/// [`group`] orders the kernel's groups.
+pub(crate) fn object_runs(
+    surfels: &[Surfel],
+    outline: &[bool],
+    shapes: usize,
+) -> Vec<(u32, Vec<usize>)> {
+    let kept = |i: usize| outline.is_empty() || !outline[i];
+    let slot = |o: u32| {
+        if o == u32::MAX {
+            shapes
+        } else {
+            o as usize
+        }
+    };
+    let mut count = vec![0usize; shapes + 2];
+    for (i, s) in surfels.iter().enumerate() {
+        if kept(i) {
+            count[slot(s.object) + 1] += 1;
+        }
+    }
+    for k in 1..count.len() {
+        count[k] += count[k - 1];
+    }
+    let mut order = vec![0usize; count[count.len() - 1]];
+    for (i, s) in surfels.iter().enumerate().filter(|&(i, _)| kept(i)) {
+        let k = slot(s.object);
+        order[count[k]] = i;
+        count[k] += 1;
+    }
+    let mut runs = Vec::new();
+    let mut start = 0;
+    while start < order.len() {
+        let obj = surfels[order[start]].object;
+        let mut end = start;
+        while end < order.len() && surfels[order[end]].object == obj {
+            end += 1;
+        }
+        runs.push((obj, order[start..end].to_vec()));
+        start = end;
+    }
+    runs
 }

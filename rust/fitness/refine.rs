@@ -22,50 +22,13 @@ impl Kernel {
         out: &mut Solved,
         scratch: &[f32],
     ) -> [f64; 3] {
-        let (a_all, rest) = scratch.split_at(self.pixels);
-        let b_all = &rest[..self.pixels];
-        // With the bounce the diffuse column differs per channel (a'_c, after b in the scratch).
-        let bounced = proj.gauge.is_some() && rest.len() >= 4 * self.pixels;
         let sat = if clip { self.saturated } else { f32::INFINITY };
         let top = if clip { 1.0f64 } else { f64::INFINITY };
-        let srgb = self.space == Space::Srgb;
+        let objects = self.refine_objects(proj, scratch);
         out.lit.clear();
         out.lit.resize(proj.diffuse.len(), 0);
-        // The objects' groups with their diffuse and specular factors.
-        let mut objects: Vec<RefineObject> = Vec::new();
-        let mut acc = [0.0f64; 3];
-        let mut offset = 0;
-        for g in &self.groups {
-            let n = g.len();
-            let (a, b) = (&a_all[offset..offset + n], &b_all[offset..offset + n]);
-            let ac: [&[f32]; 3] = if bounced {
-                std::array::from_fn(|c| &rest[(1 + c) * self.pixels + offset..][..n])
-            } else {
-                [a; 3]
-            };
-            offset += n;
-            let Some(obj) = g.object else {
-                let gt = if srgb { &g.te } else { &g.t };
-                for c in 0..3 {
-                    acc[c] += gt[c]
-                        .iter()
-                        .map(|&t| self.norm.penalty(t) as f64)
-                        .sum::<f64>();
-                }
-                continue;
-            };
-            out.lit[obj] = a.iter().filter(|&&v| v > 0.0).count();
-            objects.push(RefineObject {
-                g,
-                obj,
-                a: ac,
-                b,
-                specular: proj.specular[obj].1 > 0.0,
-                sky: proj.sky(obj, g),
-                informed: std::array::from_fn(|c| {
-                    (0..n).any(|i| g.ts[c][i].is_finite() && ac[c][i] > 0.0)
-                }),
-            });
+        for o in &objects {
+            out.lit[o.obj] = o.lit;
         }
         // Block coordinate descent per object: each P_c given Q, then Q given the P's (four rounds for a
         // glossy object; one for a matte one, whose channels are independent). An environment column
@@ -132,6 +95,65 @@ impl Kernel {
                 }
             }
         }
+        self.loss_at(&objects, out, proj, top, None)
+    }
+
+    /// The objects' groups with their factors from `scratch` (as [`Kernel::projected`] left it), for
+    /// [`Kernel::refine`] and [`Kernel::loss_at`].
+    pub(crate) fn refine_objects<'a>(
+        &'a self,
+        proj: &'a Projection,
+        scratch: &'a [f32],
+    ) -> Vec<RefineObject<'a>> {
+        let (a_all, rest) = scratch.split_at(self.pixels);
+        let b_all = &rest[..self.pixels];
+        // With the bounce the diffuse column differs per channel (a'_c, after b in the scratch).
+        let bounced = proj.gauge.is_some() && rest.len() >= 4 * self.pixels;
+        let mut objects: Vec<RefineObject> = Vec::new();
+        let mut offset = 0;
+        for (index, g) in self.groups.iter().enumerate() {
+            let n = g.len();
+            let (a, b) = (&a_all[offset..offset + n], &b_all[offset..offset + n]);
+            let ac: [&[f32]; 3] = if bounced {
+                std::array::from_fn(|c| &rest[(1 + c) * self.pixels + offset..][..n])
+            } else {
+                [a; 3]
+            };
+            offset += n;
+            let Some(obj) = g.object else {
+                continue;
+            };
+            objects.push(RefineObject {
+                g,
+                index,
+                obj,
+                lit: a.iter().filter(|&&v| v > 0.0).count(),
+                a: ac,
+                b,
+                specular: proj.specular[obj].1 > 0.0,
+                sky: proj.sky(obj, g),
+                informed: std::array::from_fn(|c| {
+                    (0..n).any(|i| g.ts[c][i].is_finite() && ac[c][i] > 0.0)
+                }),
+            });
+        }
+        objects
+    }
+
+    /// The per-channel loss at `out`'s products of the pixels of `objects` (from
+    /// [`Kernel::refine_objects`]) and of the background's, in this kernel's norm and space, clipped at
+    /// `top`: of every pixel, or (`only`) of those whose entry of `only[group]` is true. Summed per object
+    /// and channel in f64, added in the groups' order: the same value on any number of threads.
+    pub(crate) fn loss_at(
+        &self,
+        objects: &[RefineObject],
+        out: &Solved,
+        proj: &Projection,
+        top: f64,
+        only: Option<&[Vec<bool>]>,
+    ) -> [f64; 3] {
+        let srgb = self.space == Space::Srgb;
+        let counts = |gi: usize, i: usize| only.is_none_or(|m| m[gi][i]);
         let env = |out: &Solved, o: &RefineObject| {
             if o.sky.is_some() {
                 out.environment[o.obj]
@@ -139,7 +161,6 @@ impl Kernel {
                 [0.0; 3]
             }
         };
-        // The loss at the refined products, per object and channel, added in the groups' order.
         let losses: Vec<f64> = (0..objects.len() * 3)
             .into_par_iter()
             .map(|kc| {
@@ -147,6 +168,7 @@ impl Kernel {
                 let (pc, q, ec) = (out.products[o.obj][c], out.specular[o.obj], env(out, o)[c]);
                 let gt = if srgb { &o.g.te[c] } else { &o.g.t[c] };
                 (0..o.b.len())
+                    .filter(|&i| counts(o.index, i))
                     .map(|i| {
                         let m = o.model(c, pc, q, ec, proj.weight[c], i).min(top) as f32;
                         let m = if srgb { SrgbLut::get().encode(m) } else { m };
@@ -155,7 +177,20 @@ impl Kernel {
                     .sum::<f64>()
             })
             .collect();
-        // Background first, as the groups are ordered (objects, then the background).
+        // The background (an ambient-free scene's: black), after the objects as the groups are ordered.
+        let mut acc = [0.0f64; 3];
+        for (gi, g) in self.groups.iter().enumerate() {
+            if g.object.is_some() {
+                continue;
+            }
+            let gt = if srgb { &g.te } else { &g.t };
+            for c in 0..3 {
+                acc[c] += (0..g.len())
+                    .filter(|&i| counts(gi, i))
+                    .map(|i| self.norm.penalty(gt[c][i]) as f64)
+                    .sum::<f64>();
+            }
+        }
         let mut total = [0.0f64; 3];
         for (kc, l) in losses.iter().enumerate() {
             total[kc % 3] += l;
@@ -395,7 +430,11 @@ struct Limits<'a> {
 /// One object's pixels and unit-light factors, for [`Kernel::refine`].
 pub(crate) struct RefineObject<'a> {
     g: &'a Group,
+    /// Its group's index in the kernel.
+    index: usize,
     obj: usize,
+    /// Its pixels the light reaches (unit-light factor > 0).
+    lit: usize,
     /// The diffuse column per channel (the same unit-light factors unless a bounce is folded in).
     a: [&'a [f32]; 3],
     b: &'a [f32],

@@ -95,12 +95,17 @@ pub fn line_to_sphere(oc: [f32; 3], d: [f32; 3], a: f32, r2: f32) -> Chord {
 }
 
 /// Whether the open segment t in (`tmin`, `tmax`) of a line meets a sphere, from the line's [`Chord`]
-/// and a = |d|²: the chord is real and overlaps the range. Branch-free: the one sphere occlusion test, of
-/// the renderer's shadow rays and of the fitness kernel's lanes.
+/// and a = |d|²: the chord mid ± √(disc/a) is real and overlaps the range. Branch-free and without a
+/// square root or a division: with x = mid - tmin, mid + √(disc/a) > tmin holds when x > 0 or
+/// disc > a·x² (both sides of the root's inequality non-negative otherwise), and alike at `tmax`
+/// (an infinite `tmax` passes on its sign). The one sphere occlusion test, of the renderer's shadow rays
+/// and of the fitness kernel's lanes.
 #[inline(always)]
 pub fn segment_meets_sphere(c: Chord, a: f32, (tmin, tmax): (f32, f32)) -> bool {
-    let half = (c.disc / a).sqrt();
-    (c.disc >= 0.0) & (c.mid + half > tmin) & (c.mid - half < tmax)
+    let (below, above) = (c.mid - tmin, tmax - c.mid);
+    (c.disc >= 0.0)
+        & ((below > 0.0) | (c.disc > a * below * below))
+        & ((above > 0.0) | (c.disc > a * above * above))
 }
 
 /// |oc|² - r² for the offset `oc` from a sphere's centre (the power of the point), factored to keep its

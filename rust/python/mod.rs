@@ -41,31 +41,44 @@ fn _kept_pools() -> Vec<Option<usize>> {
     pool::kept_pools()
 }
 
+/// Adds each of the `#[pyfunction]`s to the module `m`.
+macro_rules! add_functions {
+    ($m:expr, [$($f:path),+ $(,)?]) => {
+        $($m.add_function(wrap_pyfunction!($f, $m)?)?;)+
+    };
+}
+
 #[pymodule(gil_used = false)]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyScene>()?;
     m.add_class::<OptimizeResult>()?;
-    m.add_function(wrap_pyfunction!(render::render, m)?)?;
-    m.add_function(wrap_pyfunction!(lights::fit_lights, m)?)?;
-    m.add_function(wrap_pyfunction!(lights::lights_solve, m)?)?;
-    m.add_function(wrap_pyfunction!(_kept_pools, m)?)?;
-    m.add_function(wrap_pyfunction!(render::object_ids, m)?)?;
-    m.add_function(wrap_pyfunction!(render::render_many, m)?)?;
-    m.add_function(wrap_pyfunction!(render::render_layers, m)?)?;
-    m.add_function(wrap_pyfunction!(render::composite, m)?)?;
-    m.add_function(wrap_pyfunction!(render::save_image, m)?)?;
-    m.add_function(wrap_pyfunction!(projection_blocker, m)?)?;
-    m.add_function(wrap_pyfunction!(constant_term, m)?)?;
-    m.add_function(wrap_pyfunction!(optimize::evaluate, m)?)?;
-    m.add_function(wrap_pyfunction!(optimize::optimize, m)?)?;
-    m.add_function(wrap_pyfunction!(uncertainty::fd_columns, m)?)?;
-    m.add_function(wrap_pyfunction!(uncertainty::block_scores, m)?)?;
-    m.add_function(wrap_pyfunction!(uncertainty::footprint_delta, m)?)?;
-    m.add_function(wrap_pyfunction!(render::render_centre_and_footprint, m)?)?;
-    m.add_function(wrap_pyfunction!(uncertainty::order_statistics, m)?)?;
-    m.add_function(wrap_pyfunction!(photo::noise_medians, m)?)?;
-    m.add_function(wrap_pyfunction!(photo::jpeg_phases, m)?)?;
-    m.add_function(wrap_pyfunction!(photo::codes8, m)?)?;
+    add_functions!(
+        m,
+        [
+            render::render,
+            lights::fit_lights,
+            lights::lights_solve,
+            _kept_pools,
+            render::object_ids,
+            render::render_many,
+            render::render_layers,
+            render::composite,
+            render::save_image,
+            projection_blocker,
+            constant_term,
+            optimize::evaluate,
+            optimize::optimize,
+            optimize::held_out,
+            uncertainty::fd_columns,
+            uncertainty::block_scores,
+            uncertainty::footprint_delta,
+            render::render_centre_and_footprint,
+            uncertainty::order_statistics,
+            photo::noise_medians,
+            photo::jpeg_phases,
+            photo::codes8
+        ]
+    );
     m.add("RtloopError", m.py().get_type::<RtloopError>())?;
     m.add("SceneError", m.py().get_type::<SceneError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

@@ -57,14 +57,9 @@ pub(super) fn evaluate<'py>(
         solve_margin,
     )?;
     let pop = population.as_array();
-    if pop.ncols() != args.layout.bounds.len() {
-        return Err(Error::Value(format!(
-            "population has {} columns; {} parameters",
-            pop.ncols(),
-            args.layout.bounds.len()
-        ))
-        .into());
-    }
+    parameters_match(pop.ncols(), args.layout.bounds.len(), || {
+        format!("population has {} columns", pop.ncols())
+    })?;
     let rows: Vec<Vec<f64>> = pop.rows().into_iter().map(|r| r.to_vec()).collect();
     let out = detach_in_pool(py, threads, || {
         let mut fitness = args.build(scene)?;
@@ -80,6 +75,14 @@ pub(super) fn evaluate<'py>(
     })??;
     let (out, nobj) = out;
     PyArray1::from_vec(py, out).reshape([rows.len(), nobj])
+}
+
+/// An error "`what()`; `want` parameters" unless `got` == `want`.
+fn parameters_match(got: usize, want: usize, what: impl FnOnce() -> String) -> PyResult<()> {
+    if got != want {
+        return Err(Error::Value(format!("{}; {want} parameters", what())).into());
+    }
+    Ok(())
 }
 
 /// Search the fitness of `paths` against `target` with DE/rand/1/bin (`method="de"`) or L-SHADE
@@ -214,4 +217,81 @@ pub(super) fn optimize<'py>(
         return Err(e);
     }
     Ok(OptimizeResult { result, history })
+}
+
+/// Held-out losses of the closed form of `target` at the light `x` (one value per parameter of `paths`):
+/// the pixels (`pixels`, default all) split into folds by `folds` (uint8, one label per pixel of
+/// `pixels`; labels 0..K-1), and per fold the loss of its pixels at the products solved on the other folds' pixels, in the
+/// fit's `norm` and `space` (`Fitness::held_out`). `refine`: the products minimise the fit's own loss on
+/// those pixels, else least squares (a bounce's fixed point as `evaluate` solves it). The arguments
+/// otherwise as `evaluate`'s with `loss="l1_projected"`. Returns float64 (K, 2): per fold the held-out
+/// loss and its number of pixels (the fixed background's left out).
+#[pyfunction]
+#[pyo3(signature = (scene, target, x, folds, paths, pixels=None, clip=true, threads=None,
+                    product_bounds=None, norm="l1", space="linear", saturated=None, refine=true))]
+#[allow(clippy::too_many_arguments)]
+pub(super) fn held_out<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyScene>,
+    target: PyReadonlyArray3<'py, f32>,
+    x: PyReadonlyArray1<'py, f64>,
+    folds: PyReadonlyArray1<'py, u8>,
+    paths: Vec<String>,
+    pixels: Option<PyReadonlyArray1<'py, u32>>,
+    clip: bool,
+    threads: Option<usize>,
+    product_bounds: Option<PyReadonlyArray3<'py, f64>>,
+    norm: &str,
+    space: &str,
+    saturated: Option<f32>,
+    refine: bool,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let scene = &scene.get().0;
+    let n = (scene.width * scene.height) as usize;
+    let chosen: Vec<u32> = match &pixels {
+        Some(p) => p.as_slice()?.to_vec(),
+        None => (0..n as u32).collect(),
+    };
+    let labels = folds.as_slice()?;
+    if labels.len() != chosen.len() {
+        return Err(Error::Value(format!(
+            "folds has {} labels; pixels has {} (one label per pixel)",
+            labels.len(),
+            chosen.len()
+        ))
+        .into());
+    }
+    if labels.contains(&u8::MAX) {
+        return Err(Error::Value("folds: labels must be below 255".into()).into());
+    }
+    let count = labels.iter().map(|&l| l as usize + 1).max().unwrap_or(0);
+    let args = fitness_args(
+        scene,
+        &paths,
+        &target,
+        pixels,
+        "l1_projected",
+        clip,
+        product_bounds,
+        norm,
+        space,
+        false,
+        saturated,
+        0,
+    )?;
+    let x = x.as_slice()?.to_vec();
+    parameters_match(x.len(), args.layout.bounds.len(), || {
+        format!("x has {} values", x.len())
+    })?;
+    let mut dense = vec![u8::MAX; n];
+    for (&p, &l) in chosen.iter().zip(labels) {
+        if let Some(d) = dense.get_mut(p as usize) {
+            *d = l;
+        }
+    }
+    let out = detach_in_pool(py, threads, || {
+        args.build(scene)?.held_out(&x, &dense, count, refine)
+    })??;
+    let flat: Vec<f64> = out.iter().flat_map(|h| [h.loss, h.pixels as f64]).collect();
+    PyArray1::from_vec(py, flat).reshape([count, 2])
 }

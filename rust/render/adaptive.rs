@@ -21,7 +21,7 @@ use rayon::prelude::*;
 
 use super::camera::sample_offsets;
 use super::hit::Geometry;
-use super::shade::{shade_shadowed, ShadeParams};
+use super::shade::{Pixel, ShadeParams, Shading};
 use crate::error::{Error, Result};
 use crate::scene::Scene;
 
@@ -101,7 +101,8 @@ impl Layer {
     #[inline]
     fn sample(&self, px: f32, py: f32, width: u32, height: u32) -> Sample {
         let s = self.geometry.primary(px, py, width, height);
-        let (rgb, shadowed) = shade_shadowed(&s, &self.params, &self.geometry.shapes, self.shadows);
+        let shading = Shading::new(&self.params, &self.geometry.shapes, self.shadows);
+        let (rgb, shadowed) = shading.shade(&s, Pixel::default());
         Sample {
             rgb,
             normal: s.normal,

@@ -46,6 +46,17 @@ impl RectAxes {
             normal: n.as_vec3a(),
         }
     }
+
+    /// The same rectangle with its width and height set to `size` (metres; each at least
+    /// `scene::MIN_SIZE`), its centre and orientation kept.
+    pub fn resized(&self, size: [f64; 2]) -> RectAxes {
+        use crate::scene::positive_size;
+        RectAxes {
+            half_u: self.half_u.normalize_or_zero() * (0.5 * positive_size(size[0])) as f32,
+            half_v: self.half_v.normalize_or_zero() * (0.5 * positive_size(size[1])) as f32,
+            normal: self.normal,
+        }
+    }
 }
 
 /// A light in working form.

@@ -30,7 +30,7 @@ pub use camera::{sample_offsets, CameraFrame};
 pub use composite::composite;
 pub use film::{linear_to_srgb, save_srgb8, to_srgb8, Image};
 pub use hit::{closest_hit, occluded, GBuffer, Geometry, Surfel};
-pub use shade::{shade, shade_pixel, shade_shadowed, ShadeParams};
+pub use shade::{shade, Pixel, ShadeParams, Shading};
 pub use shape::PShape;
 
 /// Render `scene` at `width` x `height` (the scene's own size when `None`) with `spp` samples per pixel
@@ -323,14 +323,12 @@ impl Frame {
             .cache
             .as_ref()
             .map(|c| c.pixel(j as usize * width as usize + i as usize));
-        shade::shade_pixel_cached(
-            s,
-            axes.as_ref(),
-            &self.params,
-            &self.geometry.shapes,
-            self.shadows,
+        let pixel = Pixel {
+            footprint: axes.as_ref(),
             gathered,
-        )
+            sky: None,
+        };
+        self.shading().shade(s, pixel).0
     }
 
     /// Pixel (i, j) of a one-sample frame at its centre and over its footprint (the frame's, where it
@@ -354,14 +352,12 @@ impl Frame {
             .cache
             .as_ref()
             .map(|c| c.pixel(j as usize * self.width as usize + i as usize));
-        let (c, f) = shade::shade_pixel_pair(
-            &s,
-            axes.as_ref(),
-            &self.params,
-            &self.geometry.shapes,
-            self.shadows,
+        let pixel = Pixel {
+            footprint: axes.as_ref(),
             gathered,
-        );
+            sky: None,
+        };
+        let (c, f) = self.shading().shade_pair(&s, pixel);
         // as `pixel` sums its one sample into zero
         let (mut sc, mut sf) = (Vec3A::ZERO, Vec3A::ZERO);
         sc += c;
@@ -379,27 +375,31 @@ impl Frame {
         let samples = footprint::silhouette_samples(&g.camera, &g.shapes, ids, at)?;
         let mut sum = Vec3A::ZERO;
         for s in &samples {
-            sum += shade::shade_pixel_cached(s, None, &self.params, &g.shapes, self.shadows, None);
+            sum += self.shading().shade(s, Pixel::default()).0;
         }
         Some((sum * (1.0 / samples.len() as f32)).min(Vec3A::splat(f32::MAX)))
     }
 
     /// [`Frame::sample`] without the footprint (one sample per pixel), the sky view kept in `sky`
-    /// ([`shade::shade_pixel_sky`]).
+    /// ([`Pixel::sky`]).
     fn sample_sky(&self, s: &Surfel, i: u32, j: u32, sky: &mut Option<f32>) -> Vec3A {
         debug_assert!(!self.footprint);
         let gathered = self
             .cache
             .as_ref()
             .map(|c| c.pixel(j as usize * self.width as usize + i as usize));
-        shade::shade_pixel_sky(
-            s,
-            &self.params,
-            &self.geometry.shapes,
-            self.shadows,
+        let pixel = Pixel {
+            footprint: None,
             gathered,
-            sky,
-        )
+            sky: Some(sky),
+        };
+        self.shading().shade(s, pixel).0
+    }
+
+    /// How this frame shades its surfels.
+    #[inline(always)]
+    fn shading(&self) -> Shading<'_> {
+        Shading::new(&self.params, &self.geometry.shapes, self.shadows)
     }
 
     /// A pixel's value from the sum of its samples' radiance: their mean, finite.
@@ -483,7 +483,13 @@ mod tests {
                     let shape = &geometry.shapes[s.object as usize];
                     footprint::axes(&geometry.camera, &s, shape, (i, j), (w, h))
                 });
-                let v = shade_pixel(&s, axes.as_ref(), &params, &geometry.shapes, true);
+                let pixel = Pixel {
+                    footprint: axes.as_ref(),
+                    ..Pixel::default()
+                };
+                let v = Shading::new(&params, &geometry.shapes, true)
+                    .shade(&s, pixel)
+                    .0;
                 out.extend_from_slice(&v.min(Vec3A::splat(f32::MAX)).to_array());
             }
         }

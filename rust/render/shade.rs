@@ -74,33 +74,24 @@ impl Clone for ShadeParams {
         p
     }
 
-    /// Reuses `self.materials`' allocation: the fitness hot path calls this once per candidate.
+    /// Reuses the vectors' allocations: the fitness hot path calls this once per candidate.
     fn clone_from(&mut self, source: &Self) {
-        self.light_position = source.light_position;
-        self.light_direction = source.light_direction;
-        self.light_intensity = source.light_intensity;
-        self.light_color = source.light_color;
-        self.light_rgb = source.light_rgb;
-        self.light_radius = source.light_radius;
-        self.light_rect = source.light_rect;
-        if !source.extra_lights.is_empty() || !self.extra_lights.is_empty() {
-            self.extra_lights.clone_from(&source.extra_lights);
-        }
-        self.ambient = source.ambient;
-        self.environment = source.environment;
-        self.interreflection = source.interreflection;
-        self.background = source.background;
-        self.exposure = source.exposure;
-        self.any_specular = source.any_specular;
-        self.materials.clear();
-        self.materials.extend_from_slice(&source.materials);
-        if !source.tables.is_empty() || !self.tables.is_empty() {
-            self.tables.clone_from(&source.tables);
-        }
-        if !source.coats.is_empty() || !self.coats.is_empty() {
-            self.coats.clone_from(&source.coats);
-        }
+        *self = ShadeParams {
+            materials: refill(std::mem::take(&mut self.materials), &source.materials),
+            tables: refill(std::mem::take(&mut self.tables), &source.tables),
+            extra_lights: refill(std::mem::take(&mut self.extra_lights), &source.extra_lights),
+            coats: refill(std::mem::take(&mut self.coats), &source.coats),
+            ..*source
+        };
     }
+}
+
+/// `into` made a copy of `from` in `into`'s allocation (nothing to do when both are empty).
+fn refill<T: Clone>(mut into: Vec<T>, from: &Vec<T>) -> Vec<T> {
+    if !from.is_empty() || !into.is_empty() {
+        into.clone_from(from);
+    }
+    into
 }
 
 /// Per object its coat, or empty when no object has one.
@@ -253,6 +244,15 @@ impl ShadeParams {
             Target::ExtraColor(i) => self.extra_lights[i - 1].color = v3(),
             Target::Radius(0) => self.light_radius = v[0].max(0.0) as f32,
             Target::Radius(i) => self.extra_lights[i - 1].radius = v[0].max(0.0) as f32,
+            Target::Size(i) => {
+                let rect = match i {
+                    0 => &mut self.light_rect,
+                    _ => &mut self.extra_lights[i - 1].rect,
+                };
+                if let Some(r) = rect {
+                    *r = r.resized([v[0], v[1]]);
+                }
+            }
         }
         self.light_rgb = self.light_color * self.light_intensity;
     }
@@ -322,102 +322,88 @@ fn sender_radiance_with(
 /// Exposure-scaled radiance towards the eye at surfel `s` (the background for a miss).
 #[inline]
 pub fn shade(s: &Surfel, p: &ShadeParams, shapes: &[PShape], shadows: bool) -> Vec3A {
-    shade_full(s, None, p, shapes, shadows, None, &mut None).0
+    Shading::new(p, shapes, shadows)
+        .shade(s, Pixel::default())
+        .0
 }
 
-/// [`shade`], and whether the light faces the point but a shadow ray found it blocked.
-#[inline(always)]
-pub fn shade_shadowed(
-    s: &Surfel,
-    p: &ShadeParams,
-    shapes: &[PShape],
-    shadows: bool,
-) -> (Vec3A, bool) {
-    shade_full(s, None, p, shapes, shadows, None, &mut None)
+/// What shading a scene's surfels takes: its parameters, its shapes, and whether shadow rays are traced.
+#[derive(Clone, Copy)]
+pub struct Shading<'a> {
+    pub params: &'a ShadeParams,
+    pub shapes: &'a [PShape],
+    pub shadows: bool,
 }
 
-/// [`shade`] with the pixel's `footprint` on the surface (`footprint::axes`): a sphere's shadow edge and
-/// a sphere's own terminator are averaged over the pixel (`footprint::sphere_edge_lit`,
-/// `footprint::terminator_cos`), as the fitness does.
-#[inline]
-pub fn shade_pixel(
-    s: &Surfel,
-    footprint: Option<&[Vec3A; 2]>,
-    p: &ShadeParams,
-    shapes: &[PShape],
-    shadows: bool,
-) -> Vec3A {
-    shade_full(s, footprint, p, shapes, shadows, None, &mut None).0
+/// What a pixel adds to the shading of its surfel, each part optional: `Pixel::default()` shades the
+/// surfel alone, as [`shade`] does.
+#[derive(Default)]
+pub struct Pixel<'a> {
+    /// The pixel's footprint on the surface (`footprint::axes`): a sphere's shadow edge and a sphere's own
+    /// terminator are averaged over the pixel (`footprint::sphere_edge_lit`, `footprint::terminator_cos`),
+    /// as the fitness does.
+    pub footprint: Option<&'a [Vec3A; 2]>,
+    /// The pixel's gather points from a render's cache (`bounce::Gathered::pixel`); `None` gathers them:
+    /// the same value.
+    pub gathered: Option<&'a [CachedPoint]>,
+    /// Where the surfel's sky view (`environment::sky_view`, which depends on the surfaces alone) is kept:
+    /// computed where the environment needs it and the kept value is None, else taken from it, so that
+    /// scenes sharing a surfel compute it once (the same values bit for bit); `None` keeps it nowhere.
+    pub sky: Option<&'a mut Option<f32>>,
 }
 
-/// [`shade_pixel`] with the pixel's gather points from a render's cache (`bounce::Gathered::pixel`),
-/// `None` to gather them: the same value.
-#[inline]
-pub fn shade_pixel_cached(
-    s: &Surfel,
-    footprint: Option<&[Vec3A; 2]>,
-    p: &ShadeParams,
-    shapes: &[PShape],
-    shadows: bool,
-    gathered: Option<&[CachedPoint]>,
-) -> Vec3A {
-    shade_full(s, footprint, p, shapes, shadows, gathered, &mut None).0
-}
-
-/// [`shade_pixel_cached`] with the surfel's sky view (`environment::sky_view`, which depends on the
-/// surfaces alone) kept in `sky`: computed where the environment needs it and `sky` is None, else taken
-/// from it, so that scenes sharing a surfel compute it once. The same values bit for bit.
-pub fn shade_pixel_sky(
-    s: &Surfel,
-    p: &ShadeParams,
-    shapes: &[PShape],
-    shadows: bool,
-    gathered: Option<&[CachedPoint]>,
-    sky: &mut Option<f32>,
-) -> Vec3A {
-    shade_full(s, None, p, shapes, shadows, gathered, sky).0
-}
-
-/// [`shade_pixel`], and whether the light faces the point but is (partly) blocked.
-#[inline(always)]
-fn shade_full(
-    s: &Surfel,
-    footprint: Option<&[Vec3A; 2]>,
-    p: &ShadeParams,
-    shapes: &[PShape],
-    shadows: bool,
-    gathered: Option<&[CachedPoint]>,
-    sky: &mut Option<f32>,
-) -> (Vec3A, bool) {
-    if s.object == u32::MAX {
-        return (p.exposure * p.background, false);
+impl<'a> Shading<'a> {
+    /// Shading with `params` among `shapes`, tracing shadow rays where `shadows`.
+    #[inline(always)]
+    pub fn new(params: &'a ShadeParams, shapes: &'a [PShape], shadows: bool) -> Self {
+        Shading {
+            params,
+            shapes,
+            shadows,
+        }
     }
-    let l = indirect(s, p, shapes, gathered, sky);
-    direct(s, footprint, p, shapes, shadows, l)
-}
 
-/// [`shade_pixel_cached`] of one surfel at its pixel centre and over its `footprint`, the light that does
-/// not depend on the footprint (ambient, environment, the bounce) gathered once: the same two values, bit
-/// for bit, as the two calls.
-pub fn shade_pixel_pair(
-    s: &Surfel,
-    footprint: Option<&[Vec3A; 2]>,
-    p: &ShadeParams,
-    shapes: &[PShape],
-    shadows: bool,
-    gathered: Option<&[CachedPoint]>,
-) -> (Vec3A, Vec3A) {
-    if s.object == u32::MAX {
-        let bg = p.exposure * p.background;
-        return (bg, bg);
+    /// [`shade`] at a `pixel` (its footprint, its cached gathers, its kept sky view), and whether the light
+    /// faces the point but a shadow ray found it (partly) blocked.
+    #[inline(always)]
+    pub fn shade(&self, s: &Surfel, pixel: Pixel<'_>) -> (Vec3A, bool) {
+        let footprint = pixel.footprint;
+        match self.indirect_at(s, pixel) {
+            Ok(l) => direct(s, footprint, self.params, self.shapes, self.shadows, l),
+            Err(background) => (background, false),
+        }
     }
-    let l = indirect(s, p, shapes, gathered, &mut None);
-    let centre = direct(s, None, p, shapes, shadows, l).0;
-    let over = match footprint {
-        Some(_) => direct(s, footprint, p, shapes, shadows, l).0,
-        None => centre,
-    };
-    (centre, over)
+
+    /// [`Shading::shade`] of one surfel at its pixel centre and over the `pixel`'s footprint, the light
+    /// that does not depend on the footprint (ambient, environment, the bounce) gathered once: the same two
+    /// values, bit for bit, as the two calls.
+    pub fn shade_pair(&self, s: &Surfel, pixel: Pixel<'_>) -> (Vec3A, Vec3A) {
+        let footprint = pixel.footprint;
+        let l = match self.indirect_at(s, pixel) {
+            Ok(l) => l,
+            Err(background) => return (background, background),
+        };
+        let (p, shapes, shadows) = (self.params, self.shapes, self.shadows);
+        let centre = direct(s, None, p, shapes, shadows, l).0;
+        let over = match footprint {
+            Some(_) => direct(s, footprint, p, shapes, shadows, l).0,
+            None => centre,
+        };
+        (centre, over)
+    }
+
+    /// The `indirect` light at `s` (the `pixel`'s gathers and kept sky view used), or `Err` with the
+    /// exposure-scaled background for a miss.
+    #[inline(always)]
+    fn indirect_at(&self, s: &Surfel, pixel: Pixel<'_>) -> Result<Vec3A, Vec3A> {
+        let p = self.params;
+        if s.object == u32::MAX {
+            return Err(p.exposure * p.background);
+        }
+        let mut sky = None;
+        let sky = pixel.sky.unwrap_or(&mut sky);
+        Ok(indirect(s, p, self.shapes, pixel.gathered, sky))
+    }
 }
 
 /// The light at an object's surfel (not the background) that does not come straight from the light:

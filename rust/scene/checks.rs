@@ -17,45 +17,43 @@ pub(super) fn finite(field: &str, v: f64) -> Result<f64> {
 }
 
 pub(super) fn finite_upto(field: &str, v: f64, limit: f64) -> Result<f64> {
-    if !v.is_finite() {
-        Err(Error::scene(
-            field,
-            format!("must be a finite number (got {v})"),
-        ))
-    } else if v.abs() > limit {
-        Err(Error::scene(
-            field,
-            format!("must be within +-{limit:e} (got {v:e})"),
-        ))
-    } else {
-        Ok(v)
+    match out_of_range(v, limit) {
+        Some(why) => Err(Error::scene(field, why)),
+        None => Ok(v),
     }
+}
+
+/// Why `v` is not a finite number within +-`limit`, if it is not.
+fn out_of_range(v: f64, limit: f64) -> Option<String> {
+    if !v.is_finite() {
+        Some(format!("must be a finite number (got {v})"))
+    } else if v.abs() > limit {
+        Some(format!("must be within +-{limit:e} (got {v:e})"))
+    } else {
+        None
+    }
+}
+
+/// Every component finite, then every one within +-`limit`; the error names the first component that
+/// is not.
+fn components_upto(field: &str, v: V3, limit: f64) -> Result<V3> {
+    for bound in [f64::INFINITY, limit] {
+        for (k, c) in v.iter().enumerate() {
+            if let Some(why) = out_of_range(*c, bound) {
+                return Err(Error::scene(field, format!("component {k} {why}")));
+            }
+        }
+    }
+    Ok(v)
 }
 
 /// Finite components of any size: a direction (only its orientation is used).
 pub(super) fn finite_direction(field: &str, v: V3) -> Result<V3> {
-    for (k, c) in v.iter().enumerate() {
-        if !c.is_finite() {
-            return Err(Error::scene(
-                field,
-                format!("component {k} must be a finite number (got {c})"),
-            ));
-        }
-    }
-    Ok(v)
+    components_upto(field, v, f64::INFINITY)
 }
 
 pub(super) fn finite3(field: &str, v: V3) -> Result<V3> {
-    let v = finite_direction(field, v)?;
-    for (k, c) in v.iter().enumerate() {
-        if c.abs() > MAX_MAGNITUDE {
-            return Err(Error::scene(
-                field,
-                format!("component {k} must be within +-{MAX_MAGNITUDE:e} (got {c:e})"),
-            ));
-        }
-    }
-    Ok(v)
+    components_upto(field, v, MAX_MAGNITUDE)
 }
 
 pub(super) fn nonneg3(field: &str, v: V3) -> Result<V3> {

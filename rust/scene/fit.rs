@@ -51,6 +51,9 @@ fn bound_values(field: &str, v: Option<&Value>, len: usize, limit: f64) -> Resul
         .collect()
 }
 
+/// The largest rectangle light side a fit may search (metres): a wall of windows, not a sky.
+pub const MAX_SIZE: f64 = 100.0;
+
 pub(super) fn parse_fit_entry(scene: &Scene, path: &str, bounds: &Value) -> Result<FitParam> {
     let field = format!("fit[{path:?}]");
     let target = Target::parse(path, scene).map_err(|m| Error::scene(&field, m))?;
@@ -85,6 +88,15 @@ pub(super) fn parse_fit_entry(scene: &Scene, path: &str, bounds: &Value) -> Resu
             return Err(Error::scene(
                 format!("{field}.min"),
                 format!("must be > 0 for exposure (got {})", min[k]),
+            ));
+        }
+        if matches!(target, Target::Size(_)) && !(min[k] > 0.0 && max[k] <= MAX_SIZE) {
+            return Err(Error::scene(
+                &field,
+                format!(
+                    "a rectangle light's width and height must be within (0, {MAX_SIZE}] m (got {} to {})",
+                    min[k], max[k]
+                ),
             ));
         }
         if let Some(lo) = target.lower_limit() {

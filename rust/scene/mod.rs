@@ -22,7 +22,7 @@ pub(crate) use checks::{norm, unit};
 pub use checks::{MAX_INTENSITY, MAX_MAGNITUDE};
 use fit::parse_fit_entry;
 pub use lights::{PointLight, RectLight};
-pub use target::{Target, FITTABLE};
+pub use target::{positive_size, Target, FITTABLE, MIN_SIZE};
 
 use std::path::Path;
 use std::sync::Arc;

@@ -27,6 +27,8 @@ pub enum Target {
     ExtraColor(usize),
     /// A sphere light's radius (any index).
     Radius(usize),
+    /// A rectangle light's size, width and height in metres (any index).
+    Size(usize),
 }
 
 /// The fittable paths, for error messages and documentation.
@@ -34,7 +36,7 @@ pub const FITTABLE: &str = "light.position (point light), light.direction (direc
 light.intensity, light.color, ambient, environment, exposure, \
 objects.NAME.albedo, objects.NAME.specular, objects.NAME.shininess, \
 objects.NAME.roughness (coated), lights.NAME.position, lights.NAME.direction, lights.NAME.intensity, lights.NAME.color, \
-lights.NAME.radius (sphere light; a rectangle light's position is its centre)";
+lights.NAME.radius (sphere light), lights.NAME.size (rectangle light: [width, height]; its position is its centre)";
 
 impl Target {
     /// Parse a dotted path such as `objects.ball.albedo`. The error is a bare reason; the caller adds the field.
@@ -105,6 +107,7 @@ impl Target {
             | Target::ExtraPosition(_)
             | Target::ExtraDirection(_)
             | Target::ExtraColor(_) => 3,
+            Target::Size(_) => 2,
             Target::ExtraIntensity(_)
             | Target::Radius(_)
             | Target::LightIntensity
@@ -132,6 +135,7 @@ impl Target {
             Target::ExtraIntensity(i) => (0, i, 1),
             Target::ExtraColor(i) => (0, i, 2),
             Target::Radius(i) => (0, i, 3),
+            Target::Size(i) => (0, i, 4),
         }
     }
 
@@ -157,6 +161,7 @@ impl Target {
                 | Target::ExtraPosition(_)
                 | Target::ExtraDirection(_)
                 | Target::Radius(_)
+                | Target::Size(_)
         )
     }
 
@@ -201,6 +206,10 @@ impl Target {
             Target::ExtraIntensity(i) => vec![scene.light_at(i).intensity],
             Target::ExtraColor(i) => scene.light_at(i).color.to_vec(),
             Target::Radius(i) => vec![scene.light_at(i).radius],
+            Target::Size(i) => scene
+                .light_at(i)
+                .rect
+                .map_or(vec![0.0, 0.0], |r| r.size.to_vec()),
         }
     }
 
@@ -229,7 +238,24 @@ impl Target {
             Target::ExtraIntensity(i) => scene.light_at_mut(i).intensity = v[0],
             Target::ExtraColor(i) => scene.light_at_mut(i).color = v3(),
             Target::Radius(i) => scene.light_at_mut(i).radius = v[0].max(0.0),
+            Target::Size(i) => {
+                if let Some(r) = &mut scene.light_at_mut(i).rect {
+                    r.size = [positive_size(v[0]), positive_size(v[1])];
+                }
+            }
         }
+    }
+}
+
+/// The smallest rectangle side a fit writes (metres): a scene's size must stay > 0.
+pub const MIN_SIZE: f64 = 1e-6;
+
+/// A rectangle light's side as a fit writes it: at least `MIN_SIZE` (NaN too).
+pub fn positive_size(v: f64) -> f64 {
+    if v >= MIN_SIZE {
+        v
+    } else {
+        MIN_SIZE
     }
 }
 
@@ -275,6 +301,12 @@ fn parse_light_path(path: &str, scene: &Scene) -> std::result::Result<Target, St
         ("radius", _) if l.radius <= 0.0 => {
             return Err(format!("light {:?} is not a sphere light: it has no radius", parts[1]))
         }
+        ("size", _) if l.rect.is_none() => {
+            return Err(format!(
+                "light {:?} is not a rectangle light: it has no size",
+                parts[1]
+            ))
+        }
         ("position", 0) => Target::LightPosition,
         ("direction", 0) => Target::LightDirection,
         ("intensity", 0) => Target::LightIntensity,
@@ -284,9 +316,10 @@ fn parse_light_path(path: &str, scene: &Scene) -> std::result::Result<Target, St
         ("intensity", _) => Target::ExtraIntensity(i),
         ("color", _) => Target::ExtraColor(i),
         ("radius", _) => Target::Radius(i),
+        ("size", _) => Target::Size(i),
         (other, _) => {
             return Err(format!(
-                "lights.{}.{other} cannot be fitted (fittable per light: position, direction, intensity, color, radius)",
+                "lights.{}.{other} cannot be fitted (fittable per light: position, direction, intensity, color, radius, size)",
                 parts[1]
             ))
         }

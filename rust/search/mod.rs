@@ -203,7 +203,7 @@ where
 }
 
 /// [`run`], with a method's final polish on `polish_obj` where given (see
-/// [`lshade::minimize_polishing`]; DE/rand/1/bin has no polish and ignores it), and L-SHADE's initial
+/// [`lshade::minimize_polishing_from`]; DE/rand/1/bin has no polish and ignores it), and L-SHADE's initial
 /// population holding `start` where given ([`lshade::minimize_polishing_from`]; DE/rand/1/bin, the
 /// paper's method, takes none).
 pub fn run_polishing<O, P, C>(

@@ -154,20 +154,11 @@ mod tests {
     fn bad_configuration_is_an_error_not_a_panic() {
         let f = |x: &[f64]| x[0];
         let b = [(0.0, 1.0)];
-        for cfg in [
-            DeConfig {
-                population: 3,
-                ..Default::default()
-            },
-            DeConfig {
-                f: 0.0,
-                ..Default::default()
-            },
-            DeConfig {
-                cr: 1.5,
-                ..Default::default()
-            },
-        ] {
+        // One field out of its range each, the others default.
+        let bad: [fn(&mut DeConfig); 3] = [|c| c.population = 3, |c| c.f = 0.0, |c| c.cr = 1.5];
+        for set in bad {
+            let mut cfg = DeConfig::default();
+            set(&mut cfg);
             assert!(minimize(&f, &b, &cfg, |_| true).is_err());
         }
         assert!(minimize(&f, &[(1.0, 0.0)], &DeConfig::default(), |_| true).is_err());

@@ -5,7 +5,7 @@
 use glam::Vec3A;
 use rtloop::fitness::{fallback_sums, solve_object, SolveSums, SATURATED};
 use rtloop::render::film::srgb_encode_exact;
-use rtloop::render::shade_pixel as shade;
+use rtloop::render::{Pixel, Shading};
 use rtloop::{Fitness, Space};
 
 /// `Fitness::reference_channel_losses(x)`: the oracle as a method, so tests read as before.
@@ -36,8 +36,11 @@ fn exact_penalty(f: &Fitness, m: Vec3A, t: Vec3A) -> [f64; 3] {
 pub fn reference_channel_losses(f: &Fitness, x: &[f64]) -> [f64; 3] {
     let p = f.params(x);
     let (active, (shapes, shadows), clip) = (f.active(), f.shapes(), f.clip());
-    // Each pixel's footprint where the fitness has one (the same formulas, pixel by pixel).
-    let foot = |i: usize| active.footprint.get(i);
+    // Each pixel with its footprint where the fitness has one (the same formulas, pixel by pixel).
+    let pixel = |i: usize| Pixel {
+        footprint: active.footprint.get(i),
+        ..Pixel::default()
+    };
     let mut acc = [0.0f64; 3];
     for &(m, t) in &active.fixed {
         let l = exact_penalty(f, m, t);
@@ -54,7 +57,7 @@ pub fn reference_channel_losses(f: &Fitness, x: &[f64]) -> [f64; 3] {
             .surfels
             .iter()
             .enumerate()
-            .map(|(i, s)| shade(s, foot(i), &p, shapes, shadows).x)
+            .map(|(i, s)| Shading::new(&p, shapes, shadows).shade(s, pixel(i)).0.x)
             .collect();
         let b: Vec<f32> = active
             .surfels
@@ -69,7 +72,7 @@ pub fn reference_channel_losses(f: &Fitness, x: &[f64]) -> [f64; 3] {
                 q.materials[k].albedo = Vec3A::ZERO;
                 q.materials[k].specular = 1.0;
                 q.any_specular = true;
-                shade(s, foot(i), &q, shapes, shadows).x
+                Shading::new(&q, shapes, shadows).shade(s, pixel(i)).0.x
             })
             .collect();
         let sat = if clip { SATURATED } else { f32::INFINITY };
@@ -127,7 +130,7 @@ pub fn reference_channel_losses(f: &Fitness, x: &[f64]) -> [f64; 3] {
         return acc;
     }
     for (i, (s, t)) in active.surfels.iter().zip(&active.targets).enumerate() {
-        let m = shade(s, foot(i), &p, shapes, shadows);
+        let m = Shading::new(&p, shapes, shadows).shade(s, pixel(i)).0;
         let l = exact_penalty(f, if clip { m.min(Vec3A::ONE) } else { m }, *t);
         for c in 0..3 {
             acc[c] += l[c];

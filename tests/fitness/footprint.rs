@@ -128,7 +128,7 @@ fn pixel_footprint_matches_a_supersampled_render_at_shadow_edges_and_terminators
 
 #[test]
 fn footprint_render_is_what_the_footprint_fitness_models() {
-    // The renderer (`shade_pixel`, pixel by pixel) and the kernel (blocked, with its cheap edge bound)
+    // The renderer (`Shading::shade`, pixel by pixel) and the kernel (blocked, with its cheap edge bound)
     // call the same footprint formulas: at the true scene the loss against the footprint render vanishes.
     for (light, sun) in [([2.5, 2.2, 0.8], false), ([0.7, 0.5, 0.2], true)] {
         let scene = edge_scene(light, sun);

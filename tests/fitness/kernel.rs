@@ -18,16 +18,9 @@ fn kernel_matches_the_plain_path_on_random_scenes() {
             let f = fitness(&scene, &layout, &target, kind, true);
             for _ in 0..6 {
                 let x = random_candidate(&mut rng, &layout);
-                let fast = f.channel_losses(&x);
-                let slow = f.reference_channel_losses(&x);
-                for c in 0..3 {
-                    // Shadow-boundary pixels may flip between the two shadow tests; each flip moves a sum
-                    // of ~thousands of terms by at most one pixel value.
-                    assert!(
-                        close(fast[c], slow[c], 2e-3),
-                        "trial {trial} {kind:?} channel {c}: {fast:?} vs {slow:?}"
-                    );
-                }
+                // Shadow-boundary pixels may flip between the two shadow tests; each flip moves a sum of
+                // ~thousands of terms by at most one pixel value.
+                assert_matches_reference(&f, &x, (2e-3, 0.0), &format!("trial {trial} {kind:?}"));
                 let mut out = vec![0.0; f.n_objectives()];
                 f.evaluate(&x, &mut out);
                 assert!(out.iter().all(|v| v.is_finite()));
@@ -56,10 +49,7 @@ fn kernel_agrees_exactly_where_no_shadow_boundary_exists() {
     let mut rng = Rng::new(3);
     for _ in 0..20 {
         let x = random_candidate(&mut rng, &layout);
-        let (a, b) = (f.channel_losses(&x), f.reference_channel_losses(&x));
-        for c in 0..3 {
-            assert!(close(a[c], b[c], 1e-5), "{a:?} vs {b:?}");
-        }
+        assert_matches_reference(&f, &x, (1e-5, 0.0), "candidate");
     }
 }
 
@@ -73,16 +63,12 @@ fn projected_kernel_matches_the_plain_solve() {
         let f = matte_projected(&scene, layout.clone(), &target, true);
         for _ in 0..6 {
             let x = random_candidate(&mut rng, &layout);
-            let (a, b) = (f.channel_losses(&x), f.reference_channel_losses(&x));
-            for c in 0..3 {
-                assert!(close(a[c], b[c], 2e-3), "trial {trial}: {a:?} vs {b:?}");
-            }
+            assert_matches_reference(&f, &x, (2e-3, 0.0), &format!("trial {trial}"));
         }
         // At the true light the projected loss vanishes (up to float rounding).
         let truth: Vec<f64> = scene.light.position.to_vec();
-        let at_truth: f64 = f.channel_losses(&truth).iter().sum();
         eprintln!(
-            "trial {trial}: at truth {at_truth} ref {:?} products {:?} light {:?} objs {:?}",
+            "trial {trial}: at truth ref {:?} products {:?} light {:?} objs {:?}",
             f.reference_channel_losses(&truth),
             f.products(&truth),
             scene.light.position,
@@ -92,10 +78,8 @@ fn projected_kernel_matches_the_plain_solve() {
                 .map(|o| o.shape.clone())
                 .collect::<Vec<_>>()
         );
-        assert!(
-            at_truth < 1e-5 * (scene.width * scene.height) as f64,
-            "{at_truth}"
-        );
+        let pixels = (scene.width * scene.height) as f64;
+        loss_at_truth(&f, &truth, 1e-5 * pixels, &format!("trial {trial}"));
     }
 }
 
@@ -316,10 +300,7 @@ fn every_norm_matches_the_plain_path_and_its_definition() {
         let scene = random_scene(&mut rng, 1 + trial % 3, trial % 2 == 1, false);
         let clean = render(&scene, None, None, 1).unwrap().rgb;
         // A noisy objective, so differences span both sides of the Huber threshold.
-        let target: Vec<f32> = clean
-            .iter()
-            .map(|v| (v + 0.05 * (rng.uniform() as f32 - 0.5)).clamp(0.0, 1.0))
-            .collect();
+        let target = noisy(&clean, &mut rng, 0.05);
         let layout = ParamLayout::all(&scene);
         for norm in [Norm::L1, Norm::L2, Norm::Huber(0.01)] {
             let mut f = fitness(&scene, &layout, &target, LossKind::L1, true);
@@ -386,13 +367,7 @@ fn directional_light_kernel_matches_the_plain_path() {
         let f = fitness(&scene, &layout, &target, LossKind::L1, true);
         for _ in 0..5 {
             let x = random_candidate(&mut rng, &layout);
-            let (fast, slow) = (f.channel_losses(&x), f.reference_channel_losses(&x));
-            for c in 0..3 {
-                assert!(
-                    close(fast[c], slow[c], 2e-3),
-                    "trial {trial}: {fast:?} vs {slow:?}"
-                );
-            }
+            assert_matches_reference(&f, &x, (2e-3, 0.0), &format!("trial {trial}"));
         }
         // At the true parameters the loss vanishes; the direction's length does not matter.
         let mut x = layout.read(&scene);

@@ -32,41 +32,64 @@ pub(crate) fn glossy_fitness(scene: &Scene, target: &[f32]) -> (Fitness, ParamLa
     (f, layout)
 }
 
+/// A random trial of [`glossy_scene`]: its light position, specular `ks`, shininess `s` and intensity, the
+/// scene's clipped render (`target`) and the projected fitness against it ([`glossy_fitness`]).
+pub(crate) struct GlossyTrial {
+    pub light: [f64; 3],
+    pub ks: f64,
+    pub s: f64,
+    pub intensity: f64,
+    pub target: Vec<f32>,
+    pub f: Fitness,
+    pub layout: ParamLayout,
+}
+
+pub(crate) fn glossy_trial(rng: &mut Rng) -> GlossyTrial {
+    let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.uniform();
+    let light = [u(-4.0, 4.0), u(2.0, 6.0), u(-4.0, 1.0)];
+    let (ks, s, intensity) = (u(0.1, 0.6), u(5.0, 120.0), u(20.0, 60.0));
+    let scene = glossy_scene(light, ks, s, intensity);
+    let target: Vec<f32> = clipped_render(&scene);
+    let (f, layout) = glossy_fitness(&scene, &target);
+    GlossyTrial {
+        light,
+        ks,
+        s,
+        intensity,
+        target,
+        f,
+        layout,
+    }
+}
+
 #[test]
 fn projected_kernel_with_a_specular_term_matches_the_plain_solve_and_recovers_the_truth() {
     let mut rng = Rng::new(17);
     for trial in 0..6 {
-        let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.uniform();
-        let light = [u(-4.0, 4.0), u(2.0, 6.0), u(-4.0, 1.0)];
-        let (ks, s, intensity) = (u(0.1, 0.6), u(5.0, 120.0), u(20.0, 60.0));
-        let scene = glossy_scene(light, ks, s, intensity);
-        let target: Vec<f32> = clipped_render(&scene);
-        let (f, layout) = glossy_fitness(&scene, &target);
+        let t = glossy_trial(&mut rng);
         for _ in 0..6 {
-            let x = random_candidate(&mut rng, &layout);
-            let (a, b) = (f.channel_losses(&x), f.reference_channel_losses(&x));
-            for c in 0..3 {
-                assert!(close(a[c], b[c], 2e-3), "trial {trial}: {a:?} vs {b:?}");
-            }
+            let x = random_candidate(&mut rng, &t.layout);
+            assert_matches_reference(&t.f, &x, (2e-3, 0.0), &format!("trial {trial}"));
         }
         // At the truth the loss vanishes and the products are the scene's: Q = intensity x specular,
         // P = exposure x intensity x colour x albedo.
-        let truth = [light[0], light[1], light[2], s];
-        let at_truth: f64 = f.channel_losses(&truth).iter().sum();
-        assert!(
-            at_truth < 2e-5 * (96 * 72) as f64,
-            "trial {trial}: {at_truth}"
+        let truth = [t.light[0], t.light[1], t.light[2], t.s];
+        let at_truth = loss_at_truth(
+            &t.f,
+            &truth,
+            2e-5 * (96 * 72) as f64,
+            &format!("trial {trial}"),
         );
-        let solved = f.solved(&truth);
+        let solved = t.f.solved(&truth);
         assert!(
-            (solved.specular[0] - intensity * ks).abs() < 2e-3 * intensity * ks,
+            (solved.specular[0] - t.intensity * t.ks).abs() < 2e-3 * t.intensity * t.ks,
             "trial {trial}: Q {} vs {}",
             solved.specular[0],
-            intensity * ks
+            t.intensity * t.ks
         );
         let colour = [1.0, 0.9, 0.8];
         for c in 0..3 {
-            let want = 1.2 * intensity * colour[c] * [0.7, 0.4, 0.2][c];
+            let want = 1.2 * t.intensity * colour[c] * [0.7, 0.4, 0.2][c];
             assert!(
                 (solved.products[0][c] - want).abs() < 2e-3 * want,
                 "trial {trial}: P {:?} vs {want}",
@@ -79,12 +102,12 @@ fn projected_kernel_with_a_specular_term_matches_the_plain_solve_and_recovers_th
         );
         // A wrong shininess fits worse: the lobe's shape is informative.
         let wrong = [
-            light[0],
-            light[1],
-            light[2],
-            if s > 40.0 { s / 4.0 } else { s * 4.0 },
+            t.light[0],
+            t.light[1],
+            t.light[2],
+            if t.s > 40.0 { t.s / 4.0 } else { t.s * 4.0 },
         ];
-        assert!(f.channel_losses(&wrong).iter().sum::<f64>() > 10.0 * at_truth.max(1e-3));
+        assert!(t.f.channel_losses(&wrong).iter().sum::<f64>() > 10.0 * at_truth.max(1e-3));
     }
 }
 

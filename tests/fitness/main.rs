@@ -148,6 +148,39 @@ pub(crate) fn alone_on(f: &Fitness, x: &[f64], threads: usize) -> f64 {
     alone[0]
 }
 
+/// The kernel's channel losses at `x` against the plain per-pixel path's (`reference_channel_losses`): each
+/// [`close`] within `rel`, give or take `slack`; `what` names the case.
+pub(crate) fn assert_matches_reference(
+    f: &Fitness,
+    x: &[f64],
+    (rel, slack): (f64, f64),
+    what: &str,
+) {
+    let (a, b) = (f.channel_losses(x), f.reference_channel_losses(x));
+    for c in 0..3 {
+        assert!(
+            (a[c] - b[c]).abs() <= rel * a[c].abs().max(b[c].abs()).max(1.0) + slack,
+            "{what} channel {c}: {a:?} vs {b:?}"
+        );
+    }
+}
+
+/// The loss at the scene's own values `truth`, asserted below `bound` (it vanishes up to rounding and the
+/// table encoding); `what` names the case.
+pub(crate) fn loss_at_truth(f: &Fitness, truth: &[f64], bound: f64, what: &str) -> f64 {
+    let at_truth: f64 = f.channel_losses(truth).iter().sum();
+    assert!(at_truth < bound, "{what}: loss at the truth {at_truth}");
+    at_truth
+}
+
+/// `clean` with uniform noise `amplitude` wide added to every value, clamped to [0, 1].
+pub(crate) fn noisy(clean: &[f32], rng: &mut Rng, amplitude: f32) -> Vec<f32> {
+    clean
+        .iter()
+        .map(|v| (v + amplitude * (rng.uniform() as f32 - 0.5)).clamp(0.0, 1.0))
+        .collect()
+}
+
 /// Relative difference with a floor: the losses are sums over ~7000 pixels x 3 channels of f32 terms.
 pub(crate) fn close(a: f64, b: f64, rel: f64) -> bool {
     (a - b).abs() <= rel * a.abs().max(b.abs()).max(1.0)

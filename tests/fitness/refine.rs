@@ -32,6 +32,23 @@ fn noisy_saturated(clean: &[f32], rng: &mut Rng) -> Vec<f32> {
         .collect()
 }
 
+/// `runs` realisations of [`noisy_saturated`] of [`saturated_ball`]'s photo (seed 31), each as the closed-form
+/// fitness of the light's position, and that position's true value.
+fn saturated_fits(runs: usize) -> (Vec<Fitness>, Vec<f64>) {
+    let scene = saturated_ball();
+    let clean = render(&scene, None, None, 1).unwrap().rgb;
+    let layout = ParamLayout::new(&scene, &["light.position".to_string()]).unwrap();
+    let mut rng = Rng::new(31);
+    let fits = (0..runs)
+        .map(|_| {
+            let target = noisy_saturated(&clean, &mut rng);
+            let proj = Projection::matte(vec![[(0.0, 400.0); 3]; 2]);
+            projected(&scene, layout.clone(), &target, proj, true)
+        })
+        .collect();
+    (fits, scene.light.position.to_vec())
+}
+
 #[test]
 fn refined_products_minimise_the_loss_and_undo_the_saturation_bias() {
     // The paper's scene: the ball's red saturates over much of its lit side. Noise pulls half of those
@@ -39,18 +56,11 @@ fn refined_products_minimise_the_loss_and_undo_the_saturation_bias() {
     // to 1, where it drops them: red comes out low. The refined products count saturated pixels
     // one-sidedly and keep the clip exact (a pixel the model saturates costs a constant). Bias: the mean
     // error over realisations.
-    let scene = saturated_ball();
-    let clean = render(&scene, None, None, 1).unwrap().rgb;
-    let layout = ParamLayout::new(&scene, &["light.position".to_string()]).unwrap();
-    let x = scene.light.position.to_vec();
     let want = [[56.0, 49.0, 7.0], [42.0, 42.0, 42.0]];
-    let mut rng = Rng::new(31);
     let runs = 8;
+    let (fits, x) = saturated_fits(runs);
     let (mut ls_bias, mut ref_bias) = ([[0.0f64; 3]; 2], [[0.0f64; 3]; 2]);
-    for _ in 0..runs {
-        let target = noisy_saturated(&clean, &mut rng);
-        let proj = Projection::matte(vec![[(0.0, 400.0); 3]; 2]);
-        let f = projected(&scene, layout.clone(), &target, proj, true);
+    for f in &fits {
         let ls = f.solved(&x);
         let ls_loss: f64 = f.channel_losses(&x).iter().sum();
         let (refined, loss) = f.refined(&x).unwrap();
@@ -80,18 +90,11 @@ fn a_clip_level_below_the_noise_takes_the_least_squares_bias_off_the_search() {
     // by the least-squares products, so their bias moves the light; with the clip level at 1 - 3 sigma
     // (`set_saturated`, what `goodness.clip_level` gives such a photo) the pixels the noise scattered
     // below 1 are left out of the solve as possibly clipped.
-    let scene = saturated_ball();
-    let clean = render(&scene, None, None, 1).unwrap().rgb;
-    let layout = ParamLayout::new(&scene, &["light.position".to_string()]).unwrap();
-    let x = scene.light.position.to_vec();
     let want = 56.0; // the ball's red: exposure x intensity x albedo / pi x pi (unit light column)
-    let mut rng = Rng::new(31);
     let runs = 8;
+    let (fits, x) = saturated_fits(runs);
     let (mut at_default, mut at_level) = (0.0f64, 0.0f64);
-    for _ in 0..runs {
-        let target = noisy_saturated(&clean, &mut rng);
-        let proj = Projection::matte(vec![[(0.0, 400.0); 3]; 2]);
-        let mut f = projected(&scene, layout.clone(), &target, proj, true);
+    for mut f in fits {
         at_default += (f.solved(&x).products[0][0] / want - 1.0) / runs as f64;
         f.set_saturated(1.0 - 3.0 * 0.05);
         at_level += (f.solved(&x).products[0][0] / want - 1.0) / runs as f64;

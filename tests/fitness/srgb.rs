@@ -45,15 +45,9 @@ fn srgb_losses_match_the_plain_path_for_every_norm_clip_and_loss() {
                     assert_eq!(f.space(), Space::Srgb);
                     for _ in 0..3 {
                         let x = random_candidate(&mut rng, &layout);
-                        let (fast, slow) = (f.channel_losses(&x), f.reference_channel_losses(&x));
                         let slack = table_allowance(norm, target.len() / 3, 30.0);
-                        for c in 0..3 {
-                            assert!(
-                                (fast[c] - slow[c]).abs()
-                                    <= 2e-3 * fast[c].abs().max(slow[c].abs()).max(1.0) + slack,
-                                "trial {trial} clip {clip} {norm:?} {kind:?} channel {c}: {fast:?} vs {slow:?}"
-                            );
-                        }
+                        let what = format!("trial {trial} clip {clip} {norm:?} {kind:?}");
+                        assert_matches_reference(&f, &x, (2e-3, slack), &what);
                         cases += 1;
                     }
                 }
@@ -71,12 +65,7 @@ fn srgb_loss_is_the_loss_of_the_encoded_images() {
     let mut rng = Rng::new(72);
     for trial in 0..4 {
         let scene = random_scene(&mut rng, 1 + trial % 3, trial % 2 == 1, false);
-        let target: Vec<f32> = render(&scene, None, None, 1)
-            .unwrap()
-            .rgb
-            .iter()
-            .map(|v| (v + 0.03 * (rng.uniform() as f32 - 0.5)).clamp(0.0, 1.0))
-            .collect();
+        let target = noisy(&render(&scene, None, None, 1).unwrap().rgb, &mut rng, 0.03);
         let layout = ParamLayout::all(&scene);
         for norm in [Norm::L1, Norm::L2, Norm::Huber(0.02)] {
             let mut f = fitness(&scene, &layout, &target, LossKind::L1, true);
@@ -123,21 +112,18 @@ fn projected_srgb_loss_matches_the_plain_solve_and_vanishes_at_the_truth() {
                 f.set_space(Space::Srgb);
                 for _ in 0..3 {
                     let x = random_candidate(&mut rng, &layout);
-                    let (a, b) = (f.channel_losses(&x), f.reference_channel_losses(&x));
                     let slack = table_allowance(norm, target.len() / 3, 30.0);
-                    for c in 0..3 {
-                        assert!(
-                            (a[c] - b[c]).abs() <= 2e-3 * a[c].max(b[c]).max(1.0) + slack,
-                            "trial {trial} clip {clip} {norm:?}: {a:?} vs {b:?}"
-                        );
-                    }
+                    let what = format!("trial {trial} clip {clip} {norm:?}");
+                    assert_matches_reference(&f, &x, (2e-3, slack), &what);
                 }
                 // The objective goes through the kernel's own encoding: the model that renders it
                 // exactly costs (almost) nothing, in any norm.
-                let at_truth: f64 = f.channel_losses(&truth).iter().sum();
-                assert!(
-                    at_truth < 1e-5 * (scene.width * scene.height) as f64,
-                    "trial {trial} clip {clip} {norm:?}: {at_truth}"
+                let pixels = (scene.width * scene.height) as f64;
+                loss_at_truth(
+                    &f,
+                    &truth,
+                    1e-5 * pixels,
+                    &format!("trial {trial} clip {clip} {norm:?}"),
                 );
             }
         }
@@ -149,36 +135,26 @@ fn projected_srgb_loss_with_a_specular_term_matches_the_plain_solve() {
     use rtloop::Space;
     let mut rng = Rng::new(74);
     for trial in 0..4 {
-        let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.uniform();
-        let light = [u(-4.0, 4.0), u(2.0, 6.0), u(-4.0, 1.0)];
-        let (ks, s, intensity) = (u(0.1, 0.6), u(5.0, 120.0), u(20.0, 60.0));
-        let scene = glossy_scene(light, ks, s, intensity);
-        let target: Vec<f32> = clipped_render(&scene);
-        let (mut f, layout) = glossy_fitness(&scene, &target);
-        f.set_space(Space::Srgb);
+        let mut t = glossy_trial(&mut rng);
+        t.f.set_space(Space::Srgb);
         for _ in 0..4 {
-            let x = random_candidate(&mut rng, &layout);
-            let (a, b) = (f.channel_losses(&x), f.reference_channel_losses(&x));
-            let slack = table_allowance(rtloop::Norm::L1, target.len() / 3, 1.0);
-            for c in 0..3 {
-                assert!(
-                    (a[c] - b[c]).abs() <= 2e-3 * a[c].max(b[c]).max(1.0) + slack,
-                    "trial {trial}: {a:?} vs {b:?}"
-                );
-            }
+            let x = random_candidate(&mut rng, &t.layout);
+            let slack = table_allowance(rtloop::Norm::L1, t.target.len() / 3, 1.0);
+            assert_matches_reference(&t.f, &x, (2e-3, slack), &format!("trial {trial}"));
         }
-        let truth = [light[0], light[1], light[2], s];
-        let at_truth: f64 = f.channel_losses(&truth).iter().sum();
-        assert!(
-            at_truth < 2e-5 * (96 * 72) as f64,
-            "trial {trial}: {at_truth}"
+        let truth = [t.light[0], t.light[1], t.light[2], t.s];
+        loss_at_truth(
+            &t.f,
+            &truth,
+            2e-5 * (96 * 72) as f64,
+            &format!("trial {trial}"),
         );
-        let (refined, _) = f.refined(&truth).unwrap();
+        let (refined, _) = t.f.refined(&truth).unwrap();
         assert!(
-            (refined.specular[0] / (intensity * ks) - 1.0).abs() < 1e-3,
+            (refined.specular[0] / (t.intensity * t.ks) - 1.0).abs() < 1e-3,
             "trial {trial}: Q {:?} vs {}",
             refined.specular,
-            intensity * ks
+            t.intensity * t.ks
         );
     }
 }
@@ -351,46 +327,30 @@ fn refined_srgb_products_minimise_the_srgb_loss() {
                 (v.min(1.0) * (1.0 + 0.1 * z as f32)).clamp(0.0, 1.0)
             })
             .collect();
-        let position = ParamLayout::new(&scene, &["light.position".to_string()]).unwrap();
-        let mut proj = Fitness::new(
-            &scene,
-            position,
-            &target,
-            FitnessSpec {
-                pixels: Some(interior.clone()),
-                loss: LossKind::L1Projected,
-                projection: Some(Projection::matte(vec![[(0.0, 400.0); 3]; 2])),
+        // A fitness of `paths` over the interior pixels, in the sRGB space of `norm`.
+        let on_interior = |paths: &[&str], loss, projection| {
+            let paths: Vec<String> = paths.iter().map(|p| p.to_string()).collect();
+            let layout = ParamLayout::new(&scene, &paths).unwrap();
+            let pixels = Some(interior.clone());
+            let spec = FitnessSpec {
+                pixels,
+                loss,
+                projection,
                 ..Default::default()
-            },
-        )
-        .unwrap();
-        proj.set_norm(norm);
-        proj.set_space(Space::Srgb);
+            };
+            let mut f = Fitness::new(&scene, layout, &target, spec).unwrap();
+            f.set_norm(norm);
+            f.set_space(Space::Srgb);
+            f
+        };
+        let matte = Projection::matte(vec![[(0.0, 400.0); 3]; 2]);
+        let proj = on_interior(&["light.position"], LossKind::L1Projected, Some(matte));
         let ls_loss: f64 = proj.channel_losses(&light).iter().sum();
         let (refined, loss) = proj.refined(&light).unwrap();
         let loss: f64 = loss.iter().sum();
         // The same loss as a plain fitness of the products (the albedos here).
-        let albedos = ParamLayout::new(
-            &scene,
-            &[
-                "objects.ball.albedo".to_string(),
-                "objects.floor.albedo".to_string(),
-            ],
-        )
-        .unwrap();
-        let mut plain = Fitness::new(
-            &scene,
-            albedos,
-            &target,
-            FitnessSpec {
-                pixels: Some(interior.clone()),
-                loss: LossKind::L1,
-                ..Default::default()
-            },
-        )
-        .unwrap();
-        plain.set_norm(norm);
-        plain.set_space(Space::Srgb);
+        let albedos = ["objects.ball.albedo", "objects.floor.albedo"];
+        let plain = on_interior(&albedos, LossKind::L1, None);
         let x: Vec<f64> = refined.products.iter().flatten().copied().collect();
         let at = |x: &[f64]| plain.channel_losses(x).iter().sum::<f64>();
         assert!(

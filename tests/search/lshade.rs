@@ -9,7 +9,7 @@
 use std::f64::consts::PI;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use rtloop::search::lshade::{minimize, minimize_polishing};
+use rtloop::search::lshade::{minimize, minimize_polishing_from};
 use rtloop::search::{
     nelder_mead, normalized_spread, rand1bin, DeConfig, GenerationReport, Init, LshadeConfig,
     LshadeResult, Objective, Rng, StopReason, Variant,
@@ -42,6 +42,16 @@ fn cfg(max_evaluations: usize, seed: u64) -> LshadeConfig {
         seed,
         ..LshadeConfig::default()
     }
+}
+
+/// L-SHADE's and jSO's own configurations, each with this budget and seed and, where given, polish budget.
+fn variants(max_evaluations: usize, seed: u64, polish: Option<usize>) -> [LshadeConfig; 2] {
+    [LshadeConfig::lshade(), LshadeConfig::jso()].map(|v| LshadeConfig {
+        max_evaluations,
+        seed,
+        polish_evaluations: polish.unwrap_or(v.polish_evaluations),
+        ..v
+    })
 }
 
 fn run<O: Objective + ?Sized>(obj: &O, bounds: &[(f64, f64)], cfg: &LshadeConfig) -> LshadeResult {
@@ -205,14 +215,8 @@ fn every_individual_stays_within_bounds_and_fixed_dimensions_stay_fixed() {
         (0.0, 1e-3),
     ];
     let obj = |x: &[f64]| rastrigin(&[x[0], x[2], x[3]]) + (x[5] - 5e-4).powi(2) + x[1] + x[4];
-    for variant in [LshadeConfig::lshade(), LshadeConfig::jso()] {
-        for seed in [1, 2] {
-            let c = LshadeConfig {
-                max_evaluations: 20_000,
-                seed,
-                polish_evaluations: 300,
-                ..variant.clone()
-            };
+    for seed in [1, 2] {
+        for c in variants(20_000, seed, Some(300)) {
             let mut reports = 0;
             let res = minimize(&obj, &bounds, &c, |r: &GenerationReport| {
                 reports += 1;
@@ -485,12 +489,7 @@ fn latin_hypercube_and_uniform_initialisation() {
 
 #[test]
 fn success_history_memory_stays_in_range() {
-    for variant in [LshadeConfig::lshade(), LshadeConfig::jso()] {
-        let c = LshadeConfig {
-            max_evaluations: 20_000,
-            seed: 3,
-            ..variant
-        };
+    for c in variants(20_000, 3, None) {
         let res = run(&rastrigin, &[(-5.12, 5.12); 5], &c);
         assert_eq!(res.memory_f.len(), c.memory_size);
         assert!(res.memory_f.iter().all(|&f| f > 0.0 && f <= 1.0), "{res:?}");
@@ -534,13 +533,7 @@ impl Objective for EarlyExit {
 #[test]
 fn early_exit_objective_gives_identical_results() {
     let bounds = [(-5.12, 5.12); 6];
-    for variant in [LshadeConfig::lshade(), LshadeConfig::jso()] {
-        let c = LshadeConfig {
-            max_evaluations: 12_000,
-            seed: 8,
-            polish_evaluations: 200,
-            ..variant
-        };
+    for c in variants(12_000, 8, Some(200)) {
         let a = run(&rastrigin, &bounds, &c);
         let b = run(&EarlyExit, &bounds, &c);
         assert_eq!(a.best, b.best);
@@ -653,13 +646,7 @@ fn history_on_threads(threads: usize, c: &LshadeConfig) -> History {
 
 #[test]
 fn result_is_bit_identical_on_1_2_4_8_threads() {
-    for variant in [LshadeConfig::lshade(), LshadeConfig::jso()] {
-        let c = LshadeConfig {
-            max_evaluations: 8_000,
-            seed: 42,
-            polish_evaluations: 300,
-            ..variant
-        };
+    for c in variants(8_000, 42, Some(300)) {
         let reference = history_on_threads(1, &c);
         assert!(reference.0.len() > 50);
         for n in [2, 4, 8] {
@@ -690,49 +677,22 @@ impl Objective for TwoObjectives {
 fn bad_configuration_is_an_error_not_a_panic() {
     let f = |x: &[f64]| x[0];
     let b = [(0.0, 1.0)];
-    let bad = [
-        LshadeConfig {
-            min_population: 3,
-            ..Default::default()
-        },
-        LshadeConfig {
-            population_init: Some(3),
-            ..Default::default()
-        },
-        LshadeConfig {
-            max_evaluations: 10,
-            ..Default::default()
-        },
-        LshadeConfig {
-            memory_size: 0,
-            ..Default::default()
-        },
-        LshadeConfig {
-            memory_f: 0.0,
-            ..Default::default()
-        },
-        LshadeConfig {
-            memory_cr: 1.5,
-            ..Default::default()
-        },
-        LshadeConfig {
-            p_best: 0.0,
-            ..Default::default()
-        },
-        LshadeConfig {
-            archive_rate: -1.0,
-            ..Default::default()
-        },
-        LshadeConfig {
-            x_tol: f64::NAN,
-            ..Default::default()
-        },
-        LshadeConfig {
-            stall_tol: -1.0,
-            ..Default::default()
-        },
+    // One field out of its range each, the others default.
+    let bad: [fn(&mut LshadeConfig); 10] = [
+        |c| c.min_population = 3,
+        |c| c.population_init = Some(3),
+        |c| c.max_evaluations = 10,
+        |c| c.memory_size = 0,
+        |c| c.memory_f = 0.0,
+        |c| c.memory_cr = 1.5,
+        |c| c.p_best = 0.0,
+        |c| c.archive_rate = -1.0,
+        |c| c.x_tol = f64::NAN,
+        |c| c.stall_tol = -1.0,
     ];
-    for c in bad {
+    for set in bad {
+        let mut c = LshadeConfig::default();
+        set(&mut c);
         assert!(minimize(&f, &b, &c, |_| true).is_err(), "{c:?}");
     }
     let ok = LshadeConfig::default();
@@ -772,10 +732,18 @@ fn a_polish_objective_of_its_own_ends_at_its_minimum() {
             ..cfg(300, seed)
         };
         let plain = run(&coarse, &bounds, &c);
-        let same =
-            minimize_polishing(&coarse, None::<&fn(&[f64]) -> f64>, &bounds, &c, |_| true).unwrap();
+        let same = minimize_polishing_from(
+            &coarse,
+            None::<&fn(&[f64]) -> f64>,
+            &bounds,
+            &c,
+            None,
+            |_| true,
+        )
+        .unwrap();
         assert_eq!(same.search.best, plain.best);
-        let res = minimize_polishing(&coarse, Some(&fine), &bounds, &c, |_| true).unwrap();
+        let res =
+            minimize_polishing_from(&coarse, Some(&fine), &bounds, &c, None, |_| true).unwrap();
         for k in 0..3 {
             assert!(
                 (res.search.best[k] - moved[k]).abs() < 1e-4,

@@ -28,122 +28,62 @@ fn run<O: Objective + ?Sized>(obj: &O, bounds: &[(f64, f64)], cfg: &DeConfig) ->
     minimize(obj, bounds, cfg, |_: &GenerationReport| true).expect("valid configuration")
 }
 
-/// Run and check the result against a known optimum `x_star` with value `f_star`.
+/// Run `f` on the box [-5, 3]^`dim` (not centred on the optimum) with seeds 1 and 2, and check each result
+/// against the known optimum: `x_star` in every coordinate.
 fn check_optimum(
     name: &str,
     f: fn(&[f64]) -> f64,
-    bounds: &[(f64, f64)],
-    cfg: &DeConfig,
-    x_star: &[f64],
-    x_tol: f64,
-    f_tol: f64,
+    (dim, x_star): (usize, f64),
+    (population, generations): (usize, usize),
+    (x_tol, f_tol): (f64, f64),
 ) {
-    let f_star = f(x_star);
-    let res = run(&f, bounds, cfg);
-    let d = distance(&res.best, x_star);
-    let v = res.best_objectives[0];
-    assert_eq!(res.best_objectives.len(), 1);
-    assert_eq!(
-        v,
-        f(&res.best),
-        "{name}: reported objective is the best vector's value"
-    );
-    assert!(
-        d < x_tol,
-        "{name} (seed {}): distance to optimum {d:e} >= {x_tol:e}; best {:?}",
-        cfg.seed,
-        res.best
-    );
-    assert!(
-        (v - f_star).abs() < f_tol,
-        "{name} (seed {}): objective {v:e}, expected {f_star:e} +- {f_tol:e}",
-        cfg.seed
-    );
+    let bounds = vec![(-5.0, 3.0); dim];
+    let x_star = vec![x_star; dim];
+    let f_star = f(&x_star);
+    for seed in [1, 2] {
+        let res = run(&f, &bounds, &cfg(population, generations, seed));
+        let d = distance(&res.best, &x_star);
+        let v = res.best_objectives[0];
+        assert_eq!(res.best_objectives.len(), 1);
+        assert_eq!(
+            v,
+            f(&res.best),
+            "{name}: reported objective is the best vector's value"
+        );
+        assert!(
+            d < x_tol,
+            "{name} (seed {seed}): distance to optimum {d:e} >= {x_tol:e}; best {:?}",
+            res.best
+        );
+        assert!(
+            (v - f_star).abs() < f_tol,
+            "{name} (seed {seed}): objective {v:e}, expected {f_star:e} +- {f_tol:e}"
+        );
+    }
 }
 
 // ---------------------------------------------------------------------------------------------------
 // Known optima
 // ---------------------------------------------------------------------------------------------------
 
-#[test]
-fn sphere_dim5_finds_origin() {
-    // The box is not centred on the optimum.
-    let bounds = [(-5.0, 3.0); 5];
-    for seed in [1, 2] {
-        check_optimum(
-            "sphere-5",
-            sphere,
-            &bounds,
-            &cfg(40, 300, seed),
-            &[0.0; 5],
-            1e-4,
-            1e-8,
-        );
-    }
+/// One test per row: `test: name, f, (dim, optimum coordinate), (population, generations), (x_tol, f_tol)`.
+macro_rules! optimum_tests {
+    ($($test:ident: $name:literal, $f:expr, $at:expr, $run:expr, $tol:expr;)+) => {
+        $(
+            #[test]
+            fn $test() {
+                check_optimum($name, $f, $at, $run, $tol);
+            }
+        )+
+    };
 }
 
-#[test]
-fn rosenbrock_dim2_finds_ones() {
-    let bounds = [(-5.0, 3.0); 2];
-    for seed in [1, 2] {
-        check_optimum(
-            "rosenbrock-2",
-            rosenbrock,
-            &bounds,
-            &cfg(40, 300, seed),
-            &[1.0; 2],
-            1e-3,
-            1e-6,
-        );
-    }
-}
-
-#[test]
-fn rosenbrock_dim4_finds_ones() {
-    let bounds = [(-5.0, 3.0); 4];
-    for seed in [1, 2] {
-        check_optimum(
-            "rosenbrock-4",
-            rosenbrock,
-            &bounds,
-            &cfg(60, 800, seed),
-            &[1.0; 4],
-            1e-2,
-            1e-4,
-        );
-    }
-}
-
-#[test]
-fn rastrigin_dim2_finds_global_minimum() {
-    let bounds = [(-5.0, 3.0); 2];
-    for seed in [1, 2] {
-        check_optimum(
-            "rastrigin-2",
-            rastrigin,
-            &bounds,
-            &cfg(40, 300, seed),
-            &[0.0; 2],
-            1e-4,
-            1e-6,
-        );
-    }
-}
-
-#[test]
-fn rastrigin_dim3_finds_global_minimum() {
-    let bounds = [(-5.0, 3.0); 3];
-    for seed in [1, 2] {
-        check_optimum(
-            "rastrigin-3",
-            rastrigin,
-            &bounds,
-            &cfg(60, 400, seed),
-            &[0.0; 3],
-            1e-4,
-            1e-6,
-        );
-    }
+optimum_tests! {
+    sphere_dim5_finds_origin: "sphere-5", sphere, (5, 0.0), (40, 300), (1e-4, 1e-8);
+    rosenbrock_dim2_finds_ones: "rosenbrock-2", rosenbrock, (2, 1.0), (40, 300), (1e-3, 1e-6);
+    rosenbrock_dim4_finds_ones: "rosenbrock-4", rosenbrock, (4, 1.0), (60, 800), (1e-2, 1e-4);
+    rastrigin_dim2_finds_global_minimum: "rastrigin-2", rastrigin, (2, 0.0), (40, 300), (1e-4, 1e-6);
+    rastrigin_dim3_finds_global_minimum: "rastrigin-3", rastrigin, (3, 0.0), (60, 400), (1e-4, 1e-6);
 }
 
 // ---------------------------------------------------------------------------------------------------

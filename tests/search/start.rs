@@ -5,7 +5,7 @@
 //! definition (Rastrigin's global minimum 0 at the origin), not from earlier runs.
 
 use crate::defs::rastrigin;
-use rtloop::search::lshade::{minimize_polishing, minimize_polishing_from};
+use rtloop::search::lshade::{minimize, minimize_polishing_from};
 use rtloop::search::{run_polishing, DeConfig, GenerationReport, LshadeConfig, Method};
 
 fn small(seed: u64) -> LshadeConfig {
@@ -51,9 +51,8 @@ fn a_start_is_held_and_never_lost() {
     for seed in 0..8 {
         let cfg = small(seed);
         let (plain, first) = searched(&bounds, &cfg, None);
-        // Without a start, `minimize_polishing` is the same search.
-        let same =
-            minimize_polishing(&rastrigin, None::<&NoPolish>, &bounds, &cfg, |_| true).unwrap();
+        // Without a start, `minimize` is the same search.
+        let same = minimize(&rastrigin, &bounds, &cfg, |_| true).unwrap();
         assert_eq!(same.best, plain.best);
         let (from, held) = searched(&bounds, &cfg, Some(&origin));
         // The start replaces the first member; the others are the draws made without it.

@@ -45,6 +45,9 @@ DEFAULT_DICTIONARY = "DICT_5X5_100"
 
 #: Fewest board corners accepted for a pose or a calibration view (and they must not lie on one line).
 MIN_CORNERS = 6
+#: Where a ChArUco board's corners are not all found, detection is tried again on a copy this many times
+#: the photo's size (:func:`_detect_charuco`).
+UPSAMPLE = 2
 
 _SPEC_HELP = (
     "write it as COLSxROWS,SQUARE,MARKER[,DICT] (lengths in metres or with 'mm', e.g. "
@@ -283,15 +286,7 @@ def detect_board(
     if spec.kind == "chessboard":
         return _detect_chessboard(grey, spec, where)
     board = spec.charuco()
-    detector = spec._cache.get("detector")
-    if detector is None:
-        params = cv2.aruco.DetectorParameters()
-        params.cornerRefinementMethod = (
-            cv2.aruco.CORNER_REFINE_NONE
-        )  # ChArUco corners get subpixel refinement
-        detector = cv2.aruco.CharucoDetector(board, cv2.aruco.CharucoParameters(), params)
-        spec._cache["detector"] = detector
-    corners, ids, marker_corners, marker_ids = detector.detectBoard(grey)
+    corners, ids, marker_corners, marker_ids = _detect_charuco(grey, spec)
     n_markers = 0 if marker_ids is None else len(marker_ids)
     n = 0 if ids is None else len(ids)
     if n_markers == 0:
@@ -341,6 +336,47 @@ def detect_board(
         marker_corners=marker_corners,
         marker_ids=marker_ids,
     )
+
+
+def _charuco_detector(spec: BoardSpec) -> cv2.aruco.CharucoDetector:
+    detector = spec._cache.get("detector")
+    if detector is None:
+        params = cv2.aruco.DetectorParameters()
+        params.cornerRefinementMethod = (
+            cv2.aruco.CORNER_REFINE_NONE
+        )  # ChArUco corners get subpixel refinement
+        detector = cv2.aruco.CharucoDetector(spec.charuco(), cv2.aruco.CharucoParameters(), params)
+        spec._cache["detector"] = detector
+    return detector
+
+
+def _detect_charuco(grey: np.ndarray, spec: BoardSpec) -> tuple[Any, Any, Any, Any]:
+    """The ChArUco detector's corners, ids, marker corners and marker ids. Where it places fewer than all
+    of the board's inner corners (markers foreshortened or small: a board seen at a grazing angle), it is
+    run again on the region around the markers found (their bounding box widened by its own size each way)
+    enlarged UPSAMPLE times (bicubic), and the detection with more corners kept, its pixel coordinates taken
+    back to the photo's (pixel centres at integers)."""
+    detector = _charuco_detector(spec)
+    found = detector.detectBoard(grey)
+    cols, rows = spec.squares
+    n = 0 if found[1] is None else len(found[1])
+    if n >= (cols - 1) * (rows - 1) or found[3] is None or len(found[3]) == 0:
+        return found
+    pts = np.concatenate([np.asarray(m, np.float64).reshape(-1, 2) for m in found[2]])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    h, w = grey.shape
+    x0, y0 = (int(max(0, math.floor(v))) for v in lo - (hi - lo))
+    x1, y1 = (int(min(size, math.ceil(v) + 1)) for size, v in zip((w, h), hi + (hi - lo)))
+    big = cv2.resize(grey[y0:y1, x0:x1], None, fx=UPSAMPLE, fy=UPSAMPLE, interpolation=cv2.INTER_CUBIC)
+    corners, ids, marker_corners, marker_ids = detector.detectBoard(big)
+    if ids is None or len(ids) <= n:
+        return found
+    offset = np.array([x0, y0], np.float64)
+
+    def back(p: Any) -> np.ndarray:
+        return ((np.asarray(p, np.float64) + 0.5) / UPSAMPLE - 0.5 + offset).astype(np.float32)
+
+    return back(corners), ids, tuple(back(m) for m in marker_corners), marker_ids
 
 
 def _detect_chessboard(grey: np.ndarray, spec: BoardSpec, where: str) -> BoardDetection:

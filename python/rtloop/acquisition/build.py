@@ -4,9 +4,9 @@
 
 1. colour: a white balance from a grey card, or a colour correction from a ColorChecker, measured
    in the photo and applied in linear light (to the photo and to a separate objective photo);
-2. the camera model: with a calibration, undistort the photos and re-centre the principal point
-   (the scene's camera is an ideal pinhole); with only a field of view, take the photo as a pinhole;
-   with neither, estimate the focal length from the board (less accurate);
+2. the camera model: with a calibration (or EXIF naming a lens Lensfun has a profile of), undistort the
+   photos (the scene's camera is an ideal pinhole); with only a field of view or EXIF's focal length,
+   take the photo as a pinhole; with neither, estimate the focal length from the board (less accurate);
 3. the board: camera pose and floor plane (the board's face is the floor, y = 0, +y up, metres);
 4. the ball: its outline, searched for as a ball of the given radius resting on the floor, and its
    centre fitted to the outline;
@@ -14,9 +14,7 @@
    (light position and intensity, both albedos) with bounds scaled to the scene;
 6. an overlay: the board's axes and corners, the ball's fitted outline and edge points, and the
    outline of the ball as rtloop renders the new scene (``rtloop.object_ids``), over the photo.
-
-The fit cannot move the sphere (``objects.*.center`` is not a fittable parameter in rtloop's scene
-format), so the sphere stays where the photo puts it; the overlay is the check that it lines up.
+The fit cannot move the sphere (``objects.*.center`` is not fittable), so the overlay is the check.
 """
 
 from __future__ import annotations
@@ -37,11 +35,14 @@ from .calibration import CameraIntrinsics, PinholeRemap
 from .camera import focal_from_vfov
 from .colour import ColourCorrection, colorchecker_correction, grey_card_balance
 from .exif import ExifFocal
-from .focal import field_of_view_record, refine_vfov_by_ball, scan_vfov_for_ball
+from .focal import field_of_view_record, loose_view_warning, refine_field_of_view, scan_vfov_for_ball
+from .lens_profile import LensProfile, LensRemap
 from .overlay import OVERLAY_MAX_SIDE, _board_outline_px, draw_overlay  # noqa: F401 (re-exported)
 from .pose import VFOV_TARGET_DEG, FloorPose, estimate_floor_pose
 
 __all__ = ["AcquiredScene", "build_scene", "draw_overlay", "fit_section"]
+
+Remap = PinholeRemap | LensRemap  # what moves the photo's pixels into the scene's pinhole camera
 
 
 @dataclass
@@ -103,26 +104,16 @@ def fit_section(
     }
 
 
-def loose_view_warning(where: str, vfov_deg: float, vfov_std_deg: float, focal_px: float, height: int) -> str:
-    """One line for a field of view the board fixes more loosely than ``VFOV_TARGET_DEG``: its spread and
-    the resulting spread of the focal length, which scales every distance the board's size gives (the
-    camera's, and so the ball's and the light's)."""
-    # d f / f = d vfov * (f^2 + h^2 / 4) / (f h)
-    rel = math.radians(vfov_std_deg) * (focal_px**2 + height**2 / 4) / (focal_px * height)
-    return (f"{where} has no EXIF focal length and the board fixes the vertical field of view only to "
-            f"{vfov_deg:.2f} +- {vfov_std_deg:.2f} deg ({VFOV_TARGET_DEG:g} wanted): the focal length, and with it "
-            f"the distances from the camera (the ball's, the light's), are uncertain by about +-{100 * rel:.1f} %; "
-            "give --vfov or --camera, or pass --strict to refuse such a view")
-
-
 def build_scene(
     photo: np.ndarray, board: BoardSpec | str | dict, ball_radius: float, *,
     intrinsics: CameraIntrinsics | None = None, vfov_deg: float | None = None, exif: ExifFocal | None = None,
+    lens: LensProfile | None = None,
     objective: np.ndarray | None = None, colour: str | tuple | ColourCorrection | None = None,
     ball_hint: tuple[float, float, float] | None = None, ball_mask: np.ndarray | None = None,
     resting: bool = True, width: int = 160, light_range: float = 2.0,
     names: tuple[str, str] = ("ball", "floor"),
-    board_margin: float | None = None, card_reflectance: float | None = None, room: bool = True,
+    board_margin: float | None = None, board_thickness: float = 0.0, card_reflectance: float | None = None,
+    room: bool = True,
     where: str = "photo", objective_where: str = "objective", strict: bool = False,
 ) -> AcquiredScene:
     """Build the scene from one photo (board + ball on the floor), optionally fitting another.
@@ -135,6 +126,8 @@ def build_scene(
             full vertical field of view of an already distortion-free photo; else ``exif``, the focal
             length the photo's EXIF gives (:func:`rtloop.acquisition.exif.exif_focal`); none: estimated
             from the board, refused when the board is seen too nearly head-on for that.
+        lens: with ``exif``, the lens's profile (:func:`rtloop.acquisition.lens_profile.find_lens_profile`):
+            its distortion and vignetting are removed from both photos first.
         objective: the photo to fit, from the same camera position and settings (e.g. the same view
             with the board removed); default: ``photo``.
         colour: ``None``, ``"colorchecker"``, a grey-card rectangle ``(x, y, w, h)`` / ``"x,y,w,h"``
@@ -145,6 +138,8 @@ def build_scene(
         light_range: size of the light's search box in units of the scene's scale.
         names: the names of the sphere and the plane in the scene.
         board_margin: the white paper around the board's squares, metres (default: one square).
+        board_thickness: metres: the board's face (y = 0) lies this far above the floor the ball rests on
+            (the floor plane is then y = -board_thickness); under the ball's radius.
         room: the scene has what a photo of a room shows besides the lamp: the environment (a dim light from
             every direction, occluded by the objects) free in the fit section and one diffuse bounce between
             the objects (``"interreflection": true``); False: direct light only (rtloop-fit then adds the
@@ -167,14 +162,15 @@ def build_scene(
     same, notes = objective is photo, []
     correction, photo, objective = _correct_colour(photo, objective, same, colour, where)
     remap, focal, focal_source, photo, objective = _camera_model(
-        photo, objective, same, intrinsics, vfov_deg, exif, where
+        photo, objective, same, intrinsics, vfov_deg, exif, lens, where
     )
     pose = _pose_camera(photo, spec, focal, focal_source, where, strict, notes, h)
     mask, hint = _ball_mask_and_hint(ball_mask, ball_hint, remap, w, h)
     silhouette, sphere, locate, scanned = _locate_ball(
-        photo, pose, spec, ball_radius, hint, mask, resting, focal_source, where
+        photo, pose, spec, ball_radius, hint, mask, resting, focal_source, where,
+        _floor_height(board_thickness, ball_radius),
     )
-    pose, silhouette, sphere, refinement = _refine_field_of_view(
+    pose, silhouette, sphere, refinement = refine_field_of_view(
         photo, spec, ball_radius, pose, silhouette, sphere, locate, focal_source, where, notes, h, scanned
     )
     _ball_notes(silhouette, sphere, ball_radius, resting, notes)
@@ -183,6 +179,11 @@ def build_scene(
         photo, spec, pose, silhouette, sphere, correction, ball_radius, refinement, locate,
         focal_source, exif, intrinsics, names[0], where, notes, w, h,
     ))}
+    if board_thickness:  # the floor, where the ball rests, under the board's face
+        scene["objects"][1]["point"][1] = locate["floor_height"]
+        scene["meta"]["acquisition"]["board_thickness_m"] = float(board_thickness)
+    if isinstance(remap, LensRemap):
+        scene["meta"]["acquisition"]["lens_profile"] = jsonable(remap.report())
     rtloop.load_scene(scene)  # validates: a failure here is a bug, not bad input
     overlay = draw_overlay(photo, scene, pose, silhouette)
     unmodelled, card = _masks(
@@ -198,7 +199,7 @@ def _masks(
     pose: FloorPose,
     spec: BoardSpec,
     correction: ColourCorrection,
-    remap: PinholeRemap | None,
+    remap: Remap | None,
     photo: np.ndarray,
     same: bool,
     board_margin: float | None,
@@ -223,6 +224,15 @@ def _masks(
             "rect_px": list(correction.details["rect"]),
         }
     return unmodelled, card
+
+
+def _floor_height(board_thickness: float, ball_radius: float) -> float:
+    """The floor's height under a board of ``board_thickness`` (metres) whose face is y = 0."""
+    t = board_thickness
+    if not (isinstance(t, (int, float)) and math.isfinite(t) and 0 <= t < ball_radius):
+        raise AcquisitionError(
+            f"board thickness must be 0 or more metres and under the ball's radius (got {t})")
+    return -float(t)
 
 
 def _check_inputs(
@@ -303,11 +313,12 @@ def _camera_model(
     intrinsics: CameraIntrinsics | None,
     vfov_deg: float | None,
     exif: ExifFocal | None,
+    lens: LensProfile | None,
     where: str,
-) -> tuple[PinholeRemap | None, float | None, str, np.ndarray, np.ndarray]:
-    """Step 2, the camera model: with a calibration, undistort both photos to a pinhole; else the focal
-    length from the given field of view, from EXIF, or none (the board estimates it). Returns the remap
-    (None without a calibration), the focal length in pixels, where it came from, and both photos."""
+) -> tuple[Remap | None, float | None, str, np.ndarray, np.ndarray]:
+    """Step 2, the camera model: with a calibration (or EXIF and the lens's profile), both photos moved into a
+    pinhole; else the focal length from the given field of view, from EXIF, or none (the board estimates
+    it). Returns the remap (or None), the focal length in pixels, where it came from, and both photos."""
     h, w = photo.shape[:2]
     remap = None
     if intrinsics is not None:
@@ -321,6 +332,11 @@ def _camera_model(
                 f"vertical field of view must be between 1 and 170 degrees (got {vfov_deg})"
             )
         focal, focal_source = focal_from_vfov(vfov_deg, h), "given"
+    elif exif is not None and lens is not None:
+        remap = lens.remap(w, h, exif.focal_px)
+        photo = remap.correct(photo)
+        objective = photo if same else remap.correct(objective)
+        focal, focal_source = remap.focal_px, "exif"
     elif exif is not None:
         focal, focal_source = exif.focal_px, "exif"
     else:
@@ -362,7 +378,7 @@ def _pose_camera(
 def _ball_mask_and_hint(
     ball_mask: np.ndarray | None,
     ball_hint: tuple[float, float, float] | None,
-    remap: PinholeRemap | None,
+    remap: Remap | None,
     w: int,
     h: int,
 ) -> tuple[np.ndarray | None, tuple[float, float, float] | None]:
@@ -394,14 +410,17 @@ def _locate_ball(
     resting: bool,
     focal_source: str,
     where: str,
+    floor_height: float = 0.0,
 ) -> tuple[BallSilhouette | None, SpherePlacement | None, dict[str, Any], tuple[float, Any] | None]:
     """Step 4, the ball: its outline and the sphere, looked for beside the board. Returns them, the
-    search's settings (mask, resting, the board's outline to exclude, the board's area to keep off) and,
+    search's settings (mask, resting, the floor's height, the board's outline to exclude, the board's area
+    to keep off) and,
     where a loose board's estimate shows no ball, the field of view and outline where it was found instead
     (:func:`scan_vfov_for_ball`; the outline and sphere are then None)."""
     camera = pose.camera
     bw, bh = spec.size_m
-    locate = {"mask": mask, "resting": resting, "exclude": _board_outline_px(pose),
+    locate = {"mask": mask, "resting": resting, "floor_height": floor_height,
+              "exclude": _board_outline_px(pose),
               "keep_off": (-bw / 2, bw / 2, -bh / 2, bh / 2)}
     loose = focal_source == "board" and (pose.vfov_std_deg or 0.0) > VFOV_TARGET_DEG
     try:
@@ -417,49 +436,6 @@ def _locate_ball(
             raise AcquisitionError(f"{exc} (the ball is looked for beside the board, not on it{why})") from None
         return None, None, locate, scanned
     return silhouette, sphere, locate, None
-
-
-def _refine_field_of_view(
-    photo: np.ndarray,
-    spec: BoardSpec,
-    ball_radius: float,
-    pose: FloorPose,
-    silhouette: BallSilhouette | None,
-    sphere: SpherePlacement | None,
-    locate: dict[str, Any],
-    focal_source: str,
-    where: str,
-    notes: list[str],
-    h: int,
-    scanned: tuple[float, Any] | None = None,
-) -> tuple[FloorPose, BallSilhouette, SpherePlacement, Any]:
-    """Step 4b, the field of view: when the board alone fixes it loosely (``focal_source`` "board", a spread
-    over ``VFOV_TARGET_DEG``), refined from the ball resting on the floor (the grid centred where
-    ``scanned`` found it, if given); the pose and the ball again at the refined focal length
-    (``locate["exclude"]`` updated) and the field-of-view note replaced in ``notes``. Returns the pose, the
-    ball and the refinement (None when not refined, and then the rest as given)."""
-    if not (focal_source == "board" and (pose.vfov_std_deg or 0.0) > VFOV_TARGET_DEG):
-        return pose, silhouette, sphere, None
-    found = scanned[1] if scanned is not None else (
-        float(silhouette.centre_px[0]), float(silhouette.centre_px[1]), float(silhouette.radius_px))
-    refinement = refine_vfov_by_ball(photo, spec, ball_radius, pose, found, locate=locate, where=where,
-                                     centre=None if scanned is None else scanned[0])
-    chosen = refinement.vfov_deg if refinement is not None else None if scanned is None else scanned[0]
-    if chosen is not None:
-        std, board_vfov = pose.vfov_std_deg, pose.camera.vfov_deg
-        pose = estimate_floor_pose(photo, spec, focal_px=focal_from_vfov(chosen, h), focal_source="board",
-                                   where=where)
-        pose.vfov_std_deg = std
-        locate["exclude"] = _board_outline_px(pose)
-        silhouette, sphere = locate_ball(photo, pose.camera, ball_radius, hint=found, where=where, **locate)
-        how = "refined from the ball resting on the floor to" if refinement is not None else (
-            "the ball resting on the floor found best at")
-        found_where = "" if scanned is None else ", not found at the board's estimate"
-        notes[:] = [n for n in notes if "no EXIF focal length" not in n]
-        notes.append(loose_view_warning(where, board_vfov, std, pose.camera.focal_px, h)
-                     .replace("; give --vfov", f"; {how} {chosen:.2f} deg (where its outline fits best)"
-                              f"{found_where}; give --vfov"))
-    return pose, silhouette, sphere, refinement
 
 
 def _ball_notes(
@@ -603,7 +579,7 @@ def _acquisition_report(
     return report
 
 
-def card_pixels(rect: Any, remap: PinholeRemap | None, w: int, h: int) -> np.ndarray:
+def card_pixels(rect: Any, remap: Remap | None, w: int, h: int) -> np.ndarray:
     """True inside the grey card's rectangle (x, y, w, h in the photo as given), 1 px in from its edges, at
     the objective's size."""
     x, y, rw, rh = rect
@@ -646,7 +622,7 @@ def unmodelled_mask(
     pose: FloorPose,
     margin_m: float,
     correction: ColourCorrection,
-    remap: PinholeRemap | None,
+    remap: Remap | None,
     w: int,
     h: int,
     photo: np.ndarray | None = None,
@@ -678,7 +654,7 @@ def unmodelled_mask(
     return drop == 0
 
 
-def _remapped_rect(rect: Any, remap: PinholeRemap) -> list[int]:
+def _remapped_rect(rect: Any, remap: Remap) -> list[int]:
     """The axis-aligned box, in the undistorted photo, of a rectangle of the photo as given."""
     x, y, rw, rh = rect
     p = remap.points(np.array([[x, y], [x + rw, y], [x + rw, y + rh], [x, y + rh]], float))

@@ -18,6 +18,7 @@ from typing import Any
 from .._files import staging_dir
 from ..errors import RtloopError
 from ..fit.files import SCENE_CARD, fit_inputs, load_inputs, referenced
+from ..fit.lights import LightsFit
 from .fields import FIT_OPTIONS, READ_OPTIONS, check_id, check_options, check_path, check_seed
 from .folder import mark, may_replace
 
@@ -281,6 +282,11 @@ def run_job(job: Job, *, threads: int | None = None, options: dict[str, Any] | N
         finally:
             if log is not None:
                 log.close()
+        if isinstance(result, LightsFit) and log is not None:  # the default fit kept a further light
+            from ..cli.outputs import set_aside_one_light_log
+
+            set_aside_one_light_log(staged)  # type: ignore[arg-type]
+        several = several or isinstance(result, LightsFit)
         if warm:
             from ..fit.bounds import restore_bounds
 

@@ -3,12 +3,9 @@
 
 from __future__ import annotations
 
-from .._interrupt import interrupted_at_import
+from .._interrupt import importing
 
-try:
+with importing:  # a Ctrl-C while a console script starts: one line, exit 130
     from .fit import main
-except KeyboardInterrupt:
-    interrupted_at_import()  # a console script starting: one line, exit 130
-    raise
 
 __all__ = ["main"]

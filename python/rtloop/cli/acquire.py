@@ -3,13 +3,12 @@
 
 from __future__ import annotations
 
-from .._interrupt import interrupted_at_import
+from .._interrupt import importing
 
-try:
+with importing:  # a Ctrl-C while a console script starts: one line, exit 130
     import argparse
     import io
     import math
-    import textwrap
     from collections.abc import Callable, Sequence
     from pathlib import Path
     from typing import Any
@@ -24,21 +23,9 @@ try:
     from ..acquisition.calibration import CameraIntrinsics, calibrate_camera, undistort_to_pinhole
     from ..acquisition.response import load_photo
     from .args import (
-        BOARD_HELP,
-        RESPONSE_HELP,
-        Parser,
-        formatter,
-        info,
-        length,
-        nonneg_int,
-        positive_float,
-        positive_int,
-        run_subcommands,
-        size,
+        BOARD_HELP, RESPONSE_HELP, Parser, formatter, info, length, nonneg_int, positive_float, positive_int,
+        run_subcommands, size
     )
-except KeyboardInterrupt:
-    interrupted_at_import()  # a console script starting: one line, exit 130
-    raise
 
 __all__ = ["DEFAULT_BOARD", "acquire_main"]
 
@@ -68,14 +55,52 @@ A session:
 Run 'rtloop-acquire COMMAND --help' for each command's options.
 """
 
+BOARD_DESCRIPTION = """\
+Write a ChArUco board as a PNG to print, and its description as JSON (same name,
+.json) for --board of the other commands. Print at 100% scale ("actual size"),
+glue it flat to something rigid, then measure a square with a ruler: if it is
+not exactly the size asked for, put the measured size (in metres) into the JSON's
+"square_m" and scale "marker_m" the same way."""
+
+CAPTURE_DESCRIPTION = """\
+Capture a photo through OpenCV's VideoCapture: read --warmup frames so automatic
+exposure and white balance settle, lock both at the settled values (or at
+--exposure / --wb-temperature), average --frames frames (noise falls as 1/sqrt(N);
+keep the scene still), and write a 16-bit PNG plus OUT.json with every setting and
+whether each lock took. Locking depends on the camera and backend: the JSON and the
+warnings say 'locked', 'requested' (not confirmed) or 'unsupported'. The PNG keeps
+the camera's encoding (load it with --response srgb, the default, for webcams)."""
+
+CAPTURE_EPILOG = "example:\n  rtloop-acquire capture --device 0 --size 1920x1080 --frames 32 --out scene.png"
+
+CALIBRATE_DESCRIPTION = """\
+Calibrate the camera (cv2.calibrateCamera) from several photos of a ChArUco board or
+a chessboard: focal lengths, principal point, radial and tangential distortion. Use
+the same camera, zoom, focus and resolution as for the scene photo. Take 10 to 20
+photos from different angles (tilted up to about 45 degrees), the board covering a
+good part of the frame and, across the set, reaching every corner. Photos in which
+the board is not found are skipped (and listed); at least 3 must remain. A good
+calibration has an RMS reprojection error below about 0.5 px."""
+
+CALIBRATE_EPILOG = (
+    "example:\n  rtloop-acquire calibrate calib/*.png --board board.json --out camera.json\n"
+    "  rtloop-acquire calibrate shots/*.jpg --board chess:10x7,25mm --out camera.json"
+)
+
+UNDISTORT_DESCRIPTION = """\
+Remove the lens distortion, make the pixels square and move the principal point to the
+centre, so the photo is what the scene format's camera sees; prints its vertical field
+of view. Writes a 16-bit sRGB PNG (read by rtloop with the default --response srgb).
+rtloop-scene does this itself when given --camera."""
+
 
 def _command(
     sub: Any, name: str, handler: Callable[[argparse.Namespace], int], *, help: str, description: str,
     epilog: str | None = None,
 ) -> argparse.ArgumentParser:
-    """The subcommand ``name``, run by ``handler``, with ``description`` dedented as its help text."""
+    """The subcommand ``name``, run by ``handler``, with ``description`` as its help text."""
     parser = sub.add_parser(
-        name, help=help, formatter_class=formatter(), description=textwrap.dedent(description), epilog=epilog
+        name, help=help, formatter_class=formatter(), description=description, epilog=epilog
     )
     parser.set_defaults(handler=handler)
     return parser
@@ -89,25 +114,22 @@ def _out(parser: argparse.ArgumentParser, metavar: str, help: str | None = None)
 def _build_acquire_parser() -> Parser:
     p = Parser(prog="rtloop-acquire", description=ACQUIRE_DESCRIPTION, formatter_class=formatter())
     sub = p.add_subparsers(title="commands", metavar="COMMAND")
-    _add_board_command(sub)
-    _add_capture_command(sub)
-    _add_calibrate_command(sub)
-    _add_undistort_command(sub)
+    # name, handler, options, help (in the list of commands), description, epilog
+    for name, handler, options, help, description, epilog in (
+        ("board", _cmd_board, _board_options, "write a printable ChArUco board", BOARD_DESCRIPTION, None),
+        ("capture", _cmd_capture, _capture_options, "take an averaged 16-bit photo from a camera",
+         CAPTURE_DESCRIPTION, CAPTURE_EPILOG),
+        ("calibrate", _cmd_calibrate, _calibrate_options, "measure the camera from photos of a board",
+         CALIBRATE_DESCRIPTION, CALIBRATE_EPILOG),
+        ("undistort", _cmd_undistort, _undistort_options,
+         "resample a photo into the scene's ideal pinhole camera", UNDISTORT_DESCRIPTION, None),
+    ):
+        options(_command(sub, name, handler, help=help, description=description, epilog=epilog))
     return p
 
 
-def _add_board_command(sub: Any) -> None:
-    """The ``board`` command: write a printable ChArUco board."""
-    b = _command(
-        sub, "board", _cmd_board,
-        help="write a printable ChArUco board",
-        description="""\
-            Write a ChArUco board as a PNG to print, and its description as JSON (same name,
-            .json) for --board of the other commands. Print at 100% scale ("actual size"),
-            glue it flat to something rigid, then measure a square with a ruler: if it is
-            not exactly the size asked for, put the measured size (in metres) into the JSON's
-            "square_m" and scale "marker_m" the same way.""",
-    )
+def _board_options(b: argparse.ArgumentParser) -> None:
+    """The options of ``board``: write a printable ChArUco board."""
     b.add_argument("--board", default=DEFAULT_BOARD, help=BOARD_HELP + f" (default {DEFAULT_BOARD})")
     b.add_argument("--dpi", type=positive_int, default=300, help="printer resolution (default 300)")
     b.add_argument(
@@ -120,21 +142,8 @@ def _add_board_command(sub: Any) -> None:
     _out(b, "BOARD.png", "the image to write")
 
 
-def _add_capture_command(sub: Any) -> None:
-    """The ``capture`` command: an averaged 16-bit photo from a camera."""
-    c = _command(
-        sub, "capture", _cmd_capture,
-        help="take an averaged 16-bit photo from a camera",
-        description="""\
-            Capture a photo through OpenCV's VideoCapture: read --warmup frames so automatic
-            exposure and white balance settle, lock both at the settled values (or at
-            --exposure / --wb-temperature), average --frames frames (noise falls as 1/sqrt(N);
-            keep the scene still), and write a 16-bit PNG plus OUT.json with every setting and
-            whether each lock took. Locking depends on the camera and backend: the JSON and the
-            warnings say 'locked', 'requested' (not confirmed) or 'unsupported'. The PNG keeps
-            the camera's encoding (load it with --response srgb, the default, for webcams).""",
-        epilog="example:\n  rtloop-acquire capture --device 0 --size 1920x1080 --frames 32 --out scene.png",
-    )
+def _capture_options(c: argparse.ArgumentParser) -> None:
+    """The options of ``capture``: an averaged 16-bit photo from a camera."""
     c.add_argument(
         "--device",
         default="0",
@@ -174,24 +183,8 @@ def _add_capture_command(sub: Any) -> None:
     _out(c, "PHOTO.png", "the 16-bit PNG to write")
 
 
-def _add_calibrate_command(sub: Any) -> None:
-    """The ``calibrate`` command: measure the camera from photos of a board."""
-    k = _command(
-        sub, "calibrate", _cmd_calibrate,
-        help="measure the camera from photos of a board",
-        description="""\
-            Calibrate the camera (cv2.calibrateCamera) from several photos of a ChArUco board or
-            a chessboard: focal lengths, principal point, radial and tangential distortion. Use
-            the same camera, zoom, focus and resolution as for the scene photo. Take 10 to 20
-            photos from different angles (tilted up to about 45 degrees), the board covering a
-            good part of the frame and, across the set, reaching every corner. Photos in which
-            the board is not found are skipped (and listed); at least 3 must remain. A good
-            calibration has an RMS reprojection error below about 0.5 px.""",
-        epilog=(
-            "example:\n  rtloop-acquire calibrate calib/*.png --board board.json --out camera.json\n"
-            "  rtloop-acquire calibrate shots/*.jpg --board chess:10x7,25mm --out camera.json"
-        ),
-    )
+def _calibrate_options(k: argparse.ArgumentParser) -> None:
+    """The options of ``calibrate``: measure the camera from photos of a board."""
     k.add_argument("photos", nargs="+", metavar="PHOTO", help="photos of the board")
     k.add_argument(
         "--board",
@@ -208,17 +201,8 @@ def _add_calibrate_command(sub: Any) -> None:
     _out(k, "CAMERA.json", "the calibration to write")
 
 
-def _add_undistort_command(sub: Any) -> None:
-    """The ``undistort`` command: resample a photo into the scene's ideal pinhole camera."""
-    u = _command(
-        sub, "undistort", _cmd_undistort,
-        help="resample a photo into the scene's ideal pinhole camera",
-        description="""\
-            Remove the lens distortion, make the pixels square and move the principal point to the
-            centre, so the photo is what the scene format's camera sees; prints its vertical field
-            of view. Writes a 16-bit sRGB PNG (read by rtloop with the default --response srgb).
-            rtloop-scene does this itself when given --camera.""",
-    )
+def _undistort_options(u: argparse.ArgumentParser) -> None:
+    """The options of ``undistort``: resample a photo into the scene's ideal pinhole camera."""
     u.add_argument("photo", metavar="PHOTO")
     u.add_argument("--camera", required=True, metavar="CAMERA.json", help="from 'rtloop-acquire calibrate'")
     u.add_argument("--response", default="srgb", help=RESPONSE_HELP)

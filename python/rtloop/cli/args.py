@@ -13,9 +13,9 @@ from typing import Any, NoReturn
 
 from ..errors import RtloopError
 
-__all__ = ["BOARD_HELP", "RESPONSE_HELP", "Parser", "UsageError", "float_in", "formatter", "generations", "info",
-           "int_at_least", "length", "nonneg_int", "positive_float", "positive_int", "run_subcommands", "size",
-           "triple"]
+__all__ = ["BOARD_HELP", "RESPONSE_HELP", "Parser", "UsageError", "choice", "flag", "float_in", "formatter",
+           "generations", "info", "int_at_least", "length", "nonneg_int", "positive_float", "positive_int",
+           "run_subcommands", "size", "triple"]
 
 BOARD_HELP = (
     "the ChArUco board: a JSON file written by 'rtloop-acquire board', or COLSxROWS,SQUARE,MARKER[,DICT] "
@@ -42,6 +42,16 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message: str) -> NoReturn:
         raise UsageError(message, self.prog)
+
+
+def choice(parser: Any, flag: str, choices: tuple[str, ...], help: str, **more: Any) -> None:
+    """The option ``flag`` taking one of ``choices``, the first its default."""
+    parser.add_argument(flag, choices=choices, default=choices[0], help=help, **more)
+
+
+def flag(parser: Any, name: str, help: str) -> None:
+    """The on/off option ``name``: off unless given."""
+    parser.add_argument(name, action="store_true", help=help)
 
 
 def formatter(parser_class: Any = argparse.RawDescriptionHelpFormatter) -> Callable[[str], Any]:
@@ -134,6 +144,20 @@ def length(text: str) -> float:
         ) from None
     if not (math.isfinite(v) and v > 0):
         raise argparse.ArgumentTypeError(f"expected a length > 0, got {text!r}")
+    return v
+
+
+def length_or_zero(text: str) -> float:
+    """A length of 0 or more in metres, or with a unit: 0, 0.5mm, 0.05cm."""
+    try:
+        from ..acquisition.boards import length_m  # here: boards imports OpenCV
+
+        v = length_m(text)
+    except ValueError:
+        v = float("nan")
+    if not (math.isfinite(v) and v >= 0):
+        raise argparse.ArgumentTypeError(
+            f"expected a length of 0 or more such as 0, 0.0005 or 0.5mm, got {text!r}")
     return v
 
 

@@ -32,9 +32,9 @@ from rtloop.fit.protocol import LIMITS, max_threads
 from rtloop.report import truth_errors, truth_values
 from rtloop.uncertainty.bootstrap import replicate_of
 
-from .args import Parser, UsageError, float_in, generations, int_at_least, int_in, norm, vignetting
-from .lights import LIGHTS_HELP, lights_count, lights_summary, run_lights, uses_lights
-from .outputs import GenerationLog, input_paths, render_final, write_result
+from .args import Parser, UsageError, choice, float_in, generations, int_at_least, int_in, norm, vignetting
+from .lights import LIGHTS_HELP, lights_count, lights_summary, run_lights, uses_lights, write_lights
+from .outputs import GenerationLog, input_paths, render_final, set_aside_one_light_log, write_result
 from .progress import _Progress
 from .summary import duration as _duration, summary as _summary
 
@@ -101,7 +101,12 @@ or a rectangle light), the lights fit: result.json's fit_report lists each light
 (position or direction, intensity, their error bars, its share of the light)
 and, with auto, the held-out error per number of lights; objective.png and
 final.png as above, and with --report a page of the lights and their evidence;
-no snapshots or CSV.
+no snapshots or CSV. Without --lights, a one-light fit that does not explain
+the photo tries further lights: one kept (on pixels the fit did not see) gives
+the lights fit's files, with the test and the evidence in fit_report's
+number_of_lights (the one-light search's CSV and snapshots in one_light/); none
+kept leaves the one-light files, fit_report.model.lights saying what was tried.
+--lights 1 fits one light only.
 
 Everything is written into a temporary directory beside DIR and moved into
 place when complete: a failed or interrupted run leaves no partial results. An
@@ -196,9 +201,9 @@ def _add_search_args(p: Parser) -> None:
 
 def _add_photo_args(p: Parser) -> None:
     """How the photo is read and compared: response, crop, norm, loss space."""
-    p.add_argument("--response", choices=("srgb", "linear"), default="srgb",
-                   help="how IMAGE's stored values relate to light: 'srgb' (default, cameras and image "
-                   "editors) or 'linear' (raw linear sensor counts)")
+    choice(p, "--response", ("srgb", "linear"),
+           "how IMAGE's stored values relate to light: 'srgb' (default, cameras and image "
+           "editors) or 'linear' (raw linear sensor counts)")
     p.add_argument("--crop", action="store_true",
                    help="centre-crop IMAGE to the scene's aspect ratio (otherwise they must match)")
     p.add_argument("--norm", type=norm, default="auto", metavar="NORM",
@@ -206,43 +211,43 @@ def _add_photo_args(p: Parser) -> None:
                    "camera file, --response linear of a 16-bit or 8-bit PNG or TIFF or a RAW, and the l1 fit's "
                    "residual exceeds its own noise at most pixels; fit_report.model.norm says why), l1 (the "
                    "paper's), l2 (Gaussian noise), huber or huber:H (quadratic within H, linear beyond)")
-    p.add_argument("--loss-space", choices=("auto", "linear", "srgb"), default="auto",
-                   help="where --norm compares render and IMAGE: 'auto' (default: linear, and a JPEG that direct "
-                   "light explains refitted in sRGB), 'linear' (radiance) or 'srgb' (both sRGB-encoded, as an "
-                   "8-bit file stores them: an error in the shadows counts as the file and the eye resolve it)")
+    choice(p, "--loss-space", ("auto", "linear", "srgb"),
+           "where --norm compares render and IMAGE: 'auto' (default: linear, and a JPEG that direct "
+           "light explains refitted in sRGB), 'linear' (radiance) or 'srgb' (both sRGB-encoded, as an "
+           "8-bit file stores them: an error in the shadows counts as the file and the eye resolve it)")
 
 
 def _add_model_args(p: Parser) -> None:
     """What the model holds and checks: environment, interreflection, pixel footprint, error bars, highlights, framing."""
-    p.add_argument("--environment", choices=("auto", "on", "off"), default="auto",
-                   help="the occluded environment term (a room's light from every direction, darker under and "
-                   "between the objects): 'auto' (default) adds it when the photo shows it and says why in "
-                   "result.json's fit_report.model, 'on' always fits it, 'off' never")
-    p.add_argument("--interreflection", choices=("auto", "on", "off"), default="auto",
-                   help="one diffuse bounce between the objects (the floor lighting a ball's underside, a red ball "
-                   "tinting the floor): 'auto' (default) adds it when the photo shows it, 'on', 'off'; with it the "
-                   "fit also estimates the light's absolute intensity (a bounce is as bright as the albedos are)")
-    p.add_argument("--footprint", nargs="?", choices=("auto", "on", "off"), default="auto", const="on",
-                   help="integrate each pixel over its area where a sphere's shadow edge or terminator crosses "
-                   "it, as a camera does, instead of shading pixel centres: 'auto' (default) in the closed-form "
-                   "polish, products and loss (the search finds the basin at pixel centres), 'on' (or the bare "
-                   "flag) in every search too, 'off' pixel centres only (on the Mitsuba test photos: median light error 1.8 mm against 2.8 mm at pixel centres, for about 1.1x the CPU time)")
-    p.add_argument("--uncertainty", choices=("default", "bootstrap", "off"), default="default",
-                   help="error bars: 'default' (Gauss-Newton and the block sandwich, a few ms), 'bootstrap' "
-                   "(also a spatial block bootstrap: 30 closed-form refits on resampled image blocks, seeded by "
-                   "--seed; about 1 s on a 128x96 direct-light photo, 40-115 s with interreflection, 9 minutes "
-                   "for 50 balls with the environment and interreflection; each refit is shown, and Ctrl-C "
-                   "stops within a generation; its sigma is printed), 'off' (none)")
-    p.add_argument("--highlights", choices=("auto", "off"), default="auto",
-                   help="'auto' (default): a sphere the scene gives as matte gets a fitted specular lobe "
-                   "(Blinn-Phong, or a clear coat with its roughness where that explains it better) when the "
-                   "photo shows a highlight the diffuse model cannot explain; 'off': never")
-    p.add_argument("--framing", choices=("check", "correct", "off"), default="check",
-                   help="whether IMAGE is framed as the scene's camera frames it (the objects' outlines against "
-                   "the fitted render): 'check' (default) says so in the verdict where the outlines are 0.5 px "
-                   "or more off (a cropped, rotated or resized photo, or a wrong field of view), 'correct' "
-                   "resamples IMAGE into the scene's framing by the roll, zoom and shift its outlines give and "
-                   "fits again (objective.png is then the resampled photo), 'off'")
+    choice(p, "--environment", ("auto", "on", "off"),
+           "the occluded environment term (a room's light from every direction, darker under and "
+           "between the objects): 'auto' (default) adds it when the photo shows it and says why in "
+           "result.json's fit_report.model, 'on' always fits it, 'off' never")
+    choice(p, "--interreflection", ("auto", "on", "off"),
+           "one diffuse bounce between the objects (the floor lighting a ball's underside, a red ball "
+           "tinting the floor): 'auto' (default) adds it when the photo shows it, 'on', 'off'; with it the "
+           "fit also estimates the light's absolute intensity (a bounce is as bright as the albedos are)")
+    choice(p, "--footprint", ("auto", "on", "off"), nargs="?", const="on",
+           help="integrate each pixel over its area where a sphere's shadow edge or terminator crosses "
+           "it, as a camera does, instead of shading pixel centres: 'auto' (default) in the closed-form "
+           "polish, products and loss (the search finds the basin at pixel centres), 'on' (or the bare "
+           "flag) in every search too, 'off' pixel centres only (on the Mitsuba test photos: median light error 1.8 mm against 2.8 mm at pixel centres, for about 1.1x the CPU time)")
+    choice(p, "--uncertainty", ("default", "bootstrap", "off"),
+           "error bars: 'default' (Gauss-Newton and the block sandwich, a few ms), 'bootstrap' "
+           "(also a spatial block bootstrap: 30 closed-form refits on resampled image blocks, seeded by "
+           "--seed; about 1 s on a 128x96 direct-light photo, 40-115 s with interreflection, 9 minutes "
+           "for 50 balls with the environment and interreflection; each refit is shown, and Ctrl-C "
+           "stops within a generation; its sigma is printed), 'off' (none)")
+    choice(p, "--highlights", ("auto", "off"),
+           "'auto' (default): a sphere the scene gives as matte gets a fitted specular lobe "
+           "(Blinn-Phong, or a clear coat with its roughness where that explains it better) when the "
+           "photo shows a highlight the diffuse model cannot explain; 'off': never")
+    choice(p, "--framing", ("check", "correct", "off"),
+           "whether IMAGE is framed as the scene's camera frames it (the objects' outlines against "
+           "the fitted render): 'check' (default) says so in the verdict where the outlines are 0.5 px "
+           "or more off (a cropped, rotated or resized photo, or a wrong field of view), 'correct' "
+           "resamples IMAGE into the scene's framing by the roll, zoom and shift its outlines give and "
+           "fits again (objective.png is then the resampled photo), 'off'")
 
 
 def _add_lens_args(p: Parser) -> None:
@@ -254,10 +259,10 @@ def _add_lens_args(p: Parser) -> None:
     p.add_argument("--flat-field", metavar="FILE",
                    help="a photo of a flat white target through the same lens and settings: the falloff it shows "
                    "divides IMAGE (instead of --vignetting)")
-    p.add_argument("--tone-curve", choices=("auto", "on", "off"), default="auto",
-                   help="'auto' (default): where IMAGE is an 8-bit file whose tone curve is not sRGB (held-out "
-                   "pixels show it), a monotone curve is fitted with the light; 'on', 'off'; --response linear "
-                   "keeps the image linear (off)")
+    choice(p, "--tone-curve", ("auto", "on", "off"),
+           "'auto' (default): where IMAGE is an 8-bit file whose tone curve is not sRGB (held-out "
+           "pixels show it), a monotone curve is fitted with the light; 'on', 'off'; with --response linear "
+           "the image is declared linear: no curve, and no doubt that it is sRGB-encoded")
     p.add_argument("--mask", type=Path, metavar="PNG",
                    help="an image of IMAGE's size (or the scene's): white where the scene models the photo, "
                    "black where it does not (another object, a reflection); black pixels are left out of the fit (default: the mask the scene names, "
@@ -407,8 +412,16 @@ class _Run:
                 self.progress.generation(info)
 
             result = fit_inputs(inputs, seed=args.seed, threads=args.threads, callback=callback,
-                                **fit_options(args))
+                                lights=args.lights, **fit_options(args))
         self.progress.end_line()
+        if isinstance(result, LightsFit):  # the default fit kept a further light: the lights fit's outputs
+            set_aside_one_light_log(tmp)
+            if truth is not None:
+                print(f"{PROG}: warning: --truth: not compared: the fit kept {len(result.lights)} lights "
+                      "(see result.json's fit_report.number_of_lights)", file=sys.stderr)
+            write_lights(tmp, result, image, asked=args.lights, seed=args.seed, final_scale=args.final_scale,
+                         final_spp=args.final_spp, report=bool(args.report))
+            return result
         for w in result.warnings:
             print(f"{PROG}: warning: {w}", file=sys.stderr)
         _warn_goodness(result.goodness or {})

@@ -3,9 +3,9 @@ composite, the matte and the two renders into an output directory moved into pla
 
 from __future__ import annotations
 
-from .._interrupt import interrupted_at_import
+from .._interrupt import importing
 
-try:
+with importing:  # a Ctrl-C while a console script starts: one line, exit 130
     import argparse
     import os
     import shutil
@@ -22,9 +22,6 @@ try:
     from .._files import check_out_dir, move_into_place, recover_leftovers, staging_dir, write_bytes
     from .._srgb import encode8
     from ..errors import RtloopError, RtloopWarning
-except KeyboardInterrupt:
-    interrupted_at_import()  # a console script starting: one line, exit 130
-    raise
 
 PROG = "rtloop-insert"
 

@@ -13,7 +13,8 @@ import numpy as np
 
 import rtloop
 from rtloop.fit.files import fit_inputs
-from rtloop.fit.lights import AUTO_GAIN, AUTO_LIMIT
+from rtloop.fit.lights import AUTO_GAIN, AUTO_LIMIT, size_text
+from rtloop.fit.more_lights import MIN_ANGLE_DEG, MIN_SHARE
 
 from rtloop._files import write_json
 
@@ -27,10 +28,18 @@ LIGHTS_HELP = (
     f"(one light, then one more while it cuts their error by {AUTO_GAIN:.0%}% or more, up to {AUTO_LIMIT}). "
     "Added lights are point lights searched in the first light's position box. A scene with a 'lights' "
     "list (several lights, a sphere or a rectangle light) takes this fit without the flag, its own lights "
-    "kept; --lights 1 on a one-light scene is the ordinary fit. Objects are taken as matte, under the fit's "
+    "kept. Without the flag, a one-light scene takes the ordinary fit and, only where it does not explain "
+    "the photo, further lights are tried and kept where held-out pixels ask for them (result.json says what "
+    "was tried); --lights 1 fits one light only. Objects are taken as matte, under the fit's "
     "own loss: --norm, --loss-space, the term and camera flags are refused with it; result.json lists each "
     "light with its error bars"
 )
+
+
+#: What the default fit adds to the rule (:mod:`rtloop.fit.more_lights`).
+_DEFAULT_RULE = (f" than the one-light fit's (or the fewer lights'), carrying {MIN_SHARE:.0%} of the light "
+                 f"{MIN_ANGLE_DEG:g} degrees from the others at least; tried only where the one-light fit does not "
+                 "explain the photo (gate)")
 
 
 def lights_count(text: str) -> int | str:
@@ -90,7 +99,8 @@ def lights_document(fit: Any, *, asked: Any, seed: int) -> dict[str, Any]:
         "seconds": fit.seconds,
         "number_of_lights": {"asked": asked, "evidence": fit.evidence,
                              "rule": f"a further light is kept when it lowers the held-out squared error by "
-                                     f"{AUTO_GAIN:.0%} or more"},
+                                     f"{AUTO_GAIN:.0%} or more" + (_DEFAULT_RULE if fit.gate else ""),
+                             **({"gate": fit.gate} if fit.gate else {})},
         "seed": seed,
     }
     return doc
@@ -128,13 +138,18 @@ def lights_summary(fit: Any, out: Path, wall: float, duration: Any) -> str:
             else ("at " + _pm(light["position"], light.get("position_error"), " m"))
         extra = f", radius {_pm(light['radius'], light.get('radius_error'), ' m')}" if "radius" in light else ""
         if "size" in light:
-            extra += f", {light['size'][0]:g} x {light['size'][1]:g} m"
+            extra += f", {size_text(light)}"
         held = " (held: sets the albedos' scale)" if light.get("intensity_error") is None else ""
         lines.append(f"  {light['name']} ({light['kind']}) {where}{extra}, intensity "
                      f"{_pm(light['intensity'], light.get('intensity_error'))}{held}, {light['share']:.0%} of the light")
+        if "size_note" in light:
+            lines.append(f"    {light['name']}: {light['size_note']}")
     if fit.evidence:
         counts = ", ".join(f"{e['lights']}: {e['held_out']:.4g}" for e in fit.evidence)
         lines.append(f"held-out error per number of lights: {counts}; kept {len(fit.lights)} (a further light "
                      f"must cut it by {AUTO_GAIN:.0%})")
+    if fit.gate:
+        lines.append(f"lights chosen from the photo: the one-light fit left {fit.gate['ratio']:.2g}x the noise "
+                     f"floor, so further lights were tried (--lights 1 fits one light)")
     lines.append(f"results in {out}/ (result.json, final.png, objective.png)")
     return "\n".join(lines)

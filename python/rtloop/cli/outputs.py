@@ -17,7 +17,8 @@ from rtloop._files import write_json
 from rtloop.acquisition.raw import is_raw, raw_settings
 from rtloop.uncertainty.bootstrap import replicate_of
 
-__all__ = ["GenerationLog", "input_paths", "render_final", "result_json", "write_final", "write_result"]
+__all__ = ["GenerationLog", "input_paths", "render_final", "result_json", "set_aside_one_light_log", "write_final",
+           "write_result"]
 
 _SAFE_NAME = re.compile(r"[^A-Za-z0-9_+-]+")
 
@@ -129,3 +130,14 @@ class GenerationLog:
         if kind is not None:
             self._pending.clear()
         self.close()
+
+
+def set_aside_one_light_log(out: Path) -> None:
+    """Where the default fit kept a further light: the one-light search's log (best_per_generation.csv,
+    snapshots/), which the test started from, moved into ``out``/one_light/, so that the top level holds
+    the lights fit's files alone."""
+    aside = out / "one_light"
+    aside.mkdir()
+    for name in ("best_per_generation.csv", "snapshots"):
+        if (out / name).exists():
+            (out / name).rename(aside / name)

@@ -3,9 +3,9 @@
 
 from __future__ import annotations
 
-from .._interrupt import interrupted_at_import
+from .._interrupt import importing
 
-try:
+with importing:  # a Ctrl-C while a console script starts: one line, exit 130
     import argparse
     import json
     import math
@@ -28,21 +28,9 @@ try:
     from ..acquisition.response import load_photo
     from .acquire import DEFAULT_BOARD
     from .args import (
-        BOARD_HELP,
-        RESPONSE_HELP,
-        Parser,
-        float_in,
-        formatter,
-        info,
-        length,
-        positive_float,
-        positive_int,
-        run_subcommands,
-        triple,
+        BOARD_HELP, RESPONSE_HELP, Parser, choice, flag, float_in, formatter, info, length, length_or_zero,
+        positive_float, positive_int, run_subcommands, triple
     )
-except KeyboardInterrupt:
-    interrupted_at_import()  # a console script starting: one line, exit 130
-    raise
 
 __all__ = ["scene_main"]
 
@@ -124,7 +112,7 @@ def _build_scene_parser() -> Parser:
         help="the ball's radius: metres, or with mm/cm (measure the circumference and divide by 2 pi)",
     )
     p.add_argument("--out", "-o", required=True, metavar="DIR", help="output directory (created)")
-    p.add_argument("--force", action="store_true", help="replace DIR if it exists and is not empty")
+    flag(p, "--force", "replace DIR if it exists and is not empty")
     _add_camera_args(p)
     _add_photos_args(p)
     _add_colour_args(p)
@@ -152,12 +140,13 @@ def _add_camera_args(p: Parser) -> None:
         help="vertical field of view of a distortion-free photo, in degrees (default: from the photo's EXIF focal "
         "length, else from the board when it is seen at enough of an angle)",
     )
-    g.add_argument(
-        "--strict",
-        action="store_true",
-        help="without EXIF, --vfov or --camera: refuse a board that fixes the vertical field of view more "
-        "loosely than +-0.3 deg (default: use it and warn with its spread)",
-    )
+    choice(g, "--lens-profile", ("auto", "off"),
+           "'auto' (default): where the photo's EXIF names its camera, lens and focal length and Lensfun's "
+           "database has that lens, remove its distortion and vignetting before the board and the ball are "
+           "measured (not with --camera or --vfov); 'off': take the photo as a pinhole's")
+    flag(g, "--strict",
+         "without EXIF, --vfov or --camera: refuse a board that fixes the vertical field of view more "
+         "loosely than +-0.3 deg (default: use it and warn with its spread)")
 
 
 def _add_photos_args(p: Parser) -> None:
@@ -192,11 +181,8 @@ def _add_colour_args(p: Parser) -> None:
     col.add_argument(
         "--grey-card", metavar="X,Y,W,H", help="white balance from a neutral card at this rectangle of PHOTO"
     )
-    col.add_argument(
-        "--colorchecker",
-        action="store_true",
-        help="colour correction from a ColorChecker Classic in PHOTO (OpenCV contrib's cv2.mcc)",
-    )
+    flag(col, "--colorchecker",
+         "colour correction from a ColorChecker Classic in PHOTO (OpenCV contrib's cv2.mcc)")
     g.add_argument(
         "--grey-card-reflectance",
         type=float_in(0.0, 1.0, True, "a reflectance in (0, 1], e.g. 0.18"),
@@ -219,11 +205,8 @@ def _add_ball_args(p: Parser) -> None:
     g.add_argument(
         "--ball-mask", metavar="MASK.png", help="an image of PHOTO's size, white on the ball, black elsewhere"
     )
-    g.add_argument(
-        "--ball-free",
-        action="store_true",
-        help="do not assume the ball rests on the floor: fit its centre's height too (less precise)",
-    )
+    flag(g, "--ball-free",
+         "do not assume the ball rests on the floor: fit its centre's height too (less precise)")
     g.add_argument(
         "--board-margin",
         type=float,
@@ -231,6 +214,15 @@ def _add_ball_args(p: Parser) -> None:
         metavar="M",
         help="the white paper around the board's squares, metres (default one square); with no --objective "
         "the board, this margin and the colour target are written to mask.png and left out of the fit",
+    )
+    g.add_argument(
+        "--board-thickness",
+        type=length_or_zero,
+        default=0.0,
+        metavar="LENGTH",
+        help="how far the board's face lies above the floor the ball rests on: metres, or with mm/cm "
+        "(default 0; a board on card or foam: its thickness; without EXIF a millimetre moves the field of "
+        "view refined from the ball by up to half a degree)",
     )
     g.add_argument("--ball-name", default="ball", help="the sphere's name in the scene (default ball)")
     g.add_argument("--floor-name", default="floor", help="the plane's name in the scene (default floor)")
@@ -252,13 +244,10 @@ def _add_scene_args(p: Parser) -> None:
         metavar="FACTOR",
         help="the light's search box, in units of the camera's distance to the ball (default 2)",
     )
-    g.add_argument(
-        "--direct-only",
-        action="store_true",
-        help="a scene of direct light only; by default it also has what a room shows: a dim light from "
-        "every direction (the environment, free in the fit section) and light bouncing between the ball "
-        "and the floor (\"interreflection\": true)",
-    )
+    flag(g, "--direct-only",
+         "a scene of direct light only; by default it also has what a room shows: a dim light from "
+         "every direction (the environment, free in the fit section) and light bouncing between the ball "
+         "and the floor (\"interreflection\": true)")
 
 
 def scene_main(argv: Sequence[str] | None = None) -> int:
@@ -276,6 +265,7 @@ def _cmd_scene(args: argparse.Namespace) -> int:
     except OutputDirError as e:
         raise AcquisitionError(str(e)) from None
     photo, objective, intrinsics, exif, mask = _load_inputs(args)
+    lens = _lens_profile(args) if exif is not None and args.lens_profile == "auto" else None
     colour: Any = "colorchecker" if args.colorchecker else args.grey_card
     acq = build_scene(
         photo,
@@ -284,6 +274,7 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         intrinsics=intrinsics,
         vfov_deg=args.vfov,
         exif=exif,
+        lens=lens,
         objective=objective,
         colour=colour,
         ball_hint=args.ball,
@@ -294,6 +285,7 @@ def _cmd_scene(args: argparse.Namespace) -> int:
         room=not args.direct_only,
         names=(args.ball_name, args.floor_name),
         board_margin=args.board_margin,
+        board_thickness=args.board_thickness,
         card_reflectance=args.grey_card_reflectance,
         where=args.photo,
         objective_where=args.objective or args.photo,
@@ -325,6 +317,19 @@ def _load_inputs(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray | Non
         m = load_photo(args.ball_mask, response="linear")
         mask = m.max(axis=2) > 0.5
     return photo, objective, intrinsics, exif, mask
+
+
+def _lens_profile(args: argparse.Namespace) -> Any:
+    """The profile of the lens the photo's EXIF names (:mod:`rtloop.acquisition.lens_profile`), or None,
+    with a line saying why not when the EXIF names a camera."""
+    from ..acquisition.lens_profile import find_lens_profile, read_lens_exif
+
+    named = read_lens_exif(args.photo)
+    lens, why = find_lens_profile(named)
+    if lens is None and named is not None:
+        info(f"rtloop-scene: no lens profile ({why}): the photo is taken as a pinhole's; give --camera "
+             "(rtloop-acquire calibrate) if its lens distorts")
+    return lens
 
 
 def _record_inputs(acq: Any, args: argparse.Namespace) -> None:
@@ -387,6 +392,10 @@ def _print_summary(out: Path, acq: Any, args: argparse.Namespace) -> None:
         f"{ball['radius']:g} m; "
         f"outline fit {rep['ball']['rms_px']:.2f} px RMS over {rep['ball']['edge_points']} edge points"
     )
+    if "lens_profile" in rep:
+        lp = rep["lens_profile"]
+        done = " and ".join(k for k in ("distortion", "vignetting") if lp[k]) or "nothing"
+        print(f"  lens: {lp['lens']} at {lp['focal_mm']:g} mm; its profile ({lp['source']}) removed {done}")
     print(f"  colour: {rep['colour']['source']}")
     if args.truth:
         for line in truth_lines(acq.scene, args.truth):

@@ -9,6 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from ..fit.heldout import HELD_OUT_GAIN
+
 __all__ = ["duration", "model_lines", "summary"]
 
 
@@ -34,6 +36,7 @@ def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = 
     ]
     lines.extend(model_lines(result.model or {}, dict(result.scene.to_dict())))
     lines += _goodness_lines(result.goodness or {})
+    lines += _lights_lines((result.model or {}).get("lights"))
     lines += _products_lines(result)
     lines.append("")
     lines.append(f"fitted parameters ({result.protocol} protocol, seed {result.seed}):")
@@ -49,7 +52,7 @@ def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = 
         lines.append(bars_note)
     if not robust.get("why_none"):  # else the one line above says why there is none
         lines += undetermined_lines(reported.get("not_determined") or {}, set(result.x))
-    lines += distance_lines((u.get("robust") or {}).get("light_distance") or u.get("light_distance"))
+    lines += distance_lines(reported.get("light_distance") or robust.get("light_distance") or u.get("light_distance"))
     if truth is not None and truth.get("split_convention"):
         lines.append("  (split): the photo fixes only the products of these, not each one: their errors "
                      "say how the fit split the products (see the product errors below)")
@@ -63,6 +66,17 @@ def summary(result: Any, out: Path, wall: float, truth: dict[str, Any] | None = 
     if report is not None:
         lines.append(f"report: {report}")
     return "\n".join(lines)
+
+
+def _lights_lines(tested: dict[str, Any] | None) -> list[str]:
+    """Where the one-light fit did not explain the photo: the further lights tried and why one light stays."""
+    if not tested:
+        return []
+    if not tested.get("tried"):
+        return [f"a further light: not tried ({tested['why']})"]
+    counts = ", ".join(f"{e['lights']}: {e['held_out']:.4g}" for e in tested["evidence"])
+    return [f"a further light: tried, refused (held-out squared error per number of lights {counts}): "
+            f"{tested['why']}"]
 
 
 def _goodness_lines(good: dict[str, Any]) -> list[str]:
@@ -191,6 +205,11 @@ def model_lines(model: dict[str, Any], fitted: dict[str, Any]) -> list[str]:
                      + (f"; at most {ev['loss_with_nested']:.4g} with its products' best" if ev.get("raised") else "")
                      + (f", BIC {-bic:+.4g}" if bic is not None else "")
                      + (f"; {100 * ev['earlier_gain']:+.1f}% before them)" if "earlier_gain" in ev else ")"))
+        held = ev.get("held_out") or {}
+        if "gain" in held:
+            lines.append(f"    held out ({held['folds']} folds of {held['block']}x{held['block']}-pixel blocks): "
+                         f"{held['loss_without']:.4g} -> {held['loss_with']:.4g} with it, {100 * held['gain']:+.1f}% "
+                         f"(at least {100 * HELD_OUT_GAIN:g}% needed)")
         if ev.get("lobe") == "coat":
             lines.append(f"    lobe: a clear coat (GGX roughness {ev['coat']['roughness']:.3g}, IOR {ev['coat']['ior']:g}), "
                          f"its loss {ev['coat']['loss_with']:.4g} against Blinn-Phong's {ev['blinn_phong']['loss_with']:.4g}")

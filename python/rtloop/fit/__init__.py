@@ -24,6 +24,7 @@ from .inputs import objective
 from .jpeg import JPEG_CHROMA_MARGIN
 from .lights import LightsFit, choose_count, fit_lights
 from .method import run_method
+from .more_lights import more_lights
 from .observation import observe
 from .options import LightsOptions, check_options
 from .plan import plan_fit
@@ -123,7 +124,10 @@ def fit(
     term tests stay at pixel centres.
     ``lights``: the number of lights to fit (1 to 8), or "auto" to choose it from held-out pixels (one
     light, then one more while it explains pixels the fit did not see: :func:`.lights.choose_count`).
-    None (default) or 1 for a one-light scene is the fit above; more lights, or a scene with a ``lights``
+    1 for a one-light scene is the fit above. None (default) is that fit too, and where it does not
+    explain the photo (its goodness of fit) further lights are tried and kept only where held-out pixels
+    ask for them (:mod:`.more_lights`): a kept light returns the lights fit, a refused one the fit above
+    with ``model["lights"]`` saying what was tried. More lights, or a scene with a ``lights``
     list of several lights or a sphere light, take the lights fit (:mod:`.lights`: matte objects, the
     lights' geometry searched and their products solved) and return a :class:`.lights.LightsFit`.
     ``framing``: whether the photo is framed as the scene's camera frames it (the objects' outlines against
@@ -133,7 +137,8 @@ def fit(
     ``vignetting``, ``tone``: the camera between the scene and the file (:mod:`.camera`, docs/camera.md):
     "auto" (default) fits the lens's falloff (cos^4 x (1 + k1 r^2 + k2 r^4)) or a monotone tone curve
     with the light where held-out pixels show it (a tone curve on 8-bit images only), "on", "off";
-    ``vignetting=(k1, k2)`` or ``flat_field`` (a linear photo of a flat white target, (H, W[, 3])) give
+    ``tone="linear"`` declares the image linear radiance (a RAW, a file read with ``response="linear"``,
+    as rtloop-fit does): no curve, and no doubt that it may be sRGB-encoded; ``vignetting=(k1, k2)`` or ``flat_field`` (a linear photo of a flat white target, (H, W[, 3])) give
     the falloff. ``result.model["camera"]`` records the terms and the evidence.
     """
     args, t0 = dict(locals()), time.perf_counter()
@@ -142,23 +147,28 @@ def fit(
     if isinstance(options, LightsOptions):
         return _fit_lights(scene, image, mask, options)
     if options.camera.active:  # the camera's terms: each of their fits through fit() again
-        return _through_camera(args, scene, options.camera, t0)
-    if options.framing == "correct":  # the framing's correction: each of its fits through fit() again
-        return fit_reframed(fit, scene, image, mask, reference, options.reframed(args))
-    photo = observe(scene, image, mask, reference, clip=clip)
-    plan = plan_fit(scene, options, photo)
-    fitted = run_method(options, photo, plan)
-    result, doubts = fit_result(fitted, options, photo, plan, t0)
-    analyse(result, options, fitted.photo, plan, doubts)
-    result.seconds = time.perf_counter() - t0
+        result = _through_camera(args, scene, options.camera, t0)
+    elif options.framing == "correct":  # the framing's correction: each of its fits through fit() again
+        result = fit_reframed(fit, scene, image, mask, reference, {**options.reframed(args), "lights": 1})
+    else:
+        photo = observe(scene, image, mask, reference, clip=clip)
+        plan = plan_fit(scene, options, photo)
+        fitted = run_method(options, photo, plan)
+        result, doubts = fit_result(fitted, options, photo, plan, t0)
+        analyse(result, options, fitted.photo, plan, doubts)
+        result.seconds = time.perf_counter() - t0
+    if lights is None:  # the default: a further light only where the photo asks for it
+        return more_lights(result, scene, image, mask, args, fit.__kwdefaults__, t0)
     return result
 
 
 def _through_camera(args: dict[str, Any], scene: Scene, camera: Camera, t0: float) -> FitResult:
     """``fit()`` (``args``: its arguments) through the camera's terms (:func:`.camera.fit_through_camera`):
-    each fit with them off."""
+    each fit with them off (an image declared linear stays declared)."""
+    tone = "linear" if camera.tone == "linear" else "off"
+
     def once(img: np.ndarray, near: Scene | None = None) -> FitResult:
-        return fit(**{**args, "image": img, "vignetting": "off", "tone": "off", "flat_field": None,
+        return fit(**{**args, "image": img, "vignetting": "off", "tone": tone, "flat_field": None, "lights": 1,
                       **({"scene": near} if near is not None else {})})
 
     result = fit_through_camera(once, scene, *objective(scene, args["image"], args["mask"], []), camera)

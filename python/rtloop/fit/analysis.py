@@ -72,7 +72,7 @@ def analyse(result: FitResult, options: FitOptions, photo: Observation, plan: Pl
         as_compared, at_optimum = _native.render(current, current.width, current.height, 1, True), None
     result.goodness = goodness(current, photo.target, photo.use, clip=options.clip, render=as_compared,
                                sigma=photo.sigma, blocking=photo.blocking, encoding=photo.encoding,
-                               codes=photo.codes)
+                               codes=photo.codes, split=options.with_sigma, ids=lambda: photo.ids)
     result.goodness["framing"] = framing_check(current, photo.target, photo.use, result.goodness["ratio"],
                                                options.framing, as_compared)
     if result.goodness["framing"]["mismatch"]:

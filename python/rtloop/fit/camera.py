@@ -35,6 +35,9 @@ from ..scene import Scene, load_scene
 from .bounds import narrowed, restore_bounds
 
 MODES = ("auto", "on", "off")
+#: ``tone`` takes these and "linear": the image is declared linear radiance (a RAW, a file read with
+#: ``response="linear"``): no curve is fitted and its sRGB encoding is not doubted (:mod:`.terms`).
+TONE_MODES = (*MODES, "linear")
 #: A term is selected when its held-out residual is at least this fraction below the products' alone.
 HELD_OUT_GAIN = 0.4
 #: The checkerboard's block side (pixels) for the held-out test.
@@ -63,7 +66,7 @@ class Camera:
 
     @property
     def active(self) -> bool:
-        return self.given is not None or self.vignetting != "off" or self.tone != "off"
+        return self.given is not None or self.vignetting != "off" or self.tone not in ("off", "linear")
 
 
 def off_axis(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
@@ -103,8 +106,8 @@ def check_camera(scene: Scene, vignetting: Any, tone: Any, flat_field: Any) -> C
             raise RtloopError(f"vignetting: (k1, k2) = ({k[0]:g}, {k[1]:g}) makes the falloff 0 or negative "
                               "inside the image (1 + k1 r^2 + k2 r^4 must stay positive for r in [0, 1])")
         cam.vignetting, cam.given, cam.given_from = "given", v, {"k1": k[0], "k2": k[1], "source": "given"}
-    if not (isinstance(tone, str) and tone in MODES):
-        raise RtloopError(f"tone: must be 'auto', 'on' or 'off' (got {tone!r})")
+    if not (isinstance(tone, str) and tone in TONE_MODES):
+        raise RtloopError(f"tone: must be 'auto', 'on', 'off' or 'linear' (got {tone!r})")
     cam.tone = tone
     if flat_field is not None:
         if cam.given is not None:
@@ -489,7 +492,7 @@ def fit_through_camera(fit_once: Callable[..., Any], scene: Scene, image: np.nda
     if why is not None:
         first.model["camera"] = {"terms": [], "not_tested": why}
         return first
-    terms = [t for t, mode in (("vignetting", cam.vignetting), ("tone", cam.tone)) if mode != "off"]
+    terms = [t for t, mode in (("vignetting", cam.vignetting), ("tone", cam.tone)) if mode not in ("off", "linear")]
     if "tone" in terms and cam.tone == "auto" and codes8(target) is None:
         terms.remove("tone")  # linear data (RAW, 16-bit, float) stays linear
     env = "environment" in first.model.get("terms", []) or "environment" in first.scene.to_dict()
@@ -525,4 +528,8 @@ def fit_through_camera(fit_once: Callable[..., Any], scene: Scene, image: np.nda
     record.update(terms=[term], **{term: params}, search={"light": [float(v) for v in light],
                                                            "renders": renders})
     result.model["camera"] = record
+    if term == "tone":  # the curve shares one scale with the colours: their level is not determined
+        from ..uncertainty.bars import tone_curve_products
+
+        tone_curve_products((result.uncertainty or {}).get("bars"))
     return result

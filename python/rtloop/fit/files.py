@@ -120,11 +120,12 @@ def fit_inputs(inputs: Inputs, *, seed: int = 0, threads: int | None = None, cal
                **options: Any) -> Any:
     """:func:`rtloop.fit` on what :func:`load_inputs` read (``options`` as its keyword arguments); its
     warnings are in the result's ``warnings``, not shown. A photo read as linear (``response="linear"``)
-    stays linear: its tone curve is not tested unless ``tone`` says so."""
+    stays linear: ``tone="linear"`` (no curve tested, no doubt of an sRGB encoding) unless ``tone`` says
+    otherwise."""
     import rtloop
 
     if inputs.response == "linear" and options.get("tone", "auto") == "auto":
-        options = {**options, "tone": "off"}
+        options = {**options, "tone": "linear"}
 
     flat = options.get("flat_field")
     if isinstance(flat, (tuple, list)):  # (path, response): the photo of a flat white target

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -139,7 +140,8 @@ def clip_level(sigma: Any, blocking: dict[str, Any]) -> float:
 def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool = True,
              render: np.ndarray | None = None, sigma: np.ndarray | None = None,
              blocking: dict[str, Any] | None = None, encoding: np.ndarray | None = None,
-             codes: np.ndarray | None = None) -> dict[str, Any]:
+             codes: np.ndarray | None = None, split: bool = True,
+             ids: Callable[[], np.ndarray] | None = None) -> dict[str, Any]:
     """The residual of ``scene``'s render against ``target`` (L1 over the used, unsaturated pixels) over
     its floor: per pixel and channel the larger of the 8-bit quantisation's mean error (a quarter code
     step) and the mean error of the measured noise (sigma x sqrt(2/pi)) and of a JPEG's blocks
@@ -147,7 +149,11 @@ def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool 
     the floor, per object its share of the excess (``per_object``, empty otherwise). ``render``: the
     scene's render (spp 1) when the caller has it; ``sigma`` and ``blocking``: ``target``'s
     :func:`noise_sigma`, :func:`jpeg_blocking` and :func:`encoded` when the caller has them, ``codes`` its
-    8-bit codes (:func:`rtloop._srgb.codes8`) where it has them (the same numbers, looked up)."""
+    8-bit codes (:func:`rtloop._srgb.codes8`) where it has them (the same numbers, looked up). ``split``:
+    measure the structure of a residual between the floor and EXPLAINED_RATIO too (what the error bars
+    widen for); above it, it is always measured, with its causes. ``ids``: where the caller traces the
+    object index per pixel once (:attr:`.observation.Observation.ids`), a function giving it, called only
+    where the residual is split by object."""
     if render is None:
         render = _native.render(scene, scene.width, scene.height, 1)
     model = np.minimum(render, np.float32(1.0)) if clip else render
@@ -183,12 +189,14 @@ def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool 
     total, fl = float(resid.sum(dtype=np.float64)), float(floor.sum(dtype=np.float64))
     ratio = total / fl if fl > 0 else float("inf")
     per: dict[str, Any] = {}
-    if ratio >= EXPLAINED_RATIO and math.isfinite(ratio):  # where the excess lies: only worth a look then
-        per = _per_object(scene, target, m, keep, resid, floor)
+    if (ratio >= EXPLAINED_RATIO or split and ratio > 1.0) and math.isfinite(ratio):
+        # where the excess lies, and how much of it is structure the error bars must widen for
+        # (uncertainty.bars.model_lacks): wherever there is any, so the widening grows with it from 0
+        per = _per_object(scene, target, m, keep, resid, floor, causes=ratio >= EXPLAINED_RATIO, ids=ids)
     out: dict[str, Any] = {"ratio": ratio, "loss": total, "floor": fl, "noise_sigma": [float(s) for s in sigma],
                            "jpeg_blocking": blocking,
                            "pixels": int(keep.sum()), "per_object": per, "explained_below": EXPLAINED_RATIO}
-    if per:
+    if per and ratio >= EXPLAINED_RATIO:  # a diagnosis only where the photo is not explained
         out["explained"], out["diagnosis"] = _diagnosis(per)
     if not keep.any() or not math.isfinite(ratio):
         out["ratio"] = None
@@ -205,12 +213,14 @@ def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool 
 
 
 def _per_object(scene: Any, target: np.ndarray, m: np.ndarray, keep: np.ndarray, resid: np.ndarray,
-                floor: np.ndarray) -> dict[str, Any]:
+                floor: np.ndarray, causes: bool = True, ids: Callable[[], np.ndarray] | None = None) -> dict[str, Any]:
     """Per object (and the background) with a kept pixel: its pixels, its residual's ratio to its floor,
-    its share of the excess over the floor, and the structure of its residual (:func:`residual_structure`).
+    its share of the excess over the floor, and the structure of its residual (:func:`residual_structure`;
+    its causes only with ``causes``; ``ids`` gives the object index per pixel, None: traced here).
     ``m``: the model's values (pixels, 3); ``resid`` and ``floor``: over the kept pixels."""
     per: dict[str, Any] = {}
-    ids = np.asarray(_native.object_ids(scene)).reshape(-1)[keep]
+    full_ids = np.asarray(_native.object_ids(scene) if ids is None else ids()).reshape(-1)
+    ids = full_ids[keep]
     for k, name in [*enumerate(scene.object_names), (-1, "background")]:
         sel = ids == k
         if sel.any():
@@ -220,10 +230,9 @@ def _per_object(scene: Any, target: np.ndarray, m: np.ndarray, keep: np.ndarray,
     excess = sum(v["share_of_excess"] for v in per.values())
     for v in per.values():
         v["share_of_excess"] = v["share_of_excess"] / excess if excess > 0 else 0.0
-    full_ids = np.asarray(_native.object_ids(scene)).reshape(-1)
     parts = residual_structure(scene, np.asarray(target, np.float32).reshape(scene.height, scene.width, 3),
                                m.reshape(scene.height, scene.width, 3), keep, floor,
-                               full_ids, list(scene.object_names))
+                               full_ids, list(scene.object_names), causes)
     for name, part in parts.items():
         per[name]["structure"] = part
     return per

@@ -19,7 +19,7 @@ from .protocol import LOSS_SPACES, PIXELS_PER_OBJECT, Budget, budget, check_argu
 from .result import GenerationInfo
 from .selection import check_environment, check_highlights, check_interreflection
 
-__all__ = ["FitOptions", "LightsOptions", "check_options"]
+__all__ = ["FitOptions", "LightsOptions", "check_options", "not_with_lights"]
 
 #: The values ``uncertainty`` takes besides True and False.
 UNCERTAINTY_MODES = ("default", "bootstrap", "off")
@@ -127,17 +127,25 @@ def check_options(scene: Scene, args: dict[str, Any], defaults: dict[str, Any]) 
                       highlights=highlights, footprint=footprint, framing=framing, budget=b, camera=camera)
 
 
+def not_with_lights(args: dict[str, Any], defaults: dict[str, Any]) -> str | None:
+    """The first of NOT_WITH_LIGHTS that ``args`` (fit()'s) give other than its default, or None."""
+    for name in NOT_WITH_LIGHTS:
+        value, default = args[name], defaults[name]
+        given = value is not None if default is None else not (type(value) is type(default) and value == default)
+        if given and not (name == "tone" and value == "linear"):  # the lights fit takes the image as linear
+            return name
+    return None
+
+
 def _lights_options(scene: Scene, args: dict[str, Any], defaults: dict[str, Any],
                     lights: int | str | None) -> LightsOptions:
     """The arguments of the lights fit checked: an argument it would ignore refused, in one line naming it
     (one given other than its default, and a bootstrap: its error bars are a jackknife's), then its own."""
-    for name in NOT_WITH_LIGHTS:
-        value, default = args[name], defaults[name]
-        given = value is not None if default is None else not (type(value) is type(default) and value == default)
-        if given:
-            raise RtloopError(f"{name}: not taken by the lights fit (several lights, or a scene with a 'lights' "
-                              f"list: matte objects, its own loss, no camera terms); leave it at its default "
-                              f"({default!r})")
+    name = not_with_lights(args, defaults)
+    if name is not None:
+        raise RtloopError(f"{name}: not taken by the lights fit (several lights, or a scene with a 'lights' "
+                          f"list: matte objects, its own loss, no camera terms); leave it at its default "
+                          f"({defaults[name]!r})")
     if args["uncertainty"] == "bootstrap":
         raise RtloopError("uncertainty: 'bootstrap' is not taken by the lights fit (its error bars are a "
                           "delete-a-tile jackknife's)")

@@ -105,14 +105,15 @@ def _occlusion_column(d: dict[str, Any]) -> np.ndarray:
 
 
 def residual_structure(scene: Any, target: np.ndarray, model: np.ndarray, keep: np.ndarray, floor: np.ndarray,
-                       ids: np.ndarray, names: list[str]) -> dict[str, Any]:
+                       ids: np.ndarray, names: list[str], causes: bool = True) -> dict[str, Any]:
     """Per object of ``names`` (index k, -1 the background), the split of its residual ``model - target``
     (both (H, W, 3)) over the used pixels ``keep`` (flat bool) into a fine and a smooth part, their sums of
     absolute values (``fine``, ``smooth``), its noise floor's (``floor``), the smooth part beyond white residual's share of the fine
     (``excess``) over the object's noise floor (``floor``: per used pixel and channel, as ``keep`` selects;
     ``structured_ratio``), whether that is structure (``structured``), and for a structured object the share
     of its smooth residual each cause explains (``causes``) and the one named (``cause``, None where none
-    reaches NAMED_SHARE: ``why`` then). ``ids``: the object index per pixel (flat)."""
+    reaches NAMED_SHARE: ``why`` then; not with ``causes`` False: the split alone). ``ids``: the object index
+    per pixel (flat)."""
     h, w = target.shape[:2]
     r = (np.asarray(model, np.float64) - np.asarray(target, np.float64)).reshape(h, w, 3)
     kept = keep.reshape(h, w)
@@ -139,7 +140,7 @@ def residual_structure(scene: Any, target: np.ndarray, model: np.ndarray, keep: 
                                  "structured_ratio": ratio if math.isfinite(ratio) else None,
                                  "structured": bool(ratio >= STRUCTURED_RATIO)}
         out[name] = entry
-        if entry["structured"] and k >= 0:
+        if entry["structured"] and k >= 0 and causes:
             smooth_of[k] = (sel, lp)
     if smooth_of:
         d = scene_to_dict(scene) if not isinstance(scene, dict) else scene

@@ -15,6 +15,7 @@ from ..scene import Scene
 from .bounds import narrowed, restore_bounds
 from .coat import choose_lobe, with_coat
 from .constant import as_environment, compare_constant, declares_ambient
+from .heldout import HeldOut, block_folds, held_out_loss
 from .jpeg import jpeg_codes
 from .observation import Observation
 from .options import FitOptions
@@ -118,12 +119,16 @@ class _Selection:
     def check_encoding(self, encoding: dict[str, Any] | None) -> None:
         """``model["encoding"]``: whether the image looks sRGB-encoded rather than linear. An encoding is
         within [0, 1]: an image beyond it is radiance, not sRGB codes. An image whose every value is an 8-bit
-        code's linear value (a PNG or JPEG as load_image decodes it) was decoded: linear. ``encoding``: the
+        code's linear value (a PNG or JPEG as load_image decodes it) was decoded: linear; an image declared
+        linear (``tone="linear"``) is not checked. ``encoding``: the
         first fit's check (the L1 one the check's gain was measured with), where this is a refit."""
         target = self.photo.target
         if encoding is not None:
             if encoding:
                 self.model["encoding"] = encoding
+        elif self.options.camera.tone == "linear":
+            self.model["encoding"] = {"suspect": False, "why": "declared linear (tone='linear', as a file read "
+                                                               "with response='linear'): not checked"}
         elif self.photo.codes is not None:
             self.model["encoding"] = {"suspect": False, "why": "its values are 8-bit sRGB codes decoded to linear "
                                                                "(as rtloop.load_image reads a PNG or JPEG): not checked"}
@@ -162,6 +167,7 @@ class _Selection:
         self.model_work, self.model_env, added = work, self.env, []
         self.base = float(closed_form_loss(work.with_params(x, where), where, [x], self.photo.target, self.sub,
                                            environment=self.env, **self.kw)[0])
+        self.held = self.held_out(work, where, x, self.env)
         held_colour = "light.color" in model.get("held", {})
         self.names = highlight_candidates(work) if options.highlights == "auto" and not held_colour else []
         candidates = [t for t, wanted in (
@@ -185,18 +191,29 @@ class _Selection:
                     self.base = ev["loss_with"]
                     added.append(term)
                     self.add_term(term, ev, shininess)
+                    known = ev["held_out"].get("loss_with")
+                    self.held = (self.held_out(self.model_work, where, x, self.model_env) if known is None
+                                 else HeldOut(self.held.folds, lambda known=known: known))
         added.sort(key=TERM_ORDER.index)
         return added
+
+    def held_out(self, work: Scene, where: list[str], x: list[float], env: bool) -> HeldOut:
+        """The held-out comparison's folds of the test's pixels and, when first asked, the held-out loss of
+        the model ``work`` (``env``: with the environment's column) at the light ``x`` (of ``where``)."""
+        folds = block_folds(self.sub, self.plan.scene.width)
+        return HeldOut(folds, lambda: held_out_loss(work.with_params(x, where), where, x, self.photo.target,
+                                                    self.sub, folds, environment=env, **self.kw))
 
     def evidence(self, term: str, at: Scene, where: list[str], x: list[float]) -> tuple[dict[str, Any], float | None]:
         """``term``'s test at ``at`` (the model so far at the light found), and a lobe's best trial shininess."""
         target, sub, base, kw = self.photo.target, self.sub, self.base, self.kw
         n_sub, env, names = self.first.pixels // 4, self.model_env, self.names
         if term == "environment":
-            return environment_evidence(at, where, x, target, sub, base=base, active_pixels=n_sub, **kw), None
+            return environment_evidence(at, where, x, target, sub, base=base, active_pixels=n_sub, held=self.held,
+                                        **kw), None
         if term == "interreflection":
             return interreflection_evidence(at, where, x, target, sub, base=base, environment=env,
-                                            active_pixels=n_sub, **kw), None
+                                            active_pixels=n_sub, held=self.held, **kw), None
         ev, shininess = highlight_evidence(at, names, where, x, target, sub, base=base, environment=env,
                                            active_pixels=n_sub, **kw)
         if ev["selected"]:  # the coat against Blinn-Phong, by the same evidence (fit/coat.py)

@@ -15,6 +15,7 @@ import numpy as np
 
 from .. import _native
 from .._files import write_bytes
+from ..fit.lights import size_text
 from .page import _CHECK, _CSS, Report, _objective_section, _Page, _table
 
 __all__ = ["lights_report"]
@@ -35,7 +36,7 @@ def light_rows(fit: Any) -> list[list[str]]:
             where, bar_text = light["position"], _cm(light.get("position_error"))
         shape = f" r {light['radius']:.3g} m" if "radius" in light else ""
         if "size" in light:
-            shape = f" {light['size'][0]:g} × {light['size'][1]:g} m"
+            shape = " " + size_text(light).replace(" x ", " × ").replace("+-", "±")
         err = light.get("intensity_error")
         rows.append([light["name"], light["kind"] + shape, "(" + ", ".join(f"{v:.3f}" for v in where) + ")",
                      bar_text, f"{light['intensity']:.4g}",
@@ -69,6 +70,9 @@ def lights_report(fit: Any, path: str | os.PathLike[str], *, objective: Any = No
                      "its error bar", "share of the light"], light_rows(fit), numeric_from=9))
     page.add('<p class="muted">Error bars (1σ): the loss\'s curvature at the optimum plus a delete-a-tile '
              "jackknife over 4 × 3 tiles of the image (docs/methods.md).</p>")
+    for light in fit.lights:
+        if "size_note" in light:
+            page.add(f'<p class="muted">{html.escape(light["name"])}: {html.escape(light["size_note"])}.</p>')
     page.add("<h2>How many lights</h2>")
     if fit.evidence:
         page.add(_table(["lights", "held-out error", "held-out pixels", "kept"],
@@ -82,7 +86,8 @@ def lights_report(fit: Any, path: str | os.PathLike[str], *, objective: Any = No
     body = []
     for name, rows in fit.products.items():
         for k, row in enumerate(rows):
-            who = fit.lights[k]["name"] if k < n else "constant (ambient)"
+            who = fit.lights[k]["name"] if k < n else "constant (ambient)" if k == n else \
+                f"{fit.lights[k - n - 1]['name']} (its lobe)"
             body.append([name, who, *[float(v) for v in row]])
     page.add(_table(["object", "light", "R", "G", "B"], body, numeric_from=2))
     page.add(f'<p class="muted">rtloop {html.escape(_native.__version__)} · images also in '

@@ -12,7 +12,11 @@ determine reported as not determined, with the reason, rather than as a sigma la
   where that distance is not determined; any other parameter (a product, the intensity, an albedo, an
   environment) whose sigma exceeds a uniform distribution's over its bounds (range / sqrt(12): the photo
   says no more than the bounds), or, for a product, its own value (a colour known to no better than 100 %).
-  Each gets ``sigma`` None and ``why``.
+  Each gets ``sigma`` None and ``why``. Where the fit took a tone curve, every colour product is not
+  determined (:func:`tone_curve_products`): the curve and the products share one scale.
+- **The light's direction and distance** (``light_distance``): the sandwich's, widened alike, the distance
+  again not determined where its widened sigma exceeds :data:`~.light.DISTANCE_DETERMINED` of it; this is
+  what a photo of a far light fixes when its coordinates are not determined.
 """
 
 from __future__ import annotations
@@ -20,12 +24,16 @@ from __future__ import annotations
 import math
 from typing import Any
 
-__all__ = ["LIGHT_DETERMINED", "LIGHT_SIGMA_MAX_M", "WIDEN_PER", "error_bars", "model_lacks"]
+from .light import DISTANCE_DETERMINED
 
-#: The bars are widened by model_lacks / WIDEN_PER (at least 1). Chosen on the coverage fixtures
-#: (studies/coverage.py, camera class: vignetting and tone curves the model lacks): 3 left 3 of the 17
-#: judged photos' lights beyond 3 sigma, with a light sigma of 0.6 m; 2 none beyond, at most 0.42 m.
-WIDEN_PER = 2.0
+__all__ = ["LIGHT_DETERMINED", "LIGHT_SIGMA_MAX_M", "WIDEN_PER", "error_bars", "model_lacks", "tone_curve_products"]
+
+#: The bars are widened by model_lacks / WIDEN_PER (at least 1): by the structured residual's own ratio to
+#: the noise floor. Measured with the synthetic coverage fixtures (studies/coverage.py: 78 of 81 judged
+#: photos within 3 sigma with 1 or 2, 3 of 17 camera-class photos beyond with 3) and real photographs
+#: (studies/real_photos.py --bars, the DiLiGenT ball: 67 % of 96 lights within 3 sigma with 2, 84 % with 1
+#: and the structure measured wherever the residual exceeds the floor).
+WIDEN_PER = 1.0
 
 #: A light coordinate is determined when its sigma is at most this fraction of the light's distance from
 #: the subject (one eighth: about 7 degrees of direction) ...
@@ -35,6 +43,10 @@ LIGHT_DETERMINED = 0.125
 LIGHT_SIGMA_MAX_M = 0.5
 
 _LIGHT = ("light.position.x", "light.position.y", "light.position.z")
+
+#: Why a colour product has no bar where the fit took a tone curve: the curve and the products share a scale.
+TONE_CURVE_PRODUCTS = ("a tone curve was fitted: it and the colours share one scale, so the photo fixes the colours' "
+                       "ratios, not their common level")
 
 
 def model_lacks(goodness: dict[str, Any] | None) -> float:
@@ -94,7 +106,37 @@ def error_bars(u: dict[str, Any], d: dict[str, Any], bounds: dict[str, tuple[flo
                          "colour (an object too dark, too small or unlit)")
         if name in why:
             out[name] = None
-    return {"sigma": out, "not_determined": why, "widened_by": widen, "model_lacks": lacks, "source": source,
+    bars = {"sigma": out, "not_determined": why, "widened_by": widen, "model_lacks": lacks, "source": source}
+    if distance:
+        bars["light_distance"] = widened_distance(distance, widen)
+    return {**bars,
             "rule": (f"the {source} sigma times max(1, model_lacks / {WIDEN_PER:g}); a light coordinate over "
                      f"{LIGHT_DETERMINED:g} of the light's distance or {LIGHT_SIGMA_MAX_M:g} m, or another parameter "
                      "over a uniform sigma on its bounds (a product over its value), is not determined")}
+
+
+def widened_distance(distance: dict[str, Any], widen: float) -> dict[str, Any]:
+    """``light_distance`` (:func:`.light.light_distance`) with its sigmas times ``widen``, and the distance not
+    determined where its widened sigma exceeds DISTANCE_DETERMINED of it."""
+    out = dict(distance)
+    if out.get("direction_sigma_deg") is None or out.get("distance_sigma_m") is None:
+        return out
+    out["direction_sigma_deg"] = float(out["direction_sigma_deg"]) * widen
+    out["distance_sigma_m"] = float(out["distance_sigma_m"]) * widen
+    r = float(out["distance_m"])
+    if out.get("distance_determined") and not out["distance_sigma_m"] <= DISTANCE_DETERMINED * r:
+        out["distance_determined"] = False
+        out["why"] = (f"the distance's sigma ({out['distance_sigma_m']:.3g} m, widened {widen:.2g}x for what the "
+                      f"model lacks) exceeds {DISTANCE_DETERMINED:.0%} of the distance ({r:.3g} m): the shading fixes "
+                      "the light's direction, not how far it is")
+    return out
+
+
+def tone_curve_products(bars: dict[str, Any] | None) -> None:
+    """Mark every colour product of ``bars`` (a fit's ``uncertainty["bars"]``) not determined, with the reason:
+    the fit took a tone curve (fit/camera.py), which shares one scale with the colours."""
+    if not bars:
+        return
+    for name in [n for n in bars.get("sigma", {}) if n.startswith("products.")]:
+        bars["sigma"][name] = None
+        bars.setdefault("not_determined", {})[name] = TONE_CURVE_PRODUCTS

@@ -10,8 +10,10 @@ from typing import Any
 import numpy as np
 
 from ..fit.products import product_range, products_of, specular_product, specular_range
-from ..scene import Scene
+from ..scene import MAX_MAGNITUDE, Scene
 
+#: A linear parameter's (an albedo's, a product's, a specular's) scale is at most this times its value.
+LINEAR_SCALE = 10.0
 #: The scale of a direction angle (radians): the default step is STEP_FRACTION of it.
 ANGLE_SCALE = 1.0
 
@@ -116,7 +118,7 @@ def _products_space(scene: Scene, d: dict[str, Any]) -> tuple[_Space, dict[str, 
         plo, phi = product_range(ilo, ihi, color_scale[0], color_scale[1], ab[:, 0], ab[:, 1])
         o["material"]["albedo"] = [float(v) for v in prod * inv_w]
         top = float(max(np.max(phi), np.max(prod), 1.0) * np.max(inv_w))
-        fit_new[p] = {"min": [0.0, 0.0, 0.0], "max": [top] * 3}
+        fit_new[p] = {"min": [0.0, 0.0, 0.0], "max": [_work_bound(top, np.max(prod * inv_w))] * 3}
         for c, lo_c, hi_c, f_c in zip("rgb", plo, phi, inv_w):
             bounds[f"{p}.{c}"] = (float(lo_c), float(hi_c))
             factor[f"{p}.{c}"] = float(f_c)
@@ -129,7 +131,7 @@ def _products_space(scene: Scene, d: dict[str, Any]) -> tuple[_Space, dict[str, 
         o["material"]["specular"] = float(q)
         qlo, qhi = specular_range(ilo, ihi, klo, khi)
         bounds[p] = (float(qlo * e_range[0]), float(qhi * e_range[1]))
-        fit_new[p] = {"min": 0.0, "max": float(max(bounds[p][1], q, 1.0))}
+        fit_new[p] = {"min": 0.0, "max": _work_bound(max(bounds[p][1], q, 1.0), q)}
         rename[p] = f"products.{o['name']}.specular"
     for p in paths:
         if p not in _LIGHT_SCALE and p not in fit_new:
@@ -149,6 +151,13 @@ def _products_space(scene: Scene, d: dict[str, Any]) -> tuple[_Space, dict[str, 
         if name in bounds:
             b[i] = bounds[name]
     return _space(work, new_paths, d, b[:, 0], b[:, 1], rename, factor), d
+
+
+def _work_bound(top: float, value: float) -> float:
+    """The work scene's upper bound for a product: ``top``, within the scene format's limit on bounds (a
+    light of 3e7 W/sr and a specular of 4 make products beyond it; the products' own bounds, which the
+    estimate uses, are kept apart) but never below the product's ``value``."""
+    return float(max(min(top, MAX_MAGNITUDE), value))
 
 
 def _space(
@@ -178,6 +187,13 @@ def _space(
             albedo[i] = (objects[head + "."], "rgb".index(tail))
         elif name.endswith(".specular") and name[: -len("specular")] in objects:
             specular[i] = objects[name[: -len("specular")]]
+    # A linear parameter's column is exact (or rendered, with a bounce); its step says which pixels cross the
+    # clip within it. Bounds far wider than the value (a light of 3e5 W/sr with its intensity free over
+    # decades) would step the products by thousands of times themselves and put every pixel on the kink: at
+    # most LINEAR_SCALE times the value (a step of a hundredth of it: a float32 render's rounding stays at
+    # 1e-5 of a rendered column).
+    for k in (*albedo, *specular):
+        scale[k] = min(scale[k], max(LINEAR_SCALE * abs(values[k]), 1e-6 * scale[k]))
     names = [rename.get(name, name) for name in native]
     direction = None
     if "light.direction.x" in native:

@@ -150,31 +150,15 @@ where
     O: Objective + ?Sized,
     C: FnMut(&GenerationReport) -> bool,
 {
-    minimize_polishing(obj, None::<&O>, bounds, cfg, callback)
+    minimize_polishing_from(obj, None::<&O>, bounds, cfg, None, callback)
 }
 
 /// [`minimize`], with the final polish on `polish_obj` where given: a finer model of the same loss (the
 /// pixel footprint) that only the last digits need. The polish starts from the search's best, re-evaluated
-/// on `polish_obj`; the result's value is `polish_obj`'s.
-pub fn minimize_polishing<O, P, C>(
-    obj: &O,
-    polish_obj: Option<&P>,
-    bounds: &[(f64, f64)],
-    cfg: &LshadeConfig,
-    callback: C,
-) -> Result<LshadeResult>
-where
-    O: Objective + ?Sized,
-    P: Objective + ?Sized,
-    C: FnMut(&GenerationReport) -> bool,
-{
-    minimize_polishing_from(obj, polish_obj, bounds, cfg, None, callback)
-}
-
-/// [`minimize_polishing`] with `start`, where given, as the initial population's first individual (clamped
-/// to `bounds`; the others drawn as without it, from the same random numbers): a search that refines a
-/// point already found (a refit with one more image term, near the light found without it) then never
-/// ends worse than that point, whatever its small population draws.
+/// on `polish_obj`; the result's value is `polish_obj`'s. With `start`, where given, as the initial
+/// population's first individual (clamped to `bounds`; the others drawn as without it, from the same random
+/// numbers): a search that refines a point already found (a refit with one more image term, near the light
+/// found without it) then never ends worse than that point, whatever its small population draws.
 pub fn minimize_polishing_from<O, P, C>(
     obj: &O,
     polish_obj: Option<&P>,

@@ -1,0 +1,60 @@
+"""Scenes built in code and the starts a user would hand the fit, shared by the tests (through conftest),
+tests/pinned_cases.py and the studies (which put this folder on sys.path). Plain dicts; no pytest."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+#: The paper's scene: a sphere on a floor, one point light, its light and both albedos free; 64x48.
+BALL_ON_FLOOR = {
+    "image": {"width": 64, "height": 48},
+    "camera": {"position": [0, 1.6, -6], "look_at": [0, 0.8, 0], "up": [0, 1, 0], "vfov_deg": 35},
+    "light": {"position": [2.5, 4.5, -1.0], "intensity": 70.0, "color": [1, 1, 1]},
+    "objects": [
+        {"name": "ball", "shape": "sphere", "center": [0, 1, 0], "radius": 1,
+         "material": {"albedo": [0.8, 0.7, 0.1]}},
+        {"name": "floor", "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0],
+         "material": {"albedo": [0.6, 0.6, 0.6]}},
+    ],
+    "fit": {
+        "light.position": {"min": [-8, 0.5, -8], "max": [8, 8, 8]},
+        "light.intensity": {"min": 1, "max": 400},
+        "objects.ball.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]},
+        "objects.floor.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]},
+    },
+}
+
+
+def centred_start(truth: dict) -> dict:
+    """``truth`` with the light at the centre of its position bounds and every albedo grey (0.5)."""
+    start = copy.deepcopy(truth)
+    lo, hi = np.array(truth["fit"]["light.position"]["min"]), np.array(truth["fit"]["light.position"]["max"])
+    start["light"]["position"] = list((lo + hi) / 2)
+    for o in start["objects"]:
+        o["material"]["albedo"] = [0.5, 0.5, 0.5]
+    return start
+
+
+def matte_start(truth: dict) -> dict:
+    """What a user writes for a photo of ``truth``: its camera and geometry, every material matte grey, a
+    neutral light overhead, the light and the ball's and floor's albedos free (tools/make_photos.py's fit
+    section)."""
+    d = copy.deepcopy(truth)
+    d["light"] = {"position": [0.0, 4.25, 0.0], "intensity": 50.0, "color": [1, 1, 1]}
+    for o in d["objects"]:
+        o["material"] = {"albedo": [0.5, 0.5, 0.5]}
+    d["fit"] = copy.deepcopy(BALL_ON_FLOOR["fit"])
+    return d
+
+
+def sphere(name: str, center: list[float], radius: float, albedo: list[float]) -> dict:
+    """A matte sphere's scene entry, with only the fields a scene must give."""
+    return {"name": name, "shape": "sphere", "center": center, "radius": radius, "material": {"albedo": albedo}}
+
+
+def floor(albedo: list[float], name: str = "floor") -> dict:
+    """A matte floor's scene entry: the plane y = 0, facing up."""
+    return {"name": name, "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0],
+            "material": {"albedo": albedo}}
