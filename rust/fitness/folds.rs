@@ -66,7 +66,11 @@ impl Fitness {
                 "held-out losses need the projected loss (loss=\"l1_projected\")".into(),
             ));
         };
-        let runs = object_runs(&self.active.surfels, &self.active.outline, self.shapes.len());
+        let runs = object_runs(
+            &self.active.surfels,
+            &self.active.outline,
+            self.shapes.len(),
+        );
         let label = |j: usize| folds.get(self.active.index[j] as usize).copied();
         if let Some(j) = (0..self.active.index.len()).find(|&j| label(j).is_none()) {
             return Err(Error::Invalid(format!(
