@@ -53,6 +53,28 @@ pub struct StageResult {
     pub lit_pixels: Option<Vec<usize>>,
     /// Projected loss with interreflection: the gauge u = 1 / intensity the bounce was solved with.
     pub gauge: Option<f64>,
+    /// A default fit's outline gate (`fit::outlines`): its evidence, where it ran.
+    pub outlines: Option<OutlineEvidence>,
+}
+
+/// What the outline gate saw at a default fit's light, and what it did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OutlineEvidence {
+    /// The fit's loss at its light (outlines at pixel centres).
+    pub centre: f64,
+    /// The loss at the same light with the outline pixels integrated (its products refined for it).
+    pub integrated: f64,
+    /// The pixels on an outline (the integrated ones).
+    pub pixels: usize,
+    /// The largest share, over the objects, of an object's lit pixels that are on an outline
+    /// (`Fitness::outline_evidence`).
+    pub share: f64,
+    /// Whether `integrated` fell below `centre` by `fit::outlines::OUTLINE_GAIN` of it: the polish ran again.
+    pub fired: bool,
+    /// The loss after that polish, with the outlines integrated (`None` where the gate did not fire).
+    pub polished: Option<f64>,
+    /// Whether the polished result replaced the fit's (`polished` below `centre`).
+    pub kept: bool,
 }
 
 /// Search `fitness` within `bounds` with `method`. `callback` runs after the initial population and
@@ -109,6 +131,7 @@ where
         products: None,
         lit_pixels: None,
         gauge: None,
+        outlines: None,
     };
     // The search ranks lights by least-squares products; the result carries the products that minimise
     // the loss itself (saturated pixels one-sided), and that loss.
@@ -162,6 +185,7 @@ pub fn polish_stage(
         products: None,
         lit_pixels: None,
         gauge: None,
+        outlines: None,
     })
 }
 

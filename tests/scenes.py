@@ -58,3 +58,23 @@ def floor(albedo: list[float], name: str = "floor") -> dict:
     """A matte floor's scene entry: the plane y = 0, facing up."""
     return {"name": name, "shape": "plane", "point": [0, 0, 0], "normal": [0, 1, 0],
             "material": {"albedo": albedo}}
+
+
+#: A ball lit from behind: the light beyond the ball from the camera, low, so that the side the camera
+#: sees is lit on a thin rim along its outline only (the floor lit beyond and beside it); 128x96.
+BACKLIT_BALL = {
+    "image": {"width": 128, "height": 96},
+    "camera": {"position": [1.2, 2.9, -4.8], "look_at": [0.0, 0.5, 0.0], "up": [0, 1, 0], "vfov_deg": 36.0},
+    "light": {"position": [-0.5, 1.3, 2.4], "intensity": 30.0, "color": [1.0, 0.9, 0.8]},
+    "objects": [sphere("ball", [0.0, 0.7, 0.0], 0.7, [0.8, 0.4, 0.2]), floor([0.5, 0.5, 0.45])],
+    "fit": copy.deepcopy(BALL_ON_FLOOR["fit"]),
+}
+
+
+def supersampled_photo(truth: dict, spp: int = 256) -> np.ndarray:
+    """``truth`` rendered by rtloop with ``spp`` sub-pixel rays per pixel (16 x 16: a camera's area average,
+    independent of the fit's outline model), rounded to 8-bit sRGB and read back as linear values."""
+    import rtloop
+    from rtloop._srgb import encode8, srgb_to_linear
+
+    return srgb_to_linear(encode8(rtloop.render(truth, spp=spp)))

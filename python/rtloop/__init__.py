@@ -76,23 +76,24 @@ def __dir__() -> list[str]:
 
 
 def render(scene: object, width: int | None = None, height: int | None = None, spp: int = 1, *,
-           footprint: bool = False) -> _np.ndarray:
+           footprint: bool | str = False) -> _np.ndarray:
     """Render ``scene`` (a Scene, dict or path) to a float32 (H, W, 3) linear-RGB array.
 
     ``width``/``height`` default to the scene's image size and keep the field of view; ``spp`` > 1
     supersamples each pixel (stratified grid when it is a square number) and averages in linear light.
     ``footprint`` (one sample per pixel) integrates sphere shadow edges and terminators over each pixel
-    in closed form: the image ``fit(..., footprint=True)`` compares with a photo. Values are radiance
-    times exposure, not clipped.
+    in closed form: the image ``fit(..., footprint=True)`` compares with a photo; "silhouette" besides
+    averages each pixel that straddles an object's outline over 16 sub-pixel rays (the model a fit whose
+    ``settings["silhouettes"]`` is True compared). Values are radiance times exposure, not clipped.
     """
     scene = load_scene(scene)
     width, height = _size(width, height)
     spp = _whole("spp", spp, 1, MAX_SPP)
-    if not isinstance(footprint, bool):
-        raise RtloopError(f"footprint: must be True or False (got {footprint!r})")
+    if not (isinstance(footprint, bool) or (isinstance(footprint, str) and footprint == "silhouette")):
+        raise RtloopError(f"footprint: must be True, False or 'silhouette' (got {footprint!r})")
     if footprint and spp != 1:
         raise RtloopError(f"footprint: takes one sample per pixel (got spp={spp})")
-    return _native.render(scene, width, height, spp, footprint)
+    return _native.render(scene, width, height, spp, bool(footprint), outlines=footprint == "silhouette")
 
 
 def object_ids(scene: object, width: int | None = None, height: int | None = None) -> _np.ndarray:

@@ -39,7 +39,8 @@ class Scene:
     def to_dict(self) -> dict[str, Any]: ...
 
 def render(
-    scene: Scene, width: int | None = None, height: int | None = None, spp: int = 1, footprint: bool = False
+    scene: Scene, width: int | None = None, height: int | None = None, spp: int = 1, footprint: bool = False,
+    outlines: bool = False,
 ) -> npt.NDArray[np.float32]: ...
 def object_ids(scene: Scene, width: int | None = None, height: int | None = None) -> npt.NDArray[np.int32]: ...
 def render_many(scenes: list[Scene]) -> tuple[list[npt.NDArray[np.float32]], npt.NDArray[np.int32]]:
@@ -77,7 +78,9 @@ def fd_columns(
     """Finite-difference Jacobian columns into the rows ``rows`` of ``jt``, their scenes rendered in one pass."""
 def order_statistics(values: npt.NDArray[np.float64], ks: list[int]) -> list[float]:
     """The ``ks``-th smallest of ``values`` (0-based), as ``np.partition(values, ks)[ks]``."""
-def render_centre_and_footprint(scene: Scene) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+def render_centre_and_footprint(
+    scene: Scene, outlines: bool = False
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
     """The pixel-centre render and the footprint render of ``scene`` (its own size) in one pass: ``render(scene)``
     and ``render(scene, footprint=True)`` bit for bit."""
 def footprint_delta(
@@ -162,6 +165,7 @@ def optimize(
     saturated: float | None = None,
     solve_margin: int = 0,
     x0: Sequence[float] | None = None,
+    silhouettes: str = "off",
 ) -> OptimizeResult:
     """polish_tol: the polish stops once every simplex vertex is within this fraction of each range of
     the best (default 1e-13). product_bounds: (objects, 3, 2), or (objects, 4, 2) whose row 4 bounds
@@ -176,7 +180,9 @@ def optimize(
     far, each later pass a Nelder-Mead polish from it (half the polish budget) in a tenth of the box; the
     first pass's own polish takes half the budget too where N > 1. x0: one value per searched parameter
     (clamped to its bounds), the first member of L-SHADE's initial population, so that a search refining
-    a point never ends worse than it (method "lshade" only)."""
+    a point never ends worse than it (method "lshade" only). silhouettes (with the footprint): "on"
+    integrates the outline pixels in every footprint evaluation, "auto" (with polish_footprint) only where
+    the outline gate finds the photo needs them (OptimizeResult.outlines), "off" at pixel centres."""
 
 class OptimizeResult:
     """What ``optimize`` found (immutable). For the projected loss ``products`` (per object
@@ -207,6 +213,10 @@ class OptimizeResult:
     def products(self) -> list[list[float]] | None: ...
     @property
     def lit_pixels(self) -> list[int] | None: ...
+    @property
+    def outlines(self) -> tuple[float, float, int, float, bool, float | None, bool] | None:
+        """The outline gate's (loss at centres, loss integrated, outline pixels, the largest share of an
+        object's lit pixels on its outline, fired, loss polished, kept)."""
     @property
     def history(self) -> list[tuple[int, npt.NDArray[np.float64], list[float], int]]:
         """(generation, best, best's objectives, evaluations) after the initial population and every

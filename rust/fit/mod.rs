@@ -3,6 +3,7 @@
 //! held at the light the previous pass found (`passes.rs`). The Python binding converts its arguments and
 //! calls it.
 
+pub mod outlines;
 pub mod passes;
 
 pub use passes::{run_passes, PassOptions};

@@ -4,6 +4,7 @@
 //! whole box; each later pass holds it at the light the previous pass found and polishes from there, in a
 //! box around it, until the light stops moving (the held bounce's fixed point) or the passes run out.
 
+use super::outlines::outline_gate;
 use crate::error::{Error, Result};
 use crate::fitness::{Fitness, FitnessSpec};
 use crate::params::ParamLayout;
@@ -31,6 +32,10 @@ pub struct PassOptions {
     pub start: Option<Vec<f64>>,
     /// The reports carry the closed-form products of the best (projected loss only).
     pub with_products: bool,
+    /// With `polish_footprint` (and no bounce): the outline gate (`fit::outlines`) after the search, the
+    /// outlines integrated where the photo shows it needs them. `FitnessSpec::outlines` instead takes them
+    /// in every evaluation of the footprint.
+    pub outline_gate: bool,
 }
 
 /// Each pass after the first searches this fraction of the previous pass's box (per dimension, centred
@@ -123,6 +128,9 @@ where
         footprint: spec.footprint || only_polish,
         ..spec
     };
+    // the outline gate's own fitness, built after the search from the same arguments
+    let gate = (options.outline_gate && only_polish && !spec.outlines && !scene.interreflection)
+        .then(|| (layout.clone(), spec.clone()));
     let built = Fitness::new(scene, layout, target, spec)?;
     let (mut fitness, mut finer) = if only_polish {
         (built.at_pixel_centres(), Some(built))
@@ -218,6 +226,13 @@ where
         }
     }
     let mut result = last.expect("at least one pass");
+    if let (Some((layout, spec)), Method::Lshade(cfg)) = (gate, method) {
+        if result.stop != StopReason::Callback && result.products.is_some() {
+            let budget = (cfg.polish_evaluations, cfg.polish_x_tol);
+            let gate = outline_gate(scene, (layout, target, spec), &bounds, budget, &mut result)?;
+            result.outlines = gate;
+        }
+    }
     result.evaluations += done;
     result.generations += generations;
     Ok(result)

@@ -88,6 +88,10 @@ pub struct FitnessSpec {
     /// Each pixel integrated over its area where a sphere's shadow edge or its terminator crosses it
     /// (`render::footprint`), as a camera integrates it (`render_with` renders the same model).
     pub footprint: bool,
+    /// With the footprint: the pixels that straddle an object's outline are each the mean of their
+    /// sub-pixel rays (`silhouette`), not their centre's value. Off by default: a fit takes them only where
+    /// the photo shows it needs them (`fit::passes`, the outline gate).
+    pub outlines: bool,
     /// The closed-form products are informed only by pixels that every pixel within this Chebyshev
     /// distance shows the same object ([`interior_by`]; 0: the 4-neighbours). The loss still counts every
     /// pixel.
@@ -109,6 +113,7 @@ impl Default for FitnessSpec {
             clip: true,
             projection: None,
             footprint: false,
+            outlines: false,
             solve_margin: 0,
             norm: Norm::L1,
             space: Space::Linear,
@@ -328,7 +333,7 @@ impl Fitness {
             camera,
             spec.solve_margin,
             // with the bounce each pixel keeps its centre's gathers: no sub-pixel samples
-            !scene.interreflection,
+            spec.outlines && !scene.interreflection,
         );
         // The occluded environment costs a sky view factor per pixel only where the model has it.
         let environment = match &projection {

@@ -463,3 +463,30 @@ impl<'m, F: Fn(usize) -> Linear<'m>, E: Encoding> Simd for Outline<'_, F, E> {
         o.s.loss::<AVX2, E>(o.light, o.model, o.bg, (o.top, o.norm), o.enc)
     }
 }
+
+impl super::Fitness {
+    /// The pixels on an outline, each the mean of its sub-pixel rays ([`super::FitnessSpec::outlines`]).
+    pub fn outline_pixels(&self) -> usize {
+        self.active.silhouettes.len()
+    }
+
+    /// For the projected loss with the outlines integrated ([`super::FitnessSpec::outlines`]): at
+    /// candidate `x`, the loss at the products [`super::Fitness::refined`] reports (per channel), and the
+    /// largest share, over the objects, of an object's lit pixels that are outline pixels (a ball lit
+    /// from behind is lit on its rim alone: its share is near 1). `None` without outlines.
+    pub fn outline_evidence(&self, x: &[f64]) -> Option<([f64; 3], f64)> {
+        let (o, proj) = (self.outlines.as_ref()?, self.projection.as_ref()?);
+        let (solved, loss) = self.refined(x)?;
+        let p = self.params(x);
+        let light = unit_light(&p);
+        let model = |obj| Linear::solved(&p, proj, &solved, obj);
+        let on_outline = o.lit(&light, model, solved.products.len());
+        let share = on_outline
+            .iter()
+            .zip(&solved.lit)
+            .filter(|(_, &all)| all > 0)
+            .map(|(&edge, &all)| edge as f64 / all as f64)
+            .fold(0.0, f64::max);
+        Some((loss, share))
+    }
+}

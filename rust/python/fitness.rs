@@ -114,6 +114,8 @@ pub(crate) fn fitness_args(
             clip,
             projection,
             footprint,
+            // the outline gate's or the caller's to set (`optimize`'s `silhouettes`)
+            outlines: false,
             solve_margin,
             norm,
             space,
@@ -206,6 +208,25 @@ impl OptimizeResult {
     #[getter]
     fn gauge(&self) -> Option<f64> {
         self.result.gauge
+    }
+    /// The outline gate's evidence (`optimize(..., silhouettes="auto")`, `fit::outlines`): (the fit's loss
+    /// with outlines at pixel centres, the loss at the same light with them integrated, the outline
+    /// pixels, the largest share of an object's lit pixels on its outline, whether it fired, the loss after the polish with them integrated or None, whether that
+    /// result was kept); None where the gate did not run.
+    #[getter]
+    #[allow(clippy::type_complexity)]
+    fn outlines(&self) -> Option<(f64, f64, usize, f64, bool, Option<f64>, bool)> {
+        self.result.outlines.map(|e| {
+            (
+                e.centre,
+                e.integrated,
+                e.pixels,
+                e.share,
+                e.fired,
+                e.polished,
+                e.kept,
+            )
+        })
     }
 
     /// (generation, best (float64), best's objectives, evaluations) after the initial population and

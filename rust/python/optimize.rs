@@ -104,13 +104,18 @@ fn parameters_match(got: usize, want: usize, what: impl FnOnce() -> String) -> P
 /// bounce's fixed point; `fit::PassOptions::passes`).
 /// `x0`: a point (one value per searched parameter, clamped to their bounds) that L-SHADE's initial
 /// population holds, so that a search refining it never ends worse than it (method "lshade" only).
+/// `silhouettes` (with the footprint): "on" integrates the outline pixels over their area in every
+/// footprint evaluation (`FitnessSpec::outlines`); "auto" (with `polish_footprint`) only where the
+/// outline gate finds the photo needs it (`fit::outlines`; its evidence `OptimizeResult.outlines`); "off":
+/// outlines at pixel centres.
 /// Returns an `OptimizeResult`.
 #[pyfunction]
 #[pyo3(signature = (scene, paths, target, *, pixels=None, loss="l1", clip=true, population=60,
                     generations=200, f=0.6, cr=0.8, seed=0, threads=None, callback=None,
                     product_bounds=None, method="de", max_evaluations=None, polish=0, norm="l1",
                     with_products=true, space="linear", polish_tol=None, footprint=false,
-                    polish_footprint=false, frozen_bounce=0, saturated=None, solve_margin=0, x0=None))]
+                    polish_footprint=false, frozen_bounce=0, saturated=None, solve_margin=0, x0=None,
+                    silhouettes="off"))]
 #[allow(clippy::too_many_arguments)]
 pub(super) fn optimize<'py>(
     py: Python<'py>,
@@ -141,9 +146,21 @@ pub(super) fn optimize<'py>(
     saturated: Option<f32>,
     solve_margin: usize,
     x0: Option<Vec<f64>>,
+    silhouettes: &str,
 ) -> PyResult<OptimizeResult> {
     let scene = &scene.get().0;
-    let args = fitness_args(
+    let (outlines, outline_gate) = match silhouettes {
+        "off" => (false, false),
+        "auto" => (false, true),
+        "on" => (true, false),
+        other => {
+            return Err(Error::Value(format!(
+                "silhouettes: must be 'auto', 'on' or 'off' (got {other:?})"
+            ))
+            .into())
+        }
+    };
+    let mut args = fitness_args(
         scene,
         &paths,
         &target,
@@ -167,7 +184,9 @@ pub(super) fn optimize<'py>(
         polish,
         polish_tol,
     };
+    args.spec.outlines = outlines;
     let options = PassOptions {
+        outline_gate,
         passes: frozen_bounce,
         polish_footprint,
         start: x0,

@@ -24,7 +24,7 @@ fn image_array<'py>(
 /// Render `scene` to a float32 (H, W, 3) linear RGB array (`footprint`: as the fitness with the
 /// footprint models pixels).
 #[pyfunction]
-#[pyo3(signature = (scene, width=None, height=None, spp=1, footprint=false))]
+#[pyo3(signature = (scene, width=None, height=None, spp=1, footprint=false, outlines=false))]
 pub(super) fn render<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyScene>,
@@ -32,22 +32,26 @@ pub(super) fn render<'py>(
     height: Option<u32>,
     spp: u32,
     footprint: bool,
+    outlines: bool,
 ) -> PyResult<Bound<'py, PyArray3<f32>>> {
     let scene = &scene.get().0;
-    let img = py.detach(|| core_render::render_with(scene, width, height, spp, footprint))?;
+    let size = (width, height);
+    let img = py.detach(|| core_render::render_model(scene, size, spp, footprint, outlines))?;
     image_array(py, img.height, img.width, img.rgb)
 }
 
 /// The pixel-centre render and the footprint render of `scene` (its own size), float32 (H, W, 3) each, in
 /// one pass (`render::render_centre_and_footprint`): `render(scene)` and `render(scene, footprint=True)` bit
-/// for bit.
+/// for bit (`outlines`: as `render(scene, footprint=True, outlines=True)`).
 #[pyfunction]
+#[pyo3(signature = (scene, outlines=false))]
 pub(super) fn render_centre_and_footprint<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyScene>,
+    outlines: bool,
 ) -> PyResult<(Bound<'py, PyArray3<f32>>, Bound<'py, PyArray3<f32>>)> {
     let scene = &scene.get().0;
-    let (c, f) = py.detach(|| core_render::render_centre_and_footprint(scene))?;
+    let (c, f) = py.detach(|| core_render::render_centre_and_footprint(scene, outlines))?;
     Ok((
         image_array(py, c.height, c.width, c.rgb)?,
         image_array(py, f.height, f.width, f.rgb)?,

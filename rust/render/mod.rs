@@ -48,7 +48,20 @@ pub fn render_with(
     spp: u32,
     footprint: bool,
 ) -> Result<Image> {
-    let frame = Frame::new(scene, width, height, spp, footprint)?;
+    render_model(scene, (width, height), spp, footprint, false)
+}
+
+/// [`render_with`], with `outlines` (and the footprint) the pixels that straddle an object's outline each
+/// the mean of their sub-pixel rays (`footprint::silhouette_samples`), as the fitness with
+/// `FitnessSpec::outlines` models a photo.
+pub fn render_model(
+    scene: &Scene,
+    (width, height): (Option<u32>, Option<u32>),
+    spp: u32,
+    footprint: bool,
+    outlines: bool,
+) -> Result<Image> {
+    let frame = Frame::new(scene, width, height, spp, footprint, outlines)?;
     let (width, height) = (frame.width, frame.height);
     let mut rgb = vec![0.0f32; (width * height * 3) as usize];
     rgb.par_chunks_mut(3 * width as usize)
@@ -65,8 +78,9 @@ pub fn render_with(
 /// ([`render_with`] with `footprint`) in one pass, each pixel's light that does not depend on the footprint
 /// (ambient, environment, the bounce) shaded once: both images bit for bit (a fit compares the footprint
 /// render; its uncertainty differentiates the pixel centres).
-pub fn render_centre_and_footprint(scene: &Scene) -> Result<(Image, Image)> {
-    let frame = Frame::new(scene, None, None, 1, true)?;
+/// With `outlines`, the footprint render's outline pixels are integrated too ([`render_model`]).
+pub fn render_centre_and_footprint(scene: &Scene, outlines: bool) -> Result<(Image, Image)> {
+    let frame = Frame::new(scene, None, None, 1, true, outlines)?;
     let (width, height) = (frame.width, frame.height);
     let mut centre = vec![0.0f32; (width * height * 3) as usize];
     let mut over = vec![0.0f32; (width * height * 3) as usize];
@@ -140,7 +154,7 @@ pub fn render_many_with_ids(scenes: &[&Scene]) -> Result<(Vec<Image>, Vec<i32>)>
 fn shade_many(scenes: &[&Scene], idx: &[u32], ids: bool) -> Result<(Vec<Vec<f32>>, Vec<i32>)> {
     let frames = scenes
         .iter()
-        .map(|s| Frame::new(s, None, None, 1, false))
+        .map(|s| Frame::new(s, None, None, 1, false, false))
         .collect::<Result<Vec<_>>>()?;
     for f in &frames {
         let pixels = u64::from(f.width) * u64::from(f.height);
@@ -229,6 +243,7 @@ impl Frame {
         height: Option<u32>,
         spp: u32,
         footprint: bool,
+        outlines: bool,
     ) -> Result<Self> {
         let width = width.unwrap_or(scene.width);
         let height = height.unwrap_or(scene.height);
@@ -278,8 +293,8 @@ impl Frame {
         let footprint =
             footprint && shadows && !geometry.shapes.iter().any(|s| matches!(s, PShape::Mesh(_)));
         let key = bounce::geometry_key(&geometry, camera_key, (width, height));
-        let outlines =
-            (footprint && !params.interreflection).then(|| GBuffer::new(&geometry, width, height));
+        let outlines = (footprint && outlines && !params.interreflection)
+            .then(|| GBuffer::new(&geometry, width, height));
         Ok(Frame {
             outlines,
             geometry,
@@ -447,7 +462,7 @@ mod tests {
         for (bounce, env) in [(true, 0.0), (true, 0.3), (false, 0.3), (false, 0.0)] {
             let mut scene = bounce_scene(1.5, 0.6, env);
             scene.interreflection = bounce;
-            let (c, f) = render_centre_and_footprint(&scene).unwrap();
+            let (c, f) = render_centre_and_footprint(&scene, false).unwrap();
             let c0 = render_with(&scene, None, None, 1, false).unwrap();
             let f0 = render_with(&scene, None, None, 1, true).unwrap();
             let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();

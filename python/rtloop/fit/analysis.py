@@ -64,12 +64,14 @@ def analyse(result: FitResult, options: FitOptions, photo: Observation, plan: Pl
     # The model the fit compared with the photo, for the goodness of fit and the uncertainty's residual, and
     # the pixel-centre render the uncertainty's finite differences start from (the same where the fit took no
     # footprint; else both in one pass, the light a footprint does not change shaded once).
+    outlines = bool(result.settings.get("silhouettes", False))
     if plan.footprint == "off":
         as_compared = at_optimum = _native.render(current, current.width, current.height, 1, False)
     elif options.with_sigma:
-        at_optimum, as_compared = _native.render_centre_and_footprint(current)
+        at_optimum, as_compared = _native.render_centre_and_footprint(current, outlines=outlines)
     else:
-        as_compared, at_optimum = _native.render(current, current.width, current.height, 1, True), None
+        as_compared = _native.render(current, current.width, current.height, 1, True, outlines=outlines)
+        at_optimum = None
     result.goodness = goodness(current, photo.target, photo.use, clip=options.clip, render=as_compared,
                                sigma=photo.sigma, blocking=photo.blocking, encoding=photo.encoding,
                                codes=photo.codes, split=options.with_sigma, ids=lambda: photo.ids)

@@ -317,7 +317,9 @@ def _between(p: np.ndarray, q: np.ndarray, outline: np.ndarray) -> float:
 def _compared(result: Any) -> np.ndarray:
     """The render a fit compared with the photo (with the pixel footprint where it took it)."""
     s = result.scene
-    return _native.render(s, s.width, s.height, 1, result.settings.get("footprint", "off") != "off")
+    settings = result.settings
+    return _native.render(s, s.width, s.height, 1, settings.get("footprint", "off") != "off",
+                          outlines=bool(settings.get("silhouettes", False)))
 
 
 def fit_reframed(fit: Callable[..., Any], scene: Any, image: np.ndarray, mask: Any, reference: Any,

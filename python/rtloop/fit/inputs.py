@@ -34,7 +34,7 @@ def check_norm(norm: Any) -> tuple[str, str]:
 
 
 #: The ``footprint`` argument's values, with True and False for "on" and "off".
-FOOTPRINT_MODES = ("auto", "on", "off")
+FOOTPRINT_MODES = ("auto", "silhouette", "on", "off")
 
 
 def check_footprint(footprint: Any) -> str:
@@ -43,7 +43,7 @@ def check_footprint(footprint: Any) -> str:
         return "on" if footprint else "off"
     if isinstance(footprint, str) and footprint in FOOTPRINT_MODES:
         return footprint
-    raise RtloopError(f"footprint: must be 'auto', 'on' or 'off' (or True / False) (got {footprint!r})")
+    raise RtloopError(f"footprint: must be 'auto', 'silhouette', 'on' or 'off' (or True / False) (got {footprint!r})")
 
 
 def objective(scene: Scene, image: Any, mask: Any, doubts: list[str]) -> tuple[np.ndarray, np.ndarray | None]:

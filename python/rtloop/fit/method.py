@@ -12,6 +12,7 @@ from ..scene import Scene
 from .norm import dense_residual, linear_file, norm_verdict, not_linear_verdict, representable_pixels
 from .observation import Observation
 from .options import FitOptions
+from .outlines import outlines_taken, record_outlines
 from .plan import Plan, new_stages
 from .selection import environment_given, interreflection_given
 from .stages import Stages
@@ -32,9 +33,16 @@ class Fitted:
 
 
 def run_method(options: FitOptions, photo: Observation, plan: Plan) -> Fitted:
-    """The plan's method run on ``photo``: the closed form with its terms and norm, or the two stages."""
+    """The plan's method run on ``photo``: the closed form with its terms and norm, or the two stages; the
+    outline pixels' record (:func:`.outlines.record_outlines`) in its model and settings."""
+    fitted = _run_method(options, photo, plan)
+    record_outlines(fitted.stages, plan.silhouettes, fitted.model, plan.settings)
+    return fitted
+
+
+def _run_method(options: FitOptions, photo: Observation, plan: Plan) -> Fitted:
     stages = new_stages(options, photo, plan.work, plan.budget, plan.ident, norm=options.first_norm,
-                        space=options.first_space, footprint=plan.footprint)
+                        space=options.first_space, footprint=plan.footprint, silhouettes=plan.silhouettes)
     model = plan.new_model()
     if plan.budget.method != "projected":
         if environment_given(plan.scene):
@@ -54,7 +62,8 @@ def _norm_refit(options: FitOptions, plan: Plan, first: Fitted) -> Fitted:
     (:mod:`.norm`); ``model["norm"]`` records the choice."""
     photo, current = first.photo, first.scene
     if photo.codes is None and not photo.jpeg and linear_file(photo.target):
-        render = _native.render(current, current.width, current.height, 1, plan.footprint != "off")
+        render = _native.render(current, current.width, current.height, 1, plan.footprint != "off",
+                                outlines=outlines_taken(first.stages, plan.silhouettes))
         chosen = norm_verdict(dense_residual(render, photo.target, photo.use, None, photo.sigma, [0.0, 0.0, 0.0],
                                              clip=options.clip))
     else:
@@ -64,7 +73,7 @@ def _norm_refit(options: FitOptions, plan: Plan, first: Fitted) -> Fitted:
         return first
     dense_photo = photo.within(representable_pixels(plan.scene, photo.use, photo.ids))
     dense = new_stages(options, dense_photo, plan.work, plan.budget, plan.ident, norm="l2",
-                       space=options.first_space, footprint=plan.footprint)
+                       space=options.first_space, footprint=plan.footprint, silhouettes=plan.silhouettes)
     model = plan.new_model()
     current = select_terms(options, dense_photo, plan, dense, model, encoding=first.model.get("encoding", {}))
     dense.stages[:0] = first.stages.stages

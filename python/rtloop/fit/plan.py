@@ -40,6 +40,9 @@ class Plan:
     footprint: str
     seeds: np.ndarray
     settings: dict[str, Any]
+    #: The outline pixels with the footprint ("auto": where the outline gate finds the photo needs them,
+    #: "on": always, "off": at pixel centres; :attr:`.stages.Stages.silhouettes`).
+    silhouettes: str = "off"
 
     def new_model(self) -> dict[str, Any]:
         """The record of the image terms before any is selected (``result.model``)."""
@@ -63,7 +66,10 @@ def plan_fit(scene: Scene, options: FitOptions, photo: Observation) -> Plan:
                     pixels_per_object=options.pixels_per_object, population=b.population)  # the scaled budget too
     # "auto": the closed form's polish; the fallback from it every stage (its two stages have no polish apart)
     auto = "polish" if b.method == "projected" else ("on" if b.projection_unavailable else "off")
-    footprint = auto if options.footprint == "auto" else options.footprint
+    footprint = auto if options.footprint in ("auto", "silhouette") else options.footprint
+    # the outline pixels integrated where the photo shows it needs them (the gate after the closed-form
+    # search), or always ("silhouette")
+    silhouettes = {"auto": "auto" if footprint == "polish" else "off", "silhouette": "on"}.get(options.footprint, "off")
     settings = {**b.settings(), "clip": options.clip,
                 "masked_pixels": None if photo.use is None else int(scene.width * scene.height - photo.use.size),
                 "norm": options.first_norm, "space": options.first_space,
@@ -78,11 +84,12 @@ def plan_fit(scene: Scene, options: FitOptions, photo: Observation) -> Plan:
         settings["solve_margin"] = photo.solve_margin
     work = with_interreflection(scene) if options.interreflection == "on" else scene
     seeds = np.random.SeedSequence(options.seed).generate_state(4, dtype=np.uint64)
-    return Plan(given, scene, work, held, ident, b, footprint, seeds, settings)
+    return Plan(given, scene, work, held, ident, b, footprint, seeds, settings, silhouettes)
 
 
 def new_stages(options: FitOptions, photo: Observation, scene: Scene, budget: Budget, ident: dict[str, Any], *,
-               norm: str, space: str, footprint: str, report_names: list[str] | None = None) -> Stages:
+               norm: str, space: str, footprint: str, report_names: list[str] | None = None,
+               silhouettes: str = "off") -> Stages:
     """The stages of a fit of ``scene`` to ``photo`` (its used pixels, clip level and solve margin) with
     ``budget``, in ``norm`` and ``space``."""
     stages = Stages(scene, photo.target, photo.use, photo.mask, budget, ident, clip=options.clip, norm=norm,
@@ -90,4 +97,5 @@ def new_stages(options: FitOptions, photo: Observation, scene: Scene, budget: Bu
                     rng=np.random.default_rng(options.seed), callback=options.callback, footprint=footprint,
                     report_names=report_names)
     stages.saturated, stages.solve_margin = photo.saturated, photo.solve_margin
+    stages.silhouettes = silhouettes
     return stages

@@ -38,7 +38,8 @@ def refit_stages(options: FitOptions, photo: Observation, stages: Stages, box: S
     if b2.method != "projected":
         return None
     return new_stages(options, photo, box, b2, identifiability(box, box.fit_paths), norm=stages.norm, space=space,
-                      footprint=stages.footprint, report_names=stages.all_names)
+                      footprint=stages.footprint, report_names=stages.all_names,
+                      silhouettes=stages.silhouettes)
 
 
 def stays_linear(model: dict[str, Any], codes: float) -> None:

@@ -50,6 +50,10 @@ class StageResult:
     lit_pixels: list[int] | None = None
     #: For the projected loss with interreflection: 1 / the light intensity the bounce was solved with.
     gauge: float | None = None
+    #: The outline gate's evidence where it ran (``_native.OptimizeResult.outlines``): (loss with outlines at
+    #: pixel centres, with them integrated, outline pixels, the largest share of an object's lit pixels on its
+    #: outline, fired, loss after the polish with them, kept).
+    outlines: tuple[float, float, int, float, bool, float | None, bool] | None = None
 
 
 @dataclass

@@ -75,6 +75,10 @@ class Stages:
         #: products (``_native.optimize``'s ``solve_margin``; 0: a pixel's 4-neighbours show its object;
         #: :data:`rtloop.fit.JPEG_CHROMA_MARGIN` for a JPEG, whose colour mixes across silhouettes).
         self.solve_margin = 0
+        #: With the footprint, the outline pixels (``_native.optimize``'s ``silhouettes``): "auto" integrated
+        #: where the outline gate finds the photo needs it (a search with the footprint in its polish),
+        #: "on" in every evaluation with the footprint, "off" at pixel centres.
+        self.silhouettes = "off"
         #: The callback's ``params`` hold the closed-form products of each generation's best, split into the
         #: scene's parameters (one solve per generation); False: the scene's own values stand for them.
         self.products_per_generation = True
@@ -120,6 +124,7 @@ class Stages:
             polish_tol=polish_tol, footprint=self.footprint == "on",
             polish_footprint=self.footprint == "polish" and method == "lshade" and polish > 0,
             frozen_bounce=self.frozen_bounce, saturated=self.saturated, solve_margin=self.solve_margin, x0=x0,
+            silhouettes=self.silhouettes if self.footprint != "off" else "off",
         )
         history = [(gen, float(sum(objectives)), list(objectives), np.array(best))
                    for gen, best, objectives, _ in out.history]
@@ -136,7 +141,7 @@ class Stages:
             name=name, paths=paths, param_names=stage_scene.param_names(paths), x=out.x,
             objectives=list(out.objectives), evaluations=out.evaluations, generations=generations_run,
             seconds=time.perf_counter() - t, loss=loss, pixels=out.active_pixels, history=history,
-            products=out.products, lit_pixels=out.lit_pixels, gauge=out.gauge,
+            products=out.products, lit_pixels=out.lit_pixels, gauge=out.gauge, outlines=out.outlines,
         )
         self.stages.append(stage)
         return stage

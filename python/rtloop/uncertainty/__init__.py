@@ -190,8 +190,10 @@ def _residual(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The model values the fit compared with the photo at the used pixels (flat; the footprint render for
     a fit that took the pixel footprint, ``compared`` where given, else ``f0``) and the residual."""
-    if compared is None and getattr(result, "settings", {}).get("footprint", "off") != "off":
-        compared = _native.render(scene, scene.width, scene.height, 1, True)
+    settings = getattr(result, "settings", {})
+    if compared is None and settings.get("footprint", "off") != "off":
+        compared = _native.render(scene, scene.width, scene.height, 1, True,
+                                  outlines=bool(settings.get("silhouettes", False)))
     if compared is not None:
         if np.shape(compared) != target.shape:
             raise RtloopError(f"compared: shape {np.shape(compared)} does not match the scene's {target.shape}")

@@ -1,0 +1,84 @@
+//! The outline gate: a default fit (the footprint in its polish, outlines at pixel centres) takes the
+//! silhouette integration ([`FitnessSpec::outlines`]) only where its photo shows that it needs it. At the
+//! fit's light the loss is evaluated once more with the outline pixels integrated over their area; where
+//! that explains the photo better by [`OUTLINE_GAIN`] of the fit's loss, the light is polished again from
+//! there with the outlines integrated, and the result kept where its loss is below the fit's. The two
+//! models have the same free parameters (the integration adds none), so their in-sample losses compare
+//! as they are.
+
+use crate::error::Result;
+use crate::fitness::{Fitness, FitnessSpec};
+use crate::params::ParamLayout;
+use crate::scene::Scene;
+use crate::stage::{polish_stage, OutlineEvidence, StageResult};
+
+/// The least relative fall of a default fit's loss, at its own light, from integrating the outline pixels
+/// for the gate to polish again with them. The loss of a fit that has every term its photo needs is the
+/// photo's noise and rounding; what the integration removes beyond this share of it is the outlines' own
+/// error (a back-lit rim: 44 % here; the 27 study photos 0-9 %, see benches/results/silhouette.md).
+pub const OUTLINE_GAIN: f64 = 0.15;
+/// And the least share of some object's lit pixels that are outline pixels: where the outlines carry
+/// little of an object's light, the light is fixed by its interior and the outline's error barely moves
+/// it.
+pub const OUTLINE_SHARE: f64 = 0.5;
+/// The polish with the outlines integrated starts from the fit's light with this initial simplex (a
+/// fraction of each range): the integration moves a light by millimetres to centimetres, inside its basin.
+pub const OUTLINE_STEP: f64 = 0.02;
+
+/// The outline gate on `result`, a default fit of `layout` of `scene` to `target` (its fitness `spec`,
+/// with the footprint, its light searched within `bounds`): the evidence, and `result` replaced by the
+/// polish with the outlines integrated (`evaluations` at most, stopping at `x_tol`) where the gate fires
+/// and that polish lowers the loss.
+pub(crate) fn outline_gate(
+    scene: &Scene,
+    (layout, target, spec): (ParamLayout, &[f32], FitnessSpec),
+    bounds: &[(f64, f64)],
+    (evaluations, x_tol): (usize, f64),
+    result: &mut StageResult,
+) -> Result<Option<OutlineEvidence>> {
+    let spec = FitnessSpec {
+        outlines: true,
+        footprint: true,
+        ..spec
+    };
+    let outlined = Fitness::new(scene, layout, target, spec)?;
+    let pixels = outlined.outline_pixels();
+    let Some((loss, share)) = outlined.outline_evidence(&result.x) else {
+        return Ok(None);
+    };
+    let centre: f64 = result.objectives.iter().sum();
+    let integrated: f64 = loss.iter().sum();
+    let mut evidence = OutlineEvidence {
+        centre,
+        integrated,
+        pixels,
+        share,
+        fired: pixels > 0 && share >= OUTLINE_SHARE && centre - integrated >= OUTLINE_GAIN * centre,
+        polished: None,
+        kept: false,
+    };
+    if !evidence.fired {
+        return Ok(Some(evidence));
+    }
+    let mut stage = polish_stage(
+        &outlined,
+        None,
+        bounds,
+        &result.x,
+        OUTLINE_STEP,
+        evaluations,
+        x_tol,
+    )?;
+    stage.refine(&outlined, None);
+    let polished: f64 = stage.objectives.iter().sum();
+    evidence.polished = Some(polished);
+    evidence.kept = polished < centre;
+    result.evaluations += stage.evaluations;
+    if evidence.kept {
+        result.x = stage.x;
+        result.objectives = stage.objectives;
+        result.products = stage.products;
+        result.lit_pixels = stage.lit_pixels;
+    }
+    Ok(Some(evidence))
+}
