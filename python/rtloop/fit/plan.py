@@ -64,9 +64,8 @@ def plan_fit(scene: Scene, options: FitOptions, photo: Observation) -> Plan:
                       generations=options.generations, optimizer=options.optimizer, polish=options.polish)
     check_arguments(scene, seed=options.seed, threads=options.threads, polish=b.polish,
                     pixels_per_object=options.pixels_per_object, population=b.population)  # the scaled budget too
-    # "auto": the closed form's polish; the fallback from it every stage (its two stages have no polish apart)
-    auto = "polish" if b.method == "projected" else ("on" if b.projection_unavailable else "off")
-    footprint = auto if options.footprint in ("auto", "silhouette") else options.footprint
+    footprint = ("polish" if b.method == "projected" else "off") if options.footprint in ("auto", "silhouette") \
+        else options.footprint
     # the outline pixels integrated where the photo shows it needs them (the gate after the closed-form
     # search), or always ("silhouette")
     silhouettes = {"auto": "auto" if footprint == "polish" else "off", "silhouette": "on"}.get(options.footprint, "off")
