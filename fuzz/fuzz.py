@@ -304,7 +304,7 @@ JOB_FIELDS = ["seed", "mask", "protocol", "population", "generations", "f", "cr"
               "highlights", "footprint", "framing", "vignetting", "tone", "lights", "response", "crop", "grey_card",
               "image",
               "bogus"]
-JOB_VALUES = [*ODD, "auto", "on", "off", "srgb", "linear", "paper", "l2", "bootstrap", "check", "correct", 2, 9, [1, 1], [2, "x"], [-0.3, -0.05], [0, 1e400],
+JOB_VALUES = [*ODD, "auto", "on", "off", "silhouette", "srgb", "linear", "paper", "l2", "bootstrap", "check", "correct", 2, 9, [1, 1], [2, "x"], [-0.3, -0.05], [0, 1e400],
               {"mask": "photo.png", "reflectance": 0.18}, {"mask": "../scene.json", "reflectance": 2}, 10**40]
 RAW_LINES = ["[" * 100_000 + "]" * 100_000, '{"id": "a", "id": "b", "scene": "s", "photo": "p"}', "{", "null",
              '{"id": "a", "seed": 1' + "0" * 5000 + "}", "# comment", "\ufeff{}", "\x00"]

@@ -124,14 +124,14 @@ def test_outputs(inputs, tmp_path, capsys):
 
 
 def test_a_refit_that_frees_a_lobe_logs_the_scenes_own_parameters(tmp_path, capsys):
-    """A photo of a glossy ball lit from behind (tests/fixtures/photos/gloss-back): the fit frees the ball's lobe (a coat's
+    """A photo of a glossy ball (tests/fixtures/photos/gloss-a025): the fit frees the ball's lobe (a coat's
     specular weight, its roughness chosen from the photo) for its refit, a stage whose scene has more
     parameters than the user's. Its generations
     are logged with the user's parameters like the first stage's (the CSV's columns, the snapshots rendered
     from the user's scene; it raised "expected 10 values, got 12" from the snapshot's render), and its
     progress line names it a closed-form stage (an L-SHADE budget), not one of a generation count; the
     report shows the fitted scene's parameters, the lobe at its fitted value."""
-    photo = REPO / "tests" / "fixtures" / "photos" / "gloss-back"
+    photo = REPO / "tests" / "fixtures" / "photos" / "gloss-a025"
     out = tmp_path / "gloss"
     code, stdout, stderr = run(capsys, photo / "scene_input.json", photo / "objective.png", "--out", out,
                                "--final-scale", 1, "--final-spp", 1, "--report")

@@ -17,9 +17,9 @@ PHOTOS = Path(__file__).resolve().parent / "fixtures" / "photos"
 EDGES = sorted(p.name for p in PHOTOS.iterdir() if p.name.startswith("edge-") and (p / "scene.json").exists())
 #: Where the fit misses the target, and why.
 GAPS = {
-    "edge-dark-floor": "a ball over a floor of albedo 0.03, whose 8-bit sRGB codes are a few steps: fitted with the "
-                       "default footprint, rtloop's own 256-spp render of the truth is 5 mm off, 16 mm once "
-                       "rounded to 8 bits as the photo is",
+    "edge-dark-floor": "a ball over a floor of albedo 0.03, whose 8-bit sRGB codes are a few steps: the outline "
+                       "gate takes the outline pixels averaged (24 -> 16 mm), and rtloop's own 256-spp render "
+                       "of the truth fitted so is 5 mm off, 16 mm once rounded to 8 bits as the photo is",
 }
 
 

@@ -211,7 +211,8 @@ class _quiet:
 #: JSON values an adversary would put in a job line's field.
 JSON_VALUES = st.recursive(
     st.one_of(st.none(), st.booleans(), st.integers(), st.integers(10**20, 10**40), st.floats(), st.text(max_size=8),
-              st.sampled_from(["auto", "on", "off", "srgb", "linear", "paper", "rtloop", "l2", "bootstrap"])),
+              st.sampled_from(["auto", "on", "off", "silhouette", "srgb", "linear", "paper", "rtloop", "l2",
+                               "bootstrap"])),
     lambda inner: st.one_of(st.lists(inner, max_size=3), st.dictionaries(st.text(max_size=6), inner, max_size=3)),
     max_leaves=6,
 )
@@ -539,7 +540,8 @@ PHOTO_LIGHTS = rtloop.render(SMALL_LIGHTS)
                  st.sampled_from([0, 9, -1, 2.0, "2", True, math.nan, [1]])),
        st.booleans(), st.integers(0, 3),
        st.sampled_from([{}, {}, {"norm": "l2"}, {"norm": "auto"}, {"vignetting": "off"}, {"tone": "auto"},
-                        {"footprint": True}, {"uncertainty": "bootstrap"}, {"protocol": "paper"}]))
+                        {"footprint": True}, {"footprint": "silhouette"}, {"uncertainty": "bootstrap"},
+                        {"protocol": "paper"}]))
 def test_the_lights_argument_fits_or_raises_rtloop_error(lights, listed, seed, other):
     """The lights fit runs, or refuses in one line; an argument it would ignore (one given other than its
     default) is refused naming it, never dropped."""

@@ -773,9 +773,8 @@ def test_the_sandwich_follows_the_fits_norm(ball_scene):
     least-squares one; with white noise neither inflates Gauss-Newton's sigma beyond the median's
     efficiency loss (L1: 1.0-1.7x, theory 1.25 before the floor at Gauss-Newton; measured 1.26-1.45, mean
     over 4 draws; least squares 1.0-1.6x, measured 1.22-1.29: the noisier sandwich floored at Gauss-Newton).
-    With H at half (Powell's estimate without the factor 2 the sign scores need) the L1 ratio is about 2.5.
-    The photo is the model the default fit compares (the footprint render): white noise is its only residual."""
-    clean = rtloop.render(ball_scene, footprint=True)
+    With H at half (Powell's estimate without the factor 2 the sign scores need) the L1 ratio is about 2.5."""
+    clean = rtloop.render(ball_scene)
     start = wrong_start(ball_scene)
     for norm, top in (("l1", 1.7), ("l2", 1.6)):
         ratios = []

@@ -1,8 +1,9 @@
 //! The outline gate: a default fit (the footprint in its polish, outlines at pixel centres) takes the
 //! silhouette integration ([`FitnessSpec::outlines`]) only where its photo shows that it needs it. At the
 //! fit's light the loss is evaluated once more with the outline pixels integrated over their area; where
-//! that explains the photo better by [`OUTLINE_GAIN`] of the fit's loss, the light is polished again from
-//! there with the outlines integrated, and the result kept where its loss is below the fit's. The two
+//! that explains the photo better by [`OUTLINE_GAIN`] of the fit's loss (or by [`OUTLINE_SHARE_GAIN`] where
+//! an object is lit mostly on its outline, [`OUTLINE_SHARE`]), the light is polished again from there with
+//! the outlines integrated, and the result kept where its loss is below the fit's. The two
 //! models have the same free parameters (the integration adds none), so their in-sample losses compare
 //! as they are.
 
@@ -12,15 +13,16 @@ use crate::params::ParamLayout;
 use crate::scene::Scene;
 use crate::stage::{polish_stage, OutlineEvidence, StageResult};
 
-/// The least relative fall of a default fit's loss, at its own light, from integrating the outline pixels
-/// for the gate to polish again with them. The loss of a fit that has every term its photo needs is the
-/// photo's noise and rounding; what the integration removes beyond this share of it is the outlines' own
-/// error (a back-lit rim: 44 % here; the 27 study photos 0-9 %, see benches/results/silhouette.md).
-pub const OUTLINE_GAIN: f64 = 0.15;
-/// And the least share of some object's lit pixels that are outline pixels: where the outlines carry
-/// little of an object's light, the light is fixed by its interior and the outline's error barely moves
-/// it.
+/// The gate fires where integrating the outline pixels lowers a default fit's loss, at its own light, by
+/// this share of it: the outlines' error is then about half of what the fit leaves (on the 27 study photos
+/// 1-37 % where the outlines barely move the light, 47-52 % on the outline-heavy ones; see
+/// benches/results/silhouette.md).
+pub const OUTLINE_GAIN: f64 = 0.45;
+/// Or where some object has this share of its lit pixels on its outline (a ball lit from behind, lit on
+/// its rim alone) and the fall is [`OUTLINE_SHARE_GAIN`] at least: its light is then measured on its
+/// outline.
 pub const OUTLINE_SHARE: f64 = 0.5;
+pub const OUTLINE_SHARE_GAIN: f64 = 0.15;
 /// The polish with the outlines integrated starts from the fit's light with this initial simplex (a
 /// fraction of each range): the integration moves a light by millimetres to centimetres, inside its basin.
 pub const OUTLINE_STEP: f64 = 0.02;
@@ -53,7 +55,9 @@ pub(crate) fn outline_gate(
         integrated,
         pixels,
         share,
-        fired: pixels > 0 && share >= OUTLINE_SHARE && centre - integrated >= OUTLINE_GAIN * centre,
+        fired: pixels > 0
+            && (centre - integrated >= OUTLINE_GAIN * centre
+                || (share >= OUTLINE_SHARE && centre - integrated >= OUTLINE_SHARE_GAIN * centre)),
         polished: None,
         kept: false,
     };

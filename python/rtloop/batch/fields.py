@@ -133,7 +133,7 @@ _CHECKS: dict[str, Callable[[Any, str], Any]] = {
     "norm": _TEXT, "space": _choice("auto", "linear", "srgb"), "optimizer": _TEXT, "polish": _WHOLE,
     "clip": _BOOL, "uncertainty": _choice(True, False, "bootstrap"), "pixels_per_object": _WHOLE,
     "environment": _choice("auto", "on", "off"), "interreflection": _choice("auto", "on", "off"),
-    "highlights": _choice("auto", "off"), "footprint": _choice("auto", "on", "off", True, False),
+    "highlights": _choice("auto", "off"), "footprint": _choice("auto", "silhouette", "on", "off", True, False),
     "framing": _choice("check", "correct", "off"), "vignetting": _vignetting, "tone": _choice("auto", "on", "off"),
     "lights": _lights, "response": _TEXT, "crop": _BOOL, "grey_card": _grey_card,
 }

@@ -114,7 +114,7 @@ def _build_parser() -> Parser:
                    "objects (default auto: added when the photo shows it)")
     p.add_argument("--highlights", choices=("auto", "off"), help="free a matte sphere's specular lobe when the "
                    "photo shows a highlight (default auto)")
-    p.add_argument("--footprint", nargs="?", choices=("auto", "on", "off"), const="on",
+    p.add_argument("--footprint", nargs="?", choices=("auto", "silhouette", "on", "off"), const="on",
                    help="every job's pixel footprint mode, as rtloop-fit's --footprint (default auto)")
     p.add_argument("--framing", choices=("check", "correct", "off"),
                    help="every job's framing check, as rtloop-fit's --framing (default check)")

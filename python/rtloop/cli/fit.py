@@ -227,10 +227,12 @@ def _add_model_args(p: Parser) -> None:
            "one diffuse bounce between the objects (the floor lighting a ball's underside, a red ball "
            "tinting the floor): 'auto' (default) adds it when the photo shows it, 'on', 'off'; with it the "
            "fit also estimates the light's absolute intensity (a bounce is as bright as the albedos are)")
-    choice(p, "--footprint", ("auto", "on", "off"), nargs="?", const="on",
+    choice(p, "--footprint", ("auto", "silhouette", "on", "off"), nargs="?", const="on",
            help="integrate each pixel over its area where a sphere's shadow edge or terminator crosses "
            "it, as a camera does, instead of shading pixel centres: 'auto' (default) in the closed-form "
-           "polish, products and loss (the search finds the basin at pixel centres), 'on' (or the bare "
+           "polish, products and loss (the search finds the basin at pixel centres; the outline pixels "
+           "averaged over sub-pixel rays where the photo needs it), 'silhouette' that with the outlines always "
+           "averaged, 'on' (or the bare "
            "flag) in every search too, 'off' pixel centres only (on the Mitsuba test photos: median light error 1.8 mm against 2.8 mm at pixel centres, for about 1.1x the CPU time)")
     choice(p, "--uncertainty", ("default", "bootstrap", "off"),
            "error bars: 'default' (Gauss-Newton and the block sandwich, a few ms), 'bootstrap' "

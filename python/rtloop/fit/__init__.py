@@ -115,13 +115,15 @@ def fit(
     (a grey card; ``card`` bool (H, W), True on it, and left out of the fit by ``mask``): the fitted scene is
     rescaled to absolute albedos and the light's intensity in W/sr (:mod:`rtloop.fit.reference`), recorded
     in ``result.reference``.
-    ``footprint``: compare the photo with pixels integrated over their area where a sphere's shadow edge,
-    its terminator or an object's outline crosses them, as a camera integrates them
-    (``render(..., footprint=True)`` renders that model), instead of pixel centres. "auto" (default): the
-    closed-form method's search finds the basin at pixel centres and its polish, products and loss take
-    the footprint (the two-stage fallback from it takes it in every stage; the paper protocol stays at
-    pixel centres); "on" (or True): every search takes it too; "off" (or False): pixel centres only. The
-    term tests stay at pixel centres.
+    ``footprint``: compare the photo with pixels integrated over their area where a sphere's shadow edge
+    or terminator crosses them, as a camera integrates them (``render(..., footprint=True)`` renders that
+    model), instead of pixel centres. "auto" (default): the closed-form method's search finds the basin at
+    pixel centres and its polish, products and loss take the footprint (the two-stage fallback stays at
+    pixel centres); where the photo shows it needs them (the outline gate, :mod:`.outlines`), the pixels on
+    an object's outline are then averaged over 16 sub-pixel rays and the light polished again
+    (``result.model["outlines"]`` records the evidence, ``result.settings["silhouettes"]`` whether they were
+    taken). "silhouette": as "auto" with the outlines always averaged. "on" (or True): every search takes
+    the footprint too; "off" (or False): pixel centres only. The term tests stay at pixel centres.
     ``lights``: the number of lights to fit (1 to 8), or "auto" to choose it from held-out pixels (one
     light, then one more while it explains pixels the fit did not see: :func:`.lights.choose_count`).
     1 for a one-light scene is the fit above. None (default) is that fit too, and where it does not

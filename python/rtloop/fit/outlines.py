@@ -11,12 +11,14 @@ from typing import Any
 
 from .stages import Stages
 
-__all__ = ["OUTLINE_GAIN", "OUTLINE_SHARE", "outlines_taken", "record_outlines"]
+__all__ = ["OUTLINE_GAIN", "OUTLINE_SHARE", "OUTLINE_SHARE_GAIN", "outlines_taken", "record_outlines"]
 
 #: The outline gate's least relative fall of the loss (the core's ``fit::outlines::OUTLINE_GAIN``).
-OUTLINE_GAIN = 0.15
-#: And the least share of some object's lit pixels on its outline (``fit::outlines::OUTLINE_SHARE``).
+OUTLINE_GAIN = 0.45
+#: Or this share of some object's lit pixels on its outline (``fit::outlines::OUTLINE_SHARE``) and a fall
+#: of ``OUTLINE_SHARE_GAIN`` at least.
 OUTLINE_SHARE = 0.5
+OUTLINE_SHARE_GAIN = 0.15
 
 
 def _last_gate(stages: Stages) -> tuple[float, float, int, float, bool, float | None, bool] | None:
@@ -46,11 +48,12 @@ def record_outlines(stages: Stages, silhouettes: str, model: dict[str, Any], set
         gain = (centre - integrated) / centre if centre > 0 else 0.0
         record["evidence"] = {"loss_centres": centre, "loss_integrated": integrated, "outline_pixels": pixels,
                               "outline_share": share, "min_share": OUTLINE_SHARE,
+                              "min_gain_with_share": OUTLINE_SHARE_GAIN,
                               "gain": gain, "min_gain": OUTLINE_GAIN, "fired": fired, "loss_polished": polished,
                               "kept": kept}
         record["why"] = (f"at the fitted light, integrating the {pixels} outline pixels lowers the loss by "
-                         f"{100 * gain:.1f} % (the gate takes {100 * OUTLINE_GAIN:g} %), and up to {100 * share:.0f} % of "
-                         f"an object's lit pixels are on its outline (the gate takes {100 * OUTLINE_SHARE:g} %)"
+                         f"{100 * gain:.1f} % (the gate takes {100 * OUTLINE_GAIN:g} %, or {100 * OUTLINE_SHARE_GAIN:g} % "
+                         f"where half an object's lit pixels are on its outline: here up to {100 * share:.0f} %)"
                          + ("" if not fired else "; polished again with them: " + ("kept" if kept else "not lower")))
     elif silhouettes == "on":
         record["why"] = "forced (footprint='silhouette')"

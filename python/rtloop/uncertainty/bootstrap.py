@@ -102,6 +102,7 @@ def block_bootstrap(result: Any, target: np.ndarray, use: np.ndarray | None, *, 
                     norm=settings.get("norm", "l1"), space=settings.get("space", "linear"), threads=threads,
                     pixels_per_object=settings.get("pixels_per_object", 0), rng=np.random.default_rng(0),
                     callback=watch, footprint=_footprint_mode(settings.get("footprint", "off")))
+        st.silhouettes = "on" if settings.get("silhouettes") else "off"  # the outlines as the fit took them
         st.products_per_generation = False  # the callback watches; a solve per generation would only slow it
         refit = scene_to_dict(st.projected(int(rng.integers(0, 2**63 - 1)), environment=env, name=name))
         if stopped:
