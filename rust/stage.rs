@@ -60,20 +60,19 @@ pub struct StageResult {
 /// What the outline gate saw at a default fit's light, and what it did.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct OutlineEvidence {
-    /// The fit's loss at its light (outlines at pixel centres).
+    /// The fit's search loss at its light (outlines at pixel centres, the least-squares products).
     pub centre: f64,
-    /// The loss at the same light with the outline pixels integrated (its products refined for it).
+    /// The same with the outline pixels averaged over their sub-pixel rays (`Fitness::outline_gain`).
     pub integrated: f64,
-    /// The pixels on an outline (the integrated ones).
+    /// The pixels on an outline.
     pub pixels: usize,
-    /// The largest share, over the objects, of an object's lit pixels that are on an outline
-    /// (`Fitness::outline_evidence`).
+    /// The largest share, over the objects, of an object's lit pixels that are on an outline.
     pub share: f64,
-    /// Whether `integrated` fell below `centre` by `fit::outlines::OUTLINE_GAIN` of it: the polish ran again.
+    /// Whether the gate fired (`fit::outlines`): the light was polished again with the outlines integrated.
     pub fired: bool,
-    /// The loss after that polish, with the outlines integrated (`None` where the gate did not fire).
+    /// The loss after that polish at its refined products (`None` where the gate did not fire).
     pub polished: Option<f64>,
-    /// Whether the polished result replaced the fit's (`polished` below `centre`).
+    /// Whether the polished result replaced the fit's (`polished` below the fit's refined loss).
     pub kept: bool,
 }
 

@@ -203,7 +203,7 @@ def test_footprint_option(inputs, tmp_path, capsys):
     settings = json.loads((tmp_path / "off" / "result.json").read_text(encoding="utf-8"))["fit_report"]["settings"]
     assert settings["footprint"] == "off"
     code, stdout, _ = run(capsys, "--help")
-    assert "--footprint [{auto,on,off}]" in stdout
+    assert "--footprint [{auto,silhouette,on,off}]" in stdout
 
 
 def test_uncertainty_option(inputs, tmp_path, capsys):

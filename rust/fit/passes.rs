@@ -124,13 +124,14 @@ where
     // Where only the polish takes the pixel footprint, the search's fitness is the polish's at pixel
     // centres (one set-up for both).
     let only_polish = options.polish_footprint && !spec.footprint;
+    let gated = options.outline_gate && only_polish && !spec.outlines && !scene.interreflection;
     let spec = FitnessSpec {
         footprint: spec.footprint || only_polish,
+        outline_gate: gated,
         ..spec
     };
-    // the outline gate's own fitness, built after the search from the same arguments
-    let gate = (options.outline_gate && only_polish && !spec.outlines && !scene.interreflection)
-        .then(|| (layout.clone(), spec.clone()));
+    // where the gate fires, the fitness with the outlines integrated is built from the same arguments
+    let gate = gated.then(|| (layout.clone(), spec.clone()));
     let built = Fitness::new(scene, layout, target, spec)?;
     let (mut fitness, mut finer) = if only_polish {
         (built.at_pixel_centres(), Some(built))
@@ -226,11 +227,11 @@ where
         }
     }
     let mut result = last.expect("at least one pass");
-    if let (Some((layout, spec)), Method::Lshade(cfg)) = (gate, method) {
+    if let (Some((layout, spec)), Method::Lshade(cfg), Some(finer)) = (gate, method, &finer) {
         if result.stop != StopReason::Callback && result.products.is_some() {
             let budget = (cfg.polish_evaluations, cfg.polish_x_tol);
-            let gate = outline_gate(scene, (layout, target, spec), &bounds, budget, &mut result)?;
-            result.outlines = gate;
+            let model = (scene, layout, target, spec);
+            result.outlines = outline_gate(finer, model, &bounds, budget, &mut result)?;
         }
     }
     result.evaluations += done;

@@ -18,6 +18,7 @@ pub mod lights;
 pub mod line_min;
 mod lobe;
 pub mod loss;
+pub mod outline_gate;
 pub mod pixels;
 pub mod projected;
 pub mod refine;
@@ -92,6 +93,9 @@ pub struct FitnessSpec {
     /// sub-pixel rays (`silhouette`), not their centre's value. Off by default: a fit takes them only where
     /// the photo shows it needs them (`fit::passes`, the outline gate).
     pub outlines: bool,
+    /// With the footprint and outlines at pixel centres: their samples kept beside the model (which they do
+    /// not change) for [`Fitness::outline_gain`].
+    pub outline_gate: bool,
     /// The closed-form products are informed only by pixels that every pixel within this Chebyshev
     /// distance shows the same object ([`interior_by`]; 0: the 4-neighbours). The loss still counts every
     /// pixel.
@@ -114,6 +118,7 @@ impl Default for FitnessSpec {
             projection: None,
             footprint: false,
             outlines: false,
+            outline_gate: false,
             solve_margin: 0,
             norm: Norm::L1,
             space: Space::Linear,
@@ -147,6 +152,8 @@ pub struct Fitness {
     bounce: bounce::Mode,
     /// With the footprint, the pixels on an outline (`silhouette`): each the mean of its sub-pixel rays.
     outlines: Option<silhouette::Silhouettes>,
+    /// For the outline gate, outlines at their centres: their samples beside the model (`outline_gate`).
+    gate: Option<Box<outline_gate::GateOutlines>>,
 }
 
 /// Per-thread scratch, reused across evaluations so the hot path never allocates.
@@ -354,8 +361,13 @@ impl Fitness {
             environment,
         )
         .map(|o| o.products_from_outlines(spec.solve_margin == 0));
+        let gate = (spec.outline_gate && !spec.outlines && !scene.interreflection)
+            .then(|| camera.map(|c| (c, (&gbuffer, pixels, background))))
+            .flatten()
+            .and_then(|(c, at)| outline_gate::gate_outlines(&active, at, c, shadows, environment));
         let mut fitness = Fitness {
             outlines,
+            gate,
             layout,
             early_exit: true,
             base,
@@ -382,36 +394,6 @@ impl Fitness {
             fitness.set_saturated(level);
         }
         Ok(fitness)
-    }
-
-    /// This fitness with pixels shaded at their centres (as [`Fitness::new`] builds it without
-    /// [`FitnessSpec::footprint`]) from one built with the footprint, without redoing its geometry: a search
-    /// and its polish can then take the two models for the price of one set-up.
-    pub fn at_pixel_centres(&self) -> Fitness {
-        let active = self.active.at_pixel_centres();
-        let kernel = match &self.outlines {
-            // the silhouette pixels back in their groups: the groups `new` builds without the footprint
-            Some(_) => self
-                .kernel
-                .regrouped(active.set(), &self.shapes, self.shadows),
-            None => self.kernel.at_pixel_centres(),
-        };
-        Fitness {
-            layout: self.layout.clone(),
-            early_exit: self.early_exit,
-            kernel,
-            base: self.base.clone(),
-            shapes: self.shapes.clone(),
-            constant: penalty_sums(&active.fixed, self.norm(), self.space()),
-            active,
-            kind: self.kind,
-            clip: self.clip,
-            shadows: self.shadows,
-            projection: self.projection.clone(),
-            held_solve: None, // solved with the footprint: not this model's
-            outlines: None,
-            bounce: self.bounce.clone(),
-        }
     }
 
     /// The closed-form products (object x channel) for candidate light `x` (`L1Projected` only).
@@ -547,6 +529,9 @@ impl Fitness {
         self.kernel.set_space(space);
         if let Some(o) = &mut self.outlines {
             o.set_space(space);
+        }
+        if let Some(g) = &mut self.gate {
+            g.set_space(space);
         }
         self.constant = penalty_sums(&self.active.counted_fixed(), self.norm(), space);
     }

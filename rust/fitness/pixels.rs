@@ -133,8 +133,29 @@ impl ActivePixels {
         gbuffer: &GBuffer,
         pixels: &[u32],
         background: Option<Vec3A>,
-        (camera, shapes): (&CameraFrame, &[PShape]),
+        camera: (&CameraFrame, &[PShape]),
     ) {
+        let (outline, fixed_outline, silhouettes, _) =
+            self.outline_samples(gbuffer, pixels, background, camera);
+        if !silhouettes.is_empty() {
+            self.outline = outline;
+            self.fixed_outline = fixed_outline;
+        }
+        self.silhouettes = silhouettes;
+    }
+
+    /// The pixels on an outline among these (as [`ActivePixels::select`] took them from `pixels`): per
+    /// active pixel and per fixed pair whether it is one, each one's objective and sub-pixel first hits,
+    /// and each one's centre first hit.
+    #[allow(clippy::type_complexity)]
+    pub(crate) fn outline_samples(
+        &self,
+        gbuffer: &GBuffer,
+        pixels: &[u32],
+        background: Option<Vec3A>,
+        (camera, shapes): (&CameraFrame, &[PShape]),
+    ) -> (Vec<bool>, Vec<bool>, Vec<Silhouette>, Vec<Surfel>) {
+        let (mut silhouettes, mut centres) = (Vec::new(), Vec::new());
         let mut outline = vec![false; self.surfels.len()];
         let mut fixed_outline = vec![false; self.fixed.len()];
         let (mut j, mut k) = (0, 0);
@@ -154,13 +175,11 @@ impl ActivePixels {
                 footprint::silhouette_samples(camera, shapes, gbuffer, i as usize)
             {
                 *slot = true;
-                self.silhouettes.push(Silhouette { target, samples });
+                silhouettes.push(Silhouette { target, samples });
+                centres.push(gbuffer.surfels[i as usize]);
             }
         }
-        if !self.silhouettes.is_empty() {
-            self.outline = outline;
-            self.fixed_outline = fixed_outline;
-        }
+        (outline, fixed_outline, silhouettes, centres)
     }
 
     /// The fixed pairs the constant loss counts: all of them, less those on an outline.

@@ -11,8 +11,9 @@ use super::loss::{Encoding, Identity, Norm, Space, SrgbLut};
 use super::pixels::{group, Group, Light, PixelSet, Silhouette, Sky};
 use super::projected::{Products, Projection, Run, Solved};
 use super::simd::{self, Simd};
+use super::Fitness;
 use crate::render::coat::Coat;
-use crate::render::footprint::SILHOUETTE_SAMPLES;
+
 use crate::render::{PShape, ShadeParams, Surfel};
 
 /// One object's value at a sample, linear in its unit-light factors (`projected::Run::factors`): per
@@ -81,6 +82,8 @@ pub(crate) struct Silhouettes {
     pixel: Vec<Vec<u32>>,
     /// Per silhouette pixel, its samples that see the background.
     misses: Vec<f32>,
+    /// The samples per pixel (`render::footprint::SILHOUETTE_SAMPLES`; 1 for the outline gate's pixel centres).
+    per_pixel: usize,
     t: [Vec<f32>; 3],
     /// The objective in the loss space (sRGB); empty in the linear space.
     te: [Vec<f32>; 3],
@@ -91,7 +94,8 @@ pub(crate) struct Silhouettes {
 
 impl Silhouettes {
     /// The silhouette pixels `list` among `shapes` (`shadows`: the scene can shadow; `sky`: the constant
-    /// term modelled, as for every pixel); `None` where there are none.
+    /// term modelled, as for every pixel), each with as many samples as the first; `None` where there are
+    /// none.
     pub(crate) fn new(
         list: &[Silhouette],
         shapes: &[PShape],
@@ -135,6 +139,7 @@ impl Silhouettes {
             groups,
             pixel,
             misses,
+            per_pixel: list[0].samples.len(),
             t: std::array::from_fn(|c| list.iter().map(|s| s.target[c]).collect()),
             te: Default::default(),
             refine: true,
@@ -211,6 +216,11 @@ impl Silhouettes {
     }
 
     /// Compare in `space` (see `Kernel::set_space`).
+    /// The silhouette pixels.
+    pub(crate) fn pixels(&self) -> usize {
+        self.misses.len()
+    }
+
     pub(crate) fn set_space(&mut self, space: Space) {
         let lut = SrgbLut::get();
         self.te = match space {
@@ -245,7 +255,7 @@ impl Silhouettes {
                 }
             }
         });
-        let w = 1.0 / SILHOUETTE_SAMPLES as f32;
+        let w = 1.0 / self.per_pixel as f32;
         let t = if E::ENCODES { &self.te } else { &self.t };
         std::array::from_fn(|c| {
             sum[c]
@@ -258,7 +268,7 @@ impl Silhouettes {
 }
 
 /// The unit light at `p`'s light (the factors' light; its colour is the models').
-fn unit_light(p: &ShadeParams) -> Light {
+pub(crate) fn unit_light(p: &ShadeParams) -> Light {
     Light {
         pos: p.light_position.to_array(),
         dir: p.light_direction.map(|d| d.to_array()),
@@ -464,29 +474,40 @@ impl<'m, F: Fn(usize) -> Linear<'m>, E: Encoding> Simd for Outline<'_, F, E> {
     }
 }
 
-impl super::Fitness {
+impl Fitness {
+    /// This fitness with pixels shaded at their centres (as [`Fitness::new`] builds it without
+    /// [`super::FitnessSpec::footprint`]) from one built with the footprint, without redoing its geometry: a search
+    /// and its polish can then take the two models for the price of one set-up.
+    pub fn at_pixel_centres(&self) -> Fitness {
+        let active = self.active.at_pixel_centres();
+        let kernel = match &self.outlines {
+            // the silhouette pixels back in their groups: the groups `new` builds without the footprint
+            Some(_) => self
+                .kernel
+                .regrouped(active.set(), &self.shapes, self.shadows),
+            None => self.kernel.at_pixel_centres(),
+        };
+        Fitness {
+            layout: self.layout.clone(),
+            early_exit: self.early_exit,
+            kernel,
+            base: self.base.clone(),
+            shapes: self.shapes.clone(),
+            constant: super::loss::penalty_sums(&active.fixed, self.norm(), self.space()),
+            active,
+            kind: self.kind,
+            clip: self.clip,
+            shadows: self.shadows,
+            projection: self.projection.clone(),
+            held_solve: None, // solved with the footprint: not this model's
+            outlines: None,
+            gate: None,
+            bounce: self.bounce.clone(),
+        }
+    }
+
     /// The pixels on an outline, each the mean of its sub-pixel rays ([`super::FitnessSpec::outlines`]).
     pub fn outline_pixels(&self) -> usize {
         self.active.silhouettes.len()
-    }
-
-    /// For the projected loss with the outlines integrated ([`super::FitnessSpec::outlines`]): at
-    /// candidate `x`, the loss at the products [`super::Fitness::refined`] reports (per channel), and the
-    /// largest share, over the objects, of an object's lit pixels that are outline pixels (a ball lit
-    /// from behind is lit on its rim alone: its share is near 1). `None` without outlines.
-    pub fn outline_evidence(&self, x: &[f64]) -> Option<([f64; 3], f64)> {
-        let (o, proj) = (self.outlines.as_ref()?, self.projection.as_ref()?);
-        let (solved, loss) = self.refined(x)?;
-        let p = self.params(x);
-        let light = unit_light(&p);
-        let model = |obj| Linear::solved(&p, proj, &solved, obj);
-        let on_outline = o.lit(&light, model, solved.products.len());
-        let share = on_outline
-            .iter()
-            .zip(&solved.lit)
-            .filter(|(_, &all)| all > 0)
-            .map(|(&edge, &all)| edge as f64 / all as f64)
-            .fold(0.0, f64::max);
-        Some((loss, share))
     }
 }

@@ -116,6 +116,7 @@ pub(crate) fn fitness_args(
             footprint,
             // the outline gate's or the caller's to set (`optimize`'s `silhouettes`)
             outlines: false,
+            outline_gate: false,
             solve_margin,
             norm,
             space,
