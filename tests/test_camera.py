@@ -122,11 +122,33 @@ def test_photos_without_a_camera_keep_the_ordinary_fit_bit_for_bit(name):
 
 @pytest.mark.parametrize("name", ["blue-ball-bayer", "orange-ball-bayer"])
 def test_sensor_noise_and_demosaicing_select_no_camera_term(name):
+    """A noisy sensor's demosaiced JPEG: no camera term, and the linear loss, its errors not alike in code
+    values (the dark pixels' read noise and clipping at 0 are many codes), which the sRGB loss would follow."""
     scene, image, truth, _ = _load(FIXTURES / name)
     res = rtloop.fit(scene, image, uncertainty=False)
     assert res.model["camera"]["terms"] == []
+    space = res.model["space"]
+    assert space["used"] == "linear" and space["codes"]["alike"] is False, space
     light, worst, _ = _errors(res, truth)
-    assert light < 0.06 and worst < 0.03
+    assert light < 0.02 and worst < 0.03
+    srgb, _, _ = _errors(rtloop.fit(scene, image, uncertainty=False, space="srgb"), truth)
+    assert light < srgb
+
+
+def test_codes_alike_tells_a_jpegs_errors_from_a_sensors():
+    """A residual of one size in code values (a JPEG's quantisation) is alike in the dark and the bright
+    pixels; a sensor's read noise in linear values, clipped at 0, is many codes in the dark ones."""
+    from rtloop._srgb import decode, encode
+    from rtloop.fit.jpeg import codes_alike
+
+    rng = np.random.default_rng(0)
+    render = np.repeat(np.linspace(0.0, 0.9, 96 * 128).reshape(96, 128, 1), 3, axis=2)
+    jpeg = decode(np.clip(encode(render) + rng.normal(0.0, 1.5, render.shape) / 255.0, 0.0, 1.0))
+    sensor = np.clip(render + rng.normal(0.0, 0.006, render.shape), 0.0, 1.0)
+    assert codes_alike(render, jpeg, None, None)["alike"] is True
+    evidence = codes_alike(render, sensor, None, None)
+    assert evidence["alike"] is False and evidence["dark_spread_codes"] > 3 * evidence["bright_spread_codes"]
+    assert codes_alike(render, sensor, np.arange(100), None)["alike"] is None  # too few pixels to tell
 
 
 def test_linear_images_stay_linear_and_show_their_vignetting():
