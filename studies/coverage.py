@@ -149,15 +149,18 @@ def _codes(x: np.ndarray) -> np.ndarray:
 
 def camera_variant(photo: np.ndarray, variant: str, truth: Any) -> np.ndarray:
     """A lens's radial falloff (corners at 40 % of the centre), an S-shaped tone curve on the codes, or the
-    floor's albedo varied per pixel by a uniform factor 1 +- 0.3 (seed 0; exact for direct light)."""
+    floor's albedo varied per pixel by a uniform factor 1 +- 0.3 (seed 0; exact for direct light). A value the
+    photo has clipped stays clipped: its radiance is unknown, and a lens or a texture acts before the sensor
+    clips (darkening a clipped 1.0 would make a value no camera records)."""
     from rtloop import _native
     from rtloop._srgb import decode, encode
 
     h, w = photo.shape[:2]
+    clipped = photo >= 1.0
     if variant == "vignetting":
         yy, xx = np.mgrid[0:h, 0:w]
         r2 = ((xx - (w - 1) / 2) ** 2 + (yy - (h - 1) / 2) ** 2) / ((w / 2) ** 2 + (h / 2) ** 2)
-        return _codes(photo * (1.0 - 0.6 * r2)[..., None])
+        return _codes(np.where(clipped, 1.0, photo * (1.0 - 0.6 * r2)[..., None]))
     if variant == "tone":
         e = encode(np.clip(photo, 0.0, 1.0))
         return _codes(decode(np.clip(e + 0.12 * np.sin(2 * np.pi * e), 0.0, 1.0)))
@@ -166,7 +169,7 @@ def camera_variant(photo: np.ndarray, variant: str, truth: Any) -> np.ndarray:
     out = photo.copy()
     floor = ids == truth.object_names.index("floor")
     out[floor] *= factor[floor][:, None]
-    return _codes(out)
+    return _codes(np.where(clipped, 1.0, out))
 
 
 def photo_of(folder: Path, scene: Any, variant: str | None) -> np.ndarray:

@@ -1011,3 +1011,28 @@ proptest! {
         }
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: cases(32), ..ProptestConfig::default() })]
+
+    /// `render_pixels` is the whole render's values at the pixels asked for, bit for bit, with the footprint
+    /// or at pixel centres, in any order and with repeats; a pixel outside the image is an error naming it.
+    #[test]
+    fn rendered_pixels_are_the_renders_pixels(seed in any::<u64>(), matte in any::<bool>(), footprint in any::<bool>(),
+                                              sky in prop_oneof![Just(Sky::None), Just(Sky::Ambient), Just(Sky::Environment)],
+                                              picks in prop::collection::vec(any::<u32>(), 0..200)) {
+        let mut rng = Rng::new(seed);
+        let (scene, _) = random_kernel_scene(&mut rng, matte, sky);
+        let whole = render::render_with(&scene, None, None, 1, footprint).unwrap().rgb;
+        let n = scene.width * scene.height;
+        let idx: Vec<u32> = picks.iter().map(|p| p % n).collect();
+        let some = render::render_pixels(&scene, &idx, footprint).unwrap();
+        prop_assert_eq!(some.len(), 3 * idx.len());
+        for (k, &p) in idx.iter().enumerate() {
+            let p = p as usize;
+            prop_assert_eq!(&some[3 * k..3 * k + 3], &whole[3 * p..3 * p + 3], "pixel {}", p);
+        }
+        let err = render::render_pixels(&scene, &[n], footprint).unwrap_err().to_string();
+        prop_assert!(err.contains(&format!("pixel {n} is outside")), "{}", err);
+    }
+}

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import rtloop
 from rtloop.errors import RtloopError
@@ -120,11 +122,33 @@ def test_photos_without_a_camera_keep_the_ordinary_fit_bit_for_bit(name):
 
 @pytest.mark.parametrize("name", ["blue-ball-bayer", "orange-ball-bayer"])
 def test_sensor_noise_and_demosaicing_select_no_camera_term(name):
+    """A noisy sensor's demosaiced JPEG: no camera term, and the linear loss, its errors not alike in code
+    values (the dark pixels' read noise and clipping at 0 are many codes), which the sRGB loss would follow."""
     scene, image, truth, _ = _load(FIXTURES / name)
     res = rtloop.fit(scene, image, uncertainty=False)
     assert res.model["camera"]["terms"] == []
+    space = res.model["space"]
+    assert space["used"] == "linear" and space["codes"]["alike"] is False, space
     light, worst, _ = _errors(res, truth)
-    assert light < 0.06 and worst < 0.03
+    assert light < 0.02 and worst < 0.03
+    srgb, _, _ = _errors(rtloop.fit(scene, image, uncertainty=False, space="srgb"), truth)
+    assert light < srgb
+
+
+def test_codes_alike_tells_a_jpegs_errors_from_a_sensors():
+    """A residual of one size in code values (a JPEG's quantisation) is alike in the dark and the bright
+    pixels; a sensor's read noise in linear values, clipped at 0, is many codes in the dark ones."""
+    from rtloop._srgb import decode, encode
+    from rtloop.fit.jpeg import codes_alike
+
+    rng = np.random.default_rng(0)
+    render = np.repeat(np.linspace(0.0, 0.9, 96 * 128).reshape(96, 128, 1), 3, axis=2)
+    jpeg = decode(np.clip(encode(render) + rng.normal(0.0, 1.5, render.shape) / 255.0, 0.0, 1.0))
+    sensor = np.clip(render + rng.normal(0.0, 0.006, render.shape), 0.0, 1.0)
+    assert codes_alike(render, jpeg, None, None)["alike"] is True
+    evidence = codes_alike(render, sensor, None, None)
+    assert evidence["alike"] is False and evidence["dark_spread_codes"] > 3 * evidence["bright_spread_codes"]
+    assert codes_alike(render, sensor, np.arange(100), None)["alike"] is None  # too few pixels to tell
 
 
 def test_linear_images_stay_linear_and_show_their_vignetting():
@@ -185,3 +209,42 @@ def test_cli_flat_field_file(tmp_path, capsys):
     assert main([str(folder / "scene_input.json"), str(folder / "objective.png"), "--out", str(tmp_path / "b"),
                  "--flat-field", str(tmp_path / "missing.png"), "-q"]) == 1
     assert "missing.png" in capsys.readouterr().err
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), extra=st.integers(1, 12), cols=st.integers(1, 12),
+       start=st.lists(st.booleans(), min_size=12, max_size=12))
+def test_nnls_from_any_start_is_the_cold_solution_and_scipys(seed, extra, cols, start):
+    """The camera terms' non-negative least squares (more equations than unknowns, as its normal
+    equations' factor with the scale's row has: one solution) started from a guessed positive set (the
+    previous light's, in the searches) ends at the cold start's solution bit for bit, and at scipy's within
+    rounding."""
+    from scipy.optimize import nnls as scipy_nnls
+
+    from rtloop.fit.camera import nnls
+
+    rng = np.random.default_rng(seed)
+    a = rng.normal(size=(cols + extra, cols))
+    rows = cols + extra
+    b = rng.normal(size=rows) + a @ rng.normal(size=cols)
+    cold = nnls(a, b)
+    warm = nnls(a, b, start=np.array(start[:cols]))
+    reference = scipy_nnls(a, b)[0]
+    assert (cold >= 0).all()
+    np.testing.assert_array_equal(warm, cold)
+    scale = np.linalg.norm(b) + np.linalg.norm(a) * np.linalg.norm(reference)
+    assert np.linalg.norm(a @ cold - b) <= np.linalg.norm(a @ reference - b) + 1e-9 * scale
+
+
+def test_rendered_pixels_are_the_renders_and_an_outside_pixel_is_named():
+    """``_native.render_pixels`` (the camera terms' renders of every few pixels) is the whole render's pixels
+    bit for bit, with the footprint and without; a pixel outside the image is a one-line error."""
+    from rtloop import _native
+
+    scene = rtloop.load_scene(PHOTOS / "direct-side" / "scene_input.json")
+    idx = np.arange(0, scene.width * scene.height, 7, dtype=np.uint32)[::-1].copy()
+    for footprint in (False, True):
+        whole = _native.render(scene, scene.width, scene.height, 1, footprint).reshape(-1, 3)
+        np.testing.assert_array_equal(_native.render_pixels(scene, idx, footprint), whole[idx])
+    with pytest.raises(RtloopError, match=r"^render_pixels: pixel 12288 is outside the 12288 of a 128x96 image$"):
+        _native.render_pixels(scene, np.array([12288], np.uint32))

@@ -76,6 +76,8 @@ def test_a_finely_textured_floor_is_explained_as_texture(case):
     assert g["explained"]["floor"] == "texture/noise"
     assert g["per_object"]["floor"]["structure"]["structured"] is False
     assert "floor: explained: texture/noise" in g["diagnosis"]
+    assert g["fine_only"] is True and g["verdict"].startswith("the model explains this photo: the residual is ")
+    assert "fine and zero-mean on floor" in g["verdict"]
     # and the light it found is right (the texture did not move it)
     err = np.linalg.norm(np.subtract(result.scene.to_dict()["light"]["position"], truth.to_dict()["light"]["position"]))
     assert err < 0.02
@@ -103,6 +105,7 @@ def test_a_wrong_model_is_not_called_texture(case, wrong):
     assert flagged, g["per_object"]
     assert all(v != "texture/noise" for v in flagged.values()), flagged
     assert "not explained" in g["diagnosis"]
+    assert "fine_only" not in g and "the model does not explain this photo" in g["verdict"]
 
 
 @pytest.mark.parametrize("case", ["env-overhead", "bounce-red-ball"])
@@ -158,6 +161,25 @@ def test_rtloop_fit_prints_what_the_residual_is(tmp_path, capsys):
     assert code == 0, out.err
     assert "  residual by object: ball: not explained" in out.out
     assert "rtloop-fit: residual by object: " in out.err
+
+
+def test_rtloop_fit_does_not_warn_about_texture(tmp_path, capsys):
+    """rtloop-fit on a photo whose floor is finely textured: the verdict says the model explains it, and
+    there is no warning."""
+    from PIL import Image
+
+    from rtloop import cli
+    from rtloop._srgb import encode
+
+    scene, photo, truth = _case("direct-side")
+    path = tmp_path / "textured.png"
+    Image.fromarray(np.round(encode(np.clip(textured_floor(photo, truth), 0, 1)) * 255).astype(np.uint8)).save(path)
+    code = cli.main([str(PHOTOS / "direct-side" / "scene_input.json"), str(path), "--out", str(tmp_path / "o"),
+                     "--final-scale", "1", "--final-spp", "1", "--snapshot-every", "0"])
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    assert "the model explains this photo: the residual is" in out.out
+    assert "warning" not in out.err, out.err
 
 
 def test_the_box_mean_over_an_objects_pixels_against_a_direct_sum():

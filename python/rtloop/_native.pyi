@@ -45,6 +45,8 @@ def render(
 def object_ids(scene: Scene, width: int | None = None, height: int | None = None) -> npt.NDArray[np.int32]: ...
 def render_many(scenes: list[Scene]) -> tuple[list[npt.NDArray[np.float32]], npt.NDArray[np.int32]]:
     """One-sample renders of scenes of one size in one pass, and the first scene's object index per pixel."""
+def render_pixels(scene: Scene, idx: npt.NDArray[np.uint32], footprint: bool = False) -> npt.NDArray[np.float32]:
+    """The pixels ``idx`` (flat, row-major) of ``render(scene, footprint=footprint)``, (len(idx), 3), bit for bit."""
 def save_image(path: str | PathLike[str], image: npt.NDArray[np.float32]) -> None: ...
 def render_layers(
     scenes: list[Scene], width: int, height: int, spp: int = 16, adaptive: bool = True, cover_from: int = 0,

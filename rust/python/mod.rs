@@ -61,6 +61,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
             _kept_pools,
             render::object_ids,
             render::render_many,
+            render::render_pixels,
             render::render_layers,
             render::composite,
             render::save_image,

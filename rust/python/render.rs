@@ -3,8 +3,8 @@
 use std::path::PathBuf;
 
 use numpy::{
-    PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3,
-    PyUntypedArrayMethods,
+    PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
+    PyReadonlyArray3, PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 
@@ -56,6 +56,22 @@ pub(super) fn render_centre_and_footprint<'py>(
         image_array(py, c.height, c.width, c.rgb)?,
         image_array(py, f.height, f.width, f.rgb)?,
     ))
+}
+
+/// The pixels `idx` (flat indices `j * width + i`, uint32) of `render(scene, footprint=footprint)`, float32
+/// (len(idx), 3): those pixels of the whole render bit for bit, for their cost alone.
+#[pyfunction]
+#[pyo3(signature = (scene, idx, footprint=false))]
+pub(super) fn render_pixels<'py>(
+    py: Python<'py>,
+    scene: &Bound<'py, PyScene>,
+    idx: PyReadonlyArray1<'py, u32>,
+    footprint: bool,
+) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    let scene = &scene.get().0;
+    let idx = idx.as_slice()?;
+    let rgb = py.detach(|| core_render::render_pixels(scene, idx, footprint))?;
+    PyArray1::from_vec(py, rgb).reshape([idx.len(), 3])
 }
 
 /// Images float32 (H, W, 3) and an object index int32 (H, W).

@@ -123,6 +123,35 @@ pub fn render_pixels_many(scenes: &[&Scene], idx: &[u32]) -> Result<Vec<Vec<f32>
     Ok(shade_many(scenes, idx, false)?.0)
 }
 
+/// The pixels `idx` (flat indices `j * width + i` of the scene's own size) of [`render_with`] at one sample
+/// per pixel, three values a pixel in `idx`'s order: those pixels of the whole render bit for bit, for the cost
+/// of these pixels alone (a fit's tests that read every few pixels of a render).
+pub fn render_pixels(scene: &Scene, idx: &[u32], footprint: bool) -> Result<Vec<f32>> {
+    let frame = Frame::new(scene, None, None, 1, footprint)?;
+    check_pixels(&frame, idx)?;
+    let mut rgb = vec![0.0f32; 3 * idx.len()];
+    rgb.par_chunks_mut(3 * 64)
+        .zip(idx.par_chunks(64))
+        .for_each(|(out, at)| {
+            for (px, &p) in out.chunks_exact_mut(3).zip(at) {
+                px.copy_from_slice(&frame.pixel(p % frame.width, p / frame.width).to_array());
+            }
+        });
+    Ok(rgb)
+}
+
+/// An error naming the first of `idx` outside `frame`'s image.
+fn check_pixels(frame: &Frame, idx: &[u32]) -> Result<()> {
+    let pixels = u64::from(frame.width) * u64::from(frame.height);
+    match idx.iter().find(|&&p| u64::from(p) >= pixels) {
+        Some(&p) => Err(Error::Invalid(format!(
+            "render_pixels: pixel {p} is outside the {pixels} of a {}x{} image",
+            frame.width, frame.height
+        ))),
+        None => Ok(()),
+    }
+}
+
 /// The whole one-sample renders of `scenes`, which must have the same image size, in one pass
 /// ([`render_pixels_many`]), and the object index per pixel of the first scene's first hits (-1 for
 /// background: [`object_ids`]'s values).
@@ -157,13 +186,7 @@ fn shade_many(scenes: &[&Scene], idx: &[u32], ids: bool) -> Result<(Vec<Vec<f32>
         .map(|s| Frame::new(s, None, None, 1, false, false))
         .collect::<Result<Vec<_>>>()?;
     for f in &frames {
-        let pixels = u64::from(f.width) * u64::from(f.height);
-        if let Some(&p) = idx.iter().find(|&&p| u64::from(p) >= pixels) {
-            return Err(Error::Invalid(format!(
-                "render_pixels: pixel {p} is outside the {pixels} of a {}x{} image",
-                f.width, f.height
-            )));
-        }
+        check_pixels(f, idx)?;
     }
     // each scene's leader: the first scene with the same first hits (itself where none is)
     let keys: Vec<_> = frames.iter().map(|f| f.key.clone()).collect();

@@ -491,9 +491,9 @@ def _load_truth(args: argparse.Namespace, scene: Any) -> Any:
 
 
 def _warn_goodness(good: dict[str, Any]) -> None:
-    """A warning with the verdict (and the residual by object) where the model does not explain the photo
-    or the framing does not match."""
-    if (good.get("ratio") or 0.0) >= good.get("explained_below", float("inf")) or \
+    """A warning with the verdict (and the residual by object) where the model does not explain the photo (a
+    residual over the noise floor that is not all texture or noise) or the framing does not match."""
+    if (good.get("ratio") or 0.0) >= good.get("explained_below", float("inf")) and not good.get("fine_only") or \
             (good.get("framing") or {}).get("mismatch"):
         print(f"{PROG}: warning: {good['verdict']}", file=sys.stderr)
         if good.get("diagnosis"):

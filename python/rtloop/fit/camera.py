@@ -162,12 +162,14 @@ class Shading:
             keep[use] = True
             ok &= keep.reshape(ok.shape)
         self.ok = ok
+        self.idx = np.flatnonzero(ok).astype(np.uint32)  # the pixels the terms read, rendered alone
         self.t = target[ok].astype(np.float64)  # (n, 3)
         self.group = (ids[ok][:, None] * 3 + np.arange(3)).ravel()  # object x channel per value
         self.groups = len(d["objects"]) * 3
         cos4, r = off_axis(fitted)
         self.c4, self.r2 = np.repeat(cos4[ok], 3), np.repeat(r[ok], 3) ** 2
         self._cache: dict[int, Any] = {}
+        self._positive: dict[int, np.ndarray] = {}  # the tone's last positive variables, per pixel selection
         self._k = np.zeros(2)
         cb = ((np.indices(ok.shape) // BLOCK).sum(axis=0) % 2).astype(bool)[ok]
         self.halves = (np.repeat(cb, 3), np.repeat(~cb, 3))
@@ -178,11 +180,11 @@ class Shading:
             d.update(environment=[1.0, 1.0, 1.0])
             d["light"]["intensity"] = 0.0
             e = load_scene(d)
-            self.env = np.asarray(_native.render(e, e.width, e.height, 1, False), np.float64)[ok].ravel()
+            self.env = np.asarray(_native.render_pixels(e, self.idx), np.float64).ravel()
 
     def shading(self, position: Any) -> np.ndarray:
         s = self.scene.with_params([float(p) for p in position], ["light.position"])
-        return np.asarray(_native.render(s, s.width, s.height, 1, True), np.float64)[self.ok].ravel()
+        return np.asarray(_native.render_pixels(s, self.idx, True), np.float64).ravel()
 
     def _model(self, y: np.ndarray, s: np.ndarray, sel: np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
         """The least-squares products (and environment products) per object and channel fitted to ``y``
@@ -282,7 +284,8 @@ class Shading:
         u = np.linalg.cholesky(normal).T
         scale = math.sqrt(float(np.trace(normal))) * 10
         row = np.concatenate([b_mean, np.zeros(n - k)]) * scale
-        x = nnls(np.vstack([u, row]), np.concatenate([np.zeros(n), [mean_t * scale]]))
+        x = nnls(np.vstack([u, row]), np.concatenate([np.zeros(n), [mean_t * scale]]), start=self._positive.get(key))
+        self._positive[key] = x > 0
         w = x[:k]
         model = sum(x[k + i * m: k + (i + 1) * m][self.group] * c for i, c in
                     enumerate([s] if self.env is None else [s, self.env]))
@@ -293,10 +296,22 @@ def _l1(a: np.ndarray, b: np.ndarray, sel: np.ndarray) -> float:
     return float(np.abs(a[sel] - b[sel]).sum())
 
 
-def nnls(a: np.ndarray, b: np.ndarray, iterations: int = 0) -> np.ndarray:
-    """min |a x - b| subject to x >= 0 (Lawson and Hanson's active set, for the few tens of unknowns here)."""
+def nnls(a: np.ndarray, b: np.ndarray, iterations: int = 0, start: np.ndarray | None = None) -> np.ndarray:
+    """min |a x - b| subject to x >= 0 (Lawson and Hanson's active set, for the few tens of unknowns here).
+    ``start``: the variables likely positive (a neighbouring problem's), tried first: the search then
+    takes a step or two instead of one per variable, and ends at the same solution (the least squares on
+    the final positive set, which the optimality test fixes)."""
     n = a.shape[1]
     x, passive = np.zeros(n), np.zeros(n, bool)
+    if start is not None:
+        passive = start.copy()
+        while passive.any():  # the start's positive solution, variables dropped until there is one
+            z = np.zeros(n)
+            z[passive] = np.linalg.lstsq(a[:, passive], b, rcond=None)[0]
+            if (z[passive] > 0).all():
+                x = z
+                break
+            passive &= z > 0
     for _ in range(iterations or 3 * n):
         w = a.T @ (b - a @ x)
         if passive.all() or w[~passive].max() <= 1e-12 * max(1.0, float(np.abs(w).max())):

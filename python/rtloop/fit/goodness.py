@@ -203,6 +203,11 @@ def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool 
         out["verdict"] = "no unsaturated pixel to judge the fit by: every used pixel is at or above 1"
     elif ratio < EXPLAINED_RATIO:
         out["verdict"] = "the model explains this photo to the noise level"
+    elif fine_only(out):
+        out["fine_only"] = True
+        out["verdict"] = (f"the model explains this photo: the residual is {ratio:.2g}x the noise floor, the excess "
+                          f"fine and zero-mean on {', '.join(out['explained'])} (texture or noise: no smooth part "
+                          "the light or the colours could absorb)")
     else:
         worst = max(per, key=lambda n: per[n]["share_of_excess"])
         out["verdict"] = (f"the residual is {ratio:.2g}x the noise floor, {per[worst]['share_of_excess']:.0%} of "
@@ -210,6 +215,13 @@ def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool 
                           "cover what it lacks; look at the difference image, and at a mask for what the scene "
                           "leaves out)")
     return out
+
+
+def fine_only(good: dict[str, Any]) -> bool:
+    """Whether a goodness over the noise floor is all texture or noise: every object whose residual exceeds
+    its floor has a fine, zero-mean residual (``good["explained"]``, :func:`_diagnosis`)."""
+    explained = good.get("explained") or {}
+    return bool(explained) and all(v == "texture/noise" for v in explained.values())
 
 
 def _per_object(scene: Any, target: np.ndarray, m: np.ndarray, keep: np.ndarray, resid: np.ndarray,

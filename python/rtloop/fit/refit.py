@@ -6,9 +6,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from .. import _native
 from ..scene import Scene
 from .bounds import narrowed, restore_bounds
 from .identifiability import identifiability
+from .jpeg import codes_alike
 from .observation import Observation
 from .options import FitOptions
 from .plan import new_stages
@@ -50,7 +52,8 @@ def stays_linear(model: dict[str, Any], codes: float) -> None:
 
 
 def jpeg_refit(current: Scene, work: Scene, stages: Stages, first: StageResult, model: dict[str, Any], seed: int,
-               *, codes: float | None, env: bool, refit: Callable[[Scene, str], Stages | None]) -> Scene:
+               *, codes: float | None, env: bool, refit: Callable[[Scene, str], Stages | None],
+               photo: Observation) -> Scene:
     """For ``space="auto"``: a JPEG (``codes``: :func:`.jpeg.jpeg_codes`, None for another photo) that the
     base model explains (no term selected or given) refitted in the sRGB space, near the light found (as the
     terms' refit). JPEG quantises the DCT of the sRGB-encoded values, so its errors are alike in code values
@@ -58,12 +61,23 @@ def jpeg_refit(current: Scene, work: Scene, stages: Stages, first: StageResult, 
     about it. On the JPEG-40 variants of the 11 direct Mitsuba photos the median light error falls 24.5 ->
     11.7 mm (docs/accuracy.md, "Noisy and JPEG photos"). Where the model lacks something the photo shows (a
     desk lamp's soft shadow, a coat), the sRGB loss weighs up the dark pixels where that shows most
-    (lamp-desk: 10 -> 30 mm), so a photo with extra terms stays linear. ``model["space"]`` records the
-    choice."""
+    (lamp-desk: 10 -> 30 mm), so a photo with extra terms stays linear. So does a JPEG whose errors are not
+    alike in code values (:func:`.jpeg.codes_alike`: a noisy sensor's, its dark pixels' read noise and its
+    clipping at 0 many codes, which the sRGB loss would follow: the Bayer fixtures 55 and 25 mm in sRGB,
+    13 and 12 mm linear). ``model["space"]`` records the choice."""
     if codes is None:
         return current
     if len(model["terms"]) > 1 or env:
         stays_linear(model, codes)
+        return current
+    render = _native.render(current, current.width, current.height, 1, stages.footprint != "off")
+    alike = codes_alike(render, photo.target, photo.use, photo.saturated)
+    if alike["alike"] is False:
+        model["space"] = {"used": "linear", "jpeg_error_codes": codes, "codes": alike,
+                          "why": (f"a JPEG, but its errors are not alike in code values: the first fit's residual "
+                                  f"spreads {alike['dark_spread_codes']:.2g} codes in the dark pixels against "
+                                  f"{alike['bright_spread_codes']:.2g} in the bright ones, which the sRGB loss would "
+                                  "weigh up: the linear loss")}
         return current
     box = narrowed(work.with_params(list(first.x), first.paths), first.paths, REFIT_FRACTION)
     more = refit(box, "srgb")
@@ -72,7 +86,7 @@ def jpeg_refit(current: Scene, work: Scene, stages: Stages, first: StageResult, 
     candidate = more.projected(seed, name="light+colour (srgb)", from_scene=True)
     stages.stages += more.stages
     stages.evaluations += more.evaluations
-    model["space"] = {"used": "srgb", "jpeg_error_codes": codes,
+    model["space"] = {"used": "srgb", "jpeg_error_codes": codes, "codes": alike,
                       "why": (f"a JPEG (its blocks err by {codes:.2g} codes RMS) that direct light explains: "
                               "refitted in the sRGB space, where its errors are alike")}
     return restore_bounds(candidate, work)

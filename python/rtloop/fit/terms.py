@@ -69,7 +69,8 @@ def select_terms(options: FitOptions, photo: Observation, plan: Plan, stages: St
     added = s.forward()
     if not added:
         return jpeg_refit(s.current, s.work, stages, s.first, model, int(plan.seeds[1]),
-                          codes=jpeg_codes(photo.blocking, options.space), env=s.env, refit=s.refit)
+                          codes=jpeg_codes(photo.blocking, options.space), env=s.env, refit=s.refit,
+                          photo=photo)
     return s.refit_with(added)
 
 
