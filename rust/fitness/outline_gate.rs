@@ -94,9 +94,7 @@ impl Fitness {
         let centres = sum(gate.centres.loss_of(&self.kernel, &p, closed, self.clip));
         let integrated = sum(gate.integrated.loss_of(&self.kernel, &p, closed, self.clip));
         let model = |obj| Linear::solved(&p, proj, &solved, obj);
-        let lit = gate
-            .integrated
-            .lit(&unit_light(&p), model, all.len());
+        let lit = gate.integrated.lit(&unit_light(&p), model, all.len());
         let share = lit
             .iter()
             .zip(&all)

@@ -127,7 +127,7 @@ pub fn render_pixels_many(scenes: &[&Scene], idx: &[u32]) -> Result<Vec<Vec<f32>
 /// per pixel, three values a pixel in `idx`'s order: those pixels of the whole render bit for bit, for the cost
 /// of these pixels alone (a fit's tests that read every few pixels of a render).
 pub fn render_pixels(scene: &Scene, idx: &[u32], footprint: bool) -> Result<Vec<f32>> {
-    let frame = Frame::new(scene, None, None, 1, footprint)?;
+    let frame = Frame::new(scene, None, None, 1, footprint, false)?;
     check_pixels(&frame, idx)?;
     let mut rgb = vec![0.0f32; 3 * idx.len()];
     rgb.par_chunks_mut(3 * 64)
