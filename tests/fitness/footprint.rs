@@ -245,7 +245,7 @@ fn silhouette_pixels_match_a_supersampled_render() {
         let w = scene.width as usize;
         let fine = render(&scene, None, None, 1024).unwrap().rgb;
         let centre = render(&scene, None, None, 1).unwrap().rgb;
-        let over = rtloop::render::render_with(&scene, None, None, 1, true)
+        let over = rtloop::render::render_model(&scene, (None, None), 1, true, true)
             .unwrap()
             .rgb;
         let outline = outline_pixels(&rtloop::render::object_ids(&scene, None, None), w);
@@ -278,7 +278,7 @@ fn the_closed_form_with_silhouettes_models_the_footprint_render() {
     // true light, and the silhouettes are part of it (the pixel-centre model's loss is far above).
     let (light, sun) = ([2.5, 2.2, 0.8], false);
     let scene = edge_scene(light, sun);
-    let target = rtloop::render::render_with(&scene, None, None, 1, true)
+    let target = rtloop::render::render_model(&scene, (None, None), 1, true, true)
         .unwrap()
         .rgb;
     let (layout, x) = searched_light(&scene, light, sun);
@@ -292,6 +292,7 @@ fn the_closed_form_with_silhouettes_models_the_footprint_render() {
             projection: Some(proj),
             clip: false,
             footprint: true,
+            outlines: true,
             ..Default::default()
         },
     )
@@ -304,4 +305,49 @@ fn the_closed_form_with_silhouettes_models_the_footprint_render() {
     let (_, refined) = f.refined(&x).unwrap();
     let refined: f64 = refined.iter().sum();
     assert!(refined < 1e-5 * total, "refined: {refined} against {total}");
+}
+
+#[test]
+fn the_outline_gain_tells_an_integrated_photo_from_a_pixel_centre_one() {
+    // The gate's evidence (`Fitness::outline_gain`, a fitness with the outlines at their centres and their
+    // samples beside it) at the true light: against the render with the outlines averaged over their
+    // samples, their averaged loss vanishes and their centre loss does not; against the footprint render
+    // with the outlines at their centres, the other way round (up to the centre's own footprint, which
+    // the gate's centre values leave out).
+    let (light, sun) = ([2.5, 2.2, 0.8], false);
+    let scene = edge_scene(light, sun);
+    let (layout, x) = searched_light(&scene, light, sun);
+    let proj = Projection::matte(vec![[(0.0, 50.0); 3]; scene.objects.len()]);
+    let gain = |outlines: bool| {
+        let target = rtloop::render::render_model(&scene, (None, None), 1, true, outlines)
+            .unwrap()
+            .rgb;
+        let spec = FitnessSpec {
+            loss: LossKind::L1Projected,
+            projection: Some(proj.clone()),
+            clip: false,
+            footprint: true,
+            outline_gate: true,
+            ..Default::default()
+        };
+        let f = Fitness::new(&scene, layout.clone(), &target, spec).unwrap();
+        let total: f64 = target.iter().map(|&v| v as f64).sum();
+        (f.outline_gain(&x).unwrap(), total)
+    };
+    let (integrated, total) = gain(true);
+    assert!(integrated.pixels > 150, "{integrated:?}");
+    assert!(
+        integrated.integrated < 1e-5 * total,
+        "{integrated:?} against {total}"
+    );
+    assert!(
+        integrated.centres > 100.0 * integrated.integrated.max(1e-9),
+        "{integrated:?}"
+    );
+    assert!(
+        integrated.centres <= integrated.loss * (1.0 + 1e-9),
+        "{integrated:?}"
+    );
+    let (centred, _) = gain(false);
+    assert!(centred.centres < 0.3 * centred.integrated, "{centred:?}");
 }
