@@ -17,6 +17,7 @@ from .identifiability import keep_undetermined
 from .products import fix_gauge, product_bounds, split_products
 from .protocol import Budget, searched_paths
 from .result import GenerationInfo, StageResult
+from .spec import fitness_spec
 
 __all__ = ["Stages", "sample_object_pixels"]
 
@@ -112,14 +113,16 @@ class Stages:
 
         b = self.budget
         t = time.perf_counter()
+        spec = fitness_spec(paths, pixels=pixels, loss=loss, clip=self.clip, product_bounds=product_bounds,
+                            norm=self.norm, space=self.space, footprint=self.footprint == "on",
+                            frozen_bounce=self.frozen_bounce, saturated=self.saturated,
+                            solve_margin=self.solve_margin)
         out = _native.optimize(
-            stage_scene, paths, self.target, pixels=pixels, loss=loss, clip=self.clip, population=b.population,
-            generations=generations, f=b.f, cr=b.cr, seed=stage_seed, threads=self.threads,
-            callback=None if callback is None else on_generation, product_bounds=product_bounds,
-            method=method, polish=polish, norm=self.norm, space=self.space, with_products=callback is not None and self.products_per_generation,
-            polish_tol=polish_tol, footprint=self.footprint == "on",
+            stage_scene, self.target, spec, population=b.population, generations=generations, f=b.f, cr=b.cr,
+            seed=stage_seed, method=method, polish=polish, polish_tol=polish_tol,
             polish_footprint=self.footprint == "polish" and method == "lshade" and polish > 0,
-            frozen_bounce=self.frozen_bounce, saturated=self.saturated, solve_margin=self.solve_margin, x0=x0,
+            with_products=callback is not None and self.products_per_generation, x0=x0,
+            callback=None if callback is None else on_generation, threads=self.threads,
         )
         history = [(gen, float(sum(objectives)), list(objectives), np.array(best))
                    for gen, best, objectives, _ in out.history]
