@@ -5,7 +5,8 @@ for a developer to run for minutes; prints the counts. ``--only SURFACE[,SURFACE
 surfaces (``batch``: job lines, ``ids``: job ids, ``mesh``, ``insert``, ``exif``, ``strict``, ``framing``: warped
 photos through fit()'s framing check and correction, ``lights``: the lights fit with a rectangle light's size
 free, fuzz/lights_size.py, ``default_lights``: the default fit's number of lights on photos with a second
-light, fuzz/default_lights.py), each input on
+light, fuzz/default_lights.py, ``fitness_spec``: the native fitness spec and the calls that take it,
+fuzz/fitness_spec.py), each input on
 the next in turn; ``--out FILE`` also writes the counts per surface as markdown headed by the command.
 
 What counts as a finding, by kind: ``data loss`` (a batch that deleted, changed or wrote beside its folder,
@@ -43,6 +44,7 @@ from rtloop.cli import fit as cli_fit
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from default_lights import default_lights  # noqa: E402
+from fitness_spec import fitness_spec  # noqa: E402
 from lights_size import lights_size  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -552,7 +554,7 @@ def _fov(rng: random.Random, c: Counts, tmp: Path) -> None:
 
 
 SURFACES = ("batch", "ids", "mesh", "insert", "exif", "strict", "framing", "coat", "fov", "lens", "lights",
-            "default_lights")
+            "default_lights", "fitness_spec")
 
 
 def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None = None) -> None:
@@ -567,6 +569,7 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
              "lens": _lens,
              "lights": lambda r, t: lights_size(r, c, LIGHTS_BASE, mutate, odd, check_fit),
              "default_lights": lambda r, t: default_lights(r, c, FIT_SCENES, mutate, check_fit, finite),
+             "fitness_spec": lambda r, t: fitness_spec(r, c, FIT_SCENES, odd, finite),
              }[only](rng, tmp)
         c.bump("ok")
         return
@@ -577,6 +580,8 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
     kind = rng.random()
     if kind < 0.1:  # mesh files, EXIF tags, rtloop-insert arguments
         [_mesh, _exif, _insert_cli][int(kind * 30)](rng, tmp)
+    elif kind < 0.13:  # the native fitness spec and the calls that take it
+        fitness_spec(rng, c, FIT_SCENES, odd, finite)
     elif kind < 0.55:  # scenes
         scene = rtloop.load_scene(mutate(rng, rng.choice([BASE, LIGHTS_BASE, COAT_BASE])))
         img = rtloop.render(scene, width=rng.choice([None, 4, 7]), height=None, spp=1)

@@ -151,6 +151,17 @@ def _held_spec(bounds: np.ndarray, passes: int) -> _native.FitnessSpec:
                                frozen_bounce=passes)
 
 
+def _held_searches(truth: dict, start: list[float], photo: np.ndarray, passes: tuple[int, ...]) -> list:
+    """From the light ``start`` (intensity 20, free in [1, 400]), the closed form's L-SHADE searches (12 x 20,
+    a polish of 200 evaluations, seed 3) with each of ``passes`` passes holding the bounce."""
+    scene = _box({**truth, "light": {**truth["light"], "intensity": 20.0}}, start, 0.6)
+    scene = rtloop.Scene(json.dumps({**scene.to_dict(), "fit": {**scene.to_dict()["fit"],
+                                                                "light.intensity": {"min": 1, "max": 400}}}))
+    bounds = product_bounds(scene, False)
+    return [_native.optimize(scene, photo, _held_spec(bounds, n), population=12, generations=20,
+                             method="lshade", polish=200, seed=3) for n in passes]
+
+
 @pytest.mark.parametrize("two", [False, True], ids=["one-ball", "two-balls"])
 def test_held_bounce_search_reaches_the_full_search_optimum(two):
     """From the light a bounce-free fit finds (off by the bounce's pull, 8-12 cm here), the search with the
@@ -167,18 +178,13 @@ def test_held_bounce_search_reaches_the_full_search_optimum(two):
     x0 = plain.scene.to_dict()["light"]["position"]
     pull = np.linalg.norm(np.subtract(x0, t))
     assert pull > 5e-3  # the bounce moves the light: the test can tell the searches apart
-    scene = _box({**truth, "light": {**truth["light"], "intensity": 20.0}}, x0, 0.6)
-    scene = rtloop.Scene(json.dumps({**scene.to_dict(), "fit": {**scene.to_dict()["fit"],
-                                                                "light.intensity": {"min": 1, "max": 400}}}))
-    pb = product_bounds(scene, False)
-    kw = {"population": 12, "generations": 20, "method": "lshade", "polish": 200, "seed": 3}
-    full, held, one = (_native.optimize(scene, photo, _held_spec(pb, n), **kw) for n in (0, 2, 1))
+    full, held, one = _held_searches(truth, x0, photo, (0, 2, 1))
     assert np.linalg.norm(np.subtract(held.x, t)) < pull / 100
     assert np.linalg.norm(np.subtract(full.x, t)) < pull / 50
     assert np.linalg.norm(np.subtract(held.x, full.x)) < pull / 50
     assert held.gauge == pytest.approx(1 / 60.0, rel=2e-3) and full.gauge == pytest.approx(1 / 60.0, rel=2e-3)
     # the second pass only polishes (at most the polish budget) from the first pass's light
-    assert one.evaluations < held.evaluations <= one.evaluations + kw["polish"] + 1
+    assert one.evaluations < held.evaluations <= one.evaluations + 200 + 1
 
 
 @pytest.mark.parametrize("two", [False, True], ids=["one-ball", "two-balls"])
@@ -192,12 +198,7 @@ def test_held_bounce_passes_run_until_the_light_stops_moving(two):
     photo = _photo(truth, footprint=False)
     t = np.array(truth["light"]["position"])
     start = list(t + [0.2, -0.15, 0.25])
-    scene = _box({**truth, "light": {**truth["light"], "intensity": 20.0}}, start, 0.6)
-    scene = rtloop.Scene(json.dumps({**scene.to_dict(), "fit": {**scene.to_dict()["fit"],
-                                                                "light.intensity": {"min": 1, "max": 400}}}))
-    pb = product_bounds(scene, False)
-    kw = {"population": 12, "generations": 20, "method": "lshade", "polish": 200, "seed": 3}
-    two_passes, three, eight = (_native.optimize(scene, photo, _held_spec(pb, n), **kw) for n in (2, 3, 8))
+    two_passes, three, eight = _held_searches(truth, start, photo, (2, 3, 8))
     err = {n: float(np.linalg.norm(np.subtract(r.x, t))) for n, r in ((2, two_passes), (3, three), (8, eight))}
     assert err[8] < err[2] / 3, err
     assert eight.evaluations == three.evaluations > two_passes.evaluations

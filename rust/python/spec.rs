@@ -30,9 +30,12 @@ fn field<'a, 'py, T: FromPyObject<'a, 'py>>(
 ) -> PyResult<T> {
     value.extract::<T>().map_err(|_| {
         let got = match (value.getattr("dtype"), value.getattr("shape")) {
+            (Ok(dtype), Ok(shape)) if shape.len().is_ok_and(|n| n == 0) => {
+                format!("a {dtype} scalar")
+            }
             (Ok(dtype), Ok(shape)) => format!("a {dtype} array of shape {shape}"),
             _ => match value.get_type().name() {
-                Ok(t) => format!("a {t}"),
+                Ok(t) => t.to_string(),
                 Err(_) => "another type".to_string(),
             },
         };
@@ -160,27 +163,6 @@ impl PyFitnessSpec {
         })
     }
 
-    #[getter]
-    fn paths(&self) -> Vec<String> {
-        self.paths.clone()
-    }
-    #[getter]
-    fn loss(&self) -> &str {
-        &self.names[0]
-    }
-    #[getter]
-    fn norm(&self) -> &str {
-        &self.names[1]
-    }
-    #[getter]
-    fn space(&self) -> &str {
-        &self.names[2]
-    }
-    #[getter]
-    fn frozen_bounce(&self) -> usize {
-        self.frozen_bounce
-    }
-
     fn __repr__(&self) -> String {
         let s = &self.spec;
         format!(
@@ -237,7 +219,7 @@ impl PyFitnessSpec {
                     "product_bounds has {} objects; the scene has {n} (one row per object)",
                     proj.diffuse.len()
                 );
-                return Err(Error::Value(msg).into());
+                return Err(Error::Invalid(msg).into());
             }
         }
         Ok(FitnessArgs {

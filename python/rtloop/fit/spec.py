@@ -26,9 +26,9 @@ def fitness_spec(paths: Sequence[str], *, pixels: np.ndarray | None = None, loss
     if product_bounds is not None:
         product_bounds = np.ascontiguousarray(product_bounds, dtype=np.float64)
     return _native.FitnessSpec(list(paths), pixels=pixels, loss=loss, clip=bool(clip),
-                               product_bounds=product_bounds, norm=norm, space=space, footprint=bool(footprint),
-                               frozen_bounce=int(frozen_bounce), saturated=saturated,
-                               solve_margin=int(solve_margin))
+                               product_bounds=product_bounds, norm=norm, space=space,
+                               footprint=bool(footprint), frozen_bounce=int(frozen_bounce),
+                               saturated=saturated, solve_margin=int(solve_margin))
 
 
 def closed_form_spec(scene: Scene, paths: list[str], pixels: np.ndarray | None, *, environment: bool,
