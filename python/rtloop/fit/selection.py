@@ -353,9 +353,10 @@ def closed_form_loss(scene: Scene, paths: list[str], rows: list[list[float]], ta
                      threads: int | None, saturated: float | None = None, frozen_bounce: bool = False
                      ) -> np.ndarray:
     """The closed-form (least-squares products) loss of ``scene`` at each row of values of ``paths``, with
-    or without the environment column: the measure every test of a term compares. ``saturated``: where
-    clipping may start (``_native.evaluate``'s; None: SATURATED). ``frozen_bounce``: with interreflection,
-    the bounce solved once at the scene's own values and held for every row (``_native.evaluate``'s)."""
+    or without the environment column: the measure every test of a term compares (its spec:
+    :func:`.spec.closed_form_spec`). ``saturated``: where clipping may start (None: SATURATED).
+    ``frozen_bounce``: with interreflection, the bounce solved once at the scene's own values and held for
+    every row."""
     spec = closed_form_spec(scene, paths, pixels, environment=environment, clip=clip, norm=norm, space=space,
                             saturated=saturated, frozen_bounce=frozen_bounce)
     v = _native.evaluate(scene, target, np.asarray(rows, dtype=np.float64), spec, threads=threads)

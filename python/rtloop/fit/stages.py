@@ -66,14 +66,14 @@ class Stages:
         self.other_paths = [p for p in self.all_paths if not p.startswith("light.")]
         self.stages: list[StageResult] = []
         self.evaluations = 0
-        #: With interreflection: the searches' passes holding the bounce (``_native.optimize``'s
+        #: With interreflection: the searches' passes holding the bounce (``_native.FitnessSpec``'s
         #: ``frozen_bounce``; 0: none; the refit with the bounce sets ``selection.BOUNCE_PASSES``).
         self.frozen_bounce = 0
-        #: Objective values from which a pixel may be clipped (``_native.optimize``'s ``saturated``; None:
+        #: Objective values from which a pixel may be clipped (``_native.FitnessSpec``'s ``saturated``; None:
         #: SATURATED; ``goodness.clip_level`` for a noisy or JPEG photo).
         self.saturated: float | None = None
         #: Pixels within this many (Chebyshev distance) of another object's do not inform the closed-form
-        #: products (``_native.optimize``'s ``solve_margin``; 0: a pixel's 4-neighbours show its object;
+        #: products (``_native.FitnessSpec``'s ``solve_margin``; 0: a pixel's 4-neighbours show its object;
         #: :data:`rtloop.fit.JPEG_CHROMA_MARGIN` for a JPEG, whose colour mixes across silhouettes).
         self.solve_margin = 0
         #: The callback's ``params`` hold the closed-form products of each generation's best, split into the
