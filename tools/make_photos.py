@@ -58,8 +58,8 @@ from photos.cases import (CAM_A, CAM_B, CAM_C, CASES, FIT_ALBEDO, FIT_INTENSITY,
                           FIT_LIGHT_POSITION, HEIGHT, INPUT_ALBEDO, INPUT_LIGHT, WIDTH, Case, _diffuse,
                           _floor, _plastic, _sphere)
 from photos.make import make_case, write_json  # noqa: E402,F401
-from photos.mitsuba import (MITSUBA_VERSION, VARIANT, _mi, _rgb, lamp_radiance, mitsuba_dict,  # noqa: E402,F401
-                            render)
+from photos.mitsuba import (MITSUBA_VERSION, VARIANT, _mi, _rgb,  # noqa: E402,F401
+                            lamp_radiance, mitsuba_dict, render)
 from photos.pixels import encode8, png_bytes  # noqa: E402,F401
 from photos.truth import input_scene, truth_scene  # noqa: E402,F401
 

@@ -2,7 +2,7 @@
 the cases (cases.py), the Mitsuba scenes and renders (mitsuba.py), sRGB and pixel helpers (pixels.py),
 the truth, input scenes and measurements (truth.py) and one case's folder (make.py).
 
-Object ids and the sRGB transfer are rtloop's own (``rtloop.object_ids``' core, ``rtloop._srgb``): the
+Object ids and the sRGB transfer are rtloop's own (``rtloop.object_ids``, ``rtloop._srgb``): the
 repository's ``python/`` folder goes first on ``sys.path`` when it holds a built extension
 (``maturin develop``), so the tools run from a checkout without an install."""
 

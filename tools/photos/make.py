@@ -129,7 +129,8 @@ def extra_truth(case: Case, ids: np.ndarray, gloss: dict[str, Any], floor_l: flo
     extra: dict[str, Any] = {}
     if case.environment is not None:
         extra["environment_radiance"] = case.environment
-        extra["environment_over_median_lit_floor_radiance"] = round(float(np.mean(case.environment)) / floor_l, 4)
+        extra["environment_over_median_lit_floor_radiance"] = round(
+            float(np.mean(case.environment)) / floor_l, 4)
     if case.max_depth and case.max_depth > 2:
         extra["interreflection"] = f"path tracer, max_depth {case.max_depth}"
     if case.lamp_radius > 0:
@@ -187,7 +188,7 @@ def make_case(case: Case, out: Path) -> dict[str, Any]:
         "generator": "tools/make_photos.py",
     }
     write_json(folder / "meta.json", meta)
-    return {"name": case.name, "seconds": meta["generation_seconds"], "noise": noise["max_sigma_codes_robust"],
-            "noise_rms": noise["max_rms_codes"], "clipped": stats["fraction_pixels_clipped(any>1)"],
+    return {"name": case.name, "seconds": meta["generation_seconds"],
+            "noise": noise["max_sigma_codes_robust"], "noise_rms": noise["max_rms_codes"], "clipped": stats["fraction_pixels_clipped(any>1)"],
             "ball_p90": stats[names[0]]["max_channel_p10_p50_p90_p99"][2],
             "env_ratio": extra.get("environment_over_median_lit_floor_radiance")}

@@ -3,6 +3,7 @@ bytes, the pixels away from silhouettes, unit vectors."""
 
 from __future__ import annotations
 
+import functools
 import io
 
 import numpy as np
@@ -11,14 +12,10 @@ from PIL import Image
 from rtloop import _srgb
 
 
-def srgb_oetf(x: np.ndarray) -> np.ndarray:
-    """IEC 61966-2-1 encoding of clamp(x, 0, 1), in [0, 1], computed in float64."""
-    return _srgb.encode(x, np.float64)
-
-
-def encode8(linear: np.ndarray) -> np.ndarray:
-    """8-bit sRGB codes (rounded) of a linear image, encoded in float64."""
-    return _srgb.encode8(linear, np.float64)
+#: IEC 61966-2-1 encoding of clamp(x, 0, 1), in [0, 1], computed in float64 whatever the input's dtype.
+srgb_oetf = functools.partial(_srgb.encode, dtype=np.float64)
+#: 8-bit sRGB codes (rounded) of a linear image, encoded in float64.
+encode8 = functools.partial(_srgb.encode8, dtype=np.float64)
 
 
 def png_bytes(codes: np.ndarray) -> bytes:

@@ -21,16 +21,15 @@ GLOSS_CALIBRATION_SPP = 256
 
 def object_ids(case: Case, *, sub: int = 1, lamp: bool = False) -> np.ndarray:
     """Which object each pixel centre shows: int32 (HEIGHT*sub, WIDTH*sub), an index into ``case.objects``,
-    -1 where none is hit; rtloop's own ray caster (``rtloop.object_ids``) on the case's truth scene, at
+    -1 where none is hit; rtloop's own ray caster (:func:`rtloop.object_ids`) on the case's truth scene, at
     the centres of a grid ``sub`` times finer each way where ``sub`` > 1. ``lamp``: the sphere lamp is one
     more object, first (index 0; the case's objects follow from 1)."""
     scene = truth_scene(case, {o["name"]: list(INPUT_ALBEDO) for o in case.objects})
     if lamp:
-        names = {o["name"] for o in case.objects}
-        scene["objects"].insert(0, {"name": next(n for n in ("lamp", "lamp-sphere") if n not in names),
-                                    "shape": "sphere", "center": [float(c) for c in case.light_position],
+        scene["objects"].insert(0, {"name": "lamp", "shape": "sphere",
+                                    "center": [float(c) for c in case.light_position],
                                     "radius": float(case.lamp_radius), "material": {"albedo": [0.0, 0.0, 0.0]}})
-    return rtloop._native.object_ids(rtloop.load_scene(scene), WIDTH * sub, HEIGHT * sub)
+    return rtloop.object_ids(scene, WIDTH * sub, HEIGHT * sub)
 
 
 def lamp_in_frame(case: Case) -> bool:
