@@ -160,8 +160,8 @@ def population(scene, n: int, seed: int = 1) -> np.ndarray:
 
 
 def rtloop_cpps(scene, target, pop, threads: int, repeats: int) -> float:
-    paths = scene.fit_paths
-    secs = best_of(lambda: _native.evaluate(scene, paths, target, pop, threads=threads), repeats)
+    spec = _native.FitnessSpec(scene.fit_paths)
+    secs = best_of(lambda: _native.evaluate(scene, target, pop, spec, threads=threads), repeats)
     return len(pop) * scene.width * scene.height / secs
 
 
@@ -196,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
     target = np.minimum(rtloop.render(scene), 1).astype(np.float32)
     pop = population(stage1, 600)
     np_fit = NumpyFitness(truth, target)
-    ours = _native.evaluate(stage1, fit_paths, target, pop[:60], threads=1)[:, 0]
+    ours = _native.evaluate(stage1, target, pop[:60], _native.FitnessSpec(fit_paths), threads=1)[:, 0]
     theirs = np_fit(pop[:60])
     agree = float(np.max(np.abs(ours - theirs) / np.maximum(theirs, 1)))
     pixels = scene.width * scene.height

@@ -1,11 +1,12 @@
 """A fuzz campaign over the Python API (scenes, render()/fit() arguments, image arrays, CLI arguments via
 main() in-process, batch job lines and ids via rtloop-fit --batch, mesh files, EXIF focal tags,
-rtloop-insert arguments, rtloop-scene's --strict refusal of a field of view estimated from the board alone)
+rtloop-insert arguments (those three and the odd values in fuzz/files.py), rtloop-scene's --strict refusal of a field of view estimated from the board alone)
 for a developer to run for minutes; prints the counts. ``--only SURFACE[,SURFACE...]`` runs only those
 surfaces (``batch``: job lines, ``ids``: job ids, ``mesh``, ``insert``, ``exif``, ``strict``, ``framing``: warped
 photos through fit()'s framing check and correction, ``lights``: the lights fit with a rectangle light's size
 free, fuzz/lights_size.py, ``default_lights``: the default fit's number of lights on photos with a second
-light, fuzz/default_lights.py), each input on
+light, fuzz/default_lights.py, ``fitness_spec``: the native fitness spec and the calls that take it,
+fuzz/fitness_spec.py), each input on
 the next in turn; ``--out FILE`` also writes the counts per surface as markdown headed by the command.
 
 What counts as a finding, by kind: ``data loss`` (a batch that deleted, changed or wrote beside its folder,
@@ -43,6 +44,8 @@ from rtloop.cli import fit as cli_fit
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from default_lights import default_lights  # noqa: E402
+from files import ODD, exif, insert_cli, lens, mesh, odd  # noqa: E402
+from fitness_spec import fitness_spec  # noqa: E402
 from lights_size import lights_size  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -117,30 +120,6 @@ def _framing_base() -> dict:
 
 
 FRAMING_BASE = _framing_base()
-ODD = [
-    None,
-    True,
-    0,
-    -1,
-    1e300,
-    -1e-300,
-    float("nan"),
-    float("inf"),
-    "",
-    "x",
-    [],
-    {},
-    [1, 2],
-    [0, 0, 0],
-    {"min": 1, "max": 0},
-    2**70,
-]
-
-
-def odd(rng: random.Random):
-    return copy.deepcopy(rng.choice(ODD)) if rng.random() < 0.7 else rng.uniform(-1e3, 1e3)
-
-
 def mutate(rng: random.Random, d) -> dict:
     d = copy.deepcopy(d)
     for _ in range(rng.randint(1, 3)):
@@ -198,103 +177,8 @@ def check_fit(res, scene_dict, c: Counts) -> None:
             print("out of bounds:", name, v, (lo, hi), file=sys.stderr)
 
 
-MESH_HEADS = [
-    "ply\nformat ascii 1.0\nelement vertex {n}\nproperty float x\nproperty float y\nproperty float z\n"
-    "element face {m}\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
-    "ply\nformat binary_little_endian 1.0\nelement vertex {n}\nproperty double x\nproperty double y\n"
-    "property double z\nelement face {m}\nproperty list uint int vertex_indices\nend_header\n",
-    "v 0 0 0\nv 1e300 0 0\nv 0 1 0\nf 1 2 {m}\nmtllib /dev/zero\n",
-]
-
-
 def _mesh(rng: random.Random, tmp: Path) -> None:
-    """A mesh file: a header with odd counts and a mutated body (bytes flipped, cut, repeated)."""
-    data = bytearray(rng.choice(MESH_HEADS).format(n=rng.choice([0, 3, 2**31, 10**12, -1]),
-                                                    m=rng.choice([0, 1, 9, 2**32])).encode())
-    for _ in range(rng.randint(0, 4)):
-        if data:
-            data[rng.randrange(len(data))] = rng.randrange(256)
-    data += bytes(rng.randrange(256) for _ in range(rng.randint(0, 64)))
-    path = tmp / f"m.{rng.choice(['ply', 'obj', 'PLY'])}"
-    path.write_bytes(bytes(data[: rng.randint(0, len(data))] if rng.random() < 0.2 else data))
-    scene = copy.deepcopy(BASE)
-    scene["objects"].append({"name": "m", "shape": "mesh", "file": str(path), "scale": rng.choice([1, 1e-9, 1e9])})
-    rtloop.render(rtloop.load_scene(scene), 6, 4, 1)
-
-
-def _exif(rng: random.Random, tmp: Path) -> None:
-    from PIL import Image
-
-    from rtloop.acquisition.exif import exif_exposure, exif_focal
-
-    exif = Image.Exif()
-    exif[0x0112] = rng.randint(-1, 10)
-    tags = {t: odd(rng) if rng.random() < 0.5 else rng.choice([4.0, 28, 1600.0, 3, (1, 0), 1e9, 1e-9])
-            for t in rng.sample([0x920A, 0xA405, 0xA20E, 0xA210, 0x829A, 0x829D, 0x8827], rng.randint(1, 5))}
-    try:
-        exif.get_ifd(0x8769).update(tags)
-        Image.new("RGB", (8, 6)).save(tmp / "e.jpg", exif=exif)
-    except Exception:  # noqa: BLE001 - a value Pillow cannot write
-        return
-    found = exif_focal(tmp / "e.jpg", rng.choice([8, 6, 1000]), 6)
-    if found is not None and not (math.isfinite(found.focal_px) and found.focal_px > 0):
-        raise AssertionError(f"focal_px {found.focal_px}")
-    exif_exposure(tmp / "e.jpg")
-
-
-LENS_NAMES = ["Canon", "Canon EOS 600D", "EF-S18-55mm f/3.5-5.6 IS II", "NIKON CORPORATION", "NIKON D90",
-              "AF-S DX Nikkor 18-105mm f/3.5-5.6G ED VR", "OLYMPUS IMAGING CORP.", "E-M5", "", "\x00", "x" * 300]
-
-
-def _lens(rng: random.Random, tmp: Path) -> None:
-    """EXIF naming a camera and lens (real names, odd strings and numbers): a lens profile whose resampling is
-    finite, or None and a one-line reason."""
-    from PIL import Image
-
-    from rtloop.acquisition.lens_profile import find_lens_profile, read_lens_exif
-
-    pick = lambda: rng.choice(LENS_NAMES) if rng.random() < 0.7 else odd(rng)  # noqa: E731
-    exif = Image.Exif()
-    try:
-        exif[0x010F], exif[0x0110] = pick(), pick()
-        exif.get_ifd(0x8769).update({0xA434: pick(), 0x920A: rng.choice([18.0, 35.0, 105.0, odd(rng)]),
-                                     0x829D: rng.choice([3.5, 8.0, odd(rng)])})
-        Image.new("RGB", (12, 9)).save(tmp / "lens.png", exif=exif)
-    except Exception:  # noqa: BLE001 - a value Pillow cannot write
-        return
-    profile, why = find_lens_profile(read_lens_exif(tmp / "lens.png"))
-    if profile is None:
-        if not why or "\n" in why:
-            raise AssertionError(f"no profile and no one-line reason: {why!r}")
-        return
-    remap = profile.remap(12, 9, rng.choice([5.0, 12.0, 300.0]))
-    out = remap.correct(np.full((9, 12, 3), 0.5, np.float32))
-    if not (np.isfinite(out).all() and np.isfinite(remap.points(np.array([[0.0, 0.0], [11.0, 8.0]]))).all()):
-        raise AssertionError("lens profile: a non-finite resampling")
-
-
-def _insert_cli(rng: random.Random, tmp: Path) -> None:
-    from rtloop.cli.insert import insert_main
-
-    work = tmp / "ins"
-    work.mkdir(exist_ok=True)
-    before = sorted(p.name for p in work.iterdir())
-    argv = [str(tmp / "scene.json"), str(tmp / "photo.png"), "--add", str(tmp / "objects.json"),
-            "--out", str(work / "out")]
-    for _ in range(rng.randint(0, 3)):
-        flag = rng.choice(["--spp", "--response", "--out", "--force", "--uniform"])
-        argv += [flag] if flag in ("--force", "--uniform") else [flag, str(odd(rng))]
-    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()), \
-            contextlib.chdir(work):  # a relative --out stays inside the sandbox
-        try:
-            insert_main(argv)
-        except SystemExit as e:
-            if e.code not in (0, 1, 2):
-                raise
-    outs = {argv[i + 1] for i, a in enumerate(argv[:-1]) if a == "--out"}
-    made = sorted(p.name for p in work.iterdir() if p.name not in before and p.name not in outs | {"out"})
-    if made or not (tmp / "photo.png").is_file() or not (tmp / "objects.json").is_file():
-        raise AssertionError(f"rtloop-insert wrote beside --out or lost an input: {made}")
+    mesh(rng, tmp, BASE)
 
 
 JOB_IDS = ["a", "b-1", "keep", "results.jsonl", "../out", "/tmp", ".hidden", "", "a/b", "..", "x" * 129, "ok.1",
@@ -552,7 +436,7 @@ def _fov(rng: random.Random, c: Counts, tmp: Path) -> None:
 
 
 SURFACES = ("batch", "ids", "mesh", "insert", "exif", "strict", "framing", "coat", "fov", "lens", "lights",
-            "default_lights")
+            "default_lights", "fitness_spec")
 
 
 def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None = None) -> None:
@@ -561,12 +445,13 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
         if only in ("batch", "ids"):
             batch(rng, c, tmp, ids=only == "ids")
         else:
-            {"mesh": _mesh, "insert": _insert_cli, "exif": _exif, "strict": lambda r, t: _strict(r, c, t),
+            {"mesh": _mesh, "insert": insert_cli, "exif": exif, "strict": lambda r, t: _strict(r, c, t),
              "framing": lambda r, t: _framing(r, c),
              "coat": lambda r, t: _coat(r, c), "fov": lambda r, t: _fov(r, c, t),
-             "lens": _lens,
+             "lens": lens,
              "lights": lambda r, t: lights_size(r, c, LIGHTS_BASE, mutate, odd, check_fit),
              "default_lights": lambda r, t: default_lights(r, c, FIT_SCENES, mutate, check_fit, finite),
+             "fitness_spec": lambda r, t: fitness_spec(r, c, FIT_SCENES, odd, finite),
              }[only](rng, tmp)
         c.bump("ok")
         return
@@ -576,7 +461,9 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
         return
     kind = rng.random()
     if kind < 0.1:  # mesh files, EXIF tags, rtloop-insert arguments
-        [_mesh, _exif, _insert_cli][int(kind * 30)](rng, tmp)
+        [_mesh, exif, insert_cli][int(kind * 30)](rng, tmp)
+    elif kind < 0.13:  # the native fitness spec and the calls that take it
+        fitness_spec(rng, c, FIT_SCENES, odd, finite)
     elif kind < 0.55:  # scenes
         scene = rtloop.load_scene(mutate(rng, rng.choice([BASE, LIGHTS_BASE, COAT_BASE])))
         img = rtloop.render(scene, width=rng.choice([None, 4, 7]), height=None, spp=1)

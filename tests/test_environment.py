@@ -106,15 +106,18 @@ def test_kernel_and_closed_form_reproduce_the_render(two):
     scene = rtloop.Scene(json.dumps(truth))
     photo = _photo(truth, footprint=False)
     x = np.array([truth["light"]["position"]], float)
-    direct = _native.evaluate(scene, ["light.position"], photo, x, loss="l1")[0, 0]
+    direct = _native.evaluate(scene, photo, x, _native.FitnessSpec(["light.position"], loss="l1"))[0, 0]
     assert direct < 1e-4 * photo.sum()
     from rtloop.fit.products import product_bounds
 
-    closed = _native.evaluate(scene, ["light.position"], photo, x, loss="l1_projected",
-                              product_bounds=product_bounds(scene, True))[0, 0]
+    def closed_form(environment: bool) -> float:
+        spec = _native.FitnessSpec(["light.position"], loss="l1_projected",
+                                   product_bounds=product_bounds(scene, environment))
+        return _native.evaluate(scene, photo, x, spec)[0, 0]
+
+    closed = closed_form(True)
     assert closed < 1e-4 * photo.sum()
-    without = _native.evaluate(scene, ["light.position"], photo, x, loss="l1_projected",
-                               product_bounds=product_bounds(scene, False))[0, 0]
+    without = closed_form(False)
     assert without > 100 * max(closed, 1e-6)
 
 

@@ -137,7 +137,7 @@ def test_fitness_is_the_distance_of_the_rendered_image(ball_scene, norm):
     paths = scene.fit_paths
     bounds = np.array(scene.bounds(paths))
     pop = bounds[:, 0] + (bounds[:, 1] - bounds[:, 0]) * rng.random((8, len(bounds)))
-    got = _native.evaluate(scene, paths, photo, pop, norm=norm)[:, 0]
+    got = _native.evaluate(scene, photo, pop, _native.FitnessSpec(paths, norm=norm))[:, 0]
 
     for x, g in zip(pop, got):
         img = rtloop.render(scene.with_params(list(x)))
@@ -176,8 +176,9 @@ def test_srgb_fitness_is_the_distance_of_the_encoded_images(ball_scene, norm, cl
     paths = scene.fit_paths
     bounds = np.array(scene.bounds(paths))
     pop = bounds[:, 0] + (bounds[:, 1] - bounds[:, 0]) * rng.random((6, len(bounds)))
-    got = _native.evaluate(scene, paths, photo, pop, norm=norm, space="srgb", clip=clip)[:, 0]
-    linear = _native.evaluate(scene, paths, photo, pop, norm=norm, clip=clip)[:, 0]
+    srgb = _native.FitnessSpec(paths, norm=norm, space="srgb", clip=clip)
+    got = _native.evaluate(scene, photo, pop, srgb)[:, 0]
+    linear = _native.evaluate(scene, photo, pop, _native.FitnessSpec(paths, norm=norm, clip=clip))[:, 0]
 
     for x, g, lin in zip(pop, got, linear):
         img = rtloop.render(scene.with_params(list(x)))
@@ -190,8 +191,9 @@ def test_srgb_fitness_is_the_distance_of_the_encoded_images(ball_scene, norm, cl
     start = rtloop.load_scene(wrong_start(truth))
     pb = _product_bounds(start)
     for light in ([1.0, 5.0, -2.0], [2.5, 4.5, -1.0]):
-        proj = _native.evaluate(start, ["light.position"], photo, np.array([light]), loss="l1_projected",
-                                product_bounds=pb, norm=norm, space="srgb", clip=clip)[0, 0]
+        spec = _native.FitnessSpec(["light.position"], loss="l1_projected", product_bounds=pb, norm=norm,
+                                   space="srgb", clip=clip)
+        proj = _native.evaluate(start, photo, np.array([light]), spec)[0, 0]
         d = start.to_dict()
         d["light"]["position"], d["light"]["intensity"], d["fit"] = light, 1.0, {}
         for o, p in zip(d["objects"], _solve_products(start, photo, light, pb, clip=clip)):
@@ -217,11 +219,8 @@ def test_srgb_space_recovers_a_self_rendered_scene(ball_scene):
     assert result.report()["settings"]["space"] == "srgb"
     with pytest.raises(rtloop.RtloopError, match="space: unknown loss space 'sRGB'"):
         rtloop.fit(truth, _photo(truth), space="sRGB")
-    scene = rtloop.load_scene(truth)
-    with pytest.raises(rtloop.RtloopError, match="space"):
-        _native.evaluate(scene, ["light.position"], _photo(truth), np.zeros((1, 3)), space="gamma")
-    with pytest.raises(rtloop.RtloopError, match="space"):
-        _native.optimize(scene, ["light.position"], _photo(truth), space="gamma", generations=1)
+    with pytest.raises(rtloop.RtloopError, match="^space: "):
+        _native.FitnessSpec(["light.position"], space="gamma")
 
 
 def test_optimize_from_a_start_holds_it_and_names_a_bad_one(ball_scene):
@@ -233,18 +232,18 @@ def test_optimize_from_a_start_holds_it_and_names_a_bad_one(ball_scene):
     photo = _photo(truth, footprint=False)
     scene = rtloop.load_scene(wrong_start(truth))
     true_light = list(truth["light"]["position"])
-    kw = dict(loss="l1_projected", population=4, generations=0, product_bounds=_product_bounds(scene), seed=0,
-              method="lshade")
-    alone = _native.optimize(scene, ["light.position"], photo, **kw)
-    held = _native.optimize(scene, ["light.position"], photo, x0=true_light, **kw)
+    spec = _native.FitnessSpec(["light.position"], loss="l1_projected", product_bounds=_product_bounds(scene))
+    kw = dict(population=4, generations=0, seed=0, method="lshade")
+    alone = _native.optimize(scene, photo, spec, **kw)
+    held = _native.optimize(scene, photo, spec, x0=true_light, **kw)
     assert np.linalg.norm(np.subtract(alone.x, true_light)) > 0.05
     np.testing.assert_allclose(held.x, true_light, rtol=0, atol=1e-12)
     assert sum(held.objectives) < sum(alone.objectives)
     for bad in ([1.0, 2.0], [1.0, float("nan"), 0.0]):
         with pytest.raises(rtloop.RtloopError, match="x0: needs 3 finite values"):
-            _native.optimize(scene, ["light.position"], photo, x0=bad, **kw)
+            _native.optimize(scene, photo, spec, x0=bad, **kw)
     with pytest.raises(rtloop.RtloopError, match="lshade"):
-        _native.optimize(scene, ["light.position"], photo, x0=true_light, **{**kw, "method": "de"})
+        _native.optimize(scene, photo, spec, x0=true_light, **{**kw, "method": "de"})
 
 
 def test_projected_fitness_equals_l1_at_the_solved_products(ball_scene):
@@ -254,12 +253,11 @@ def test_projected_fitness_equals_l1_at_the_solved_products(ball_scene):
     scene = rtloop.load_scene(wrong_start(truth))
     from rtloop.fit import _product_bounds
     pb = _product_bounds(scene)
+    spec = _native.FitnessSpec(["light.position"], loss="l1_projected", product_bounds=pb)
     for light in ([1.0, 5.0, -2.0], [-3.0, 2.0, 1.0], [2.5, 4.5, -1.0]):
-        out = _native.optimize(scene, ["light.position"], photo, loss="l1_projected", population=4,
-                               generations=0, product_bounds=pb, seed=0)
+        out = _native.optimize(scene, photo, spec, population=4, generations=0, seed=0)
         assert out.generations == 0
-        proj = _native.evaluate(scene, ["light.position"], photo, np.array([light]), loss="l1_projected",
-                                product_bounds=pb)[0, 0]
+        proj = _native.evaluate(scene, photo, np.array([light]), spec)[0, 0]
         # Re-render with intensity 1 and albedo = product: the same image, the same L1.
         d = scene.to_dict()
         d["light"]["position"] = light
@@ -271,8 +269,7 @@ def test_projected_fitness_equals_l1_at_the_solved_products(ball_scene):
         img = rtloop.render(d)
         assert proj == pytest.approx(np.abs(np.minimum(img, 1) - photo).sum(), rel=1e-4, abs=1e-3)
     # At the truth the loss vanishes.
-    at_truth = _native.evaluate(scene, ["light.position"], photo, np.array([truth["light"]["position"]]),
-                                loss="l1_projected", product_bounds=pb)[0, 0]
+    at_truth = _native.evaluate(scene, photo, np.array([truth["light"]["position"]]), spec)[0, 0]
     assert at_truth < 1e-3
 
 

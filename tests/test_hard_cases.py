@@ -111,7 +111,7 @@ def test_light_inside_the_sphere_or_under_the_floor_is_a_losing_candidate_not_a_
         [0.0, 0.0, -3.0, 70.0],   # in the floor plane
         [2.5, 4.5, -1.0, 70.0],   # the truth
     ])
-    losses = _native.evaluate(scene, paths, photo, candidates)[:, 0]
+    losses = _native.evaluate(scene, photo, candidates, _native.FitnessSpec(paths))[:, 0]
     assert np.all(np.isfinite(losses))
     assert np.argmin(losses) == 4
     # A search box that contains the sphere's inside and the space under the floor still finds the light.

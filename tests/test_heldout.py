@@ -49,10 +49,11 @@ def _photo(scene: rtloop.Scene) -> np.ndarray:
     return np.clip(clean + noise, 0.0, 0.9).astype(np.float32)
 
 
-def _held(scene, target, folds, pixels, **kw) -> np.ndarray:
+def _held(scene, target, folds, pixels, norm: str = "l1", **kw) -> np.ndarray:
     x = np.asarray(scene.get_params(PATHS), np.float64)
-    return _native.held_out(scene, target, x, folds, PATHS, pixels=pixels, product_bounds=product_bounds(scene),
-                            **kw)
+    spec = _native.FitnessSpec(PATHS, pixels=pixels, loss="l1_projected", product_bounds=product_bounds(scene),
+                               norm=norm)
+    return _native.held_out(scene, target, x, folds, spec, **kw)
 
 
 def _reference(scene: rtloop.Scene, target: np.ndarray, folds: np.ndarray, pixels: np.ndarray) -> np.ndarray:

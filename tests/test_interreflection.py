@@ -53,11 +53,13 @@ def test_kernel_and_closed_form_reproduce_the_render(two, env):
     scene = rtloop.Scene(json.dumps(truth))
     photo = _photo(truth, footprint=False)
     x = np.array([truth["light"]["position"]], float)
-    direct = _native.evaluate(scene, ["light.position"], photo, x, loss="l1")[0, 0]
-    closed = _native.evaluate(scene, ["light.position"], photo, x, loss="l1_projected",
-                              product_bounds=product_bounds(scene, env is not None))[0, 0]
+    direct_spec = _native.FitnessSpec(["light.position"], loss="l1")
+    direct = _native.evaluate(scene, photo, x, direct_spec)[0, 0]
+    closed_spec = _native.FitnessSpec(["light.position"], loss="l1_projected",
+                                      product_bounds=product_bounds(scene, env is not None))
+    closed = _native.evaluate(scene, photo, x, closed_spec)[0, 0]
     plain = rtloop.Scene(json.dumps({**truth, "interreflection": False}))
-    without = _native.evaluate(plain, ["light.position"], photo, x, loss="l1")[0, 0]
+    without = _native.evaluate(plain, photo, x, direct_spec)[0, 0]
     assert direct < 1e-5 * photo.sum() and closed < 1e-5 * photo.sum()
     assert without > 1e4 * max(direct, closed)
 
@@ -134,12 +136,30 @@ def test_held_bounce_ranks_lights_as_the_full_bounce_at_its_reference():
     total = float(photo.sum())
     rows = [t] + [t + s * e for s in (0.01, -0.01, 0.03, -0.03) for e in np.eye(3)]
     kw = {"loss": "l1_projected", "product_bounds": pb}
-    full = _native.evaluate(scene, ["light.position"], photo, np.array(rows), **kw)[:, 0]
-    held = _native.evaluate(scene, ["light.position"], photo, np.array(rows), frozen_bounce=True, **kw)[:, 0]
+    full = _native.evaluate(scene, photo, np.array(rows), _native.FitnessSpec(["light.position"], **kw))[:, 0]
+    held_spec = _native.FitnessSpec(["light.position"], frozen_bounce=1, **kw)
+    held = _native.evaluate(scene, photo, np.array(rows), held_spec)[:, 0]
     assert held[0] == pytest.approx(full[0], rel=1e-3, abs=1e-6 * total)
     assert held[0] < 1e-5 * total
     assert np.all(held[1:] > 10 * max(held[0], 1e-6 * total))
     assert np.any(np.abs(held[1:] - full[1:]) > 1e-3 * full[1:])
+
+
+def _held_spec(bounds: np.ndarray, passes: int) -> _native.FitnessSpec:
+    """The closed form's spec of the light's position with ``passes`` passes holding the bounce."""
+    return _native.FitnessSpec(["light.position"], loss="l1_projected", product_bounds=bounds,
+                               frozen_bounce=passes)
+
+
+def _held_searches(truth: dict, start: list[float], photo: np.ndarray, passes: tuple[int, ...]) -> list:
+    """From the light ``start`` (intensity 20, free in [1, 400]), the closed form's L-SHADE searches (12 x 20,
+    a polish of 200 evaluations, seed 3) with each of ``passes`` passes holding the bounce."""
+    scene = _box({**truth, "light": {**truth["light"], "intensity": 20.0}}, start, 0.6)
+    scene = rtloop.Scene(json.dumps({**scene.to_dict(), "fit": {**scene.to_dict()["fit"],
+                                                                "light.intensity": {"min": 1, "max": 400}}}))
+    bounds = product_bounds(scene, False)
+    return [_native.optimize(scene, photo, _held_spec(bounds, n), population=12, generations=20,
+                             method="lshade", polish=200, seed=3) for n in passes]
 
 
 @pytest.mark.parametrize("two", [False, True], ids=["one-ball", "two-balls"])
@@ -158,20 +178,13 @@ def test_held_bounce_search_reaches_the_full_search_optimum(two):
     x0 = plain.scene.to_dict()["light"]["position"]
     pull = np.linalg.norm(np.subtract(x0, t))
     assert pull > 5e-3  # the bounce moves the light: the test can tell the searches apart
-    scene = _box({**truth, "light": {**truth["light"], "intensity": 20.0}}, x0, 0.6)
-    scene = rtloop.Scene(json.dumps({**scene.to_dict(), "fit": {**scene.to_dict()["fit"],
-                                                                "light.intensity": {"min": 1, "max": 400}}}))
-    kw = {"loss": "l1_projected", "product_bounds": product_bounds(scene, False), "population": 12,
-          "generations": 20, "method": "lshade", "polish": 200, "seed": 3}
-    full = _native.optimize(scene, ["light.position"], photo, frozen_bounce=0, **kw)
-    held = _native.optimize(scene, ["light.position"], photo, frozen_bounce=2, **kw)
-    one = _native.optimize(scene, ["light.position"], photo, frozen_bounce=1, **kw)
+    full, held, one = _held_searches(truth, x0, photo, (0, 2, 1))
     assert np.linalg.norm(np.subtract(held.x, t)) < pull / 100
     assert np.linalg.norm(np.subtract(full.x, t)) < pull / 50
     assert np.linalg.norm(np.subtract(held.x, full.x)) < pull / 50
     assert held.gauge == pytest.approx(1 / 60.0, rel=2e-3) and full.gauge == pytest.approx(1 / 60.0, rel=2e-3)
     # the second pass only polishes (at most the polish budget) from the first pass's light
-    assert one.evaluations < held.evaluations <= one.evaluations + kw["polish"] + 1
+    assert one.evaluations < held.evaluations <= one.evaluations + 200 + 1
 
 
 @pytest.mark.parametrize("two", [False, True], ids=["one-ball", "two-balls"])
@@ -185,13 +198,7 @@ def test_held_bounce_passes_run_until_the_light_stops_moving(two):
     photo = _photo(truth, footprint=False)
     t = np.array(truth["light"]["position"])
     start = list(t + [0.2, -0.15, 0.25])
-    scene = _box({**truth, "light": {**truth["light"], "intensity": 20.0}}, start, 0.6)
-    scene = rtloop.Scene(json.dumps({**scene.to_dict(), "fit": {**scene.to_dict()["fit"],
-                                                                "light.intensity": {"min": 1, "max": 400}}}))
-    kw = {"loss": "l1_projected", "product_bounds": product_bounds(scene, False), "population": 12,
-          "generations": 20, "method": "lshade", "polish": 200, "seed": 3}
-    two_passes, three, eight = (_native.optimize(scene, ["light.position"], photo, frozen_bounce=n, **kw)
-                                for n in (2, 3, 8))
+    two_passes, three, eight = _held_searches(truth, start, photo, (2, 3, 8))
     err = {n: float(np.linalg.norm(np.subtract(r.x, t))) for n, r in ((2, two_passes), (3, three), (8, eight))}
     assert err[8] < err[2] / 3, err
     assert eight.evaluations == three.evaluations > two_passes.evaluations
@@ -205,10 +212,10 @@ def test_a_held_search_stopped_in_its_first_pass_still_reports_the_bounce_produc
     truth = _bounced(position=[1.5, 3.5, -2.0])
     photo = _photo(truth, footprint=False)
     scene = _box(truth, [1.6, 3.4, -2.1], 0.4)
-    kw = {"loss": "l1_projected", "product_bounds": product_bounds(scene, False), "population": 8,
-          "generations": 6, "method": "lshade", "polish": 40, "seed": 1, "frozen_bounce": 2}
-    whole = _native.optimize(scene, ["light.position"], photo, **kw)
-    stopped = _native.optimize(scene, ["light.position"], photo, callback=lambda g, *_: g < 2, **kw)
+    spec = _held_spec(product_bounds(scene, False), 2)
+    kw = {"population": 8, "generations": 6, "method": "lshade", "polish": 40, "seed": 1}
+    whole = _native.optimize(scene, photo, spec, **kw)
+    stopped = _native.optimize(scene, photo, spec, callback=lambda g, *_: g < 2, **kw)
     assert stopped.stopped and stopped.evaluations < whole.evaluations
     for r in (whole, stopped):
         assert r.products is not None and r.gauge is not None and np.isfinite(r.objectives).all()

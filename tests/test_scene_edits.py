@@ -80,7 +80,8 @@ def test_with_fit_and_without_fit_equal_the_json_route(ball_scene):
 def test_optimize_returns_a_typed_frozen_result(ball_scene):
     scene = load_scene(ball_scene)
     target = np.asarray(_native.render(scene), np.float32)
-    out = _native.optimize(scene, ["light.position"], target, population=8, generations=2, seed=1)
+    spec = _native.FitnessSpec(["light.position"])
+    out = _native.optimize(scene, target, spec, population=8, generations=2, seed=1)
     assert isinstance(out, _native.OptimizeResult)
     assert out.x.shape == (3,) and out.x.dtype == np.float64
     assert out.generations == 2 and out.evaluations == 8 * 3 and not out.stopped
@@ -91,8 +92,8 @@ def test_optimize_returns_a_typed_frozen_result(ball_scene):
         out.generations = 3
     with pytest.raises(TypeError):
         out["x"]  # no longer a dict
-    polished = _native.optimize(scene, ["light.position"], target, population=8, generations=2, seed=1,
-                                method="lshade", polish=20)
+    polished = _native.optimize(scene, target, spec, population=8, generations=2, seed=1, method="lshade",
+                                polish=20)
     evals, before, after = polished.polish
     assert 0 < evals <= 20 and after <= before
     assert polished.evaluations == 8 * 3 + evals

@@ -14,7 +14,8 @@ For each view ``OUT/NAME/`` gets ``photo.png`` (640x480 8-bit sRGB with EXIF Foc
 FocalPlaneXResolution, as a camera writes them), ``scene.json`` (the truth in rtloop's format at the
 160 px working width rtloop-scene uses, with the ``fit`` section rtloop-scene writes) and ``meta.json``
 (camera, ball, light, albedos, the card's pixel rectangle, the board, how it was rendered).
-Only Mitsuba, NumPy, OpenCV and Pillow are needed (rtloop is not imported). ``nice -n 10`` on a shared
+Needs Mitsuba, NumPy, OpenCV, Pillow and rtloop for its sRGB encoding (tools/photos/pixels.py: the
+repository's ``python/`` with its extension built, or an installed rtloop). ``nice -n 10`` on a shared
 machine.
 """
 
@@ -31,6 +32,9 @@ from typing import Any
 import cv2
 import numpy as np
 from PIL import Image
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from photos.pixels import encode8  # noqa: E402
 
 MITSUBA_VERSION = "3.9.1"
 WIDTH, HEIGHT = 640, 480
@@ -228,9 +232,7 @@ def make_view(view: dict[str, Any], out: Path, spp: int, seed: int) -> dict[str,
     t0 = time.perf_counter()
     linear = np.array(mi.render(mi.load_dict(scene_dict(view, spp, seed))), dtype=np.float64)
     seconds = time.perf_counter() - t0
-    x = np.clip(linear, 0.0, 1.0)
-    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-    codes = np.round(255 * srgb).astype(np.uint8)
+    codes = encode8(linear)
     folder = EXAMPLE_DIR if out == DEFAULT_OUT and view["name"] == EXAMPLE_VIEW else out / view["name"]
     folder.mkdir(parents=True, exist_ok=True)
     Image.fromarray(codes, "RGB").save(folder / "photo.png", optimize=True, exif=exif_bytes(view))

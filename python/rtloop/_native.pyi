@@ -105,84 +105,84 @@ def codes8(values: npt.NDArray[np.float32], table: npt.NDArray[np.float32], buck
            shift: int) -> npt.NDArray[np.uint8] | None:
     """The 8-bit codes of the 1-D ``values`` if each is bit for bit a code's value in ``table``, else None
     (``buckets`` and ``shift`` as ``rtloop._srgb`` builds them)."""
+class FitnessSpec:
+    """What ``evaluate``, ``optimize`` and ``held_out`` compare and how, checked once (each bad value a
+    one-line RtloopError naming its field). paths: the searched parameters (in the scene's fit section).
+    pixels: the pixel indices the loss counts (uint32; None: all). loss: "l1", "l1_rgb" or "l1_projected"
+    (the closed form). product_bounds: the closed form's bounds, (objects, 3, 2), or (objects, 4, 2) whose
+    row 4 bounds Q = intensity x specular, or (objects, 7, 2) whose rows 5-7 bound exposure x environment
+    x albedo. norm: "l1", "l2", "huber" or "huber:H"; space: "linear" or "srgb" (the loss compares the
+    sRGB encodings of the clipped render and of target; the least-squares products stay linear).
+    footprint: pixels integrated over their area. saturated: objective values at or above it (capped at
+    0.999) may be clipped: the least-squares solve leaves them out and the refine counts them one-sidedly
+    (default 0.999; rtloop.fit passes goodness.clip_level). solve_margin: only pixels whose neighbours
+    within this Chebyshev distance all show their object inform the closed-form products (0, the default:
+    the 4-neighbours; rtloop.fit passes 2 for a JPEG); the loss counts every pixel. frozen_bounce: with
+    interreflection, 0 the full bounce; N >= 1 holds it at the scene's light (``evaluate``, ``held_out``)
+    or, for ``optimize``, ranks lights with the bounce held at the scene's light, then up to N - 1 times at
+    the light found so far, each later pass a Nelder-Mead polish from it (half the polish budget) in a
+    tenth of the box; the first pass's own polish takes half the budget too where N > 1."""
+
+    def __init__(
+        self,
+        paths: list[str],
+        *,
+        pixels: npt.NDArray[np.uint32] | None = None,
+        loss: str = "l1",
+        clip: bool = True,
+        product_bounds: npt.NDArray[np.float64] | None = None,
+        norm: str = "l1",
+        space: str = "linear",
+        footprint: bool = False,
+        frozen_bounce: int = 0,
+        saturated: float | None = None,
+        solve_margin: int = 0,
+    ) -> None: ...
+
 def evaluate(
     scene: Scene,
-    paths: list[str],
     target: npt.NDArray[np.float32],
     population: npt.NDArray[np.float64],
-    pixels: npt.NDArray[np.uint32] | None = None,
-    loss: str = "l1",
-    clip: bool = True,
+    spec: FitnessSpec,
     threads: int | None = None,
-    product_bounds: npt.NDArray[np.float64] | None = None,
-    norm: str = "l1",
-    space: str = "linear",
-    footprint: bool = False,
-    frozen_bounce: bool = False,
-    saturated: float | None = None,
-    solve_margin: int = 0,
 ) -> npt.NDArray[np.float64]: ...
 def held_out(
     scene: Scene,
     target: npt.NDArray[np.float32],
     x: npt.NDArray[np.float64],
     folds: npt.NDArray[np.uint8],
-    paths: list[str],
-    pixels: npt.NDArray[np.uint32] | None = None,
-    clip: bool = True,
+    spec: FitnessSpec,
     threads: int | None = None,
-    product_bounds: npt.NDArray[np.float64] | None = None,
-    norm: str = "l1",
-    space: str = "linear",
-    saturated: float | None = None,
     refine: bool = True,
-) -> npt.NDArray[np.float64]: ...
+) -> npt.NDArray[np.float64]:
+    """spec's loss must be "l1_projected"."""
 def optimize(
     scene: Scene,
-    paths: list[str],
     target: npt.NDArray[np.float32],
+    spec: FitnessSpec,
     *,
-    pixels: npt.NDArray[np.uint32] | None = None,
-    loss: str = "l1",
-    clip: bool = True,
     population: int = 60,
     generations: int = 200,
     f: float = 0.6,
     cr: float = 0.8,
     seed: int = 0,
-    threads: int | None = None,
-    callback: Callable[[int, npt.NDArray[np.float64], list[float], int, list[list[float]] | None], Any]
-    | None = None,
-    product_bounds: npt.NDArray[np.float64] | None = None,
     method: str = "de",
     max_evaluations: int | None = None,
     polish: int = 0,
-    norm: str = "l1",
-    with_products: bool = True,
-    space: str = "linear",
     polish_tol: float | None = None,
-    footprint: bool = False,
     polish_footprint: bool = False,
-    frozen_bounce: int = 0,
-    saturated: float | None = None,
-    solve_margin: int = 0,
+    with_products: bool = True,
     x0: Sequence[float] | None = None,
+    callback: Callable[[int, npt.NDArray[np.float64], list[float], int, list[list[float]] | None], Any]
+    | None = None,
+    threads: int | None = None,
     silhouettes: str = "off",
 ) -> OptimizeResult:
     """polish_tol: the polish stops once every simplex vertex is within this fraction of each range of
-    the best (default 1e-13). product_bounds: (objects, 3, 2), or (objects, 4, 2) whose row 4 bounds
-    Q = intensity x specular. space: "linear" or "srgb" (the loss compares the sRGB encodings of the
-    clipped render and of target; the least-squares products stay linear). saturated: objective values
-    at or above it (capped at 0.999) may be clipped: the least-squares solve leaves them out and the
-    refine counts them one-sidedly (default 0.999; rtloop.fit passes goodness.clip_level). solve_margin:
-    only pixels whose neighbours within this Chebyshev distance all show their object inform the
-    closed-form products (0, the default: the 4-neighbours; rtloop.fit passes 2 for a JPEG); the loss
-    counts every pixel. frozen_bounce: with interreflection, 0 searches with the full bounce; N >= 1
-    ranks lights with the bounce held at the scene's light, then up to N - 1 times at the light found so
-    far, each later pass a Nelder-Mead polish from it (half the polish budget) in a tenth of the box; the
-    first pass's own polish takes half the budget too where N > 1. x0: one value per searched parameter
-    (clamped to its bounds), the first member of L-SHADE's initial population, so that a search refining
-    a point never ends worse than it (method "lshade" only). silhouettes (with the footprint): "on"
+    the best (default 1e-13). polish_footprint: the pixel footprint in the polish (and the products and
+    loss reported) only. x0: one value per searched parameter (clamped to its bounds), the first member
+    of L-SHADE's initial population, so that a search refining a point never ends worse than it (method
+    "lshade" only). silhouettes (with the footprint): "on"
     integrates the outline pixels in every footprint evaluation, "auto" (with polish_footprint) only where
     the outline gate finds the photo needs them (OptimizeResult.outlines), "off" at pixel centres."""
 
@@ -217,8 +217,8 @@ class OptimizeResult:
     def lit_pixels(self) -> list[int] | None: ...
     @property
     def outlines(self) -> tuple[float, float, int, float, bool, float | None, bool] | None:
-        """The outline gate's (loss at centres, loss integrated, outline pixels, the largest share of an
-        object's lit pixels on its outline, fired, loss polished, kept)."""
+        """The outline gate's (loss at centres, loss with the outlines averaged, outline pixels, the largest
+        share of an object's lit pixels on its outline, fired, loss polished, kept)."""
     @property
     def history(self) -> list[tuple[int, npt.NDArray[np.float64], list[float], int]]:
         """(generation, best, best's objectives, evaluations) after the initial population and every

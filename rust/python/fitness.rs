@@ -1,11 +1,11 @@
-//! Conversions between Python's arrays and the fitness: building a [`Fitness`] from the arguments of
-//! `evaluate`/`optimize`, and the typed result of `optimize`.
+//! Conversions between Python's arrays and the fitness: the arguments a [`Fitness`] is built from
+//! (`spec::PyFitnessSpec::args` reads them), and the typed result of `optimize`.
 
-use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray3, PyUntypedArrayMethods};
+use numpy::PyArray1;
 use pyo3::prelude::*;
 
 use crate::error::Error;
-use crate::fitness::{Fitness, FitnessSpec, LossKind, Norm, Projection, Space};
+use crate::fitness::{Fitness, FitnessSpec};
 use crate::params::ParamLayout;
 use crate::scene::Scene;
 use crate::stage::StageResult;
@@ -23,13 +23,6 @@ pub(super) fn check_image_shape(
     Ok(())
 }
 
-fn target_vec(scene: &Scene, target: &PyReadonlyArray3<'_, f32>) -> PyResult<Vec<f32>> {
-    check_image_shape(scene, target.shape(), |shape, h, w| {
-        format!("objective image has shape {shape:?}; the scene needs ({h}, {w}, 3)")
-    })?;
-    Ok(target.as_slice()?.to_vec())
-}
-
 /// A fitness's arguments, read from Python (with the GIL, every check that names an argument done):
 /// [`FitnessArgs::build`] then builds it without the GIL, inside the call's worker pool.
 pub(crate) struct FitnessArgs {
@@ -37,92 +30,6 @@ pub(crate) struct FitnessArgs {
     pub(crate) layout: ParamLayout,
     pub(crate) target: Vec<f32>,
     pub(crate) spec: FitnessSpec,
-}
-
-/// The arguments of the fitness of `paths` against `target` (see [`FitnessArgs`]).
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn fitness_args(
-    scene: &Scene,
-    paths: &[String],
-    target: &PyReadonlyArray3<'_, f32>,
-    pixels: Option<PyReadonlyArray1<'_, u32>>,
-    loss: &str,
-    clip: bool,
-    product_bounds: Option<PyReadonlyArray3<'_, f64>>,
-    norm: &str,
-    space: &str,
-    footprint: bool,
-    saturated: Option<f32>,
-    solve_margin: usize,
-) -> PyResult<FitnessArgs> {
-    let space = Space::parse(space).map_err(Error::Invalid)?;
-    let layout = ParamLayout::new(scene, paths)?;
-    let target = target_vec(scene, target)?;
-    let pixels: Option<Vec<u32>> = match pixels {
-        Some(p) => Some(p.as_slice()?.to_vec()),
-        None => None,
-    };
-    let projection = match product_bounds {
-        Some(b) => {
-            let a = b.as_array();
-            let n = scene.objects.len();
-            if a.ndim() != 3
-                || a.shape()[0] != n
-                || ![3, 4, 7].contains(&a.shape()[1])
-                || a.shape()[2] != 2
-            {
-                return Err(Error::Value(format!(
-                    "product_bounds must have shape ({n}, 3, 2), ({n}, 4, 2) (row 4: intensity x \
-                     specular) or ({n}, 7, 2) (rows 5-7: exposure x environment x albedo), got {:?}",
-                    a.shape()
-                ))
-                .into());
-            }
-            let mut proj = Projection::matte(
-                (0..n)
-                    .map(|k| std::array::from_fn(|c| (a[[k, c, 0]], a[[k, c, 1]])))
-                    .collect(),
-            );
-            if a.shape()[1] >= 4 {
-                proj.specular = (0..n).map(|k| (a[[k, 3, 0]], a[[k, 3, 1]])).collect();
-            }
-            if a.shape()[1] == 7 {
-                proj.environment = (0..n)
-                    .map(|k| std::array::from_fn(|c| (a[[k, 4 + c, 0]], a[[k, 4 + c, 1]])))
-                    .collect();
-            }
-            Some(proj)
-        }
-        None => None,
-    };
-    let kind = LossKind::parse(loss)?;
-    let norm = Norm::parse(norm).map_err(Error::Invalid)?;
-    if let Some(level) = saturated {
-        if !level.is_finite() || level <= 0.0 {
-            return Err(Error::Value(format!(
-                "saturated must be a number in (0, 1] (got {level})"
-            ))
-            .into());
-        }
-    }
-    Ok(FitnessArgs {
-        layout,
-        target,
-        spec: FitnessSpec {
-            pixels,
-            loss: kind,
-            clip,
-            projection,
-            footprint,
-            // the outline gate's or the caller's to set (`optimize`'s `silhouettes`)
-            outlines: false,
-            outline_gate: false,
-            solve_margin,
-            norm,
-            space,
-            saturated,
-        },
-    })
 }
 
 impl FitnessArgs {
@@ -211,23 +118,15 @@ impl OptimizeResult {
         self.result.gauge
     }
     /// The outline gate's evidence (`optimize(..., silhouettes="auto")`, `fit::outlines`): (the fit's loss
-    /// with outlines at pixel centres, the loss at the same light with them integrated, the outline
-    /// pixels, the largest share of an object's lit pixels on its outline, whether it fired, the loss after the polish with them integrated or None, whether that
-    /// result was kept); None where the gate did not run.
+    /// with outlines at pixel centres, the same with them averaged over their sub-pixel rays, the outline
+    /// pixels, the largest share of an object's lit pixels on its outline, whether it fired, the loss after
+    /// the polish with them integrated or None, whether that result was kept); None where it did not run.
     #[getter]
     #[allow(clippy::type_complexity)]
     fn outlines(&self) -> Option<(f64, f64, usize, f64, bool, Option<f64>, bool)> {
-        self.result.outlines.map(|e| {
-            (
-                e.centre,
-                e.integrated,
-                e.pixels,
-                e.share,
-                e.fired,
-                e.polished,
-                e.kept,
-            )
-        })
+        self.result
+            .outlines
+            .map(|e| (e.centre, e.integrated, e.pixels, e.share, e.fired, e.polished, e.kept))
     }
 
     /// (generation, best (float64), best's objectives, evaluations) after the initial population and

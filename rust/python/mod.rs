@@ -11,6 +11,7 @@ mod photo;
 mod pool;
 mod render;
 mod scene;
+mod spec;
 #[cfg(feature = "test-hooks")]
 mod test_hooks;
 mod uncertainty;
@@ -52,6 +53,7 @@ macro_rules! add_functions {
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyScene>()?;
     m.add_class::<OptimizeResult>()?;
+    m.add_class::<spec::PyFitnessSpec>()?;
     add_functions!(
         m,
         [

@@ -1,61 +1,39 @@
-//! `evaluate` and `optimize`: the fitness's values and the search, stage by stage.
+//! `evaluate`, `optimize` and `held_out`: the fitness's values, the search stage by stage and the
+//! held-out losses, each of the fitness a `FitnessSpec` describes.
 
 use numpy::{
     PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
 };
 use pyo3::prelude::*;
 
-use super::fitness::{fitness_args, Generation, OptimizeResult};
+use super::fitness::{Generation, OptimizeResult};
 use super::pool::detach_in_pool;
 use super::scene::PyScene;
+use super::spec::PyFitnessSpec;
 use crate::error::Error;
 use crate::fit::{run_passes, PassOptions};
+use crate::fitness::LossKind;
 use crate::search::{Budget, Method, Objective};
 
-/// Objective values of each row of `population` (N, D): float64 (N, n_objectives). `norm` is the
-/// per-pixel penalty ("l1", "l2", "huber", "huber:H"), `space` where it compares values ("linear" or
-/// "srgb": the sRGB encodings of the clipped model and of the objective). `frozen_bounce`: with
-/// interreflection and the projected loss, the bounce held at the scene's own values
-/// (`Fitness::freeze_bounce`), as `optimize`'s first pass ranks lights.
+/// Objective values of each row of `population` (N, D) for the fitness `spec` (a `FitnessSpec`):
+/// float64 (N, n_objectives). With interreflection and the projected loss, a spec whose
+/// `frozen_bounce` is >= 1 holds the bounce at the scene's own values (`Fitness::freeze_bounce`), as
+/// `optimize`'s first pass ranks lights.
 #[pyfunction]
-#[pyo3(signature = (scene, paths, target, population, pixels=None, loss="l1", clip=true, threads=None,
-                    product_bounds=None, norm="l1", space="linear", footprint=false,
-                    frozen_bounce=false, saturated=None, solve_margin=0))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (scene, target, population, spec, threads=None))]
 pub(super) fn evaluate<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyScene>,
-    paths: Vec<String>,
     target: PyReadonlyArray3<'py, f32>,
     population: PyReadonlyArray2<'py, f64>,
-    pixels: Option<PyReadonlyArray1<'py, u32>>,
-    loss: &str,
-    clip: bool,
+    spec: &Bound<'py, PyFitnessSpec>,
     threads: Option<usize>,
-    product_bounds: Option<PyReadonlyArray3<'py, f64>>,
-    norm: &str,
-    space: &str,
-    footprint: bool,
-    frozen_bounce: bool,
-    saturated: Option<f32>,
-    solve_margin: usize,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     use rayon::prelude::*;
     let scene = &scene.get().0;
-    let args = fitness_args(
-        scene,
-        &paths,
-        &target,
-        pixels,
-        loss,
-        clip,
-        product_bounds,
-        norm,
-        space,
-        footprint,
-        saturated,
-        solve_margin,
-    )?;
+    let spec = spec.get();
+    let args = spec.args(scene, &target)?;
+    let frozen_bounce = spec.frozen_bounce_passes() > 0;
     let pop = population.as_array();
     parameters_match(pop.ncols(), args.layout.bounds.len(), || {
         format!("population has {} columns", pop.ncols())
@@ -85,95 +63,67 @@ fn parameters_match(got: usize, want: usize, what: impl FnOnce() -> String) -> P
     Ok(())
 }
 
-/// Search the fitness of `paths` against `target` with DE/rand/1/bin (`method="de"`) or L-SHADE
+/// Search the fitness `spec` (a `FitnessSpec`) of `target` with DE/rand/1/bin (`method="de"`) or L-SHADE
 /// (`"lshade"`, optionally followed by a Nelder-Mead `polish`). One call per stage; the GIL is released
 /// except while `callback(generation, best, best_objectives, evaluations, products)` runs, after the
 /// initial population and after every generation (returning False stops the search). `products` are the
 /// closed-form products of the best for the projected loss when `with_products` (one row per object:
-/// [P_r, P_g, P_b, Q], Q = intensity x specular), else None. `product_bounds` is (objects, 3, 2), or
-/// (objects, 4, 2) with row 4 bounding Q for objects with a specular term. `norm` and `space` as for
-/// `evaluate`; in "srgb" the closed-form products stay least squares in linear space, and the reported
-/// `products` minimise the sRGB-space loss. `polish_tol`: the polish stops once its simplex spans less
-/// than this fraction of every range (default 1e-13). `footprint`: the pixel footprint in the whole
-/// search; `polish_footprint`: in the polish (and the products and loss reported) only. `frozen_bounce`:
-/// with interreflection, the search
-/// ranks lights with the bounce held at the scene's own values (`Fitness::freeze_bounce`; each evaluation
-/// then costs a direct one's), the result's products and loss are the full bounce's at the found light;
-/// `frozen_bounce=N` > 1 adds up to N - 1 passes, each holding the bounce at the light the previous found and
-/// polishing from there, a third and later one only while the previous pass moved the light (the held
-/// bounce's fixed point; `fit::PassOptions::passes`).
+/// [P_r, P_g, P_b, Q], Q = intensity x specular), else None. In the "srgb" space the closed-form products
+/// stay least squares in linear space, and the reported `products` minimise the sRGB-space loss.
+/// `polish_tol`: the polish stops once its simplex spans less than this fraction of every range
+/// (default 1e-13). The spec's `footprint`: the pixel footprint in the whole search; `polish_footprint`:
+/// in the polish (and the products and loss reported) only. The spec's `frozen_bounce`: with
+/// interreflection, N >= 1 ranks lights with the bounce held at the scene's own values
+/// (`Fitness::freeze_bounce`; each evaluation then costs a direct one's), the result's products and loss
+/// are the full bounce's at the found light; N > 1 adds up to N - 1 passes, each holding the bounce at
+/// the light the previous found and polishing from there, a third and later one only while the previous
+/// pass moved the light (the held bounce's fixed point; `fit::PassOptions::passes`).
 /// `x0`: a point (one value per searched parameter, clamped to their bounds) that L-SHADE's initial
 /// population holds, so that a search refining it never ends worse than it (method "lshade" only).
-/// `silhouettes` (with the footprint): "on" integrates the outline pixels over their area in every
-/// footprint evaluation (`FitnessSpec::outlines`); "auto" (with `polish_footprint`) only where the
-/// outline gate finds the photo needs it (`fit::outlines`; its evidence `OptimizeResult.outlines`); "off":
-/// outlines at pixel centres.
+/// `silhouettes` (with the footprint): "on" integrates the outline pixels in every footprint evaluation
+/// (`FitnessSpec::outlines`); "auto" (with `polish_footprint`) only where the outline gate finds the photo
+/// needs it (`fit::outlines`; its evidence `OptimizeResult.outlines`); "off": outlines at pixel centres.
 /// Returns an `OptimizeResult`.
 #[pyfunction]
-#[pyo3(signature = (scene, paths, target, *, pixels=None, loss="l1", clip=true, population=60,
-                    generations=200, f=0.6, cr=0.8, seed=0, threads=None, callback=None,
-                    product_bounds=None, method="de", max_evaluations=None, polish=0, norm="l1",
-                    with_products=true, space="linear", polish_tol=None, footprint=false,
-                    polish_footprint=false, frozen_bounce=0, saturated=None, solve_margin=0, x0=None,
+#[pyo3(signature = (scene, target, spec, *, population=60, generations=200, f=0.6, cr=0.8, seed=0,
+                    method="de", max_evaluations=None, polish=0, polish_tol=None,
+                    polish_footprint=false, with_products=true, x0=None, callback=None, threads=None,
                     silhouettes="off"))]
 #[allow(clippy::too_many_arguments)]
 pub(super) fn optimize<'py>(
     py: Python<'py>,
     scene: &Bound<'py, PyScene>,
-    paths: Vec<String>,
     target: PyReadonlyArray3<'py, f32>,
-    pixels: Option<PyReadonlyArray1<'py, u32>>,
-    loss: &str,
-    clip: bool,
+    spec: &Bound<'py, PyFitnessSpec>,
     population: usize,
     generations: usize,
     f: f64,
     cr: f64,
     seed: u64,
-    threads: Option<usize>,
-    callback: Option<Py<PyAny>>,
-    product_bounds: Option<PyReadonlyArray3<'py, f64>>,
     method: &str,
     max_evaluations: Option<usize>,
     polish: usize,
-    norm: &str,
-    with_products: bool,
-    space: &str,
     polish_tol: Option<f64>,
-    footprint: bool,
     polish_footprint: bool,
-    frozen_bounce: usize,
-    saturated: Option<f32>,
-    solve_margin: usize,
+    with_products: bool,
     x0: Option<Vec<f64>>,
+    callback: Option<Py<PyAny>>,
+    threads: Option<usize>,
     silhouettes: &str,
 ) -> PyResult<OptimizeResult> {
     let scene = &scene.get().0;
+    let spec = spec.get();
     let (outlines, outline_gate) = match silhouettes {
         "off" => (false, false),
         "auto" => (false, true),
         "on" => (true, false),
         other => {
-            return Err(Error::Value(format!(
-                "silhouettes: must be 'auto', 'on' or 'off' (got {other:?})"
-            ))
-            .into())
+            let msg = format!("silhouettes: must be 'auto', 'on' or 'off' (got {other:?})");
+            return Err(Error::Value(msg).into());
         }
     };
-    let mut args = fitness_args(
-        scene,
-        &paths,
-        &target,
-        pixels,
-        loss,
-        clip,
-        product_bounds,
-        norm,
-        space,
-        footprint,
-        saturated,
-        solve_margin,
-    )?;
+    let mut args = spec.args(scene, &target)?;
+    args.spec.outlines = outlines;
     let budget = Budget {
         population,
         generations,
@@ -184,10 +134,9 @@ pub(super) fn optimize<'py>(
         polish,
         polish_tol,
     };
-    args.spec.outlines = outlines;
     let options = PassOptions {
         outline_gate,
-        passes: frozen_bounce,
+        passes: spec.frozen_bounce_passes(),
         polish_footprint,
         start: x0,
         with_products: with_products && callback.is_some(),
@@ -238,16 +187,15 @@ pub(super) fn optimize<'py>(
     Ok(OptimizeResult { result, history })
 }
 
-/// Held-out losses of the closed form of `target` at the light `x` (one value per parameter of `paths`):
-/// the pixels (`pixels`, default all) split into folds by `folds` (uint8, one label per pixel of
-/// `pixels`; labels 0..K-1), and per fold the loss of its pixels at the products solved on the other folds' pixels, in the
-/// fit's `norm` and `space` (`Fitness::held_out`). `refine`: the products minimise the fit's own loss on
-/// those pixels, else least squares (a bounce's fixed point as `evaluate` solves it). The arguments
-/// otherwise as `evaluate`'s with `loss="l1_projected"`. Returns float64 (K, 2): per fold the held-out
-/// loss and its number of pixels (the fixed background's left out).
+/// Held-out losses of the closed form of `target` at the light `x` (one value per parameter of the spec's
+/// paths): the spec's pixels (default all) split into folds by `folds` (uint8, one label per pixel;
+/// labels 0..K-1), and per fold the loss of its pixels at the products solved on the other folds'
+/// pixels, in the spec's norm and space (`Fitness::held_out`). The spec's loss must be "l1_projected".
+/// `refine`: the products minimise the fit's own loss on those pixels, else least squares (a bounce's
+/// fixed point as `evaluate` solves it, held where the spec's `frozen_bounce` holds it). Returns float64
+/// (K, 2): per fold the held-out loss and its number of pixels (the fixed background's left out).
 #[pyfunction]
-#[pyo3(signature = (scene, target, x, folds, paths, pixels=None, clip=true, threads=None,
-                    product_bounds=None, norm="l1", space="linear", saturated=None, refine=true))]
+#[pyo3(signature = (scene, target, x, folds, spec, threads=None, refine=true))]
 #[allow(clippy::too_many_arguments)]
 pub(super) fn held_out<'py>(
     py: Python<'py>,
@@ -255,20 +203,19 @@ pub(super) fn held_out<'py>(
     target: PyReadonlyArray3<'py, f32>,
     x: PyReadonlyArray1<'py, f64>,
     folds: PyReadonlyArray1<'py, u8>,
-    paths: Vec<String>,
-    pixels: Option<PyReadonlyArray1<'py, u32>>,
-    clip: bool,
+    spec: &Bound<'py, PyFitnessSpec>,
     threads: Option<usize>,
-    product_bounds: Option<PyReadonlyArray3<'py, f64>>,
-    norm: &str,
-    space: &str,
-    saturated: Option<f32>,
     refine: bool,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let scene = &scene.get().0;
+    let spec = spec.get();
+    if spec.loss_kind() != LossKind::L1Projected {
+        let msg = "spec: held-out losses need the projected loss (loss=\"l1_projected\")";
+        return Err(Error::Invalid(msg.into()).into());
+    }
     let n = (scene.width * scene.height) as usize;
-    let chosen: Vec<u32> = match &pixels {
-        Some(p) => p.as_slice()?.to_vec(),
+    let chosen: Vec<u32> = match spec.pixels() {
+        Some(p) => p.to_vec(),
         None => (0..n as u32).collect(),
     };
     let labels = folds.as_slice()?;
@@ -284,20 +231,8 @@ pub(super) fn held_out<'py>(
         return Err(Error::Value("folds: labels must be below 255".into()).into());
     }
     let count = labels.iter().map(|&l| l as usize + 1).max().unwrap_or(0);
-    let args = fitness_args(
-        scene,
-        &paths,
-        &target,
-        pixels,
-        "l1_projected",
-        clip,
-        product_bounds,
-        norm,
-        space,
-        false,
-        saturated,
-        0,
-    )?;
+    let args = spec.args(scene, &target)?;
+    let frozen_bounce = spec.frozen_bounce_passes() > 0;
     let x = x.as_slice()?.to_vec();
     parameters_match(x.len(), args.layout.bounds.len(), || {
         format!("x has {} values", x.len())
@@ -309,7 +244,11 @@ pub(super) fn held_out<'py>(
         }
     }
     let out = detach_in_pool(py, threads, || {
-        args.build(scene)?.held_out(&x, &dense, count, refine)
+        let mut fitness = args.build(scene)?;
+        if frozen_bounce {
+            fitness.freeze_bounce(None);
+        }
+        fitness.held_out(&x, &dense, count, refine)
     })??;
     let flat: Vec<f64> = out.iter().flat_map(|h| [h.loss, h.pixels as f64]).collect();
     PyArray1::from_vec(py, flat).reshape([count, 2])

@@ -14,7 +14,7 @@ import numpy as np
 
 from .. import _native
 from ..scene import Scene
-from .products import product_bounds
+from .spec import closed_form_spec
 
 __all__ = ["HELD_OUT_BLOCK", "HELD_OUT_FOLDS", "HELD_OUT_GAIN", "HeldOut", "block_folds", "held_out_evidence",
            "held_out_loss"]
@@ -63,11 +63,11 @@ def held_out_loss(scene: Scene, paths: list[str], x: list[float], target: np.nda
     products, whose refine by bisection would cost more than the fit's test) solved on the other folds."""
     if pixels is None:
         pixels = np.arange(scene.width * scene.height, dtype=np.uint32)
+    spec = closed_form_spec(scene, paths, pixels, environment=environment, clip=clip, norm=norm, space=space,
+                            saturated=saturated)
     v = _native.held_out(scene, target, np.asarray(x, dtype=np.float64),
-                         np.ascontiguousarray(folds, dtype=np.uint8), paths,
-                         pixels=np.ascontiguousarray(pixels, dtype=np.uint32), clip=clip, threads=threads,
-                         product_bounds=product_bounds(scene, environment), norm=norm, space=space,
-                         saturated=saturated, refine=not (norm == "l2" and space == "linear"))
+                         np.ascontiguousarray(folds, dtype=np.uint8), spec, threads=threads,
+                         refine=not (norm == "l2" and space == "linear"))
     return float(np.sum(v[:, 0]))
 
 

@@ -22,7 +22,7 @@ from .._srgb import decode, encode, per_code
 from ..errors import RtloopError
 from ..scene import Scene, scene_to_dict
 from .heldout import HeldOut, held_out_evidence, held_out_loss
-from .products import product_bounds
+from .spec import closed_form_spec
 
 __all__ = [
     "BOUNCE_PASSES",
@@ -353,13 +353,13 @@ def closed_form_loss(scene: Scene, paths: list[str], rows: list[list[float]], ta
                      threads: int | None, saturated: float | None = None, frozen_bounce: bool = False
                      ) -> np.ndarray:
     """The closed-form (least-squares products) loss of ``scene`` at each row of values of ``paths``, with
-    or without the environment column: the measure every test of a term compares. ``saturated``: where
-    clipping may start (``_native.evaluate``'s; None: SATURATED). ``frozen_bounce``: with interreflection,
-    the bounce solved once at the scene's own values and held for every row (``_native.evaluate``'s)."""
-    v = _native.evaluate(scene, paths, target, np.asarray(rows, dtype=np.float64), pixels=pixels,
-                         loss="l1_projected", clip=clip, threads=threads,
-                         product_bounds=product_bounds(scene, environment), norm=norm, space=space,
-                         saturated=saturated, frozen_bounce=frozen_bounce)
+    or without the environment column: the measure every test of a term compares (its spec:
+    :func:`.spec.closed_form_spec`). ``saturated``: where clipping may start (None: SATURATED).
+    ``frozen_bounce``: with interreflection, the bounce solved once at the scene's own values and held for
+    every row."""
+    spec = closed_form_spec(scene, paths, pixels, environment=environment, clip=clip, norm=norm, space=space,
+                            saturated=saturated, frozen_bounce=frozen_bounce)
+    v = _native.evaluate(scene, target, np.asarray(rows, dtype=np.float64), spec, threads=threads)
     return v[:, 0]
 
 

@@ -17,6 +17,7 @@ from .identifiability import keep_undetermined
 from .products import fix_gauge, product_bounds, split_products
 from .protocol import Budget, searched_paths
 from .result import GenerationInfo, StageResult
+from .spec import fitness_spec
 
 __all__ = ["Stages", "sample_object_pixels"]
 
@@ -65,14 +66,14 @@ class Stages:
         self.other_paths = [p for p in self.all_paths if not p.startswith("light.")]
         self.stages: list[StageResult] = []
         self.evaluations = 0
-        #: With interreflection: the searches' passes holding the bounce (``_native.optimize``'s
+        #: With interreflection: the searches' passes holding the bounce (``_native.FitnessSpec``'s
         #: ``frozen_bounce``; 0: none; the refit with the bounce sets ``selection.BOUNCE_PASSES``).
         self.frozen_bounce = 0
-        #: Objective values from which a pixel may be clipped (``_native.optimize``'s ``saturated``; None:
+        #: Objective values from which a pixel may be clipped (``_native.FitnessSpec``'s ``saturated``; None:
         #: SATURATED; ``goodness.clip_level`` for a noisy or JPEG photo).
         self.saturated: float | None = None
         #: Pixels within this many (Chebyshev distance) of another object's do not inform the closed-form
-        #: products (``_native.optimize``'s ``solve_margin``; 0: a pixel's 4-neighbours show its object;
+        #: products (``_native.FitnessSpec``'s ``solve_margin``; 0: a pixel's 4-neighbours show its object;
         #: :data:`rtloop.fit.JPEG_CHROMA_MARGIN` for a JPEG, whose colour mixes across silhouettes).
         self.solve_margin = 0
         #: With the footprint, the outline pixels (``_native.optimize``'s ``silhouettes``): "auto" integrated
@@ -116,14 +117,16 @@ class Stages:
 
         b = self.budget
         t = time.perf_counter()
+        spec = fitness_spec(paths, pixels=pixels, loss=loss, clip=self.clip, product_bounds=product_bounds,
+                            norm=self.norm, space=self.space, footprint=self.footprint == "on",
+                            frozen_bounce=self.frozen_bounce, saturated=self.saturated,
+                            solve_margin=self.solve_margin)
         out = _native.optimize(
-            stage_scene, paths, self.target, pixels=pixels, loss=loss, clip=self.clip, population=b.population,
-            generations=generations, f=b.f, cr=b.cr, seed=stage_seed, threads=self.threads,
-            callback=None if callback is None else on_generation, product_bounds=product_bounds,
-            method=method, polish=polish, norm=self.norm, space=self.space, with_products=callback is not None and self.products_per_generation,
-            polish_tol=polish_tol, footprint=self.footprint == "on",
+            stage_scene, self.target, spec, population=b.population, generations=generations, f=b.f, cr=b.cr,
+            seed=stage_seed, method=method, polish=polish, polish_tol=polish_tol,
             polish_footprint=self.footprint == "polish" and method == "lshade" and polish > 0,
-            frozen_bounce=self.frozen_bounce, saturated=self.saturated, solve_margin=self.solve_margin, x0=x0,
+            with_products=callback is not None and self.products_per_generation, x0=x0,
+            callback=None if callback is None else on_generation, threads=self.threads,
             silhouettes=self.silhouettes if self.footprint != "off" else "off",
         )
         history = [(gen, float(sum(objectives)), list(objectives), np.array(best))
