@@ -175,8 +175,9 @@ fn bench(c: &mut Criterion) {
     }
     g.finish();
 
-    // With the footprint (`FitnessSpec::footprint`): shadow edges, terminators and silhouettes over each
-    // pixel's area; one candidate as the polish evaluates it, and the set-up.
+    // With the footprint and the outlines (`FitnessSpec::footprint`, `FitnessSpec::outlines`, as a fit whose
+    // outline gate fires): shadow edges, terminators and outline pixels over each pixel's area; one
+    // candidate as the polish evaluates it, and the set-up.
     let mut g = c.benchmark_group("footprint");
     let with_footprint = || {
         Fitness::new(
@@ -187,6 +188,7 @@ fn bench(c: &mut Criterion) {
                 loss: LossKind::L1Projected,
                 projection: Some(matte.clone()),
                 footprint: true,
+                outlines: true,
                 ..Default::default()
             },
         )

@@ -113,3 +113,14 @@ def test_the_silhouette_render_differs_from_the_footprint_render_on_outlines_onl
     edge[:, :-1] |= ids[:, 1:] != ids[:, :-1]
     changed = np.abs(outlined - plain).max(axis=2) > 0
     assert changed.any() and not (changed & ~edge).any()
+
+
+def test_the_native_silhouettes_option_refuses_a_bad_value_in_one_line():
+    from rtloop.fit.spec import fitness_spec
+
+    scene, photo, _ = _photo("direct-side")
+    spec = fitness_spec(scene.fit_paths, loss="l1", footprint=True)
+    for bad in ("silhouette", "", "AUTO"):
+        with pytest.raises(rtloop.RtloopError, match=r"^silhouettes: must be 'auto', 'on' or 'off'") as e:
+            rtloop._native.optimize(scene, photo, spec, population=4, generations=1, silhouettes=bad)
+        assert "\n" not in str(e.value)

@@ -124,9 +124,17 @@ impl OptimizeResult {
     #[getter]
     #[allow(clippy::type_complexity)]
     fn outlines(&self) -> Option<(f64, f64, usize, f64, bool, Option<f64>, bool)> {
-        self.result
-            .outlines
-            .map(|e| (e.centre, e.integrated, e.pixels, e.share, e.fired, e.polished, e.kept))
+        self.result.outlines.map(|e| {
+            (
+                e.centre,
+                e.integrated,
+                e.pixels,
+                e.share,
+                e.fired,
+                e.polished,
+                e.kept,
+            )
+        })
     }
 
     /// (generation, best (float64), best's objectives, evaluations) after the initial population and

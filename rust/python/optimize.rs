@@ -119,7 +119,7 @@ pub(super) fn optimize<'py>(
         "on" => (true, false),
         other => {
             let msg = format!("silhouettes: must be 'auto', 'on' or 'off' (got {other:?})");
-            return Err(Error::Value(msg).into());
+            return Err(Error::Invalid(msg).into());
         }
     };
     let mut args = spec.args(scene, &target)?;

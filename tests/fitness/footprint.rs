@@ -282,21 +282,7 @@ fn the_closed_form_with_silhouettes_models_the_footprint_render() {
         .unwrap()
         .rgb;
     let (layout, x) = searched_light(&scene, light, sun);
-    let proj = Projection::matte(vec![[(0.0, 50.0); 3]; scene.objects.len()]);
-    let f = Fitness::new(
-        &scene,
-        layout,
-        &target,
-        FitnessSpec {
-            loss: LossKind::L1Projected,
-            projection: Some(proj),
-            clip: false,
-            footprint: true,
-            outlines: true,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let f = closed_form_footprint(&scene, layout, &target, (true, false));
     let loss: f64 = f.channel_losses(&x).iter().sum();
     let centres: f64 = f.at_pixel_centres().channel_losses(&x).iter().sum();
     let total: f64 = target.iter().map(|&v| v as f64).sum();
@@ -317,20 +303,11 @@ fn the_outline_gain_tells_an_integrated_photo_from_a_pixel_centre_one() {
     let (light, sun) = ([2.5, 2.2, 0.8], false);
     let scene = edge_scene(light, sun);
     let (layout, x) = searched_light(&scene, light, sun);
-    let proj = Projection::matte(vec![[(0.0, 50.0); 3]; scene.objects.len()]);
     let gain = |outlines: bool| {
         let target = rtloop::render::render_model(&scene, (None, None), 1, true, outlines)
             .unwrap()
             .rgb;
-        let spec = FitnessSpec {
-            loss: LossKind::L1Projected,
-            projection: Some(proj.clone()),
-            clip: false,
-            footprint: true,
-            outline_gate: true,
-            ..Default::default()
-        };
-        let f = Fitness::new(&scene, layout.clone(), &target, spec).unwrap();
+        let f = closed_form_footprint(&scene, layout.clone(), &target, (false, true));
         let total: f64 = target.iter().map(|&v| v as f64).sum();
         (f.outline_gain(&x).unwrap(), total)
     };
@@ -350,4 +327,29 @@ fn the_outline_gain_tells_an_integrated_photo_from_a_pixel_centre_one() {
     );
     let (centred, _) = gain(false);
     assert!(centred.centres < 0.3 * centred.integrated, "{centred:?}");
+}
+
+/// The closed form's fitness (products within 0-50, unclipped) of `layout` of `scene` against `target`,
+/// with the footprint, and (`FitnessSpec::outlines`, `FitnessSpec::outline_gate`) as given.
+fn closed_form_footprint(
+    scene: &Scene,
+    layout: ParamLayout,
+    target: &[f32],
+    (outlines, outline_gate): (bool, bool),
+) -> Fitness {
+    let projection = Some(Projection::matte(vec![
+        [(0.0, 50.0); 3];
+        scene.objects.len()
+    ]));
+    let (loss, clip, footprint) = (LossKind::L1Projected, false, true);
+    let spec = FitnessSpec {
+        loss,
+        projection,
+        clip,
+        footprint,
+        outlines,
+        outline_gate,
+        ..Default::default()
+    };
+    Fitness::new(scene, layout, target, spec).unwrap()
 }
