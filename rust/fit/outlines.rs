@@ -16,7 +16,7 @@ use crate::stage::{polish_stage, OutlineEvidence, StageResult};
 
 /// The gate fires where integrating the outline pixels lowers a default fit's loss, at its own light, by
 /// this share of it: the outlines' error is then about half of what the fit leaves (on the 27 study photos
-/// 1-41 % where the outlines barely move the light, 47-52 % on the outline-heavy ones; see
+/// 1-41 % where the outlines barely move the light, 46-51 % on the outline-heavy ones; see
 /// benches/results/silhouette.md).
 pub const OUTLINE_GAIN: f64 = 0.45;
 /// Or where some object has this share of its lit pixels on its outline (a ball lit from behind, lit on
