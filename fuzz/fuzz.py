@@ -500,6 +500,8 @@ def one(rng: random.Random, c: Counts, tmp: Path, first: dict, only: str | None 
                                              (math.nan, 0.0), "0.1,0.2", None])
         if rng.random() < 0.2:
             opts["tone"] = rng.choice(["on", "on", "off", "linear", "srgb", None])
+        if rng.random() < 0.2:  # the pixel footprint: the outline gate's choice, forced, the others, bad ones
+            opts["footprint"] = rng.choice(["auto", "silhouette", "silhouette", "on", "off", True, "SILHOUETTE", 2])
         if opts["lights"] not in (None, 1) and rng.random() < 0.7:  # mostly the options the lights fit takes
             for key in ("norm", "vignetting", "tone"):
                 opts.pop(key, None)
