@@ -150,3 +150,21 @@ def test_a_lobe_whose_refit_ends_at_its_box_top_is_refitted_with_the_box_moved_u
     assert raised[0]["loss_after"] < raised[0]["loss_before"]
     assert shininess == pytest.approx(1400.0, rel=0.01) and error < 0.02
     assert [s.name for s in r.stages][-1] == "light+colour+lobe (its box moved up)"
+
+
+def test_a_shininess_counts_as_at_its_box_top_within_a_fiftieth_of_the_box_in_log_shininess():
+    """The refit's small search may stop short of the top (a DiLiGenT photo's ended at 1973 of a box
+    [312.5, 2000]): within LOBE_TOP of the box's span in log shininess it is at the top, below it not; a
+    sphere whose shininess is not near the top is not named."""
+    import json
+
+    from rtloop.fit.terms import LOBE_TOP, _at_top
+
+    d = _glossy()
+    d["objects"][0]["material"]["specular"] = 0.0
+    d["fit"] = {"objects.ball.shininess": {"min": 312.5, "max": 2000.0}}
+    box = rtloop.Scene(json.dumps(d))
+    edge = 2000.0 * (312.5 / 2000.0) ** LOBE_TOP  # LOBE_TOP of the span below the top, in log shininess
+    for value, at in [(2000.0, True), (1973.0, True), (edge * 1.001, True), (edge * 0.999, False), (1000.0, False)]:
+        scene = box.with_params([value], ["objects.ball.shininess"])
+        assert _at_top(scene, box, ["ball"]) == ({"ball": pytest.approx(value)} if at else {}), value
