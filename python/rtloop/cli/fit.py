@@ -213,7 +213,9 @@ def _add_photo_args(p: Parser) -> None:
                    "paper's), l2 (Gaussian noise), huber or huber:H (quadratic within H, linear beyond)")
     choice(p, "--loss-space", ("auto", "linear", "srgb"),
            "where --norm compares render and IMAGE: 'auto' (default: linear, and a JPEG that direct "
-           "light explains refitted in sRGB), 'linear' (radiance) or 'srgb' (both sRGB-encoded, as an "
+           "light explains refitted in sRGB where its errors are alike in code values in the dark and "
+           "the bright pixels, as a JPEG's own are and a noisy sensor's are not), 'linear' (radiance) "
+           "or 'srgb' (both sRGB-encoded, as an "
            "8-bit file stores them: an error in the shadows counts as the file and the eye resolve it)")
 
 
