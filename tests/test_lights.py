@@ -87,6 +87,18 @@ def test_the_same_seed_gives_the_same_lights_on_any_thread_count():
     assert a.lights == b.lights and a.products == b.products
 
 
+def test_camera_terms_off_are_what_the_lights_fit_does_anyway():
+    """vignetting="off" and tone="off" ask for no camera term, as the lights fit has none: the same lights bit
+    for bit; a camera term asked for is still refused in one line naming it."""
+    _, image, scene_input = photo("key-fill-25")
+    plain = rtloop.fit(scene_input, image, lights=2, seed=3, generations=20)
+    off = rtloop.fit(scene_input, image, lights=2, seed=3, generations=20, vignetting="off", tone="off")
+    assert off.lights == plain.lights and off.products == plain.products
+    with pytest.raises(RtloopError, match=r"^vignetting: not taken by the lights fit") as e:
+        rtloop.fit(scene_input, image, lights=2, vignetting="on")
+    assert "\n" not in str(e.value)
+
+
 @pytest.mark.parametrize("bad", [0, 9, -1, 1.5, "two", True, [2]])
 def test_a_bad_lights_argument_is_one_line_naming_it(bad):
     _, image, scene_input = photo("key-fill-25")

@@ -541,11 +541,13 @@ PHOTO_LIGHTS = rtloop.render(SMALL_LIGHTS)
        st.booleans(), st.integers(0, 3),
        st.sampled_from([{}, {}, {"norm": "l2"}, {"norm": "auto"}, {"vignetting": "off"}, {"tone": "auto"},
                         {"footprint": True}, {"footprint": "silhouette"}, {"uncertainty": "bootstrap"},
-                        {"protocol": "paper"}]))
+                        {"protocol": "paper"}, {"tone": "off"}, {"vignetting": "on"}]))
 def test_the_lights_argument_fits_or_raises_rtloop_error(lights, listed, seed, other):
     """The lights fit runs, or refuses in one line; an argument it would ignore (one given other than its
-    default) is refused naming it, never dropped."""
-    ignored = {k: v for k, v in other.items() if (k, v) not in (("norm", "auto"), ("tone", "auto"))}
+    default, and other than the camera terms off, which the lights fit has none of) is refused naming it,
+    never dropped."""
+    honoured = (("norm", "auto"), ("tone", "auto"), ("vignetting", "off"), ("tone", "off"))
+    ignored = {k: v for k, v in other.items() if (k, v) not in honoured}
     try:
         with _quiet():
             result = rtloop.fit(SMALL_LIGHTS if listed else SMALL, PHOTO_LIGHTS if listed else PHOTO,

@@ -127,12 +127,18 @@ def check_options(scene: Scene, args: dict[str, Any], defaults: dict[str, Any]) 
                       highlights=highlights, footprint=footprint, framing=framing, budget=b, camera=camera)
 
 
+#: Values of NOT_WITH_LIGHTS that ask for what the lights fit does anyway: it fits no camera term and takes
+#: the image as it is (linear).
+AS_LIGHTS_DO = {"vignetting": ("off",), "tone": ("off", "linear")}
+
+
 def not_with_lights(args: dict[str, Any], defaults: dict[str, Any]) -> str | None:
-    """The first of NOT_WITH_LIGHTS that ``args`` (fit()'s) give other than its default, or None."""
+    """The first of NOT_WITH_LIGHTS that ``args`` (fit()'s) give other than its default and other than what
+    the lights fit does anyway (AS_LIGHTS_DO), or None."""
     for name in NOT_WITH_LIGHTS:
         value, default = args[name], defaults[name]
         given = value is not None if default is None else not (type(value) is type(default) and value == default)
-        if given and not (name == "tone" and value == "linear"):  # the lights fit takes the image as linear
+        if given and not (isinstance(value, str) and value in AS_LIGHTS_DO.get(name, ())):
             return name
     return None
 
