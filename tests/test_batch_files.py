@@ -152,7 +152,7 @@ def test_a_lights_job_refuses_the_options_the_lights_fit_does_not_take(tmp_path,
     case = LIGHTS / "key-fill-25"
     job = {"id": "l2", "scene": str(case / "scene_input.json"), "photo": str(case / "objective.png"),
            "lights": "auto"}
-    jobs = write_jobs(tmp_path / "jobs.jsonl", [job | {"norm": "l2"}, job | {"id": "vig", "vignetting": "off"}])
+    jobs = write_jobs(tmp_path / "jobs.jsonl", [job | {"norm": "l2"}, job | {"id": "vig", "vignetting": "on"}])
     assert batch_cli.main(["--batch", str(jobs), "--out", str(tmp_path / "b"), "--no-images", "-q"]) == 1
     records = {r["id"]: r for r in map(json.loads, (tmp_path / "b" / "results.jsonl").read_text().splitlines())}
     assert records["l2"]["status"] == "error" and records["l2"]["error"].startswith("norm: not taken by the lights")
