@@ -28,6 +28,7 @@ import numpy as np
 
 import rtloop
 
+from .._stats import median
 from ._common import AcquisitionError, check_image, jsonable
 from .ball import BallSilhouette, SpherePlacement, locate_ball
 from .boards import BoardSpec, parse_board
@@ -603,7 +604,7 @@ def card_region(photo: np.ndarray, rect: Any) -> np.ndarray:
     h, w = photo.shape[:2]
     x, y, rw, rh = (int(v) for v in rect)
     lum = photo @ np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)
-    ref = float(np.median(lum[y : y + rh, x : x + rw]))
+    ref = float(median(lum[y : y + rh, x : x + rw]))
     x0, y0, x1, y1 = max(0, x - rw), max(0, y - rh), min(w, x + 2 * rw), min(h, y + 2 * rh)
     near = (np.abs(lum[y0:y1, x0:x1] / max(ref, 1e-6) - 1) < CARD_TOLERANCE).astype(np.uint8)
     near[y - y0 : y - y0 + rh, x - x0 : x - x0 + rw] = 1

@@ -29,6 +29,7 @@ from .._pixels import edges
 from .._srgb import encode
 from ..errors import RtloopError
 from ..scene import Scene
+from .._stats import median
 
 __all__ = ["CHECK_ABOVE", "FRAMING_MODES", "MISMATCH_PX", "check_framing", "fit_reframed", "framing_check",
            "measure", "mismatch_verdict", "reframe", "register_outlines"]
@@ -142,7 +143,7 @@ def register_outlines(template: np.ndarray, photo: np.ndarray, band: np.ndarray,
         r = g * iv + offset[group] - t
         a = np.abs(r)
         if tukey is None and (step_no >= HUBER_STEPS or settled):
-            tukey = max(TUKEY_C * 1.4826 * float(np.median(a)), 1e-4)
+            tukey = max(TUKEY_C * 1.4826 * float(median(a)), 1e-4)
             settled = False
         if tukey is None:
             wts = np.where(a <= HUBER, 1.0, HUBER / np.maximum(a, 1e-12))

@@ -14,6 +14,7 @@ from .. import _native
 from .._pixels import SATURATED
 from .._srgb import decode, encode, per_code
 from .structure import CAUSES, residual_structure
+from .._stats import median
 
 __all__ = ["CLIPPED_SIGMAS", "EXPLAINED_RATIO", "clip_level", "encoded", "goodness", "jpeg_blocking", "noise_sigma"]
 
@@ -97,7 +98,7 @@ def jpeg_blocking(image: np.ndarray, encoding: np.ndarray | None = None) -> dict
     phases = _native.jpeg_phases(np.ascontiguousarray(codes, np.float32), JPEG_BLOCK, np.float32(JPEG_EDGE_CODES ** 2))
     # phases 0 and 6 have a grid line's pair as a neighbour (in d_{j-1} or d_{j+1}): not the photo's own
     grid, others = phases[JPEG_BLOCK - 1], phases[1 : JPEG_BLOCK - 2]
-    inside = np.median(others, axis=0)
+    inside = median(others, axis=0)
     spread = float(others.std(axis=0).mean())
     excess = grid - inside
     sd = float(excess.mean() / spread) if spread > 0 else (float("inf") if excess.mean() > 0 else 0.0)

@@ -7,6 +7,8 @@ from typing import Any
 
 import numpy as np
 
+from .._stats import median
+
 __all__ = ["DARK_CODES", "BRIGHT_CODES", "CODES_ALIKE", "JPEG_CHROMA_MARGIN", "JPEG_SRGB_CODES", "codes_alike",
            "is_jpeg", "jpeg_codes"]
 
@@ -79,7 +81,7 @@ def codes_alike(render: np.ndarray, target: np.ndarray, use: np.ndarray | None,
         if r.size < MIN_VALUES:
             out["alike"] = None
             return out
-        spreads.append(1.4826 * float(np.median(np.abs(r - np.median(r)))))
+        spreads.append(1.4826 * float(median(np.abs(r - median(r)))))
         out[f"{name}_spread_codes"] = round(spreads[-1], 3)
     out["alike"] = bool(spreads[0] <= CODES_ALIKE * max(spreads[1], 1e-9))
     return out

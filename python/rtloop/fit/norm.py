@@ -38,6 +38,7 @@ import numpy as np
 from .. import _native
 from .._pixels import SATURATED, edges
 from .._srgb import decode, encode, per_code
+from .._stats import median
 
 __all__ = ["DENSE_MEDIAN_Z", "NORMS", "dense_residual", "linear_file", "norm_verdict", "not_linear_verdict",
            "pixel_errors", "pixel_mask", "representable_pixels"]
@@ -128,9 +129,9 @@ def dense_residual(render: np.ndarray, target: np.ndarray, use: np.ndarray | Non
         return {"median_z": None, "dense": False, "pixels": int(keep.sum()), "noise_free": True}
     err = pixel_errors(target, codes, sigma, jpeg_codes)[keep]
     z = np.abs(m[keep] - t[keep]) / np.maximum(err, np.float32(1e-12))
-    median = float(np.median(z))
-    return {"median_z": median if math.isfinite(median) else None,
-            "dense": bool(math.isfinite(median) and median >= DENSE_MEDIAN_Z), "pixels": int(keep.sum()),
+    mid = float(median(z))
+    return {"median_z": mid if math.isfinite(mid) else None,
+            "dense": bool(math.isfinite(mid) and mid >= DENSE_MEDIAN_Z), "pixels": int(keep.sum()),
             "threshold": DENSE_MEDIAN_Z}
 
 

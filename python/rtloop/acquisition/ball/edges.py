@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from ..._stats import median
 from .._common import encode_srgb
 from .cone import BallSilhouette, _gauss_newton, _rays_cam, silhouette_polyline
 
@@ -51,7 +52,7 @@ def _refine(model, x: np.ndarray, edges: _Edges, f: float, tol: float) -> tuple[
         x = _gauss_newton(lambda p, sub=sub: model(p, sub), x)
         # Tighten the tolerance towards the fit's own scatter (keeps out near-miss shadow edges).
         res = np.abs(model(x, sub)) * f
-        tol = min(tol, max(0.75, 3.0 * 1.4826 * float(np.median(res))))
+        tol = min(tol, max(0.75, 3.0 * 1.4826 * float(median(res))))
     return x, chosen
 
 

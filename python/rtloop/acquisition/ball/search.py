@@ -9,6 +9,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from ..._stats import median
 from .._common import AcquisitionError, check_image, encode_srgb
 from .cone import (
     BallSilhouette,
@@ -97,7 +98,7 @@ def _make_silhouette(
         float(np.sqrt(np.mean(res**2))),
         float(len(chosen) / edges.k),
         source,
-        {"strength": float(np.median(edges.strength[chosen])), "edges": edges},
+        {"strength": float(median(edges.strength[chosen])), "edges": edges},
     )
 
 
