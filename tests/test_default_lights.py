@@ -15,7 +15,7 @@ import pytest
 import rtloop
 from rtloop.cli.fit import main
 from rtloop.fit.lights import LightsFit
-from rtloop.fit.more_lights import MIN_ANGLE_DEG, MIN_SHARE, distinct, gate
+from rtloop.fit.more_lights import BASELINES, MIN_ANGLE_DEG, MIN_SHARE, distinct, gate
 
 from conftest import BALL_ON_FLOOR
 
@@ -88,6 +88,8 @@ def test_a_further_light_the_held_out_pixels_do_not_ask_for_is_refused():
     first, second = tested["evidence"][:2]
     assert first["kept"] and not second["kept"] and second["lights"] == 2
     assert first["held_out"] == min(v for k, v in first.items() if k.startswith(("lights_fit", "given_fit")))
+    beaten = min(BASELINES, key=lambda k: first[k])  # the why names the baseline the further light had to beat
+    assert BASELINES[beaten] in tested["why"]
     assert second["held_out"] >= 0.75 * first["held_out"] or not second["passes"]
     same_fit(default, one, leave_out=("lights",))  # the one-light fit unchanged
     json.dumps(default.report())  # the evidence is JSON

@@ -183,6 +183,22 @@ def distinct(found: LightsFit, have: int) -> dict[str, Any]:
     return {"least_share": share, "least_angle_deg": angle, "passes": passes}
 
 
+#: The one-light baselines a further light must beat (:func:`_held_out_error` and the lights fit's own).
+BASELINES = {"lights_fit": "the lights fit's one light", "given_fit": "the one-light fit as it is",
+             "given_fit_tone": "the one-light fit through a tone curve",
+             "given_fit_field": "the one-light fit times a smooth field over the image"}
+
+
+def _baseline(evidence: list[dict[str, Any]]) -> str:
+    """Which one-light baseline a further light had to beat: the best on the held-out pixels of those in
+    ``evidence``'s first entry (the one-light counts), named."""
+    first = evidence[0] if evidence else {}
+    scores = {k: float(first[k]) for k in BASELINES if k in first}
+    if not scores:
+        return "the one-light fit"
+    return BASELINES[min(scores, key=scores.__getitem__)]
+
+
 def more_lights(result: FitResult, scene: Scene, image: np.ndarray, mask: Any, args: dict[str, Any],
                 defaults: dict[str, Any], t0: float) -> FitResult | LightsFit:
     """The default fit's answer: ``result`` (the one-light fit) unchanged where :func:`gate` does not fire;
@@ -209,8 +225,9 @@ def more_lights(result: FitResult, scene: Scene, image: np.ndarray, mask: Any, a
               "min_angle_deg": MIN_ANGLE_DEG}
     if found is None:
         record.update(kept=1, evidence=evidence, why=why or (
-            f"no further light lowered the one-light fit's held-out error by {AUTO_GAIN:.0%}, carrying "
-            f"{MIN_SHARE:.0%} of the light {MIN_ANGLE_DEG:g} degrees from the others: the one-light fit is kept"))
+            f"no further light lowered the held-out error of {_baseline(evidence)} by {AUTO_GAIN:.0%}, "
+            f"carrying {MIN_SHARE:.0%} of the light {MIN_ANGLE_DEG:g} degrees from the others: the one-light "
+            "fit is kept"))
         result.model["lights"] = record
         result.seconds = time.perf_counter() - t0
         return result
