@@ -166,10 +166,10 @@ class _Selection:
     def forward(self) -> list[str]:
         """Forward selection: each auto term is tested on top of those selected so far, and a term not
         selected is tested again once another has been added (a missing term's share of the residual shows
-        only when the others' is explained: on lamp-front a dim room's light takes 3.5 % of the loss beside
-        the unexplained bounce and lobe, 5.1 % on top of them), until a round adds nothing (a term is tested
-        at most once per term selected, and once more only if another was selected after it). Returns the
-        terms selected, in TERM_ORDER."""
+        only when the others' is explained: judged by its share of the whole loss, lamp-front's dim room
+        light takes 3.5 % beside the unexplained bounce and lobe, 5.1 % on top of them), until a round adds
+        nothing (a term is tested at most once per term selected, and once more only if another was selected
+        after it). Returns the terms selected, in TERM_ORDER."""
         options, model, work = self.options, self.model, self.work
         where, x = self.first.paths, list(self.first.x)
         self.model_work, self.model_env, added = work, self.env, []
