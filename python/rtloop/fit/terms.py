@@ -16,6 +16,7 @@ from ..scene import Scene
 from .bounds import narrowed, restore_bounds
 from .coat import choose_lobe, with_coat
 from .constant import as_environment, compare_constant, declares_ambient
+from .excess import noise_floor
 from .heldout import HeldOut, block_folds, held_out_loss
 from .jpeg import jpeg_codes
 from .observation import Observation
@@ -116,6 +117,11 @@ class _Selection:
         w, h = self.plan.scene.width, self.plan.scene.height
         grid = np.arange(w * h, dtype=np.uint32).reshape(h, w)[::2, ::2]
         self.sub = grid.ravel() if photo.use is None else np.intersect1d(grid.ravel(), photo.use).astype(np.uint32)
+        # the loss the photo's noise leaves on those pixels: the environment's and the bounce's gains are
+        # measured beyond it (fit/excess.py)
+        self.floor = noise_floor(photo.encoding, photo.sigma, photo.blocking, self.sub, norm=self.stages.norm,
+                                 space=self.options.first_space)
+        model["residual"]["test_noise_floor"] = self.floor
         return False
 
     def check_encoding(self, encoding: dict[str, Any] | None) -> None:
@@ -160,10 +166,10 @@ class _Selection:
     def forward(self) -> list[str]:
         """Forward selection: each auto term is tested on top of those selected so far, and a term not
         selected is tested again once another has been added (a missing term's share of the residual shows
-        only when the others' is explained: on lamp-front a dim room's light takes 3.5 % of the loss beside
-        the unexplained bounce and lobe, 5.1 % on top of them), until a round adds nothing (a term is tested
-        at most once per term selected, and once more only if another was selected after it). Returns the
-        terms selected, in TERM_ORDER."""
+        only when the others' is explained: judged by its share of the whole loss, lamp-front's dim room
+        light takes 3.5 % beside the unexplained bounce and lobe, 5.1 % on top of them), until a round adds
+        nothing (a term is tested at most once per term selected, and once more only if another was selected
+        after it). Returns the terms selected, in TERM_ORDER."""
         options, model, work = self.options, self.model, self.work
         where, x = self.first.paths, list(self.first.x)
         self.model_work, self.model_env, added = work, self.env, []
@@ -195,7 +201,7 @@ class _Selection:
                     self.add_term(term, ev, shininess)
                     known = ev["held_out"].get("loss_with")
                     self.held = (self.held_out(self.model_work, where, x, self.model_env) if known is None
-                                 else HeldOut(self.held.folds, lambda known=known: known))
+                                 else HeldOut(self.held.folds, lambda known=known: known, self.floor))
         added.sort(key=TERM_ORDER.index)
         return added
 
@@ -204,7 +210,7 @@ class _Selection:
         the model ``work`` (``env``: with the environment's column) at the light ``x`` (of ``where``)."""
         folds = block_folds(self.sub, self.plan.scene.width)
         return HeldOut(folds, lambda: held_out_loss(work.with_params(x, where), where, x, self.photo.target,
-                                                    self.sub, folds, environment=env, **self.kw))
+                                                    self.sub, folds, environment=env, **self.kw), self.floor)
 
     def evidence(self, term: str, at: Scene, where: list[str], x: list[float]) -> tuple[dict[str, Any], float | None]:
         """``term``'s test at ``at`` (the model so far at the light found), and a lobe's best trial shininess."""
