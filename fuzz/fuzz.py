@@ -235,7 +235,8 @@ def batch(rng: random.Random, c: Counts, tmp: Path, ids: bool = False) -> None:
     lines = id_lines(rng) if ids else [job_line(rng) for _ in range(rng.randint(1, 3))]
     (root / "jobs.jsonl").write_text("\n".join(lines) + "\n")
     flags = [] if rng.random() < 0.5 else rng.choice([["--warm-start"], ["--retry-failed"], ["--threads", str(odd(rng))],
-                        ["--final-spp", str(odd(rng))], ["--population", str(odd(rng))]])
+                        ["--final-spp", str(odd(rng))], ["--population", str(odd(rng))], ["--processes"],
+                        ["--processes", "--warm-start"], ["--processes", "--workers", str(odd(rng))]])
     before, top = {**_tree(tmp / "outside"), **_tree(root)}, set(os.listdir(tmp))
     err = io.StringIO()
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):

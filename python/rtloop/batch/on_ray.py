@@ -9,30 +9,13 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 from ..errors import RtloopError
-from .jobs import Job, JobResult, run_job
-from .local import blas_threads
+from .jobs import Job, JobResult
+from .worker import plain_job as _plain
+from .worker import run_plain as _task
 
 __all__ = ["RAY_HINT", "run_ray"]
 
 RAY_HINT = "Ray is not installed: pip install 'rtloop[ray]' (or pip install 'ray>=2.9')"
-
-
-def _task(job: dict[str, Any], digest: str, threads: int, kwargs: dict[str, Any]) -> JobResult:
-    """One job inside a Ray worker: plain inputs in, a plain JobResult out (no FitResult); numpy's BLAS
-    on the task's ``threads`` (Ray sets OMP_NUM_THREADS only where the worker starts with it)."""
-    with blas_threads(threads):
-        return run_job(Job(**job), threads=threads, hash=digest, keep_fit=False, **kwargs)
-
-
-def _plain(job: Job) -> dict[str, Any]:
-    """The job's fields for a task, its paths made absolute here (a worker's working directory is not the
-    driver's)."""
-    options = dict(job.options)
-    if isinstance(options.get("grey_card"), dict):
-        options["grey_card"] = {**options["grey_card"], "mask": os.path.abspath(options["grey_card"]["mask"])}
-    return {"id": job.id, "scene": os.path.abspath(job.scene), "photo": os.path.abspath(job.photo),
-            "seed": job.seed, "mask": None if job.mask is None else os.path.abspath(job.mask),
-            "options": options}
 
 
 #: How long a cluster's address may take to accept a connection before the batch gives up.
