@@ -9,7 +9,6 @@ from typing import Any
 
 import numpy as np
 
-from ..fit.excess import FLOOR_SHARE
 from ..fit.heldout import HELD_OUT_GAIN
 
 __all__ = ["duration", "model_lines", "summary"]
@@ -203,8 +202,6 @@ def model_lines(model: dict[str, Any], fitted: dict[str, Any]) -> list[str]:
         lines.append(f"  {term}: {verdict} (loss at the light found without it"
                      + (f", with {' and '.join(on_top)}" if on_top else "")
                      + f" {ev['loss_without']:.4g} -> {ev['loss_with']:.4g} with it, {100 * ev['gain']:+.1f}%"
-                     + (f" of the {ev['loss_without'] - min(ev['noise_floor'], FLOOR_SHARE * ev['loss_without']):.4g} "
-                        f"beyond the noise floor" if ev.get("noise_floor") is not None else "")
                      + (f"; at most {ev['loss_with_nested']:.4g} with its products' best" if ev.get("raised") else "")
                      + (f", BIC {-bic:+.4g}" if bic is not None else "")
                      + (f"; {100 * ev['earlier_gain']:+.1f}% before them)" if "earlier_gain" in ev else ")"))
@@ -212,8 +209,7 @@ def model_lines(model: dict[str, Any], fitted: dict[str, Any]) -> list[str]:
         if "gain" in held:
             lines.append(f"    held out ({held['folds']} folds of {held['block']}x{held['block']}-pixel blocks): "
                          f"{held['loss_without']:.4g} -> {held['loss_with']:.4g} with it, {100 * held['gain']:+.1f}% "
-                         + ("beyond the noise floor " if held.get("noise_floor") is not None else "")
-                         + f"(at least {100 * HELD_OUT_GAIN:g}% needed)")
+                         f"(at least {100 * HELD_OUT_GAIN:g}% needed)")
         if ev.get("lobe") == "coat":
             lines.append(f"    lobe: a clear coat (GGX roughness {ev['coat']['roughness']:.3g}, IOR {ev['coat']['ior']:g}), "
                          f"its loss {ev['coat']['loss_with']:.4g} against Blinn-Phong's {ev['blinn_phong']['loss_with']:.4g}")

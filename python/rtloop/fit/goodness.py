@@ -16,8 +16,7 @@ from .._srgb import decode, encode, per_code
 from .structure import CAUSES, residual_structure
 from .._stats import median
 
-__all__ = ["CLIPPED_SIGMAS", "EXPLAINED_RATIO", "clip_level", "encoded", "goodness", "jpeg_blocking", "noise_sigma",
-           "pixel_floor"]
+__all__ = ["CLIPPED_SIGMAS", "EXPLAINED_RATIO", "clip_level", "encoded", "goodness", "jpeg_blocking", "noise_sigma"]
 
 #: A residual within this many times the noise floor is explained to the noise level (the same factor as
 #: the term selection's screen, :data:`rtloop.fit.selection.EXPLAINED`).
@@ -76,19 +75,6 @@ def _quarter_step(e: np.ndarray) -> np.ndarray:
 def _quarter_step_at(x: np.ndarray) -> np.ndarray:
     """:func:`_quarter_step` at the float32 linear values ``x``."""
     return _quarter_step(_encode32(x))
-
-
-def pixel_floor(quant: np.ndarray, sigma: np.ndarray, blocking: dict[str, Any]) -> np.ndarray:
-    """Per pixel and channel, the mean absolute error an exact model would leave (linear units): the larger
-    of the 8-bit rounding's (``quant``, a quarter code step at each value, (N, 3) float32) and the measured
-    noise's (``sigma`` per channel x sqrt(2/pi)) added in quadrature to a JPEG's blocks' (``blocking``'s
-    RMS error in codes times the code step there x sqrt(2/pi))."""
-    jpeg_codes = np.asarray(blocking["error_codes"], np.float32)[None, :]
-    noise = (np.asarray(sigma, np.float64) * math.sqrt(2.0 / math.pi)).astype(np.float32)[None, :]
-    if jpeg_codes.any():
-        jpeg = np.float32(4.0) * quant * jpeg_codes
-        return np.maximum(quant, np.sqrt(noise * noise + np.float32(2.0 / math.pi) * jpeg * jpeg))
-    return np.maximum(quant, np.sqrt(noise * noise))  # no JPEG: noise^2 + 0 is noise^2 itself, per channel
 
 
 def jpeg_blocking(image: np.ndarray, encoding: np.ndarray | None = None) -> dict[str, Any]:
@@ -190,7 +176,14 @@ def goodness(scene: Any, target: np.ndarray, use: np.ndarray | None, clip: bool 
         quant = _quarter_step_at(t if everywhere else np.compress(keep, t, axis=0))
     sigma = noise_sigma(target) if sigma is None else np.asarray(sigma, np.float64)
     blocking = jpeg_blocking(target) if blocking is None else blocking
-    floor = pixel_floor(quant, sigma, blocking)
+    # The JPEG's error per pixel in linear units: its RMS in codes times the code step there (4 quarter steps).
+    jpeg_codes = np.asarray(blocking["error_codes"], np.float32)[None, :]
+    noise = (sigma * math.sqrt(2.0 / math.pi)).astype(np.float32)[None, :]
+    if jpeg_codes.any():
+        jpeg = np.float32(4.0) * quant * jpeg_codes
+        floor = np.maximum(quant, np.sqrt(noise * noise + np.float32(2.0 / math.pi) * jpeg * jpeg))
+    else:  # no JPEG: its term is 0, and noise^2 + 0 is noise^2 itself, per channel
+        floor = np.maximum(quant, np.sqrt(noise * noise))
     resid = m - t
     np.abs(resid, out=resid)
     resid = resid if everywhere else np.compress(keep, resid, axis=0)

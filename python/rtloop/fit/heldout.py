@@ -14,7 +14,6 @@ import numpy as np
 
 from .. import _native
 from ..scene import Scene
-from .excess import excess_gain
 from .spec import closed_form_spec
 
 __all__ = ["HELD_OUT_BLOCK", "HELD_OUT_FOLDS", "HELD_OUT_GAIN", "HeldOut", "block_folds", "held_out_evidence",
@@ -42,13 +41,10 @@ def block_folds(pixels: np.ndarray, width: int, block: int = HELD_OUT_BLOCK,
 class HeldOut:
     """A held-out comparison's pixels' folds (one per pixel of the test, :func:`block_folds`) and the held-out
     loss of the model without the term tested: ``without`` computes it (once, when first asked: a photo
-    whose terms the in-sample rule all rejects never pays for it). ``floor``: the loss the photo's noise
-    leaves on the test's pixels (:func:`.excess.noise_floor`; None: none), which both the in-sample and the
-    held-out gains are measured beyond (:func:`.excess.excess_gain`)."""
+    whose terms the in-sample rule all rejects never pays for it)."""
 
-    def __init__(self, folds: np.ndarray, without: Callable[[], float], floor: float | None = None):
+    def __init__(self, folds: np.ndarray, without: Callable[[], float]):
         self.folds = folds
-        self.floor = floor
         self._without = without
         self._value: float | None = None
 
@@ -75,11 +71,10 @@ def held_out_loss(scene: Scene, paths: list[str], x: list[float], target: np.nda
     return float(np.sum(v[:, 0]))
 
 
-def held_out_evidence(without: float, with_term: float, floor: float | None = None) -> dict[str, Any]:
+def held_out_evidence(without: float, with_term: float) -> dict[str, Any]:
     """The held-out record of a term that takes the held-out loss from ``without`` to ``with_term``: both
-    losses, the gain (of the loss beyond the noise ``floor`` of the same pixels where given:
-    :func:`.excess.excess_gain`), the folds and the block, and whether it passes (``gain`` >= HELD_OUT_GAIN)."""
-    gain = excess_gain(without, with_term, floor)
+    losses, the relative gain, the folds and the block, and whether it passes (``gain`` >= HELD_OUT_GAIN)."""
+    gain = (without - with_term) / without if without > 0 else 0.0
     return {"loss_without": without, "loss_with": with_term, "gain": gain, "passes": bool(gain >= HELD_OUT_GAIN),
-            "folds": HELD_OUT_FOLDS, "block": HELD_OUT_BLOCK, "noise_floor": floor,
-            "rule": f"the held-out loss beyond the noise floor must fall by at least {HELD_OUT_GAIN:.0%} too"}
+            "folds": HELD_OUT_FOLDS, "block": HELD_OUT_BLOCK,
+            "rule": f"the held-out loss must fall by at least {HELD_OUT_GAIN:.0%} too"}

@@ -21,7 +21,6 @@ from .. import _native
 from .._srgb import decode, encode, per_code
 from ..errors import RtloopError
 from ..scene import Scene, scene_to_dict
-from .excess import excess_gain
 from .heldout import HeldOut, held_out_evidence, held_out_loss
 from .spec import closed_form_spec
 
@@ -322,7 +321,7 @@ def interreflection_evidence(scene: Scene, paths: list[str], x: list[float], tar
           "saturated": saturated}
     bounced = with_interreflection(scene)
     l1 = closed_form_loss(bounced, paths, [x], target, pixels, **kw)[0]
-    ev = _verdict(base, l1, active_pixels, 1, norm, nested=False, floor=held.floor if held else None)
+    ev = _verdict(base, l1, active_pixels, 1, norm, nested=False)
     return _judge_held_out(ev, held, lambda folds: held_out_loss(bounced, paths, x, target, pixels, folds, **kw))
 
 
@@ -344,8 +343,7 @@ def environment_evidence(scene: Scene, paths: list[str], x: list[float], target:
     compared)."""
     kw = {"clip": clip, "norm": norm, "space": space, "threads": threads, "saturated": saturated}
     l1 = closed_form_loss(scene, paths, [x], target, pixels, environment=True, **kw)[0]
-    ev = _verdict(base, l1, active_pixels, 3 * len(scene.object_names), norm, nested=True,
-                  floor=held.floor if held else None)
+    ev = _verdict(base, l1, active_pixels, 3 * len(scene.object_names), norm, nested=True)
     return _judge_held_out(ev, held, lambda folds: held_out_loss(scene, paths, x, target, pixels, folds,
                                                                  environment=True, **kw))
 
@@ -390,21 +388,18 @@ def _judge_held_out(ev: dict[str, Any], held: HeldOut | None,
     if not ev["selected"]:
         ev["held_out"] = {"skipped": "not measured: the in-sample rule rejects the term"}
         return ev
-    ev["held_out"] = held_out_evidence(held.without(), with_term(held.folds), held.floor)
+    ev["held_out"] = held_out_evidence(held.without(), with_term(held.folds))
     ev["selected"] = ev["held_out"]["passes"]
     return ev
 
 
-def _verdict(l0: float, l1: float, active_pixels: int, k: int, norm: str, *, nested: bool,
-             floor: float | None = None) -> dict[str, Any]:
+def _verdict(l0: float, l1: float, active_pixels: int, k: int, norm: str, *, nested: bool) -> dict[str, Any]:
     """The evidence for a term that takes the loss from ``l0`` to ``l1`` with ``k`` more parameters.
     ``nested``: the model without the term is the model with it at 0 (the environment, a lobe: their
     products' bounds hold 0), so the term's best loss is at most ``l0`` (``loss_with_nested``); the
-    selection is unchanged by it (a term must lower the closed form's own loss). ``floor``: the photo's
-    noise floor on the same pixels, beyond which the gain is measured (:func:`.excess.excess_gain`; None:
-    the gain is of the whole loss)."""
+    selection is unchanged by it (a term must lower the closed form's own loss)."""
     n = 3 * max(int(active_pixels), 1)
-    gain = excess_gain(l0, l1, floor)
+    gain = (l0 - l1) / l0 if l0 > 0 else 0.0
     per = n if norm == "l2" else 2 * n
     if l0 > 0 and l1 > 0:
         dbic = per * math.log(l0 / l1) - k * math.log(n)
@@ -417,15 +412,11 @@ def _verdict(l0: float, l1: float, active_pixels: int, k: int, norm: str, *, nes
         "gain": gain,
         "delta_bic": dbic if math.isfinite(dbic) else None,
         "selected": selected,
-        "rule": f"added when the loss {'beyond the noise floor ' if floor is not None else ''}falls by at least "
-                f"{MIN_GAIN:.0%} and the BIC falls",
+        "rule": f"added when the loss falls by at least {MIN_GAIN:.0%} and the BIC falls",
         "nested": nested,
         "loss_with_nested": min(l0, l1) if nested else l1,
         "raised": bool(l1 > l0),
     }
-    if floor is not None:
-        out["noise_floor"] = floor
-        out["gain_of_loss"] = (l0 - l1) / l0 if l0 > 0 else 0.0
     if l1 > l0:
         out["why_raised"] = WHY_RAISED[nested].format(norm=norm.upper())
     return out

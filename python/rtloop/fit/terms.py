@@ -16,7 +16,6 @@ from ..scene import Scene
 from .bounds import narrowed, restore_bounds
 from .coat import choose_lobe, with_coat
 from .constant import as_environment, compare_constant, declares_ambient
-from .excess import noise_floor
 from .heldout import HeldOut, block_folds, held_out_loss
 from .jpeg import jpeg_codes
 from .observation import Observation
@@ -117,11 +116,6 @@ class _Selection:
         w, h = self.plan.scene.width, self.plan.scene.height
         grid = np.arange(w * h, dtype=np.uint32).reshape(h, w)[::2, ::2]
         self.sub = grid.ravel() if photo.use is None else np.intersect1d(grid.ravel(), photo.use).astype(np.uint32)
-        # the loss the photo's noise leaves on those pixels: the environment's and the bounce's gains are
-        # measured beyond it (fit/excess.py)
-        self.floor = noise_floor(photo.encoding, photo.sigma, photo.blocking, self.sub, norm=self.stages.norm,
-                                 space=self.options.first_space)
-        model["residual"]["test_noise_floor"] = self.floor
         return False
 
     def check_encoding(self, encoding: dict[str, Any] | None) -> None:
@@ -201,7 +195,7 @@ class _Selection:
                     self.add_term(term, ev, shininess)
                     known = ev["held_out"].get("loss_with")
                     self.held = (self.held_out(self.model_work, where, x, self.model_env) if known is None
-                                 else HeldOut(self.held.folds, lambda known=known: known, self.floor))
+                                 else HeldOut(self.held.folds, lambda known=known: known))
         added.sort(key=TERM_ORDER.index)
         return added
 
@@ -210,7 +204,7 @@ class _Selection:
         the model ``work`` (``env``: with the environment's column) at the light ``x`` (of ``where``)."""
         folds = block_folds(self.sub, self.plan.scene.width)
         return HeldOut(folds, lambda: held_out_loss(work.with_params(x, where), where, x, self.photo.target,
-                                                    self.sub, folds, environment=env, **self.kw), self.floor)
+                                                    self.sub, folds, environment=env, **self.kw))
 
     def evidence(self, term: str, at: Scene, where: list[str], x: list[float]) -> tuple[dict[str, Any], float | None]:
         """``term``'s test at ``at`` (the model so far at the light found), and a lobe's best trial shininess."""
