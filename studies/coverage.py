@@ -27,10 +27,12 @@ sigma reported.
 Usage (from the repository root, with the extension built)::
 
     python studies/coverage.py [--footprint {auto,on,off}] [--bootstrap] [--classic] [--no-onephoto] [--only CLASS]
-                               [--json rows.json]
+                               [--sandwich-form {cr2,cr1}] [--held {on,off}] [--json rows.json]
 
 ``--footprint`` sets the fit's footprint mode: "auto" (the default fit: its polish integrates pixels over
 their area at shadow edges and terminators), "on" (every search too), "off" (pixel centres).
+``--sandwich-form cr1`` computes the block sandwich without the bias reduction and ``--held off`` holds the
+coat roughness the fit chose as known, as the bars did before (the comparison in docs/uncertainty.md).
 """
 
 from __future__ import annotations
@@ -238,6 +240,7 @@ def _row(name: str, cls: str, result: Any, light: np.ndarray, truth: dict[str, A
                            "boot_ms": (u.get("bootstrap") or {}).get("ms", float("nan")),
                            "model_lacks": (u.get("bars") or {}).get("model_lacks"),
                            "widened_by": (u.get("bars") or {}).get("widened_by"),
+                           "light_blocks": (u.get("robust") or {}).get("light_blocks"),
                            "not_determined": sorted((u.get("bars") or {}).get("not_determined", {})),
                            "explained": (result.goodness or {}).get("explained", {}),
                            "terms": list((result.model or {}).get("terms", [])),
@@ -289,9 +292,9 @@ def summary(rows: list[dict[str, Any]]) -> list[str]:
 def photo_summary(rows: list[dict[str, Any]], key: str = "bars") -> list[str]:
     """Per class and over all photos: the share of photos whose true light lies within 3 sigma on every
     determined coordinate (photos whose light is not determined at all are counted apart), the largest
-    determined light sigma, and (clean photos) median sigma over median error."""
-    lines = ["| class | photos | light within 3 sigma | light not determined | largest light sigma (m) |",
-             "|---|---|---|---|---|"]
+    determined light sigma, and how many image blocks the light's sandwich bar rests on (``robust["light_blocks"]``)."""
+    lines = [("| class | photos | light within 3 sigma | light not determined | largest light sigma (m) | "
+              "light's bar rests on (blocks, median) |"), "|---|---|---|---|---|---|"]
     for cls in (*CLASSES, "all"):
         sel = [r for r in rows if cls in (r["class"], "all")]
         if not sel:
@@ -299,8 +302,9 @@ def photo_summary(rows: list[dict[str, Any]], key: str = "bars") -> list[str]:
         judged = [r for r in sel if np.isfinite(r[f"z_{key}"]).any()]
         inside = sum(bool(np.nanmax(r[f"z_{key}"]) <= 3) for r in judged)
         big = max((np.nanmax(r[f"sigma_{key}_mm"]) for r in judged), default=float("nan")) / 1e3
+        blocks = [r["light_blocks"] for r in sel if r.get("light_blocks") is not None]
         lines.append(f"| {cls} | {len(sel)} | {inside} / {len(judged)} ({100 * inside / max(len(judged), 1):.0f} %) | "
-                     f"{len(sel) - len(judged)} | {big:.3g} |")
+                     f"{len(sel) - len(judged)} | {big:.3g} | {np.median(blocks) if blocks else float('nan'):.1f} |")
     return lines
 
 
@@ -327,7 +331,18 @@ def main() -> int:
     parser.add_argument("--only", choices=CLASSES, help="only this class of photos")
     parser.add_argument("--classic", action="store_true",
                         help="only the fixtures and their noise and JPEG variants (no camera or ambient class)")
+    parser.add_argument("--sandwich-form", choices=("cr2", "cr1"), default="cr2",
+                        help="the block sandwich's form: 'cr2' (the default: each block's score bias-reduced for its "
+                        "leverage) or 'cr1' (the plain form with B / (B - p), as before; "
+                        "rtloop.uncertainty.sandwich.BIAS_REDUCED)")
+    parser.add_argument("--held", choices=("on", "off"), default="on",
+                        help="whether the bars carry the coat roughness the fit chose (off: held as known, as before; "
+                        "rtloop.uncertainty.nuisance.HELD_TERMS)")
     args = parser.parse_args()
+    from rtloop.uncertainty import nuisance, sandwich
+
+    sandwich.BIAS_REDUCED = args.sandwich_form == "cr2"
+    nuisance.HELD_TERMS = args.held == "on"
     rows = []
     boot = args.bootstrap
     print("| case | class | light error (mm) | worst product (%) | max z light (GN / sandwich" + (" / bootstrap" if boot else "")

@@ -92,10 +92,11 @@ def _uncertainty(result: FitResult, options: FitOptions, photo: Observation, at_
     """``result.uncertainty``: the Gauss-Newton and sandwich error bars, and with ``uncertainty="bootstrap"``
     the block bootstrap's; a failure recorded in its ``warnings``."""
     from ..uncertainty import estimate_uncertainty
+    from ..uncertainty.nuisance import current
 
-    try:
+    try:  # a photo a camera term corrected (.camera): the term's parameters profiled out (``current()``)
         result.uncertainty = estimate_uncertainty(result, photo.target, clip=options.clip, mask=photo.mask,
-                                                  render=at_optimum, compared=as_compared)
+                                                  render=at_optimum, compared=as_compared, nuisance=current())
     except RtloopError as e:
         result.uncertainty = {"method": "gauss-newton", "sigma": {}, "warnings": [str(e)]}
     if options.uncertainty == "bootstrap":

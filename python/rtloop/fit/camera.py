@@ -32,6 +32,7 @@ from .._pixels import SATURATED, edges
 from .._srgb import codes8, encode
 from ..errors import RtloopError
 from ..scene import Scene, load_scene
+from ..uncertainty.nuisance import Nuisance, profiled_by
 from .bounds import narrowed, restore_bounds
 
 MODES = ("auto", "on", "off")
@@ -476,6 +477,28 @@ def corrected(target: np.ndarray, term: str, fitted: Any, scene: Scene) -> tuple
     return g.astype(np.float32), {"knots": KNOTS.round(3).tolist(), "linear_at_knots": curve.round(5).tolist()}
 
 
+def tone_nuisance(target: np.ndarray, w: Any) -> Nuisance:
+    """The fitted tone curve's parameters as nuisance parameters of the corrected photo's fit: the curve
+    g(v) = sum_j w'_j ramp_j(v), w' = w / sum(w) (g(1) = 1, the gauge :func:`corrected` fixes: the curve and
+    the colours share one scale), so the corrected photo moves along ramp_j - ramp_ref per free weight
+    (``ref`` the largest). Weights the non-negative fit left at 0 are on their bound and held, as that
+    fit's active set holds them. ``target``: the photo as the file gave it (linear, (H, W, 3))."""
+    wn = np.asarray(w, float) / float(np.sum(w))
+    free = np.flatnonzero(wn > 0)
+    ref = int(free[np.argmax(wn[free])])
+    others = free[free != ref]
+    v = encode(np.clip(np.asarray(target), 0, 1)).reshape(-1, 3)
+    lo, hi = KNOTS[:-1], KNOTS[1:]
+
+    def columns(idx: np.ndarray) -> np.ndarray:
+        vv = v[idx].astype(np.float64).ravel()[:, None]
+        ramps = np.clip((vv - lo[np.r_[others, ref]]) / (hi - lo)[np.r_[others, ref]], 0.0, 1.0)
+        return ramps[:, :-1] - ramps[:, -1:]
+
+    return Nuisance("the fitted tone curve's weights between its knots", tuple(
+        f"camera.tone.w{j}" for j in others), columns)
+
+
 def applicable(fitted: Scene) -> str | None:
     """Why the camera terms are not tested on this fit (None: they are): a matte scene, one point light
     whose position the fit frees, no ambient light."""
@@ -538,7 +561,10 @@ def fit_through_camera(fit_once: Callable[..., Any], scene: Scene, image: np.nda
     # search's light (the ordinary search would trade the light against what the correction left).
     near = narrowed(scene.with_params([float(v) for v in light], ["light.position"]), ["light.position"],
                     REFIT_FRACTION)
-    result = fit_once(out, near)
+    # A tone curve's own uncertainty is carried into the bars: its parameters are profiled out of them
+    # (rtloop.uncertainty.nuisance; vignetting's two are left to the corrected photo's bars).
+    with profiled_by(tone_nuisance(target, fitted) if term == "tone" else None):
+        result = fit_once(out, near)
     result.scene = restore_bounds(result.scene, scene)
     record.update(terms=[term], **{term: params}, search={"light": [float(v) for v in light],
                                                            "renders": renders})

@@ -24,6 +24,7 @@ from .bars import error_bars
 from .covariance import _Covariance, _direction_cone, _product_sigma
 from .light import light_distance
 from .linalg import _svd_scaled
+from .nuisance import Nuisance, basis, held_terms, profile
 from .pixels import UsedPixels, used_pixels
 from .sandwich import block_sandwich, block_side, sandwich_norm
 from .space import _products_blocker, _products_space, _scene_space, _Space
@@ -54,6 +55,7 @@ def estimate_uncertainty(
     mask: np.ndarray | None = None,
     render: np.ndarray | None = None,
     compared: np.ndarray | None = None,
+    nuisance: Nuisance | None = None,
 ) -> dict[str, Any]:
     """Per-parameter standard deviations and correlations of a fit (Gauss-Newton at the optimum).
 
@@ -69,7 +71,10 @@ def estimate_uncertainty(
     image the fit compared with the photo, whose residual sigma scales (default: for a fit that took the
     pixel footprint, ``result.settings["footprint"]``, the footprint render; else the render at the
     optimum). The Jacobian's columns stay pixel-centre differences: the footprint changes only pixels at
-    shadow edges and terminators, which the Gauss-Newton model leaves out.
+    shadow edges and terminators, which the Gauss-Newton model leaves out. ``nuisance``
+    (:class:`.nuisance.Nuisance`): parameters the fit estimated and held besides the scene's (a tone curve
+    that corrected ``image``), profiled out: every sigma is marginal over them (``u["nuisance"]``); so is
+    the roughness of a coat the fit chose for a highlight (:func:`.nuisance.held_terms`).
 
     Returns a JSON-able dict: ``method`` ("gauss-newton"), ``names``, ``values`` (the parameters at the
     optimum; 0 for the direction angles), ``sigma`` ({name: float or None}), ``correlation`` (rows and
@@ -108,10 +113,21 @@ def estimate_uncertainty(
     f0, r0 = _residual(result, scene, target, px.idx, f0, compared, clip)
     drop, excluded, n_pix, n_res = _leave_out(Jt, r0, px, kink, jump)
     rr = float(np.einsum("i,i->", r0, r0))  # not r0 @ r0: a threaded BLAS dot waits on the render's threads
-    fit = _covariance(Jt, space, rr, n_res, warnings)
+    # What the fit estimated and holds besides the scene's parameters (a tone curve, a coat's roughness):
+    # nuisance parameters, profiled out (least squares: the orthogonal complement of their columns)
+    held = [n for n in (nuisance, held_terms(result, space, wd, px.idx, clip)) if n is not None]
+    q, Jt_gn = None, Jt
+    if held:
+        q = basis(np.hstack([n.columns(px.idx) for n in held]), drop.ravel() if drop.any() else None)
+        Jt_gn = profile(Jt, q)
+    fit = _covariance(Jt_gn, space, rr, n_res - (0 if q is None else q.shape[1]), warnings)
     out = _summary(space, fit, use_products, rr, n_res, n_pix, excluded, steps, warnings)
+    if held:
+        out["dof"] -= q.shape[1]
+        out["nuisance"] = {"what": "; ".join(n.what for n in held), "names": [m for n in held for m in n.names],
+                           "profiled": int(q.shape[1])}
     centre = got_full["optimum"] if render is None else np.asarray(render, np.float32)
-    _robust(out, result, scene, d, space, wd, fit, use_products, Jt, r0, f0, px.idx, drop, centre, rr)
+    _robust(out, result, scene, d, space, wd, fit, use_products, Jt, r0, f0, px.idx, drop, centre, rr, q, Jt_gn)
     out["bars"] = _bars(out, scene, d, getattr(result, "goodness", None), getattr(result, "products", None))
     return out
 
@@ -284,18 +300,22 @@ def _robust(
     drop: np.ndarray,
     centre: np.ndarray,
     rr: float,
+    q: np.ndarray | None = None,
+    Jt_gn: np.ndarray | None = None,
 ) -> None:
     """Add to ``out`` the light's distance, the products' sigma and ``robust``: the block sandwich's
     covariance (with the footprint's shift, from the pixel-centre render ``centre``) and the same
-    quantities from it."""
+    quantities from it. ``q``: the nuisance columns' basis (:func:`.nuisance.basis`) the sandwich profiles
+    out, and ``Jt_gn`` the Jacobian with them profiled out by least squares (Gauss-Newton's, ``fit``'s)."""
     names = space.names
     dof = out["dof"]
     s2 = rr / dof if dof > 0 else 0.0
-    bias = _footprint_bias(centre, idx, f0, Jt, drop.ravel() if drop.any() else None, fit, s2) \
-        if FOOTPRINT_BIAS else None
+    bias = _footprint_bias(centre, idx, f0, Jt if Jt_gn is None else Jt_gn, drop.ravel() if drop.any() else None,
+                           fit, s2) if FOOTPRINT_BIAS else None
     robust, robust_fit = block_sandwich(Jt, r0, idx, scene.width, fit, s2, names,
                                         block_side(scene.width, scene.height),
-                                        norm=sandwich_norm(getattr(result, "settings", {})), bias=bias)
+                                        norm=sandwich_norm(getattr(result, "settings", {})), bias=bias,
+                                        nuisance=q)
     if space.direction is not None:
         robust["light_direction_deg"] = (_direction_cone(space, robust_fit)["angle_deg"]
                                          if robust_fit is not None else None)

@@ -9,7 +9,12 @@ regression covariance: J. L. Powell 1991; J. A. F. Machado, P. M. D. C. Parente 
 "Quantile regression with clustered data", J. Econometric Methods 2016; R. Koenker, "Quantile Regression",
 2005, 3.4). It describes the estimator the fit used: under a model error the residuals of a region are large
 and of one sign, so their density at zero is small and their signs are correlated over the region, both of
-which the least-squares form, weighting each residual by its size, does not see."""
+which the least-squares form, weighting each residual by its size, does not see.
+
+Each block's score is bias-reduced for the block's own leverage (CR2, :func:`_bias_reduced`): a block that
+holds much of what fixes a parameter (a highlight, for the light and the lobe) has absorbed in its own fit
+the part of its model error the plain form would read, and with one such block the plain form's variance is
+one block's score squared (docs/uncertainty.md, "A block's own leverage")."""
 
 from __future__ import annotations
 
@@ -26,6 +31,11 @@ from .. import _native
 #: Smallest side of the square image blocks (pixels) whose score contributions are summed; the side is
 #: the larger of this and a sixth of the image's short side (model error is correlated on an object's scale).
 BLOCK_PX = 8
+#: The covariance is the bias-reduced block sandwich (CR2, :func:`_bias_reduced`); False: the plain one with
+#: the small-sample factor B / (B - p) (CR1), as before (studies compare the two).
+BIAS_REDUCED = True
+#: A block's leverage eigenvalue within this of 1 counts as 1: the block alone determines that direction.
+LEVERAGE_ONE = 1e-9
 #: The L1 bread's density-weighted Gram matrix (unit diagonal) counts as singular below this ratio of its
 #: eigenvalues: the Gauss-Newton decomposition's RCOND (1e-4 on singular values), squared.
 RCOND_L1 = 1e-8
@@ -60,16 +70,21 @@ def sandwich_norm(settings: dict[str, Any]) -> str:
 
 
 def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, fit: Any, s2: float,
-                   names: list[str], block: int, norm: str = "l2", bias: np.ndarray | None = None
-                   ) -> tuple[dict[str, Any], Any]:
-    """A (Σ_b g_b g_bᵀ) A over the B blocks that hold used pixels, with the small-sample factor B / (B - p).
-    ``norm`` "l2" (least squares): A = (JᵀJ)⁺, g_b = Σ_{i in block b} J_i r_i. ``norm`` "l1" (the fit's
-    default; see the module): A = H⁺, H = Σ_{|r_i| <= h} J_i J_iᵀ / h (twice Powell's), g_b = Σ_{i in b} J_i sign(r_i),
-    h the Hall-Sheather bandwidth of the used residuals; where H cannot be formed (no residual within h, or
-    H singular where JᵀJ is not) the least-squares form. ``bias`` (over the determined parameters, ``fit.idx_p``
-    order): a systematic shift the residuals cannot show (the pixel footprint's), added as its outer product
-    and reported as ``footprint_shift``. Each sigma is the larger of this and the Gauss-Newton one (the
-    sandwich is the noisier estimate).
+                   names: list[str], block: int, norm: str = "l2", bias: np.ndarray | None = None,
+                   nuisance: np.ndarray | None = None) -> tuple[dict[str, Any], Any]:
+    """The block sandwich A (Σ_b g~_b g~_bᵀ) A over the B blocks that hold used pixels, each block's score g_b
+    bias-reduced for the block's own leverage (CR2, :func:`_bias_reduced`; with BIAS_REDUCED False the plain
+    g_b and the small-sample factor B / (B - p), CR1). ``norm`` "l2" (least squares): A = (JᵀJ)⁺,
+    g_b = Σ_{i in block b} J_i r_i. ``norm`` "l1" (the fit's default; see the module): A = H⁺,
+    H = Σ_{|r_i| <= h} J_i J_iᵀ / h (twice Powell's), g_b = Σ_{i in b} J_i sign(r_i), h the Hall-Sheather
+    bandwidth of the used residuals; where H cannot be formed (no residual within h, or H singular where
+    JᵀJ is not) the least-squares form. ``bias`` (over the determined parameters, ``fit.idx_p`` order): a
+    systematic shift the residuals cannot show (the pixel footprint's), added as its outer product and
+    reported as ``footprint_shift``. Each sigma is the larger of this and the Gauss-Newton one (the sandwich
+    is the noisier estimate). ``nuisance``: an orthonormal basis (3 n, k) of nuisance parameters' columns
+    (:mod:`.nuisance`): the sandwich is formed over the parameters and the nuisance together and its
+    parameters' block kept, so that every sigma is marginal over them (``fit`` is then Gauss-Newton's with
+    them profiled out, which is that joint covariance's block).
 
     Where the blocks of side ``block`` are no more than the parameters (many objects, each with its own
     colour), the side is halved, down to BLOCK_PX, until they are more than twice as many (``block_px`` is
@@ -86,7 +101,8 @@ def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, 
         out["why_none"] = "Gauss-Newton's covariance could not be formed (see the warnings)"
         out["seconds"] = time.perf_counter() - t0
         return out, None
-    p = fit.idx_p.size
+    q = fit.idx_p.size
+    p = q + (0 if nuisance is None else nuisance.shape[1])  # the nuisance's count too
     bid, nb = _block_ids(idx, width, block)
     if nb <= p and block > BLOCK_PX:
         first = (block, nb)
@@ -103,16 +119,29 @@ def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, 
         out["seconds"] = time.perf_counter() - t0
         return out, None
     bid = bid.astype(np.int64, copy=False)
-    a = _l1_bread(Jt, r0, fit, out) if norm == "l1" else None
+    # The rows of the estimating equations: the determined parameters', then the nuisance's (joint).
+    js, rows = Jt, fit.idx_p.tolist()
+    if nuisance is not None:
+        js = np.ascontiguousarray(np.vstack([Jt[fit.idx_p], nuisance.T]))
+        rows = list(range(p))
+    a = _l1_bread(js, r0, rows, out) if norm == "l1" else None
+    weights = None
     # the per-residual score contributions summed per block, in the core (as np.bincount would)
     if a is not None:
-        g = _native.block_scores(Jt, fit.idx_p.tolist(), np.sign(r0), bid, nb)
+        g = _native.block_scores(js, rows, np.sign(r0), bid, nb)
+        weights = ((np.abs(r0) <= out["bandwidth"]) & (r0 != 0.0)) / out["bandwidth"]  # the kernel's
     else:
-        g = _native.block_scores(Jt, fit.idx_p.tolist(), r0, bid, nb)
+        g = _native.block_scores(js, rows, r0, bid, nb)
         # A photo the model explains exactly (zero residual): no spread at all, the Gauss-Newton zero.
-        a = fit.cov / s2 if s2 > 0 else np.zeros_like(fit.cov)
-    meat = (g @ g.T) * (nb / (nb - p))
-    cov = a @ meat @ a
+        a = (fit.cov / s2 if nuisance is None else _gram_inverse(js)) if s2 > 0 else np.zeros((p, p))
+    if BIAS_REDUCED:
+        influence, out["block_leverage"] = _bias_reduced(js, rows, g, bid, nb, a, weights)
+        out["form"] = "CR2"
+        cov = influence @ influence.T
+    else:
+        out["form"] = "CR1"
+        cov = a @ ((g @ g.T) * (nb / (nb - p))) @ a
+    cov = cov[:q, :q]  # the parameters' block: marginal over the nuisance
     cov = 0.5 * (cov + cov.T)
     if bias is not None:  # a model error's systematic shift: the mean squared error's bias part
         cov = cov + np.outer(bias, bias)
@@ -130,9 +159,55 @@ def block_sandwich(Jt: np.ndarray, r0: np.ndarray, idx: np.ndarray, width: int, 
     light = [f"light.position.{c}" for c in "xyz"]
     if all(n in names and fit.determined[names.index(n)] for n in light):
         at = [int(np.flatnonzero(fit.idx_p == names.index(n))[0]) for n in light]
-        out["light_position_m"] = float(np.sqrt(max(np.linalg.eigvalsh(cov[np.ix_(at, at)])[-1], 0.0)))
+        lw, lv = np.linalg.eigh(cov[np.ix_(at, at)])
+        out["light_position_m"] = float(np.sqrt(max(lw[-1], 0.0)))
+        # How many blocks the light's bar rests on: along its largest axis, each block's plain influence
+        # (A g_b) squared, (Σ a_b²)² / Σ a_b⁴ (1: one block's score is all of it)
+        a_b = lv[:, -1] @ (a @ g)[at]
+        out["light_blocks"] = float(np.sum(a_b**2) ** 2 / np.sum(a_b**4)) if np.any(a_b) else None
     out["seconds"] = time.perf_counter() - t0
     return out, replace(fit, cov=cov)
+
+
+def _gram_inverse(js: np.ndarray) -> np.ndarray:
+    """(JᵀJ)⁺ of the rows ``js`` (all of them), on unit-diagonal scaling with Gauss-Newton's cut-off."""
+    gram = np.einsum("ij,kj->ik", js, js)
+    d = np.sqrt(np.diag(gram))
+    d = np.where(d > 0, d, 1.0)
+    w, v = np.linalg.eigh(gram / np.outer(d, d))
+    good = w > RCOND_L1 * w[-1]
+    return ((v[:, good] / w[good]) @ v[:, good].T) / np.outer(d, d)
+
+
+def _bias_reduced(jt: np.ndarray, rows: list[int], g: np.ndarray, bid: np.ndarray, nb: int, a: np.ndarray,
+                  weights: np.ndarray | None) -> tuple[np.ndarray, float]:
+    """Each block's influence on the estimate, bias-reduced (CR2): F (I - K_b)^(-1/2) Fᵀ g_b, with A = F Fᵀ the
+    bread, K_b = Fᵀ H_b F block b's leverage (H_b = Σ_{i in b} w_i J_i J_iᵀ, the bread's matrix over the block,
+    ``weights`` w its residuals' (None: 1; the L1 bread's kernel weights 1{|r_i| <= h} / h), Σ_b K_b = I) and
+    g_b its score. A block's own fit absorbs the part K_b of what its residuals push, which the plain form
+    then reads as K_b less; (I - K_b)^(-1/2) restores it on average (exactly for independent residuals of
+    equal variance: Bell and McCaffrey 2002). Directions a block alone determines (an eigenvalue of K_b of 1:
+    its residual there is 0) count 0, the Moore-Penrose convention (Pustejovsky and Tipton 2018). Returns the
+    influences (p, B) over ``rows`` of ``jt``, whose outer product is the covariance, and the largest
+    eigenvalue of any K_b."""
+    # Each block's residuals (three per pixel) in one sort, then H_b from its columns of the sorted copy
+    res_bid = np.repeat(bid, 3)
+    used = np.flatnonzero(res_bid >= 0) if weights is None else np.flatnonzero(weights)
+    order = used[np.argsort(res_bid[used], kind="stable")]
+    cuts = np.searchsorted(res_bid[order], np.arange(nb + 1))
+    jo = jt[np.ix_(rows, order)]
+    jw = jo if weights is None else jo * weights[order]
+    hb = np.stack([jw[:, cuts[b]:cuts[b + 1]] @ jo[:, cuts[b]:cuts[b + 1]].T for b in range(nb)])  # (B, p, p)
+    u = np.sqrt(np.clip(np.diag(a), 0.0, None))
+    u = np.where(u > 0, u, 1.0)
+    w, v = np.linalg.eigh(a / np.outer(u, u))  # unit-diagonal scaling: the parameters' units differ
+    f = u[:, None] * ((v * np.sqrt(np.clip(w, 0.0, None))) @ v.T)  # F, A = F Fᵀ
+    k = f.T @ hb @ f  # K_b = Fᵀ H_b F, all blocks at once
+    lw, lv = np.linalg.eigh(0.5 * (k + k.transpose(0, 2, 1)))
+    scale = np.where(lw < 1.0 - LEVERAGE_ONE, 1.0 / np.sqrt(np.clip(1.0 - lw, LEVERAGE_ONE, None)), 0.0)
+    x = (lv.transpose(0, 2, 1) @ (f.T @ g).T[:, :, None])[:, :, 0] * scale  # (I - K_b)^(-1/2) Fᵀ g_b, K_b's axes
+    out = f @ (lv @ x[:, :, None])[:, :, 0].T
+    return out, float(lw[:, -1].max()) if nb else 0.0
 
 
 def _block_ids(idx: np.ndarray, width: int, block: int) -> tuple[np.ndarray, int]:
@@ -144,22 +219,22 @@ def _block_ids(idx: np.ndarray, width: int, block: int) -> tuple[np.ndarray, int
     return (np.cumsum(present) - 1)[bid], int(present.sum())  # no sort
 
 
-def _l1_bread(Jt: np.ndarray, r0: np.ndarray, fit: Any, out: dict[str, Any]) -> np.ndarray | None:
-    """H⁺ for the median regression, H = Σ_{|r_i| <= h} J_i J_iᵀ / h over the determined parameters
+def _l1_bread(Jt: np.ndarray, r0: np.ndarray, rows: list[int], out: dict[str, Any]) -> np.ndarray | None:
+    """H⁺ for the median regression, H = Σ_{|r_i| <= h} J_i J_iᵀ / h over the parameters ``rows`` of ``Jt``
     (Powell's kernel estimate of the density-weighted Gram matrix, h the Hall-Sheather bandwidth of the
     used residuals); None where it cannot be formed: then the least-squares bread serves. Notes the norm
     and the bandwidth in ``out``."""
     used = r0[r0 != 0.0]  # rows left out are exactly 0 (a used residual of exactly 0 counts in no sum either)
     h = hall_sheather(used)
-    p = fit.idx_p.size
+    p = len(rows)
     if not h > 0:
         return None
     small = np.flatnonzero((np.abs(r0) <= h) & (r0 != 0.0))
     if small.size < p:
         return None
     js = Jt[:, small]  # the few columns first, then the determined rows: no copy of all of Jt
-    if fit.idx_p.size < Jt.shape[0]:
-        js = js[fit.idx_p]
+    if p < Jt.shape[0]:
+        js = js[rows]
     hess = (js @ js.T) / h  # 2 x Powell's estimate of Σ f_i(0) J_i J_iᵀ: the scores are signs, not 1/2 - 1{r < 0}
     # H is a weighted JᵀJ: singular only in the directions JᵀJ is (which the determined set excludes)
     # unless no residual near zero falls where a parameter acts. Then the L1 objective is flat along it
