@@ -297,6 +297,44 @@ pub fn gather(p: Vec3A, n: Vec3A, own: usize, shapes: &[PShape], out: &mut Vec<G
     }
 }
 
+/// The point of another shape that the surface point `p` of object `own` sees in the unit direction
+/// `dir` (a direction of a coat's lobe, `coat::Coat::lobe`), as a gather point of form `w` with its normal
+/// facing `p`: where a coat's reflection takes the other objects' light from; `None` where the direction
+/// meets no sphere or plane (a mesh neither sends nor blocks bounce light) or `w` is 0.
+pub fn mirror(
+    p: Vec3A,
+    (dir, w): (Vec3A, f32),
+    own: usize,
+    shapes: &[PShape],
+) -> Option<GatherPoint> {
+    if !(w > 0.0) {
+        return None;
+    }
+    let mut best: Option<(usize, crate::geometry::ShapeHit)> = None;
+    for (k, shape) in shapes.iter().enumerate() {
+        if k == own || matches!(shape, PShape::Mesh(_)) {
+            continue;
+        }
+        let tmax = best.as_ref().map_or(f32::INFINITY, |b| b.1.t);
+        let tmin = super::hit::Surfel::eps_at(p.abs().max_element() + shape.scale());
+        if let Some(h) = shape.intersect(p, dir, tmin, tmax) {
+            best = Some((k, h));
+        }
+    }
+    let (sender, h) = best?;
+    let normal = if h.normal.dot(dir) > 0.0 {
+        -h.normal
+    } else {
+        h.normal
+    };
+    Some(GatherPoint {
+        sender,
+        form: w,
+        position: h.position,
+        normal,
+    })
+}
+
 /// One gather point as a render keeps it: the point, its sender's table point (`u32::MAX` for a plane
 /// sender, which has no table) and, where the cache was built for a scene with environment light, the
 /// point's sky view (NaN otherwise): everything of a sender's radiance that does not depend on the light

@@ -7,7 +7,9 @@
 
 use glam::Vec3A;
 
-use super::bounce::{gather, nearest_table, table_points, CachedPoint, GatherPoint, Gathered};
+use super::bounce::{
+    gather, mirror, nearest_table, table_points, CachedPoint, GatherPoint, Gathered,
+};
 use super::brdf::{blinn_phong, lambert, specular_scale};
 use super::coat::Coat;
 use super::environment::sky_view;
@@ -154,7 +156,7 @@ impl ShadeParams {
                     gather(y, n, k, shapes, &mut points);
                     points
                         .iter()
-                        .map(|g| g.form * sender_radiance(g, p, shapes))
+                        .map(|g| table_form(p.coat(k), g, y, n) * sender_radiance(g, p, shapes, y))
                         .fold(Vec3A::ZERO, |a, b| a + b)
                 })
                 .collect()
@@ -164,14 +166,18 @@ impl ShadeParams {
     /// [`ShadeParams::prepare_bounce`] from a render's cached gathers (`bounce::Gathered`, built for
     /// `shapes`): the same tables.
     pub fn prepare_bounce_cached(&mut self, shapes: &[PShape], cache: &Gathered) {
-        self.prepare_tables(shapes, |p, k, _| {
+        self.prepare_tables(shapes, |p, k, at| {
             cache
                 .table(k)
                 .iter()
-                .map(|points| {
+                .zip(at)
+                .map(|(points, &(y, n))| {
                     points
                         .iter()
-                        .map(|c| c.point.form * sender_radiance_cached(c, p, shapes))
+                        .map(|c| {
+                            table_form(p.coat(k), &c.point, y, n)
+                                * sender_radiance_cached(c, p, shapes, y)
+                        })
                         .fold(Vec3A::ZERO, |a, b| a + b)
                 })
                 .collect()
@@ -260,25 +266,58 @@ impl ShadeParams {
 
 thread_local! {
     static GATHER: std::cell::RefCell<Vec<GatherPoint>> = const { std::cell::RefCell::new(Vec::new()) };
+    static LOBE: std::cell::RefCell<Vec<(Vec3A, f32)>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
-/// The radiance (before exposure) that the sender of `g` leaves at its representative point: its direct
-/// light (shadowed), environment and ambient, diffusely; not its own bounce.
-pub fn sender_radiance(g: &GatherPoint, p: &ShadeParams, shapes: &[PShape]) -> Vec3A {
+/// The configuration factor of `g` as a coated receiver (`coat`, at `y` with normal `n`) weighs it:
+/// times the coat's [`Coat::over_lambert`] from `g`'s direction to the receiver's view `view`, or (no
+/// view: a sphere's bounce table) its entering half, [`Coat::entering`]; `g.form` for a matte receiver.
+#[inline(always)]
+pub fn received_form(
+    coat: Option<&Coat>,
+    g: &GatherPoint,
+    y: Vec3A,
+    n: Vec3A,
+    view: Option<Vec3A>,
+) -> f32 {
+    let Some(c) = coat else { return g.form };
+    let cos_in = n.dot((g.position - y).normalize_or_zero());
+    g.form
+        * match view {
+            Some(v) => c.over_lambert(cos_in, n.dot(v)),
+            None => c.entering(cos_in),
+        }
+}
+
+/// [`received_form`] for a sphere's bounce table point (`y`, normal `n`).
+#[inline(always)]
+fn table_form(coat: Option<&Coat>, g: &GatherPoint, y: Vec3A, n: Vec3A) -> f32 {
+    received_form(coat, g, y, n, None)
+}
+
+/// The radiance (before exposure) that the sender of `g` leaves at its representative point towards the
+/// receiving point `to`: its direct light (shadowed), environment and ambient, diffusely (a coated
+/// sender's direct light and own bounce through its coat, [`Coat::over_lambert`]); not its own bounce.
+pub fn sender_radiance(g: &GatherPoint, p: &ShadeParams, shapes: &[PShape], to: Vec3A) -> Vec3A {
     sender_radiance_with(
         g,
         || sky_view(g.position, g.normal, g.sender, shapes),
         || nearest_table(g.normal),
-        p,
-        shapes,
+        (p, shapes),
+        to,
     )
 }
 
 /// [`sender_radiance`] from a render's cached gather point (`bounce::Gathered`): its sky view and table
 /// point as kept, the same value.
 #[inline]
-pub fn sender_radiance_cached(c: &CachedPoint, p: &ShadeParams, shapes: &[PShape]) -> Vec3A {
-    sender_radiance_with(&c.point, || c.sky, || c.table as usize, p, shapes)
+pub fn sender_radiance_cached(
+    c: &CachedPoint,
+    p: &ShadeParams,
+    shapes: &[PShape],
+    to: Vec3A,
+) -> Vec3A {
+    sender_radiance_with(&c.point, || c.sky, || c.table as usize, (p, shapes), to)
 }
 
 /// [`sender_radiance`] with the point's sky view (`sky`, called only with environment light) and its
@@ -288,10 +327,14 @@ fn sender_radiance_with(
     g: &GatherPoint,
     sky: impl Fn() -> f32,
     table: impl Fn() -> usize,
-    p: &ShadeParams,
-    shapes: &[PShape],
+    (p, shapes): (&ShadeParams, &[PShape]),
+    to: Vec3A,
 ) -> Vec3A {
     let m = &p.materials[g.sender];
+    // A coated sender's cosine towards the receiver.
+    let coat = p
+        .coat(g.sender)
+        .map(|c| (c, g.normal.dot((to - g.position).normalize_or_zero())));
     let mut l = m.albedo * p.ambient;
     if p.environment != Vec3A::ZERO {
         l += m.albedo * p.environment * sky();
@@ -306,14 +349,20 @@ fn sender_radiance_with(
             eps: Surfel::eps_at(g.position.abs().max_element() + shapes[g.sender].scale()),
         };
         if ndotl > 0.0 && !occluded(&at, dir, dist, shapes) {
-            l += (p.light_rgb * lambert(m.albedo) * irradiance(ndotl, falloff))
-                .min(Vec3A::splat(f32::MAX));
+            let mut e = irradiance(ndotl, falloff);
+            if let Some((c, cos_out)) = coat {
+                e *= c.over_lambert(ndotl, cos_out);
+            }
+            l += (p.light_rgb * lambert(m.albedo) * e).min(Vec3A::splat(f32::MAX));
         }
     }
     // A sphere sender's own bounce (the second bounce), from its table once prepared.
     if let Some((at, light)) = p.tables.get(g.sender) {
         if !at.is_empty() {
-            l += m.albedo * light[table()];
+            match coat {
+                Some((c, cos_out)) => l += m.albedo * light[table()] * c.leaving(cos_out),
+                None => l += m.albedo * light[table()],
+            }
         }
     }
     l
@@ -423,19 +472,42 @@ fn indirect(
             *sky.get_or_insert_with(|| sky_view(s.position, s.normal, s.object as usize, shapes));
         l += m.albedo * p.environment * sky;
     }
+    let coat = p.coat(s.object as usize);
+    let (y, n, v) = (s.position, s.normal, Some(s.view));
     if let (true, Some(points)) = (p.interreflection, gathered) {
         for c in points {
-            l += m.albedo * c.point.form * sender_radiance_cached(c, p, shapes);
+            let form = received_form(coat, &c.point, y, n, v);
+            l += m.albedo * form * sender_radiance_cached(c, p, shapes, y);
         }
     } else if p.interreflection {
         GATHER.with_borrow_mut(|points| {
             gather(s.position, s.normal, s.object as usize, shapes, points);
             for g in points.iter() {
-                l += m.albedo * g.form * sender_radiance(g, p, shapes);
+                l += m.albedo * received_form(coat, g, y, n, v) * sender_radiance(g, p, shapes, y);
             }
         });
     }
+    if let (true, Some(c)) = (p.interreflection && m.specular > 0.0, coat) {
+        l += reflected(s, c, m.specular, p, shapes);
+    }
     l
+}
+
+/// A coated surfel's reflection of the other objects (with interreflection): its specular weight `ks`
+/// times, over the coat's lobe (`Coat::lobe`), each direction's weight times the radiance of the object it
+/// meets (`bounce::mirror`: that object's diffuse light towards the surfel); the environment the lobe sees
+/// is not reflected.
+pub fn reflected(s: &Surfel, c: &Coat, ks: f32, p: &ShadeParams, shapes: &[PShape]) -> Vec3A {
+    LOBE.with_borrow_mut(|lobe| {
+        c.lobe(s.normal, s.view, lobe);
+        let mut l = Vec3A::ZERO;
+        for &sample in lobe.iter() {
+            if let Some(g) = mirror(s.position, sample, s.object as usize, shapes) {
+                l += (ks * g.form) * sender_radiance(&g, p, shapes, s.position);
+            }
+        }
+        l
+    })
 }
 
 /// The exposure-scaled radiance at an object's surfel: the `indirect` light `l` plus the light's own

@@ -1,0 +1,88 @@
+//! A coated object's reflection of the other objects, with interreflection: the coat's specular lobe
+//! (`render::coat::Coat::lobe`) sees the lit floor below a glossy ball, which `render::shade::reflected`
+//! adds to the ball's light. Per pixel of a coated object, the lobe's directions that meet another object
+//! are kept as gathers (light-independent: their points' occluders and sky views), each of the weight its
+//! direction has in the lobe of the coat they were built for; a candidate with another coat (the coat's
+//! roughness tried) rescales them by the two coats' directional albedos (`light_terms::Receive::Lobe`).
+
+use super::kernel::{gathered_from, Kernel};
+use super::light_terms::Receive;
+use super::pixels::{gathers_of, Gather, Group, Light};
+use crate::render::bounce::{mirror, GatherPoint};
+use crate::render::coat::Coat;
+use crate::render::{PShape, ShadeParams, Surfel};
+use glam::Vec3A;
+
+/// A coated object's lobe points (see the module): per sender, the gathers of its pixels' lobe
+/// directions, built for the coat `coat`.
+#[derive(Clone)]
+pub(crate) struct Reflections {
+    pub(crate) coat: Coat,
+    pub(crate) gathers: Vec<Gather>,
+}
+
+impl Kernel {
+    /// Builds the [`Reflections`] of every group whose object has a coat in `coats` (per object; empty:
+    /// none), among `shapes` with shadow tests where `shadows`; every other group keeps none.
+    pub(crate) fn set_reflections(
+        &mut self,
+        shapes: &[PShape],
+        shadows: bool,
+        coats: &[Option<Coat>],
+    ) {
+        let sky = self.sky;
+        for g in &mut self.groups {
+            g.reflections = None;
+            let Some(o) = g.object else { continue };
+            let Some(Some(coat)) = coats.get(o) else {
+                continue;
+            };
+            let at = |v: &[Vec<f32>; 3], i: usize| Vec3A::new(v[0][i], v[1][i], v[2][i]);
+            let surfels: Vec<Surfel> = (0..g.len())
+                .map(|i| Surfel {
+                    position: at(&g.p, i),
+                    normal: at(&g.n, i),
+                    view: at(&g.v, i),
+                    object: o as u32,
+                    eps: 0.0,
+                })
+                .collect();
+            let idx: Vec<usize> = (0..surfels.len()).collect();
+            let points = |s: &Surfel, out: &mut Vec<GatherPoint>| {
+                let mut lobe = Vec::new();
+                coat.lobe(s.normal, s.view, &mut lobe);
+                out.clear();
+                out.extend(
+                    lobe.into_iter()
+                        .filter_map(|d| mirror(s.position, d, o, shapes)),
+                );
+            };
+            let gathers = gathers_of(&surfels, &idx, shapes, (shadows, sky), points);
+            g.reflections = Some(Reflections {
+                coat: coat.clone(),
+                gathers,
+            });
+        }
+    }
+}
+
+/// Per channel and pixel of `g`, its reflection of the others per unit specular weight under shading
+/// parameters `p` (exposure applied): Σ over its lobe points of their weight times their sender's
+/// radiance towards the pixel, as `render::shade::reflected`; `None` without reflections or
+/// interreflection.
+pub(crate) fn reflected<const AVX2: bool>(
+    g: &Group,
+    p: &ShadeParams,
+    light: &Light,
+    tables: &[[Vec<f32>; 3]],
+) -> Option<[Vec<f32>; 3]> {
+    let r = g.reflections.as_ref().filter(|_| p.interreflection)?;
+    let how = Receive::Lobe(&r.coat);
+    Some(gathered_from::<AVX2>(
+        (g.len(), &r.gathers, how),
+        g,
+        p,
+        light,
+        tables,
+    ))
+}
