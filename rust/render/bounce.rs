@@ -636,6 +636,27 @@ mod tests {
     }
 
     #[test]
+    fn a_balls_mirror_direction_meets_the_floor_or_nothing() {
+        let shapes = ball_on_floor();
+        // From the ball's side, a direction down and out meets the floor where the line does.
+        let p = Vec3A::new(1.0, 1.0, 0.0);
+        let d = Vec3A::new(1.0, -1.0, 0.0).normalize();
+        let g = mirror(p, (d, 0.25), 1, &shapes).expect("the floor");
+        assert_eq!((g.sender, g.form), (0, 0.25));
+        assert!((g.position - Vec3A::new(2.0, 0.0, 0.0)).length() < 1e-5);
+        assert_eq!(g.normal, Vec3A::Y);
+        // Up: nothing; a zero weight: nothing.
+        assert!(mirror(p, (Vec3A::Y, 0.25), 1, &shapes).is_none());
+        assert!(mirror(p, (d, 0.0), 1, &shapes).is_none());
+        // From the floor, the ball above.
+        let g = mirror(Vec3A::new(0.5, 0.0, 0.0), (Vec3A::Y, 1.0), 0, &shapes).expect("the ball");
+        let y = 1.0 - 0.75f32.sqrt();
+        assert_eq!(g.sender, 1);
+        assert!((g.position - Vec3A::new(0.5, y, 0.0)).length() < 1e-5);
+        assert!((g.normal - Vec3A::new(0.5, y - 1.0, 0.0)).length() < 1e-5);
+    }
+
+    #[test]
     fn the_floor_gathers_from_the_ball() {
         let shapes = ball_on_floor();
         let mut out = Vec::new();

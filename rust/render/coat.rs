@@ -478,6 +478,43 @@ mod tests {
     }
 
     #[test]
+    fn the_lobes_weights_add_up_to_the_directional_albedo() {
+        // Σ w over the 16 stratified visible normals against the table's 16 x 8 Gauss-Legendre
+        // expectation of the same integrand (and the other way: the grid's error), every direction above
+        // the surface; over_lambert is π times the diffuse factor, its halves multiply to it.
+        let n = Vec3A::new(0.3, 0.9, -0.2).normalize();
+        let (t, _) = n.any_orthonormal_pair();
+        let mut out = Vec::new();
+        for alpha in [0.03, 0.2, 0.5] {
+            let c = Coat::new(alpha, 1.49);
+            for mu in [0.15f32, 0.5, 0.95] {
+                let v = (n * mu + t * (1.0 - mu * mu).sqrt()).normalize();
+                c.lobe(n, v, &mut out);
+                assert_eq!(out.len(), LOBE_SIDE * LOBE_SIDE);
+                let sum: f32 = out.iter().map(|d| d.1).sum();
+                let want = c.reflectance(n.dot(v));
+                assert!(
+                    (sum - want).abs() < 0.1 * want + 2e-3,
+                    "α {alpha} μ {mu}: {sum} against {want}"
+                );
+                assert!(out
+                    .iter()
+                    .all(|&(d, w)| w == 0.0 || (d.dot(n) > 0.0 && w > 0.0)));
+                let pi = std::f32::consts::PI;
+                let (a, b) = (0.4f32, mu);
+                assert!((c.over_lambert(a, b) - pi * c.diffuse(a, b)).abs() < 1e-5);
+                assert!((c.entering(a) * c.leaving(b) - c.over_lambert(a, b)).abs() < 1e-6);
+            }
+        }
+        // Below the horizon: nothing.
+        let c = Coat::new(0.2, 1.49);
+        c.lobe(n, -n, &mut out);
+        assert!(out.is_empty());
+        assert_eq!(c.reflectance(-0.1), 0.0);
+        assert_eq!(c.over_lambert(0.5, -0.1), 0.0);
+    }
+
+    #[test]
     fn no_light_below_the_horizon() {
         let c = Coat::new(0.1, 1.49);
         let n = Vec3A::Y;
