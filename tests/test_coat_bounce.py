@@ -13,7 +13,7 @@ import pytest
 
 import rtloop
 from rtloop import _native
-from rtloop.fit import coat as coat_mod
+from rtloop.fit import selection
 from rtloop.fit.products import product_bounds
 from test_environment import _photo, _scene
 
@@ -76,7 +76,7 @@ def test_the_coat_in_the_bounce_explains_mitsubas_lamp_photos_better(case, monke
     truth, user, photo = _lamp(case)
     scene = _held_at_truth(user, truth)
     default = rtloop.fit(scene, photo, seed=0, uncertainty=False)
-    monkeypatch.setattr(coat_mod, "COAT_WITH_BOUNCE", True)
+    monkeypatch.setattr(selection, "COAT_WITH_BOUNCE", True)
     coated = rtloop.fit(scene, photo, seed=0, uncertainty=False)
     assert default.model["evidence"]["specular"].get("lobe", "blinn-phong") == "blinn-phong"
     assert coated.model["evidence"]["specular"]["lobe"] == "coat"
@@ -87,7 +87,17 @@ def test_the_coat_in_the_bounce_fits_lamp_sides_light(monkeypatch):
     """lamp-side (a white plastic ball, a low lamp): with the coat in the bounce the fitted light is within
     5 mm of Mitsuba's (1.7-3.2 mm over seeds 0-2; Blinn-Phong in its place: 20.7 mm)."""
     truth, user, photo = _lamp("lamp-side")
-    monkeypatch.setattr(coat_mod, "COAT_WITH_BOUNCE", True)
+    monkeypatch.setattr(selection, "COAT_WITH_BOUNCE", True)
     r = rtloop.fit(rtloop.load_scene(user), photo, seed=0, uncertainty=False)
     fitted = np.asarray(r.scene.to_dict()["light"]["position"], float)
     assert np.linalg.norm(fitted - np.asarray(truth["light"]["position"], float)) < 5e-3
+
+
+def test_the_coat_in_the_bounce_gives_the_same_fit_on_any_thread_count(monkeypatch):
+    """The coat's lobe points are built and lit over the pool: a fit with a seed is the same on 1-3 threads."""
+    truth, user, photo = _lamp("lamp-side")
+    monkeypatch.setattr(selection, "COAT_WITH_BOUNCE", True)
+    fits = [rtloop.fit(rtloop.load_scene(user), photo, seed=4, threads=t, uncertainty=False) for t in (1, 2, 3)]
+    assert fits[0].model["evidence"]["specular"]["lobe"] == "coat"
+    for r in fits[1:]:
+        assert r.x == fits[0].x and r.model == fits[0].model

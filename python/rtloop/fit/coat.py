@@ -21,9 +21,10 @@ from typing import Any
 import numpy as np
 
 from ..scene import Scene, scene_to_dict
+from . import selection
 from .selection import _verdict, closed_form_loss, interreflection_given
 
-__all__ = ["COAT_IOR", "COAT_WITH_BOUNCE", "COAT_SPECULAR_RANGE", "ROUGHNESS_TRIALS", "choose_lobe", "coat_evidence", "with_coat"]
+__all__ = ["COAT_IOR", "COAT_SPECULAR_RANGE", "ROUGHNESS_TRIALS", "choose_lobe", "coat_evidence", "with_coat"]
 
 #: GGX roughnesses tried at the found light: a factor 2 apart from a near-mirror coat to a matte one (the
 #: parabola through the best and its neighbours in log roughness refines it).
@@ -33,11 +34,6 @@ COAT_IOR = 1.49
 #: The coat's specular weight's bounds (a physical coat's is 1; the photo's exposure and the light's
 #: intensity share a gauge with the albedos, so the fitted weight may exceed it).
 COAT_SPECULAR_RANGE = (0.0, 4.0)
-#: Whether the coat is tried where the fit models the bounce (``interreflection``). The bounce models the
-#: coat both ways and its reflection of the lit floor (docs/methods.md, "A coat in the bounce"), but on the
-#: Mitsuba lamp photos the coat with the bounce fits lamp-side better and lamp-desk and lamp-front worse
-#: than Blinn-Phong does (studies/results/coat_bounce.md), so the default fit keeps Blinn-Phong there.
-COAT_WITH_BOUNCE = False
 #: The second parabola's points: a factor this far either side of the first's vertex.
 REFINE = 1.2
 #: The roughness a refinement may reach: ROUGHNESS_TRIALS' ends.
@@ -81,10 +77,10 @@ def coat_evidence(scene: Scene, names: list[str], paths: list[str], x: list[floa
     evidence (:func:`.selection.highlight_evidence`'s, at the same light ``x``): the closed-form loss at
     each of ROUGHNESS_TRIALS and at the vertices of two parabolas in log roughness (:func:`_vertex`), the
     verdict against ``base`` (k = 2 per sphere), and ``better_than_blinn_phong``. Returns (evidence, roughness), or None where the
-    coat is not tried (the scene models a bounce and COAT_WITH_BOUNCE is off)."""
+    coat is not tried (the scene models a bounce and :data:`.selection.COAT_WITH_BOUNCE` is off)."""
     coated = with_coat(scene, names, ROUGHNESS_TRIALS[0], free_roughness=True)
     cpaths = paths + [f"objects.{n}.roughness" for n in names]
-    if interreflection_given(scene) and not COAT_WITH_BOUNCE:
+    if interreflection_given(scene) and not selection.COAT_WITH_BOUNCE:
         return None
     kw = {"environment": environment, "clip": clip, "norm": norm, "space": space, "threads": threads,
           "saturated": saturated}
