@@ -101,3 +101,22 @@ def test_the_coat_in_the_bounce_gives_the_same_fit_on_any_thread_count(monkeypat
     assert fits[0].model["evidence"]["specular"]["lobe"] == "coat"
     for r in fits[1:]:
         assert r.x == fits[0].x and r.model == fits[0].model
+
+
+def test_a_scene_declaring_a_coat_and_the_bounce_is_fitted_with_both():
+    """The default fit (COAT_WITH_BOUNCE off) of a scene that gives the coat and the bounce itself: rtloop's
+    render of it, the light started elsewhere, is fitted back to its light with both modelled."""
+    truth = _coated(False, None)
+    photo = _photo(truth)
+    start = json.loads(json.dumps(truth))
+    start["light"] = {**start["light"], "position": [0.0, 4.0, 0.0], "intensity": 20.0}
+    start["fit"] = {"light.position": {"min": [-8, 0.5, -8], "max": [8, 8, 8]},
+                    "light.intensity": {"min": 1, "max": 400},
+                    "objects.ball.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]},
+                    "objects.floor.albedo": {"min": [0, 0, 0], "max": [1, 1, 1]},
+                    "objects.ball.specular": {"min": 0, "max": 4}}
+    r = rtloop.fit(rtloop.Scene(json.dumps(start)), photo, seed=0, uncertainty=False)
+    d = r.scene.to_dict()
+    assert d["interreflection"] is True and "coat" in d["objects"][0]["material"]
+    assert np.linalg.norm(np.subtract(d["light"]["position"], truth["light"]["position"])) < 2e-3
+    assert abs(d["light"]["intensity"] - truth["light"]["intensity"]) < 0.01 * truth["light"]["intensity"]
