@@ -213,7 +213,7 @@ impl Kernel {
             let bounce = (p.interreflection && !g.gathers.is_empty())
                 .then(|| gathered::<AVX2>(g, p, &light, &tables));
             // A coated object's reflection of the others (`reflect`), exposure applied.
-            let mirrored = super::reflect::reflected::<AVX2>(g, p, &light, &tables);
+            let mirrored = reflected::<AVX2>(g, p, &light, &tables);
             let k: [f32; 3] =
                 std::array::from_fn(|c| lambert(p.exposure * light.rgb[c] * m.albedo[c]));
             let ks: [f32; 3] = std::array::from_fn(|c| {
@@ -402,4 +402,25 @@ impl<E: Encoding> Simd for L1<'_, E> {
     fn run<const AVX2: bool>(self) -> [f64; 3] {
         self.k.l1_generic::<AVX2, E>(self.c, self.enc)
     }
+}
+
+/// Per channel and pixel of `g`, its reflection of the others per unit specular weight under shading
+/// parameters `p` (exposure applied): Σ over its lobe points of their weight times their sender's
+/// radiance towards the pixel, as `render::shade::reflected`; `None` without reflections or
+/// interreflection.
+pub(crate) fn reflected<const AVX2: bool>(
+    g: &Group,
+    p: &ShadeParams,
+    light: &Light,
+    tables: &[[Vec<f32>; 3]],
+) -> Option<[Vec<f32>; 3]> {
+    let r = g.reflections.as_ref().filter(|_| p.interreflection)?;
+    let how = Receive::Lobe(&r.coat);
+    Some(gathered_from::<AVX2>(
+        (g.len(), &r.gathers, how),
+        g,
+        p,
+        light,
+        tables,
+    ))
 }

@@ -253,7 +253,7 @@ pub(crate) struct Group {
     pub(crate) gathers: Vec<Gather>,
     /// Where a coated object's pixels take the other objects' light in its coat's lobe from
     /// (`reflect`); `None` otherwise.
-    pub(crate) reflections: Option<super::reflect::Reflections>,
+    pub(crate) reflections: Option<Reflections>,
     /// Bounding sphere (centre, radius) of each run of `BLOCK` pixels, for culling shadow tests.
     pub(crate) blocks: Vec<([f32; 3], f32)>,
     /// Each pixel's footprint axes on its surface (x: `du`, y: `dv`), so that a sphere's shadow edge is
@@ -301,6 +301,14 @@ pub(crate) struct Gather {
     /// Per point, the cosines a coat weighs its light by (`render::coat::Coat::over_lambert`): the
     /// receiver's towards the point and towards its eye, and the sender's towards the receiver.
     pub(crate) cosines: Vec<[f32; 3]>,
+}
+
+/// A coated object's lobe points (`reflect`): per sender, the gathers of its pixels' lobe
+/// directions, built for the coat `coat`.
+#[derive(Clone)]
+pub(crate) struct Reflections {
+    pub(crate) coat: crate::render::coat::Coat,
+    pub(crate) gathers: Vec<Gather>,
 }
 
 /// Pixels per parallel run of [`gathers`].

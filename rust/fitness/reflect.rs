@@ -5,21 +5,12 @@
 //! direction has in the lobe of the coat they were built for; a candidate with another coat (the coat's
 //! roughness tried) rescales them by the two coats' directional albedos (`light_terms::Receive::Lobe`).
 
-use super::kernel::{gathered_from, Kernel};
-use super::light_terms::Receive;
-use super::pixels::{gathers_of, Gather, Group, Light};
+use super::kernel::Kernel;
+use super::pixels::{gathers_of, Reflections};
 use crate::render::bounce::{mirror, GatherPoint};
 use crate::render::coat::Coat;
-use crate::render::{PShape, ShadeParams, Surfel};
+use crate::render::{PShape, Surfel};
 use glam::Vec3A;
-
-/// A coated object's lobe points (see the module): per sender, the gathers of its pixels' lobe
-/// directions, built for the coat `coat`.
-#[derive(Clone)]
-pub(crate) struct Reflections {
-    pub(crate) coat: Coat,
-    pub(crate) gathers: Vec<Gather>,
-}
 
 impl Kernel {
     /// Builds the [`Reflections`] of every group whose object has a coat in `coats` (per object; empty:
@@ -64,25 +55,4 @@ impl Kernel {
             });
         }
     }
-}
-
-/// Per channel and pixel of `g`, its reflection of the others per unit specular weight under shading
-/// parameters `p` (exposure applied): Σ over its lobe points of their weight times their sender's
-/// radiance towards the pixel, as `render::shade::reflected`; `None` without reflections or
-/// interreflection.
-pub(crate) fn reflected<const AVX2: bool>(
-    g: &Group,
-    p: &ShadeParams,
-    light: &Light,
-    tables: &[[Vec<f32>; 3]],
-) -> Option<[Vec<f32>; 3]> {
-    let r = g.reflections.as_ref().filter(|_| p.interreflection)?;
-    let how = Receive::Lobe(&r.coat);
-    Some(gathered_from::<AVX2>(
-        (g.len(), &r.gathers, how),
-        g,
-        p,
-        light,
-        tables,
-    ))
 }

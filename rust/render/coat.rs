@@ -20,7 +20,8 @@
 //! coat's tables cost 2 × 64 × 128 samples, about a millisecond, so that a fit can try several
 //! roughnesses. This is the only
 //! place these formulas live: the renderer (`shade`) and the fitness (`fitness::projected`) call
-//! [`Coat::diffuse`] and [`Coat::specular`].
+//! [`Coat::diffuse`] and [`Coat::specular`], and with the bounce [`Coat::over_lambert`] (the base's light
+//! through the coat both ways) and [`Coat::lobe`] (the directions in which the coat reflects the others).
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
