@@ -1,6 +1,6 @@
 """The coat in the bounce (docs/methods.md, "A coat in the bounce"): the default fit with and without the coat
-tried where the fit models the bounce (``rtloop.fit.selection.COAT_WITH_BOUNCE``), on the Mitsuba photos whose fit
-adds the bounce or a highlight and on rtloop's own renders of the lamp photos' truths.
+tried where the fit models the bounce (``rtloop.fit.selection.COAT_WITH_BOUNCE``), on the Mitsuba photos
+whose fit adds the bounce or a highlight and on rtloop's own renders of the lamp photos' truths.
 
 Per case of ``tests/fixtures/photos`` (default: the lamp, bounce, env-bounce and gloss photos):
 
@@ -100,10 +100,11 @@ def main(argv: list[str] | None = None) -> int:
     title = "# The coat in the bounce (`python studies/coat_bounce.py`)"
     if args.bounce_passes is not None:
         importlib.import_module("rtloop.fit.terms").BOUNCE_PASSES = args.bounce_passes
-        title = f"## The light searched with {args.bounce_passes} held-bounce passes (`--bounce-passes {args.bounce_passes}`)"
+        n = args.bounce_passes
+        title = f"## The light searched with {n} held-bounce passes (`--bounce-passes {n}`)"
     print(title + "\n")
-    print("| case | light error (mm), off: seeds 0-2 | on: seeds 0-2 | loss at the truth, off / on | lobe (on) "
-          "| fit (ms), off / on |\n| --- | --- | --- | --- | --- | --- |")
+    print("| case | light error (mm), off: seeds 0-2 | on: seeds 0-2 | loss at the truth, off / on "
+          "| lobe (on) | fit (ms), off / on |\n| --- | --- | --- | --- | --- | --- |")
     for case in args.cases:
         print(study(case), flush=True)
     lamps = [c for c in args.cases if c.startswith("lamp-")]

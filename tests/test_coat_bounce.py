@@ -12,10 +12,9 @@ import numpy as np
 import pytest
 
 import rtloop
-from rtloop import _native
 from rtloop.fit import selection
-from rtloop.fit.products import product_bounds
 from test_environment import _photo, _scene
+from test_interreflection import losses_at_truth
 
 PHOTOS = Path(__file__).parent / "fixtures" / "photos"
 LAMPS = ("lamp-side", "lamp-desk", "lamp-front")
@@ -36,19 +35,10 @@ def test_kernel_and_closed_form_reproduce_a_coated_render(two, env):
     """rtloop's render of coated balls with the bounce (the coat both ways, its reflection of the others) is
     what the kernel and the closed form model at the true light; the same scene with matte balls is not."""
     truth = _coated(two, env)
-    truth["fit"] = {"light.position": {"min": [-8, 0.5, -8], "max": [8, 8, 8]}}
-    scene = rtloop.Scene(json.dumps(truth))
-    photo = _photo(truth, footprint=False)
-    x = np.array([truth["light"]["position"]], float)
-    direct_spec = _native.FitnessSpec(["light.position"], loss="l1")
-    direct = _native.evaluate(scene, photo, x, direct_spec)[0, 0]
-    closed_spec = _native.FitnessSpec(["light.position"], loss="l1_projected",
-                                      product_bounds=product_bounds(scene, env is not None))
-    closed = _native.evaluate(scene, photo, x, closed_spec)[0, 0]
     matte = json.loads(json.dumps(truth))
     for o in matte["objects"]:
         o["material"].pop("coat", None)
-    without = _native.evaluate(rtloop.Scene(json.dumps(matte)), photo, x, direct_spec)[0, 0]
+    photo, direct, closed, without = losses_at_truth(truth, matte)
     assert direct < 1e-5 * photo.sum() and closed < 1e-5 * photo.sum()
     assert without > 1e3 * max(direct, closed)
 
@@ -94,10 +84,12 @@ def test_the_coat_in_the_bounce_fits_lamp_sides_light(monkeypatch):
 
 
 def test_the_coat_in_the_bounce_gives_the_same_fit_on_any_thread_count(monkeypatch):
-    """The coat's lobe points are built and lit over the pool: a fit with a seed is the same on 1-3 threads."""
+    """The coat's lobe points are built and lit over the pool: a fit with a seed is the same on 1-3
+    threads."""
     truth, user, photo = _lamp("lamp-side")
     monkeypatch.setattr(selection, "COAT_WITH_BOUNCE", True)
-    fits = [rtloop.fit(rtloop.load_scene(user), photo, seed=4, threads=t, uncertainty=False) for t in (1, 2, 3)]
+    scene = rtloop.load_scene(user)
+    fits = [rtloop.fit(scene, photo, seed=4, threads=t, uncertainty=False) for t in (1, 2, 3)]
     assert fits[0].model["evidence"]["specular"]["lobe"] == "coat"
     for r in fits[1:]:
         assert r.x == fits[0].x and r.model == fits[0].model

@@ -324,7 +324,8 @@ def interreflection_evidence(scene: Scene, paths: list[str], x: list[float], tar
     COAT_WITH_BOUNCE."""
     if not COAT_WITH_BOUNCE and any("coat" in o["material"] for o in scene_to_dict(scene)["objects"]):
         return {"loss_without": base, "loss_with": base, "gain": 0.0, "delta_bic": None, "selected": False,
-                "rule": "not tested: a coated object and the bounce stay apart (COAT_WITH_BOUNCE)", "nested": False,
+                "rule": "not tested: a coated object and the bounce stay apart (COAT_WITH_BOUNCE)",
+                "nested": False,
                 "loss_with_nested": base, "raised": False}
     kw = {"environment": environment, "clip": clip, "norm": norm, "space": space, "threads": threads,
           "saturated": saturated}
