@@ -261,21 +261,7 @@ impl Kernel {
             self.solve_run(run, obj, &sums, proj, out, &a_all[o0..o0 + n], sat);
         }
         // Each sphere's table points: their senders' light (unit light), for the second bounce.
-        let table_light: Vec<Vec<Compact>> = self
-            .tables
-            .iter()
-            .enumerate()
-            .map(|(k, gths)| {
-                let coats = |gth: &Gather| Coats {
-                    receiver: p.coat(k),
-                    how: Receive::Table,
-                    sender: p.coat(gth.sender),
-                };
-                gths.iter()
-                    .map(|gth| Compact::lit::<AVX2>(gth, &light, coats(gth), c.parallel))
-                    .collect()
-            })
-            .collect();
+        let table_light = self.table_light::<AVX2>(p, &light, c.parallel);
         // The senders' own bounce, folded per receiving pixel: for a sphere sender k and each of its
         // table's senders k', Σ form·(light on k's table from k') and Σ form·(sky of k's table from k') over
         // the pixel's lookups. A round then costs per pixel and k', not per lookup.
@@ -296,36 +282,7 @@ impl Kernel {
         // A coated object's reflection of the others (`reflect`): its lobe points lit and folded as the
         // gathers are; a round adds them to B scaled so that the receiver's albedo becomes its specular
         // weight (`mirror_scale`).
-        type Mirrored<'g> = (&'g [Gather], Vec<Compact>, Vec<Vec<Fold>>);
-        let mirrored: Vec<Option<Mirrored>> = self
-            .groups
-            .iter()
-            .map(|g| {
-                let r = g.reflections.as_ref()?;
-                let receiver = p.coat(g.object?)?;
-                let lit: Vec<Compact> = r
-                    .gathers
-                    .par_iter()
-                    .map(|gth| {
-                        let coats = Coats {
-                            receiver: Some(receiver),
-                            how: Receive::Lobe(&r.coat),
-                            sender: p.coat(gth.sender),
-                        };
-                        Compact::lit::<AVX2>(gth, &light, coats, c.parallel)
-                    })
-                    .collect();
-                let folds = r
-                    .gathers
-                    .iter()
-                    .zip(&lit)
-                    .map(|(gth, cg)| {
-                        Fold::of(cg, &self.tables[gth.sender], &table_light[gth.sender])
-                    })
-                    .collect();
-                Some((&r.gathers[..], lit, folds))
-            })
-            .collect();
+        let mirrored = self.mirrored::<AVX2>(p, &light, &table_light, c.parallel);
         // The fixed point: the bounce columns from the senders' products, the gauge, the products.
         // From the brightest lamp the bounds allow (the dimmest bounce): converges faster than from the
         // scene's own intensity.
@@ -359,39 +316,17 @@ impl Kernel {
                 .filter_map(|(gi, c, col)| {
                     let g = &self.groups[gi];
                     col.fill(0.0);
-                    let add = |col: &mut [f32], lit: &Lit, scale: f32| {
-                        for ((gth, cg), folds) in lit.gathers.iter().zip(lit.lit).zip(lit.folds) {
-                            let pk = scale * solved.products[gth.sender][c] as f32;
-                            let ek = scale * solved.environment_at(gth.sender, c) as f32;
-                            add_terms(col, &cg.pixels, (pk, &cg.a), (ek, &cg.s));
-                            // The sender's own bounce: its albedo P_k·u/g_c times the light on its table.
-                            let second = (u / w[c]) as f32 * pk;
-                            for fold in folds {
-                                let pt = second * solved.products[fold.sender][c] as f32;
-                                let et = second * solved.environment_at(fold.sender, c) as f32;
-                                add_terms(col, &cg.pixels, (pt, &fold.a), (et, &fold.s));
-                            }
-                        }
-                    };
                     let bounce = Lit {
                         gathers: &g.gathers,
                         lit: &gathered[gi],
                         folds: &folded[gi],
                     };
-                    add(col, &bounce, 1.0);
+                    bounce.add(col, (solved, u, w[c]), c, 1.0);
                     let obj = g.object?;
-                    if let Some((gathers, lit, folds)) = &mirrored[gi] {
+                    if let Some(m) = &mirrored[gi] {
                         let scale = mirror_scale(solved, obj, c, w[c]);
                         if scale > 0.0 {
-                            add(
-                                col,
-                                &Lit {
-                                    gathers,
-                                    lit,
-                                    folds,
-                                },
-                                scale,
-                            );
+                            m.lit().add(col, (solved, u, w[c]), c, scale);
                         }
                     }
                     let (o0, n) = (offsets[gi], col.len());
@@ -541,10 +476,29 @@ impl Kernel {
 
 /// Gathers lit for one candidate ([`Compact`]) with their table lookups folded ([`Fold`]), as a round of
 /// the fixed point adds them.
-struct Lit<'a> {
-    gathers: &'a [Gather],
-    lit: &'a [Compact],
-    folds: &'a [Vec<Fold>],
+pub(crate) struct Lit<'a> {
+    pub(crate) gathers: &'a [Gather],
+    pub(crate) lit: &'a [Compact],
+    pub(crate) folds: &'a [Vec<Fold>],
+}
+
+impl Lit<'_> {
+    /// Adds to `col` (channel `c`) `scale` times Σ form·(P_k,c·e + E_k,c·S) over the gathers at the
+    /// products `solved`, with each sphere sender's own bounce (its albedo P_k·u/g_c times the light on
+    /// its table).
+    fn add(&self, col: &mut [f32], (solved, u, g_c): (&Solved, f64, f64), c: usize, scale: f32) {
+        for ((gth, cg), folds) in self.gathers.iter().zip(self.lit).zip(self.folds) {
+            let pk = scale * solved.products[gth.sender][c] as f32;
+            let ek = scale * solved.environment_at(gth.sender, c) as f32;
+            add_terms(col, &cg.pixels, (pk, &cg.a), (ek, &cg.s));
+            let second = (u / g_c) as f32 * pk;
+            for fold in folds {
+                let pt = second * solved.products[fold.sender][c] as f32;
+                let et = second * solved.environment_at(fold.sender, c) as f32;
+                add_terms(col, &cg.pixels, (pt, &fold.a), (et, &fold.s));
+            }
+        }
+    }
 }
 
 /// The scale that turns a coated object's reflection R_c (`reflect`, gathered as B_c is) into a term of

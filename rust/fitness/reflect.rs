@@ -5,12 +5,16 @@
 //! direction has in the lobe of the coat they were built for; a candidate with another coat (the coat's
 //! roughness tried) rescales them by the two coats' directional albedos (`light_terms::Receive::Lobe`).
 
+use super::bounce::Lit;
+use super::compact::{Coats, Compact, Fold};
 use super::kernel::Kernel;
-use super::pixels::{gathers_of, Reflections};
+use super::light_terms::Receive;
+use super::pixels::{gathers_of, Gather, Light, Reflections};
 use crate::render::bounce::{mirror, GatherPoint};
 use crate::render::coat::Coat;
-use crate::render::{PShape, Surfel};
+use crate::render::{PShape, ShadeParams, Surfel};
 use glam::Vec3A;
+use rayon::prelude::*;
 
 impl Kernel {
     /// Builds the [`Reflections`] of every group whose object has a coat in `coats` (per object; empty:
@@ -54,5 +58,91 @@ impl Kernel {
                 gathers,
             });
         }
+    }
+}
+
+/// A coated group's lobe points lit for one candidate, with their table lookups folded (`bounce`).
+pub(crate) struct Mirrored<'g> {
+    gathers: &'g [Gather],
+    lit: Vec<Compact>,
+    folds: Vec<Vec<Fold>>,
+}
+
+impl Mirrored<'_> {
+    pub(crate) fn lit(&self) -> Lit<'_> {
+        Lit {
+            gathers: self.gathers,
+            lit: &self.lit,
+            folds: &self.folds,
+        }
+    }
+}
+
+impl Kernel {
+    /// Each sphere's table points' light from each of their senders (unit light `light`), as the second
+    /// bounce reads it (`bounce`).
+    pub(crate) fn table_light<const AVX2: bool>(
+        &self,
+        p: &ShadeParams,
+        light: &Light,
+        parallel: bool,
+    ) -> Vec<Vec<Compact>> {
+        self.tables
+            .iter()
+            .enumerate()
+            .map(|(k, gths)| {
+                let coats = |gth: &Gather| Coats {
+                    receiver: p.coat(k),
+                    how: Receive::Table,
+                    sender: p.coat(gth.sender),
+                };
+                gths.iter()
+                    .map(|gth| Compact::lit::<AVX2>(gth, light, coats(gth), parallel))
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// Per group, its reflections lit at the unit light `light` (and folded into `table_light`) where its
+    /// object has a coat in `p`; `None` elsewhere.
+    pub(crate) fn mirrored<const AVX2: bool>(
+        &self,
+        p: &ShadeParams,
+        light: &Light,
+        table_light: &[Vec<Compact>],
+        parallel: bool,
+    ) -> Vec<Option<Mirrored<'_>>> {
+        self.groups
+            .iter()
+            .map(|g| {
+                let r = g.reflections.as_ref()?;
+                let receiver = p.coat(g.object?)?;
+                let lit: Vec<Compact> = r
+                    .gathers
+                    .par_iter()
+                    .map(|gth| {
+                        let coats = Coats {
+                            receiver: Some(receiver),
+                            how: Receive::Lobe(&r.coat),
+                            sender: p.coat(gth.sender),
+                        };
+                        Compact::lit::<AVX2>(gth, light, coats, parallel)
+                    })
+                    .collect();
+                let folds = r
+                    .gathers
+                    .iter()
+                    .zip(&lit)
+                    .map(|(gth, cg)| {
+                        Fold::of(cg, &self.tables[gth.sender], &table_light[gth.sender])
+                    })
+                    .collect();
+                Some(Mirrored {
+                    gathers: &r.gathers,
+                    lit,
+                    folds,
+                })
+            })
+            .collect()
     }
 }
