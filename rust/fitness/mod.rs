@@ -10,6 +10,7 @@ use glam::Vec3A;
 use crate::error::{Error, Result};
 mod blocker;
 pub mod bounce;
+mod compact;
 mod folds;
 mod held;
 pub mod kernel;
@@ -22,6 +23,7 @@ pub mod outline_gate;
 pub mod pixels;
 pub mod projected;
 pub mod refine;
+mod reflect;
 pub mod silhouette;
 mod simd;
 pub mod solve;
@@ -388,6 +390,13 @@ impl Fitness {
             held_solve: None,
             bounce: bounce::Mode::SEARCH,
         };
+        if scene.interreflection && scene.can_occlude() {
+            // a coated object's reflection of the others (`reflect`)
+            let shapes = &fitness.shapes;
+            fitness
+                .kernel
+                .set_reflections(shapes, shadows, &fitness.base.coats);
+        }
         fitness.set_norm(spec.norm);
         fitness.set_space(spec.space);
         if let Some(level) = spec.saturated {
