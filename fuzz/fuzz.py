@@ -348,12 +348,9 @@ def _strict(rng: random.Random, c: Counts, tmp: Path) -> None:
 
 
 def _coat(rng: random.Random, c: Counts) -> None:
-    """A coated scene (with the bounce a third of the time: the coat in the bounce) mutated (its coat's fields
-    most often) through load_scene and render, or fitted by default (the lobe chosen from the photo) to a
-    render of a coated ball under another light, with noise."""
+    """A coated scene mutated (its coat's fields most often) through load_scene and render, or fitted by
+    default (the lobe chosen from the photo) to a render of a coated ball under another light, with noise."""
     d = copy.deepcopy(COAT_BASE)
-    if rng.random() < 1 / 3:
-        d["interreflection"] = True
     coat = d["objects"][0]["material"]["coat"]
     if rng.random() < 0.5:
         for _ in range(rng.randint(1, 3)):

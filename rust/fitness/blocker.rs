@@ -1,5 +1,6 @@
 //! When the closed form (the projected method) applies to a scene, and which constant term it solves.
 
+use super::lobe::coat_blocker;
 use super::pixels::Sky;
 use crate::scene::Scene;
 
@@ -16,6 +17,9 @@ pub fn projection_blocker(scene: &Scene, paths: &[String]) -> Option<String> {
     }
     if ambient && scene.interreflection {
         return Some("the scene has ambient light and interreflection".into());
+    }
+    if let Some(why) = coat_blocker(scene) {
+        return Some(why);
     }
     let allowed = |p: &str| {
         matches!(

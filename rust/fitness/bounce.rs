@@ -11,12 +11,10 @@
 //! the pool; the search's candidates, with the bounce held ([`Frozen`], `held`), are spread over the pool
 //! for a lone candidate and stop early above their bound, as direct candidates do.
 
-use super::compact::{add_terms, Coats, Compact, Fold};
 use super::held::Frozen;
 use super::kernel::{Candidate, Kernel};
-use super::light_terms::Receive;
 use super::loss::{Encoding, Identity, Space, SrgbLut};
-use super::pixels::{Gather, Light, BLOCK};
+use super::pixels::{Light, BLOCK};
 use super::projected::{Gauge, Projection, Solved};
 use super::simd::{self, Simd};
 use super::solve::{environment_lane_sums, SolveSums};
@@ -232,14 +230,9 @@ impl Kernel {
             .groups
             .par_iter()
             .map(|g| {
-                let coats = |gth: &Gather| Coats {
-                    receiver: g.object.and_then(|o| p.coat(o)),
-                    how: Receive::View,
-                    sender: p.coat(gth.sender),
-                };
                 g.gathers
                     .par_iter()
-                    .map(|gth| Compact::lit::<AVX2>(gth, &light, coats(gth), c.parallel))
+                    .map(|gth| Compact::lit::<AVX2>(gth, &light, c.parallel))
                     .collect()
             })
             .collect();
@@ -261,7 +254,15 @@ impl Kernel {
             self.solve_run(run, obj, &sums, proj, out, &a_all[o0..o0 + n], sat);
         }
         // Each sphere's table points: their senders' light (unit light), for the second bounce.
-        let table_light = self.table_light::<AVX2>(p, &light, c.parallel);
+        let table_light: Vec<Vec<Compact>> = self
+            .tables
+            .iter()
+            .map(|gths| {
+                gths.iter()
+                    .map(|gth| Compact::lit::<AVX2>(gth, &light, c.parallel))
+                    .collect()
+            })
+            .collect();
         // The senders' own bounce, folded per receiving pixel: for a sphere sender k and each of its
         // table's senders k', Σ form·(light on k's table from k') and Σ form·(sky of k's table from k') over
         // the pixel's lookups. A round then costs per pixel and k', not per lookup.
@@ -279,10 +280,6 @@ impl Kernel {
                     .collect()
             })
             .collect();
-        // A coated object's reflection of the others (`reflect`): its lobe points lit and folded as the
-        // gathers are; a round adds them to B scaled so that the receiver's albedo becomes its specular
-        // weight (`mirror_scale`).
-        let mirrored = self.mirrored::<AVX2>(p, &light, &table_light, c.parallel);
         // The fixed point: the bounce columns from the senders' products, the gauge, the products.
         // From the brightest lamp the bounds allow (the dimmest bounce): converges faster than from the
         // scene's own intensity.
@@ -316,19 +313,19 @@ impl Kernel {
                 .filter_map(|(gi, c, col)| {
                     let g = &self.groups[gi];
                     col.fill(0.0);
-                    let bounce = Lit {
-                        gathers: &g.gathers,
-                        lit: &gathered[gi],
-                        folds: &folded[gi],
-                    };
-                    bounce.add(col, (solved, u, w[c]), c, 1.0);
-                    let obj = g.object?;
-                    if let Some(m) = &mirrored[gi] {
-                        let scale = mirror_scale(solved, obj, c, w[c]);
-                        if scale > 0.0 {
-                            m.lit().add(col, (solved, u, w[c]), c, scale);
+                    for ((gth, cg), folds) in g.gathers.iter().zip(&gathered[gi]).zip(&folded[gi]) {
+                        let pk = solved.products[gth.sender][c] as f32;
+                        let ek = solved.environment_at(gth.sender, c) as f32;
+                        add_terms(col, &cg.pixels, (pk, &cg.a), (ek, &cg.s));
+                        // The sender's own bounce: its albedo P_k·u/g_c times the light on its table.
+                        let second = (u / w[c]) as f32 * pk;
+                        for fold in folds {
+                            let pt = second * solved.products[fold.sender][c] as f32;
+                            let et = second * solved.environment_at(fold.sender, c) as f32;
+                            add_terms(col, &cg.pixels, (pt, &fold.a), (et, &fold.s));
                         }
                     }
+                    let obj = g.object?;
                     let (o0, n) = (offsets[gi], col.len());
                     let sums = gauge_sums(
                         GaugeTerms {
@@ -474,43 +471,111 @@ impl Kernel {
     }
 }
 
-/// Gathers lit for one candidate ([`Compact`]) with their table lookups folded ([`Fold`]), as a round of
-/// the fixed point adds them.
-pub(crate) struct Lit<'a> {
-    pub(crate) gathers: &'a [Gather],
-    pub(crate) lit: &'a [Compact],
-    pub(crate) folds: &'a [Vec<Fold>],
-}
-
-impl Lit<'_> {
-    /// Adds to `col` (channel `c`) `scale` times Σ form·(P_k,c·e + E_k,c·S) over the gathers at the
-    /// products `solved`, with each sphere sender's own bounce (its albedo P_k·u/g_c times the light on
-    /// its table).
-    fn add(&self, col: &mut [f32], (solved, u, g_c): (&Solved, f64, f64), c: usize, scale: f32) {
-        for ((gth, cg), folds) in self.gathers.iter().zip(self.lit).zip(self.folds) {
-            let pk = scale * solved.products[gth.sender][c] as f32;
-            let ek = scale * solved.environment_at(gth.sender, c) as f32;
-            add_terms(col, &cg.pixels, (pk, &cg.a), (ek, &cg.s));
-            let second = (u / g_c) as f32 * pk;
-            for fold in folds {
-                let pt = second * solved.products[fold.sender][c] as f32;
-                let et = second * solved.environment_at(fold.sender, c) as f32;
-                add_terms(col, &cg.pixels, (pt, &fold.a), (et, &fold.s));
-            }
-        }
+/// Adds p·a[j] + e·s[j] to `col` at each receiving pixel `pixels[j]`, for `(p, a)` and `(e, s)`.
+#[inline(always)]
+fn add_terms(col: &mut [f32], pixels: &[u32], (p, a): (f32, &[f32]), (e, s): (f32, &[f32])) {
+    for (j, &i) in pixels.iter().enumerate() {
+        col[i as usize] += p * a[j] + e * s[j];
     }
 }
 
-/// The scale that turns a coated object's reflection R_c (`reflect`, gathered as B_c is) into a term of
-/// its bounce column B_c: with a'_c = a + (u/g_c)·B_c times P_c, g_c·Q/P_c·R_c becomes u·Q·R_c, its
-/// specular weight (Q·u) times R_c, at the products `solved` (of the last round: the fixed point holds
-/// the reflection as it holds the bounce); 0 where P_c or Q is not positive.
-fn mirror_scale(solved: &Solved, obj: usize, c: usize, g_c: f64) -> f32 {
-    let (pc, q) = (solved.products[obj][c], solved.specular[obj]);
-    if pc > 0.0 && q > 0.0 && g_c > 0.0 {
-        (g_c * q / pc).min(f32::MAX as f64) as f32
-    } else {
-        0.0
+/// One gather for one candidate, summed per receiving pixel: Σ form·e (the unit light the sender's points
+/// get) and Σ form·S (their sky view), and for a sphere sender the (pixel, table point, Σ form) of its
+/// table lookups; a round of the fixed point then costs per pixel, not per point.
+struct Compact {
+    pixels: Vec<u32>,
+    a: Vec<f32>,
+    s: Vec<f32>,
+    table: Vec<(u32, u32, f32)>,
+}
+
+impl Compact {
+    /// [`Compact::new`] of `gth` with the unit light `light` gives its points (`Gather::light`).
+    fn lit<const AVX2: bool>(
+        gth: &super::pixels::Gather,
+        light: &Light,
+        parallel: bool,
+    ) -> Compact {
+        let mut e = Vec::new();
+        gth.light::<AVX2>(light, &mut e, parallel);
+        Compact::new(gth, &e)
+    }
+
+    fn new(gth: &super::pixels::Gather, e: &[f32]) -> Compact {
+        let sky = &gth.points.sky;
+        let mut c = Compact {
+            pixels: Vec::new(),
+            a: Vec::new(),
+            s: Vec::new(),
+            table: Vec::new(),
+        };
+        for (j, &i) in gth.pixel.iter().enumerate() {
+            // The gather's points come in pixel order: a new pixel starts a new entry.
+            if c.pixels.last() != Some(&i) {
+                c.pixels.push(i);
+                c.a.push(0.0);
+                c.s.push(0.0);
+            }
+            let k = c.pixels.len() - 1;
+            let f = gth.form[j];
+            c.a[k] += f * e[j];
+            if !sky.is_empty() {
+                c.s[k] += f * sky[j];
+            }
+            if let Some(&t) = gth.table.get(j) {
+                match c.table.last_mut() {
+                    Some(last) if last.0 == k as u32 && last.1 == t => last.2 += f,
+                    _ => c.table.push((k as u32, t, f)),
+                }
+            }
+        }
+        c
+    }
+}
+
+/// One receiving gather's lookups into a sphere sender's table, summed per receiving pixel for one of the
+/// table's own senders: Σ form·e and Σ form·S over the table points each pixel looks up.
+struct Fold {
+    sender: usize,
+    a: Vec<f32>,
+    s: Vec<f32>,
+}
+
+impl Fold {
+    /// Per table sender (`table_gathers[m]`, lit as `table_light[m]`), the folded lookups of `cg`; none
+    /// for a plane sender (no table) or a gather with no lookups.
+    fn of(
+        cg: &Compact,
+        table_gathers: &[super::pixels::Gather],
+        table_light: &[Compact],
+    ) -> Vec<Fold> {
+        if cg.table.is_empty() {
+            return Vec::new();
+        }
+        table_gathers
+            .iter()
+            .zip(table_light)
+            .map(|(gth, tl)| {
+                let (mut at, mut st) = (
+                    vec![0.0f32; crate::render::bounce::TABLE],
+                    vec![0.0f32; crate::render::bounce::TABLE],
+                );
+                for (j, &t) in tl.pixels.iter().enumerate() {
+                    at[t as usize] += tl.a[j];
+                    st[t as usize] += tl.s[j];
+                }
+                let mut fold = Fold {
+                    sender: gth.sender,
+                    a: vec![0.0; cg.pixels.len()],
+                    s: vec![0.0; cg.pixels.len()],
+                };
+                for &(j, t, f) in &cg.table {
+                    fold.a[j as usize] += f * at[t as usize];
+                    fold.s[j as usize] += f * st[t as usize];
+                }
+                fold
+            })
+            .collect()
     }
 }
 

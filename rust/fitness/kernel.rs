@@ -5,7 +5,7 @@
 
 use glam::Vec3A;
 
-use super::light_terms::{irradiance, shadow, Receive};
+use super::light_terms::{irradiance, shadow};
 use super::lobe::{coat_factors, half_cos};
 use super::loss::{rgb_loss_in, Encoding, Identity, Norm, Space, SrgbLut, SATURATED};
 use super::pixels::{gathers, group, Gather, Group, Light, PixelSet, Sky, BLOCK};
@@ -212,8 +212,6 @@ impl Kernel {
             // One bounce from the other objects, per pixel (exposure applied; times the albedo below).
             let bounce = (p.interreflection && !g.gathers.is_empty())
                 .then(|| gathered::<AVX2>(g, p, &light, &tables));
-            // A coated object's reflection of the others (`reflect`), exposure applied.
-            let mirrored = reflected::<AVX2>(g, p, &light, &tables);
             let k: [f32; 3] =
                 std::array::from_fn(|c| lambert(p.exposure * light.rgb[c] * m.albedo[c]));
             let ks: [f32; 3] = std::array::from_fn(|c| {
@@ -237,9 +235,6 @@ impl Kernel {
                             let mut base = if sky { a[c] + ae[c] * g.sky[s] } else { a[c] };
                             if let Some(b) = &bounce {
                                 base += m.albedo[c] * b[c][s];
-                            }
-                            if let Some(r) = &mirrored {
-                                base += m.specular * r[c][s];
                             }
                             let v = base + kd * e[i] + ks * lobes[i];
                             let v = if clip { v.min(1.0) } else { v };
@@ -299,8 +294,7 @@ impl Kernel {
         let mut e = Vec::new();
         self.tables
             .iter()
-            .enumerate()
-            .map(|(k, gths)| {
+            .map(|gths| {
                 let mut out: [Vec<f32>; 3] = std::array::from_fn(|_| {
                     if gths.is_empty() {
                         Vec::new()
@@ -309,7 +303,7 @@ impl Kernel {
                     }
                 });
                 for gth in gths {
-                    gth.light::<AVX2>(light, p.coat(gth.sender), &mut e, false);
+                    gth.light::<AVX2>(light, &mut e, false);
                     let rho = p.materials[gth.sender].albedo;
                     let sky = &gth.points.sky;
                     for c in 0..3 {
@@ -318,8 +312,7 @@ impl Kernel {
                             if !sky.is_empty() {
                                 l += p.environment[c] * sky[j];
                             }
-                            let form = gth.received_form(j, p.coat(k), Receive::Table);
-                            out[c][i as usize] += form * rho[c] * l;
+                            out[c][i as usize] += gth.form[j] * rho[c] * l;
                         }
                     }
                 }
@@ -339,24 +332,11 @@ pub(crate) fn gathered<const AVX2: bool>(
     light: &Light,
     tables: &[[Vec<f32>; 3]],
 ) -> [Vec<f32>; 3] {
-    gathered_from::<AVX2>((g.len(), &g.gathers, Receive::View), g, p, light, tables)
-}
-
-/// [`gathered`] over the gathers `gathers` of `g`'s `n` pixels, received as `how` says.
-#[inline(always)]
-pub(crate) fn gathered_from<const AVX2: bool>(
-    (n, gathers, how): (usize, &[Gather], Receive),
-    g: &Group,
-    p: &ShadeParams,
-    light: &Light,
-    tables: &[[Vec<f32>; 3]],
-) -> [Vec<f32>; 3] {
+    let n = g.len();
     let mut out: [Vec<f32>; 3] = std::array::from_fn(|_| vec![0.0f32; n]);
     let mut e = Vec::new();
-    let receiver = g.object.and_then(|o| p.coat(o));
-    for gth in gathers {
-        let sender = p.coat(gth.sender);
-        gth.light::<AVX2>(light, sender, &mut e, false);
+    for gth in &g.gathers {
+        gth.light::<AVX2>(light, &mut e, false);
         let rho = p.materials[gth.sender].albedo;
         let sky = &gth.points.sky;
         for c in 0..3 {
@@ -367,10 +347,9 @@ pub(crate) fn gathered_from<const AVX2: bool>(
                     l += p.environment[c] * sky[j];
                 }
                 if !gth.table.is_empty() {
-                    let t = tables[gth.sender][c][gth.table[j] as usize];
-                    l += gth.leaving(j, sender, t);
+                    l += tables[gth.sender][c][gth.table[j] as usize];
                 }
-                out[c][i as usize] += gth.received_form(j, receiver, how) * k * l;
+                out[c][i as usize] += gth.form[j] * k * l;
             }
         }
     }
@@ -402,25 +381,4 @@ impl<E: Encoding> Simd for L1<'_, E> {
     fn run<const AVX2: bool>(self) -> [f64; 3] {
         self.k.l1_generic::<AVX2, E>(self.c, self.enc)
     }
-}
-
-/// Per channel and pixel of `g`, its reflection of the others per unit specular weight under shading
-/// parameters `p` (exposure applied): Σ over its lobe points of their weight times their sender's
-/// radiance towards the pixel, as `render::shade::reflected`; `None` without reflections or
-/// interreflection.
-pub(crate) fn reflected<const AVX2: bool>(
-    g: &Group,
-    p: &ShadeParams,
-    light: &Light,
-    tables: &[[Vec<f32>; 3]],
-) -> Option<[Vec<f32>; 3]> {
-    let r = g.reflections.as_ref().filter(|_| p.interreflection)?;
-    let how = Receive::Lobe(&r.coat);
-    Some(gathered_from::<AVX2>(
-        (g.len(), &r.gathers, how),
-        g,
-        p,
-        light,
-        tables,
-    ))
 }

@@ -10,11 +10,8 @@ use super::pixels::{offset, Gather, Group, Light, PlaneOccluder, SphereOccluder,
 use crate::geometry::plane;
 use crate::geometry::sphere::{line_to_sphere, segment_meets_sphere, Chord};
 use crate::render::brdf::lambert;
-use crate::render::coat::Coat;
 use crate::render::footprint::{near_sphere_edge, sphere_edge_lit, terminator_cos};
-use crate::render::light::{
-    directional_irradiance, incidence, point_irradiance, point_irradiance_in, Lanes,
-};
+use crate::render::light::{directional_irradiance, point_irradiance, point_irradiance_in, Lanes};
 
 /// e = max(0, n·l) / d² (unit light), written into `e`; 0 for a light on the surface. On a sphere with
 /// a footprint, max(0, n·l) is its mean over the pixel where the terminator crosses it.
@@ -399,27 +396,19 @@ pub(crate) fn shadow_directional(g: &Group, r: std::ops::Range<usize>, d: [f32; 
 }
 
 impl Gather {
-    /// The unit-light diffuse factor (irradiance / π, shadowed) at every point towards its receiver, into
-    /// `e`, for a sender with the coat `coat` the coat's (`Coat::over_lambert`, as `render::shade`'s
-    /// sender); with `parallel`, runs of [`GATHER_LIGHT_RUN`] points spread over the current pool (each
-    /// point's value is its own: the same either way).
+    /// The unit-light diffuse factor (irradiance / π, shadowed) at every point, into `e`; with
+    /// `parallel`, runs of [`GATHER_LIGHT_RUN`] points spread over the current pool (each point's value
+    /// is its own: the same either way).
     #[inline(always)]
-    pub(crate) fn light<const AVX2: bool>(
-        &self,
-        light: &Light,
-        coat: Option<&Coat>,
-        e: &mut Vec<f32>,
-        parallel: bool,
-    ) {
+    pub(crate) fn light<const AVX2: bool>(&self, light: &Light, e: &mut Vec<f32>, parallel: bool) {
         e.resize(self.points.len(), 0.0);
         let blocks = |first: usize, e: &mut [f32]| {
             for (k, e) in e.chunks_mut(BLOCK).enumerate() {
                 let r = first + k * BLOCK..first + k * BLOCK + e.len();
                 irradiance::<AVX2>(&self.points, r.clone(), light, e);
-                shadow(&self.points, r.clone(), light, e);
-                match coat {
-                    Some(c) => self.coat_sent(r, light, c, e),
-                    None => e.iter_mut().for_each(|v| *v = lambert(*v)),
+                shadow(&self.points, r, light, e);
+                for v in e.iter_mut() {
+                    *v = lambert(*v);
                 }
             }
         };
@@ -429,72 +418,6 @@ impl Gather {
                 .for_each(|(k, e)| blocks(k * GATHER_LIGHT_RUN, e));
         } else {
             blocks(0, e);
-        }
-    }
-}
-
-/// How a gather's receiver takes its points' light through its coat: as `render::shade::received_form`,
-/// its diffuse base from the point towards its eye (`Coat::over_lambert`), or for a sphere's bounce
-/// table the entering half (`Coat::entering`); or as its coat's lobe built for the coat `.0`
-/// (`reflect`): the point's weight, rescaled by the two coats' directional albedos where the candidate's
-/// coat differs.
-#[derive(Clone, Copy)]
-pub(crate) enum Receive<'a> {
-    View,
-    Table,
-    Lobe(&'a Coat),
-}
-
-impl Gather {
-    /// Point `j`'s configuration factor as its receiver's coat `coat` weighs it ([`Receive`]); the factor
-    /// itself for a matte receiver.
-    #[inline(always)]
-    pub(crate) fn received_form(&self, j: usize, coat: Option<&Coat>, how: Receive) -> f32 {
-        let Some(c) = coat else { return self.form[j] };
-        let [cos_in, cos_view, _] = self.cosines[j];
-        match how {
-            Receive::View => self.form[j] * c.over_lambert(cos_in, cos_view),
-            Receive::Table => self.form[j] * c.entering(cos_in),
-            Receive::Lobe(built) if built == c => self.form[j],
-            Receive::Lobe(built) => {
-                let r = built.reflectance(cos_view);
-                if r > 0.0 {
-                    self.form[j] * (c.reflectance(cos_view) / r)
-                } else {
-                    0.0
-                }
-            }
-        }
-    }
-
-    /// `f` times the factor by which a coated sender's (`coat`) own bounce leaves point `j` towards its
-    /// receiver, `Coat::leaving`; `f` for a matte sender.
-    #[inline(always)]
-    pub(crate) fn leaving(&self, j: usize, coat: Option<&Coat>, f: f32) -> f32 {
-        match coat {
-            Some(c) => f * c.leaving(self.cosines[j][2]),
-            None => f,
-        }
-    }
-
-    /// `e` (the unit-light irradiance at the points `r`, shadowed) as a coated sender's diffuse factor
-    /// towards each point's receiver: irradiance / π times `Coat::over_lambert` from the light's
-    /// incidence to the receiver's direction.
-    fn coat_sent(&self, r: std::ops::Range<usize>, light: &Light, coat: &Coat, e: &mut [f32]) {
-        let (pos, dir) = (
-            Vec3A::from_array(light.pos),
-            light.dir.map(Vec3A::from_array),
-        );
-        let g = &self.points;
-        for (i, s) in r.enumerate() {
-            let at = |v: &[Vec<f32>; 3]| Vec3A::new(v[0][s], v[1][s], v[2][s]);
-            let factor = match incidence(pos, dir, at(&g.p)) {
-                Some((l, _, _)) if e[i] > 0.0 => {
-                    coat.over_lambert(at(&g.n).dot(l), self.cosines[s][2])
-                }
-                _ => 0.0,
-            };
-            e[i] = lambert(e[i]) * factor;
         }
     }
 }

@@ -8,6 +8,18 @@ use crate::render::coat::Coat;
 use crate::render::light::incidence;
 use glam::Vec3A;
 
+/// Why the closed form cannot take a scene's coat, if it cannot: the bounce's closed form does not model
+/// a coated object.
+pub fn coat_blocker(scene: &crate::scene::Scene) -> Option<String> {
+    let o = scene.objects.iter().find(|o| o.material.coat.is_some())?;
+    scene.interreflection.then(|| {
+        format!(
+            "objects.{} has a coat and the scene has interreflection",
+            o.name
+        )
+    })
+}
+
 /// The coat's factors over the block `r`: `e` holds each pixel's unit-light irradiance (cos/d², shadowed)
 /// and becomes the diffuse factor per unit albedo, e·`Coat::diffuse`; `b` gets the lobe's, e·`Coat::specular`
 /// (the renderer's `Coat` calls, on the same directions as `shade`'s).
@@ -97,7 +109,6 @@ mod tests {
             planes: Vec::new(),
             sky: Vec::new(),
             gathers: Vec::new(),
-            reflections: None,
             blocks: Vec::new(),
             du: Default::default(),
             dv: Default::default(),

@@ -10,7 +10,6 @@ use glam::Vec3A;
 use crate::error::{Error, Result};
 mod blocker;
 pub mod bounce;
-mod compact;
 mod folds;
 mod held;
 pub mod kernel;
@@ -23,7 +22,6 @@ pub mod outline_gate;
 pub mod pixels;
 pub mod projected;
 pub mod refine;
-mod reflect;
 pub mod silhouette;
 mod simd;
 pub mod solve;
@@ -390,13 +388,6 @@ impl Fitness {
             held_solve: None,
             bounce: bounce::Mode::SEARCH,
         };
-        if scene.interreflection && scene.can_occlude() {
-            // a coated object's reflection of the others (`reflect`)
-            let shapes = &fitness.shapes;
-            fitness
-                .kernel
-                .set_reflections(shapes, shadows, &fitness.base.coats);
-        }
         fitness.set_norm(spec.norm);
         fitness.set_space(spec.space);
         if let Some(level) = spec.saturated {

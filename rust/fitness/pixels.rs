@@ -5,7 +5,7 @@
 use glam::Vec3A;
 use rayon::prelude::*;
 
-use crate::render::bounce::{gather, nearest_table, GatherPoint};
+use crate::render::bounce::{gather, nearest_table};
 use crate::render::environment::sky_view;
 use crate::render::footprint;
 pub use crate::render::footprint::interior;
@@ -251,9 +251,6 @@ pub(crate) struct Group {
     /// Where each pixel gathers one bounce from the other objects (`render::bounce::gather`), per
     /// sender; empty unless the kernel models interreflection.
     pub(crate) gathers: Vec<Gather>,
-    /// Where a coated object's pixels take the other objects' light in its coat's lobe from
-    /// (`reflect`); `None` otherwise.
-    pub(crate) reflections: Option<Reflections>,
     /// Bounding sphere (centre, radius) of each run of `BLOCK` pixels, for culling shadow tests.
     pub(crate) blocks: Vec<([f32; 3], f32)>,
     /// Each pixel's footprint axes on its surface (x: `du`, y: `dv`), so that a sphere's shadow edge is
@@ -298,17 +295,6 @@ pub(crate) struct Gather {
     /// For a sphere sender: each point's nearest table point (`render::bounce::TABLE`), whose tabulated
     /// bounce the sender adds to its radiance there; empty for a plane.
     pub(crate) table: Vec<u32>,
-    /// Per point, the cosines a coat weighs its light by (`render::coat::Coat::over_lambert`): the
-    /// receiver's towards the point and towards its eye, and the sender's towards the receiver.
-    pub(crate) cosines: Vec<[f32; 3]>,
-}
-
-/// A coated object's lobe points (`reflect`): per sender, the gathers of its pixels' lobe
-/// directions, built for the coat `coat`.
-#[derive(Clone)]
-pub(crate) struct Reflections {
-    pub(crate) coat: crate::render::coat::Coat,
-    pub(crate) gathers: Vec<Gather>,
 }
 
 /// Pixels per parallel run of [`gathers`].
@@ -323,20 +309,7 @@ pub(crate) fn gathers(
     shadows: bool,
     sky: Sky,
 ) -> Vec<Gather> {
-    let points =
-        |s: &Surfel, out: &mut Vec<GatherPoint>| gather(s.position, s.normal, own, shapes, out);
-    gathers_of(surfels, idx, shapes, (shadows, sky), points)
-}
-
-/// [`gathers`] with each pixel's points from `points` (which replaces its second argument's contents).
-pub(crate) fn gathers_of(
-    surfels: &[Surfel],
-    idx: &[usize],
-    shapes: &[PShape],
-    (shadows, sky): (bool, Sky),
-    points_of: impl Fn(&Surfel, &mut Vec<GatherPoint>) + Sync,
-) -> Vec<Gather> {
-    type PerSender = Vec<(Vec<u32>, Vec<f32>, Vec<Surfel>, Vec<[f32; 3]>)>;
+    type PerSender = Vec<(Vec<u32>, Vec<f32>, Vec<Surfel>)>;
     // Runs of pixels gathered in parallel, then joined in pixel order: the same lists on any pool (on
     // one thread, one run, nothing to join).
     let run_len = if rayon::current_num_threads() > 1 {
@@ -353,7 +326,7 @@ pub(crate) fn gathers_of(
             for (jj, &i) in run.iter().enumerate() {
                 let j = r * run_len + jj;
                 let s = &surfels[i];
-                points_of(s, &mut points);
+                gather(s.position, s.normal, own, shapes, &mut points);
                 for g in &points {
                     let slot = &mut per_sender[g.sender];
                     slot.0.push(j as u32);
@@ -366,9 +339,6 @@ pub(crate) fn gathers_of(
                         object: g.sender as u32,
                         eps: Surfel::eps_at(scale),
                     });
-                    let to = (g.position - s.position).normalize_or_zero();
-                    slot.3
-                        .push([s.normal.dot(to), s.normal.dot(s.view), -g.normal.dot(to)]);
                 }
             }
             per_sender
@@ -384,7 +354,6 @@ pub(crate) fn gathers_of(
                     Vec::with_capacity(n),
                     Vec::with_capacity(n),
                     Vec::with_capacity(n),
-                    Vec::with_capacity(n),
                 )
             })
             .collect()
@@ -394,14 +363,13 @@ pub(crate) fn gathers_of(
             to.0.extend(from.0);
             to.1.extend(from.1);
             to.2.extend(from.2);
-            to.3.extend(from.3);
         }
     }
     per_sender
         .into_par_iter()
         .enumerate()
         .filter(|(_, s)| !s.0.is_empty())
-        .map(|(k, (pixel, form, pts, cosines))| {
+        .map(|(k, (pixel, form, pts))| {
             let zeros = vec![Vec3A::ZERO; pts.len()];
             let solve = vec![false; pts.len()];
             let table = match shapes[k] {
@@ -425,7 +393,6 @@ pub(crate) fn gathers_of(
                 form,
                 points: g.pop().expect("one sender, one group"),
                 table,
-                cosines,
             }
         })
         .collect()
@@ -577,7 +544,6 @@ pub(crate) fn group(
                     Some(o) if bounce => gathers(surfels, idx, o, shapes, shadows, sky),
                     _ => Vec::new(),
                 },
-                reflections: None,
                 blocks: idx
                     .chunks(BLOCK)
                     .map(|chunk| {

@@ -297,44 +297,6 @@ pub fn gather(p: Vec3A, n: Vec3A, own: usize, shapes: &[PShape], out: &mut Vec<G
     }
 }
 
-/// The point of another shape that the surface point `p` of object `own` sees in the unit direction
-/// `dir` (a direction of a coat's lobe, `coat::Coat::lobe`), as a gather point of form `w` with its normal
-/// facing `p`: where a coat's reflection takes the other objects' light from; `None` where the direction
-/// meets no sphere or plane (a mesh neither sends nor blocks bounce light) or `w` is 0.
-pub fn mirror(
-    p: Vec3A,
-    (dir, w): (Vec3A, f32),
-    own: usize,
-    shapes: &[PShape],
-) -> Option<GatherPoint> {
-    if !(w > 0.0) {
-        return None;
-    }
-    let mut best: Option<(usize, crate::geometry::ShapeHit)> = None;
-    for (k, shape) in shapes.iter().enumerate() {
-        if k == own || matches!(shape, PShape::Mesh(_)) {
-            continue;
-        }
-        let tmax = best.as_ref().map_or(f32::INFINITY, |b| b.1.t);
-        let tmin = super::hit::Surfel::eps_at(p.abs().max_element() + shape.scale());
-        if let Some(h) = shape.intersect(p, dir, tmin, tmax) {
-            best = Some((k, h));
-        }
-    }
-    let (sender, h) = best?;
-    let normal = if h.normal.dot(dir) > 0.0 {
-        -h.normal
-    } else {
-        h.normal
-    };
-    Some(GatherPoint {
-        sender,
-        form: w,
-        position: h.position,
-        normal,
-    })
-}
-
 /// One gather point as a render keeps it: the point, its sender's table point (`u32::MAX` for a plane
 /// sender, which has no table) and, where the cache was built for a scene with environment light, the
 /// point's sky view (NaN otherwise): everything of a sender's radiance that does not depend on the light
@@ -633,27 +595,6 @@ mod tests {
             let j = nearest_table(n);
             assert!(at[j].1.dot(n) > 20f32.to_radians().cos(), "{n}");
         }
-    }
-
-    #[test]
-    fn a_balls_mirror_direction_meets_the_floor_or_nothing() {
-        let shapes = ball_on_floor();
-        // From the ball's side, a direction down and out meets the floor where the line does.
-        let p = Vec3A::new(1.0, 1.0, 0.0);
-        let d = Vec3A::new(1.0, -1.0, 0.0).normalize();
-        let g = mirror(p, (d, 0.25), 1, &shapes).expect("the floor");
-        assert_eq!((g.sender, g.form), (0, 0.25));
-        assert!((g.position - Vec3A::new(2.0, 0.0, 0.0)).length() < 1e-5);
-        assert_eq!(g.normal, Vec3A::Y);
-        // Up: nothing; a zero weight: nothing.
-        assert!(mirror(p, (Vec3A::Y, 0.25), 1, &shapes).is_none());
-        assert!(mirror(p, (d, 0.0), 1, &shapes).is_none());
-        // From the floor, the ball above.
-        let g = mirror(Vec3A::new(0.5, 0.0, 0.0), (Vec3A::Y, 1.0), 0, &shapes).expect("the ball");
-        let y = 1.0 - 0.75f32.sqrt();
-        assert_eq!(g.sender, 1);
-        assert!((g.position - Vec3A::new(0.5, y, 0.0)).length() < 1e-5);
-        assert!((g.normal - Vec3A::new(0.5, y - 1.0, 0.0)).length() < 1e-5);
     }
 
     #[test]

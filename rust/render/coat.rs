@@ -20,8 +20,7 @@
 //! coat's tables cost 2 × 64 × 128 samples, about a millisecond, so that a fit can try several
 //! roughnesses. This is the only
 //! place these formulas live: the renderer (`shade`) and the fitness (`fitness::projected`) call
-//! [`Coat::diffuse`] and [`Coat::specular`], and with the bounce [`Coat::over_lambert`] (the base's light
-//! through the coat both ways) and [`Coat::lobe`] (the directions in which the coat reflects the others).
+//! [`Coat::diffuse`] and [`Coat::specular`].
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
@@ -55,12 +54,8 @@ impl PartialEq for Coat {
 struct Tables {
     /// T(μ_k), μ_k = k / 63 (at least 1e-6).
     transmittance: [f32; TABLE],
-    /// The coat's directional albedo from outside, R(μ_k): what its rough interface reflects.
-    reflectance: [f32; TABLE],
     /// 1 / (π η² (1 − R_i)): the diffuse factor's constant.
     diffuse_scale: f32,
-    /// 1 / (η² (1 − R_i)): the same without Lambert's 1/π.
-    base_scale: f32,
     internal_reflectance: f64,
 }
 
@@ -87,21 +82,6 @@ impl Coat {
         t[i] + (t[i + 1] - t[i]) * f
     }
 
-    /// The coat's directional albedo seen from `cos` (∫ f_s cos_l dω of [`Coat::specular`]'s lobe, per unit
-    /// weight; 0 below the horizon), by linear interpolation in its table: what the coat reflects of a
-    /// radiance constant over its lobe.
-    #[inline(always)]
-    pub fn reflectance(&self, cos: f32) -> f32 {
-        if cos <= 0.0 {
-            return 0.0;
-        }
-        let t = &self.tables.reflectance;
-        let x = cos.min(1.0) * (TABLE - 1) as f32;
-        let i = (x as usize).min(TABLE - 2);
-        let f = x - i as f32;
-        t[i] + (t[i + 1] - t[i]) * f
-    }
-
     /// The base's light that the coat reflects back inside, R_i.
     pub fn internal_reflectance(&self) -> f64 {
         self.tables.internal_reflectance
@@ -115,38 +95,6 @@ impl Coat {
             return 0.0;
         }
         self.transmittance(cos_v) * self.transmittance(cos_l) * self.tables.diffuse_scale
-    }
-
-    /// The coat's factor on a Lambertian base's light that enters at incidence `cos_in` and leaves
-    /// towards `cos_out`, T(cos_in) T(cos_out) / (η² (1 − R_i)) (0 below either horizon): π·[`Coat::diffuse`],
-    /// what a coated object's diffuse light is over a matte one's. The bounce (`render::bounce`) takes
-    /// it both ways: the light a coated point sends to another object, and the light it receives from one.
-    #[inline(always)]
-    pub fn over_lambert(&self, cos_in: f32, cos_out: f32) -> f32 {
-        if cos_in <= 0.0 || cos_out <= 0.0 {
-            return 0.0;
-        }
-        self.transmittance(cos_in) * self.transmittance(cos_out) * self.tables.base_scale
-    }
-
-    /// The entering half of [`Coat::over_lambert`], T(cos_in) / (η² (1 − R_i)) (0 below the horizon):
-    /// a sphere's bounce table keeps its received light so, the leaving T(cos_out) taken where a
-    /// receiver reads the table.
-    #[inline(always)]
-    pub fn entering(&self, cos_in: f32) -> f32 {
-        if cos_in <= 0.0 {
-            return 0.0;
-        }
-        self.transmittance(cos_in) * self.tables.base_scale
-    }
-
-    /// The leaving half of [`Coat::over_lambert`], T(cos_out) (0 below the horizon).
-    #[inline(always)]
-    pub fn leaving(&self, cos_out: f32) -> f32 {
-        if cos_out <= 0.0 {
-            return 0.0;
-        }
-        self.transmittance(cos_out)
     }
 
     /// The coat's specular lobe per unit weight, F(v·h) D(h) G₁(v,h) G₁(l,h) / (4 cos_v cos_l), for the
@@ -185,42 +133,6 @@ impl Coat {
     }
 }
 
-/// The side of the stratified grid of [`Coat::lobe`]'s samples: `LOBE_SIDE`² directions.
-pub const LOBE_SIDE: usize = 4;
-
-impl Coat {
-    /// The coat's specular lobe seen from `v` at a point of unit normal `n`: [`LOBE_SIDE`]² directions
-    /// `l`, the mirror images of `v` about GGX's visible normals m on a stratified grid of the sample
-    /// square (Heitz 2018), each with the weight F(v·m)·G₁(l, m) / N (0 for a direction below the
-    /// surface), into `out`: Σ w·L(l) estimates ∫ f_s L cos_l dω per unit specular weight, and Σ w the
-    /// coat's directional albedo ([`Coat::reflectance`], to the grid's error).
-    pub fn lobe(&self, n: Vec3A, v: Vec3A, out: &mut Vec<(Vec3A, f32)>) {
-        out.clear();
-        let (t, b) = n.any_orthonormal_pair();
-        let wi = [v.dot(t) as f64, v.dot(b) as f64, v.dot(n) as f64];
-        if !(wi[2] > 0.0) {
-            return;
-        }
-        let (alpha, eta) = (self.alpha as f64, self.eta as f64);
-        let side = LOBE_SIDE as f64;
-        for i in 0..LOBE_SIDE {
-            for j in 0..LOBE_SIDE {
-                let u = ((i as f64 + 0.5) / side, (j as f64 + 0.5) / side);
-                let m = sample_visible(alpha, wi, u.0, u.1);
-                let c = dot(wi, m);
-                let l: [f64; 3] = std::array::from_fn(|k| 2.0 * c * m[k] - wi[k]);
-                let w = if l[2] > 0.0 {
-                    fresnel(c, eta).0 * smith_g1(alpha, l, m) / (side * side)
-                } else {
-                    0.0
-                };
-                let dir = t * l[0] as f32 + b * l[1] as f32 + n * l[2] as f32;
-                out.push((dir.normalize_or_zero(), w as f32));
-            }
-        }
-    }
-}
-
 fn cached(alpha: f32, eta: f32) -> Arc<Tables> {
     static CACHE: OnceLock<Mutex<HashMap<(u32, u32), Arc<Tables>>>> = OnceLock::new();
     let cache = CACHE.get_or_init(|| Mutex::new(HashMap::new()));
@@ -241,23 +153,18 @@ fn tables(alpha: f64, eta: f64) -> Tables {
     let (radius, angle) = (gauss_legendre(16), gauss_legendre(8));
     let nodes = (&radius[..], &angle[..]);
     let mut transmittance = [0.0f32; TABLE];
-    let mut reflectance = [0.0f32; TABLE];
     let mut ri = 0.0;
     for (k, t) in transmittance.iter_mut().enumerate() {
         let m = (k as f64 / (TABLE - 1) as f64).max(1e-6);
         *t = through(alpha, incident(m), eta, nodes, true) as f32;
-        reflectance[k] = through(alpha, incident(m), eta, nodes, false) as f32;
         ri += through(alpha, incident(m), 1.0 / eta, nodes, false) * m;
     }
     let internal_reflectance = 2.0 * ri / TABLE as f64;
     let diffuse_scale =
         (1.0 / (std::f64::consts::PI * eta * eta * (1.0 - internal_reflectance))) as f32;
-    let base_scale = (1.0 / (eta * eta * (1.0 - internal_reflectance))) as f32;
     Tables {
         transmittance,
-        reflectance,
         diffuse_scale,
-        base_scale,
         internal_reflectance,
     }
 }
@@ -476,43 +383,6 @@ mod tests {
             let want = through(0.3, wi, 1.5, (&q, &q), false);
             assert!((sum - want).abs() < 0.01, "mu {mu}: {sum} against {want}");
         }
-    }
-
-    #[test]
-    fn the_lobes_weights_add_up_to_the_directional_albedo() {
-        // Σ w over the 16 stratified visible normals against the table's 16 x 8 Gauss-Legendre
-        // expectation of the same integrand (and the other way: the grid's error), every direction above
-        // the surface; over_lambert is π times the diffuse factor, its halves multiply to it.
-        let n = Vec3A::new(0.3, 0.9, -0.2).normalize();
-        let (t, _) = n.any_orthonormal_pair();
-        let mut out = Vec::new();
-        for alpha in [0.03, 0.2, 0.5] {
-            let c = Coat::new(alpha, 1.49);
-            for mu in [0.15f32, 0.5, 0.95] {
-                let v = (n * mu + t * (1.0 - mu * mu).sqrt()).normalize();
-                c.lobe(n, v, &mut out);
-                assert_eq!(out.len(), LOBE_SIDE * LOBE_SIDE);
-                let sum: f32 = out.iter().map(|d| d.1).sum();
-                let want = c.reflectance(n.dot(v));
-                assert!(
-                    (sum - want).abs() < 0.1 * want + 2e-3,
-                    "α {alpha} μ {mu}: {sum} against {want}"
-                );
-                assert!(out
-                    .iter()
-                    .all(|&(d, w)| w == 0.0 || (d.dot(n) > 0.0 && w > 0.0)));
-                let pi = std::f32::consts::PI;
-                let (a, b) = (0.4f32, mu);
-                assert!((c.over_lambert(a, b) - pi * c.diffuse(a, b)).abs() < 1e-5);
-                assert!((c.entering(a) * c.leaving(b) - c.over_lambert(a, b)).abs() < 1e-6);
-            }
-        }
-        // Below the horizon: nothing.
-        let c = Coat::new(0.2, 1.49);
-        c.lobe(n, -n, &mut out);
-        assert!(out.is_empty());
-        assert_eq!(c.reflectance(-0.1), 0.0);
-        assert_eq!(c.over_lambert(0.5, -0.1), 0.0);
     }
 
     #[test]

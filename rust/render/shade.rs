@@ -2,15 +2,12 @@
 //! with a shadow ray (`hit::occluded`), plus ambient and the occluded environment (`environment`).
 //!
 //! L = ρ·(ambient + env·S) + V·I·color·max(0, n·l)/d² · [ρ/π + k_s·(s+8)/(8π)·max(0, n·h)^s]
-//!     (+ ρ·Σ_k F_k·L_k, one bounce from the other objects, with `interreflection`: `bounce`; through a
-//!     coat's transmission both ways, and a coat's reflection of the others, `reflected`),
+//!     (+ ρ·Σ_k F_k·L_k, one bounce from the other objects, with `interreflection`: `bounce`),
 //! pixel = exposure·L, with V the light's visibility and S the sky view factor.
 
 use glam::Vec3A;
 
-use super::bounce::{
-    gather, mirror, nearest_table, table_points, CachedPoint, GatherPoint, Gathered,
-};
+use super::bounce::{gather, nearest_table, table_points, CachedPoint, GatherPoint, Gathered};
 use super::brdf::{blinn_phong, lambert, specular_scale};
 use super::coat::Coat;
 use super::environment::sky_view;
@@ -157,7 +154,7 @@ impl ShadeParams {
                     gather(y, n, k, shapes, &mut points);
                     points
                         .iter()
-                        .map(|g| table_form(p.coat(k), g, y, n) * sender_radiance(g, p, shapes, y))
+                        .map(|g| g.form * sender_radiance(g, p, shapes))
                         .fold(Vec3A::ZERO, |a, b| a + b)
                 })
                 .collect()
@@ -167,18 +164,14 @@ impl ShadeParams {
     /// [`ShadeParams::prepare_bounce`] from a render's cached gathers (`bounce::Gathered`, built for
     /// `shapes`): the same tables.
     pub fn prepare_bounce_cached(&mut self, shapes: &[PShape], cache: &Gathered) {
-        self.prepare_tables(shapes, |p, k, at| {
+        self.prepare_tables(shapes, |p, k, _| {
             cache
                 .table(k)
                 .iter()
-                .zip(at)
-                .map(|(points, &(y, n))| {
+                .map(|points| {
                     points
                         .iter()
-                        .map(|c| {
-                            table_form(p.coat(k), &c.point, y, n)
-                                * sender_radiance_cached(c, p, shapes, y)
-                        })
+                        .map(|c| c.point.form * sender_radiance_cached(c, p, shapes))
                         .fold(Vec3A::ZERO, |a, b| a + b)
                 })
                 .collect()
@@ -267,58 +260,25 @@ impl ShadeParams {
 
 thread_local! {
     static GATHER: std::cell::RefCell<Vec<GatherPoint>> = const { std::cell::RefCell::new(Vec::new()) };
-    static LOBE: std::cell::RefCell<Vec<(Vec3A, f32)>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
-/// The configuration factor of `g` as a coated receiver (`coat`, at `y` with normal `n`) weighs it:
-/// times the coat's [`Coat::over_lambert`] from `g`'s direction to the receiver's view `view`, or (no
-/// view: a sphere's bounce table) its entering half, [`Coat::entering`]; `g.form` for a matte receiver.
-#[inline(always)]
-pub fn received_form(
-    coat: Option<&Coat>,
-    g: &GatherPoint,
-    y: Vec3A,
-    n: Vec3A,
-    view: Option<Vec3A>,
-) -> f32 {
-    let Some(c) = coat else { return g.form };
-    let cos_in = n.dot((g.position - y).normalize_or_zero());
-    g.form
-        * match view {
-            Some(v) => c.over_lambert(cos_in, n.dot(v)),
-            None => c.entering(cos_in),
-        }
-}
-
-/// [`received_form`] for a sphere's bounce table point (`y`, normal `n`).
-#[inline(always)]
-fn table_form(coat: Option<&Coat>, g: &GatherPoint, y: Vec3A, n: Vec3A) -> f32 {
-    received_form(coat, g, y, n, None)
-}
-
-/// The radiance (before exposure) that the sender of `g` leaves at its representative point towards the
-/// receiving point `to`: its direct light (shadowed), environment and ambient, diffusely (a coated
-/// sender's direct light and own bounce through its coat, [`Coat::over_lambert`]); not its own bounce.
-pub fn sender_radiance(g: &GatherPoint, p: &ShadeParams, shapes: &[PShape], to: Vec3A) -> Vec3A {
+/// The radiance (before exposure) that the sender of `g` leaves at its representative point: its direct
+/// light (shadowed), environment and ambient, diffusely; not its own bounce.
+pub fn sender_radiance(g: &GatherPoint, p: &ShadeParams, shapes: &[PShape]) -> Vec3A {
     sender_radiance_with(
         g,
         || sky_view(g.position, g.normal, g.sender, shapes),
         || nearest_table(g.normal),
-        (p, shapes),
-        to,
+        p,
+        shapes,
     )
 }
 
 /// [`sender_radiance`] from a render's cached gather point (`bounce::Gathered`): its sky view and table
 /// point as kept, the same value.
 #[inline]
-pub fn sender_radiance_cached(
-    c: &CachedPoint,
-    p: &ShadeParams,
-    shapes: &[PShape],
-    to: Vec3A,
-) -> Vec3A {
-    sender_radiance_with(&c.point, || c.sky, || c.table as usize, (p, shapes), to)
+pub fn sender_radiance_cached(c: &CachedPoint, p: &ShadeParams, shapes: &[PShape]) -> Vec3A {
+    sender_radiance_with(&c.point, || c.sky, || c.table as usize, p, shapes)
 }
 
 /// [`sender_radiance`] with the point's sky view (`sky`, called only with environment light) and its
@@ -328,14 +288,10 @@ fn sender_radiance_with(
     g: &GatherPoint,
     sky: impl Fn() -> f32,
     table: impl Fn() -> usize,
-    (p, shapes): (&ShadeParams, &[PShape]),
-    to: Vec3A,
+    p: &ShadeParams,
+    shapes: &[PShape],
 ) -> Vec3A {
     let m = &p.materials[g.sender];
-    // A coated sender's cosine towards the receiver.
-    let coat = p
-        .coat(g.sender)
-        .map(|c| (c, g.normal.dot((to - g.position).normalize_or_zero())));
     let mut l = m.albedo * p.ambient;
     if p.environment != Vec3A::ZERO {
         l += m.albedo * p.environment * sky();
@@ -350,20 +306,14 @@ fn sender_radiance_with(
             eps: Surfel::eps_at(g.position.abs().max_element() + shapes[g.sender].scale()),
         };
         if ndotl > 0.0 && !occluded(&at, dir, dist, shapes) {
-            let mut e = irradiance(ndotl, falloff);
-            if let Some((c, cos_out)) = coat {
-                e *= c.over_lambert(ndotl, cos_out);
-            }
-            l += (p.light_rgb * lambert(m.albedo) * e).min(Vec3A::splat(f32::MAX));
+            l += (p.light_rgb * lambert(m.albedo) * irradiance(ndotl, falloff))
+                .min(Vec3A::splat(f32::MAX));
         }
     }
     // A sphere sender's own bounce (the second bounce), from its table once prepared.
     if let Some((at, light)) = p.tables.get(g.sender) {
         if !at.is_empty() {
-            match coat {
-                Some((c, cos_out)) => l += m.albedo * light[table()] * c.leaving(cos_out),
-                None => l += m.albedo * light[table()],
-            }
+            l += m.albedo * light[table()];
         }
     }
     l
@@ -473,42 +423,19 @@ fn indirect(
             *sky.get_or_insert_with(|| sky_view(s.position, s.normal, s.object as usize, shapes));
         l += m.albedo * p.environment * sky;
     }
-    let coat = p.coat(s.object as usize);
-    let (y, n, v) = (s.position, s.normal, Some(s.view));
     if let (true, Some(points)) = (p.interreflection, gathered) {
         for c in points {
-            let form = received_form(coat, &c.point, y, n, v);
-            l += m.albedo * form * sender_radiance_cached(c, p, shapes, y);
+            l += m.albedo * c.point.form * sender_radiance_cached(c, p, shapes);
         }
     } else if p.interreflection {
         GATHER.with_borrow_mut(|points| {
             gather(s.position, s.normal, s.object as usize, shapes, points);
             for g in points.iter() {
-                l += m.albedo * received_form(coat, g, y, n, v) * sender_radiance(g, p, shapes, y);
+                l += m.albedo * g.form * sender_radiance(g, p, shapes);
             }
         });
     }
-    if let (true, Some(c)) = (p.interreflection && m.specular > 0.0, coat) {
-        l += reflected(s, c, m.specular, p, shapes);
-    }
     l
-}
-
-/// A coated surfel's reflection of the other objects (with interreflection): its specular weight `ks`
-/// times, over the coat's lobe (`Coat::lobe`), each direction's weight times the radiance of the object it
-/// meets (`bounce::mirror`: that object's diffuse light towards the surfel); the environment the lobe sees
-/// is not reflected.
-pub fn reflected(s: &Surfel, c: &Coat, ks: f32, p: &ShadeParams, shapes: &[PShape]) -> Vec3A {
-    LOBE.with_borrow_mut(|lobe| {
-        c.lobe(s.normal, s.view, lobe);
-        let mut l = Vec3A::ZERO;
-        for &sample in lobe.iter() {
-            if let Some(g) = mirror(s.position, sample, s.object as usize, shapes) {
-                l += (ks * g.form) * sender_radiance(&g, p, shapes, s.position);
-            }
-        }
-        l
-    })
 }
 
 /// The exposure-scaled radiance at an object's surfel: the `indirect` light `l` plus the light's own
@@ -636,4 +563,94 @@ fn visible_fraction(
 }
 
 #[cfg(test)]
-mod tests;
+mod tests {
+    use super::*;
+    use crate::render::Surfel;
+
+    fn params(spec: f32, shin: f32) -> ShadeParams {
+        ShadeParams {
+            light_position: Vec3A::new(0.0, 2.0, 0.0),
+            light_direction: None,
+            light_intensity: 10.0,
+            light_color: Vec3A::ONE,
+            light_rgb: Vec3A::splat(10.0),
+            light_radius: 0.0,
+            light_rect: None,
+            extra_lights: Vec::new(),
+            ambient: Vec3A::ZERO,
+            environment: Vec3A::ZERO,
+            interreflection: false,
+            coats: Vec::new(),
+            tables: Vec::new(),
+            background: Vec3A::new(0.1, 0.2, 0.3),
+            exposure: 1.0,
+            materials: vec![PMaterial {
+                albedo: Vec3A::splat(0.5),
+                specular: spec,
+                shininess: shin,
+            }],
+            any_specular: spec != 0.0,
+        }
+    }
+
+    fn floor_point(x: f32) -> Surfel {
+        Surfel {
+            position: Vec3A::new(x, 0.0, 0.0),
+            normal: Vec3A::Y,
+            view: Vec3A::Y,
+            object: 0,
+            eps: 1e-6,
+        }
+    }
+
+    #[test]
+    fn lambert_inverse_square_and_cosine() {
+        let p = params(0.0, 0.0);
+        let under = shade(&floor_point(0.0), &p, &[], false);
+        assert!((under.x - 10.0 * 0.5 / std::f32::consts::PI / 4.0).abs() < 1e-6);
+        // At x = 2 the light is at 45 degrees and sqrt(8) away.
+        let side = shade(&floor_point(2.0), &p, &[], false);
+        let want = 10.0 * 0.5 / std::f32::consts::PI * (0.5f32.sqrt()) / 8.0;
+        assert!((side.x - want).abs() < 1e-6);
+    }
+
+    #[test]
+    fn light_on_or_below_the_surface_gives_no_direct_light_and_no_nan() {
+        let mut p = params(1.0, 10.0);
+        p.light_position = Vec3A::ZERO;
+        assert_eq!(shade(&floor_point(0.0), &p, &[], false), Vec3A::ZERO);
+        p.light_position = Vec3A::new(0.0, -1.0, 0.0);
+        assert_eq!(shade(&floor_point(0.0), &p, &[], false), Vec3A::ZERO);
+        p.light_position = Vec3A::new(0.0, 1e-30, 0.0);
+        let v = shade(&floor_point(0.0), &p, &[], false);
+        assert!(v.is_finite(), "{v}");
+    }
+
+    #[test]
+    fn normalised_blinn_phong_peak() {
+        // Eye straight above, light straight above: n.h = 1, lobe = ks (s+8)/(8 pi).
+        let p = params(0.5, 20.0);
+        let v = shade(&floor_point(0.0), &p, &[], false);
+        let e = 10.0 / 4.0;
+        let want = e * (0.5 / std::f32::consts::PI + 0.5 * 28.0 / (8.0 * std::f32::consts::PI));
+        assert!((v.x - want).abs() < 1e-5, "{} vs {want}", v.x);
+    }
+
+    #[test]
+    fn miss_returns_exposed_background() {
+        let mut p = params(0.0, 0.0);
+        p.exposure = 2.0;
+        let mut s = floor_point(0.0);
+        s.object = u32::MAX;
+        assert_eq!(shade(&s, &p, &[], false), Vec3A::new(0.2, 0.4, 0.6));
+    }
+
+    #[test]
+    fn sphere_shadows_the_floor_but_not_beside_it() {
+        let p = params(0.0, 0.0);
+        let shapes = crate::render::shape::ball_over_floor(1.0, 0.5);
+        // Light at y = 2 straight above a sphere centred at y = 1 with r = 0.5.
+        assert_eq!(shade(&floor_point(0.0), &p, &shapes, true), Vec3A::ZERO);
+        assert!(shade(&floor_point(3.0), &p, &shapes, true).x > 0.0);
+    }
+}

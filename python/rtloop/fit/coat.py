@@ -21,7 +21,6 @@ from typing import Any
 import numpy as np
 
 from ..scene import Scene, scene_to_dict
-from . import selection
 from .selection import _verdict, closed_form_loss, interreflection_given
 
 __all__ = ["COAT_IOR", "COAT_SPECULAR_RANGE", "ROUGHNESS_TRIALS", "choose_lobe", "coat_evidence", "with_coat"]
@@ -77,11 +76,11 @@ def coat_evidence(scene: Scene, names: list[str], paths: list[str], x: list[floa
     evidence (:func:`.selection.highlight_evidence`'s, at the same light ``x``): the closed-form loss at
     each of ROUGHNESS_TRIALS and at the vertices of two parabolas in log roughness (:func:`_vertex`), the
     verdict against ``base`` (k = 2 per sphere), and ``better_than_blinn_phong``. Returns (evidence, roughness), or None where the
-    coat is not tried (the scene models a bounce and :data:`.selection.COAT_WITH_BOUNCE` is off)."""
+    coat is not tried (the scene models a bounce, which the coat does not shape)."""
+    if interreflection_given(scene):
+        return None
     coated = with_coat(scene, names, ROUGHNESS_TRIALS[0], free_roughness=True)
     cpaths = paths + [f"objects.{n}.roughness" for n in names]
-    if interreflection_given(scene) and not selection.COAT_WITH_BOUNCE:
-        return None
     kw = {"environment": environment, "clip": clip, "norm": norm, "space": space, "threads": threads,
           "saturated": saturated}
 

@@ -26,7 +26,6 @@ from .spec import closed_form_spec
 
 __all__ = [
     "BOUNCE_PASSES",
-    "COAT_WITH_BOUNCE",
     "ENVIRONMENT_MODES",
     "EXPLAINED",
     "HIGHLIGHT_MODES",
@@ -295,13 +294,6 @@ def check_interreflection(mode: Any) -> str:
 #: 108 more evaluations on each of the three photos that took it (+13 % of those fits' evaluations).
 BOUNCE_PASSES = 3
 
-#: Whether the fit combines a coat and the bounce: tries the coat (:mod:`.coat`) where the fit models the
-#: bounce, and tests the bounce on a scene with a coated object. The bounce models the coat both ways and its
-#: reflection of the other objects (docs/methods.md, "A coat in the bounce"), but on the Mitsuba lamp photos
-#: the coat with the bounce fits lamp-side's light better and lamp-desk's and lamp-front's worse than
-#: Blinn-Phong over Lambert does (studies/results/coat_bounce.md), so by default the two stay apart.
-COAT_WITH_BOUNCE = False
-
 
 def interreflection_given(scene: Scene) -> bool:
     """Whether the scene itself models one bounce (``"interreflection": true``)."""
@@ -319,12 +311,11 @@ def interreflection_evidence(scene: Scene, paths: list[str], x: list[float], tar
                              saturated: float | None = None, held: HeldOut | None = None) -> dict[str, Any]:
     """Whether one bounce between the objects explains the photo better at the light ``x`` found without
     it: the closed-form loss without (``base``) and with it (its one extra unknown is the gauge, 1 /
-    intensity: k = 1), as :func:`environment_evidence`. Not tested on a scene with a coated object unless
-    COAT_WITH_BOUNCE."""
-    if not COAT_WITH_BOUNCE and any("coat" in o["material"] for o in scene_to_dict(scene)["objects"]):
+    intensity: k = 1), as :func:`environment_evidence`. Not selected on a scene with a coated object (the
+    bounce's closed form does not model the coat)."""
+    if any("coat" in o["material"] for o in scene_to_dict(scene)["objects"]):
         return {"loss_without": base, "loss_with": base, "gain": 0.0, "delta_bic": None, "selected": False,
-                "rule": "not tested: a coated object and the bounce stay apart (COAT_WITH_BOUNCE)",
-                "nested": False,
+                "rule": "not tested: the bounce does not model a coated object", "nested": False,
                 "loss_with_nested": base, "raised": False}
     kw = {"environment": environment, "clip": clip, "norm": norm, "space": space, "threads": threads,
           "saturated": saturated}
